@@ -131,10 +131,59 @@ def node(
 
 
 # ---------------------------------------------------------------------------- the rest
-@cli.command(context_settings={"ignore_unknown_options": True, "allow_extra_args": True})
-def up() -> None:
+@cli.command()
+@click.argument("scenario_arg", metavar="[SCENARIO]", required=False)
+@SCENARIO_OPT
+@click.option("--headless", is_flag=True, help="No viewer.")
+@click.option("--record", is_flag=True, help="Also run the recorder (MCAP in the run directory).")
+@click.option("--out", type=click.Path(path_type=Path), default=None, help="Run directory.")
+@click.option("--connect", multiple=True, help="Router endpoint (default: the scenario's).")
+@click.option("--listen", multiple=True, help="Endpoint every node listens on.")
+@click.option("--roles", default=None, help="Only these roles, comma-separated (one host of many).")
+@click.option("--no-router", is_flag=True, help="Do not start a router (another host runs it).")
+@click.option("--hosts", "hosts_file", type=click.Path(path_type=Path), default=None)
+@click.option("--host", "host_name", default=None, help="This host's entry in --hosts.")
+def up(
+    scenario_arg: str | None,
+    scenario: str | None,
+    headless: bool,
+    record: bool,
+    out: Path | None,
+    connect: tuple[str, ...],
+    listen: tuple[str, ...],
+    roles: str | None,
+    no_router: bool,
+    hosts_file: Path | None,
+    host_name: str | None,
+) -> None:
     """Start the whole swarm (plume, physics, autopilots, gateway, viewer) and supervise it."""
-    not_yet("plumeswarm up", "#7")
+    from deploy.console import Console
+    from deploy.launcher import LaunchError, LaunchOptions, default_run_dir
+    from deploy.up import run_up
+
+    path = resolve_scenario_path(scenario_arg or scenario)
+    sc = scenario_from(str(path))
+    opts = LaunchOptions(
+        scenario_path=path,
+        headless=headless,
+        record=record,
+        run_dir=out or default_run_dir(),
+        connect=connect,
+        listen=listen,
+        roles=tuple(r.strip() for r in roles.split(",") if r.strip()) if roles else None,
+        router=not no_router,
+    )
+    if hosts_file is not None or host_name is not None:
+        from deploy.hosts import HostsError, options_for_host
+
+        try:
+            opts = options_for_host(opts, hosts_file, host_name)
+        except HostsError as exc:
+            fail(str(exc))
+    try:
+        sys.exit(run_up(sc, opts, Console()))
+    except LaunchError as exc:
+        fail(str(exc), code=1)
 
 
 @cli.command(context_settings={"ignore_unknown_options": True, "allow_extra_args": True})
