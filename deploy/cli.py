@@ -192,10 +192,25 @@ def demo() -> None:
     not_yet("plumeswarm demo", "#7")
 
 
-@cli.command(context_settings={"ignore_unknown_options": True, "allow_extra_args": True})
-def status() -> None:
+@cli.command()
+@SCENARIO_OPT
+@click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
+@click.option("--connect", multiple=True, help="Router endpoint (default: the scenario's).")
+@click.option("--timeout", "timeout_s", type=float, default=5.0, show_default=True)
+def status(scenario: str | None, as_json: bool, connect: tuple[str, ...], timeout_s: float) -> None:
     """Ask the bus what is running: nodes, sim time, vehicles."""
-    not_yet("plumeswarm status", "#7")
+    import json
+
+    from deploy.status import NothingRunning, format_status, query_status
+    from swarmbus.keys import Keys
+
+    sc = scenario_from(scenario)
+    net = sc.network.with_overrides(connect=list(connect) or None)
+    try:
+        snap = query_status(net, Keys(sc.world.name), [v.id for v in sc.vehicles], timeout_s)
+    except NothingRunning as exc:
+        fail(str(exc), code=1)
+    click.echo(json.dumps(snap.to_json(), indent=2) if as_json else format_status(snap))
 
 
 @cli.command(context_settings={"ignore_unknown_options": True, "allow_extra_args": True})
