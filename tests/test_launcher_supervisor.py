@@ -93,5 +93,5 @@ def test_stop_all_kills_stubborn_groups_and_leaves_no_orphans(tmp_path: Path) ->
     codes = sup.stop_all(stage_timeout_s=1.0)
     assert time.monotonic() - t0 < 15.0
     assert codes["polite"] == -15 and codes["stubborn"] == -9
-    gone, alive = psutil.wait_procs(family, timeout=5.0)
+    _, alive = psutil.wait_procs(family, timeout=5.0)
     assert alive == [], f"survivors: {alive}"
