@@ -186,10 +186,22 @@ def up(
         fail(str(exc), code=1)
 
 
-@cli.command(context_settings={"ignore_unknown_options": True, "allow_extra_args": True})
-def demo() -> None:
+@cli.command()
+@SCENARIO_OPT
+@click.option("--vehicles", type=click.IntRange(1, 1024), default=None, help="Scale to N vehicles.")
+@click.option("--out", type=click.Path(path_type=Path), default=None, help="Run directory.")
+@click.option("--timeout", "timeout_s", type=float, default=900.0, show_default=True)
+def demo(scenario: str | None, vehicles: int | None, out: Path | None, timeout_s: float) -> None:
     """Fly the default scenario end to end, headless, and print the accuracy table."""
-    not_yet("plumeswarm demo", "#7")
+    from deploy.console import Console
+    from deploy.demo import DemoOptions, run_demo
+    from deploy.launcher import default_run_dir
+
+    path = resolve_scenario_path(scenario)
+    opts = DemoOptions(
+        scenario_from(str(path)), path, out or default_run_dir(), vehicles, timeout_s
+    )
+    sys.exit(run_demo(opts, Console()))
 
 
 @cli.command()

@@ -193,7 +193,15 @@ class Launcher:
         # The launcher's own session: a peer that only connects to the router.
         return NetworkConfig(connect=router_endpoints(self.scenario, self.opts), listen=[])
 
-    def start(self) -> None:
+    @property
+    def session(self) -> zenoh.Session:
+        if self._session is None:
+            raise RuntimeError("the launcher has no bus session before start()")
+        return self._session
+
+    def start(self, on_bus: Callable[[zenoh.Session], None] | None = None) -> None:
+        """Start everything; ``on_bus(session)`` runs once the router is up and before any
+        other role starts (subscribe there to see a run from its first message)."""
         roles = sorted({s.role for s in self.specs})
         missing = missing_roles(roles)
         if missing:
@@ -213,6 +221,8 @@ class Launcher:
         self.view = BusView(self._session, self.keys)
         if first:
             self.wait_ready(first, timeout)
+        if on_bus is not None:
+            on_bus(self._session)
         # The recorder before anything publishes; then everything else together.
         early = [s.name for s in self.specs if s.role == "recorder"]
         if early:
