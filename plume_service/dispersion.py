@@ -44,6 +44,7 @@ COEFFICIENT_FAMILIES: tuple[str, ...] = ("mcmullen", "novak2018", "briggs-rural"
 SIGMA_MIN_M = 1e-6
 #: Largest σ (m) the model uses (10 000 km); reached only far outside any fit's valid range.
 SIGMA_MAX_M = 1e7
+_LN_SIGMA_MAX = math.log(SIGMA_MAX_M)
 
 #: Below this downwind distance (m) a McMullen fit is always continued linearly (ln x → −∞).
 MCMULLEN_NEAR_CUTOFF_M = 1.0
@@ -77,16 +78,25 @@ class LogQuadraticFit:
         ln_x = math.log(x_m)
         return math.exp(self.i + self.j * ln_x + self.k * ln_x * ln_x)
 
-    def __call__(self, x_m: FloatArray) -> FloatArray:
+    def __call__(self, x_m: FloatArray, ln_x: FloatArray | None = None) -> FloatArray:
+        """σ (m) at downwind distances x > 0 (m); pass ln x if already computed."""
+        if ln_x is None:
+            ln_x = np.log(x_m)
+        if math.isfinite(self.x_far_m):
+            ln_x = np.minimum(ln_x, math.log(self.x_far_m))
+        ln_sigma = self.k * ln_x
+        ln_sigma += self.j
+        ln_sigma *= ln_x
+        ln_sigma += self.i
+        if self.k > 0.0:  # unbounded growth far away
+            np.minimum(ln_sigma, _LN_SIGMA_MAX, out=ln_sigma)
+        sigma = np.exp(ln_sigma, out=ln_sigma)
         x_near = self.x_near_m
-        x_far = self.x_far_m
-        x_fit = np.clip(x_m, x_near, x_far)
-        ln_x = np.log(x_fit)
-        sigma = np.exp(self.i + ln_x * (self.j + self.k * ln_x))
         near = x_m < x_near
         if near.any():
-            sigma[near] = (self.raw(x_near) / x_near) * x_m[near]
-        return np.clip(sigma, SIGMA_MIN_M, SIGMA_MAX_M, out=sigma)
+            slope = self.raw(x_near) / x_near
+            sigma[near] = np.maximum(slope * x_m[near], SIGMA_MIN_M)
+        return sigma
 
     def describe(self) -> dict[str, object]:
         return {
@@ -107,10 +117,20 @@ class BriggsFormula:
     b: float
     p: float
 
-    def __call__(self, x_m: FloatArray) -> FloatArray:
+    def __call__(self, x_m: FloatArray, ln_x: FloatArray | None = None) -> FloatArray:
+        """σ (m) at downwind distances x > 0 (m); ``ln_x`` is accepted for symmetry, unused."""
         sigma = self.a * x_m
         if self.b != 0.0 and self.p != 0.0:
-            sigma *= (1.0 + self.b * x_m) ** self.p
+            growth = self.b * x_m
+            growth += 1.0
+            if self.p == -0.5:
+                sigma /= np.sqrt(growth, out=growth)
+            elif self.p == 0.5:
+                sigma *= np.sqrt(growth, out=growth)
+            elif self.p == -1.0:
+                sigma /= growth
+            else:
+                sigma *= growth**self.p
         return np.clip(sigma, SIGMA_MIN_M, SIGMA_MAX_M, out=sigma)
 
     def describe(self) -> dict[str, object]:
@@ -128,6 +148,11 @@ class DispersionCurves:
     stability: str
     sigma_y: SigmaFunction
     sigma_z: SigmaFunction
+
+    def sigmas(self, x_m: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """σy, σz (m) at downwind distances x > 0 (m)."""
+        ln_x = np.log(x_m) if isinstance(self.sigma_y, LogQuadraticFit) else None
+        return self.sigma_y(x_m, ln_x), self.sigma_z(x_m, ln_x)
 
     def describe(self) -> dict[str, object]:
         return {

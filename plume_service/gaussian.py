@@ -30,6 +30,7 @@ from plume_service.dispersion import DispersionCurves, dispersion_curves
 from plume_service.field import ConcentrationField, FloatArray
 
 _SQRT_2PI = math.sqrt(2.0 * math.pi)
+_SQRT_HALF = math.sqrt(0.5)
 
 # Image sum while σz ≤ L: images farther than |z ± H| + 9σz contribute < exp(−40) relative.
 _IMAGE_SIGMAS = 9.0
@@ -129,8 +130,7 @@ class GaussianPlume(ConcentrationField):
 
     def sigmas(self, x_m: FloatArray) -> tuple[FloatArray, FloatArray]:
         """σy, σz (m) at downwind distances x > 0 (m)."""
-        x = np.asarray(x_m, dtype=np.float64)
-        return self.dispersion.sigma_y(x), self.dispersion.sigma_z(x)
+        return self.dispersion.sigmas(np.asarray(x_m, dtype=np.float64))
 
     def to_plume_frame(self, points: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         """World ENU (n, 3) → plume-frame downwind x, crosswind y (to the left), height z."""
@@ -154,50 +154,58 @@ class GaussianPlume(ConcentrationField):
             if not inside.any():
                 return out
             sigma_y, sigma_z = self.sigmas(downwind[inside])
+            # r = 1/(σ√2), so that exp(−a²/2σ²) = exp(−(a·r)²): multiplications, not divisions.
+            r_y = np.divide(_SQRT_HALF, sigma_y, out=sigma_y)
+            r_z = np.divide(_SQRT_HALF, sigma_z, out=sigma_z)
             ln_f = crosswind[inside]
-            ln_f /= sigma_y
+            ln_f *= r_y
             ln_f *= ln_f
-            ln_f *= -0.5
-            value = self._vertical(height[inside], sigma_z, ln_f)
-            value /= sigma_y
-            value /= sigma_z
-            value *= self.release_rate_g_s / (2.0 * math.pi * self.wind_speed_m_s)
+            np.negative(ln_f, out=ln_f)
+            value = self._vertical(height[inside], r_z, ln_f)
+            value *= r_y
+            value *= r_z
+            # Q/(2π u σy σz) = Q/(π u) · r_y · r_z
+            value *= self.release_rate_g_s / (math.pi * self.wind_speed_m_s)
         out[inside] = value
         return out
 
-    def _vertical(self, z: FloatArray, sigma_z: FloatArray, ln_f: FloatArray) -> FloatArray:
-        """f·g: the crosswind factor times the vertical term with its reflections."""
+    def _vertical(self, z: FloatArray, r_z: FloatArray, ln_f: FloatArray) -> FloatArray:
+        """f·g: the crosswind factor times the vertical term with its reflections.
+
+        ``r_z`` is 1/(σz√2); ``ln_f`` is ln f = −y²/2σy².
+        """
         if self.mixing_height_m is None:
-            return _gauss_pair(z - self.release_height_m, z + self.release_height_m, sigma_z, ln_f)
+            return _gauss_pair(z - self.release_height_m, z + self.release_height_m, r_z, ln_f)
         lid = self.mixing_height_m
         value = np.empty_like(z)
-        narrow = sigma_z <= lid
+        narrow = r_z * lid >= _SQRT_HALF  # σz ≤ L
         if narrow.any():
-            value[narrow] = self._image_sum(z[narrow], sigma_z[narrow], ln_f[narrow], lid)
+            value[narrow] = self._image_sum(z[narrow], r_z[narrow], ln_f[narrow], lid)
         wide = ~narrow
         if wide.any():
-            value[wide] = self._fourier_sum(z[wide], sigma_z[wide], ln_f[wide], lid)
+            value[wide] = self._fourier_sum(z[wide], r_z[wide], ln_f[wide], lid)
         return value
 
     def _image_sum(
-        self, z: FloatArray, sigma_z: FloatArray, ln_f: FloatArray, lid: float
+        self, z: FloatArray, r_z: FloatArray, ln_f: FloatArray, lid: float
     ) -> FloatArray:
         height = self.release_height_m
-        reach = 2.0 * lid + _IMAGE_SIGMAS * float(sigma_z.max())
+        sigma_max = _SQRT_HALF / float(r_z.min())
+        reach = 2.0 * lid + _IMAGE_SIGMAS * sigma_max
         images = math.ceil(reach / (2.0 * lid))
         value = np.zeros_like(z)
         for k in range(-images, images + 1):
             shift = 2.0 * k * lid
-            value += _gauss_pair(z - height - shift, z + height - shift, sigma_z, ln_f)
+            value += _gauss_pair(z - height - shift, z + height - shift, r_z, ln_f)
         return value
 
     def _fourier_sum(
-        self, z: FloatArray, sigma_z: FloatArray, ln_f: FloatArray, lid: float
+        self, z: FloatArray, r_z: FloatArray, ln_f: FloatArray, lid: float
     ) -> FloatArray:
         # Poisson summation of the image sum: Σ_k exp(−(a − 2kL)²/2σ²)
         #   = √(2π)σ/2L · [1 + 2 Σ_n exp(−π²n²σ²/2L²) cos(πna/L)], applied to a = z ∓ H.
         height = self.release_height_m
-        ratio = sigma_z / lid
+        ratio = _SQRT_HALF / (r_z * lid)  # σz / L
         series = np.ones_like(z)
         for n in range(1, _FOURIER_TERMS + 1):
             weight = np.exp(-0.5 * (math.pi * n * ratio) ** 2)
@@ -224,17 +232,12 @@ class GaussianPlume(ConcentrationField):
         }
 
 
-def _gauss_pair(a: FloatArray, b: FloatArray, sigma: FloatArray, ln_f: FloatArray) -> FloatArray:
-    """exp(ln f − a²/2σ²) + exp(ln f − b²/2σ²), computed in place on a and b."""
-    a /= sigma
-    a *= a
-    a *= -0.5
-    a += ln_f
-    np.exp(a, out=a)
-    b /= sigma
-    b *= b
-    b *= -0.5
-    b += ln_f
-    np.exp(b, out=b)
+def _gauss_pair(a: FloatArray, b: FloatArray, r: FloatArray, ln_f: FloatArray) -> FloatArray:
+    """exp(ln f − (a·r)²) + exp(ln f − (b·r)²), computed in place on a and b."""
+    for term in (a, b):
+        term *= r
+        term *= term
+        np.subtract(ln_f, term, out=term)
+        np.exp(term, out=term)
     a += b
     return a
