@@ -108,7 +108,8 @@ class GaussianPlume(ConcentrationField):
             self.mixing_height_m = lid
         # Unit vector the wind blows toward, in ENU: bearing (from + 180°) → (sin, cos).
         toward = math.radians(self.wind_from_deg + 180.0)
-        self.downwind_unit = (math.sin(toward), math.cos(toward))
+        # Snap the 1e-16 residues of sin/cos at multiples of 90° so cardinal winds are exact.
+        self.downwind_unit = (_snap(math.sin(toward)), _snap(math.cos(toward)))
         self.preset_name: str | None = None
 
     @classmethod
@@ -230,6 +231,10 @@ class GaussianPlume(ConcentrationField):
             },
             "dispersion": self.dispersion.describe(),
         }
+
+
+def _snap(component: float) -> float:
+    return 0.0 if abs(component) < 1e-12 else component
 
 
 def _gauss_pair(a: FloatArray, b: FloatArray, r: FloatArray, ln_f: FloatArray) -> FloatArray:
