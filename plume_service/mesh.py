@@ -4,7 +4,8 @@ The seed built its plume mesh with nested Python loops over a 0.1 m grid. Here t
 evaluated vectorised, slab by slab (bounded memory, optional tqdm progress bar), and the
 surface is extracted by marching cubes from PyMCubes. The volume is padded with a layer of
 zeros on every side, so the surface is closed even where the level set touches the domain
-boundary. Faces are oriented so their normals point outward (toward lower concentration).
+boundary (the cap lies on the boundary plane). Faces are oriented so their normals point
+outward (toward lower concentration).
 
 Default bounds for a Gaussian plume (or a superposition of them) are derived from the field:
 first a conservative analytic box from C ≤ Q/(2π u σy)·(2/σz + √(2π)/L)·f(y), then tightened
@@ -69,6 +70,9 @@ def isosurface(
     vertices, faces = mcubes.marching_cubes(padded, level)
     origin = np.array([axis[0] for axis in axes]) - resolution
     vertices = np.asarray(vertices, dtype=np.float64) * resolution + origin
+    # Where the level set reaches the domain's edge (the ground, say) the zero padding closes
+    # it half a cell outside; put those cap vertices on the boundary plane instead.
+    np.clip(vertices, [a[0] for a in axes], [a[-1] for a in axes], out=vertices)
     faces = np.asarray(faces, dtype=np.int64)
     if _signed_volume(vertices, faces) < 0.0:
         faces = np.ascontiguousarray(faces[:, ::-1])

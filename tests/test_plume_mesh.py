@@ -100,6 +100,15 @@ def test_superposed_sources_mesh_is_closed():
     assert_on_level(field, vertices, 0.4)
 
 
+def test_mesh_of_a_grounded_plume_is_closed_and_capped_at_ground():
+    plume = GaussianPlume(10.0, 2.0, 2.0, stability="B")
+    vertices, faces = isosurface(plume, LEVEL, resolution_m=0.5)
+    assert_closed(vertices, faces)
+    assert vertices[:, 2].min() == 0.0
+    on_level = vertices[vertices[:, 2] > 0.0]
+    assert_on_level(plume, on_level, 0.5)
+
+
 def test_explicit_bounds_and_bad_arguments():
     plume = GaussianPlume.preset("novak2018")
     bounds = ((0.0, 20.0), (-3.0, 3.0), (7.0, 13.0))
