@@ -1,4 +1,4 @@
-"""``python -m bench`` (``make bench``): run every benchmark script in this folder, one table each."""
+"""``python -m bench`` (``make bench``): run every benchmark script here, one table each."""
 
 from __future__ import annotations
 

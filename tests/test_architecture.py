@@ -41,7 +41,7 @@ def test_swarmbus_imports_no_process_package() -> None:
 
 def test_key_expressions_are_built_only_in_swarmbus_keys() -> None:
     offenders = []
-    for package in PROCESS_PACKAGES + ["swarmbus"]:
+    for package in [*PROCESS_PACKAGES, "swarmbus"]:
         for path in (REPO / package).rglob("*.py"):
             if path == REPO / "swarmbus" / "keys.py":
                 continue
