@@ -1,9 +1,10 @@
 """What every process of plumeswarm shares: its config object and its runtime shell.
 
 A role's entry point is ``main(ctx: NodeContext) -> int``. It opens a :class:`NodeRuntime`
-(``with NodeRuntime(ctx, role="physics") as rt:``), which opens the Zenoh session, publishes its :class:`~swarmbus.messages.NodeHealth` (up → ready →
-stopping) and turns SIGINT/SIGTERM into ``rt.stop`` being set, so the role's loop ends cleanly.
-``rt.ready()`` declares the node's liveliness token once the role serves.
+(``with NodeRuntime(ctx, role="physics") as rt:``), which opens the Zenoh session, publishes
+its :class:`~swarmbus.messages.NodeHealth` (up → ready → stopping) and turns SIGINT/SIGTERM
+into ``rt.stop`` being set, so the role's loop ends cleanly. ``rt.ready()`` declares the node's
+liveliness token once the role serves.
 """
 
 from __future__ import annotations
