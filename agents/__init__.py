@@ -1,0 +1,1 @@
+"""agents — one autopilot process per vehicle, and the ``Swarm`` client for swarm algorithms."""

@@ -1,0 +1,1 @@
+"""deploy — the ``plumeswarm`` CLI, the launcher, scenarios and multi-host configuration."""

@@ -1,0 +1,129 @@
+"""Every Zenoh key expression of plumeswarm, built in one place.
+
+All keys live under ``plumeswarm/<world>/``. Three planes are kept apart so that a
+wildcard never crosses them: ``sim/`` and ``vehicle/*/{state,actuators,status,concentration}``
+carry data, ``vehicle/*/cmd`` and ``plume/*`` are queryables (control), ``node/*`` is presence.
+No other module formats a key expression.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+ROOT = "plumeswarm"
+_NAME_RE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}$")
+
+
+class KeyNameError(ValueError):
+    """A world, vehicle or node name that cannot be part of a key expression."""
+
+
+def check_name(kind: str, name: str) -> str:
+    """Return ``name`` if it is safe inside a key (no ``/``, wildcards or ``$``), else raise."""
+    if not isinstance(name, str) or not _NAME_RE.match(name):
+        raise KeyNameError(
+            f"{kind} name {name!r} is not allowed: use 1-64 of A-Z a-z 0-9 _ . - "
+            "(not starting with . or -)"
+        )
+    return name
+
+
+@dataclass(frozen=True)
+class Keys:
+    """Key expressions of one world."""
+
+    world: str = "default"
+
+    def __post_init__(self) -> None:
+        check_name("world", self.world)
+
+    @property
+    def prefix(self) -> str:
+        return f"{ROOT}/{self.world}"
+
+    # -- everything (recorder) -------------------------------------------------
+    def everything(self) -> str:
+        return f"{self.prefix}/**"
+
+    # -- sim plane -------------------------------------------------------------
+    def clock(self) -> str:
+        return f"{self.prefix}/sim/clock"
+
+    def tick(self) -> str:
+        return f"{self.prefix}/sim/tick"
+
+    # -- vehicle data plane ----------------------------------------------------
+    def _vehicle(self, vehicle_id: str, leaf: str) -> str:
+        return f"{self.prefix}/vehicle/{check_name('vehicle', vehicle_id)}/{leaf}"
+
+    def vehicle_state(self, vehicle_id: str) -> str:
+        return self._vehicle(vehicle_id, "state")
+
+    def vehicle_actuators(self, vehicle_id: str) -> str:
+        return self._vehicle(vehicle_id, "actuators")
+
+    def vehicle_status(self, vehicle_id: str) -> str:
+        return self._vehicle(vehicle_id, "status")
+
+    def vehicle_concentration(self, vehicle_id: str) -> str:
+        return self._vehicle(vehicle_id, "concentration")
+
+    def vehicle_cmd(self, vehicle_id: str) -> str:
+        return self._vehicle(vehicle_id, "cmd")
+
+    def all_vehicle_states(self) -> str:
+        return f"{self.prefix}/vehicle/*/state"
+
+    def all_vehicle_actuators(self) -> str:
+        return f"{self.prefix}/vehicle/*/actuators"
+
+    def all_vehicle_status(self) -> str:
+        return f"{self.prefix}/vehicle/*/status"
+
+    def all_vehicle_concentration(self) -> str:
+        return f"{self.prefix}/vehicle/*/concentration"
+
+    # -- plume control plane ---------------------------------------------------
+    def plume_concentration(self) -> str:
+        return f"{self.prefix}/plume/concentration"
+
+    def plume_info(self) -> str:
+        return f"{self.prefix}/plume/info"
+
+    def plume_mesh(self) -> str:
+        return f"{self.prefix}/plume/mesh"
+
+    # -- presence plane --------------------------------------------------------
+    def node_health(self, node_name: str) -> str:
+        return f"{self.prefix}/node/{check_name('node', node_name)}/health"
+
+    def all_node_health(self) -> str:
+        return f"{self.prefix}/node/*/health"
+
+    # -- parsing ---------------------------------------------------------------
+    def vehicle_id_of(self, key: str) -> str:
+        """The vehicle id in a ``vehicle/<id>/...`` key of this world."""
+        parts = str(key).split("/")
+        head = self.prefix.split("/")
+        if (
+            parts[: len(head)] != head
+            or len(parts) < len(head) + 3
+            or parts[len(head)] != "vehicle"
+        ):
+            raise KeyNameError(f"{key!r} is not a vehicle key of world {self.world!r}")
+        return parts[len(head) + 1]
+
+    def node_name_of(self, key: str) -> str:
+        """The node name in a ``node/<name>/health`` key of this world."""
+        parts = str(key).split("/")
+        head = self.prefix.split("/")
+        if parts[: len(head)] != head or len(parts) < len(head) + 3 or parts[len(head)] != "node":
+            raise KeyNameError(f"{key!r} is not a node key of world {self.world!r}")
+        return parts[len(head) + 1]
+
+    def relative(self, key: str) -> str:
+        """``key`` without the ``plumeswarm/<world>/`` prefix (for channel names)."""
+        key = str(key)
+        p = self.prefix + "/"
+        return key[len(p) :] if key.startswith(p) else key

@@ -1,0 +1,423 @@
+"""Typed, versioned messages for every payload of the key space (DESIGN.md "Key space").
+
+Every message is a ``msgspec.Struct`` tagged with ``schema = "<name>/v<version>"``; decoding a
+payload with another version fails with a typed error. Floats are bounded (which also rejects
+NaN and inf) unless a field says otherwise. Encode and decode with :mod:`swarmbus.codec`.
+"""
+
+from __future__ import annotations
+
+import enum
+from typing import Annotated, Literal
+
+import msgspec
+
+SCHEMA_VERSION = 1
+
+# Bounded floats: the bounds reject NaN and +-inf as well as absurd magnitudes.
+Finite = Annotated[float, msgspec.Meta(ge=-1e9, le=1e9)]
+NonNegative = Annotated[float, msgspec.Meta(ge=0.0, le=1e9)]
+Positive = Annotated[float, msgspec.Meta(gt=0.0, le=1e9)]
+Unit = Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
+Latitude = Annotated[float, msgspec.Meta(ge=-90.0, le=90.0)]
+Longitude = Annotated[float, msgspec.Meta(ge=-180.0, le=180.0)]
+Altitude = Annotated[float, msgspec.Meta(ge=-1e5, le=1e6)]
+SimTime = Annotated[float, msgspec.Meta(ge=0.0, le=1e9)]
+Tick = Annotated[int, msgspec.Meta(ge=0, le=2**62)]
+Name = Annotated[str, msgspec.Meta(pattern=r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}$")]
+Text = Annotated[str, msgspec.Meta(max_length=1000)]
+Vec3 = tuple[Finite, Finite, Finite]
+Quat = tuple[Finite, Finite, Finite, Finite]
+
+MAX_BATCH_POINTS = 100_000
+MAX_ROTORS = 16
+MAX_MISSION_ITEMS = 1000
+
+
+def _tag(name: str) -> str:
+    return f"{name}/v{SCHEMA_VERSION}"
+
+
+class Message(msgspec.Struct, frozen=True, kw_only=True, tag_field="schema"):
+    """Base of all bus messages."""
+
+
+# --------------------------------------------------------------------------- sim plane
+class SpeedMode(enum.StrEnum):
+    LOCKSTEP = "lockstep"
+    REALTIME = "realtime"
+
+
+class Clock(Message, frozen=True, kw_only=True, tag=_tag("clock")):
+    """``sim/clock``: the physics' view of time."""
+
+    tick: Tick
+    sim_time_s: SimTime
+    mode: SpeedMode
+    speed_factor: Positive
+    real_time_factor: NonNegative
+    participants: list[Name] = []
+
+
+class VehicleState(Message, frozen=True, kw_only=True, tag=_tag("vehicle_state")):
+    """``vehicle/<id>/state`` and an element of ``sim/tick``: ground truth from physics.
+
+    ENU world frame (x east, y north, z up) in metres, origin at the scenario origin;
+    ``attitude_xyzw`` rotates body (FLU: x forward, y left, z up) to world.
+    """
+
+    vehicle_id: Name
+    tick: Tick
+    sim_time_s: SimTime
+    position_enu_m: Vec3
+    velocity_enu_m_s: Vec3
+    attitude_xyzw: Quat
+    body_rates_rad_s: Vec3
+    lat_deg: Latitude
+    lon_deg: Longitude
+    alt_m: Altitude
+    on_ground: bool
+    crashed: bool = False
+    motors_enabled: bool = True
+
+
+class SimTick(Message, frozen=True, kw_only=True, tag=_tag("sim_tick")):
+    """``sim/tick``: all vehicle states of tick k in one message (the lockstep's go signal)."""
+
+    tick: Tick
+    sim_time_s: SimTime
+    control_dt_s: Positive
+    states: list[VehicleState]
+
+
+class ActuatorCommand(Message, frozen=True, kw_only=True, tag=_tag("actuators")):
+    """``vehicle/<id>/actuators``: normalised rotor commands (0..1) for tick ``tick``."""
+
+    vehicle_id: Name
+    tick: Tick
+    rotor_commands: Annotated[list[Unit], msgspec.Meta(max_length=MAX_ROTORS)]
+
+
+# --------------------------------------------------------------------------- vehicle status
+class FlightMode(enum.StrEnum):
+    DISARMED = "disarmed"
+    ARMED = "armed"  # armed on the ground, idle
+    TAKEOFF = "takeoff"
+    HOLD = "hold"
+    MISSION = "mission"
+    LAND = "land"
+    RTL = "rtl"
+    OFFBOARD = "offboard"
+
+
+class VehicleStatus(Message, frozen=True, kw_only=True, tag=_tag("vehicle_status")):
+    """``vehicle/<id>/status``: the autopilot's view of its vehicle."""
+
+    vehicle_id: Name
+    sim_time_s: SimTime
+    mode: FlightMode
+    armed: bool
+    landed: bool
+    crashed: bool = False
+    mission_index: Annotated[int, msgspec.Meta(ge=-1, le=MAX_MISSION_ITEMS)] = -1
+    mission_count: Annotated[int, msgspec.Meta(ge=0, le=MAX_MISSION_ITEMS)] = 0
+    mission_items_reached: Annotated[int, msgspec.Meta(ge=0, le=MAX_MISSION_ITEMS)] = 0
+    mission_finished: bool = False
+    home_enu_m: Vec3 = (0.0, 0.0, 0.0)
+    failsafe: Text = ""
+    health: Text = "ok"
+
+
+class PeerReading(msgspec.Struct, frozen=True, kw_only=True):
+    vehicle_id: Name
+    position_enu_m: Vec3
+    true_g_m3: NonNegative
+
+
+class ConcentrationReading(Message, frozen=True, kw_only=True, tag=_tag("concentration")):
+    """``vehicle/<id>/concentration``: the sensor's reading at the vehicle's own position.
+
+    ``available`` is false when the plume service did not answer: then ``reported_g_m3`` and
+    ``true_g_m3`` are ``None``, never a silent 0.
+    """
+
+    vehicle_id: Name
+    sim_time_s: SimTime
+    position_enu_m: Vec3
+    available: bool
+    reported_g_m3: NonNegative | None
+    true_g_m3: NonNegative | None
+    peers: list[PeerReading] = []
+
+
+# --------------------------------------------------------------------------- commands
+class MissionFrame(enum.StrEnum):
+    ENU = "enu"
+    GLOBAL = "global"  # x = latitude deg, y = longitude deg, z = altitude AMSL m
+
+
+class MissionCommand(enum.StrEnum):
+    """What a mission item does (MAVLink NAV_WAYPOINT, NAV_TAKEOFF, NAV_LAND, NAV_RTL)."""
+
+    WAYPOINT = "waypoint"
+    TAKEOFF = "takeoff"
+    LAND = "land"
+    RTL = "rtl"
+
+
+class MissionItem(msgspec.Struct, frozen=True, kw_only=True):
+    """One mission item. ``frame = enu``: x, y, z metres in the world frame (z above origin);
+    ``frame = global``: x latitude (deg), y longitude (deg), z altitude AMSL (m)."""
+
+    command: MissionCommand = MissionCommand.WAYPOINT
+    x: Finite
+    y: Finite
+    z: Finite
+    frame: MissionFrame = MissionFrame.ENU
+    acceptance_radius_m: Annotated[float, msgspec.Meta(gt=0.0, le=1000.0)] = 1.0
+    hold_s: Annotated[float, msgspec.Meta(ge=0.0, le=3600.0)] = 0.0
+    speed_m_s: Annotated[float, msgspec.Meta(ge=0.0, le=100.0)] = 0.0  # 0: vehicle default
+    yaw_deg: Annotated[float, msgspec.Meta(ge=-360.0, le=360.0)] | None = None
+
+
+class Arm(Message, frozen=True, kw_only=True, tag=_tag("cmd.arm")):
+    pass
+
+
+class Disarm(Message, frozen=True, kw_only=True, tag=_tag("cmd.disarm")):
+    force: bool = False  # MAVLink's 21196: disarm even in the air
+
+
+class Takeoff(Message, frozen=True, kw_only=True, tag=_tag("cmd.takeoff")):
+    altitude_m: Annotated[float, msgspec.Meta(gt=0.0, le=10000.0)]  # above home
+
+
+class Land(Message, frozen=True, kw_only=True, tag=_tag("cmd.land")):
+    pass
+
+
+class ReturnToLaunch(Message, frozen=True, kw_only=True, tag=_tag("cmd.rtl")):
+    pass
+
+
+class Hold(Message, frozen=True, kw_only=True, tag=_tag("cmd.hold")):
+    pass
+
+
+class Goto(Message, frozen=True, kw_only=True, tag=_tag("cmd.goto")):
+    position_enu_m: Vec3
+    yaw_deg: Annotated[float, msgspec.Meta(ge=-360.0, le=360.0)] | None = None
+    speed_m_s: Annotated[float, msgspec.Meta(ge=0.0, le=100.0)] = 0.0
+
+
+class SetMode(Message, frozen=True, kw_only=True, tag=_tag("cmd.set_mode")):
+    mode: FlightMode
+
+
+class MissionUpload(Message, frozen=True, kw_only=True, tag=_tag("cmd.mission_upload")):
+    items: Annotated[list[MissionItem], msgspec.Meta(max_length=MAX_MISSION_ITEMS)]
+
+
+class MissionStart(Message, frozen=True, kw_only=True, tag=_tag("cmd.mission_start")):
+    start_index: Annotated[int, msgspec.Meta(ge=0, le=MAX_MISSION_ITEMS)] = 0
+
+
+class MissionPause(Message, frozen=True, kw_only=True, tag=_tag("cmd.mission_pause")):
+    pass
+
+
+class MissionClear(Message, frozen=True, kw_only=True, tag=_tag("cmd.mission_clear")):
+    pass
+
+
+class MissionDownload(Message, frozen=True, kw_only=True, tag=_tag("cmd.mission_download")):
+    pass
+
+
+class Setpoint(Message, frozen=True, kw_only=True, tag=_tag("cmd.setpoint")):
+    """Offboard setpoint: a position, or a velocity (position ``None``), optional yaw."""
+
+    position_enu_m: Vec3 | None = None
+    velocity_enu_m_s: Vec3 | None = None
+    yaw_deg: Annotated[float, msgspec.Meta(ge=-360.0, le=360.0)] | None = None
+
+
+class GcsHeartbeat(Message, frozen=True, kw_only=True, tag=_tag("cmd.gcs_heartbeat")):
+    """The ground-control link is alive (feeds the data-link-loss failsafe)."""
+
+    source: Text = "gcs"
+
+
+class SetParam(Message, frozen=True, kw_only=True, tag=_tag("cmd.set_param")):
+    name: Annotated[str, msgspec.Meta(pattern=r"^[A-Z0-9_]{1,16}$")]
+    value: Finite
+
+
+class GetParams(Message, frozen=True, kw_only=True, tag=_tag("cmd.get_params")):
+    pass
+
+
+Command = (
+    Arm
+    | Disarm
+    | Takeoff
+    | Land
+    | ReturnToLaunch
+    | Hold
+    | Goto
+    | SetMode
+    | MissionUpload
+    | MissionStart
+    | MissionPause
+    | MissionClear
+    | MissionDownload
+    | Setpoint
+    | GcsHeartbeat
+    | SetParam
+    | GetParams
+)
+
+
+class RejectCode(enum.StrEnum):
+    NONE = ""
+    DENIED = "denied"  # valid but refused in the current state
+    INVALID = "invalid"  # malformed or out-of-range argument
+    UNSUPPORTED = "unsupported"
+    FAILED = "failed"
+
+
+class CommandReply(Message, frozen=True, kw_only=True, tag=_tag("cmd_reply")):
+    """Reply of ``vehicle/<id>/cmd``: accepted, or rejected with a code and a reason."""
+
+    vehicle_id: Name
+    accepted: bool
+    code: RejectCode = RejectCode.NONE
+    reason: Text = ""
+    mission: list[MissionItem] | None = None  # MissionDownload
+    params: dict[str, float] | None = None  # GetParams / SetParam
+
+
+# --------------------------------------------------------------------------- plume
+class PlumeQuery(Message, frozen=True, kw_only=True, tag=_tag("plume_query")):
+    """``plume/concentration`` request: a batch of points (ENU m), optional sim time."""
+
+    points_enu_m: Annotated[list[Vec3], msgspec.Meta(max_length=MAX_BATCH_POINTS)]
+    sim_time_s: SimTime | None = None
+
+
+class PlumeValues(Message, frozen=True, kw_only=True, tag=_tag("plume_values")):
+    values_g_m3: list[NonNegative]
+    sim_time_s: SimTime | None = None
+
+
+class PlumeSource(msgspec.Struct, frozen=True, kw_only=True):
+    x_m: Finite
+    y_m: Finite
+    release_rate_g_s: Positive
+    release_height_m: NonNegative
+
+
+class PlumeInfo(Message, frozen=True, kw_only=True, tag=_tag("plume_info")):
+    model: Text
+    stability: Text
+    coefficients: Text
+    wind_speed_m_s: Positive
+    wind_from_deg: Annotated[float, msgspec.Meta(ge=-360.0, le=360.0)]
+    mixing_height_m: Positive | None
+    sources: list[PlumeSource]
+
+
+class PlumeInfoQuery(Message, frozen=True, kw_only=True, tag=_tag("plume_info_query")):
+    pass
+
+
+class PlumeMeshQuery(Message, frozen=True, kw_only=True, tag=_tag("plume_mesh_query")):
+    level_g_m3: Positive
+    resolution_m: Annotated[float, msgspec.Meta(ge=0.01, le=100.0)] = 0.5
+    bounds_min_m: Vec3 | None = None
+    bounds_max_m: Vec3 | None = None
+
+
+class PlumeMesh(Message, frozen=True, kw_only=True, tag=_tag("plume_mesh")):
+    """Isosurface: ``vertices`` little-endian float32 (V,3), ``faces`` little-endian int32 (F,3)."""
+
+    level_g_m3: Positive
+    vertices_f32: bytes
+    faces_i32: bytes
+
+
+class ErrorReply(Message, frozen=True, kw_only=True, tag=_tag("error")):
+    """Error reply of any queryable: which field was wrong and why."""
+
+    field: Text
+    reason: Text
+
+
+# --------------------------------------------------------------------------- presence
+class NodeState(enum.StrEnum):
+    UP = "up"
+    READY = "ready"
+    STOPPING = "stopping"
+
+
+class NodeHealth(Message, frozen=True, kw_only=True, tag=_tag("node_health")):
+    """``node/<name>/health``: published on change and periodically by every process."""
+
+    name: Name
+    role: Name
+    state: NodeState
+    version: Text
+    pid: Annotated[int, msgspec.Meta(ge=0)]
+    host: Text
+    sim_time_s: SimTime | None = None
+    detail: Text = ""
+
+
+ALL_MESSAGES: tuple[type[Message], ...] = (
+    Clock,
+    VehicleState,
+    SimTick,
+    ActuatorCommand,
+    VehicleStatus,
+    ConcentrationReading,
+    Arm,
+    Disarm,
+    Takeoff,
+    Land,
+    ReturnToLaunch,
+    Hold,
+    Goto,
+    SetMode,
+    MissionUpload,
+    MissionStart,
+    MissionPause,
+    MissionClear,
+    MissionDownload,
+    Setpoint,
+    GcsHeartbeat,
+    SetParam,
+    GetParams,
+    CommandReply,
+    PlumeQuery,
+    PlumeValues,
+    PlumeInfo,
+    PlumeInfoQuery,
+    PlumeMeshQuery,
+    PlumeMesh,
+    ErrorReply,
+    NodeHealth,
+)
+
+__all__ = [m.__name__ for m in ALL_MESSAGES] + [
+    "Command",
+    "FlightMode",
+    "MissionCommand",
+    "MissionFrame",
+    "MissionItem",
+    "NodeState",
+    "PeerReading",
+    "PlumeSource",
+    "RejectCode",
+    "SpeedMode",
+    "Literal",
+]

@@ -1,0 +1,274 @@
+"""Scenario files: TOML validated into typed, immutable config objects.
+
+A bad file gives one line naming the file, the field and what is wrong
+(:class:`ScenarioError`), never a traceback.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+from typing import Annotated, Literal
+
+import msgspec
+
+from swarmbus.messages import MissionItem
+from swarmbus.session import NetworkConfig
+from swarmbus.vehicle_types import VehicleTypeError, load_vehicle_type
+
+SCENARIOS_DIR = Path(__file__).resolve().parent.parent / "deploy" / "scenarios"
+DEFAULT_SCENARIO = SCENARIOS_DIR / "novak2018.toml"
+
+Pos = Annotated[float, msgspec.Meta(gt=0.0, le=1e9)]
+NonNeg = Annotated[float, msgspec.Meta(ge=0.0, le=1e9)]
+Fin = Annotated[float, msgspec.Meta(ge=-1e7, le=1e7)]
+Name = Annotated[str, msgspec.Meta(pattern=r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}$")]
+Degrees = Annotated[float, msgspec.Meta(ge=-360.0, le=360.0)]
+
+
+class _Section(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    pass
+
+
+class Origin(_Section, frozen=True, kw_only=True):
+    """Geodetic origin of the ENU world frame (default: PX4 SITL's Zurich home)."""
+
+    lat_deg: Annotated[float, msgspec.Meta(ge=-90.0, le=90.0)] = 47.397742
+    lon_deg: Annotated[float, msgspec.Meta(ge=-180.0, le=180.0)] = 8.545594
+    alt_m: Annotated[float, msgspec.Meta(ge=-500.0, le=9000.0)] = 488.0
+
+
+class World(_Section, frozen=True, kw_only=True):
+    name: Name = "default"
+    seed: Annotated[int, msgspec.Meta(ge=0, le=2**63 - 1)] = 0
+    origin: Origin = Origin()
+
+
+class Time(_Section, frozen=True, kw_only=True):
+    physics_hz: Annotated[int, msgspec.Meta(ge=1, le=10_000)] = 240
+    control_hz: Annotated[int, msgspec.Meta(ge=1, le=10_000)] = 120
+    mode: Literal["lockstep", "realtime"] = "lockstep"
+    speed_factor: Annotated[float, msgspec.Meta(gt=0.0, le=1000.0)] = 1.0
+    participant_timeout_s: Pos = 2.0
+    startup_timeout_s: Pos = 60.0
+    duration_s: NonNeg = 0.0  # 0: run until stopped
+
+
+class Wind(_Section, frozen=True, kw_only=True):
+    """One wind, two consumers: the plume's advection and the vehicles' air velocity."""
+
+    speed_m_s: Pos = 6.0
+    from_deg: Degrees = 270.0  # meteorological: the direction it blows FROM; 270 → toward +x
+
+
+class Source(_Section, frozen=True, kw_only=True):
+    x_m: Fin = 0.0
+    y_m: Fin = 0.0
+    release_rate_g_s: Pos = 10.0
+    release_height_m: NonNeg = 10.0
+
+
+class Plume(_Section, frozen=True, kw_only=True):
+    """``preset`` fills model, stability, coefficients and sources; explicit fields override."""
+
+    preset: Literal["novak2018"] | None = None
+    model: Literal["gaussian"] = "gaussian"
+    stability: Literal["A", "B", "C", "D", "E", "F"] = "D"
+    coefficients: Literal["mcmullen", "briggs-rural", "briggs-urban", "novak2018"] = "mcmullen"
+    mixing_height_m: Pos | None = None
+    sources: list[Source] = msgspec.field(default_factory=lambda: [Source()])
+
+
+class Sensor(_Section, frozen=True, kw_only=True):
+    """Concentration sensor model. ``preset = "novak2018"`` is the seed's [0.01, 0.2] window."""
+
+    preset: Literal["novak2018", "ideal"] | None = None
+    detection_limit_g_m3: NonNeg = 0.0  # below → 0
+    saturation_g_m3: Pos | None = None  # above → saturation
+    noise_std_g_m3: NonNeg = 0.0
+    time_constant_s: NonNeg = 0.0  # first-order response lag; 0: none
+    period_ticks: Annotated[int, msgspec.Meta(ge=1, le=100_000)] = 1
+
+    def resolved(self) -> Sensor:
+        if self.preset == "novak2018":
+            return msgspec.structs.replace(
+                self, preset=None, detection_limit_g_m3=0.01, saturation_g_m3=0.2
+            )
+        if self.preset == "ideal":
+            return msgspec.structs.replace(
+                self, preset=None, detection_limit_g_m3=0.0, saturation_g_m3=None
+            )
+        return self
+
+
+class Failsafe(_Section, frozen=True, kw_only=True):
+    datalink_loss_action: Literal["none", "hold", "land", "rtl"] = "rtl"
+    datalink_timeout_s: Pos = 10.0
+    datalink_required: bool = False  # only armed once a GCS heartbeat was seen
+    offboard_loss_action: Literal["hold", "land", "rtl"] = "hold"
+    offboard_timeout_s: Pos = 0.5
+    geofence_max_alt_m: Pos = 120.0
+    geofence_max_distance_m: Pos = 1000.0
+    rtl_altitude_m: Pos = 15.0
+    takeoff_altitude_m: Pos = 2.5
+    crash_speed_m_s: Pos = 3.0
+
+
+class Vehicle(_Section, frozen=True, kw_only=True):
+    id: Name
+    type: Name = "iris"
+    sysid: Annotated[int, msgspec.Meta(ge=1, le=254)] | None = None
+    spawn_enu_m: tuple[Fin, Fin, Fin] = (0.0, 0.0, 0.0)
+    spawn_yaw_deg: Degrees = 0.0
+    mission: list[MissionItem] = []
+    behavior: str | None = None  # "module:Class" plug-in for offboard mode
+    failsafe: Failsafe | None = None  # overrides the scenario's [failsafe]
+
+
+class Gateway(_Section, frozen=True, kw_only=True):
+    host: str = "127.0.0.1"
+    gcs_port: Annotated[int, msgspec.Meta(ge=1, le=65535)] = 14550
+    api_port_base: Annotated[int, msgspec.Meta(ge=1, le=65535)] = 14540
+    signing_key_hex: Annotated[str, msgspec.Meta(pattern=r"^[0-9a-fA-F]{64}$")] | None = None
+    telemetry_hz: Annotated[float, msgspec.Meta(gt=0.0, le=100.0)] = 4.0
+
+
+class Scenario(_Section, frozen=True, kw_only=True):
+    world: World = World()
+    time: Time = Time()
+    network: NetworkConfig = NetworkConfig()
+    wind: Wind = Wind()
+    plume: Plume = Plume()
+    sensor: Sensor = Sensor()
+    failsafe: Failsafe = Failsafe()
+    gateway: Gateway = Gateway()
+    vehicles: Annotated[list[Vehicle], msgspec.Meta(min_length=1, max_length=1024)]
+
+    def vehicle(self, vehicle_id: str) -> Vehicle:
+        for v in self.vehicles:
+            if v.id == vehicle_id:
+                return v
+        raise KeyError(vehicle_id)
+
+    def failsafe_for(self, vehicle_id: str) -> Failsafe:
+        return self.vehicle(vehicle_id).failsafe or self.failsafe
+
+    def sysid_of(self, vehicle_id: str) -> int:
+        for index, v in enumerate(self.vehicles):
+            if v.id == vehicle_id:
+                return v.sysid if v.sysid is not None else index + 1
+        raise KeyError(vehicle_id)
+
+    @property
+    def substeps(self) -> int:
+        return self.time.physics_hz // self.time.control_hz
+
+
+class ScenarioError(ValueError):
+    """One line: the file, the field and what is wrong."""
+
+    def __init__(self, source: str, field: str, reason: str) -> None:
+        self.source = source
+        self.field = field
+        self.reason = reason
+        super().__init__(f"{source}: {field or '<file>'}: {reason}")
+
+
+def _check(scenario: Scenario, source: str) -> None:
+    t = scenario.time
+    if t.physics_hz % t.control_hz != 0:
+        raise ScenarioError(
+            source,
+            "time.control_hz",
+            f"must divide time.physics_hz ({t.physics_hz}) exactly, got {t.control_hz}",
+        )
+    seen: dict[str, int] = {}
+    sysids: dict[int, str] = {}
+    for i, v in enumerate(scenario.vehicles):
+        if v.id in seen:
+            raise ScenarioError(
+                source,
+                f"vehicles[{i}].id",
+                f"duplicate vehicle id {v.id!r} (also vehicles[{seen[v.id]}])",
+            )
+        seen[v.id] = i
+        try:
+            load_vehicle_type(v.type)
+        except VehicleTypeError as exc:
+            raise ScenarioError(source, f"vehicles[{i}].type", str(exc)) from None
+        sysid = scenario.sysid_of(v.id)
+        if sysid in sysids:
+            raise ScenarioError(
+                source, f"vehicles[{i}].sysid", f"sysid {sysid} already used by {sysids[sysid]!r}"
+            )
+        sysids[sysid] = v.id
+        if v.behavior is not None and ":" not in v.behavior:
+            raise ScenarioError(
+                source, f"vehicles[{i}].behavior", f"expected 'module:Class', got {v.behavior!r}"
+            )
+    sensor = scenario.sensor.resolved()
+    if sensor.saturation_g_m3 is not None and sensor.saturation_g_m3 <= sensor.detection_limit_g_m3:
+        raise ScenarioError(
+            source,
+            "sensor.saturation_g_m3",
+            f"must exceed sensor.detection_limit_g_m3 ({sensor.detection_limit_g_m3})",
+        )
+    if not scenario.plume.sources:
+        raise ScenarioError(source, "plume.sources", "at least one source is required")
+
+
+def _field_of(exc: msgspec.ValidationError) -> tuple[str, str]:
+    text = str(exc)
+    marker = " - at `$"
+    if marker in text:
+        reason, _, path = text.partition(marker)
+        return path.rstrip("`").lstrip("."), reason
+    return "", text
+
+
+def parse_scenario(text: str, source: str = "<scenario>") -> Scenario:
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(source, "", f"not valid TOML: {exc}") from None
+    if raw.get("plume", {}).get("preset") == "novak2018":
+        plume = raw.setdefault("plume", {})
+        plume.setdefault("coefficients", "novak2018")
+        plume.setdefault("stability", "D")
+        plume.setdefault(
+            "sources",
+            [{"x_m": 0.0, "y_m": 0.0, "release_rate_g_s": 10.0, "release_height_m": 10.0}],
+        )
+        raw.setdefault("wind", {}).setdefault("speed_m_s", 6.0)
+        raw["wind"].setdefault("from_deg", 270.0)
+    try:
+        scenario = msgspec.convert(raw, Scenario)
+    except msgspec.ValidationError as exc:
+        field, reason = _field_of(exc)
+        raise ScenarioError(source, field, reason) from None
+    _check(scenario, source)
+    return scenario
+
+
+def load_scenario(path: str | Path | None = None) -> Scenario:
+    """Load and validate a scenario file (default: ``deploy/scenarios/novak2018.toml``)."""
+    p = Path(path) if path is not None else DEFAULT_SCENARIO
+    try:
+        text = p.read_text()
+    except FileNotFoundError:
+        raise ScenarioError(str(p), "", "no such file") from None
+    except IsADirectoryError:
+        raise ScenarioError(str(p), "", "is a directory, not a scenario file") from None
+    except (PermissionError, UnicodeDecodeError, OSError) as exc:
+        raise ScenarioError(str(p), "", f"cannot read: {exc}") from None
+    return parse_scenario(text, str(p))
+
+
+def resolve_scenario_path(name_or_path: str | None) -> Path:
+    """A scenario path, or the name of a bundled scenario (``novak2018``)."""
+    if name_or_path is None:
+        return DEFAULT_SCENARIO
+    p = Path(name_or_path)
+    if p.exists() or p.suffix == ".toml" or "/" in name_or_path:
+        return p
+    return SCENARIOS_DIR / f"{name_or_path}.toml"
