@@ -228,23 +228,10 @@ def start_missions(session: zenoh.Session, keys: Keys, scenario: Scenario, deadl
 
 # ---------------------------------------------------------------------------- results
 def model_for(scenario: Scenario) -> ModelFn:
-    """The plume model the scenario describes (plume_service's GaussianPlume, superposed)."""
-    from plume_service import GaussianPlume, PlumeField  # type: ignore[attr-defined,unused-ignore]
+    """The plume model the scenario describes (plume_service's own construction of it)."""
+    from plume_service.from_scenario import field_from_scenario
 
-    plumes = [
-        GaussianPlume(
-            release_rate=src.release_rate_g_s,
-            wind_speed=scenario.wind.speed_m_s,
-            release_height=src.release_height_m,
-            stability=scenario.plume.stability,
-            coefficients=scenario.plume.coefficients,
-            source=(src.x_m, src.y_m),
-            wind_from_deg=scenario.wind.from_deg,
-            mixing_height=scenario.plume.mixing_height_m,
-        )
-        for src in scenario.plume.sources
-    ]
-    field_ = plumes[0] if len(plumes) == 1 else PlumeField(plumes)
+    field_ = field_from_scenario(scenario)
 
     def model(points: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
         return np.asarray(field_.concentration(points), dtype=np.float64)

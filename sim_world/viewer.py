@@ -422,6 +422,7 @@ class MeshFetcher:
         self, session: zenoh.Session, keys: Keys, queries: Sequence[PlumeMeshQuery]
     ) -> None:
         self.results: dict[int, PlumeMesh] = {}
+        self.queries = list(queries)
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._thread = threading.Thread(
@@ -468,7 +469,8 @@ def mesh_queries(scenario: Scenario, opts: ViewerOptions) -> list[PlumeMeshQuery
     ]
 
 
-def render(scene: Scene, feed: Feed, meshes: MeshFetcher) -> None:
+def render(scene: Scene, feed: Feed, meshes: MeshFetcher) -> int:
+    """Draw what is new; the number of plume levels that arrived."""
     tick_raw, readings_raw = feed.take()
     if tick_raw is not None:
         try:
@@ -481,8 +483,10 @@ def render(scene: Scene, feed: Feed, meshes: MeshFetcher) -> None:
             scene.update_reading(decode(raw, ConcentrationReading))
         except MessageError as exc:
             log.warning("ignoring reading of %s: %s", vid, exc)
-    for index, mesh in meshes.take().items():
+    new_meshes = meshes.take()
+    for index, mesh in new_meshes.items():
         scene.set_plume(index, mesh)
+    return len(new_meshes)
 
 
 def main(ctx: NodeContext) -> int:
@@ -500,13 +504,18 @@ def main(ctx: NodeContext) -> int:
         # The URL is this role's output for its user.
         sys.stdout.write(f"viewer: open {srv.web_url}\n")
         sys.stdout.flush()
-        rt.publish_health(detail=f"url={srv.web_url}")
+        levels = len(meshes.queries)
+        answered = 0
+        rt.publish_health(detail=f"url={srv.web_url} plume=0/{levels}")
         rt.ready()
         period = 1.0 / opts.rate_hz
         try:
             while not rt.stop.is_set():
                 t0 = time.monotonic()
-                render(scene, feed, meshes)
+                arrived = render(scene, feed, meshes)
+                if arrived:
+                    answered += arrived
+                    rt.publish_health(detail=f"url={srv.web_url} plume={answered}/{levels}")
                 rt.stop.wait(max(0.0, period - (time.monotonic() - t0)))
         finally:
             feed.close()

@@ -1,8 +1,8 @@
 """The viewer in headless Chromium: the page shows the scene, and its tree holds vehicles and plume.
 
-Stand-ins in the test process play physics (``sim/tick``), the autopilots' readings and the plume
-service's ``plume/mesh`` queryable (a closed mesh from marching cubes), so only the viewer is
-under test. The screenshot is kept as docs/viewer.png when PLUMESWARM_SAVE_SCREENSHOT=1.
+The real plume node answers ``plume/mesh``; stand-ins in the test process play physics
+(``sim/tick``) and the autopilots' readings. The screenshot is kept as docs/viewer.png when
+PLUMESWARM_SAVE_SCREENSHOT=1.
 """
 
 from __future__ import annotations
@@ -17,17 +17,14 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import matplotlib.image
-import mcubes
 import numpy as np
 import pytest
 import zenoh
 
 from deploy.busview import BusView
-from swarmbus.codec import decode, encode
+from swarmbus.codec import encode
 from swarmbus.messages import (
     ConcentrationReading,
-    PlumeMesh,
-    PlumeMeshQuery,
     SimTick,
     VehicleState,
 )
@@ -55,21 +52,6 @@ pytestmark = [
 ]
 
 
-def fake_mesh(query: PlumeMeshQuery) -> PlumeMesh:
-    """A plume-like cigar downwind of the origin, meshed at the asked level."""
-    x, y, z = np.mgrid[0:60:61j, -15:15:31j, 0:25:26j]
-    sigma = 1.0 + 0.12 * x
-    field = 0.4 * np.exp(-(y**2 + (z - 10.0) ** 2) / (2 * sigma**2)) * (x > 1)
-    padded = np.pad(field, 1)
-    verts, faces = mcubes.marching_cubes(padded, query.level_g_m3)
-    verts = (verts - 1) * np.array([1.0, 1.0, 1.0]) + np.array([0.0, -15.0, 0.0])
-    return PlumeMesh(
-        level_g_m3=query.level_g_m3,
-        vertices_f32=verts.astype("<f4").tobytes(),
-        faces_i32=faces.astype("<i4").tobytes(),
-    )
-
-
 def state(vid: str, tick: int, pos: tuple[float, float, float]) -> VehicleState:
     return VehicleState(
         vehicle_id=vid,
@@ -87,18 +69,10 @@ def state(vid: str, tick: int, pos: tuple[float, float, float]) -> VehicleState:
 
 
 @contextmanager
-def world_stand_ins(session: zenoh.Session) -> Iterator[list[PlumeMeshQuery]]:
+def flying_stand_ins(session: zenoh.Session) -> Iterator[None]:
+    """Physics' ticks and the autopilots' readings: vehicles circling inside the plume."""
     keys = keys_for()
     sc = load_scenario()
-    queries: list[PlumeMeshQuery] = []
-
-    def on_mesh(query: zenoh.Query) -> None:
-        assert query.payload is not None
-        q = decode(query.payload.to_bytes(), PlumeMeshQuery)
-        queries.append(q)
-        query.reply(keys.plume_mesh(), encode(fake_mesh(q)))
-
-    queryable = session.declare_queryable(keys.plume_mesh(), on_mesh)
     stop = threading.Event()
 
     def fly() -> None:
@@ -127,11 +101,10 @@ def world_stand_ins(session: zenoh.Session) -> Iterator[list[PlumeMeshQuery]]:
     t = threading.Thread(target=fly, daemon=True)
     t.start()
     try:
-        yield queries
+        yield
     finally:
         stop.set()
         t.join(5)
-        queryable.undeclare()
 
 
 def chromium(
@@ -153,23 +126,19 @@ def test_viewer_page_shows_vehicles_and_plume(
     sc = load_scenario()
     with (
         _client(net) as session,
-        world_stand_ins(session) as queries,
+        flying_stand_ins(session),
         NodeProcs(net, log_dir=tmp_path) as procs,
     ):
         view = BusView(session, keys_for())
+        procs.start("plume", name="plume")
         procs.start("viewer", name="viewer")
         health = wait_until(
-            lambda: (
-                (h := view.snapshot().health.get("viewer")) and h.detail.startswith("url=") and h
-            ),
-            60.0,
-            "the viewer's health with its URL",
+            lambda: (h := view.snapshot().health.get("viewer")) and "plume=3/3" in h.detail and h,
+            90.0,
+            "the viewer's health saying all 3 plume levels arrived",
         )
-        url = health.detail.removeprefix("url=")
+        url = health.detail.split()[0].removeprefix("url=")
         assert url.startswith("http://127.0.0.1:") and url.endswith("/static/")
-        wait_until(lambda: len(queries) >= 3, 30.0, "the viewer to ask plume/mesh for 3 levels")
-        # Let a few frames and trail updates reach the page's server.
-        wait_until(lambda: "viewer" in view.presence.alive, 10.0, "viewer token")
         dom = chromium(["--dump-dom", "--virtual-time-budget=6000", url], tmp_path / "u1")
         page = dom.stdout.decode("utf-8", "replace")
         assert dom.returncode == 0, dom.stderr[-2000:]
