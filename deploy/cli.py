@@ -191,7 +191,14 @@ def up(
 @click.option("--vehicles", type=click.IntRange(1, 1024), default=None, help="Scale to N vehicles.")
 @click.option("--out", type=click.Path(path_type=Path), default=None, help="Run directory.")
 @click.option("--timeout", "timeout_s", type=float, default=900.0, show_default=True)
-def demo(scenario: str | None, vehicles: int | None, out: Path | None, timeout_s: float) -> None:
+@click.option("--attach", multiple=True, metavar="EP", help="Fly a stack already running here.")
+def demo(
+    scenario: str | None,
+    vehicles: int | None,
+    out: Path | None,
+    timeout_s: float,
+    attach: tuple[str, ...],
+) -> None:
     """Fly the default scenario end to end, headless, and print the accuracy table."""
     from deploy.console import Console
     from deploy.demo import DemoOptions, run_demo
@@ -199,7 +206,7 @@ def demo(scenario: str | None, vehicles: int | None, out: Path | None, timeout_s
 
     path = resolve_scenario_path(scenario)
     opts = DemoOptions(
-        scenario_from(str(path)), path, out or default_run_dir(), vehicles, timeout_s
+        scenario_from(str(path)), path, out or default_run_dir(), vehicles, timeout_s, attach=attach
     )
     sys.exit(run_demo(opts, Console()))
 

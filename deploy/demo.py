@@ -25,7 +25,7 @@ import numpy as np
 import numpy.typing as npt
 import zenoh
 
-from deploy.busview import Snapshot, status_line
+from deploy.busview import BusView, Snapshot, status_line
 from deploy.console import Console
 from deploy.launcher import Launcher, LaunchError, LaunchOptions, missing_roles
 from deploy.scaling import scale_scenario, write_scenario
@@ -42,7 +42,7 @@ from swarmbus.messages import (
     VehicleStatus,
 )
 from swarmbus.scenario import Scenario
-from swarmbus.session import free_tcp_port
+from swarmbus.session import NetworkConfig, free_tcp_port, open_session
 
 log = logging.getLogger(__name__)
 
@@ -353,6 +353,47 @@ class DemoOptions:
     vehicles: int | None = None
     timeout_s: float = 900.0
     table_period_s: float = 1.0
+    attach: tuple[str, ...] = ()  # fly a stack already running behind this router endpoint
+
+
+class AttachedStack:
+    """A stack someone else started (on this host or others): we only join its bus."""
+
+    def __init__(self, scenario: Scenario, connect: Sequence[str]) -> None:
+        self.scenario = scenario
+        self.net = NetworkConfig(connect=list(connect), listen=[])
+        self.keys = Keys(scenario.world.name)
+        self.specs: Sequence[object] = ()
+        self._session: zenoh.Session | None = None
+        self.view: BusView | None = None
+
+    @property
+    def session(self) -> zenoh.Session:
+        assert self._session is not None
+        return self._session
+
+    def start(self, on_bus: Callable[[zenoh.Session], None] | None = None) -> None:
+        self._session = open_session(self.net)
+        self.view = BusView(self._session, self.keys)
+        if on_bus is not None:
+            on_bus(self._session)
+        wanted = {f"autopilot-{v.id}" for v in self.scenario.vehicles} | {"physics", "plume"}
+        timeout = self.scenario.time.startup_timeout_s
+        if not self.view.presence.wait_for(lambda alive: wanted <= alive, timeout):
+            missing = ", ".join(sorted(wanted - self.view.presence.alive))
+            raise LaunchError(f"not on the bus within {timeout:.0f} s: {missing}")
+        self.specs = sorted(self.view.presence.alive)
+
+    def supervise_once(self) -> None:
+        pass
+
+    def stop(self) -> None:
+        if self.view is not None:
+            self.view.close()
+            self.view = None
+        if self._session is not None:
+            self._session.close()
+            self._session = None
 
 
 def prepare(opts: DemoOptions) -> tuple[Scenario, Path]:
@@ -360,6 +401,8 @@ def prepare(opts: DemoOptions) -> tuple[Scenario, Path]:
     sc = opts.scenario
     if opts.vehicles is not None:
         sc = scale_scenario(sc, opts.vehicles)
+    if opts.attach:
+        return sc, write_scenario(sc, opts.out / "scenario.toml")
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     sc = msgspec.structs.replace(
         sc,
@@ -373,9 +416,11 @@ def run_demo(opts: DemoOptions, console: Console) -> int:
     sc, path = prepare(opts)
     keys = Keys(sc.world.name)
     ids = [v.id for v in sc.vehicles]
-    record = not missing_roles(["recorder"])
+    record = not opts.attach and not missing_roles(["recorder"])
     launch = LaunchOptions(scenario_path=path, headless=True, record=record, run_dir=opts.out)
-    launcher = Launcher(sc, launch)
+    launcher: Launcher | AttachedStack = (
+        AttachedStack(sc, opts.attach) if opts.attach else Launcher(sc, launch)
+    )
     collector: Collector | None = None
     deadline = time.monotonic() + opts.timeout_s
     console.line(f"plumeswarm demo: {len(ids)} vehicle(s), run directory {opts.out}")

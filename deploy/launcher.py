@@ -216,7 +216,7 @@ class Launcher:
         first = [s.name for s in self.specs if s.role == "router"]
         if first:
             self.supervisor.start_all(first)
-            self._wait_procs_started(first, timeout)
+        self._wait_router(timeout)
         self._session = open_session(self._client_network())
         self.view = BusView(self._session, self.keys)
         if first:
@@ -233,8 +233,8 @@ class Launcher:
         self.wait_ready(rest, timeout)
         self.write_pids()
 
-    def _wait_procs_started(self, names: Sequence[str], timeout_s: float) -> None:
-        # The router must accept connections before our session connects to it.
+    def _wait_router(self, timeout_s: float) -> None:
+        # The router (ours or another host's) must accept connections before anyone joins.
         import socket
 
         endpoints = router_endpoints(self.scenario, self.opts)
@@ -245,7 +245,7 @@ class Launcher:
                 continue
             host, _, port = addr.rpartition(":")
             while True:
-                self._check_exits(names)
+                self._check_exits()
                 try:
                     with socket.create_connection((host.strip("[]"), int(port)), timeout=0.5):
                         break
@@ -256,7 +256,7 @@ class Launcher:
                         ) from None
                     time.sleep(0.05)
 
-    def _check_exits(self, names: Sequence[str]) -> None:
+    def _check_exits(self) -> None:
         self.supervisor.poll()
         for sv in self.supervisor.failed_for_good():
             detail = _last_lines(sv.log_path)
@@ -272,7 +272,7 @@ class Launcher:
         wanted = set(names)
         deadline = time.monotonic() + timeout_s
         while True:
-            self._check_exits(names)
+            self._check_exits()
             alive = self.view.presence.alive
             if wanted <= alive:
                 return
