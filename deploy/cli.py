@@ -158,10 +158,17 @@ def up(
 ) -> None:
     """Start the whole swarm (plume, physics, autopilots, gateway, viewer) and supervise it."""
     from deploy.console import Console
+    from deploy.hosts import HostsError, load_deployment, options_for_host
     from deploy.launcher import LaunchError, LaunchOptions, default_run_dir
     from deploy.up import run_up
 
-    path = resolve_scenario_path(scenario_arg or scenario)
+    try:
+        deployment = load_deployment(hosts_file) if hosts_file is not None else None
+    except HostsError as exc:
+        fail(str(exc))
+    path = resolve_scenario_path(
+        scenario_arg or scenario or (deployment.scenario if deployment else None)
+    )
     sc = scenario_from(str(path))
     opts = LaunchOptions(
         scenario_path=path,
@@ -173,11 +180,9 @@ def up(
         roles=tuple(r.strip() for r in roles.split(",") if r.strip()) if roles else None,
         router=not no_router,
     )
-    if hosts_file is not None or host_name is not None:
-        from deploy.hosts import HostsError, options_for_host
-
+    if deployment is not None or host_name is not None:
         try:
-            opts = options_for_host(opts, hosts_file, host_name)
+            opts = options_for_host(opts, deployment, host_name)
         except HostsError as exc:
             fail(str(exc))
     try:

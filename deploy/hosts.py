@@ -57,14 +57,15 @@ def load_deployment(path: Path) -> Deployment:
 
 
 def options_for_host(
-    opts: LaunchOptions, path: Path | None, host_name: str | None
+    opts: LaunchOptions, deployment: Deployment | None, host_name: str | None
 ) -> LaunchOptions:
-    if path is None or host_name is None:
+    """``opts`` narrowed to one host's roles and endpoints."""
+    if deployment is None or host_name is None:
         raise HostsError("--hosts FILE and --host NAME go together")
-    host = load_deployment(path).host(host_name)
+    host = deployment.host(host_name)
     return replace(
         opts,
-        connect=(load_deployment(path).router,),
+        connect=(deployment.router,),
         listen=tuple(host.listen) or opts.listen,
         roles=tuple(host.roles),
         router="router" in host.roles,
