@@ -47,6 +47,7 @@ from swarmbus.session import NetworkConfig, free_tcp_port, open_session
 log = logging.getLogger(__name__)
 
 SAMPLES_PER_VEHICLE = 5
+DEMO_ROLES = ("router", "plume", "physics", "autopilot")
 AIRBORNE_M = 1.0
 ModelFn = Callable[[npt.NDArray[np.float64]], npt.NDArray[np.float64]]
 
@@ -216,6 +217,24 @@ def command_until_answered(
         if time.monotonic() > deadline:
             raise DemoError(f"{vehicle_id} did not answer {name} in time")
         time.sleep(0.2)
+
+
+def wait_for_world(view: BusView, vehicle_ids: Sequence[str], deadline: float) -> None:
+    """Until the lockstep runs: a state and a status of every vehicle."""
+
+    def ready(snap: Snapshot) -> bool:
+        return all(
+            (v := snap.vehicles.get(vid)) is not None
+            and v.state is not None
+            and v.status is not None
+            for vid in vehicle_ids
+        )
+
+    while not ready(snap := view.snapshot()):
+        if time.monotonic() > deadline:
+            missing = [vid for vid in vehicle_ids if vid not in snap.vehicles]
+            raise DemoError(f"the world did not start in time (no state of {', '.join(missing)})")
+        view.wait_changed(0.2)
 
 
 def start_missions(session: zenoh.Session, keys: Keys, scenario: Scenario, deadline: float) -> None:
@@ -417,7 +436,11 @@ def run_demo(opts: DemoOptions, console: Console) -> int:
     keys = Keys(sc.world.name)
     ids = [v.id for v in sc.vehicles]
     record = not opts.attach and not missing_roles(["recorder"])
-    launch = LaunchOptions(scenario_path=path, headless=True, record=record, run_dir=opts.out)
+    # What flying needs (no gateway: nobody speaks MAVLink here; the recorder when it exists).
+    roles = DEMO_ROLES + (("recorder",) if record else ())
+    launch = LaunchOptions(
+        scenario_path=path, headless=True, record=record, run_dir=opts.out, roles=roles
+    )
     launcher: Launcher | AttachedStack = (
         AttachedStack(sc, opts.attach) if opts.attach else Launcher(sc, launch)
     )
@@ -435,7 +458,9 @@ def run_demo(opts: DemoOptions, console: Console) -> int:
     try:
         launcher.start(on_bus=subscribe)
         assert collector is not None and launcher.view is not None
-        console.line(f"plumeswarm demo: {len(launcher.specs)} processes ready; starting missions")
+        console.line(f"plumeswarm demo: {len(launcher.specs)} processes ready")
+        wait_for_world(launcher.view, ids, deadline)
+        console.line("plumeswarm demo: the world is ticking; starting missions")
         start_missions(launcher.session, keys, sc, deadline)
         wall0 = time.monotonic()
         snap = launcher.view.snapshot()
