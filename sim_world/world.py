@@ -34,6 +34,12 @@ from swarmbus.vehicle_types import VehicleType, load_vehicle_type
 GRAVITY_M_S2 = 9.81
 # pybullet reports contact points within its collision margin; closer than this is touching.
 CONTACT_DISTANCE_M = 5e-3
+# Rotor speeds this close to their target snap to it, so settled motors (idle on the ground,
+# open-loop hover) skip the motor maths: 1e-6 rad/s changes thrust by ~1e-9 relative.
+MOTOR_SNAP_RAD_S = 1e-6
+# Bullet's default is 50; resting and landing boxes need far fewer, and with many vehicles on
+# the ground the contact solver is most of the step's cost (128 grounded: ~2x faster at 10).
+SOLVER_ITERATIONS = 10
 _ORIGIN = (0.0, 0.0, 0.0)
 
 
@@ -80,9 +86,11 @@ class _Vehicle:
         "on_ground",
         "rotor_x",
         "rotor_y",
+        "settled",
         "spin",
         "target",
         "type",
+        "wrench",
     )
 
     def __init__(self, spec: VehicleSpec, vtype: VehicleType, body: int, crash_speed: float):
@@ -101,12 +109,49 @@ class _Vehicle:
         self.motor_alpha = 1.0  # set by World from the physics step
         self.omega = [0.0] * n
         self.target = [0.0] * n
+        # Motors at their targets: the body-frame thrust and torque are constant (cached).
+        self.settled = True
+        self.wrench = (0.0, 0.0, 0.0, 0.0)
         self.motors_enabled = True
         self.crash_speed_m_s = crash_speed
         self.crashed = False
         self.on_ground = False
         self.in_contact = False
         self.max_speed2 = 0.0
+
+
+def _spin_motors(v: _Vehicle) -> tuple[float, float, float, float]:
+    """One motor-lag step; the body-frame thrust and torque (x, y, z) of the new speeds."""
+    alpha = v.motor_alpha
+    k_f = v.k_f
+    k_m = v.k_m
+    omega = v.omega
+    target = v.target
+    rx = v.rotor_x
+    ry = v.rotor_y
+    spin = v.spin
+    thrust = tx = ty = tz = 0.0
+    settled = True
+    for i in range(len(omega)):
+        w = omega[i]
+        diff = target[i] - w
+        if -MOTOR_SNAP_RAD_S < diff < MOTOR_SNAP_RAD_S:
+            w = target[i]
+        else:
+            w += diff * alpha
+            settled = False
+        omega[i] = w
+        w2 = w * w
+        f = k_f * w2
+        thrust += f
+        tx += ry[i] * f
+        ty -= rx[i] * f
+        tz -= spin[i] * k_m * w2
+    wrench = (thrust, tx, ty, tz)
+    if settled:
+        v.settled = True
+        v.wrench = wrench
+    return wrench
 
 
 class World:
@@ -137,6 +182,7 @@ class World:
         c = self._client
         pb.setGravity(0.0, 0.0, -GRAVITY_M_S2, physicsClientId=c)
         pb.setTimeStep(self.dt_s, physicsClientId=c)
+        pb.setPhysicsEngineParameter(numSolverIterations=SOLVER_ITERATIONS, physicsClientId=c)
         plane = pb.createCollisionShape(pb.GEOM_PLANE, physicsClientId=c)
         self.ground_body = pb.createMultiBody(0.0, plane, -1, _ORIGIN, physicsClientId=c)
         self._vehicles: list[_Vehicle] = []
@@ -222,7 +268,10 @@ class World:
         enabled = v.motors_enabled
         for i, u in enumerate(rotor_commands):
             u = 0.0 if u < 0.0 else (1.0 if u > 1.0 else float(u))
-            target[i] = u * omega_max if enabled else 0.0
+            w = u * omega_max if enabled else 0.0
+            if w != target[i]:
+                target[i] = w
+                v.settled = False
 
     def set_motors_enabled(self, vehicle_id: str, enabled: bool) -> None:
         """Disabled motors get zero targets until enabled again (a dropped participant)."""
@@ -230,6 +279,7 @@ class World:
         v.motors_enabled = enabled
         if not enabled:
             v.target[:] = [0.0] * len(v.target)
+            v.settled = False
 
     def set_rotor_speeds(self, vehicle_id: str, omega_rad_s: Sequence[float]) -> None:
         """Initial condition: rotors already spinning at ``omega_rad_s`` (and targeting it)."""
@@ -238,6 +288,7 @@ class World:
             raise ValueError(f"vehicle {vehicle_id!r} has {len(v.omega)} rotors")
         v.omega[:] = [float(w) for w in omega_rad_s]
         v.target[:] = [float(w) for w in omega_rad_s]
+        v.settled = False
 
     def rotor_speeds(self, vehicle_id: str) -> tuple[float, ...]:
         return tuple(self._by_id[vehicle_id].omega)
@@ -262,26 +313,10 @@ class World:
                 speed2 = vx * vx + vy * vy + vz * vz
                 if speed2 > v.max_speed2:
                     v.max_speed2 = speed2
-                # Motors, thrust and torques.
-                alpha = v.motor_alpha
-                k_f = v.k_f
-                k_m = v.k_m
-                omega = v.omega
-                target = v.target
-                rx = v.rotor_x
-                ry = v.rotor_y
-                spin = v.spin
-                thrust = tx = ty = tz = 0.0
-                for i in range(len(omega)):
-                    w = omega[i]
-                    w += (target[i] - w) * alpha
-                    omega[i] = w
-                    w2 = w * w
-                    f = k_f * w2
-                    thrust += f
-                    tx += ry[i] * f
-                    ty -= rx[i] * f
-                    tz -= spin[i] * k_m * w2
+                if v.settled:
+                    thrust, tx, ty, tz = v.wrench
+                else:
+                    thrust, tx, ty, tz = _spin_motors(v)
                 # Drag against the air, in body axes.
                 bx, by, bz = rotate_to_body(q, vx - wx, vy - wy, vz - wz)
                 dx, dy, dz = v.drag
