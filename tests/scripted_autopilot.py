@@ -107,6 +107,9 @@ class Script:
             self.stop.wait(a.delay_s)
             with self.lock:
                 self.delaying = False
+        with self.lock:  # before the puts: tick k + 1 may arrive as soon as they are out
+            self.answered = max(self.answered, msg.tick)
+            self.answers += 1
         for state in msg.states:
             if state.vehicle_id in self.pubs:
                 cmd = ActuatorCommand(
@@ -115,9 +118,6 @@ class Script:
                     rotor_commands=self.rotor_commands(state),
                 )
                 self.pubs[state.vehicle_id].put(encode(cmd))
-        with self.lock:
-            self.answered = max(self.answered, msg.tick)
-            self.answers += 1
         if a.max_tick is not None and msg.tick >= a.max_tick:
             self.stop.set()
 
