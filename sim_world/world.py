@@ -328,7 +328,8 @@ class World:
                     link_frame,
                     physicsClientId=c,
                 )
-                torque(body, -1, (tx, ty, tz), link_frame, physicsClientId=c)
+                if tx or ty or tz:  # idle motors: no torque call
+                    torque(body, -1, (tx, ty, tz), link_frame, physicsClientId=c)
             step_sim(physicsClientId=c)
             self.step_count += 1
         self._update_contacts()
