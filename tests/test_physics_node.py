@@ -14,9 +14,9 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from swarmbus.codec import decode
+from swarmbus.codec import decode, encode
 from swarmbus.keys import Keys
-from swarmbus.messages import Clock, SimTick
+from swarmbus.messages import ActuatorCommand, Clock, SimTick
 from tests.procs import REPO, Network, NodeProcs, run_cli, wait_until
 
 WORLD = "physics-test"
@@ -74,6 +74,7 @@ class Watch:
         self.motors: dict[int, dict[str, bool]] = {}
         self.last_tick = -1
         self.clock: Clock | None = None
+        self.session = session
         self._subs = [
             session.declare_subscriber(KEYS.tick(), self._on_tick),
             session.declare_subscriber(KEYS.clock(), self._on_clock),
@@ -206,6 +207,13 @@ def test_late_joiner_is_admitted(setup: tuple[NodeProcs, Watch], tmp_path: Path)
     wait_until(lambda: watch.first_tick_after(0, "a", True), 60.0, "a's motors on")
     joined_from = watch.last_tick
     assert watch.motors[joined_from]["b"] is False  # nobody flies b yet
+    # Garbage, a command on another vehicle's key and a command without a token change nothing.
+    watch.session.put(KEYS.vehicle_actuators("b"), b"\x00garbage")
+    for key_vid in ("a", "b"):
+        cmd = ActuatorCommand(vehicle_id="b", tick=watch.last_tick, rotor_commands=[1.0] * 6)
+        watch.session.put(KEYS.vehicle_actuators(key_vid), encode(cmd))
+    wait_until(lambda: watch.last_tick >= joined_from + 50, 30.0, "ticks go on")
+    assert watch.first_tick_after(joined_from, "b", True) == 0
     start_script(procs, sc, "--vehicle", "b", "--throttle", "0.2", label="script-b")
     wait_until(lambda: watch.first_tick_after(joined_from, "b", True), 60.0, "b admitted")
 
