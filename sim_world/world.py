@@ -170,6 +170,8 @@ class World:
         origin = scenario.world.origin
         self._origin = (origin.lat_deg, origin.lon_deg, origin.alt_m)
         self.step_count = 0
+        self._fresh: list[tuple[Sequence[float], Sequence[float]]] = []
+        self._fresh_step = -1
         self._client = pb.connect(pb.DIRECT)
         try:
             self._build(vehicle_types or {})
@@ -305,11 +307,16 @@ class World:
         step_sim = pb.stepSimulation
         wx, wy, wz = self.wind_enu_m_s
         vehicles = self._vehicles
+        # What states() read since the last step is what the first substep would read again.
+        fresh = self._fresh if self._fresh_step == self.step_count else None
         for _ in range(n):
-            for v in vehicles:
+            for i, v in enumerate(vehicles):
                 body = v.body
-                q = get_pose(body, physicsClientId=c)[1]
-                (vx, vy, vz) = get_vel(body, physicsClientId=c)[0]
+                if fresh is None:
+                    q = get_pose(body, physicsClientId=c)[1]
+                    (vx, vy, vz) = get_vel(body, physicsClientId=c)[0]
+                else:
+                    q, (vx, vy, vz) = fresh[i]
                 speed2 = vx * vx + vy * vy + vz * vz
                 if speed2 > v.max_speed2:
                     v.max_speed2 = speed2
@@ -332,6 +339,7 @@ class World:
                     torque(body, -1, (tx, ty, tz), link_frame, physicsClientId=c)
             step_sim(physicsClientId=c)
             self.step_count += 1
+            fresh = None
         self._update_contacts()
 
     def _update_contacts(self) -> None:
@@ -371,6 +379,8 @@ class World:
             east.append(pos[0])
             north.append(pos[1])
             up.append(pos[2])
+        self._fresh = [(p[1], p[2]) for p in poses]
+        self._fresh_step = self.step_count
         lat0, lon0, h0 = self._origin
         lats, lons, alts = pymap3d.enu2geodetic(
             np.array(east), np.array(north), np.array(up), lat0, lon0, h0

@@ -238,3 +238,17 @@ def test_same_inputs_give_bit_identical_states() -> None:
         return out
 
     assert run() == run()
+
+
+def test_reading_states_between_steps_does_not_change_the_trajectory() -> None:
+    def run(read_every_tick: bool) -> bytes:
+        sc = scenario([("a", "iris", (0.0, 0.0, 1.0))])
+        with World(sc) as world:
+            for k in range(120):
+                world.apply("a", [0.6 + 0.001 * (k % 7), 0.6, 0.61, 0.6])
+                world.step(2)
+                if read_every_tick:
+                    world.states(k)
+            return msgspec.msgpack.encode(world.states(0))
+
+    assert run(True) == run(False)
