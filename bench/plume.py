@@ -7,10 +7,16 @@ vectorised/scalar ratio ≥ 200×, 0.1 m mesh of the seed domain < 10 s,
 
 from __future__ import annotations
 
+import argparse
 import math
+import os
+import signal
+import subprocess
+import sys
 import time
 import tracemalloc
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 
@@ -21,6 +27,7 @@ SEED_LEVEL_G_M3 = 0.01  # the seed sensor's detection limit: the plume's visible
 MESH_RESOLUTION_M = 0.1
 SCALAR_POINTS = 100_000
 VECTOR_SIZES = (1_000_000, 10_000_000)
+REPO = Path(__file__).resolve().parent.parent
 
 
 def seed_scalar_concentration(x: float, y: float, z: float) -> float:
@@ -54,7 +61,58 @@ def best_seconds(run: Callable[[], object], repeats: int) -> float:
     return best
 
 
+def bus_round_trips(counts: tuple[int, ...], queries: int) -> dict[int, tuple[float, float]]:
+    """p50/p99 seconds of `plume/concentration` round trips to a real plume node over Zenoh."""
+    from swarmbus.codec import decode, encode
+    from swarmbus.keys import Keys
+    from swarmbus.messages import PlumeInfoQuery, PlumeQuery, PlumeValues
+    from swarmbus.session import NetworkConfig, Presence, free_tcp_port, open_session
+
+    port = free_tcp_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    router = NetworkConfig(mode="router", connect=[], listen=[endpoint], low_latency=True)
+    client = NetworkConfig(connect=[endpoint], listen=["tcp/127.0.0.1:0"], low_latency=True)
+    keys = Keys("default")
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    out: dict[int, tuple[float, float]] = {}
+    with open_session(router), open_session(client) as session:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "deploy", "node", "plume", "--connect", endpoint],
+            cwd=REPO,
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            start_new_session=True,
+        )
+        try:
+            presence = Presence(session, keys)
+            if not presence.wait_for(lambda alive: "plume" in alive, 60.0):
+                raise SystemExit("plume node did not come up within 60 s")
+            deadline = time.monotonic() + 30.0
+            while not list(session.get(keys.plume_info(), payload=encode(PlumeInfoQuery()))):
+                if time.monotonic() > deadline:
+                    raise SystemExit("plume/info never answered")
+            for count in counts:
+                points = [tuple(p) for p in seed_domain_points(count).tolist()]
+                payload = encode(PlumeQuery(points_enu_m=points))
+                times = []
+                for _ in range(queries):
+                    t0 = time.perf_counter()
+                    (reply,) = list(session.get(keys.plume_concentration(), payload=payload))
+                    decode(reply.ok.payload.to_bytes(), PlumeValues)
+                    times.append(time.perf_counter() - t0)
+                out[count] = (float(np.percentile(times, 50)), float(np.percentile(times, 99)))
+            presence.close()
+        finally:
+            os.killpg(proc.pid, signal.SIGTERM)
+            proc.wait(timeout=10)
+    return out
+
+
 def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--queries", type=int, default=500, help="bus queries per batch size")
+    args = parser.parse_args()
     plume = GaussianPlume.preset("novak2018")
     rows: list[tuple[str, str, str]] = []
 
@@ -101,14 +159,11 @@ def main() -> None:
     )
     rows.append(("  mesh peak traced memory", f"{peak / 2**20:.0f} MiB", ""))
 
-    # TODO(plume service): bus query round trip over Zenoh, p50/p99 for 1, 100 and 1000
-    # points per `plume/concentration` query (target: 1-point p50 < 0.5 ms). Filled in by the
-    # engineer who adds the service; keep the row labels.
-    for count in (1, 100, 1000):
+    for count, (p50, p99) in bus_round_trips((1, 100, 1000), queries=args.queries).items():
         rows.append(
             (
                 f"bus query {count} points p50/p99",
-                "TODO (service)",
+                f"{p50 * 1e3:.3f} / {p99 * 1e3:.3f} ms",
                 "p50 < 0.5 ms" if count == 1 else "",
             )
         )

@@ -65,8 +65,7 @@ def isosurface(
     if bounds is None:
         bounds = default_bounds(field, level)
     axes = _grid_axes(bounds, resolution)
-    volume = _evaluate_grid(field, axes, progress, t)
-    padded = np.pad(volume, 1, mode="constant", constant_values=0.0)
+    padded = _evaluate_grid(field, axes, progress, t)
     vertices, faces = mcubes.marching_cubes(padded, level)
     origin = np.array([axis[0] for axis in axes]) - resolution
     vertices = np.asarray(vertices, dtype=np.float64) * resolution + origin
@@ -156,8 +155,11 @@ def _grid_axes(bounds: Bounds, resolution: float) -> list[FloatArray]:
 def _evaluate_grid(
     field: ConcentrationField, axes: list[FloatArray], progress: bool, t: float | None
 ) -> FloatArray:
+    """The field on the grid, inside one layer of zeros on every side (which closes the mesh);
+    filled in place so the volume is never copied."""
     xs, ys, zs = axes
-    volume = np.empty((len(xs), len(ys), len(zs)), dtype=np.float64)
+    padded = np.zeros((len(xs) + 2, len(ys) + 2, len(zs) + 2), dtype=np.float64)
+    volume = padded[1:-1, 1:-1, 1:-1]
     plane = np.empty((len(ys), len(zs), 3), dtype=np.float64)
     plane[:, :, 1] = ys[:, None]
     plane[:, :, 2] = zs[None, :]
@@ -170,7 +172,7 @@ def _evaluate_grid(
             slab[:, :, :, 0] = xs[start:stop, None, None]
             volume[start:stop] = field.concentration(slab.reshape(-1, 3), t).reshape(slab.shape[:3])
             bar.update(stop - start)
-    return volume
+    return padded
 
 
 def _slabs(count: int, size: int) -> Iterator[tuple[int, int]]:
