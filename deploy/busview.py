@@ -12,7 +12,6 @@ import threading
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
-import msgspec
 import zenoh
 
 from swarmbus.codec import MessageError, decode
@@ -213,7 +212,3 @@ def status_line(snap: Snapshot, expected_vehicles: int | None = None) -> str:
     if readings:
         parts.append("g/m3 " + " ".join(readings))
     return " | ".join(parts)
-
-
-def as_builtins(obj: Any) -> Any:
-    return msgspec.to_builtins(obj)

@@ -77,7 +77,6 @@ class LaunchOptions:
     vehicles: tuple[str, ...] | None = None  # autopilots for these vehicles; None: all
     verbose: int = 1
     node_options: dict[str, tuple[str, ...]] = field(default_factory=dict)  # role → KEY=VALUE
-    netns: dict[str, str] = field(default_factory=dict)  # role → network namespace (tests)
 
 
 def router_endpoints(scenario: Scenario, opts: LaunchOptions) -> list[str]:
@@ -135,7 +134,6 @@ def plan(scenario: Scenario, opts: LaunchOptions) -> list[ProcessSpec]:
                 restart=RESTART[role],
                 stop_stage=STOP_STAGE[role],
                 critical=role not in NOT_CRITICAL,
-                netns=opts.netns.get(role),
             )
         )
 

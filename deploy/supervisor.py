@@ -69,7 +69,6 @@ class ProcessSpec:
     stop_stage: int = 0  # stages stop in increasing order
     critical: bool = True  # the run fails when it ends for good with an error
     env: dict[str, str] = field(default_factory=dict)
-    netns: str | None = None  # run inside this network namespace (``ip netns exec``)
 
 
 class ProcState(enum.StrEnum):
@@ -149,8 +148,6 @@ class Supervisor:
         sv = self.procs[name]
         spec = sv.spec
         argv = list(spec.argv)
-        if spec.netns is not None:
-            argv = ["ip", "netns", "exec", spec.netns, *argv]
         log_file = open(sv.log_path, "ab")  # noqa: SIM115 - closed by the pump thread
         log_file.write(f"--- start {time.strftime('%H:%M:%S')}: {' '.join(argv)}\n".encode())
         log_file.flush()
@@ -251,7 +248,9 @@ class Supervisor:
                 try:
                     sv.proc.wait(timeout=max(0.05, deadline - time.monotonic()))
                 except subprocess.TimeoutExpired:
-                    log.warning("%s did not stop within %.1f s: killing it", sv.spec.name, 4.0)
+                    log.warning(
+                        "%s did not stop within %.1f s: killing it", sv.spec.name, stage_timeout_s
+                    )
                     self._signal_group(sv, signal.SIGKILL)
                     sv.proc.wait(timeout=5.0)
                 self._reap_group(sv)
