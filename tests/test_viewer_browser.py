@@ -108,7 +108,7 @@ def flying_stand_ins(session: zenoh.Session) -> Iterator[None]:
 
 
 def chromium(
-    args: list[str], user_dir: Path, timeout_s: float = 90.0
+    args: list[str], user_dir: Path, timeout_s: float = 180.0
 ) -> subprocess.CompletedProcess[bytes]:
     assert CHROMIUM is not None
     return subprocess.run(
