@@ -38,15 +38,16 @@ from swarmbus.session import DEFAULT_ROUTER, NetworkConfig, open_session
 log = logging.getLogger(__name__)
 
 ALL_ROLES = ("router", "recorder", "plume", "physics", "autopilot", "gateway", "viewer")
-# Stop order: the edges first, then the world, then its consumers, the recorder, the router.
+# Stop order: the world and its edges first (so no autopilot is "dropped" from a lockstep that
+# is still running), then the autopilots and the plume, then the recorder, the router last.
 STOP_STAGE = {
     "gateway": 0,
     "viewer": 0,
-    "physics": 1,
-    "autopilot": 2,
-    "plume": 3,
-    "recorder": 4,
-    "router": 5,
+    "physics": 0,
+    "autopilot": 1,
+    "plume": 1,
+    "recorder": 2,
+    "router": 3,
 }
 RESTART = {
     "router": RestartPolicy(),
