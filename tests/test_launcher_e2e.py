@@ -119,6 +119,19 @@ def test_up_status_viewer_and_clean_stop(tmp_path: Path) -> None:
         summary = json.loads((tmp_path / "demo" / "summary.json").read_text())
         assert summary["ok"]
 
+        # on-failure restart: a killed autopilot comes back under a new PID and rejoins the bus
+        os.killpg(pids["autopilot-uav1"], signal.SIGKILL)
+
+        def restarted() -> int | None:
+            new = json.loads((run / "pids.json").read_text()).get("autopilot-uav1")
+            return new if new not in (None, pids["autopilot-uav1"]) else None
+
+        new_pid = wait_until(restarted, 60.0, "autopilot-uav1 to be restarted")
+        result = run_cli(["status", "--json", "--connect", endpoint, "--timeout", "20"])
+        nodes = {n["name"]: n for n in json.loads(result.stdout)["nodes"]}
+        assert nodes["autopilot-uav1"]["alive"], nodes
+        family.append(psutil.Process(new_pid))
+
         up.send_signal(signal.SIGTERM)
         assert up.wait(timeout=60) == 0
         _, alive = psutil.wait_procs(family, timeout=10.0)
