@@ -127,10 +127,19 @@ def test_up_status_viewer_and_clean_stop(tmp_path: Path) -> None:
             return new if new not in (None, pids["autopilot-uav1"]) else None
 
         new_pid = wait_until(restarted, 60.0, "autopilot-uav1 to be restarted")
-        result = run_cli(["status", "--json", "--connect", endpoint, "--timeout", "20"])
-        nodes = {n["name"]: n for n in json.loads(result.stdout)["nodes"]}
-        assert nodes["autopilot-uav1"]["alive"], nodes
         family.append(psutil.Process(new_pid))
+        with open_session(NetworkConfig(connect=[endpoint], listen=[])) as session:
+            view = BusView(session, keys_for())
+            wait_until(
+                lambda: (
+                    (h := view.snapshot().health.get("autopilot-uav1")) is not None
+                    and h.pid == new_pid
+                    and "autopilot-uav1" in view.presence.alive
+                ),
+                120.0,
+                "the restarted autopilot-uav1 back on the bus",
+            )
+            view.close()
 
         up.send_signal(signal.SIGTERM)
         assert up.wait(timeout=60) == 0
