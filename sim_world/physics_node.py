@@ -167,14 +167,13 @@ class PhysicsNode:
         self.rt.ready()
         deadline = time.monotonic() + self.scenario.time.startup_timeout_s
         if self.options.wait_for_autopilots and not self._wait_for_tokens(deadline):
-            return 1
+            return 0 if self.rt.stop.is_set() else 1  # a stop signal is not a failure
         with self._cond:
             self.barrier.start()
-        with self._cond:
             self.barrier.begin(0, timeout_s=max(0.0, deadline - time.monotonic()))
         self._publish_tick(self.world.states(0, 0.0))
         if not self._handshake():
-            return 1
+            return 0 if self.rt.stop.is_set() else 1
         self._reset_clock()
         return self._loop()
 
