@@ -159,7 +159,9 @@ class PhysicsNode:
             log.warning("ignoring actuators for %s sent on %s", cmd.vehicle_id, sample.key_expr)
             return
         with self._cond:
-            if self.barrier.receive(cmd.vehicle_id, cmd.tick, cmd.rotor_commands):
+            # Wake the loop once per tick, not once per command.
+            counted = self.barrier.receive(cmd.vehicle_id, cmd.tick, cmd.rotor_commands)
+            if counted and self.barrier.complete():
                 self._cond.notify_all()
 
     # ------------------------------------------------------------------ phases
