@@ -197,12 +197,16 @@ def up(
 @click.option("--out", type=click.Path(path_type=Path), default=None, help="Run directory.")
 @click.option("--timeout", "timeout_s", type=float, default=900.0, show_default=True)
 @click.option("--attach", multiple=True, metavar="EP", help="Fly a stack already running here.")
+@click.option(
+    "--record/--no-record", default=True, help="Record the run (when the recorder exists)."
+)
 def demo(
     scenario: str | None,
     vehicles: int | None,
     out: Path | None,
     timeout_s: float,
     attach: tuple[str, ...],
+    record: bool,
 ) -> None:
     """Fly the default scenario end to end, headless, and print the accuracy table."""
     from deploy.console import Console
@@ -211,7 +215,13 @@ def demo(
 
     path = resolve_scenario_path(scenario)
     opts = DemoOptions(
-        scenario_from(str(path)), path, out or default_run_dir(), vehicles, timeout_s, attach=attach
+        scenario_from(str(path)),
+        path,
+        out or default_run_dir(),
+        vehicles,
+        timeout_s,
+        attach=attach,
+        record=record,
     )
     sys.exit(run_demo(opts, Console()))
 

@@ -373,6 +373,7 @@ class DemoOptions:
     timeout_s: float = 900.0
     table_period_s: float = 1.0
     attach: tuple[str, ...] = ()  # fly a stack already running behind this router endpoint
+    record: bool = True  # run the recorder too, when it is installed
 
 
 class AttachedStack:
@@ -435,7 +436,7 @@ def run_demo(opts: DemoOptions, console: Console) -> int:
     sc, path = prepare(opts)
     keys = Keys(sc.world.name)
     ids = [v.id for v in sc.vehicles]
-    record = not opts.attach and not missing_roles(["recorder"])
+    record = opts.record and not opts.attach and not missing_roles(["recorder"])
     # What flying needs (no gateway: nobody speaks MAVLink here; the recorder when it exists).
     roles = DEMO_ROLES + (("recorder",) if record else ())
     launch = LaunchOptions(
