@@ -155,10 +155,15 @@ def plume() -> None:
     not_yet("plumeswarm plume", "#3")
 
 
-@cli.command(context_settings={"ignore_unknown_options": True, "allow_extra_args": True})
-def record() -> None:
-    """Record everything on the bus to an MCAP file."""
-    not_yet("plumeswarm record", "#8")
+@cli.command()
+@SCENARIO_OPT
+@click.option("--connect", multiple=True, help="Zenoh endpoint to connect to (repeatable).")
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None)
+def record(scenario: str | None, connect: tuple[str, ...], out: Path | None) -> None:
+    """Record everything on the bus to an MCAP file (until Ctrl-C)."""
+    from deploy.recording import commands
+
+    sys.exit(commands.record(scenario_from(scenario), list(connect), out))
 
 
 @cli.command(context_settings={"ignore_unknown_options": True, "allow_extra_args": True})

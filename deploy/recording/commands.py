@@ -1,0 +1,36 @@
+"""The bodies of ``plumeswarm record``, ``replay`` and ``report`` (parsing stays in deploy.cli).
+
+Each returns the process exit code; failures are one line on stderr, never a traceback.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from swarmbus.node import NodeContext
+from swarmbus.scenario import Scenario
+
+
+def _context(
+    scenario: Scenario, connect: list[str], name: str, options: dict[str, str]
+) -> NodeContext:
+    net = scenario.network.with_overrides(connect=connect or None)
+    return NodeContext(scenario, net, name, (), options)
+
+
+def record(scenario: Scenario, connect: list[str], out: Path | None) -> int:
+    """Run the recorder in the foreground until Ctrl-C / SIGTERM."""
+    from deploy.recording.recorder import RecorderOptions, run
+
+    ctx = _context(scenario, connect, "recorder", {"out": str(out)} if out else {})
+    target = RecorderOptions.from_ctx(ctx).out
+    ctx = _context(scenario, connect, "recorder", {"out": str(target)})
+    click.echo(f"recording world {scenario.world.name!r} to {target} (Ctrl-C to stop)", err=True)
+    code = run(ctx)
+    if code == 0:
+        click.echo(f"recorded {target}", err=True)
+    else:
+        click.echo(f"plumeswarm: error: cannot record to {target} (see the log above)", err=True)
+    return code
