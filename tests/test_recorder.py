@@ -19,21 +19,38 @@ from tests.procs import REPO, Network, NodeProcs, keys_for, run_cli, wait_until
 KEYS = keys_for()
 
 
-def run_publisher(net: Network, out: Path, *args: str, timeout_s: float = 90.0) -> dict[str, Any]:
-    """Run the scripted publisher to completion; its counts and published payloads."""
+def start_publisher(net: Network, out: Path, *args: str) -> subprocess.Popen[str]:
     env = dict(os.environ, PYTHONPATH=str(REPO))
     cmd = [sys.executable, "-m", "tests.scripted_publisher", "--connect", net.endpoint]
-    proc = subprocess.run(
+    return subprocess.Popen(
         [*cmd, "--out", str(out), *args],
         cwd=REPO,
         env=env,
-        capture_output=True,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
         text=True,
-        timeout=timeout_s,
+        start_new_session=True,
     )
-    assert proc.returncode == 0, f"scripted publisher failed:\n{proc.stderr[-3000:]}"
+
+
+def finish_publisher(
+    proc: subprocess.Popen[str], out: Path, timeout_s: float = 90.0
+) -> dict[str, Any]:
+    """Wait for a scripted publisher; its counts and published payloads."""
+    try:
+        _, err = proc.communicate(timeout=timeout_s)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(10)
+    assert proc.returncode == 0, f"scripted publisher failed:\n{err[-3000:]}"
     result: dict[str, Any] = json.loads(out.read_text())
     return result
+
+
+def run_publisher(net: Network, out: Path, *args: str) -> dict[str, Any]:
+    """Run the scripted publisher to completion."""
+    return finish_publisher(start_publisher(net, out, *args), out)
 
 
 def start_recorder(procs: NodeProcs, out: Path, *extra: str) -> subprocess.Popen[bytes]:
@@ -135,3 +152,34 @@ def test_record_command_unwritable_output_is_one_line(tmp_path: Path) -> None:
     assert result.returncode != 0
     assert "Traceback" not in result.stderr
     assert "error" in result.stderr.splitlines()[-1]
+
+
+def test_eight_vehicles_every_published_message_is_recorded(
+    network: tuple[Network, zenoh.Session], tmp_path: Path
+) -> None:
+    net, _ = network
+    out = tmp_path / "eight.mcap"
+    groups = {"pub-a": "uav1,uav2,uav3,uav4", "pub-b": "uav5,uav6,uav7,uav8"}
+    with NodeProcs(net, log_dir=tmp_path) as procs:
+        rec = start_recorder(procs, out)
+        pubs = {
+            name: start_publisher(
+                net,
+                tmp_path / f"{name}.json",
+                *("--name", name, "--vehicles", vehicles, "--steps", "240", "--rate-hz", "120"),
+            )
+            for name, vehicles in groups.items()
+        }
+        results = {name: finish_publisher(p, tmp_path / f"{name}.json") for name, p in pubs.items()}
+        procs.stop_all()
+    assert rec.returncode == 0
+
+    published: dict[str, int] = {}
+    for result in results.values():
+        published.update(result["counts"])
+    assert len(published) == 8 * 3
+    recorded: dict[str, int] = {}
+    for m in Recording.open(out).messages():
+        if m.topic in published:
+            recorded[m.topic] = recorded.get(m.topic, 0) + 1
+    assert recorded == published
