@@ -34,3 +34,25 @@ def record(scenario: Scenario, connect: list[str], out: Path | None) -> int:
     else:
         click.echo(f"plumeswarm: error: cannot record to {target} (see the log above)", err=True)
     return code
+
+
+def replay(
+    path: str,
+    scenario: Scenario,
+    connect: list[str],
+    speed: float,
+    wait_for: tuple[str, ...],
+    recorded_by: str | None,
+) -> int:
+    """Publish a recording back onto the bus; one line on success or failure."""
+    from deploy.recording import replay as rp
+    from deploy.recording.reader import RecordingError
+
+    opts = rp.ReplayOptions(speed=speed, wait_for=wait_for, recorded_by=recorded_by)
+    try:
+        sent = rp.run(path, scenario, connect, opts)
+    except (RecordingError, rp.ReplayError) as exc:
+        click.echo(f"plumeswarm: error: {exc}", err=True)
+        return 2
+    click.echo(f"replayed {sent} messages from {path}", err=True)
+    return 0
