@@ -149,12 +149,6 @@ def status() -> None:
     not_yet("plumeswarm status", "#7")
 
 
-@cli.command(context_settings={"ignore_unknown_options": True, "allow_extra_args": True})
-def plume() -> None:
-    """Sample, mesh and plot the plume field."""
-    not_yet("plumeswarm plume", "#3")
-
-
 @cli.command()
 @SCENARIO_OPT
 @click.option("--connect", multiple=True, help="Zenoh endpoint to connect to (repeatable).")
@@ -198,6 +192,15 @@ def report() -> None:
 def bench() -> None:
     """Scale benchmark of the full stack."""
     not_yet("plumeswarm bench", "#10")
+
+
+def _register_groups() -> None:
+    from deploy.plume_cli import plume
+
+    cli.add_command(plume)
+
+
+_register_groups()
 
 
 def main() -> None:
