@@ -182,10 +182,14 @@ def replay(
     sys.exit(commands.replay(file, sc, list(connect), speed, wait_for, recorded_by))
 
 
-@cli.command(context_settings={"ignore_unknown_options": True, "allow_extra_args": True})
-def report() -> None:
+@cli.command()
+@click.argument("file")
+@click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path))
+def report(file: str, out: Path) -> None:
     """Plots, CSV and a one-page report from a recording."""
-    not_yet("plumeswarm report", "#8")
+    from deploy.recording import commands
+
+    sys.exit(commands.report(file, out))
 
 
 @cli.command(context_settings={"ignore_unknown_options": True, "allow_extra_args": True})

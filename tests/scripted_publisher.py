@@ -36,8 +36,8 @@ from swarmbus.session import NetworkConfig
 
 
 def field_g_m3(x: float, y: float, z: float) -> float:
-    """A smooth made-up field (not the plume model): a blob around (30, 0, 10)."""
-    return 0.3 * math.exp(-((x - 30.0) ** 2 + y**2) / 200.0 - (z - 10.0) ** 2 / 50.0)
+    """A smooth made-up field (not the plume model): a blob around (40, 0, 10)."""
+    return 0.3 * math.exp(-((x - 40.0) ** 2 + y**2) / 100.0 - (z - 10.0) ** 2 / 50.0)
 
 
 def position(index: int, step: int, steps: int) -> tuple[float, float, float]:
@@ -67,7 +67,9 @@ def messages(vehicle: str, index: int, step: int, args: argparse.Namespace) -> l
     ]
     if step % args.every == 0:
         true = field_g_m3(x, y, z)
-        reported = 0.0 if true < 0.01 else min(true, 0.2)
+        # a sensor with a detection limit, saturation and a deterministic 10 % wobble
+        wobbled = true * (1.0 + 0.1 * math.sin(0.7 * step + index))
+        reported = 0.0 if wobbled < 0.01 else min(wobbled, 0.2)
         out.append(
             VehicleStatus(
                 vehicle_id=vehicle,

@@ -56,3 +56,20 @@ def replay(
         return 2
     click.echo(f"replayed {sent} messages from {path}", err=True)
     return 0
+
+
+def report(path: str, out: Path) -> int:
+    """Write the report of a recording; one line on success or failure."""
+    from deploy.recording.reader import RecordingError
+    from deploy.recording.report import ReportError, make_report
+
+    try:
+        files = make_report(path, out)
+    except (RecordingError, ReportError) as exc:
+        click.echo(f"plumeswarm: error: {exc}", err=True)
+        return 2
+    except OSError as exc:
+        click.echo(f"plumeswarm: error: cannot write the report to {out}: {exc}", err=True)
+        return 2
+    click.echo(f"wrote {len(files)} files to {out} (open {out / 'report.html'})", err=True)
+    return 0
