@@ -103,6 +103,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--pause-at", type=int, default=-1)
     p.add_argument("--pause-s", type=float, default=0.0)
     p.add_argument("--garbage", action="store_true")
+    p.add_argument("--skip-at", type=int, default=-1, help="publish nothing from this step ...")
+    p.add_argument("--skip-n", type=int, default=0, help="... for this many steps")
     p.add_argument("--recorder", default="recorder")
     p.add_argument("--out", required=True, type=Path)
     args = p.parse_args(argv)
@@ -151,6 +153,8 @@ def main(argv: list[str] | None = None) -> int:
             if delay > 0:
                 time.sleep(delay)
             next_t += 1.0 / args.rate_hz
+            if args.skip_at <= step < args.skip_at + args.skip_n:
+                continue
             for i, v in enumerate(vehicles):
                 for msg in messages(v, i, step, args):
                     put(key_of[type(msg)](v), encode(msg))

@@ -183,3 +183,21 @@ def test_eight_vehicles_every_published_message_is_recorded(
         if m.topic in published:
             recorded[m.topic] = recorded.get(m.topic, 0) + 1
     assert recorded == published
+
+
+def test_ticks_missing_from_a_state_stream_are_counted_and_recorded(
+    network: tuple[Network, zenoh.Session], tmp_path: Path
+) -> None:
+    net, _ = network
+    out = tmp_path / "gaps.mcap"
+    with NodeProcs(net, log_dir=tmp_path) as procs:
+        start_recorder(procs, out)
+        run_publisher(
+            net, tmp_path / "pub.json", *("--steps", "30", "--skip-at", "10", "--skip-n", "5")
+        )
+        procs.stop_all()
+    recording = Recording.open(out)
+    gaps = [e for m in recording.messages() if (e := m.event()) is not None and e.kind == "gap"]
+    assert [e.lost_upstream for e in gaps] == [5]
+    summary = recording.metadata["plumeswarm.summary"]
+    assert json.loads(summary["tick_gaps"]) == {KEYS.vehicle_state("uav1"): 5}

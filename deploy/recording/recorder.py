@@ -4,7 +4,10 @@ Zenoh delivers samples on its own threads; the callback only stamps and queues t
 block, or publishers with the ``drop`` congestion policy would lose messages upstream). A writer
 thread transcodes and writes them (:class:`~deploy.recording.sink.McapSink`). Nothing is dropped
 silently: per-key counts are kept, a queue that falls behind is logged and recorded as an event,
-and only a queue at its hard limit drops — counted, logged as an error and recorded.
+and only a queue at its hard limit drops — counted, logged as an error and recorded. Messages lost
+in Zenoh before they reach the recorder (publishers use the ``drop`` congestion policy) cannot be
+seen directly; for the streams that carry one per tick (``vehicle/<id>/state``, ``sim/tick``) a
+jump in ``tick`` is counted, logged and recorded as a ``gap`` event.
 
 The recorder acknowledges every ``NodeHealth`` it records from another node by publishing its own
 health with ``detail = "heard <name> <state>"``: a publisher that must not lose its first messages
@@ -30,7 +33,7 @@ from deploy.recording import schema as sch
 from deploy.recording.sink import DEFAULT_CHUNK_BYTES, DEFAULT_CHUNK_INTERVAL_S, McapSink
 from swarmbus.codec import MessageError, decode, encode
 from swarmbus.keys import Keys
-from swarmbus.messages import NodeHealth, PlumeInfo, PlumeInfoQuery
+from swarmbus.messages import NodeHealth, PlumeInfo, PlumeInfoQuery, SimTick, VehicleState
 from swarmbus.node import NodeContext, NodeRuntime, package_version
 
 log = logging.getLogger(__name__)
@@ -88,6 +91,9 @@ class Recorder:
         self._lock = threading.Lock()
         self.received: Counter[str] = Counter()
         self.dropped: Counter[str] = Counter()
+        self.tick_gaps: Counter[str] = Counter()  # messages missing from per-tick streams
+        self._last_tick: dict[str, int] = {}
+        self._gaps_reported = 0
         self._received_total = 0
         self._dropped_total = 0
         self._taken_total = 0
@@ -134,6 +140,7 @@ class Recorder:
         if self._thread.is_alive():
             log.error("recorder writer did not finish within %.0f s", timeout_s)
         self._report_drops()
+        self._report_gaps()
         self._sink.write_event(self._event(sch.EventKind.STOPPED))
         self._sink.close(self.summary())
         log.info("recording closed: %s (%d messages)", self._sink.path, self.written_total)
@@ -155,6 +162,7 @@ class Recorder:
             "received": msgspec.json.encode(received).decode(),
             "dropped": msgspec.json.encode(dropped).decode(),
             "undecodable": msgspec.json.encode(dict(self._sink.undecodable)).decode(),
+            "tick_gaps": msgspec.json.encode(dict(self.tick_gaps)).decode(),
             "received_total": str(sum(received.values())),
             "dropped_total": str(sum(dropped.values())),
         }
@@ -196,8 +204,16 @@ class Recorder:
         with self._lock:
             self._taken_total += 1
         message = self._sink.write_bus(key, payload, log_time_ns)
-        if isinstance(message, NodeHealth) and message.name != self._name:
+        if isinstance(message, VehicleState | SimTick):
+            self._check_tick(key, message.tick)
+        elif isinstance(message, NodeHealth) and message.name != self._name:
             self._publish_health(f"heard {message.name} {message.state}")
+
+    def _check_tick(self, key: str, tick: int) -> None:
+        last = self._last_tick.get(key)
+        self._last_tick[key] = tick
+        if last is not None and tick > last + 1:  # backwards: a restart or a replay, not a loss
+            self.tick_gaps[key] += tick - last - 1
 
     def _housekeeping(self, age_s: float = 0.0) -> None:
         self._sink.maybe_close_chunk()
@@ -206,6 +222,7 @@ class Recorder:
         now = time.monotonic()
         if now - self._last_health >= self._opts.health_period_s:
             self._last_health = now
+            self._report_gaps()
             self._publish_health(
                 f"recording {self._sink.path.name}: {self.written_total} messages, "
                 f"backlog {self.backlog}, dropped {self._dropped_total}"
@@ -224,6 +241,19 @@ class Recorder:
         else:
             return
         self._behind = behind
+
+    def _report_gaps(self) -> None:
+        total = sum(self.tick_gaps.values())
+        if total > self._gaps_reported:
+            worst = self.tick_gaps.most_common(1)[0][0]
+            detail = (
+                f"{total - self._gaps_reported} messages missing from per-tick streams "
+                f"(lost before reaching the recorder); most on {worst}"
+            )
+            log.warning("RECORDER SAW GAPS: %s", detail)
+            event = self._event(sch.EventKind.GAP, detail)
+            self._sink.write_event(msgspec.structs.replace(event, lost_upstream=total))
+            self._gaps_reported = total
 
     def _report_drops(self) -> None:
         with self._lock:

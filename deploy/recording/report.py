@@ -151,6 +151,7 @@ def _facts(flight: Flight, source: Path) -> list[tuple[str, str]]:
         span = f"{t.min():.2f} – {t.max():.2f} s ({t.max() - t.min():.2f} s)"
     behind = sum(1 for e in flight.events if e.kind == EventKind.BEHIND)
     dropped = max((e.dropped for e in flight.events), default=0)
+    lost = max((e.lost_upstream for e in flight.events), default=0)
     plume = "—"
     if flight.plume_info is not None:
         i = flight.plume_info
@@ -167,7 +168,9 @@ def _facts(flight: Flight, source: Path) -> list[tuple[str, str]]:
         ("file", "cut short (recorder killed?)" if flight.truncated else "complete"),
         (
             "recorder",
-            f"fell behind {behind}×, dropped {dropped}" if behind or dropped else "kept up",
+            f"fell behind {behind}×, dropped {dropped}, {lost} missing from per-tick streams"
+            if behind or dropped or lost
+            else "kept up, no tick gaps",
         ),
         ("plume", plume),
     ]

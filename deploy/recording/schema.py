@@ -40,6 +40,7 @@ class EventKind(enum.StrEnum):
     CAUGHT_UP = "caught_up"
     DROPPED = "dropped"  # the queue hit its hard limit: messages were lost (counted)
     UNDECODABLE = "undecodable"  # a payload that is not a valid message (kept raw)
+    GAP = "gap"  # ticks missing from a per-tick stream: lost before reaching the recorder
     STOPPED = "stopped"
 
 
@@ -53,6 +54,7 @@ class RecorderEvent(msgspec.Struct, frozen=True, kw_only=True):
     dropped: int = 0
     received: int = 0
     written: int = 0
+    lost_upstream: int = 0  # total messages missing from per-tick streams so far
 
 
 def decode_bus(payload: bytes) -> Message:
