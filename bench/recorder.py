@@ -168,6 +168,7 @@ def through_bus(vehicles: int, ticks: int, paced: bool) -> dict[str, Any]:
         "dropped": float(summary.get("dropped_total", "nan")),
         "behind": behind,
         "recorded": recorded,
+        "gaps": sum(json.loads(summary.get("tick_gaps", "{}")).values()),
         "truncated": recording.truncated,
         "summary": summary,
     }
@@ -193,8 +194,11 @@ def main() -> None:
     print(f"| writer alone (transcode + MCAP + zstd), 8 vehicles | {rate:,.0f} msg/s |")
     print(f"| file size, 120 Hz VehicleState | {per_vm / 1e6:.2f} MB per vehicle-minute |")
     print()
-    print("| offered (vehicles × 120 Hz VehicleState) | recorded / sent | recorder CPU | behind |")
-    print("|---|---|---|---|")
+    print(
+        "| offered (vehicles × 120 Hz VehicleState) | recorded / sent | lost, seen as tick gaps "
+        "| recorder CPU | behind events |"
+    )
+    print("|---|---|---|---|---|")
     seconds = 3.0 * scale
     for vehicles in args.steps:
         r = through_bus(vehicles, int(STATE_HZ * seconds), paced=True)
@@ -203,7 +207,8 @@ def main() -> None:
         print(
             f"| {vehicles} × {STATE_HZ} Hz = {offered:,} msg/s for {r['sent_s']:.1f} s | "
             f"{r['recorded']:,} / {r['count']:,} (recorder dropped {r['dropped']:.0f}) | "
-            f"{cpu:.0f} % of a core | {r['behind']} events |",
+            f"{r['count'] - r['recorded']:,}, {r['gaps']:,} | {cpu:.0f} % of a core | "
+            f"{r['behind']} |",
             flush=True,
         )
 
