@@ -18,6 +18,8 @@ from swarmbus.messages import VehicleState
 from swarmbus.vehicle_types import VehicleType
 
 if TYPE_CHECKING:
+    import zenoh
+
     from agents.autopilot import Autopilot
     from swarmbus.scenario import Scenario
 
@@ -175,3 +177,113 @@ class ToyWorld:
             self.tick += 1
             if until is not None and until():
                 return
+
+
+class BusToyPhysics:
+    """A stand-in for the physics process on the bus, speaking the agreed lockstep protocol.
+
+    Publishes ``SimTick`` k (and each ``VehicleState``), waits for every participant's
+    ``ActuatorCommand`` for tick k (re-publishing tick 0 until all answered: the start
+    handshake), steps the toy vehicles, repeats. Runs on its own thread until ``stop``.
+    """
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        scenario: Scenario,
+        participants: list[str] | None = None,
+        timeout_s: float = 5.0,
+    ) -> None:
+        import threading
+
+        from swarmbus.keys import Keys
+        from swarmbus.vehicle_types import load_vehicle_type
+
+        self.session = session
+        self.scenario = scenario
+        self.keys = Keys(scenario.world.name)
+        self.participants = participants or [v.id for v in scenario.vehicles]
+        self.timeout_s = timeout_s
+        speed = scenario.wind.speed_m_s
+        toward = math.radians(270.0 - scenario.wind.from_deg)
+        wind = (speed * math.cos(toward), speed * math.sin(toward), 0.0)
+        self.vehicles = {
+            v.id: ToyVehicle(
+                load_vehicle_type(v.type),
+                v.id,
+                v.spawn_enu_m,
+                v.spawn_yaw_deg,
+                wind,
+                scenario.time.physics_hz,
+            )
+            for v in scenario.vehicles
+        }
+        self.dt = 1.0 / scenario.time.control_hz
+        self.tick = 0
+        self.error: str | None = None
+        self._cond = threading.Condition()
+        self._commands: dict[str, tuple[int, list[float]]] = {}
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._sub = session.declare_subscriber(self.keys.all_vehicle_actuators(), self._on_cmd)
+        self._pub = session.declare_publisher(self.keys.tick())
+        self._state_pubs = {
+            vid: session.declare_publisher(self.keys.vehicle_state(vid)) for vid in self.vehicles
+        }
+
+    def _on_cmd(self, sample: zenoh.Sample) -> None:
+        from swarmbus.codec import decode
+        from swarmbus.messages import ActuatorCommand
+
+        cmd = decode(sample.payload.to_bytes(), ActuatorCommand)
+        with self._cond:
+            self._commands[cmd.vehicle_id] = (cmd.tick, list(cmd.rotor_commands))
+            self._cond.notify_all()
+
+    def start(self) -> BusToyPhysics:
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=10)
+        self._sub.undeclare()
+
+    @property
+    def sim_time_s(self) -> float:
+        return self.tick * self.dt
+
+    def _answered(self, k: int) -> bool:
+        return all(self._commands.get(v, (-1, []))[0] == k for v in self.participants)
+
+    def _run(self) -> None:
+        import time
+
+        from swarmbus.codec import encode
+        from swarmbus.messages import SimTick
+
+        while not self._stop.is_set():
+            k = self.tick
+            states = [toy.state(k, self.sim_time_s) for toy in self.vehicles.values()]
+            payload = encode(
+                SimTick(tick=k, sim_time_s=self.sim_time_s, control_dt_s=self.dt, states=states)
+            )
+            for s in states:
+                self._state_pubs[s.vehicle_id].put(encode(s))
+            deadline = time.monotonic() + self.timeout_s
+            with self._cond:
+                while not self._answered(k):
+                    if self._stop.is_set():
+                        return
+                    if time.monotonic() > deadline:
+                        missing = [
+                            v for v in self.participants if self._commands.get(v, (-1, []))[0] != k
+                        ]
+                        self.error = f"tick {k}: no actuators from {missing}"
+                        return
+                    self._pub.put(payload)  # (re-)publish: start-up handshake / lost sample
+                    self._cond.wait(0.05 if k == 0 else self.timeout_s)
+                commands = {v: self._commands[v][1] for v in self.participants}
+            for vid, toy in self.vehicles.items():
+                toy.step(commands.get(vid, [0.0] * len(toy.vt.rotors)), self.scenario.substeps)
+            self.tick += 1
