@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from swarmbus.messages import VehicleState
+from swarmbus.messages import ConcentrationReading, VehicleState
 from swarmbus.vehicle_types import VehicleType
 
 if TYPE_CHECKING:
@@ -139,7 +139,20 @@ class ToyVehicle:
 class ToyWorld:
     """Lockstep loop of autopilots against toy vehicles, ticking like the physics would."""
 
-    def __init__(self, scenario: Scenario, autopilots: dict[str, Autopilot]) -> None:
+    def __init__(
+        self,
+        scenario: Scenario,
+        autopilots: dict[str, Autopilot],
+        field: Callable[[np.ndarray], np.ndarray] | None = None,
+    ) -> None:
+        from agents.sensor import ConcentrationSensor
+
+        self.field = field
+        self.sensors = {
+            v.id: ConcentrationSensor(scenario.sensor, scenario.world.seed, i)
+            for i, v in enumerate(scenario.vehicles)
+        }
+        self.readings: dict[str, list[ConcentrationReading]] = {v: [] for v in autopilots}
         self.scenario = scenario
         self.autopilots = autopilots
         speed = scenario.wind.speed_m_s
@@ -168,12 +181,20 @@ class ToyWorld:
         return {vid: toy.state(self.tick, self.sim_time_s) for vid, toy in self.vehicles.items()}
 
     def run(self, seconds: float, until: Callable[[], bool] | None = None) -> None:
+        pending: dict[str, ConcentrationReading] = {}
         for _ in range(round(seconds / self.dt)):
             states = self.states()
             for vid, ap in self.autopilots.items():
                 peers = [s for k, s in states.items() if k != vid]
-                u = ap.step(states[vid], peers)
+                # like the node: the reading of the previous tick reaches this tick's step
+                new = [pending.pop(vid)] if vid in pending else []
+                self.readings[vid].extend(new)
+                u = ap.step(states[vid], peers, new)
                 self.vehicles[vid].step(u, self.scenario.substeps)
+                if self.field is not None:
+                    pos = states[vid].position_enu_m
+                    true = float(self.field(np.array([pos]))[0])
+                    pending[vid] = self.sensors[vid].reading(vid, self.sim_time_s, pos, true, [])
             self.tick += 1
             if until is not None and until():
                 return
