@@ -78,25 +78,38 @@ class LogQuadraticFit:
         ln_x = math.log(x_m)
         return math.exp(self.i + self.j * ln_x + self.k * ln_x * ln_x)
 
-    def __call__(self, x_m: FloatArray, ln_x: FloatArray | None = None) -> FloatArray:
-        """σ (m) at downwind distances x > 0 (m); pass ln x if already computed."""
+    def __call__(
+        self, x_m: FloatArray, ln_x: FloatArray | None = None, out: FloatArray | None = None
+    ) -> FloatArray:
+        """σ (m) at downwind distances x > 0 (m); pass ln x if already computed, and ``out``
+        to write into a preallocated array."""
         if ln_x is None:
             ln_x = np.log(x_m)
-        if math.isfinite(self.x_far_m):
-            ln_x = np.minimum(ln_x, math.log(self.x_far_m))
-        ln_sigma = self.k * ln_x
+        ln_sigma = np.multiply(ln_x, self.k, out=out)
         ln_sigma += self.j
         ln_sigma *= ln_x
         ln_sigma += self.i
         if self.k > 0.0:  # unbounded growth far away
             np.minimum(ln_sigma, _LN_SIGMA_MAX, out=ln_sigma)
+        elif self.k < 0.0 and ln_x.size and ln_x.max() > self._ln_x_far:
+            # Past the fit's maximum: hold σ at the maximum.
+            np.copyto(ln_sigma, self._ln_sigma_peak, where=ln_x > self._ln_x_far)
         sigma = np.exp(ln_sigma, out=ln_sigma)
         x_near = self.x_near_m
-        near = x_m < x_near
-        if near.any():
+        if x_m.size and x_m.min() < x_near:
+            near = x_m < x_near
             slope = self.raw(x_near) / x_near
             sigma[near] = np.maximum(slope * x_m[near], SIGMA_MIN_M)
         return sigma
+
+    @property
+    def _ln_x_far(self) -> float:
+        return -self.j / (2.0 * self.k)
+
+    @property
+    def _ln_sigma_peak(self) -> float:
+        ln_x = self._ln_x_far
+        return self.i + self.j * ln_x + self.k * ln_x * ln_x
 
     def describe(self) -> dict[str, object]:
         return {
@@ -117,9 +130,11 @@ class BriggsFormula:
     b: float
     p: float
 
-    def __call__(self, x_m: FloatArray, ln_x: FloatArray | None = None) -> FloatArray:
+    def __call__(
+        self, x_m: FloatArray, ln_x: FloatArray | None = None, out: FloatArray | None = None
+    ) -> FloatArray:
         """σ (m) at downwind distances x > 0 (m); ``ln_x`` is accepted for symmetry, unused."""
-        sigma = self.a * x_m
+        sigma = np.multiply(x_m, self.a, out=out)
         if self.b != 0.0 and self.p != 0.0:
             growth = self.b * x_m
             growth += 1.0
@@ -149,10 +164,22 @@ class DispersionCurves:
     sigma_y: SigmaFunction
     sigma_z: SigmaFunction
 
-    def sigmas(self, x_m: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """σy, σz (m) at downwind distances x > 0 (m)."""
-        ln_x = np.log(x_m) if isinstance(self.sigma_y, LogQuadraticFit) else None
-        return self.sigma_y(x_m, ln_x), self.sigma_z(x_m, ln_x)
+    def sigmas(
+        self,
+        x_m: FloatArray,
+        out_y: FloatArray | None = None,
+        out_z: FloatArray | None = None,
+        ln_x: FloatArray | None = None,
+    ) -> tuple[FloatArray, FloatArray]:
+        """σy, σz (m) at downwind distances x > 0 (m), optionally into preallocated arrays.
+
+        ``ln_x`` is a scratch array for ln x (it is overwritten) or None to allocate one.
+        """
+        if isinstance(self.sigma_y, LogQuadraticFit) or isinstance(self.sigma_z, LogQuadraticFit):
+            ln_x = np.log(x_m, out=ln_x)
+        else:
+            ln_x = None
+        return self.sigma_y(x_m, ln_x, out_y), self.sigma_z(x_m, ln_x, out_z)
 
     def describe(self) -> dict[str, object]:
         return {

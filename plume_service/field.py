@@ -33,17 +33,25 @@ _THREADS = 2
 
 
 def as_points(points: npt.ArrayLike) -> FloatArray:
-    """Return ``points`` as a C-contiguous (N, 3) float64 array, or raise ValueError."""
+    """Return ``points`` as a C-contiguous (N, 3) float64 array, or raise ValueError.
+
+    Finiteness is checked chunk by chunk by :func:`check_finite`, keeping temporaries small.
+    """
     try:
         array = np.ascontiguousarray(points, dtype=np.float64)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"points must be an (N, 3) array of numbers: {exc}") from exc
     if array.ndim != 2 or array.shape[1] != 3:
         raise ValueError(f"points must have shape (N, 3), got shape {array.shape}")
-    if not np.isfinite(array).all():
-        bad = int(np.flatnonzero(~np.isfinite(array).all(axis=1))[0])
-        raise ValueError(f"points must be finite; row {bad} is {array[bad].tolist()}")
     return array
+
+
+def check_finite(points: FloatArray, first_row: int = 0) -> None:
+    """Raise ValueError naming the first row of ``points`` that is not finite."""
+    finite = np.isfinite(points)
+    if not finite.all():
+        bad = int(np.flatnonzero(~finite.all(axis=1))[0])
+        raise ValueError(f"points must be finite; row {first_row + bad} is {points[bad].tolist()}")
 
 
 def check_time(t: float | None) -> float | None:
@@ -67,10 +75,13 @@ class ConcentrationField(ABC):
         n = array.shape[0]
         out = np.empty(n, dtype=np.float64)
         starts = range(0, n, CHUNK_POINTS)
+        # Validate every chunk before evaluating any, so a bad row raises before any work.
+        for start in starts:
+            check_finite(array[start : start + CHUNK_POINTS], start)
 
         def run(start: int) -> None:
             stop = min(start + CHUNK_POINTS, n)
-            out[start:stop] = self._evaluate(array[start:stop], t)
+            self._evaluate(array[start:stop], t, out[start:stop])
 
         if n >= THREADED_MIN_POINTS:
             with ThreadPoolExecutor(max_workers=_THREADS) as pool:
@@ -82,8 +93,8 @@ class ConcentrationField(ABC):
         return out
 
     @abstractmethod
-    def _evaluate(self, points: FloatArray, t: float | None) -> FloatArray:
-        """Concentration at one chunk of already validated (n, 3) points."""
+    def _evaluate(self, points: FloatArray, t: float | None, out: FloatArray) -> None:
+        """Write the concentration at one chunk of validated (n, 3) points into ``out`` (n,)."""
 
     @abstractmethod
     def info(self) -> dict[str, Any]:
@@ -104,11 +115,13 @@ class PlumeField(ConcentrationField):
                 )
         self.sources: tuple[ConcentrationField, ...] = tuple(sources)
 
-    def _evaluate(self, points: FloatArray, t: float | None) -> FloatArray:
-        total = self.sources[0]._evaluate(points, t)
-        for source in self.sources[1:]:
-            total += source._evaluate(points, t)
-        return total
+    def _evaluate(self, points: FloatArray, t: float | None, out: FloatArray) -> None:
+        self.sources[0]._evaluate(points, t, out)
+        if len(self.sources) > 1:
+            term = np.empty_like(out)
+            for source in self.sources[1:]:
+                source._evaluate(points, t, term)
+                out += term
 
     def info(self) -> dict[str, Any]:
         return {"model": "superposition", "sources": [source.info() for source in self.sources]}

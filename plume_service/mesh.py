@@ -4,7 +4,8 @@ The seed built its plume mesh with nested Python loops over a 0.1 m grid. Here t
 evaluated vectorised, slab by slab (bounded memory, optional tqdm progress bar), and the
 surface is extracted by marching cubes from PyMCubes. The volume is padded with a layer of
 zeros on every side, so the surface is closed even where the level set touches the domain
-boundary. Faces are oriented so their normals point outward (toward lower concentration).
+boundary (the cap lies on the boundary plane). Faces are oriented so their normals point
+outward (toward lower concentration).
 
 Default bounds for a Gaussian plume (or a superposition of them) are derived from the field:
 first a conservative analytic box from C ≤ Q/(2π u σy)·(2/σz + √(2π)/L)·f(y), then tightened
@@ -64,11 +65,13 @@ def isosurface(
     if bounds is None:
         bounds = default_bounds(field, level)
     axes = _grid_axes(bounds, resolution)
-    volume = _evaluate_grid(field, axes, progress, t)
-    padded = np.pad(volume, 1, mode="constant", constant_values=0.0)
+    padded = _evaluate_grid(field, axes, progress, t)
     vertices, faces = mcubes.marching_cubes(padded, level)
     origin = np.array([axis[0] for axis in axes]) - resolution
     vertices = np.asarray(vertices, dtype=np.float64) * resolution + origin
+    # Where the level set reaches the domain's edge (the ground, say) the zero padding closes
+    # it half a cell outside; put those cap vertices on the boundary plane instead.
+    np.clip(vertices, [a[0] for a in axes], [a[-1] for a in axes], out=vertices)
     faces = np.asarray(faces, dtype=np.int64)
     if _signed_volume(vertices, faces) < 0.0:
         faces = np.ascontiguousarray(faces[:, ::-1])
@@ -152,8 +155,11 @@ def _grid_axes(bounds: Bounds, resolution: float) -> list[FloatArray]:
 def _evaluate_grid(
     field: ConcentrationField, axes: list[FloatArray], progress: bool, t: float | None
 ) -> FloatArray:
+    """The field on the grid, inside one layer of zeros on every side (which closes the mesh);
+    filled in place so the volume is never copied."""
     xs, ys, zs = axes
-    volume = np.empty((len(xs), len(ys), len(zs)), dtype=np.float64)
+    padded = np.zeros((len(xs) + 2, len(ys) + 2, len(zs) + 2), dtype=np.float64)
+    volume = padded[1:-1, 1:-1, 1:-1]
     plane = np.empty((len(ys), len(zs), 3), dtype=np.float64)
     plane[:, :, 1] = ys[:, None]
     plane[:, :, 2] = zs[None, :]
@@ -166,7 +172,7 @@ def _evaluate_grid(
             slab[:, :, :, 0] = xs[start:stop, None, None]
             volume[start:stop] = field.concentration(slab.reshape(-1, 3), t).reshape(slab.shape[:3])
             bar.update(stop - start)
-    return volume
+    return padded
 
 
 def _slabs(count: int, size: int) -> Iterator[tuple[int, int]]:

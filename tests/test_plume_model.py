@@ -117,6 +117,12 @@ def test_sensor_window_on_the_centreline_matches_the_seed(preset, coefficients, 
 # ------------------------------------------------------------------------- conservation laws
 
 
+def trapezoid(values, grid):
+    """Trapezoid rule along the last axis (numpy-only; np.trapezoid needs numpy ≥ 2)."""
+    widths = np.diff(grid)
+    return np.sum(0.5 * (values[..., 1:] + values[..., :-1]) * widths, axis=-1)
+
+
 def mass_flux(plume: GaussianPlume, x: float, z_top: float | None = None) -> float:
     """∬ u·C dy dz over the cross-section at downwind distance x (trapezoid, fine grid)."""
     sy, sz = (float(s[0]) for s in plume.sigmas(np.array([x])))
@@ -126,7 +132,7 @@ def mass_flux(plume: GaussianPlume, x: float, z_top: float | None = None) -> flo
     grid_y, grid_z = np.meshgrid(ys, zs, indexing="ij")
     points = np.column_stack([np.full(grid_y.size, x), grid_y.ravel(), grid_z.ravel()])
     c = plume.concentration(points).reshape(grid_y.shape)
-    return plume.wind_speed_m_s * float(np.trapezoid(np.trapezoid(c, zs, axis=1), ys))
+    return plume.wind_speed_m_s * trapezoid(trapezoid(c, zs), ys)
 
 
 @pytest.mark.parametrize("x", [50.0, 500.0])
@@ -381,6 +387,28 @@ def test_large_batches_match_small_ones():
     whole = plume.concentration(points)
     pieces = np.concatenate([plume.concentration(part) for part in np.array_split(points, 37)])
     np.testing.assert_array_equal(whole, pieces)
+
+
+@pytest.mark.parametrize("lid", [None, 60.0])
+def test_sparse_and_dense_chunks_agree(lid):
+    # A chunk mostly inside the plume is evaluated whole; one mostly outside only where needed.
+    rng = np.random.default_rng(6)
+    inside = rng.uniform([0.5, -40.0, 0.0], [500.0, 40.0, 50.0], size=(1000, 3))
+    upwind = rng.uniform([-500.0, -40.0, 0.0], [0.0, 40.0, 50.0], size=(5000, 3))
+    plume = GaussianPlume(10.0, 6.0, 10.0, mixing_height=lid)
+    dense = plume.concentration(inside)
+    sparse = plume.concentration(np.vstack([upwind[:2500], inside, upwind[2500:]]))
+    np.testing.assert_array_equal(sparse[2500:3500], dense)
+    assert not sparse[:2500].any()
+    assert not sparse[3500:].any()
+
+
+def test_to_plume_frame():
+    plume = GaussianPlume(10.0, 6.0, 10.0, source=(5.0, 5.0), wind_from_deg=180.0)
+    x, y, z = plume.to_plume_frame(np.array([[5.0, 25.0, 3.0], [2.0, 5.0, 1.0]]))
+    assert x.tolist() == [20.0, 0.0]  # 20 m north is 20 m downwind of a southerly wind
+    assert y.tolist() == [0.0, 3.0]  # 3 m west is to the left of a wind blowing north
+    assert z.tolist() == [3.0, 1.0]
 
 
 def test_info_is_plain_json():

@@ -18,7 +18,7 @@ from swarmbus.messages import (
     PlumeValues,
 )
 from swarmbus.session import Presence, open_session
-from tests.procs import Network, NodeProcs, keys_for, run_cli
+from tests.procs import Network, NodeProcs, keys_for, run_cli, wait_for_queryable
 
 
 def _get(session: zenoh.Session, key: str, payload: bytes, timeout_s: float = 10.0) -> zenoh.Reply:
@@ -37,6 +37,9 @@ def plume_service() -> object:
             presence = Presence(session, keys_for())
             assert presence.wait_for(lambda a: "plume" in a, 30.0), "plume service never came up"
             presence.close()
+            wait_for_queryable(
+                session, keys_for().plume_info(), encode(PlumeInfoQuery()), 30.0, "plume/info"
+            )
             yield net, session
 
 
