@@ -292,18 +292,23 @@ class BusToyPhysics:
             for s in states:
                 self._state_pubs[s.vehicle_id].put(encode(s))
             deadline = time.monotonic() + self.timeout_s
+            self._pub.put(payload)
+            republish = time.monotonic() + 0.05
             with self._cond:
                 while not self._answered(k):
                     if self._stop.is_set():
                         return
-                    if time.monotonic() > deadline:
+                    now = time.monotonic()
+                    if now > deadline:
                         missing = [
                             v for v in self.participants if self._commands.get(v, (-1, []))[0] != k
                         ]
                         self.error = f"tick {k}: no actuators from {missing}"
                         return
-                    self._pub.put(payload)  # (re-)publish: start-up handshake / lost sample
-                    self._cond.wait(0.05 if k == 0 else self.timeout_s)
+                    if k == 0 and now > republish:  # start-up handshake
+                        self._pub.put(payload)
+                        republish = now + 0.05
+                    self._cond.wait(0.05)
                 commands = {v: self._commands[v][1] for v in self.participants}
             for vid, toy in self.vehicles.items():
                 toy.step(commands.get(vid, [0.0] * len(toy.vt.rotors)), self.scenario.substeps)
