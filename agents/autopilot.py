@@ -86,6 +86,7 @@ class Autopilot:
         self.behavior = behavior
         self.modes.has_behavior = behavior is not None
         self.behavior_error = ""
+        self.sensor_health = ""  # set by the node: why readings are unavailable
         self.state: VehicleState | None = None
         self.est: Estimate | None = None
         self.now = 0.0
@@ -279,7 +280,7 @@ class Autopilot:
         m = self.modes
         mission = m.mission
         state = self.state
-        health = self.behavior_error or "ok"
+        health = self.behavior_error or self.sensor_health or "ok"
         return VehicleStatus(
             vehicle_id=self.vehicle_id,
             sim_time_s=self.now,

@@ -274,6 +274,10 @@ class AutopilotNode:
                     ActuatorCommand(vehicle_id=vid, tick=tick.tick, rotor_commands=rotor)
                 )
                 served.actuators.put(served.last_command)
+                for event in served.autopilot.modes.mission.drain_events():
+                    log.info(
+                        "%s: mission item %d reached at %.2f s", vid, event.index, event.sim_time_s
+                    )
             for served in self.served.values():
                 served.publish_status(force=False, period_s=self.options.status_period_s)
         if any(s.sensor.due(tick.tick) for s in self.served.values()) and tick.states:
@@ -316,6 +320,9 @@ class AutopilotNode:
                 else []
             )
             reading = served.sensor.reading(vid, pending.sim_time_s, position, true, peers)
+            served.autopilot.sensor_health = (
+                "" if reading.available else "sensor: the plume service did not answer"
+            )
             served.readings_pub.put(encode(reading))
             served.new_readings.append(reading)
 

@@ -103,6 +103,9 @@ def test_without_a_plume_service_readings_are_unavailable_never_zero(
             r = swarm.reading("uav1")
             assert r is not None and not r.available
             assert r.reported_g_m3 is None and r.true_g_m3 is None
+            swarm.wait_until(
+                lambda: "plume service" in swarm.status("uav1").health, 10.0, "sensor health"
+            )
         finally:
             physics.stop()
 
