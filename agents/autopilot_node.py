@@ -6,7 +6,8 @@ One process serves one vehicle (or a few): it declares one liveliness token
 ``vehicle/<id>/status`` (on change and every ``status_period_s`` of sim time) and the sensor's
 ``vehicle/<id>/concentration``.
 
-The loop runs on the main thread; Zenoh callbacks only enqueue ticks. The sensor's plume query
+Ticks run on one worker thread reading the subscriber's channel (no Python callback thread in
+between). The sensor's plume query
 for tick k (one batched query: every vehicle's position in the tick, i.e. own + peers) is sent
 right after tick k's commands and collected before tick k+1's, so its round trip overlaps the
 physics step and a behaviour always sees the reading of the previous sensor tick — the same
@@ -19,8 +20,8 @@ Options (``--set key=value``): ``sensor_timeout_s`` (0.2), ``status_period_s`` (
 from __future__ import annotations
 
 import logging
-import queue
 import threading
+import time
 from collections.abc import Callable
 from contextlib import suppress
 from dataclasses import dataclass, fields
@@ -53,6 +54,7 @@ from swarmbus.scenario import Scenario
 log = logging.getLogger(__name__)
 
 IDLE_STATUS_PERIOD_S = 1.0  # wall clock: status while no ticks arrive (physics not running)
+TICK_QUEUE = 64
 
 
 @dataclass(frozen=True)
@@ -168,8 +170,9 @@ class AutopilotNode:
         self.served = {
             vid: _Served(session, self.keys, ctx.scenario, vid, options) for vid in ctx.vehicle_ids
         }
-        self.ticks: queue.SimpleQueue[bytes] = queue.SimpleQueue()
         self.last_tick = -1
+        self.last_tick_wall = 0.0
+        self._tick_sub: Any = None
         self.pending: _PendingSensor | None = None
         self.plume_key = self.keys.plume_concentration()
         self._declared: list[Any] = []  # subscribers and queryables, undeclared on close
@@ -178,10 +181,9 @@ class AutopilotNode:
     # ------------------------------------------------------------------ set-up
     def declare(self, node_name: str) -> None:
         """Subscriber and queryables first, then the participants' tokens."""
-        self._declared.append(
-            self.session.declare_subscriber(
-                self.keys.tick(), lambda sample: self.ticks.put(sample.payload.to_bytes())
-            )
+        # A Rust-side channel: no Python thread between the network and the tick loop.
+        self._tick_sub = self.session.declare_subscriber(
+            self.keys.tick(), zenoh.handlers.FifoChannel(TICK_QUEUE)
         )
         for vid, served in self.served.items():
             self._declared.append(
@@ -235,25 +237,42 @@ class AutopilotNode:
 
     # ------------------------------------------------------------------ loop
     def run(self, stop: threading.Event) -> None:
-        while not stop.is_set():
-            try:
-                data = self.ticks.get(timeout=IDLE_STATUS_PERIOD_S)
-            except queue.Empty:
-                with self.lock:
+        """Ticks on a worker thread; the main thread keeps statuses flowing while none arrive.
+
+        The worker blocks in the subscriber's channel; closing the session (on return from
+        ``main``) ends it — undeclaring a subscriber another thread is reading fails in zenoh.
+        """
+        worker = threading.Thread(target=self._tick_loop, args=(stop,), name="ticks", daemon=True)
+        worker.start()
+        while not stop.wait(IDLE_STATUS_PERIOD_S):
+            with self.lock:
+                if time.monotonic() - self.last_tick_wall >= IDLE_STATUS_PERIOD_S:
                     for served in self.served.values():
                         served.publish_status(force=True, period_s=0.0)
-                continue
-            with suppress(queue.Empty):  # behind (realtime mode): only the latest tick counts
-                while True:
-                    data = self.ticks.get_nowait()
+
+    def _tick_loop(self, stop: threading.Event) -> None:
+        sub = self._tick_sub
+        while not stop.is_set():
             try:
-                tick = decode(data, SimTick)
+                sample = sub.recv()
+                while (newer := sub.try_recv()) is not None:  # behind: only the latest counts
+                    sample = newer
+            except zenoh.ZError:  # the session closed
+                return
+            try:
+                tick = decode(sample.payload.to_bytes(), SimTick)
             except MessageError as exc:
                 log.warning("ignoring bad tick: %s", exc)
                 continue
-            self.on_tick(tick)
+            try:
+                self.on_tick(tick)
+            except Exception:  # never let one tick end the loop; physics would drop us
+                if stop.is_set():
+                    return
+                log.exception("tick %d failed", tick.tick)
 
     def on_tick(self, tick: SimTick) -> None:
+        self.last_tick_wall = time.monotonic()
         if tick.tick == self.last_tick:  # the start handshake repeats a tick: same answer
             for served in self.served.values():
                 if served.last_command:
