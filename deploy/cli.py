@@ -131,22 +131,120 @@ def node(
 
 
 # ---------------------------------------------------------------------------- the rest
-@cli.command(context_settings={"ignore_unknown_options": True, "allow_extra_args": True})
-def up() -> None:
+@cli.command()
+@click.argument("scenario_arg", metavar="[SCENARIO]", required=False)
+@SCENARIO_OPT
+@click.option("--headless", is_flag=True, help="No viewer.")
+@click.option("--record", is_flag=True, help="Also run the recorder (MCAP in the run directory).")
+@click.option("--out", type=click.Path(path_type=Path), default=None, help="Run directory.")
+@click.option("--connect", multiple=True, help="Router endpoint (default: the scenario's).")
+@click.option("--listen", multiple=True, help="Endpoint every node listens on.")
+@click.option("--roles", default=None, help="Only these roles, comma-separated (one host of many).")
+@click.option("--no-router", is_flag=True, help="Do not start a router (another host runs it).")
+@click.option("--hosts", "hosts_file", type=click.Path(path_type=Path), default=None)
+@click.option("--host", "host_name", default=None, help="This host's entry in --hosts.")
+def up(
+    scenario_arg: str | None,
+    scenario: str | None,
+    headless: bool,
+    record: bool,
+    out: Path | None,
+    connect: tuple[str, ...],
+    listen: tuple[str, ...],
+    roles: str | None,
+    no_router: bool,
+    hosts_file: Path | None,
+    host_name: str | None,
+) -> None:
     """Start the whole swarm (plume, physics, autopilots, gateway, viewer) and supervise it."""
-    not_yet("plumeswarm up", "#7")
+    from deploy.console import Console
+    from deploy.hosts import HostsError, load_deployment, options_for_host
+    from deploy.launcher import LaunchError, LaunchOptions, default_run_dir
+    from deploy.up import run_up
+
+    try:
+        deployment = load_deployment(hosts_file) if hosts_file is not None else None
+    except HostsError as exc:
+        fail(str(exc))
+    path = resolve_scenario_path(
+        scenario_arg or scenario or (deployment.scenario if deployment else None)
+    )
+    sc = scenario_from(str(path))
+    opts = LaunchOptions(
+        scenario_path=path,
+        headless=headless,
+        record=record,
+        run_dir=out or default_run_dir(),
+        connect=connect,
+        listen=listen,
+        roles=tuple(r.strip() for r in roles.split(",") if r.strip()) if roles else None,
+        router=not no_router,
+    )
+    if deployment is not None or host_name is not None:
+        try:
+            opts = options_for_host(opts, deployment, host_name)
+        except HostsError as exc:
+            fail(str(exc))
+    try:
+        sys.exit(run_up(sc, opts, Console()))
+    except LaunchError as exc:
+        fail(str(exc), code=1)
 
 
-@cli.command(context_settings={"ignore_unknown_options": True, "allow_extra_args": True})
-def demo() -> None:
+@cli.command()
+@SCENARIO_OPT
+@click.option("--vehicles", type=click.IntRange(1, 1024), default=None, help="Scale to N vehicles.")
+@click.option("--out", type=click.Path(path_type=Path), default=None, help="Run directory.")
+@click.option("--timeout", "timeout_s", type=float, default=900.0, show_default=True)
+@click.option("--attach", multiple=True, metavar="EP", help="Fly a stack already running here.")
+@click.option(
+    "--record/--no-record", default=True, help="Record the run (when the recorder exists)."
+)
+def demo(
+    scenario: str | None,
+    vehicles: int | None,
+    out: Path | None,
+    timeout_s: float,
+    attach: tuple[str, ...],
+    record: bool,
+) -> None:
     """Fly the default scenario end to end, headless, and print the accuracy table."""
-    not_yet("plumeswarm demo", "#7")
+    from deploy.console import Console
+    from deploy.demo import DemoOptions, run_demo
+    from deploy.launcher import default_run_dir
+
+    path = resolve_scenario_path(scenario)
+    opts = DemoOptions(
+        scenario_from(str(path)),
+        path,
+        out or default_run_dir(),
+        vehicles,
+        timeout_s,
+        attach=attach,
+        record=record,
+    )
+    sys.exit(run_demo(opts, Console()))
 
 
-@cli.command(context_settings={"ignore_unknown_options": True, "allow_extra_args": True})
-def status() -> None:
+@cli.command()
+@SCENARIO_OPT
+@click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
+@click.option("--connect", multiple=True, help="Router endpoint (default: the scenario's).")
+@click.option("--timeout", "timeout_s", type=float, default=5.0, show_default=True)
+def status(scenario: str | None, as_json: bool, connect: tuple[str, ...], timeout_s: float) -> None:
     """Ask the bus what is running: nodes, sim time, vehicles."""
-    not_yet("plumeswarm status", "#7")
+    import json
+
+    from deploy.status import NothingRunning, format_status, query_status
+    from swarmbus.keys import Keys
+
+    sc = scenario_from(scenario)
+    net = sc.network.with_overrides(connect=list(connect) or None)
+    try:
+        snap = query_status(net, Keys(sc.world.name), [v.id for v in sc.vehicles], timeout_s)
+    except NothingRunning as exc:
+        fail(str(exc), code=1)
+    click.echo(json.dumps(snap.to_json(), indent=2) if as_json else format_status(snap))
 
 
 @cli.command()

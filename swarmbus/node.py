@@ -25,6 +25,7 @@ from swarmbus.scenario import Scenario
 from swarmbus.session import NetworkConfig, open_session, process_identity
 
 log = logging.getLogger(__name__)
+HEALTH_PERIOD_S = 1.0
 
 
 def package_version() -> str:
@@ -62,6 +63,10 @@ class NodeRuntime:
         self._token: zenoh.LivelinessToken | None = None
         self._health_pub: zenoh.Publisher | None = None
         self._state = NodeState.UP
+        self._sim_time_s: float | None = None
+        self._detail = ""
+        self._heartbeat: threading.Thread | None = None
+        self._heartbeat_stop = threading.Event()
 
     @property
     def session(self) -> zenoh.Session:
@@ -80,13 +85,27 @@ class NodeRuntime:
         self._session = open_session(self.ctx.network)
         self._health_pub = self._session.declare_publisher(self.keys.node_health(self.ctx.name))
         self.publish_health(NodeState.UP)
+        self._heartbeat = threading.Thread(target=self._beat, name="health", daemon=True)
+        self._heartbeat.start()
         return self
+
+    def _beat(self) -> None:
+        # NodeHealth is also periodic, so `plumeswarm status` learns PIDs/hosts within a period.
+        while not self._heartbeat_stop.wait(HEALTH_PERIOD_S):
+            try:
+                self.publish_health()
+            except zenoh.ZError:
+                return
 
     def publish_health(
         self, state: NodeState | None = None, sim_time_s: float | None = None, detail: str = ""
     ) -> None:
         if state is not None:
             self._state = state
+        if sim_time_s is not None:
+            self._sim_time_s = sim_time_s
+        if detail:
+            self._detail = detail
         if self._health_pub is None:
             return
         pid, host = process_identity()
@@ -99,8 +118,8 @@ class NodeRuntime:
                     version=package_version(),
                     pid=pid,
                     host=host,
-                    sim_time_s=sim_time_s,
-                    detail=detail[:1000],
+                    sim_time_s=self._sim_time_s,
+                    detail=self._detail[:1000],
                 )
             )
         )
@@ -124,6 +143,9 @@ class NodeRuntime:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
+        self._heartbeat_stop.set()
+        if self._heartbeat is not None:
+            self._heartbeat.join(timeout=2.0)
         try:
             self.publish_health(NodeState.STOPPING)
             if self._token is not None:

@@ -1,0 +1,73 @@
+"""Deployment over several hosts: which roles run where, and the Zenoh endpoints between them.
+
+A hosts file (see ``deploy/hosts.example.toml``) names one router endpoint that every process
+connects to, and per host the roles it runs and the endpoint its processes listen on.
+``plumeswarm up --hosts FILE --host NAME`` runs that host's share.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import replace
+from pathlib import Path
+from typing import Annotated
+
+import msgspec
+
+from deploy.launcher import ALL_ROLES, LaunchOptions
+from swarmbus.session import Endpoint
+
+RoleName = Annotated[str, msgspec.Meta(pattern="^(" + "|".join(ALL_ROLES) + ")$")]
+
+
+class HostsError(ValueError):
+    pass
+
+
+class Host(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    name: str
+    address: str = ""  # informational: how operators reach the machine
+    roles: list[RoleName]
+    vehicles: list[str] | None = None  # autopilots for these vehicles only
+    listen: list[Endpoint] = msgspec.field(default_factory=list)
+
+
+class Deployment(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    router: Endpoint
+    scenario: str | None = None
+    hosts: list[Host]
+
+    def host(self, name: str) -> Host:
+        for h in self.hosts:
+            if h.name == name:
+                return h
+        raise HostsError(f"no host {name!r} (hosts: {', '.join(h.name for h in self.hosts)})")
+
+
+def load_deployment(path: Path) -> Deployment:
+    try:
+        raw = tomllib.loads(path.read_text())
+        dep = msgspec.convert(raw, Deployment)
+    except (OSError, tomllib.TOMLDecodeError, msgspec.ValidationError) as exc:
+        raise HostsError(f"{path}: {exc}") from None
+    owners = [h.name for h in dep.hosts if "router" in h.roles]
+    if len(owners) != 1:
+        raise HostsError(f"{path}: exactly one host must run the router, got {owners or 'none'}")
+    return dep
+
+
+def options_for_host(
+    opts: LaunchOptions, deployment: Deployment | None, host_name: str | None
+) -> LaunchOptions:
+    """``opts`` narrowed to one host's roles and endpoints."""
+    if deployment is None or host_name is None:
+        raise HostsError("--hosts FILE and --host NAME go together")
+    host = deployment.host(host_name)
+    return replace(
+        opts,
+        connect=(deployment.router,),
+        listen=tuple(host.listen) or opts.listen,
+        roles=tuple(host.roles),
+        router="router" in host.roles,
+        vehicles=tuple(host.vehicles) if host.vehicles is not None else None,
+    )

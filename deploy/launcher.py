@@ -1,0 +1,365 @@
+"""``plumeswarm up``: start the roles of one run as OS processes, see them ready, supervise, stop.
+
+The plan (which processes, with which command lines and policies) is pure data built from the
+scenario and the options (:func:`plan`); :class:`Launcher` carries it out with a
+:class:`~deploy.supervisor.Supervisor`, learns readiness from liveliness tokens
+(:class:`~swarmbus.session.Presence`) and never from sleeps, and writes ``pids.json`` into the run
+directory.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import logging
+import sys
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import TracebackType
+
+import zenoh
+
+from deploy.busview import BusView, status_line
+from deploy.roles import ROLES
+from deploy.supervisor import (
+    ProcessSpec,
+    ProcState,
+    RestartMode,
+    RestartPolicy,
+    Supervisor,
+)
+from swarmbus.keys import Keys
+from swarmbus.scenario import Scenario
+from swarmbus.session import DEFAULT_ROUTER, NetworkConfig, open_session
+
+log = logging.getLogger(__name__)
+
+ALL_ROLES = ("router", "recorder", "plume", "physics", "autopilot", "gateway", "viewer")
+# Stop order: the world and its edges first (so no autopilot is "dropped" from a lockstep that
+# is still running), then the autopilots and the plume, then the recorder, the router last.
+STOP_STAGE = {
+    "gateway": 0,
+    "viewer": 0,
+    "physics": 0,
+    "autopilot": 1,
+    "plume": 1,
+    "recorder": 2,
+    "router": 3,
+}
+RESTART = {
+    "router": RestartPolicy(),
+    "physics": RestartPolicy(),
+    "recorder": RestartPolicy(),
+    "plume": RestartPolicy(RestartMode.ON_FAILURE, max_restarts=3),
+    "autopilot": RestartPolicy(RestartMode.ON_FAILURE, max_restarts=3),
+    "gateway": RestartPolicy(RestartMode.ON_FAILURE, max_restarts=3),
+    "viewer": RestartPolicy(RestartMode.ON_FAILURE, max_restarts=2),
+}
+NOT_CRITICAL = {"viewer"}
+
+
+class LaunchError(RuntimeError):
+    """The run could not start: one line saying why."""
+
+
+@dataclass(frozen=True)
+class LaunchOptions:
+    scenario_path: Path
+    headless: bool = False
+    record: bool = False
+    run_dir: Path = Path("runs")
+    connect: tuple[str, ...] = ()  # the router endpoint(s); default: the scenario's
+    listen: tuple[str, ...] = ()  # what each node listens on; default: loopback, any port
+    roles: tuple[str, ...] | None = None  # only these roles (one host of many); None: all
+    router: bool = True  # start the router here
+    vehicles: tuple[str, ...] | None = None  # autopilots for these vehicles; None: all
+    verbose: int = 1
+    node_options: dict[str, tuple[str, ...]] = field(default_factory=dict)  # role → KEY=VALUE
+
+
+def router_endpoints(scenario: Scenario, opts: LaunchOptions) -> list[str]:
+    return list(opts.connect) or list(scenario.network.connect) or [DEFAULT_ROUTER]
+
+
+def selected_roles(opts: LaunchOptions) -> list[str]:
+    roles = list(opts.roles) if opts.roles is not None else list(ALL_ROLES)
+    unknown = [r for r in roles if r not in ROLES]
+    if unknown:
+        raise LaunchError(f"unknown role(s) {', '.join(unknown)}; roles: {', '.join(ROLES)}")
+    if opts.headless and "viewer" in roles and opts.roles is None:
+        roles.remove("viewer")
+    if not opts.record and "recorder" in roles and opts.roles is None:
+        roles.remove("recorder")
+    if not opts.router and "router" in roles:
+        roles.remove("router")
+    return [r for r in ALL_ROLES if r in roles]
+
+
+def missing_roles(roles: Sequence[str]) -> list[str]:
+    """Roles whose entry module is not installed (not built yet)."""
+    missing = []
+    for role in roles:
+        module = ROLES[role][0].partition(":")[0]
+        try:
+            found = importlib.util.find_spec(module) is not None
+        except ModuleNotFoundError:
+            found = False
+        if not found:
+            missing.append(role)
+    return missing
+
+
+def plan(scenario: Scenario, opts: LaunchOptions) -> list[ProcessSpec]:
+    """The processes of this run, in start order."""
+    endpoints = router_endpoints(scenario, opts)
+    listen = list(opts.listen) or ["tcp/127.0.0.1:0"]
+    base = [sys.executable, "-m", "deploy"] + ["-v"] * opts.verbose
+    common = ["--scenario", str(opts.scenario_path)]
+    vehicle_ids = (
+        list(opts.vehicles) if opts.vehicles is not None else [v.id for v in scenario.vehicles]
+    )
+    specs: list[ProcessSpec] = []
+
+    def add(role: str, name: str, extra: Sequence[str]) -> None:
+        args = [*base, "node", role, *common, *extra]
+        for item in opts.node_options.get(role, ()):
+            args += ["--set", item]
+        specs.append(
+            ProcessSpec(
+                name=name,
+                role=role,
+                argv=tuple(args),
+                restart=RESTART[role],
+                stop_stage=STOP_STAGE[role],
+                critical=role not in NOT_CRITICAL,
+            )
+        )
+
+    net_args = [a for ep in endpoints for a in ("--connect", ep)] + [
+        a for ep in listen for a in ("--listen", ep)
+    ]
+    for role in selected_roles(opts):
+        if role == "router":
+            add(role, "router", [a for ep in endpoints for a in ("--listen", ep)])
+        elif role == "autopilot":
+            for vid in vehicle_ids:
+                add(role, f"autopilot-{vid}", ["--vehicle", vid, *net_args])
+        elif role == "recorder":
+            out = opts.run_dir / "recording.mcap"
+            add(role, role, [*net_args, "--set", f"out={out}"])
+        else:
+            add(role, role, net_args)
+    return specs
+
+
+def default_run_dir(root: Path = Path("runs")) -> Path:
+    return root / time.strftime("%Y%m%d-%H%M%S")
+
+
+def _last_lines(path: Path, n: int = 3) -> str:
+    try:
+        lines = [ln for ln in path.read_text(errors="replace").splitlines() if ln.strip()]
+    except OSError:
+        return ""
+    return " / ".join(ln.strip() for ln in lines[-n:] if not ln.startswith("--- start"))
+
+
+class Launcher:
+    """Carries out a plan: ``with Launcher(sc, opts) as l: l.supervise(stop)``."""
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        opts: LaunchOptions,
+        console: Callable[[str], None] | None = None,
+    ) -> None:
+        self.scenario = scenario
+        self.opts = opts
+        self.keys = Keys(scenario.world.name)
+        self.run_dir = opts.run_dir
+        self.specs = plan(scenario, opts)
+        self.console = console
+        self.supervisor = Supervisor(self.specs, self.run_dir, console=console)
+        self._session: zenoh.Session | None = None
+        self.view: BusView | None = None
+        self.started_at = time.monotonic()
+
+    # ------------------------------------------------------------------ start
+    def _client_network(self) -> NetworkConfig:
+        # The launcher's own session: a peer that only connects to the router.
+        return NetworkConfig(connect=router_endpoints(self.scenario, self.opts), listen=[])
+
+    @property
+    def session(self) -> zenoh.Session:
+        if self._session is None:
+            raise RuntimeError("the launcher has no bus session before start()")
+        return self._session
+
+    def start(self, on_bus: Callable[[zenoh.Session], None] | None = None) -> None:
+        """Start everything; ``on_bus(session)`` runs once the router is up and before any
+        other role starts (subscribe there to see a run from its first message)."""
+        roles = sorted({s.role for s in self.specs})
+        missing = missing_roles(roles)
+        if missing:
+            raise LaunchError(
+                "cannot start: role(s) not available yet: "
+                + ", ".join(
+                    f"{r} ({ROLES[r][0].partition(':')[0]}, issue {ROLES[r][1]})" for r in missing
+                )
+            )
+        self.run_dir.mkdir(parents=True, exist_ok=True)
+        timeout = self.scenario.time.startup_timeout_s
+        first = [s.name for s in self.specs if s.role == "router"]
+        if first:
+            self.supervisor.start_all(first)
+        self._wait_router(timeout)
+        self._session = open_session(self._client_network())
+        self.view = BusView(self._session, self.keys)
+        if first:
+            self.wait_ready(first, timeout)
+        if on_bus is not None:
+            on_bus(self._session)
+        # The recorder before anything publishes; then everything else together.
+        early = [s.name for s in self.specs if s.role == "recorder"]
+        if early:
+            self.supervisor.start_all(early)
+            self.wait_ready(early, timeout)
+        rest = [s.name for s in self.specs if s.name not in first + early]
+        self.supervisor.start_all(rest)
+        self.wait_ready(rest, timeout)
+        self.write_pids()
+
+    def _wait_router(self, timeout_s: float) -> None:
+        # The router (ours or another host's) must accept connections before anyone joins.
+        import socket
+
+        endpoints = router_endpoints(self.scenario, self.opts)
+        deadline = time.monotonic() + timeout_s
+        for ep in endpoints:
+            proto, _, addr = ep.partition("/")
+            if proto != "tcp":
+                continue
+            host, _, port = addr.rpartition(":")
+            while True:
+                self._check_exits()
+                try:
+                    with socket.create_connection((host.strip("[]"), int(port)), timeout=0.5):
+                        break
+                except OSError:
+                    if time.monotonic() > deadline:
+                        raise LaunchError(
+                            f"router did not accept connections on {ep} within {timeout_s:.0f} s"
+                        ) from None
+                    time.sleep(0.05)
+
+    def _check_exits(self) -> None:
+        self.supervisor.poll()
+        for sv in self.supervisor.failed_for_good():
+            detail = _last_lines(sv.log_path)
+            raise LaunchError(
+                f"{sv.spec.name} exited with code {sv.returncode} before it was ready"
+                + (f": {detail}" if detail else "")
+                + f" (log: {sv.log_path})"
+            )
+
+    def wait_ready(self, names: Sequence[str], timeout_s: float) -> None:
+        """Until every name has a liveliness token; fail fast when one of them exits."""
+        assert self.view is not None
+        wanted = set(names)
+        deadline = time.monotonic() + timeout_s
+        while True:
+            self._check_exits()
+            alive = self.view.presence.alive
+            if wanted <= alive:
+                return
+            if time.monotonic() > deadline:
+                missing = ", ".join(sorted(wanted - alive))
+                raise LaunchError(f"not ready within {timeout_s:.0f} s: {missing}")
+            self.view.presence.wait_for(lambda a: wanted <= a, 0.2)
+
+    def write_pids(self) -> Path:
+        path = self.run_dir / "pids.json"
+        tmp = path.with_suffix(".tmp")
+        tmp.write_text(json.dumps(self.supervisor.pids(), indent=2) + "\n")
+        tmp.replace(path)
+        return path
+
+    # ------------------------------------------------------------------ run
+    def status_line(self) -> str:
+        if self.view is None:
+            return ""
+        expected = sum(1 for s in self.specs if s.role == "autopilot") or None
+        return status_line(self.view.snapshot(), expected)
+
+    def supervise_once(self) -> None:
+        """Reap and restart; raise :class:`LaunchError` when a critical process is gone."""
+        before = self.supervisor.pids()
+        for event in self.supervisor.poll():
+            if event.restarting:
+                log.warning(
+                    "%s exited with code %d: restarting in %.1f s",
+                    event.name,
+                    event.returncode,
+                    event.delay_s,
+                )
+            else:
+                log.warning("%s exited with code %d", event.name, event.returncode)
+        if self.supervisor.pids() != before:
+            self.write_pids()
+        failed = self.supervisor.failed_for_good()
+        if failed:
+            sv = failed[0]
+            raise LaunchError(
+                f"{sv.spec.name} exited with code {sv.returncode}: {_last_lines(sv.log_path)}"
+            )
+
+    def supervise(
+        self,
+        stop: threading.Event,
+        on_status: Callable[[str], None] | None = None,
+        status_period_s: float = 1.0,
+    ) -> None:
+        """Until ``stop`` is set (or a critical process is gone for good)."""
+        next_status = 0.0
+        while not stop.is_set():
+            self.supervise_once()
+            if not any(
+                sv.state in (ProcState.RUNNING, ProcState.BACKOFF)
+                for sv in self.supervisor.procs.values()
+            ):
+                return
+            now = time.monotonic()
+            if on_status is not None and now >= next_status:
+                on_status(self.status_line())
+                next_status = now + status_period_s
+            stop.wait(0.1)
+
+    # ------------------------------------------------------------------ stop
+    def stop(self) -> dict[str, int | None]:
+        # Our own session goes first: it must not outlive the router it talks through.
+        if self.view is not None:
+            self.view.close()
+            self.view = None
+        if self._session is not None:
+            self._session.close()
+            self._session = None
+        return self.supervisor.stop_all()
+
+    def __enter__(self) -> Launcher:
+        try:
+            self.start()
+        except BaseException:
+            self.stop()
+            raise
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.stop()

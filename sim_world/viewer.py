@@ -1,0 +1,523 @@
+"""The viewer role: a meshcat scene of the world, fed from the bus.
+
+Ground grid, each vehicle as a body with rotor discs in its own colour, its trail, the plume
+isosurfaces from ``plume/mesh`` as translucent surfaces, each vehicle's latest reading as a
+coloured, sized marker above it, and the source marked. The meshcat server (its web files ship in
+the package, nothing is fetched) runs on a thread of this process, on 127.0.0.1; the URL is
+printed at start and published in this node's health ``detail``.
+
+The viewer is only a subscriber: Zenoh callbacks store the newest payload and return; the render
+loop decodes only the newest one at most ``rate_hz`` times a second, so a slow viewer drops frames
+and never slows the lockstep.
+
+Options (``--set KEY=VALUE``): ``http_port`` (0: any free), ``rate_hz`` (25), ``vehicle_scale``
+(drawn size of the vehicles, 4: a 0.5 m quadcopter is invisible in a 60 m scene),
+``levels`` (isosurface levels g/m³, comma-separated), ``mesh_resolution_m`` (1.0).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+import sys
+import threading
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import meshcat
+import meshcat.geometry as mg
+import meshcat.transformations as mtf
+import numpy as np
+import zenoh
+from meshcat.servers.zmqserver import ZMQWebSocketBridge
+
+from swarmbus.codec import MessageError, decode, encode
+from swarmbus.keys import KeyNameError, Keys
+from swarmbus.messages import (
+    ConcentrationReading,
+    ErrorReply,
+    PlumeMesh,
+    PlumeMeshQuery,
+    SimTick,
+    VehicleState,
+)
+from swarmbus.node import NodeContext, NodeRuntime
+from swarmbus.scenario import Scenario
+from swarmbus.session import free_tcp_port
+from swarmbus.vehicle_types import load_vehicle_type
+
+log = logging.getLogger(__name__)
+
+# Vehicle colours (Tableau 10), one per vehicle in scenario order.
+PALETTE = (
+    0x1F77B4,
+    0xFF7F0E,
+    0x2CA02C,
+    0xD62728,
+    0x9467BD,
+    0x8C564B,
+    0xE377C2,
+    0x7F7F7F,
+    0xBCBD22,
+    0x17BECF,
+)
+PLUME_COLOURS = (0x6A3D9A, 0xE31A1C, 0xFFD92F)
+TRAIL_PERIOD_S = 0.5
+TRAIL_MAX_POINTS = 2000
+MESH_RETRY_S = 2.0
+READING_BINS = 16
+WORLD_ROOT = "/world"
+
+
+@dataclass(frozen=True)
+class ViewerOptions:
+    http_port: int = 0
+    rate_hz: float = 25.0
+    vehicle_scale: float = 4.0
+    levels_g_m3: tuple[float, ...] = ()
+    mesh_resolution_m: float = 1.0
+
+    @classmethod
+    def from_ctx(cls, options: dict[str, str]) -> ViewerOptions:
+        known = {"http_port", "rate_hz", "vehicle_scale", "levels", "mesh_resolution_m"}
+        unknown = set(options) - known
+        if unknown:
+            raise ValueError(f"unknown viewer option(s) {sorted(unknown)}; known: {sorted(known)}")
+        levels = tuple(float(v) for v in options.get("levels", "").split(",") if v.strip())
+        return cls(
+            http_port=int(options.get("http_port", 0)),
+            rate_hz=min(25.0, float(options.get("rate_hz", 25.0))),
+            vehicle_scale=float(options.get("vehicle_scale", 4.0)),
+            levels_g_m3=levels,
+            mesh_resolution_m=float(options.get("mesh_resolution_m", 1.0)),
+        )
+
+
+def default_levels(scenario: Scenario) -> tuple[float, ...]:
+    """The sensor window's edges and its middle (geometric), else a decade of levels."""
+    sensor = scenario.sensor.resolved()
+    low = sensor.detection_limit_g_m3 or 0.01
+    high = sensor.saturation_g_m3 or low * 20.0
+    return (low, math.sqrt(low * high), high)
+
+
+def scene_bounds(
+    scenario: Scenario,
+) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """A box around sources, spawns and mission items (ENU m), padded."""
+    pts = [(s.x_m, s.y_m, s.release_height_m) for s in scenario.plume.sources]
+    for v in scenario.vehicles:
+        pts.append(v.spawn_enu_m)
+        pts += [(m.x, m.y, m.z) for m in v.mission if m.frame == "enu"]
+    arr = np.array(pts, dtype=float)
+    lo = arr.min(axis=0) - np.array([10.0, 15.0, 0.0])
+    hi = arr.max(axis=0) + np.array([20.0, 15.0, 15.0])
+    lo[2] = 0.0
+    return (float(lo[0]), float(lo[1]), float(lo[2])), (float(hi[0]), float(hi[1]), float(hi[2]))
+
+
+def pose_matrix(position: Sequence[float], xyzw: Sequence[float], scale: float = 1.0) -> Any:
+    x, y, z, w = xyzw
+    m = mtf.quaternion_matrix([w, x, y, z])
+    m[:3, :3] *= scale
+    m[:3, 3] = position
+    return m
+
+
+def reading_colour(value: float, full_scale: float) -> int:
+    """Blue (nothing) → red (saturated), in ``READING_BINS`` steps."""
+    t = 0.0 if full_scale <= 0 else min(1.0, max(0.0, value / full_scale))
+    t = round(t * (READING_BINS - 1)) / (READING_BINS - 1)
+    r, g, b = int(255 * t), int(80 * (1 - abs(2 * t - 1))), int(255 * (1 - t))
+    return (r << 16) | (g << 8) | b
+
+
+class MeshcatServer:
+    """meshcat's websocket/zmq bridge on a thread of this process (no orphan server process)."""
+
+    def __init__(self, host: str = "127.0.0.1", http_port: int = 0) -> None:
+        self.host = host
+        self.http_port = http_port or free_tcp_port(host)
+        self.zmq_url = f"tcp://{host}:{free_tcp_port(host)}"
+        self._bridge: ZMQWebSocketBridge | None = None
+        self._error: BaseException | None = None
+        self._started = threading.Event()
+        self._thread = threading.Thread(target=self._serve, name="meshcat", daemon=True)
+
+    def _serve(self) -> None:
+        loop = asyncio.new_event_loop()
+        asyncio.set_event_loop(loop)
+        try:
+            self._bridge = ZMQWebSocketBridge(
+                zmq_url=self.zmq_url, host=self.host, port=self.http_port
+            )
+        except BaseException as exc:
+            self._error = exc
+            self._started.set()
+            return
+        self._started.set()
+        self._bridge.run()
+        loop.close()
+
+    @property
+    def web_url(self) -> str:
+        return f"http://{self.host}:{self.http_port}/static/"
+
+    def __enter__(self) -> MeshcatServer:
+        self._thread.start()
+        if not self._started.wait(30.0) or self._error is not None:
+            raise RuntimeError(f"meshcat server did not start: {self._error}")
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        bridge = self._bridge
+        if bridge is not None:
+            bridge.ioloop.add_callback(bridge.ioloop.stop)
+        self._thread.join(timeout=5.0)
+
+
+class Feed:
+    """Newest payloads from the bus; callbacks only store bytes."""
+
+    def __init__(self, session: zenoh.Session, keys: Keys) -> None:
+        self.keys = keys
+        self._lock = threading.Lock()
+        self._tick: bytes | None = None
+        self._readings: dict[str, bytes] = {}
+        self._subs = [
+            session.declare_subscriber(keys.tick(), self._on_tick),
+            session.declare_subscriber(keys.all_vehicle_concentration(), self._on_reading),
+        ]
+
+    def _on_tick(self, sample: zenoh.Sample) -> None:
+        with self._lock:
+            self._tick = sample.payload.to_bytes()
+
+    def _on_reading(self, sample: zenoh.Sample) -> None:
+        try:
+            vid = self.keys.vehicle_id_of(str(sample.key_expr))
+        except KeyNameError:
+            return
+        with self._lock:
+            self._readings[vid] = sample.payload.to_bytes()
+
+    def take(self) -> tuple[bytes | None, dict[str, bytes]]:
+        """The newest tick (once) and the newest readings (once each)."""
+        with self._lock:
+            tick, self._tick = self._tick, None
+            readings, self._readings = self._readings, {}
+        return tick, readings
+
+    def close(self) -> None:
+        for sub in self._subs:
+            sub.undeclare()
+
+
+@dataclass
+class VehicleDrawing:
+    colour: int
+    trail: list[tuple[float, float, float]] = field(default_factory=list)
+    last_trail_s: float = -1e9
+    reading_bin: int | None = None
+    position: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    reading: float | None = None
+
+
+class Scene:
+    """What the viewer draws, and the set of scene paths it has set (for tests and tools)."""
+
+    def __init__(self, vis: meshcat.Visualizer, scenario: Scenario, opts: ViewerOptions) -> None:
+        self.vis = vis
+        self.scenario = scenario
+        self.opts = opts
+        self.paths: set[str] = set()
+        self.vehicles: dict[str, VehicleDrawing] = {}
+        sensor = scenario.sensor.resolved()
+        self.full_scale = sensor.saturation_g_m3 or max(default_levels(scenario))
+
+    def node(self, path: str) -> Any:
+        """The scene node at ``path`` under the world root (which is shifted so that the
+        orbit camera's fixed target, the origin, is the middle of the scene)."""
+        return self.vis[WORLD_ROOT + path]
+
+    def _set(self, path: str, geometry: Any, material: Any) -> None:
+        self.node(path).set_object(geometry, material)
+        self.paths.add(path)
+
+    # ------------------------------------------------------------------ static
+    def draw_static(self) -> None:
+        lo, hi = scene_bounds(self.scenario)
+        self.vis["/Grid"].set_property("visible", False)
+        self._grid(lo, hi)
+        for i, src in enumerate(self.scenario.plume.sources):
+            base = f"/source/{i}"
+            h = max(src.release_height_m, 0.1)
+            self._set(
+                f"{base}/stack",
+                mg.Cylinder(h, 0.4),
+                mg.MeshLambertMaterial(color=0x444444),
+            )
+            self.node(f"{base}/stack").set_transform(
+                mtf.translation_matrix([src.x_m, src.y_m, h / 2])
+                @ mtf.rotation_matrix(math.pi / 2, [1, 0, 0])
+            )
+            self._set(f"{base}/release", mg.Sphere(1.0), mg.MeshLambertMaterial(color=0xFF0000))
+            self.node(f"{base}/release").set_transform(
+                mtf.translation_matrix([src.x_m, src.y_m, src.release_height_m])
+            )
+        for i, v in enumerate(self.scenario.vehicles):
+            self.draw_vehicle(v.id, v.type, PALETTE[i % len(PALETTE)], v.spawn_enu_m)
+        self._camera(lo, hi)
+
+    def _grid(self, lo: Sequence[float], hi: Sequence[float], step: float = 5.0) -> None:
+        x0, x1 = math.floor(lo[0] / step) * step, math.ceil(hi[0] / step) * step
+        y0, y1 = math.floor(lo[1] / step) * step, math.ceil(hi[1] / step) * step
+        segs = []
+        for x in np.arange(x0, x1 + step / 2, step):
+            segs += [(x, y0, 0.0), (x, y1, 0.0)]
+        for y in np.arange(y0, y1 + step / 2, step):
+            segs += [(x0, y, 0.0), (x1, y, 0.0)]
+        pts = np.array(segs, dtype=np.float32).T
+        self.node("/ground/grid").set_object(
+            mg.LineSegments(mg.PointsGeometry(pts), mg.LineBasicMaterial(color=0x888888))
+        )
+        self.paths.add("/ground/grid")
+
+    def _camera(self, lo: Sequence[float], hi: Sequence[float]) -> None:
+        centre = [(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, 5.0]
+        span = max(hi[0] - lo[0], hi[1] - lo[1])
+        self.vis[WORLD_ROOT].set_transform(mtf.translation_matrix([-c for c in centre]))
+        # The camera's position is in meshcat's Y-up "rotated" frame: (x, z, -y) of ENU.
+        offset = (-0.25 * span, -0.55 * span, 0.35 * span)
+        self.vis["/Cameras/default/rotated/<object>"].set_property(
+            "position", [offset[0], offset[2], -offset[1]]
+        )
+
+    def draw_vehicle(
+        self, vid: str, type_name: str, colour: int, position: Sequence[float]
+    ) -> None:
+        vt = load_vehicle_type(type_name)
+        half = vt.collision_half_extents_m
+        base = f"/vehicles/{vid}"
+        body = mg.MeshLambertMaterial(color=colour)
+        self._set(f"{base}/body", mg.Box([2 * half[0], 2 * half[1], 2 * half[2]]), body)
+        arm_r = max(math.hypot(r.position_m[0], r.position_m[1]) for r in vt.rotors)
+        disc_r = max(0.05, 0.45 * arm_r)
+        for i, rotor in enumerate(vt.rotors):
+            path = f"{base}/rotor_{i}"
+            self._set(
+                path,
+                mg.Cylinder(0.02, disc_r),
+                mg.MeshLambertMaterial(color=colour, opacity=0.6, transparent=True),
+            )
+            # Cylinders lie along y in meshcat: turn them into horizontal discs.
+            self.node(path).set_transform(
+                mtf.translation_matrix(rotor.position_m)
+                @ mtf.rotation_matrix(math.pi / 2, [1, 0, 0])
+            )
+        self.vehicles[vid] = VehicleDrawing(colour=colour, position=tuple(position))  # type: ignore[arg-type]
+        self.node(base).set_transform(pose_matrix(position, (0, 0, 0, 1), self.opts.vehicle_scale))
+
+    # ------------------------------------------------------------------ dynamic
+    def update_states(self, states: Sequence[VehicleState], now_s: float) -> None:
+        for st in states:
+            d = self.vehicles.get(st.vehicle_id)
+            if d is None:
+                self.draw_vehicle(
+                    st.vehicle_id, "iris", PALETTE[len(self.vehicles) % len(PALETTE)], (0, 0, 0)
+                )
+                d = self.vehicles[st.vehicle_id]
+            d.position = st.position_enu_m
+            self.node(f"/vehicles/{st.vehicle_id}").set_transform(
+                pose_matrix(st.position_enu_m, st.attitude_xyzw, self.opts.vehicle_scale)
+            )
+            if d.reading is not None:
+                self._place_marker(st.vehicle_id, d)
+            if now_s - d.last_trail_s >= TRAIL_PERIOD_S:
+                d.last_trail_s = now_s
+                if not d.trail or math.dist(d.trail[-1], st.position_enu_m) > 0.2:
+                    d.trail.append(st.position_enu_m)
+                    del d.trail[:-TRAIL_MAX_POINTS]
+                    if len(d.trail) >= 2:
+                        pts = np.array(d.trail, dtype=np.float32).T
+                        path = f"/trails/{st.vehicle_id}"
+                        self.node(path).set_object(
+                            mg.Line(mg.PointsGeometry(pts), mg.LineBasicMaterial(color=d.colour))
+                        )
+                        self.paths.add(path)
+
+    def update_reading(self, reading: ConcentrationReading) -> None:
+        d = self.vehicles.get(reading.vehicle_id)
+        if d is None or reading.reported_g_m3 is None:
+            return
+        d.reading = reading.reported_g_m3
+        t = min(1.0, d.reading / self.full_scale) if self.full_scale > 0 else 0.0
+        b = round(t * (READING_BINS - 1))
+        path = f"/readings/{reading.vehicle_id}"
+        if b != d.reading_bin:
+            d.reading_bin = b
+            self._set(
+                path,
+                mg.Sphere(1.0),
+                mg.MeshLambertMaterial(color=reading_colour(d.reading, self.full_scale)),
+            )
+        self._place_marker(reading.vehicle_id, d)
+
+    def _place_marker(self, vid: str, d: VehicleDrawing) -> None:
+        if d.reading is None:
+            return
+        t = min(1.0, d.reading / self.full_scale) if self.full_scale > 0 else 0.0
+        radius = 0.3 + 1.2 * t
+        x, y, z = d.position
+        m = mtf.translation_matrix([x, y, z + 1.5 + radius])
+        m[:3, :3] *= radius
+        self.node(f"/readings/{vid}").set_transform(m)
+
+    def set_plume(self, index: int, mesh: PlumeMesh) -> None:
+        vertices = np.frombuffer(mesh.vertices_f32, dtype="<f4").reshape(-1, 3)
+        faces = np.frombuffer(mesh.faces_i32, dtype="<i4").reshape(-1, 3)
+        path = f"/plume/level_{index}"
+        if len(faces) == 0:
+            log.info("plume isosurface at %g g/m3 is empty", mesh.level_g_m3)
+            return
+        colour = PLUME_COLOURS[index % len(PLUME_COLOURS)]
+        self._set(
+            path,
+            mg.TriangularMeshGeometry(vertices.astype(np.float64), faces.astype(np.int64)),
+            mg.MeshLambertMaterial(
+                color=colour, opacity=0.18 + 0.12 * index, transparent=True, depthWrite=False
+            ),
+        )
+
+
+def fetch_mesh(
+    session: zenoh.Session, keys: Keys, query: PlumeMeshQuery, timeout_s: float = 10.0
+) -> PlumeMesh | None:
+    """One ``plume/mesh`` query; None when nobody answered or it failed (logged)."""
+    for reply in session.get(keys.plume_mesh(), payload=encode(query), timeout=timeout_s):
+        if reply.ok is not None:
+            try:
+                return decode(reply.ok.payload.to_bytes(), PlumeMesh)
+            except MessageError as exc:
+                log.warning("bad plume mesh: %s", exc)
+                return None
+        if reply.err is None:
+            return None
+        try:
+            err = decode(reply.err.payload.to_bytes(), ErrorReply)
+            log.warning("plume mesh refused: %s: %s", err.field, err.reason)
+        except MessageError:
+            log.warning("plume mesh query failed")
+        return None
+    return None
+
+
+class MeshFetcher:
+    """Asks ``plume/mesh`` for each level on its own thread until every level is answered."""
+
+    def __init__(
+        self, session: zenoh.Session, keys: Keys, queries: Sequence[PlumeMeshQuery]
+    ) -> None:
+        self.results: dict[int, PlumeMesh] = {}
+        self.queries = list(queries)
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(
+            target=self._run, args=(session, keys, list(queries)), name="plume-mesh", daemon=True
+        )
+        self._thread.start()
+
+    def _run(self, session: zenoh.Session, keys: Keys, queries: list[PlumeMeshQuery]) -> None:
+        pending = dict(enumerate(queries))
+        while pending and not self._stop.is_set():
+            for i, q in list(pending.items()):
+                try:
+                    mesh = fetch_mesh(session, keys, q)
+                except zenoh.ZError as exc:
+                    log.warning("plume mesh query: %s", exc)
+                    return
+                if mesh is not None:
+                    with self._lock:
+                        self.results[i] = mesh
+                    del pending[i]
+            self._stop.wait(MESH_RETRY_S)
+
+    def take(self) -> dict[int, PlumeMesh]:
+        with self._lock:
+            out, self.results = self.results, {}
+        return out
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=15.0)
+
+
+def mesh_queries(scenario: Scenario, opts: ViewerOptions) -> list[PlumeMeshQuery]:
+    lo, hi = scene_bounds(scenario)
+    levels = opts.levels_g_m3 or default_levels(scenario)
+    return [
+        PlumeMeshQuery(
+            level_g_m3=level,
+            resolution_m=opts.mesh_resolution_m,
+            bounds_min_m=lo,
+            bounds_max_m=hi,
+        )
+        for level in levels
+    ]
+
+
+def render(scene: Scene, feed: Feed, meshes: MeshFetcher) -> int:
+    """Draw what is new; the number of plume levels that arrived."""
+    tick_raw, readings_raw = feed.take()
+    if tick_raw is not None:
+        try:
+            tick = decode(tick_raw, SimTick)
+            scene.update_states(tick.states, tick.sim_time_s)
+        except MessageError as exc:
+            log.warning("ignoring tick: %s", exc)
+    for vid, raw in readings_raw.items():
+        try:
+            scene.update_reading(decode(raw, ConcentrationReading))
+        except MessageError as exc:
+            log.warning("ignoring reading of %s: %s", vid, exc)
+    new_meshes = meshes.take()
+    for index, mesh in new_meshes.items():
+        scene.set_plume(index, mesh)
+    return len(new_meshes)
+
+
+def main(ctx: NodeContext) -> int:
+    try:
+        opts = ViewerOptions.from_ctx(ctx.options)
+    except ValueError as exc:
+        log.error("viewer: %s", exc)
+        return 2
+    with NodeRuntime(ctx, role="viewer") as rt, MeshcatServer(http_port=opts.http_port) as srv:
+        vis = meshcat.Visualizer(zmq_url=srv.zmq_url)
+        scene = Scene(vis, ctx.scenario, opts)
+        scene.draw_static()
+        feed = Feed(rt.session, rt.keys)
+        meshes = MeshFetcher(rt.session, rt.keys, mesh_queries(ctx.scenario, opts))
+        # The URL is this role's output for its user.
+        sys.stdout.write(f"viewer: open {srv.web_url}\n")
+        sys.stdout.flush()
+        levels = len(meshes.queries)
+        answered = 0
+        rt.publish_health(detail=f"url={srv.web_url} plume=0/{levels}")
+        rt.ready()
+        period = 1.0 / opts.rate_hz
+        try:
+            while not rt.stop.is_set():
+                t0 = time.monotonic()
+                arrived = render(scene, feed, meshes)
+                if arrived:
+                    answered += arrived
+                    rt.publish_health(detail=f"url={srv.web_url} plume={answered}/{levels}")
+                rt.stop.wait(max(0.0, period - (time.monotonic() - t0)))
+        finally:
+            feed.close()
+            meshes.close()
+    return 0

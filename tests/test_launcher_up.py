@@ -1,0 +1,98 @@
+"""``plumeswarm up`` as a real process: readiness, pids.json, ordered stop, no orphans."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import psutil
+import pytest
+
+from swarmbus.session import NetworkConfig, Presence, free_tcp_port, open_session
+from tests.procs import REPO, keys_for, run_cli, wait_until
+
+
+def start_up(args: list[str], out: Path) -> subprocess.Popen[bytes]:
+    env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONUNBUFFERED="1")
+    with open(out / "console.txt", "wb") as console:
+        return subprocess.Popen(
+            [sys.executable, "-m", "deploy", "up", "--out", str(out / "run"), *args],
+            cwd=REPO,
+            env=env,
+            stdout=console,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+        )
+
+
+def family_of(pid: int) -> list[psutil.Process]:
+    root = psutil.Process(pid)
+    return [root, *root.children(recursive=True)]
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_up_writes_pids_and_stops_everything_on_signal(tmp_path: Path, sig: int) -> None:
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    up = start_up(["--roles", "router", "--connect", endpoint], tmp_path)
+    try:
+        pids_file = tmp_path / "run" / "pids.json"
+        wait_until(pids_file.exists, 60.0, "pids.json")
+        pids = json.loads(pids_file.read_text())
+        assert set(pids) == {"router"}
+        family = family_of(up.pid)
+        assert pids["router"] in {p.pid for p in family}
+        # The router it started is really on the bus.
+        with open_session(NetworkConfig(connect=[endpoint], listen=[])) as session:
+            presence = Presence(session, keys_for())
+            assert presence.wait_for(lambda a: "router" in a, 20.0), sorted(presence.alive)
+            presence.close()
+        os.kill(up.pid, sig)
+        up.wait(timeout=30)
+        out = (tmp_path / "console.txt").read_text()
+        assert up.returncode == 0, out
+        assert "stopped" in out
+        _, alive = psutil.wait_procs(family, timeout=5.0)
+        assert alive == [], f"orphans: {alive}"
+        assert "router ready" in (tmp_path / "run" / "router.log").read_text()
+    finally:
+        if up.poll() is None:
+            os.killpg(up.pid, signal.SIGKILL)
+            up.wait(10)
+
+
+def test_killed_launcher_takes_its_children_along(tmp_path: Path) -> None:
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    up = start_up(["--roles", "router", "--connect", endpoint], tmp_path)
+    try:
+        wait_until((tmp_path / "run" / "pids.json").exists, 60.0, "pids.json")
+        family = family_of(up.pid)
+        up.kill()  # SIGKILL: no chance to clean up; the parent-death signal does it
+        up.wait(10)
+        _, alive = psutil.wait_procs(family[1:], timeout=15.0)
+        assert alive == [], f"orphans: {alive}"
+    finally:
+        if up.poll() is None:
+            up.kill()
+            up.wait(10)
+
+
+def test_up_with_a_role_not_built_fails_with_one_line(tmp_path: Path) -> None:
+    missing = [r for r in ("plume", "physics", "autopilot", "gateway") if not _available(r)]
+    if not missing:
+        pytest.skip("every role is built: nothing is missing any more")
+    result = run_cli(["up", "--headless", "--out", str(tmp_path)], timeout_s=60)
+    assert result.returncode != 0
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1, result.stderr
+    assert "not available yet" in lines[0] and missing[0] in lines[0]
+    assert not (tmp_path / "pids.json").exists()
+
+
+def _available(role: str) -> bool:
+    from deploy.launcher import missing_roles
+
+    return not missing_roles([role])
