@@ -105,6 +105,7 @@ class Facts:
     landed: bool
     takeoff_alt_m: float  # MIS_TAKEOFF_ALT
     mission_seqs: list[int]
+    cruise_m_s: float = 0.0  # MPC_XY_CRUISE
 
 
 @dataclass(frozen=True)
@@ -179,7 +180,7 @@ def _reposition(req: CommandRequest, facts: Facts) -> Translation:
     if abs(e) > 1e7 or abs(n) > 1e7 or abs(up) > 1e5:
         return refuse(DENIED, "target out of range")
     yaw = enu_yaw_deg_of_heading(req.param4) if _finite(req.param4) else None
-    speed = req.param1 if _finite(req.param1) and 0.0 < req.param1 <= 100.0 else 0.0
+    speed = req.param1 if _finite(req.param1) and 0.0 < req.param1 <= 100.0 else facts.cruise_m_s
     return Translation(Goto(position_enu_m=(e, n, up), yaw_deg=yaw, speed_m_s=speed))
 
 

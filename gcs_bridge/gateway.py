@@ -40,6 +40,8 @@ from gcs_bridge.commands import (
     UNSUPPORTED,
     CommandRequest,
     Facts,
+    Translation,
+    refuse,
     result_of_reply,
     translate,
     translate_mode,
@@ -58,22 +60,28 @@ from gcs_bridge.modes import decode_custom_mode
 from gcs_bridge.options import GatewayOptions, OptionError, parse_options
 from gcs_bridge.params import ParamError
 from gcs_bridge.telemetry import BUILDERS, ID_MISSION_CURRENT, StreamSchedule, wind_enu
-from gcs_bridge.vehicle import Vehicle
+from gcs_bridge.vehicle import ArmIntent, Vehicle
 from swarmbus.codec import MessageError, decode
 from swarmbus.keys import Keys
 from swarmbus.messages import (
+    Arm,
     Command,
     CommandReply,
     ConcentrationReading,
+    Disarm,
+    FlightMode,
     GcsHeartbeat,
     GetParams,
+    Hold,
     MissionClear,
     MissionDownload,
     MissionStart,
     MissionUpload,
     RejectCode,
+    SetMode,
     SetParam,
     Setpoint,
+    Takeoff,
     VehicleState,
     VehicleStatus,
 )
@@ -96,6 +104,7 @@ _MISSION_RESULT_OF_CODE = {
 }
 
 Handler = Callable[[Link, Vehicle, Msg, ms.Peer, float], None]
+Done = Callable[[CommandReply], None]
 
 
 def _text(value: Any) -> str:
@@ -447,7 +456,56 @@ class Gateway:
             landed=v.status.landed if v.status is not None else True,
             takeoff_alt_m=v.params.value("MIS_TAKEOFF_ALT"),
             mission_seqs=v.seqs(),
+            cruise_m_s=v.params.value("MPC_XY_CRUISE"),
         )
+
+    def _select_while_disarmed(self, v: Vehicle, command: Command) -> Translation | None:
+        """PX4 lets a GCS pick takeoff or mission mode while disarmed and fly it on arming
+        (QGC's takeoff and start-mission flows). Our autopilot takes those only once armed,
+        so the gateway keeps the selection and sends it right after a successful arm."""
+        if v.status is None or v.armed:
+            return None
+        if isinstance(command, Takeoff) or (
+            isinstance(command, SetMode) and command.mode == FlightMode.MISSION
+        ):
+            why = v.armable()
+            if why is not None:
+                return refuse(TEMPORARILY_REJECTED, f"cannot select a mode to arm in: {why}")
+            if isinstance(command, Takeoff):
+                v.intent = ArmIntent(FlightMode.TAKEOFF, command.altitude_m)
+            elif v.status.mission_count == 0:
+                return refuse(TEMPORARILY_REJECTED, "no mission uploaded")
+            else:
+                v.intent = ArmIntent(FlightMode.MISSION)
+            return Translation()
+        if isinstance(command, Hold):
+            v.intent = None
+            return Translation()
+        return None
+
+    def _arm_then_intent(self, v: Vehicle, intent: ArmIntent, done: Done) -> Done:
+        """Completion of an Arm that carries a selected mode: on success, fly the mode."""
+
+        def armed(reply: CommandReply) -> None:
+            done(reply)
+            if not reply.accepted:
+                return
+            follow: Command = (
+                Takeoff(altitude_m=intent.altitude_m)
+                if intent.mode == FlightMode.TAKEOFF
+                else SetMode(mode=FlightMode.MISSION)
+            )
+
+            def flown(r: CommandReply) -> None:
+                if not r.accepted:
+                    self._statustext(
+                        None, v, f"{v.id}: {intent.mode} refused: {r.reason}", time.monotonic()
+                    )
+                    self._send_all(v, v.heartbeat(), time.monotonic())
+
+            self._submit(v, follow, flown)
+
+        return armed
 
     def _on_command(self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float) -> None:
         if msg.get_type() == "COMMAND_LONG":
@@ -465,6 +523,10 @@ class Gateway:
         if t is None:
             self._ack(link, v, req.command, UNSUPPORTED, peer, now)
             return
+        if t.bus is not None:
+            t = self._select_while_disarmed(v, t.bus) or t
+            if t.bus is None and t.result == ACCEPTED:
+                self._send_all(v, v.heartbeat(), now)
         if t.bus is None:
             self._ack(link, v, req.command, t.result, peer, now, t.reason)
             return
@@ -475,7 +537,13 @@ class Gateway:
             done_now = time.monotonic()
             self._ack(link, v, req.command, result_of_reply(reply), peer, done_now, reply.reason)
 
-        self._submit(v, t.bus, done)
+        completion: Done = done
+        if isinstance(t.bus, Disarm):
+            v.intent = None
+        elif isinstance(t.bus, Arm) and v.intent is not None:
+            intent, v.intent = v.intent, None
+            completion = self._arm_then_intent(v, intent, done)
+        self._submit(v, t.bus, completion)
 
     def _cmd_set_message_interval(
         self, link: Link, v: Vehicle, req: CommandRequest, peer: ms.Peer, now: float
@@ -543,8 +611,13 @@ class Gateway:
         """SET_MODE has no ACK: the client watches the heartbeat's custom_mode change."""
         mode = decode_custom_mode(int(msg.custom_mode))
         t = translate_mode(float(msg.base_mode), mode.main, mode.sub, self._facts(v))
+        if t.bus is not None:
+            t = self._select_while_disarmed(v, t.bus) or t
         if t.bus is None:
-            self._statustext(link, v, f"{v.id}: {t.reason}", now)
+            if t.result == ACCEPTED:
+                self._send_all(v, v.heartbeat(), now)
+            else:
+                self._statustext(link, v, f"{v.id}: {t.reason}", now)
             return
 
         def done(reply: CommandReply) -> None:
@@ -698,7 +771,8 @@ class Gateway:
             self._submit(v, MissionClear(), finish(ms.Converted([], [], [])))
             return
         try:
-            converted = ms.convert_upload(c.items, v.home_place())
+            cruise = v.params.value("MPC_XY_CRUISE")
+            converted = ms.convert_upload(c.items, v.home_place(), cruise)
             command = MissionUpload(items=converted.items)
         except ms.MissionError as exc:
             self._statustext(link, v, f"{v.id}: {exc}", now)

@@ -137,11 +137,15 @@ def _yaw(param4: float) -> float | None:
     return (90.0 - param4 + 180.0) % 360.0 - 180.0
 
 
-def convert_upload(wire: list[WireItem], here: Place) -> Converted:
-    """Bus mission items of a complete MAVLink upload, or :class:`MissionError`."""
+def convert_upload(wire: list[WireItem], here: Place, cruise_m_s: float = 0.0) -> Converted:
+    """Bus mission items of a complete MAVLink upload, or :class:`MissionError`.
+
+    Items fly at ``cruise_m_s`` (MPC_XY_CRUISE; 0: the autopilot's default) until a
+    DO_CHANGE_SPEED says otherwise.
+    """
     items: list[MissionItem] = []
     seqs: list[int] = []
-    speed = 0.0
+    speed = cruise_m_s
     for w in wire:
         if w.command == CMD_CHANGE_SPEED:
             if _finite(w.param2) and w.param2 > 0:

@@ -2,8 +2,10 @@
 
 Values start from the scenario (failsafe section and vehicle type) and are replaced by the
 autopilot's own values when it answers ``GetParams``; ``PARAM_SET`` goes to the autopilot as
-``SetParam`` and the table keeps what the autopilot confirmed. PARAM_VALUE uses PX4's bytewise
-encoding: an INT32 parameter's bits travel inside the float field.
+``SetParam`` and the table keeps what the autopilot confirmed. Two parameters act in the
+gateway itself and live here when the autopilot does not know them: MIS_TAKEOFF_ALT (takeoff
+commands without an altitude) and MPC_XY_CRUISE (speed of MAVLink missions and go-to).
+PARAM_VALUE uses PX4's bytewise encoding: an INT32 parameter's bits travel in the float field.
 """
 
 from __future__ import annotations
@@ -20,9 +22,9 @@ from swarmbus.vehicle_types import VehicleType
 REAL32 = int(mavlink.MAV_PARAM_TYPE_REAL32)
 INT32 = int(mavlink.MAV_PARAM_TYPE_INT32)
 
-# PX4 NAV_DLL_ACT / COM_OBL_ACT codes of our failsafe actions.
-DLL_ACTION_CODE = {"none": 0, "hold": 1, "rtl": 2, "land": 3}
-OBL_ACTION_CODE = {"land": 0, "hold": 1, "rtl": 2}
+# Failsafe action codes, as the autopilot's SetParam/GetParams speak them: PX4's NAV_DLL_ACT
+# codes, for COM_OBL_ACT too (PX4's own COM_OBL_ACT numbers them differently).
+ACTION_CODE = {"none": 0, "hold": 1, "rtl": 2, "land": 3}
 
 
 class ParamError(ValueError):
@@ -68,7 +70,7 @@ SPECS: tuple[ParamSpec, ...] = (
         INT32,
         0,
         3,
-        lambda f, t: DLL_ACTION_CODE[f.datalink_loss_action],
+        lambda f, t: ACTION_CODE[f.datalink_loss_action],
         "data-link-loss action: 0 none, 1 hold, 2 RTL, 3 land",
     ),
     ParamSpec(
@@ -82,10 +84,10 @@ SPECS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "COM_OBL_ACT",
         INT32,
-        0,
-        2,
-        lambda f, t: OBL_ACTION_CODE[f.offboard_loss_action],
-        "offboard-loss action: 0 land, 1 hold, 2 RTL",
+        1,
+        3,
+        lambda f, t: ACTION_CODE[f.offboard_loss_action],
+        "offboard-loss action: 1 hold, 2 RTL, 3 land",
     ),
     ParamSpec(
         "COM_OF_LOSS_T",
@@ -117,31 +119,8 @@ SPECS: tuple[ParamSpec, ...] = (
         0.1,
         50.0,
         lambda f, t: min(5.0, t.gains.max_speed_xy_m_s),
-        "horizontal cruise speed in missions and go-to (m/s)",
-    ),
-    ParamSpec(
-        "MPC_XY_VEL_MAX",
-        REAL32,
-        0.1,
-        50.0,
-        lambda f, t: t.gains.max_speed_xy_m_s,
-        "maximum horizontal speed (m/s)",
-    ),
-    ParamSpec(
-        "MPC_Z_VEL_MAX_UP",
-        REAL32,
-        0.1,
-        20.0,
-        lambda f, t: t.gains.max_speed_up_m_s,
-        "maximum climb rate (m/s)",
-    ),
-    ParamSpec(
-        "MPC_Z_VEL_MAX_DN",
-        REAL32,
-        0.1,
-        20.0,
-        lambda f, t: t.gains.max_speed_down_m_s,
-        "maximum descent rate (m/s)",
+        "horizontal cruise speed of missions and go-to sent through MAVLink (m/s)",
+        gateway_side=True,
     ),
 )
 

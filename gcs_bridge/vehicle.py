@@ -9,7 +9,13 @@ from dataclasses import dataclass, field
 from gcs_bridge.dialect import Msg, mavlink
 from gcs_bridge.frames import Vec3, enu_to_geodetic
 from gcs_bridge.mission import Converted, Place, Uploader, WireItem, seq_of_bus_index, wire_of_items
-from gcs_bridge.modes import base_mode_of, custom_mode_of, mav_type_of, system_status_of
+from gcs_bridge.modes import (
+    base_mode_of,
+    custom_mode_of,
+    mav_type_of,
+    px4_mode_of,
+    system_status_of,
+)
 from gcs_bridge.params import ParamTable
 from gcs_bridge.telemetry import View
 from swarmbus.messages import (
@@ -43,6 +49,15 @@ class MissionCurrent:
     mode: int
 
 
+@dataclass(frozen=True)
+class ArmIntent:
+    """A mode selected while disarmed; arming then flies it (PX4 semantics, which QGC's
+    takeoff and start-mission flows rely on: NAV_TAKEOFF or SET_MODE first, then ARM)."""
+
+    mode: FlightMode
+    altitude_m: float = 0.0
+
+
 @dataclass
 class StatusEvents:
     """What a new status means for MAVLink: a heartbeat now, items reached, a new current."""
@@ -73,6 +88,7 @@ class Vehicle:
         self.mission: Converted | None = None  # as MAVLink last saw it (upload or download)
         self.download: list[WireItem] = []
         self._home_geo: Vec3 | None = None
+        self.intent: ArmIntent | None = None
         self.last_status_wall_s = -1e9
         self.last_gcs_heartbeat_s = -1e9
         self._reached = 0
@@ -80,14 +96,37 @@ class Vehicle:
 
     # -- identity ---------------------------------------------------------------
     def heartbeat(self) -> Msg:
+        """Armed: the autopilot's real mode. Disarmed: the mode selected for arming, if any."""
+        custom = custom_mode_of(self.status)
+        if self.intent is not None and not self.armed:
+            custom = px4_mode_of(self.intent.mode).custom_mode
         return mavlink.MAVLink_heartbeat_message(
             self.mav_type,
             mavlink.MAV_AUTOPILOT_PX4,
             base_mode_of(self.status),
-            custom_mode_of(self.status),
+            custom,
             system_status_of(self.status),
             3,
         )
+
+    @property
+    def armed(self) -> bool:
+        return self.status is not None and self.status.armed
+
+    def armable(self) -> str | None:
+        """None if the vehicle could arm now, else why not."""
+        st = self.status
+        if st is None:
+            return "no status from the autopilot yet"
+        if st.armed:
+            return "already armed"
+        if st.crashed:
+            return "crashed"
+        if not st.landed:
+            return "not on the ground"
+        if st.health != "ok":
+            return f"unhealthy: {st.health}"
+        return None
 
     def autopilot_version(self) -> Msg:
         zeros = [0] * 8
@@ -183,6 +222,8 @@ class Vehicle:
         self.status = status
         self.last_status_wall_s = wall_s
         ev = StatusEvents()
+        if status.armed or status.crashed:
+            self.intent = None  # from now on the heartbeat shows the real mode
         if old is None or (old.mode, old.armed, old.crashed, bool(old.failsafe)) != (
             status.mode,
             status.armed,
