@@ -2,11 +2,12 @@
 
 ``python -m tests.fake_autopilot --connect EP --scenario F [--speed X] [--mute ID] [--skip ID]``
 serves every vehicle of the scenario but the skipped ones: a liveliness token
-``autopilot-<id>``, the ``vehicle/<id>/cmd`` queryable with the contract's replies (the same mode rules as the autopilot: arm on the ground,
-take off only when armed, missions need an upload, …), and state / status / concentration
-publications with kinematic motion at 120 Hz of sim time, paced at ``--speed`` × real time.
-It lets the gateway's own logic be tested before the real autopilot and physics are on main;
-it flies nothing for real. ``--mute ID`` leaves one vehicle's commands unanswered.
+``autopilot-<id>``, the ``vehicle/<id>/cmd`` queryable with the contract's replies (the same
+mode rules as the autopilot: arm on the ground, take off only when armed, missions need an
+upload, …), and state / status / concentration publications with kinematic motion at 120 Hz of
+sim time, paced at ``--speed`` × real time. It lets the gateway's own logic be tested before the
+real autopilot and physics are on main; it flies nothing for real. ``--mute ID`` leaves one
+vehicle's commands unanswered.
 """
 
 from __future__ import annotations
