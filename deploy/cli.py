@@ -150,12 +150,6 @@ def status() -> None:
 
 
 @cli.command(context_settings={"ignore_unknown_options": True, "allow_extra_args": True})
-def plume() -> None:
-    """Sample, mesh and plot the plume field."""
-    not_yet("plumeswarm plume", "#3")
-
-
-@cli.command(context_settings={"ignore_unknown_options": True, "allow_extra_args": True})
 def record() -> None:
     """Record everything on the bus to an MCAP file."""
     not_yet("plumeswarm record", "#8")
@@ -177,6 +171,15 @@ def report() -> None:
 def bench() -> None:
     """Scale benchmark of the full stack."""
     not_yet("plumeswarm bench", "#10")
+
+
+def _register_groups() -> None:
+    from deploy.plume_cli import plume
+
+    cli.add_command(plume)
+
+
+_register_groups()
 
 
 def main() -> None:

@@ -1,9 +1,10 @@
 """What every process of plumeswarm shares: its config object and its runtime shell.
 
 A role's entry point is ``main(ctx: NodeContext) -> int``. It opens a :class:`NodeRuntime`
-(``with NodeRuntime(ctx, role="physics") as rt:``), which opens the Zenoh session, declares the
-node's liveliness token, publishes its :class:`~swarmbus.messages.NodeHealth` (up → ready →
-stopping) and turns SIGINT/SIGTERM into ``rt.stop`` being set, so the role's loop ends cleanly.
+(``with NodeRuntime(ctx, role="physics") as rt:``), which opens the Zenoh session, publishes
+its :class:`~swarmbus.messages.NodeHealth` (up → ready → stopping) and turns SIGINT/SIGTERM
+into ``rt.stop`` being set, so the role's loop ends cleanly. ``rt.ready()`` declares the node's
+liveliness token once the role serves.
 """
 
 from __future__ import annotations
@@ -79,7 +80,6 @@ class NodeRuntime:
         self._session = open_session(self.ctx.network)
         self._health_pub = self._session.declare_publisher(self.keys.node_health(self.ctx.name))
         self.publish_health(NodeState.UP)
-        self._token = self._session.liveliness().declare_token(self.keys.node_health(self.ctx.name))
         return self
 
     def publish_health(
@@ -106,6 +106,15 @@ class NodeRuntime:
         )
 
     def ready(self) -> None:
+        """Declare the liveliness token: the node is alive and serving from here on.
+
+        Declared only now, after the role's publishers, subscribers and queryables, so a peer
+        that sees the token also finds what the node serves.
+        """
+        if self._token is None:
+            self._token = self.session.liveliness().declare_token(
+                self.keys.node_health(self.ctx.name)
+            )
         self.publish_health(NodeState.READY)
         log.info("%s ready", self.ctx.name)
 

@@ -37,6 +37,21 @@ def wait_until(predicate: Callable[[], T], timeout_s: float, what: str, poll_s: 
         time.sleep(poll_s)
 
 
+def wait_for_queryable(
+    session: zenoh.Session, key: str, payload: bytes, timeout_s: float, what: str
+) -> zenoh.Reply:
+    """Query ``key`` until a reply arrives (a node's queryable reaches a new peer shortly
+    after its liveliness token does); fail naming ``what`` at the deadline."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        replies = list(session.get(key, payload=payload, timeout=2.0))
+        if replies:
+            return replies[0]
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout_s:.1f} s waiting for {what}")
+        time.sleep(0.05)
+
+
 class Network:
     """A router on a free loopback port and the config clients use to reach it."""
 

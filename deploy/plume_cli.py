@@ -1,0 +1,126 @@
+"""``plumeswarm plume sample|mesh|plot``: look at a scenario's or a preset's plume field."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import click
+
+from plume_service import GaussianPlume
+from plume_service.field import ConcentrationField
+from plume_service.from_scenario import field_from_scenario
+from plume_service.mesh import default_bounds, isosurface, write_mesh
+from plume_service.plots import plot_all
+
+
+def _field(scenario: str | None, preset: str | None) -> ConcentrationField:
+    from deploy.cli import fail, scenario_from
+
+    if scenario is not None and preset is not None:
+        fail("give --scenario or --preset, not both")
+    if preset is not None:
+        try:
+            return GaussianPlume.preset(preset)
+        except ValueError as exc:
+            fail(str(exc))
+    return field_from_scenario(scenario_from(scenario))
+
+
+scenario_option = click.option(
+    "--scenario", "-s", default=None, metavar="FILE|NAME", help="Scenario (default: novak2018)."
+)
+preset_option = click.option(
+    "--preset", default=None, metavar="NAME", help="A named plume, e.g. novak2018."
+)
+
+
+@click.group()
+def plume() -> None:
+    """Sample, mesh and plot the plume field."""
+
+
+@plume.command(context_settings={"ignore_unknown_options": True})
+@scenario_option
+@preset_option
+@click.argument("coords", nargs=-1, type=float, required=True)
+@click.option("--format", "fmt", type=click.Choice(["table", "json"]), default="table")
+def sample(scenario: str | None, preset: str | None, coords: tuple[float, ...], fmt: str) -> None:
+    """Concentration at points X Y Z [X Y Z ...] (world ENU metres)."""
+    from deploy.cli import fail
+
+    if len(coords) % 3 != 0:
+        fail(f"expected X Y Z triples, got {len(coords)} numbers")
+    if not all(math.isfinite(c) for c in coords):
+        fail("coordinates must be finite numbers")
+    field = _field(scenario, preset)
+    points = [coords[i : i + 3] for i in range(0, len(coords), 3)]
+    values = field.concentration(points)
+    if fmt == "json":
+        rows = [
+            {"x": p[0], "y": p[1], "z": p[2], "concentration_g_m3": float(v)}
+            for p, v in zip(points, values, strict=True)
+        ]
+        click.echo(json.dumps(rows, indent=2))
+        return
+    click.echo(f"{'x (m)':>10} {'y (m)':>10} {'z (m)':>10} {'C (g/m³)':>14}")
+    for p, v in zip(points, values, strict=True):
+        click.echo(f"{p[0]:10.3f} {p[1]:10.3f} {p[2]:10.3f} {float(v):14.6g}")
+
+
+@plume.command()
+@scenario_option
+@preset_option
+@click.option("--level", type=float, required=True, help="Isosurface level (g/m³).")
+@click.option("--resolution", type=float, default=0.1, show_default=True, help="Grid step (m).")
+@click.option(
+    "--out",
+    type=click.Path(dir_okay=False, path_type=Path),
+    required=True,
+    help="Output file, .stl or .obj.",
+)
+def mesh(
+    scenario: str | None, preset: str | None, level: float, resolution: float, out: Path
+) -> None:
+    """Closed isosurface mesh of the plume at --level, by marching cubes."""
+    from deploy.cli import fail
+
+    if out.suffix.lower() not in (".stl", ".obj"):
+        fail(f"--out must end in .stl or .obj, got {out}")
+    if not (math.isfinite(level) and level > 0):
+        fail(f"--level must be a positive number, got {level}")
+    if not (math.isfinite(resolution) and resolution > 0):
+        fail(f"--resolution must be a positive number, got {resolution}")
+    field = _field(scenario, preset)
+    try:
+        bounds = default_bounds(field, level)
+        vertices, faces = isosurface(field, level, bounds, resolution, progress=True)
+    except ValueError as exc:
+        fail(str(exc))
+    if len(faces) == 0:
+        fail(f"the plume never reaches {level} g/m³: empty mesh, nothing written")
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        write_mesh(out, vertices, faces)
+    except OSError as exc:
+        fail(f"cannot write {out}: {exc}")
+    click.echo(f"wrote {out}: {len(vertices)} vertices, {len(faces)} faces")
+
+
+@plume.command()
+@scenario_option
+@preset_option
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), required=True)
+@click.option("--height", type=float, default=None, help="Height of plan view/profiles (m).")
+def plot(scenario: str | None, preset: str | None, out: Path, height: float | None) -> None:
+    """PNGs: plan view, along-wind section, crosswind profiles."""
+    from deploy.cli import fail
+
+    field = _field(scenario, preset)
+    try:
+        paths = plot_all(field, out, height_m=height)
+    except (OSError, ValueError) as exc:
+        fail(str(exc))
+    for p in paths:
+        click.echo(f"wrote {p}")

@@ -1,0 +1,125 @@
+"""The lockstep barrier as pure logic: who the current tick waits for, and when to give up.
+
+Driven by events (a participant's liveliness token came or went, a command arrived, a tick
+began) and an injected clock function, so it is tested with a fake clock; the physics node
+feeds it from Zenoh callbacks under its own lock.
+
+A vehicle's participant is *present* while its ``autopilot-<id>`` token is alive, and *active*
+while the barrier waits for it. :meth:`Lockstep.start` makes every present participant active
+(the start-up handshake). A participant that misses the deadline of a tick is dropped (no longer
+active: its motors go to zero); a dropped or newly arrived participant becomes active again
+as soon as it answers a tick published since (it has caught up), and is waited for from then on.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Sequence
+
+AUTOPILOT_TOKEN_PREFIX = "autopilot-"
+
+
+def participant_of(node_name: str, vehicle_ids: Iterable[str]) -> str | None:
+    """The vehicle id whose autopilot token ``node_name`` is, or ``None``."""
+    if not node_name.startswith(AUTOPILOT_TOKEN_PREFIX):
+        return None
+    vid = node_name[len(AUTOPILOT_TOKEN_PREFIX) :]
+    return vid if vid in vehicle_ids else None
+
+
+class Lockstep:
+    """Barrier state for one world; not thread-safe (the caller holds a lock)."""
+
+    def __init__(
+        self, vehicle_ids: Sequence[str], timeout_s: float, clock: Callable[[], float]
+    ) -> None:
+        self.vehicle_ids = tuple(vehicle_ids)
+        self._known = frozenset(vehicle_ids)
+        self.timeout_s = timeout_s
+        self._clock = clock
+        self._present: set[str] = set()
+        self._active: set[str] = set()
+        # A non-active participant becomes active by answering a tick >= this.
+        self._rejoin_from: dict[str, int] = {}
+        self.tick = 0
+        self._deadline = clock() + timeout_s
+        self._commands: dict[str, Sequence[float]] = {}
+
+    # ------------------------------------------------------------------ presence
+    def joined(self, vehicle_id: str) -> bool:
+        """A participant's token appeared; returns whether it is one of ours."""
+        if vehicle_id not in self._known:
+            return False
+        if vehicle_id not in self._present:
+            self._present.add(vehicle_id)
+            self._rejoin_from[vehicle_id] = 0
+        return True
+
+    def left(self, vehicle_id: str) -> bool:
+        """A participant's token disappeared: stop waiting for it at once."""
+        if vehicle_id not in self._known:
+            return False
+        self._present.discard(vehicle_id)
+        self._active.discard(vehicle_id)
+        self._commands.pop(vehicle_id, None)
+        return True
+
+    @property
+    def present(self) -> frozenset[str]:
+        return frozenset(self._present)
+
+    @property
+    def active(self) -> frozenset[str]:
+        return frozenset(self._active)
+
+    def missing_tokens(self) -> list[str]:
+        """Configured vehicles whose autopilot is not present, in scenario order."""
+        return [v for v in self.vehicle_ids if v not in self._present]
+
+    # ------------------------------------------------------------------ ticks
+    def start(self) -> None:
+        """Every present participant takes part from now on (before tick 0)."""
+        self._active = set(self._present)
+
+    def begin(self, tick: int, timeout_s: float | None = None) -> None:
+        """Tick ``tick`` was published: wait for its commands until the deadline."""
+        self.tick = tick
+        self._commands = {}
+        self._deadline = self._clock() + (self.timeout_s if timeout_s is None else timeout_s)
+
+    def receive(self, vehicle_id: str, tick: int, rotor_commands: Sequence[float]) -> bool:
+        """A command arrived; returns whether it counts for the current tick."""
+        if vehicle_id not in self._present:
+            return False  # no token, no participant
+        if vehicle_id not in self._active:
+            if tick < self._rejoin_from.get(vehicle_id, 0):
+                return False  # sent before it was dropped
+            self._active.add(vehicle_id)
+        if tick != self.tick:
+            return False
+        self._commands[vehicle_id] = rotor_commands
+        return True
+
+    def complete(self) -> bool:
+        """Every active participant has answered the current tick."""
+        return all(v in self._commands for v in self._active)
+
+    def missing(self) -> list[str]:
+        """Active participants that have not answered the current tick, in scenario order."""
+        return [v for v in self.vehicle_ids if v in self._active and v not in self._commands]
+
+    def remaining_s(self) -> float:
+        return self._deadline - self._clock()
+
+    def expire(self) -> list[str]:
+        """After the deadline, drop whoever has not answered; returns the dropped ids."""
+        if self.remaining_s() > 0.0:
+            return []
+        dropped = self.missing()
+        for vid in dropped:
+            self._active.discard(vid)
+            self._rejoin_from[vid] = self.tick
+        return dropped
+
+    def commands(self) -> dict[str, Sequence[float]]:
+        """The current tick's commands of active participants (others get zero motors)."""
+        return {v: c for v, c in self._commands.items() if v in self._active}

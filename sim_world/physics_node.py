@@ -1,0 +1,354 @@
+"""The physics process (``plumeswarm node physics``): owner of simulated time and the lockstep.
+
+Each control tick ``k`` it publishes all vehicle states in one ``SimTick`` on ``sim/tick`` and
+each state on ``vehicle/<id>/state``, waits for every live autopilot's ``ActuatorCommand`` for
+tick ``k`` (:class:`~sim_world.lockstep.Lockstep`), applies them, steps ``scenario.substeps``
+physics steps and publishes tick ``k + 1``. ``sim/clock`` carries sim time and the achieved
+real-time factor about ten times a wall-clock second.
+
+Options (``--set KEY=VALUE``): ``max_ticks`` (stop once this tick is published and answered),
+``mode`` (lockstep|realtime), ``speed_factor``, ``wait_for_autopilots`` (true|false: start
+without waiting for the configured autopilots), ``clock_period_s``.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import zenoh
+
+from sim_world.lockstep import Lockstep, participant_of
+from sim_world.world import World
+from swarmbus.codec import MessageError, decode, encode
+from swarmbus.messages import ActuatorCommand, Clock, SimTick, SpeedMode, VehicleState
+from swarmbus.node import NodeContext, NodeRuntime
+from swarmbus.session import Presence
+
+log = logging.getLogger(__name__)
+
+HANDSHAKE_REPUBLISH_S = 0.1  # tick 0 is re-sent until every participant has answered it
+STOP_POLL_S = 0.2  # longest wait between checks of the stop signal
+HEALTH_PERIOD_S = 1.0
+
+
+class OptionError(ValueError):
+    pass
+
+
+def _bool(text: str) -> bool:
+    value = text.strip().lower()
+    if value in ("1", "true", "yes", "on"):
+        return True
+    if value in ("0", "false", "no", "off"):
+        return False
+    raise ValueError(f"expected true or false, got {text!r}")
+
+
+def _positive_float(text: str) -> float:
+    value = float(text)
+    if not value > 0.0:
+        raise ValueError(f"must be > 0, got {text!r}")
+    return value
+
+
+def _non_negative_int(text: str) -> int:
+    value = int(text)
+    if value < 0:
+        raise ValueError(f"must be >= 0, got {text!r}")
+    return value
+
+
+@dataclass(frozen=True)
+class PhysicsOptions:
+    mode: SpeedMode
+    speed_factor: float
+    max_ticks: int | None = None
+    wait_for_autopilots: bool = True
+    clock_period_s: float = 0.1
+
+    @classmethod
+    def from_context(cls, ctx: NodeContext) -> PhysicsOptions:
+        parsers: dict[str, Callable[[str], object]] = {
+            "mode": SpeedMode,
+            "speed_factor": _positive_float,
+            "max_ticks": _non_negative_int,
+            "wait_for_autopilots": _bool,
+            "clock_period_s": _positive_float,
+        }
+        values: dict[str, object] = {
+            "mode": SpeedMode(ctx.scenario.time.mode),
+            "speed_factor": ctx.scenario.time.speed_factor,
+        }
+        for key, text in sorted(ctx.options.items()):
+            if key not in parsers:
+                raise OptionError(f"unknown physics option {key!r}; known: {', '.join(parsers)}")
+            try:
+                values[key] = parsers[key](text)
+            except ValueError as exc:
+                raise OptionError(f"physics option {key}: {exc}") from None
+        return cls(**values)  # type: ignore[arg-type]
+
+
+class PhysicsNode:
+    """The physics loop over a :class:`World` and a :class:`NodeRuntime`'s session."""
+
+    def __init__(self, rt: NodeRuntime, world: World, options: PhysicsOptions) -> None:
+        self.rt = rt
+        self.world = world
+        self.options = options
+        self.scenario = rt.ctx.scenario
+        self.keys = rt.keys
+        self.control_dt_s = 1.0 / self.scenario.time.control_hz
+        self.substeps = self.scenario.substeps
+        self._cond = threading.Condition()
+        self.barrier = Lockstep(
+            world.vehicle_ids, self.scenario.time.participant_timeout_s, time.monotonic
+        )
+        self.tick = 0
+        self._last_tick_msg = b""
+        session = rt.session
+        self._tick_pub = session.declare_publisher(self.keys.tick())
+        self._clock_pub = session.declare_publisher(self.keys.clock())
+        self._state_pubs = [
+            session.declare_publisher(self.keys.vehicle_state(v)) for v in world.vehicle_ids
+        ]
+        self._actuator_sub = session.declare_subscriber(
+            self.keys.all_vehicle_actuators(), self._on_actuators
+        )
+        self._presence = Presence(session, self.keys, self._on_presence)
+        # Clock bookkeeping (wall clock only measures; it never drives the physics).
+        self._wall_start = time.monotonic()
+        self._sim_start = 0.0
+        self._clock_wall = self._wall_start
+        self._clock_sim = 0.0
+        self._health_wall = self._wall_start
+        self.real_time_factor = 0.0
+
+    def close(self) -> None:
+        self._presence.close()
+        self._actuator_sub.undeclare()
+
+    # ------------------------------------------------------------------ bus callbacks
+    def _on_presence(self, name: str, alive: bool) -> None:
+        vid = participant_of(name, self.world.vehicle_ids)
+        if vid is None:
+            return
+        with self._cond:
+            if alive:
+                self.barrier.joined(vid)
+            else:
+                self.barrier.left(vid)
+            self._cond.notify_all()
+        log.info("autopilot of %s %s", vid, "arrived" if alive else "left")
+
+    def _on_actuators(self, sample: zenoh.Sample) -> None:
+        try:
+            cmd = decode(sample.payload.to_bytes(), ActuatorCommand)
+        except MessageError as exc:
+            log.warning("ignoring actuators on %s: %s", sample.key_expr, exc)
+            return
+        try:
+            key_vid = self.keys.vehicle_id_of(str(sample.key_expr))
+        except ValueError:
+            key_vid = ""
+        if cmd.vehicle_id != key_vid:
+            log.warning("ignoring actuators for %s sent on %s", cmd.vehicle_id, sample.key_expr)
+            return
+        with self._cond:
+            if self.barrier.receive(cmd.vehicle_id, cmd.tick, cmd.rotor_commands):
+                self._cond.notify_all()
+
+    # ------------------------------------------------------------------ phases
+    def run(self) -> int:
+        self.rt.ready()
+        deadline = time.monotonic() + self.scenario.time.startup_timeout_s
+        if self.options.wait_for_autopilots and not self._wait_for_tokens(deadline):
+            return 1
+        with self._cond:
+            self.barrier.start()
+        with self._cond:
+            self.barrier.begin(0, timeout_s=max(0.0, deadline - time.monotonic()))
+        self._publish_tick(self.world.states(0, 0.0))
+        if not self._handshake():
+            return 1
+        self._reset_clock()
+        return self._loop()
+
+    def _wait_for_tokens(self, deadline: float) -> bool:
+        with self._cond:
+            while missing := self.barrier.missing_tokens():
+                remaining = deadline - time.monotonic()
+                if self.rt.stop.is_set():
+                    return False
+                if remaining <= 0.0:
+                    log.error(
+                        "autopilots missing after %.1f s: %s (no liveliness token %s)",
+                        self.scenario.time.startup_timeout_s,
+                        ", ".join(missing),
+                        ", ".join(f"autopilot-{v}" for v in missing),
+                    )
+                    return False
+                self._cond.wait(min(remaining, STOP_POLL_S))
+        log.info("all %d autopilots present", len(self.world.vehicle_ids))
+        return True
+
+    def _handshake(self) -> bool:
+        """Re-publish tick 0 until every participant answered it (beats start-up loss)."""
+        with self._cond:
+            while not self.barrier.complete():
+                if self.rt.stop.is_set():
+                    return False
+                if self.barrier.remaining_s() <= 0.0:
+                    log.error(
+                        "no answer to tick 0 within the start-up timeout from: %s",
+                        ", ".join(self.barrier.missing()),
+                    )
+                    return False
+                self._cond.wait(min(HANDSHAKE_REPUBLISH_S, self.barrier.remaining_s()))
+                if not self.barrier.complete():
+                    self._tick_pub.put(self._last_tick_msg)
+        log.info("tick 0 handshake done with %d participants", len(self.barrier.active))
+        return True
+
+    def _loop(self) -> int:
+        opts = self.options
+        duration_s = self.scenario.time.duration_s
+        paced = opts.mode == SpeedMode.REALTIME
+        while not self.rt.stop.is_set():
+            commands = self._await_commands()
+            if commands is None:
+                break
+            if opts.max_ticks is not None and self.tick >= opts.max_ticks:
+                break
+            if duration_s > 0.0 and self.world.sim_time_s >= duration_s:
+                break
+            self._apply(commands)
+            self.world.step(self.substeps)
+            self.tick += 1
+            sim_time = self.world.sim_time_s
+            if paced:
+                self._pace(sim_time)
+            states = self.world.states(self.tick, sim_time)
+            with self._cond:
+                self.barrier.begin(self.tick)
+            self._publish_tick(states)
+            self._maybe_publish_clock(sim_time)
+        self._publish_clock(self.world.sim_time_s, force=True)
+        wall = time.monotonic() - self._wall_start
+        log.info(
+            "physics stopped at tick %d, sim %.3f s after %.3f s wall (%.0f ticks/s)",
+            self.tick,
+            self.world.sim_time_s,
+            wall,
+            self.tick / wall if wall > 0 else 0.0,
+        )
+        return 0
+
+    def _await_commands(self) -> dict[str, list[float]] | None:
+        """Block until the current tick is complete or its deadline passed (then drop)."""
+        with self._cond:
+            barrier = self.barrier
+            while not barrier.complete():
+                if self.rt.stop.is_set():
+                    return None
+                remaining = barrier.remaining_s()
+                if remaining <= 0.0:
+                    dropped = barrier.expire()
+                    log.warning(
+                        "tick %d: dropped %s after %.2f s without actuators (motors off)",
+                        self.tick,
+                        ", ".join(dropped),
+                        barrier.timeout_s,
+                    )
+                    break
+                self._cond.wait(min(remaining, STOP_POLL_S))
+            return {v: list(c) for v, c in barrier.commands().items()}
+
+    def _apply(self, commands: dict[str, list[float]]) -> None:
+        world = self.world
+        for vid in world.vehicle_ids:
+            cmd = commands.get(vid)
+            world.set_motors_enabled(vid, cmd is not None)
+            if cmd is None:
+                continue
+            try:
+                world.apply(vid, cmd)
+            except ValueError as exc:
+                log.warning("tick %d: %s; motors off", self.tick, exc)
+                world.set_motors_enabled(vid, False)
+
+    # ------------------------------------------------------------------ output
+    def _publish_tick(self, states: list[VehicleState]) -> None:
+        msg = SimTick(
+            tick=self.tick,
+            sim_time_s=self.world.sim_time_s,
+            control_dt_s=self.control_dt_s,
+            states=states,
+        )
+        self._last_tick_msg = encode(msg)
+        self._tick_pub.put(self._last_tick_msg)
+        for pub, state in zip(self._state_pubs, states, strict=True):
+            pub.put(encode(state))
+
+    def _pace(self, sim_time_s: float) -> None:
+        """Realtime mode: hold tick ``k`` until the wall clock reaches its sim time / factor."""
+        target = self._wall_start + (sim_time_s - self._sim_start) / self.options.speed_factor
+        delay = target - time.monotonic()
+        if delay > 0.0:
+            self.rt.stop.wait(delay)
+
+    def _reset_clock(self) -> None:
+        self._wall_start = time.monotonic()
+        self._sim_start = self.world.sim_time_s
+        self._clock_wall = self._wall_start
+        self._clock_sim = self._sim_start
+        self._publish_clock(self._sim_start, force=True)
+
+    def _maybe_publish_clock(self, sim_time_s: float) -> None:
+        now = time.monotonic()
+        if now - self._clock_wall >= self.options.clock_period_s:
+            self._publish_clock(sim_time_s, now=now)
+
+    def _publish_clock(self, sim_time_s: float, force: bool = False, now: float = 0.0) -> None:
+        now = now or time.monotonic()
+        wall = now - self._clock_wall
+        if wall > 0.0 and sim_time_s > self._clock_sim:
+            self.real_time_factor = (sim_time_s - self._clock_sim) / wall
+        self._clock_wall = now
+        self._clock_sim = sim_time_s
+        with self._cond:
+            participants = sorted(self.barrier.active)
+        self._clock_pub.put(
+            encode(
+                Clock(
+                    tick=self.tick,
+                    sim_time_s=sim_time_s,
+                    mode=self.options.mode,
+                    speed_factor=self.options.speed_factor,
+                    real_time_factor=min(self.real_time_factor, 1e9),
+                    participants=participants,
+                )
+            )
+        )
+        if force or now - self._health_wall >= HEALTH_PERIOD_S:
+            self._health_wall = now
+            self.rt.publish_health(sim_time_s=sim_time_s, detail=f"tick {self.tick}")
+
+
+def main(ctx: NodeContext) -> int:
+    """Entry point of the ``physics`` role."""
+    try:
+        options = PhysicsOptions.from_context(ctx)
+    except OptionError as exc:
+        log.error("%s", exc)
+        return 2
+    with World(ctx.scenario) as world, NodeRuntime(ctx, role="physics") as rt:
+        node = PhysicsNode(rt, world, options)
+        try:
+            return node.run()
+        finally:
+            node.close()

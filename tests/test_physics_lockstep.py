@@ -1,0 +1,130 @@
+"""The lockstep barrier's logic with a fake clock (no bus, no sleeping)."""
+
+from __future__ import annotations
+
+from sim_world.lockstep import Lockstep, participant_of
+
+
+class FakeClock:
+    def __init__(self) -> None:
+        self.now = 100.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def barrier(*present: str) -> tuple[Lockstep, FakeClock]:
+    clock = FakeClock()
+    ls = Lockstep(["a", "b", "c"], timeout_s=0.5, clock=clock)
+    for vid in present:
+        ls.joined(vid)
+    return ls, clock
+
+
+def test_participant_tokens_name_exactly_one_known_vehicle() -> None:
+    ids = ("uav1", "uav-2")
+    assert participant_of("autopilot-uav1", ids) == "uav1"
+    assert participant_of("autopilot-uav-2", ids) == "uav-2"
+    assert participant_of("autopilot-uav1-uav-2", ids) is None
+    assert participant_of("physics", ids) is None
+    assert participant_of("autopilot-ghost", ids) is None
+
+
+def test_startup_names_who_is_missing() -> None:
+    ls, _ = barrier("b")
+    assert ls.missing_tokens() == ["a", "c"]
+    assert not ls.joined("zzz")
+
+
+def test_tick_completes_only_when_every_active_participant_answered() -> None:
+    ls, _ = barrier("a", "b")
+    ls.start()
+    ls.begin(0)
+    assert not ls.complete()
+    assert ls.receive("a", 0, [0.1])
+    assert not ls.complete() and ls.missing() == ["b"]
+    assert not ls.receive("b", 1, [0.2])  # a future tick does not count
+    assert ls.receive("b", 0, [0.2])
+    assert ls.complete()
+    assert ls.commands() == {"a": [0.1], "b": [0.2]}
+    ls.begin(1)
+    assert not ls.complete() and ls.commands() == {}
+
+
+def test_stale_and_tokenless_commands_are_ignored() -> None:
+    ls, _ = barrier("a")
+    ls.start()
+    ls.begin(5)
+    assert not ls.receive("a", 4, [0.0])
+    assert not ls.receive("c", 5, [0.0])  # no token
+    assert not ls.complete()
+
+
+def test_a_silent_participant_is_dropped_at_the_deadline_not_before() -> None:
+    ls, clock = barrier("a", "b")
+    ls.start()
+    ls.begin(3)
+    ls.receive("a", 3, [0.3])
+    clock.now += 0.49
+    assert ls.expire() == []
+    clock.now += 0.02
+    assert ls.remaining_s() < 0
+    assert ls.expire() == ["b"]
+    assert ls.active == {"a"} and ls.complete()
+    ls.begin(4)
+    ls.receive("a", 4, [0.4])
+    assert ls.complete()  # the world goes on without b
+
+
+def test_a_dropped_participant_rejoins_when_it_answers_a_tick_since_its_drop() -> None:
+    ls, clock = barrier("a", "b")
+    ls.start()
+    ls.begin(3)
+    clock.now += 1.0
+    assert ls.expire() == ["a", "b"]
+    ls.begin(4)
+    assert not ls.receive("b", 2, [0.0])  # in flight from before the drop
+    assert "b" not in ls.active
+    assert not ls.receive("b", 3, [0.0])  # late answer to the tick it missed: back in ...
+    assert "b" in ls.active
+    assert not ls.complete()  # ... and waited for from this tick on
+    assert ls.receive("b", 4, [0.5])
+    assert ls.complete()
+
+
+def test_a_late_joiner_is_admitted_by_its_first_answer() -> None:
+    ls, _ = barrier("a")
+    ls.start()
+    ls.begin(10)
+    ls.joined("c")
+    assert ls.present == {"a", "c"} and ls.active == {"a"}
+    ls.receive("a", 10, [0.1])
+    assert ls.complete()  # not waited for before it answers
+    assert ls.receive("c", 10, [0.9])
+    assert ls.active == {"a", "c"}
+    ls.begin(11)
+    ls.receive("a", 11, [0.1])
+    assert not ls.complete() and ls.missing() == ["c"]
+
+
+def test_a_participant_whose_token_goes_is_not_waited_for() -> None:
+    ls, _ = barrier("a", "b")
+    ls.start()
+    ls.begin(0)
+    ls.receive("b", 0, [0.2])
+    ls.left("b")
+    assert not ls.complete()
+    ls.receive("a", 0, [0.1])
+    assert ls.complete() and ls.commands() == {"a": [0.1]}
+    ls.joined("b")  # a restarted autopilot comes back as a late joiner
+    assert "b" not in ls.active
+
+
+def test_startup_handshake_uses_its_own_deadline() -> None:
+    ls, clock = barrier("a")
+    ls.start()
+    ls.begin(0, timeout_s=60.0)
+    clock.now += 30.0
+    assert ls.expire() == []
+    clock.now += 31.0
+    assert ls.expire() == ["a"]

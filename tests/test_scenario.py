@@ -1,0 +1,121 @@
+"""Scenario files: the default is valid; each broken file names the exact field."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from swarmbus.scenario import DEFAULT_SCENARIO, ScenarioError, load_scenario, parse_scenario
+from tests.procs import run_cli
+
+GOOD_VEHICLE = '[[vehicles]]\nid = "uav1"\n'
+
+
+def test_default_scenario_is_the_seed() -> None:
+    sc = load_scenario(DEFAULT_SCENARIO)
+    assert [v.id for v in sc.vehicles] == ["uav1", "uav2", "uav3"]
+    assert {v.type for v in sc.vehicles} == {"iris"}
+    assert all(v.spawn_enu_m[2] == 0.0 for v in sc.vehicles)
+    assert sc.plume.coefficients == "novak2018"
+    assert sc.plume.stability == "D"
+    (src,) = sc.plume.sources
+    assert (src.x_m, src.y_m, src.release_rate_g_s, src.release_height_m) == (0, 0, 10, 10)
+    assert sc.wind.speed_m_s == 6.0
+    assert sc.wind.from_deg == 270.0
+    sensor = sc.sensor.resolved()
+    assert (sensor.detection_limit_g_m3, sensor.saturation_g_m3) == (0.01, 0.2)
+    assert sc.time.physics_hz % sc.time.control_hz == 0
+    for v in sc.vehicles:
+        # enters the plume on take-off at ~10 m and flies inside the seed's readable band
+        assert v.mission[0].command == "takeoff"
+        assert v.mission[0].z == pytest.approx(10.0)
+        assert v.mission[-1].command == "land"
+        assert all(14.0 <= item.x <= 50.2 for item in v.mission)
+
+
+BROKEN: list[tuple[str, str]] = [
+    ("[time]\ncontrol_hz = 7\n" + GOOD_VEHICLE, "time.control_hz"),
+    ("[time]\nphysics_hz = 0\n" + GOOD_VEHICLE, "time.physics_hz"),
+    ('[time]\nmode = "warp"\n' + GOOD_VEHICLE, "time.mode"),
+    ("[wind]\nspeed_m_s = 0.0\n" + GOOD_VEHICLE, "wind.speed_m_s"),
+    ("[wind]\nspeed_m_s = nan\n" + GOOD_VEHICLE, "wind.speed_m_s"),
+    ('[plume]\nstability = "G"\n' + GOOD_VEHICLE, "plume.stability"),
+    (
+        "[plume]\nsources = [{ release_rate_g_s = -1.0 }]\n" + GOOD_VEHICLE,
+        "plume.sources[0].release_rate_g_s",
+    ),
+    ("[world]\norigin = { lat_deg = 95.0 }\n" + GOOD_VEHICLE, "world.origin.lat_deg"),
+    ('[world]\nname = "a/b"\n' + GOOD_VEHICLE, "world.name"),
+    ("vehicles = []\n", "vehicles"),
+    ('[[vehicles]]\nid = "uav 1"\n', "vehicles[0].id"),
+    ('[[vehicles]]\nid = "a"\ntype = "blimp"\n', "vehicles[0].type"),
+    ('[[vehicles]]\nid = "a"\n[[vehicles]]\nid = "a"\n', "vehicles[1].id"),
+    ('[[vehicles]]\nid = "a"\nsysid = 300\n', "vehicles[0].sysid"),
+    ('[[vehicles]]\nid = "a"\nsysid = 5\n[[vehicles]]\nid = "b"\nsysid = 5\n', "vehicles[1].sysid"),
+    ('[[vehicles]]\nid = "a"\nspawn_enu_m = [0.0, 0.0]\n', "vehicles[0].spawn_enu_m"),
+    (
+        '[[vehicles]]\nid = "a"\nmission = [{ x = 1.0, y = 2.0, z = inf }]\n',
+        "vehicles[0].mission[0].z",
+    ),
+    ('[[vehicles]]\nid = "a"\nmission = [{ x = 1.0, y = 2.0 }]\n', "vehicles[0].mission[0]"),
+    ('[[vehicles]]\nid = "a"\nbehavior = "nocolon"\n', "vehicles[0].behavior"),
+    (
+        "[sensor]\ndetection_limit_g_m3 = 0.5\nsaturation_g_m3 = 0.2\n" + GOOD_VEHICLE,
+        "sensor.saturation_g_m3",
+    ),
+    ('[network]\nconnect = ["http://x"]\n' + GOOD_VEHICLE, "network.connect[0]"),
+    ("[gateway]\ngcs_port = 70000\n" + GOOD_VEHICLE, "gateway.gcs_port"),
+    (
+        '[failsafe]\ndatalink_loss_action = "explode"\n' + GOOD_VEHICLE,
+        "failsafe.datalink_loss_action",
+    ),
+    ("[unknown_section]\nx = 1\n" + GOOD_VEHICLE, ""),
+    ("this is = = not toml", ""),
+]
+
+
+@pytest.mark.parametrize(("text", "field"), BROKEN, ids=[f for _, f in BROKEN])
+def test_broken_scenario_names_the_field(text: str, field: str) -> None:
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario(text, "broken.toml")
+    assert err.value.field == field
+    line = str(err.value)
+    assert "\n" not in line
+    assert line.startswith("broken.toml: ")
+
+
+def test_unknown_section_is_reported_by_name() -> None:
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario("[unknown_section]\nx = 1\n" + GOOD_VEHICLE, "s.toml")
+    assert "unknown_section" in err.value.reason
+
+
+def test_cli_check_accepts_the_default() -> None:
+    res = run_cli(["scenario", "check", str(DEFAULT_SCENARIO)])
+    assert res.returncode == 0, res.stderr
+    assert "3 vehicle(s)" in res.stdout
+
+
+def test_cli_check_rejects_a_broken_copy_with_one_line(tmp_path: Path) -> None:
+    broken = tmp_path / "broken.toml"
+    broken.write_text(DEFAULT_SCENARIO.read_text().replace("speed_m_s = 6.0", "speed_m_s = -6.0"))
+    res = run_cli(["scenario", "check", str(broken)])
+    assert res.returncode != 0
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1, res.stderr
+    assert "wind.speed_m_s" in lines[0]
+    assert "Traceback" not in res.stderr
+
+
+@pytest.mark.parametrize("kind", ["missing", "directory", "binary"])
+def test_cli_check_bad_files_one_line(tmp_path: Path, kind: str) -> None:
+    target = tmp_path / "x.toml"
+    if kind == "directory":
+        target.mkdir()
+    elif kind == "binary":
+        target.write_bytes(b"\xff\xfe\x00garbage")
+    res = run_cli(["scenario", "check", str(target)])
+    assert res.returncode != 0
+    assert len(res.stderr.strip().splitlines()) == 1, res.stderr
+    assert "Traceback" not in res.stderr
