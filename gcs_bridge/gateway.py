@@ -280,12 +280,9 @@ class Gateway:
 
     def _drain_inbox(self, now: float) -> None:
         latest, calls = self.inbox.take()
-        for call in calls:
-            try:
-                call()
-            except Exception:
-                log.exception("error in a command completion")
-        # status first, so telemetry built for a state carries the newest status
+        # Status first (telemetry for a state carries the newest status), and bus data before
+        # command completions: the autopilot publishes its status before it replies, so an
+        # ACK never goes out while the gateway still holds the status from before the command.
         for kind in (KIND_STATUS, KIND_READING, KIND_STATE):
             for (k, vid), payload in latest.items():
                 if k == kind:
@@ -293,6 +290,11 @@ class Gateway:
                         self._on_bus(kind, self.vehicles[vid], payload, now)
                     except Exception:
                         log.exception("error handling %s of %s", kind, vid)
+        for call in calls:
+            try:
+                call()
+            except Exception:
+                log.exception("error in a command completion")
 
     def _tick(self, now: float) -> None:
         if now >= self._next_heartbeat_s:

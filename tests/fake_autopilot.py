@@ -321,18 +321,12 @@ def main() -> None:
                     return
                 with world.lock:
                     reply = world.handle(f, cmd)  # type: ignore[arg-type]
+                    status = world.status(f)
+                pubs[f.vid][1].put(encode(status))  # as the autopilot: status, then reply
                 query.reply(query.key_expr, encode(reply))
 
             return on_query
 
-        declared = [
-            session.declare_queryable(keys.vehicle_cmd(f.vid), serve(f))
-            for f in world.vehicles.values()
-        ]
-        tokens = [
-            session.liveliness().declare_token(keys.node_health(f"autopilot-{f.vid}"))
-            for f in world.vehicles.values()
-        ]
         pubs = {
             f.vid: (
                 session.declare_publisher(keys.vehicle_state(f.vid)),
@@ -341,6 +335,14 @@ def main() -> None:
             )
             for f in world.vehicles.values()
         }
+        declared = [
+            session.declare_queryable(keys.vehicle_cmd(f.vid), serve(f))
+            for f in world.vehicles.values()
+        ]
+        tokens = [
+            session.liveliness().declare_token(keys.node_health(f"autopilot-{f.vid}"))
+            for f in world.vehicles.values()
+        ]
         start = time.monotonic()
         tick = 0
         last_status: dict[str, tuple[object, ...]] = {}
