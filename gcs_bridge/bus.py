@@ -183,7 +183,13 @@ class Commander:
                 if reply.ok is not None:
                     replies.append(decode(reply.ok.payload.to_bytes(), CommandReply))
                 elif reply.err is not None:
-                    err = decode(reply.err.payload.to_bytes(), ErrorReply)
+                    data = reply.err.payload.to_bytes()
+                    try:
+                        err = decode(data, ErrorReply)
+                    except MessageError:  # Zenoh's own errors, e.g. "Timeout"
+                        text = data[:200].decode("utf-8", "replace")
+                        replies.append(self._failed(f"no reply from the autopilot ({text})"))
+                        return
                     replies.append(
                         self._failed(f"{err.field}: {err.reason}", code=RejectCode.INVALID)
                     )

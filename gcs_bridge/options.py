@@ -12,7 +12,8 @@ Options (``plumeswarm node gateway --set KEY=VALUE``):
 - ``api_links``: ``on`` / ``off`` (default on): the per-vehicle API ports 14540 + i;
 - ``signed_links``: which links require MAVLink 2 signing when the scenario has a key:
   ``all`` (default), ``gcs``, ``api`` or ``none``;
-- ``cmd_timeout_s``: how long a command waits for the autopilot's reply (default 1.0).
+- ``cmd_timeout_s``: how long a command waits for the autopilot's reply (default 1.5; MAVSDK
+  gives up after 3 × 0.5 s, QGC after about 3 s).
 """
 
 from __future__ import annotations
@@ -51,7 +52,7 @@ class GatewayOptions:
     api_links: bool = True
     signing_key: bytes | None = None
     signed_links: frozenset[str] = frozenset({"gcs", "api"})
-    cmd_timeout_s: float = 1.0
+    cmd_timeout_s: float = 1.5
     rates_hz: dict[int, float] = field(default_factory=dict)
     heartbeat_period_s: float = 1.0
 

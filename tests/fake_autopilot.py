@@ -17,6 +17,7 @@ import math
 import threading
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import pymap3d
 
@@ -105,6 +106,9 @@ class World:
             v.id: Fake(v.id, list(v.spawn_enu_m), home=tuple(v.spawn_enu_m))
             for v in scenario.vehicles
         }
+        o = self.origin
+        lat1, lon1, _ = pymap3d.enu2geodetic(1.0, 1.0, 0.0, o.lat_deg, o.lon_deg, o.alt_m)
+        self.deg_per_m = (float(lon1) - o.lon_deg, float(lat1) - o.lat_deg)
         for v in scenario.vehicles:  # the scenario's mission is loaded, as the autopilot does
             f = self.vehicles[v.id]
             f.items, f.index = list(v.mission), (0 if v.mission else -1)
@@ -352,13 +356,14 @@ def main() -> None:
                 if world.t > wall * args.speed:
                     time.sleep(min(0.01, world.t / args.speed - wall))
                     continue
-                with world.lock:
+                out: list[tuple[Any, bytes]] = []
+                with world.lock:  # step under the lock, publish outside it
                     tick += 1
                     world.t = tick * DT
                     for f in world.vehicles.values():
                         world.step(f)
                         st_pub, status_pub, conc_pub = pubs[f.vid]
-                        st_pub.put(encode(world.state(f, tick)))
+                        out.append((st_pub, encode(world.state(f, tick))))
                         status = world.status(f)
                         key = (
                             status.mode,
@@ -372,21 +377,20 @@ def main() -> None:
                         )
                         if last_status.get(f.vid) != key or tick % 60 == 0:
                             last_status[f.vid] = key
-                            status_pub.put(encode(status))
+                            out.append((status_pub, encode(status)))
                         if tick % 12 == 0:
                             value = round(0.01 * (1 + math.sin(world.t)), 6)
-                            conc_pub.put(
-                                encode(
-                                    ConcentrationReading(
-                                        vehicle_id=f.vid,
-                                        sim_time_s=world.t,
-                                        position_enu_m=tuple(f.pos),
-                                        available=True,
-                                        reported_g_m3=value,
-                                        true_g_m3=value,
-                                    )
-                                )
+                            reading = ConcentrationReading(
+                                vehicle_id=f.vid,
+                                sim_time_s=world.t,
+                                position_enu_m=tuple(f.pos),
+                                available=True,
+                                reported_g_m3=value,
+                                true_g_m3=value,
                             )
+                            out.append((conc_pub, encode(reading)))
+                for pub, payload in out:
+                    pub.put(payload)
         except KeyboardInterrupt:
             pass
         finally:

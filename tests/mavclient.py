@@ -153,7 +153,7 @@ class MavClient:
         self,
         what: str,
         pred: Callable[[Msg], bool],
-        timeout_s: float = 20.0,
+        timeout_s: float = 60.0,
     ) -> Msg:
         """The first message (new or queued) matching ``pred``; fail naming ``what``."""
         deadline = time.monotonic() + timeout_s
@@ -166,7 +166,7 @@ class MavClient:
                 raise AssertionError(f"timed out after {timeout_s:.0f} s waiting for {what}")
             self.pump()
 
-    def wait_type(self, kind: str, sysid: int, timeout_s: float = 20.0, **fields: Any) -> Msg:
+    def wait_type(self, kind: str, sysid: int, timeout_s: float = 60.0, **fields: Any) -> Msg:
         def match(m: Msg) -> bool:
             return (
                 m.get_type() == kind
@@ -199,7 +199,7 @@ class MavClient:
         for sysid in list(self.addr_of):
             self.send(sysid, hb)
 
-    def command(self, sysid: int, command: int, *params: float, timeout_s: float = 10.0) -> int:
+    def command(self, sysid: int, command: int, *params: float, timeout_s: float = 30.0) -> int:
         """COMMAND_LONG and its COMMAND_ACK result."""
         p = [*params, *([0.0] * (7 - len(params)))]
         self.send(
@@ -220,7 +220,7 @@ class MavClient:
         )
 
     def wait_mode(
-        self, sysid: int, main: int, sub: int, armed: bool | None = None, timeout_s: float = 30.0
+        self, sysid: int, main: int, sub: int, armed: bool | None = None, timeout_s: float = 60.0
     ) -> Msg:
         custom = (main << 16) | (sub << 24)
 
@@ -245,7 +245,7 @@ class MavClient:
             timeout_s,
         )
 
-    def params(self, sysid: int, timeout_s: float = 20.0) -> dict[str, tuple[float, int, int, int]]:
+    def params(self, sysid: int, timeout_s: float = 60.0) -> dict[str, tuple[float, int, int, int]]:
         """PARAM_REQUEST_LIST → {name: (value, type, count, index)}."""
         self.send(sysid, mavlink.MAVLink_param_request_list_message(sysid, 1))
         out: dict[str, tuple[float, int, int, int]] = {}

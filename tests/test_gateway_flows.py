@@ -10,9 +10,6 @@ from __future__ import annotations
 
 import math
 import os
-import signal
-import subprocess
-import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -41,8 +38,9 @@ from swarmbus.messages import (
 )
 from swarmbus.scenario import Origin
 from swarmbus.session import open_session
+from tests.gateway_stack import gateway, vehicles
 from tests.mavclient import MavClient, mission_item, write_scenario
-from tests.procs import REPO, Network, wait_until, zenoh_network
+from tests.procs import Network, wait_until, zenoh_network
 
 ORIGIN = Origin()
 NAN = math.nan
@@ -111,68 +109,18 @@ class Swarm:
     log_dir: Path
 
 
-def _spawn(args: list[str], log: Path) -> subprocess.Popen[bytes]:
-    out = open(log, "wb")  # noqa: SIM115 - the child keeps its own descriptor
-    env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONUNBUFFERED="1")
-    proc = subprocess.Popen(
-        [sys.executable, *args],
-        cwd=REPO,
-        stdout=out,
-        stderr=subprocess.STDOUT,
-        env=env,
-        start_new_session=True,
-    )
-    out.close()
-    return proc
-
-
-def _stop(proc: subprocess.Popen[bytes]) -> None:
-    if proc.poll() is None:
-        os.killpg(proc.pid, signal.SIGTERM)
-    try:
-        proc.wait(timeout=10)
-    except subprocess.TimeoutExpired:
-        os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait(timeout=5)
-
-
 @pytest.fixture(scope="module")
 def swarm(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Swarm]:
     tmp = tmp_path_factory.mktemp("gateway")
     scenario, gcs_port, api_base = write_scenario(tmp / "scenario.toml", 3)
-    with zenoh_network() as (net, _router), open_session(net.client) as session:
+    with (
+        zenoh_network() as (net, _router),
+        open_session(net.client) as session,
+        vehicles(net, scenario, tmp, ["uav1", "uav2"], speed=3.0, skip=("uav3",)),
+        gateway(net, scenario, tmp, "cmd_timeout_s=3") as gw,
+    ):
         uav3 = ScriptedVehicle(session, Keys())
         uav3.start()
-        fake = _spawn(
-            [
-                "-m",
-                "tests.fake_autopilot",
-                "--connect",
-                net.endpoint,
-                "--scenario",
-                str(scenario),
-                "--speed",
-                "3",
-                "--skip",
-                "uav3",
-            ],
-            tmp / "fake.log",
-        )
-        gateway = _spawn(
-            [
-                "-m",
-                "deploy",
-                "-v",
-                "node",
-                "gateway",
-                *net.cli_args(),
-                "--scenario",
-                str(scenario),
-                "--set",
-                "cmd_timeout_s=0.5",
-            ],
-            tmp / "gateway.log",
-        )
         try:
             with MavClient(gcs_port) as gcs:
                 for sysid in (1, 2):  # statuses arrived: the fake's vehicles are standing by
@@ -198,10 +146,8 @@ def swarm(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Swarm]:
 
                 wait_until(uav3_ready, 30.0, "uav3's status in its heartbeat")
                 yield Swarm(net, gcs, uav3, api_base, tmp)
-                assert gateway.poll() is None, "the gateway died during the tests"
+                assert gw.poll() is None, "the gateway died during the tests"
         finally:
-            _stop(gateway)
-            _stop(fake)
             uav3.stop()
 
 
