@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import collections
 import contextlib
+import contextlib
 import logging
 import os
 import threading
@@ -58,12 +59,12 @@ class Waker:
                 os.write(self._w, b"x")
 
     def drain(self) -> None:
-        self._pending.clear()
-        try:
+        """Empty the pipe, then re-arm. In this order: a wake() between the two finds
+        ``pending`` still set and writes nothing, but its work is taken after ``drain``."""
+        with contextlib.suppress(BlockingIOError, OSError):
             while os.read(self._r, 4096):
                 pass
-        except (BlockingIOError, OSError):
-            pass
+        self._pending.clear()
 
     def close(self) -> None:
         os.close(self._r)

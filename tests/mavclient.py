@@ -104,6 +104,9 @@ class MavClient:
         signing_key: bytes | None = None,
     ) -> None:
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        # a big receive buffer: 16 vehicles' telemetry comes in bursts and this test process
+        # may be descheduled for a while on a busy machine
+        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
         self.sock.bind(("127.0.0.1", port))
         self.sock.setblocking(False)
         self.mav = new_mav(system, component)
@@ -333,3 +336,57 @@ def clients(*ports: int, **kw: Any) -> Iterator[list[MavClient]]:
     finally:
         for c in cs:
             c.close()
+
+
+TIMESTAMPED = {"ATTITUDE", "GLOBAL_POSITION_INT", "LOCAL_POSITION_NED", "NAMED_VALUE_FLOAT"}
+
+
+def measure_rates(
+    c: MavClient, sysids: list[int], sim_seconds: float, timeout_s: float
+) -> tuple[dict[int, dict[str, float]], float]:
+    """Messages per simulated second, per vehicle and type, over ``sim_seconds`` of each
+    vehicle's sim time (ATTITUDE's time_boot_ms is the clock); and the wall seconds it took.
+
+    Types without a timestamp are counted between the vehicle's first and last ATTITUDE.
+    """
+    c.drain()
+    start = time.monotonic()
+    first: dict[int, int] = {}
+    last: dict[int, int] = {}
+    seen: dict[int, list[Any]] = {s: [] for s in sysids}
+
+    def done() -> bool:
+        return all(s in first and last[s] - first[s] >= sim_seconds * 1000 for s in sysids)
+
+    while not done():
+        if time.monotonic() - start > timeout_s:
+            spans = {s: (last.get(s, 0) - first.get(s, 0)) / 1000 for s in sysids}
+            raise AssertionError(f"sim time did not advance {sim_seconds} s in time: {spans}")
+        c.pump()
+        while c.inbox:
+            m = c.inbox.popleft()
+            s = m.get_srcSystem()
+            if s not in seen:
+                continue
+            if m.get_type() == "ATTITUDE":
+                first.setdefault(s, m.time_boot_ms)
+                if s in first and not (s in last and last[s] - first[s] >= sim_seconds * 1000):
+                    last[s] = m.time_boot_ms
+            if s in first and not (s in last and last[s] - first[s] >= sim_seconds * 1000):
+                seen[s].append(m)
+    wall = time.monotonic() - start
+    rates: dict[int, dict[str, float]] = {}
+    for s, msgs in seen.items():
+        span = (last[s] - first[s]) / 1000.0
+        counts: dict[str, list[Any]] = collections.defaultdict(list)
+        for m in msgs:
+            counts[m.get_type()].append(m)
+        out: dict[str, float] = {}
+        for kind, ms in counts.items():
+            if kind in TIMESTAMPED and len(ms) > 1:
+                t = [m.time_boot_ms for m in ms]
+                out[kind] = (len(ms) - 1) / max((max(t) - min(t)) / 1000.0, 1e-9)
+            else:
+                out[kind] = len(ms) / span
+        rates[s] = out
+    return rates, wall
