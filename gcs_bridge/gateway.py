@@ -94,6 +94,7 @@ log = logging.getLogger(__name__)
 TICK_S = 0.1  # wall-clock housekeeping: heartbeats, transfer timeouts, parameter sync
 ALIVE_WITHOUT_TOKEN_S = 3.0
 GCS_HEARTBEAT_FORWARD_S = 0.5
+GCS_LINK_TIMEOUT_S = 3.0  # wall: a GCS silent this long is gone (QGC's own is ~3.5 s)
 PARAM_SYNC_RETRY_S = 5.0
 STATUSTEXT_MAX = 50
 
@@ -380,9 +381,12 @@ class Gateway:
             log.warning("%s of %s: %s", kind, v.id, exc)
 
     def _on_state(self, v: Vehicle, state: VehicleState, now: float) -> None:
+        if v.state is not None and state.sim_time_s < v.state.sim_time_s:
+            v.last_gcs_heartbeat_sim_s = -1e9  # a new simulation
         v.state = state
         if not self.alive(v, now):
             return
+        self._keep_gcs_link_alive(v, now)
         built: dict[int, Msg | None] = {}
         view = None
         for link in self.links_of[v.sysid]:
@@ -442,11 +446,29 @@ class Gateway:
 
     def _on_gcs_heartbeat(self, link: Link, now: float) -> None:
         """A ground station is there: tell each vehicle (its data-link-loss failsafe)."""
+        link.gcs_heard_s = now
         for sysid in link.sysids:
             v = self.by_sysid[sysid]
-            if now - v.last_gcs_heartbeat_s >= GCS_HEARTBEAT_FORWARD_S and self.alive(v, now):
-                v.last_gcs_heartbeat_s = now
-                self._submit(v, GcsHeartbeat(source=link.name), lambda reply: None)
+            if now - v.last_gcs_heartbeat_s >= GCS_HEARTBEAT_FORWARD_S:
+                self._forward_gcs_heartbeat(v, now)
+
+    def _forward_gcs_heartbeat(self, v: Vehicle, now: float) -> None:
+        if not self.alive(v, now):
+            return
+        v.last_gcs_heartbeat_s = now
+        if v.state is not None:
+            v.last_gcs_heartbeat_sim_s = v.state.sim_time_s
+        self._submit(v, GcsHeartbeat(source="mavlink"), lambda reply: None)
+
+    def _keep_gcs_link_alive(self, v: Vehicle, now: float) -> None:
+        """The GCS beats once per wall second, the autopilot's link timeout is in sim seconds,
+        and the simulation may run many times faster than real time. So while a GCS was heard
+        within GCS_LINK_TIMEOUT_S (wall), its heartbeat is repeated once per sim second; when it
+        falls silent the repeats stop and the autopilot's own timeout runs in sim time."""
+        if v.state is None or v.state.sim_time_s - v.last_gcs_heartbeat_sim_s < 1.0:
+            return
+        if any(now - link.gcs_heard_s <= GCS_LINK_TIMEOUT_S for link in self.links_of[v.sysid]):
+            self._forward_gcs_heartbeat(v, now)
 
     # ------------------------------------------------------------------ commands
     def _facts(self, v: Vehicle) -> Facts:

@@ -91,6 +91,7 @@ class Link:
         self.sock.setblocking(False)
         self.sock.bind(bind)
         self._peers: dict[Addr, float] = {}
+        self.gcs_heard_s = -1e9  # wall time of the last ground-station HEARTBEAT on this link
         self.signing = Signing(signing_key, link_id) if signing_key is not None else None
         self._encoders = {sysid: self._encoder(sysid, link_id) for sysid in self.sysids}
 

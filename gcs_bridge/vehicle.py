@@ -90,7 +90,8 @@ class Vehicle:
         self._home_geo: Vec3 | None = None
         self.intent: ArmIntent | None = None
         self.last_status_wall_s = -1e9
-        self.last_gcs_heartbeat_s = -1e9
+        self.last_gcs_heartbeat_s = -1e9  # wall
+        self.last_gcs_heartbeat_sim_s = -1e9
         self._reached = 0
         self._current: MissionCurrent | None = None
 

@@ -116,6 +116,8 @@ class MavClient:
             self.mav.signing.timestamp = signing_timestamp_now()
             self.mav.signing.sign_outgoing = True
         self.addr_of: dict[int, tuple[str, int]] = {}
+        self.beat = False  # send a GCS HEARTBEAT once per second while pumping, as QGC does
+        self._last_beat = 0.0
         self.inbox: collections.deque[Msg] = collections.deque()
         self.log: list[Msg] = []  # everything received, in order
 
@@ -130,6 +132,9 @@ class MavClient:
 
     # -- raw I/O -------------------------------------------------------------------
     def pump(self, timeout_s: float = 0.05) -> None:
+        if self.beat and self.addr_of and time.monotonic() - self._last_beat >= 1.0:
+            self._last_beat = time.monotonic()
+            self.heartbeat()
         select.select([self.sock], [], [], timeout_s)
         while True:
             try:
@@ -168,6 +173,17 @@ class MavClient:
             if time.monotonic() > deadline:
                 raise AssertionError(f"timed out after {timeout_s:.0f} s waiting for {what}")
             self.pump()
+
+    def until(self, what: str, cond: Callable[[], bool], timeout_s: float = 60.0) -> None:
+        """Pump until ``cond()`` holds (it may look at ``self.log``, which keeps everything)."""
+        deadline = time.monotonic() + timeout_s
+        while not cond():
+            if time.monotonic() > deadline:
+                raise AssertionError(f"timed out after {timeout_s:.0f} s waiting for {what}")
+            self.pump()
+
+    def logged(self, kind: str, sysid: int) -> list[Msg]:
+        return [m for m in self.log if m.get_type() == kind and m.get_srcSystem() == sysid]
 
     def wait_type(self, kind: str, sysid: int, timeout_s: float = 60.0, **fields: Any) -> Msg:
         def match(m: Msg) -> bool:
