@@ -299,9 +299,9 @@ class Gateway:
 
     def _tick(self, now: float) -> None:
         if now >= self._next_heartbeat_s:
-            self._next_heartbeat_s = max(
-                self._next_heartbeat_s + self.options.heartbeat_period_s, now
-            )
+            period = self.options.heartbeat_period_s
+            late = now - self._next_heartbeat_s > period
+            self._next_heartbeat_s = now + period if late else self._next_heartbeat_s + period
             for v in self.vehicles.values():
                 if self.alive(v, now):
                     self._send_all(v, v.heartbeat(), now)
