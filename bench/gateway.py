@@ -1,6 +1,6 @@
 """Gateway telemetry benchmark: rates per simulated second and the gateway's CPU, N vehicles.
 
-Run with ``python -m bench.gateway [N ...]``. Each row starts a router, the scripted fake
+Run with ``python -m bench.gateway [N ...] [--backend real]``. Each row starts a router, the scripted fake
 autopilot (kinematic vehicles at ``--speed`` × real time; it stands in for physics +
 autopilots, which would dominate the machine long before the gateway does) and the gateway,
 then listens on the GCS port like QGC and measures, over 8 s of sim time, the lowest rate of the
@@ -34,12 +34,12 @@ FAST = (
 ONE_HZ = ("BATTERY_STATUS", "MISSION_CURRENT")
 
 
-def row(n: int, speed: float, tmp: Path) -> str:
+def row(n: int, speed: float, tmp: Path, backend: str) -> str:
     scenario, gcs_port, _ = write_scenario(tmp / f"bench{n}.toml", n)
     ids = [f"uav{i + 1}" for i in range(n)]
     with (
         zenoh_network() as (net, _router),
-        vehicles(net, scenario, tmp, ids, speed=speed),
+        vehicles(net, scenario, tmp, ids, backend=backend, speed=speed),
         gateway(net, scenario, tmp) as gw,
         MavClient(gcs_port) as c,
     ):
@@ -73,6 +73,12 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("vehicles", nargs="*", type=int, default=[1, 4, 16, 32])
     ap.add_argument("--speed", type=float, default=2.0, help="fake sim speed (× real time)")
+    ap.add_argument(
+        "--backend",
+        choices=["fake", "real"],
+        default="fake",
+        help="real: plume + physics (lockstep, as fast as it goes) + autopilots",
+    )
     args = ap.parse_args()
     print(
         f"{'vehicles':>8} {'sim speed':>10} {'fast min/s':>12} {'1 Hz min/s':>12} "
@@ -81,7 +87,7 @@ def main() -> int:
     )
     with tempfile.TemporaryDirectory() as tmp:
         for n in args.vehicles:
-            print(row(n, args.speed, Path(tmp)), flush=True)
+            print(row(n, args.speed, Path(tmp), args.backend), flush=True)
     print(
         "rates: messages per simulated second (configured: fast 4, slow 1); "
         "sim speed: as achieved by the fake stand-in",
