@@ -1,8 +1,9 @@
 """Gateway telemetry benchmark: rates per simulated second and the gateway's CPU, N vehicles.
 
-Run with ``python -m bench.gateway [N ...] [--backend real]``. Each row starts a router, the scripted fake
-autopilot (kinematic vehicles at ``--speed`` × real time; it stands in for physics +
-autopilots, which would dominate the machine long before the gateway does) and the gateway,
+Run with ``python -m bench.gateway [N ...] [--backend real]``. Each row starts a router, the
+scripted fake autopilot (kinematic vehicles at ``--speed`` × real time; it stands in for physics +
+autopilots, which would dominate the machine long before the gateway does) or, with
+``--backend real``, plume + physics + one autopilot per vehicle, and the gateway,
 then listens on the GCS port like QGC and measures, over 8 s of sim time, the lowest rate of the
 fast streams (telemetry_hz, default 4 Hz) and of the 1 Hz streams across all vehicles, in
 messages per simulated second, plus the heartbeat rate per wall second and the gateway's CPU.
@@ -90,7 +91,7 @@ def main() -> int:
             print(row(n, args.speed, Path(tmp), args.backend), flush=True)
     print(
         "rates: messages per simulated second (configured: fast 4, slow 1); "
-        "sim speed: as achieved by the fake stand-in",
+        f"sim speed: as achieved by the {args.backend} stack",
         file=sys.stderr,
     )
     return 0
