@@ -26,6 +26,7 @@ SIGNATURE_LEN = 13  # link id (1) + timestamp (6) + signature (6)
 _EPOCH_2015 = 1420070400
 _NEW_STREAM_WINDOW = 60 * 100_000  # one minute, in 10 µs units
 PEER_EXPIRY_S = 15.0
+MAX_PEERS = 16  # per link: one datagram must not buy a stranger our telemetry stream forever
 MAX_DATAGRAMS_PER_POLL = 256
 
 
@@ -131,6 +132,8 @@ class Link:
             peer = (str(addr[0]), int(addr[1]))
             accepted = self._parse(data, peer)
             if accepted:
+                if peer not in self._peers and len(self._peers) >= MAX_PEERS:
+                    del self._peers[min(self._peers, key=self._peers.__getitem__)]
                 self._peers[peer] = now_s
                 out.extend((m, peer) for m in accepted)
         return out

@@ -100,3 +100,28 @@ def test_outgoing_frames_are_mavlink2_from_component_1_and_signed_when_on(
         data, _ = sock.recvfrom(1024)
         assert data[0] == 0xFD and data[2] & 0x01 == flag
         assert data[5] == 1 and data[6] == 1  # sysid 1, component 1
+
+
+def test_peers_are_capped_and_the_quietest_goes_first(
+    pair: tuple[socket.socket, Link, Link],
+) -> None:
+    from gcs_bridge.links import MAX_PEERS
+
+    _, plain, _ = pair
+    socks = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(MAX_PEERS + 3)]
+    try:
+        frame = pack(client_mav(), heartbeat())
+        for i, s in enumerate(socks):
+            s.bind(("127.0.0.1", 0))
+            s.sendto(frame, plain.address)
+            deadline = time.monotonic() + 5.0
+            while plain.stats.datagrams < i + 1:
+                assert time.monotonic() < deadline
+                select.select([plain.sock], [], [], 0.05)
+                plain.receive(i * 0.01)  # peer i last heard at "time" i / 100
+        dests = plain.destinations(1.0)
+        assert len(dests) == MAX_PEERS
+        assert socks[-1].getsockname() in dests and socks[0].getsockname() not in dests
+    finally:
+        for s in socks:
+            s.close()
