@@ -123,6 +123,14 @@ class MissionHandlers(Core):
             mission_type=int(msg.mission_type),
         )
 
+    def _plan_type(self, v: Vehicle, msg: Msg, peer: ms.Peer, now: float) -> int | None:
+        """The message's mission type if it is the mission plan; fence and rally: UNSUPPORTED."""
+        mission_type = int(msg.mission_type)
+        if mission_type != ms.MISSION_TYPE_MISSION:
+            self._mission_ack(v, peer, ms.Result.UNSUPPORTED, mission_type, now)
+            return None
+        return mission_type
+
     def _on_mission_ack(self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float) -> None:
         if int(msg.type) != ms.Result.ACCEPTED:
             v.uploader.on_cancel(peer)  # the GCS gave up on its upload
@@ -130,9 +138,8 @@ class MissionHandlers(Core):
     def _on_mission_request_list(
         self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
     ) -> None:
-        mission_type = int(msg.mission_type)
-        if mission_type != ms.MISSION_TYPE_MISSION:
-            self._mission_ack(v, peer, ms.Result.UNSUPPORTED, mission_type, now)
+        mission_type = self._plan_type(v, msg, peer, now)
+        if mission_type is None:
             return
 
         def done(reply: CommandReply) -> None:
@@ -155,9 +162,8 @@ class MissionHandlers(Core):
     def _on_mission_request(
         self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
     ) -> None:
-        mission_type = int(msg.mission_type)
-        if mission_type != ms.MISSION_TYPE_MISSION:
-            self._mission_ack(v, peer, ms.Result.UNSUPPORTED, mission_type, now)
+        mission_type = self._plan_type(v, msg, peer, now)
+        if mission_type is None:
             return
         seq = int(msg.seq)
         if not 0 <= seq < len(v.download):
