@@ -5,9 +5,10 @@
 (open-loop hover throttle at 20 m: no contacts), the ticks/s and real-time factor of
 ``plumeswarm node physics`` in lockstep mode at 240 Hz physics / 120 Hz control, answered by
 scripted participants (``tests/scripted_autopilot.py``; a few processes each serving many
-vehicles, answering inside the subscriber callback), plus the physics process's CPU share. A
-second table times the pure :class:`~sim_world.world.World` (no bus): steps and control ticks
-per second (a tick = 2 substeps + reading all states).
+vehicles, answering inside the subscriber callback), plus the physics process's CPU share and
+CPU milliseconds per tick (which, unlike ticks/s, barely depends on what else the machine
+runs). A first table times the pure :class:`~sim_world.world.World` (no bus): control ticks
+(2 substeps + reading all states) per wall second and per CPU second.
 
 Rows run a few seconds each (``--seconds``); ``--long`` runs 20 s per row.
 """
@@ -160,6 +161,7 @@ def process_row(n: int, hovering: bool, seconds: float, tmp: Path) -> dict[str, 
     sim = last[1].sim_time_s - first[1].sim_time_s
     cpu = (cpu1.user + cpu1.system) - (cpu0.user + cpu0.system)
     return {
+        "cpu_ms_tick": 1000.0 * cpu / max(1, ticks),
         "ticks_s": ticks / wall,
         "rtf": sim / wall,
         "cpu": cpu / seconds,
@@ -168,7 +170,7 @@ def process_row(n: int, hovering: bool, seconds: float, tmp: Path) -> dict[str, 
 
 
 def world_row(n: int, hovering: bool, seconds: float) -> tuple[float, float]:
-    """(physics steps/s, control ticks/s) of the bare World."""
+    """Control ticks (2 substeps + states) per wall second and per CPU second, bare World."""
     sc = parse_scenario(scenario_toml(n, 20.0 if hovering else 0.0))
     with World(sc) as world:
         vt = world.vehicle_type("v0")
@@ -181,13 +183,15 @@ def world_row(n: int, hovering: bool, seconds: float) -> tuple[float, float]:
             world.apply(vid, [u] * len(vt.rotors))
         ticks = 0
         start = time.perf_counter()
+        cpu_start = time.process_time()
         while time.perf_counter() - start < seconds:
             for _ in range(10):
                 world.step(2)
                 world.states(ticks)
                 ticks += 1
         elapsed = time.perf_counter() - start
-    return 2 * ticks / elapsed, ticks / elapsed
+        cpu = time.process_time() - cpu_start
+    return ticks / elapsed, ticks / cpu
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -200,19 +204,26 @@ def main(argv: list[str] | None = None) -> int:
     seconds = 20.0 if args.long else args.seconds
     sizes = [int(s) for s in args.sizes.split(",") if s]
     print(f"# physics bench: 240 Hz physics / 120 Hz control, lockstep, {os.cpu_count()} cores\n")
-    print("## pure World (no bus): one process, steps and control ticks per second\n")
-    print("| N | state | steps/s | ticks/s | real-time factor |")
+    print("## pure World (no bus): control ticks (2 steps + states) per second\n")
+    print("Per CPU second is what one free core gives; per wall second depends on the load.\n")
+    print("| N | state | ticks/wall s | ticks/CPU s | real-time factor (CPU) |")
     print("|---:|---|---:|---:|---:|")
     for n in sizes:
         for hovering in (False, True):
-            steps, ticks = world_row(n, hovering, min(seconds, 2.0))
+            wall_rate, cpu_rate = world_row(n, hovering, min(seconds, 2.0))
             state = "hovering" if hovering else "grounded"
-            print(f"| {n} | {state} | {steps:,.0f} | {ticks:,.0f} | {ticks / 120:.1f}x |")
+            print(
+                f"| {n} | {state} | {wall_rate:,.0f} | {cpu_rate:,.0f} | {cpu_rate / 120:.1f}x |",
+                flush=True,
+            )
     if args.no_bus:
         return 0
     print("\n## physics process over Zenoh with scripted participants\n")
-    print("| N | state | participant procs | ticks/s | real-time factor | physics CPU |")
-    print("|---:|---|---:|---:|---:|---:|")
+    print(
+        "| N | state | participant procs | ticks/s | real-time factor | physics CPU "
+        "| physics CPU ms/tick |"
+    )
+    print("|---:|---|---:|---:|---:|---:|---:|")
     with tempfile.TemporaryDirectory(prefix="bench-physics-") as tmp:
         for n in sizes:
             for hovering in (False, True):
@@ -220,7 +231,7 @@ def main(argv: list[str] | None = None) -> int:
                 state = "hovering" if hovering else "grounded"
                 print(
                     f"| {n} | {state} | {r['participants']:.0f} | {r['ticks_s']:,.0f} | "
-                    f"{r['rtf']:.1f}x | {100 * r['cpu']:.0f} % |",
+                    f"{r['rtf']:.1f}x | {100 * r['cpu']:.0f} % | {r['cpu_ms_tick']:.2f} |",
                     flush=True,
                 )
     return 0

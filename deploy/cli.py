@@ -149,22 +149,47 @@ def status() -> None:
     not_yet("plumeswarm status", "#7")
 
 
-@cli.command(context_settings={"ignore_unknown_options": True, "allow_extra_args": True})
-def record() -> None:
-    """Record everything on the bus to an MCAP file."""
-    not_yet("plumeswarm record", "#8")
+@cli.command()
+@SCENARIO_OPT
+@click.option("--connect", multiple=True, help="Zenoh endpoint to connect to (repeatable).")
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None)
+def record(scenario: str | None, connect: tuple[str, ...], out: Path | None) -> None:
+    """Record everything on the bus to an MCAP file (until Ctrl-C)."""
+    from deploy.recording import commands
+
+    sys.exit(commands.record(scenario_from(scenario), list(connect), out))
 
 
-@cli.command(context_settings={"ignore_unknown_options": True, "allow_extra_args": True})
-def replay() -> None:
-    """Publish a recording back onto the bus."""
-    not_yet("plumeswarm replay", "#8")
+@cli.command()
+@click.argument("file")
+@click.option("--speed", type=float, default=1.0, show_default=True, help="Time scale factor.")
+@SCENARIO_OPT
+@click.option("--connect", multiple=True, help="Zenoh endpoint to connect to (repeatable).")
+@click.option("--wait-for", multiple=True, metavar="NODE", help="Start once NODE is on the bus.")
+@click.option("--recorded-by", default=None, metavar="NODE", help="Recorder to hand-shake with.")
+def replay(
+    file: str,
+    speed: float,
+    scenario: str | None,
+    connect: tuple[str, ...],
+    wait_for: tuple[str, ...],
+    recorded_by: str | None,
+) -> None:
+    """Publish a recording back onto the bus with its timing."""
+    from deploy.recording import commands
+
+    sc = scenario_from(scenario)
+    sys.exit(commands.replay(file, sc, list(connect), speed, wait_for, recorded_by))
 
 
-@cli.command(context_settings={"ignore_unknown_options": True, "allow_extra_args": True})
-def report() -> None:
+@cli.command()
+@click.argument("file")
+@click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path))
+def report(file: str, out: Path) -> None:
     """Plots, CSV and a one-page report from a recording."""
-    not_yet("plumeswarm report", "#8")
+    from deploy.recording import commands
+
+    sys.exit(commands.report(file, out))
 
 
 @cli.command(context_settings={"ignore_unknown_options": True, "allow_extra_args": True})

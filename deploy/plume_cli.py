@@ -12,7 +12,6 @@ from plume_service import GaussianPlume
 from plume_service.field import ConcentrationField
 from plume_service.from_scenario import field_from_scenario
 from plume_service.mesh import default_bounds, isosurface, write_mesh
-from plume_service.plots import plot_all
 
 
 def _field(scenario: str | None, preset: str | None) -> ConcentrationField:
@@ -116,6 +115,7 @@ def mesh(
 def plot(scenario: str | None, preset: str | None, out: Path, height: float | None) -> None:
     """PNGs: plan view, along-wind section, crosswind profiles."""
     from deploy.cli import fail
+    from plume_service.plots import plot_all  # matplotlib: imported only when plotting
 
     field = _field(scenario, preset)
     try:

@@ -38,6 +38,7 @@ class Lockstep:
         self._clock = clock
         self._present: set[str] = set()
         self._active: set[str] = set()
+        self._waiting: set[str] = set()  # active and not yet answered the current tick
         # A non-active participant becomes active by answering a tick >= this.
         self._rejoin_from: dict[str, int] = {}
         self.tick = 0
@@ -60,6 +61,7 @@ class Lockstep:
             return False
         self._present.discard(vehicle_id)
         self._active.discard(vehicle_id)
+        self._waiting.discard(vehicle_id)
         self._commands.pop(vehicle_id, None)
         return True
 
@@ -79,11 +81,13 @@ class Lockstep:
     def start(self) -> None:
         """Every present participant takes part from now on (before tick 0)."""
         self._active = set(self._present)
+        self._waiting = self._active - self._commands.keys()
 
     def begin(self, tick: int, timeout_s: float | None = None) -> None:
         """Tick ``tick`` was published: wait for its commands until the deadline."""
         self.tick = tick
         self._commands = {}
+        self._waiting = set(self._active)
         self._deadline = self._clock() + (self.timeout_s if timeout_s is None else timeout_s)
 
     def receive(self, vehicle_id: str, tick: int, rotor_commands: Sequence[float]) -> bool:
@@ -94,18 +98,20 @@ class Lockstep:
             if tick < self._rejoin_from.get(vehicle_id, 0):
                 return False  # sent before it was dropped
             self._active.add(vehicle_id)
+            self._waiting.add(vehicle_id)
         if tick != self.tick:
             return False
         self._commands[vehicle_id] = rotor_commands
+        self._waiting.discard(vehicle_id)
         return True
 
     def complete(self) -> bool:
         """Every active participant has answered the current tick."""
-        return all(v in self._commands for v in self._active)
+        return not self._waiting
 
     def missing(self) -> list[str]:
         """Active participants that have not answered the current tick, in scenario order."""
-        return [v for v in self.vehicle_ids if v in self._active and v not in self._commands]
+        return [v for v in self.vehicle_ids if v in self._waiting]
 
     def remaining_s(self) -> float:
         return self._deadline - self._clock()
@@ -117,6 +123,7 @@ class Lockstep:
         dropped = self.missing()
         for vid in dropped:
             self._active.discard(vid)
+            self._waiting.discard(vid)
             self._rejoin_from[vid] = self.tick
         return dropped
 

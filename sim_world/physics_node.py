@@ -159,7 +159,9 @@ class PhysicsNode:
             log.warning("ignoring actuators for %s sent on %s", cmd.vehicle_id, sample.key_expr)
             return
         with self._cond:
-            if self.barrier.receive(cmd.vehicle_id, cmd.tick, cmd.rotor_commands):
+            # Wake the loop once per tick, not once per command.
+            counted = self.barrier.receive(cmd.vehicle_id, cmd.tick, cmd.rotor_commands)
+            if counted and self.barrier.complete():
                 self._cond.notify_all()
 
     # ------------------------------------------------------------------ phases
@@ -167,14 +169,13 @@ class PhysicsNode:
         self.rt.ready()
         deadline = time.monotonic() + self.scenario.time.startup_timeout_s
         if self.options.wait_for_autopilots and not self._wait_for_tokens(deadline):
-            return 1
+            return 0 if self.rt.stop.is_set() else 1  # a stop signal is not a failure
         with self._cond:
             self.barrier.start()
-        with self._cond:
             self.barrier.begin(0, timeout_s=max(0.0, deadline - time.monotonic()))
         self._publish_tick(self.world.states(0, 0.0))
         if not self._handshake():
-            return 1
+            return 0 if self.rt.stop.is_set() else 1
         self._reset_clock()
         return self._loop()
 

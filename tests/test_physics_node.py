@@ -24,7 +24,11 @@ KEYS = Keys(WORLD)
 
 
 def write_scenario(
-    tmp_path: Path, timeout_s: float = 1.0, startup_s: float = 60.0, name: str = "sc.toml"
+    tmp_path: Path,
+    timeout_s: float = 1.0,
+    startup_s: float = 60.0,
+    name: str = "sc.toml",
+    extra_time: str = "",
 ) -> Path:
     path = tmp_path / name
     path.write_text(
@@ -37,6 +41,7 @@ physics_hz = 240
 control_hz = 120
 participant_timeout_s = {timeout_s}
 startup_timeout_s = {startup_s}
+{extra_time}
 [[vehicles]]
 id = "a"
 spawn_enu_m = [0.0, 0.0, 0.0]
@@ -259,6 +264,23 @@ def test_missing_autopilots_fail_start_up_naming_them(
     assert exit_code(physics, "physics") == 1
     log = (tmp_path / "physics.log").read_text()
     assert "autopilots missing" in log and "a, b" in log and "autopilot-a" in log
+
+
+def test_realtime_mode_with_a_duration_ends_at_that_sim_time(
+    setup: tuple[NodeProcs, Watch], tmp_path: Path
+) -> None:
+    procs, watch = setup
+    sc = write_scenario(
+        tmp_path, extra_time='mode = "realtime"\nspeed_factor = 4.0\nduration_s = 1.0'
+    )
+    physics = procs.start(
+        "physics", "--scenario", str(sc), "--set", "wait_for_autopilots=false", name="physics"
+    )
+    assert exit_code(physics, "physics") == 0
+    wait_until(lambda: watch.last_tick == 120, 10.0, "tick 120 (1 s at 120 Hz)")
+    wait_until(lambda: watch.clock is not None and watch.clock.tick == 120, 10.0, "final clock")
+    assert watch.clock is not None and watch.clock.mode == "realtime"
+    assert watch.clock.sim_time_s == pytest.approx(1.0)
 
 
 def test_unknown_option_is_a_clear_error(tmp_path: Path) -> None:

@@ -1,0 +1,234 @@
+"""A recorded flight as arrays: per-vehicle track, readings and status, plus the plume it flew in.
+
+One pass over the recording; only the messages a report needs are decoded. Vehicle states come
+from ``vehicle/<id>/state``; a vehicle that has none there is taken from ``sim/tick``.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections import defaultdict
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+
+import msgspec
+import numpy as np
+import numpy.typing as npt
+from tqdm import tqdm
+
+from deploy.recording.reader import Recorded, Recording, RecordingError
+from deploy.recording.schema import EVENTS_TOPIC, RecorderEvent
+from swarmbus.keys import KeyNameError, Keys
+from swarmbus.messages import (
+    ConcentrationReading,
+    PlumeInfo,
+    SimTick,
+    VehicleState,
+    VehicleStatus,
+)
+from swarmbus.scenario import Scenario
+
+log = logging.getLogger(__name__)
+
+FloatArray = npt.NDArray[np.float64]
+
+
+@dataclass
+class Track:
+    """Ground truth of one vehicle, in time order (sim time)."""
+
+    columns: dict[str, FloatArray]
+
+    @property
+    def t(self) -> FloatArray:
+        return self.columns["sim_time_s"]
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+
+@dataclass
+class Readings:
+    """Sensor readings of one vehicle; unavailable values are NaN."""
+
+    columns: dict[str, FloatArray]
+
+    @property
+    def t(self) -> FloatArray:
+        return self.columns["sim_time_s"]
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+
+@dataclass
+class Flight:
+    world: str
+    tracks: dict[str, Track] = field(default_factory=dict)
+    readings: dict[str, Readings] = field(default_factory=dict)
+    modes: dict[str, list[tuple[float, str]]] = field(default_factory=dict)
+    plume_info: PlumeInfo | None = None
+    scenario: Scenario | None = None
+    events: list[RecorderEvent] = field(default_factory=list)
+    message_count: int = 0
+    truncated: bool = False
+
+    @property
+    def vehicles(self) -> list[str]:
+        return sorted(set(self.tracks) | set(self.readings))
+
+
+TRACK_FIELDS = (
+    "sim_time_s",
+    "tick",
+    "x_m",
+    "y_m",
+    "z_m",
+    "vx_m_s",
+    "vy_m_s",
+    "vz_m_s",
+    "lat_deg",
+    "lon_deg",
+    "alt_m",
+    "on_ground",
+)
+READING_FIELDS = ("sim_time_s", "x_m", "y_m", "z_m", "available", "reported_g_m3", "true_g_m3")
+
+
+def _state_row(s: VehicleState) -> tuple[float, ...]:
+    return (
+        s.sim_time_s,
+        float(s.tick),
+        *s.position_enu_m,
+        *s.velocity_enu_m_s,
+        s.lat_deg,
+        s.lon_deg,
+        s.alt_m,
+        float(s.on_ground),
+    )
+
+
+def _reading_row(r: ConcentrationReading) -> tuple[float, ...]:
+    def value(v: float | None) -> float:
+        return math.nan if v is None or not r.available else v
+
+    return (
+        r.sim_time_s,
+        *r.position_enu_m,
+        float(r.available),
+        value(r.reported_g_m3),
+        value(r.true_g_m3),
+    )
+
+
+def _columns(rows: list[tuple[float, ...]], names: tuple[str, ...]) -> dict[str, FloatArray]:
+    table = np.array(rows, dtype=np.float64).reshape(len(rows), len(names))
+    order = np.argsort(table[:, 0], kind="stable")
+    return {name: table[order, i] for i, name in enumerate(names)}
+
+
+class _Collector:
+    def __init__(self, keys: Keys) -> None:
+        self.keys = keys
+        self.states: dict[str, list[tuple[float, ...]]] = defaultdict(list)
+        self.tick_states: dict[str, list[tuple[float, ...]]] = defaultdict(list)
+        self.readings: dict[str, list[tuple[float, ...]]] = defaultdict(list)
+        self.modes: dict[str, list[tuple[float, str]]] = defaultdict(list)
+        self.plume_info: PlumeInfo | None = None
+        self.events: list[RecorderEvent] = []
+        leaf: dict[str, Callable[[Recorded], None]] = {
+            "state": self._state,
+            "concentration": self._reading,
+            "status": self._status,
+        }
+        self._vehicle_leaf = leaf
+
+    def add(self, rec: Recorded) -> None:
+        if rec.topic == EVENTS_TOPIC:
+            event = rec.event()
+            if event is not None:
+                self.events.append(event)
+            return
+        if not rec.is_bus_message:
+            return
+        relative = self.keys.relative(rec.topic)
+        if relative.startswith("vehicle/"):
+            handler = self._vehicle_leaf.get(relative.rsplit("/", 1)[-1])
+            if handler is not None:
+                handler(rec)
+        elif rec.topic == self.keys.tick():
+            msg = rec.message()
+            if isinstance(msg, SimTick):
+                for s in msg.states:
+                    self.tick_states[s.vehicle_id].append(_state_row(s))
+        elif rec.topic == self.keys.plume_info():
+            msg = rec.message()
+            if isinstance(msg, PlumeInfo):
+                self.plume_info = msg
+
+    def _state(self, rec: Recorded) -> None:
+        msg = rec.message()
+        if isinstance(msg, VehicleState):
+            self.states[msg.vehicle_id].append(_state_row(msg))
+
+    def _reading(self, rec: Recorded) -> None:
+        msg = rec.message()
+        if isinstance(msg, ConcentrationReading):
+            self.readings[msg.vehicle_id].append(_reading_row(msg))
+
+    def _status(self, rec: Recorded) -> None:
+        msg = rec.message()
+        if isinstance(msg, VehicleStatus):
+            modes = self.modes[msg.vehicle_id]
+            if not modes or modes[-1][1] != msg.mode:
+                modes.append((msg.sim_time_s, str(msg.mode)))
+
+
+def _scenario_of(recording: Recording) -> Scenario | None:
+    text = recording.metadata.get("plumeswarm", {}).get("scenario")
+    if not text:
+        return None
+    try:
+        return msgspec.json.decode(text, type=Scenario)
+    except msgspec.MsgspecError as exc:
+        log.warning("the recorded scenario cannot be read (%s); reporting without it", exc)
+        return None
+
+
+def load_flight(recording: Recording, progress: bool | None = None) -> Flight:
+    """Read ``recording`` into a :class:`Flight` (``progress``: None = only on a terminal)."""
+    world = recording.metadata.get("plumeswarm", {}).get("world", "default")
+    try:
+        keys = Keys(world)
+    except KeyNameError as exc:
+        raise RecordingError(f"{recording.path}: bad world name in metadata: {exc}") from None
+    collector = _Collector(keys)
+    count = 0
+    messages: Iterable[Recorded] = recording.messages()
+    bar = tqdm(
+        messages,
+        total=recording.message_count,
+        unit="msg",
+        desc="reading",
+        disable=None if progress is None else not progress,
+        leave=False,
+    )
+    for rec in bar:
+        collector.add(rec)
+        count += 1
+    flight = Flight(
+        world=world,
+        plume_info=collector.plume_info,
+        scenario=_scenario_of(recording),
+        events=collector.events,
+        message_count=count,
+        truncated=recording.truncated,
+    )
+    for vid in sorted(set(collector.states) | set(collector.tick_states)):
+        rows = collector.states.get(vid) or collector.tick_states[vid]
+        flight.tracks[vid] = Track(_columns(rows, TRACK_FIELDS))
+    for vid, rows in sorted(collector.readings.items()):
+        flight.readings[vid] = Readings(_columns(rows, READING_FIELDS))
+    flight.modes = dict(collector.modes)
+    return flight

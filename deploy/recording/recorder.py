@@ -1,0 +1,324 @@
+"""The ``recorder`` role: every message under the world's prefix to one MCAP file.
+
+Zenoh delivers samples on its own threads; the callback only stamps and queues them (it must never
+block, or publishers with the ``drop`` congestion policy would lose messages upstream). A writer
+thread transcodes and writes them (:class:`~deploy.recording.sink.McapSink`). Nothing is dropped
+silently: per-key counts are kept, a queue that falls behind is logged and recorded as an event,
+and only a queue at its hard limit drops — counted, logged as an error and recorded. Messages lost
+in Zenoh before they reach the recorder (publishers use the ``drop`` congestion policy) cannot be
+seen directly; for the streams that carry one per tick (``vehicle/<id>/state``, ``sim/tick``) a
+jump in ``tick`` is counted, logged and recorded as a ``gap`` event.
+
+The recorder acknowledges every ``NodeHealth`` it records from another node by publishing its own
+health with ``detail = "heard <name> <state>"``: a publisher that must not lose its first messages
+waits for that acknowledgement (:mod:`deploy.recording.handshake`) before it starts.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import sys
+import threading
+import time
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+
+import msgspec
+import zenoh
+
+from deploy.recording import schema as sch
+from deploy.recording.sink import DEFAULT_CHUNK_BYTES, DEFAULT_CHUNK_INTERVAL_S, McapSink
+from swarmbus.codec import MessageError, decode, encode
+from swarmbus.keys import Keys
+from swarmbus.messages import NodeHealth, PlumeInfo, PlumeInfoQuery, SimTick, VehicleState
+from swarmbus.node import NodeContext, NodeRuntime, package_version
+
+log = logging.getLogger(__name__)
+
+HealthPublisher = Callable[[str], None]
+
+
+@dataclass(frozen=True)
+class RecorderOptions:
+    out: Path
+    chunk_interval_s: float = DEFAULT_CHUNK_INTERVAL_S
+    chunk_bytes: int = DEFAULT_CHUNK_BYTES
+    max_backlog: int = 2_000_000  # hard limit of queued messages (memory), then drop + count
+    behind_backlog: int = 50_000  # "falling behind" above this many queued messages ...
+    behind_age_s: float = 2.0  # ... or when the oldest written message waited this long
+    health_period_s: float = 1.0
+    query_plume_info: bool = True
+
+    @classmethod
+    def from_ctx(cls, ctx: NodeContext) -> RecorderOptions:
+        opts = ctx.options
+        stamp = datetime.now(UTC).strftime("%Y%m%d-%H%M%S")
+        out = Path(opts.get("out") or f"plumeswarm-{ctx.scenario.world.name}-{stamp}.mcap")
+        return cls(
+            out=out,
+            chunk_interval_s=float(opts.get("chunk_interval_s", DEFAULT_CHUNK_INTERVAL_S)),
+            chunk_bytes=int(opts.get("chunk_bytes", DEFAULT_CHUNK_BYTES)),
+            max_backlog=int(opts.get("max_backlog", 2_000_000)),
+            query_plume_info=opts.get("query_plume_info", "true").lower() != "false",
+        )
+
+
+Item = tuple[str, bytes, int, bool]  # key, payload, receive time (ns), is a query reply
+
+
+class Recorder:
+    """Subscribes to ``keys.everything()`` and writes what arrives to ``sink``."""
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        keys: Keys,
+        name: str,
+        sink: McapSink,
+        options: RecorderOptions,
+        publish_health: HealthPublisher,
+    ) -> None:
+        self._session = session
+        self._keys = keys
+        self._name = name
+        self._sink = sink
+        self._opts = options
+        self._publish_health = publish_health
+        self._queue: queue.SimpleQueue[Item] = queue.SimpleQueue()
+        self._lock = threading.Lock()
+        self.received: Counter[str] = Counter()
+        self.dropped: Counter[str] = Counter()
+        self.tick_gaps: Counter[str] = Counter()  # messages missing from per-tick streams
+        self._last_tick: dict[str, int] = {}
+        self._gaps_reported = 0
+        self._received_total = 0
+        self._dropped_total = 0
+        self._taken_total = 0
+        self._dropped_reported = 0
+        self._behind = False
+        self._stopping = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="recorder-writer", daemon=True)
+        self._sub: zenoh.Subscriber[None] | None = None
+        self._last_health = 0.0
+        self._info_thread = threading.Thread(
+            target=self._query_plume_info, name="recorder-plume-info", daemon=True
+        )
+
+    # -- Zenoh thread --------------------------------------------------------------------------
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        now = time.time_ns()
+        key = str(sample.key_expr)
+        with self._lock:
+            if self._received_total - self._taken_total >= self._opts.max_backlog:
+                self.dropped[key] += 1
+                self._dropped_total += 1
+                return
+            self.received[key] += 1
+            self._received_total += 1
+        self._queue.put((key, sample.payload.to_bytes(), now, False))
+
+    # -- lifecycle -----------------------------------------------------------------------------
+    def start(self) -> None:
+        self._sink.write_event(sch.RecorderEvent(kind=sch.EventKind.STARTED, detail=self._name))
+        self._thread.start()
+        self._sub = self._session.declare_subscriber(self._keys.everything(), self._on_sample)
+        if self._opts.query_plume_info:
+            self._info_thread.start()
+
+    def stop(self, timeout_s: float = 30.0) -> None:
+        """Stop subscribing, write what is queued, close the file with its summary."""
+        if self._sub is not None:
+            self._sub.undeclare()
+            self._sub = None
+        self._stopping.set()
+        if self._info_thread.is_alive():
+            self._info_thread.join(5.0)
+        self._thread.join(timeout_s)
+        if self._thread.is_alive():
+            log.error("recorder writer did not finish within %.0f s", timeout_s)
+        self._report_drops()
+        self._report_gaps()
+        self._sink.write_event(self._event(sch.EventKind.STOPPED))
+        self._sink.close(self.summary())
+        log.info("recording closed: %s (%d messages)", self._sink.path, self.written_total)
+
+    @property
+    def written_total(self) -> int:
+        return sum(self._sink.written.values())
+
+    @property
+    def backlog(self) -> int:
+        with self._lock:
+            return self._received_total - self._taken_total
+
+    def summary(self) -> dict[str, str]:
+        with self._lock:
+            received = dict(self.received)
+            dropped = dict(self.dropped)
+        return {
+            "received": msgspec.json.encode(received).decode(),
+            "dropped": msgspec.json.encode(dropped).decode(),
+            "undecodable": msgspec.json.encode(dict(self._sink.undecodable)).decode(),
+            "tick_gaps": msgspec.json.encode(dict(self.tick_gaps)).decode(),
+            "received_total": str(sum(received.values())),
+            "dropped_total": str(sum(dropped.values())),
+        }
+
+    def _event(self, kind: sch.EventKind, detail: str = "") -> sch.RecorderEvent:
+        with self._lock:
+            return sch.RecorderEvent(
+                kind=kind,
+                detail=detail,
+                backlog=self._received_total - self._taken_total,
+                dropped=self._dropped_total,
+                received=self._received_total,
+                written=self._taken_total,
+            )
+
+    # -- writer thread -------------------------------------------------------------------------
+    def _run(self) -> None:
+        while True:
+            try:
+                item = self._queue.get(timeout=0.05)
+            except queue.Empty:
+                if self._stopping.is_set():
+                    break
+                self._housekeeping()
+                continue
+            self._write(item)
+            for _ in range(2000):  # drain a burst before the next housekeeping
+                try:
+                    self._write(self._queue.get_nowait())
+                except queue.Empty:
+                    break
+            self._housekeeping(age_s=(time.time_ns() - item[2]) / 1e9)
+
+    def _write(self, item: Item) -> None:
+        key, payload, log_time_ns, is_reply = item
+        if is_reply:
+            self._sink.write_reply(key, decode(payload, PlumeInfo), log_time_ns)
+            return
+        with self._lock:
+            self._taken_total += 1
+        message = self._sink.write_bus(key, payload, log_time_ns)
+        if isinstance(message, VehicleState | SimTick):
+            self._check_tick(key, message.tick)
+        elif isinstance(message, NodeHealth) and message.name != self._name:
+            self._publish_health(f"heard {message.name} {message.state}")
+
+    def _check_tick(self, key: str, tick: int) -> None:
+        last = self._last_tick.get(key)
+        self._last_tick[key] = tick
+        if last is not None and tick > last + 1:  # backwards: a restart or a replay, not a loss
+            self.tick_gaps[key] += tick - last - 1
+
+    def _housekeeping(self, age_s: float = 0.0) -> None:
+        self._sink.maybe_close_chunk()
+        self._watch_backlog(age_s)
+        self._report_drops()
+        now = time.monotonic()
+        if now - self._last_health >= self._opts.health_period_s:
+            self._last_health = now
+            self._report_gaps()
+            self._publish_health(
+                f"recording {self._sink.path.name}: {self.written_total} messages, "
+                f"backlog {self.backlog}, dropped {self._dropped_total}"
+            )
+
+    def _watch_backlog(self, age_s: float) -> None:
+        backlog = self.backlog
+        behind = backlog > self._opts.behind_backlog or age_s > self._opts.behind_age_s
+        if behind and not self._behind:
+            detail = f"write queue falling behind: {backlog} queued, oldest {age_s:.1f} s old"
+            log.warning("RECORDER BEHIND: %s", detail)
+            self._sink.write_event(self._event(sch.EventKind.BEHIND, detail))
+        elif self._behind and not behind and backlog < self._opts.behind_backlog // 10:
+            log.warning("recorder caught up (backlog %d)", backlog)
+            self._sink.write_event(self._event(sch.EventKind.CAUGHT_UP))
+        else:
+            return
+        self._behind = behind
+
+    def _report_gaps(self) -> None:
+        total = sum(self.tick_gaps.values())
+        if total > self._gaps_reported:
+            worst = self.tick_gaps.most_common(1)[0][0]
+            detail = (
+                f"{total - self._gaps_reported} messages missing from per-tick streams "
+                f"(lost before reaching the recorder); most on {worst}"
+            )
+            log.warning("RECORDER SAW GAPS: %s", detail)
+            event = self._event(sch.EventKind.GAP, detail)
+            self._sink.write_event(msgspec.structs.replace(event, lost_upstream=total))
+            self._gaps_reported = total
+
+    def _report_drops(self) -> None:
+        with self._lock:
+            dropped = self._dropped_total
+        if dropped > self._dropped_reported:
+            detail = f"{dropped - self._dropped_reported} messages dropped (queue full)"
+            log.error("RECORDER DROPPED MESSAGES: %s; %d in total", detail, dropped)
+            self._sink.write_event(self._event(sch.EventKind.DROPPED, detail))
+            self._dropped_reported = dropped
+
+    def _query_plume_info(self) -> None:
+        # plume/info is a queryable, not a publication: ask until answered, so that a report
+        # can draw the field the vehicles flew through.
+        key = self._keys.plume_info()
+        while not self._stopping.wait(0.0):
+            try:
+                for reply in self._session.get(key, payload=encode(PlumeInfoQuery()), timeout=1.0):
+                    if reply.ok is None:
+                        continue
+                    payload = reply.ok.payload.to_bytes()
+                    decode(payload, PlumeInfo)
+                    self._queue.put((key, payload, time.time_ns(), True))
+                    log.info("recorded the plume's info")
+                    return
+            except (zenoh.ZError, MessageError) as exc:
+                log.info("plume info not recorded yet: %s", exc)
+            self._stopping.wait(2.0)
+
+
+# Zenoh's receive thread needs the GIL for every sample while the writer thread holds it for up
+# to the switch interval (5 ms by default); a stalled receive thread back-pressures the link and
+# upstream drops follow. A shorter interval reduced that loss at 61k msg/s in bench/recorder.py.
+GIL_SWITCH_INTERVAL_S = 0.0005
+
+
+def run(ctx: NodeContext) -> int:
+    """Record until SIGINT/SIGTERM; returns the process exit code."""
+    opts = RecorderOptions.from_ctx(ctx)
+    sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)  # this process is the recorder alone
+    metadata = {
+        "world": ctx.scenario.world.name,
+        "recorder": ctx.name,
+        "version": package_version(),
+        "started_utc": datetime.now(UTC).isoformat(),
+        "scenario": msgspec.json.encode(ctx.scenario).decode(),
+    }
+    try:
+        opts.out.parent.mkdir(parents=True, exist_ok=True)
+        sink = McapSink(
+            opts.out,
+            chunk_interval_s=opts.chunk_interval_s,
+            chunk_bytes=opts.chunk_bytes,
+            metadata=metadata,
+        )
+    except OSError as exc:
+        log.error("cannot write recording %s: %s", opts.out, exc.strerror or exc)
+        return 2
+    with NodeRuntime(ctx, role="recorder") as rt:
+        recorder = Recorder(
+            rt.session, rt.keys, ctx.name, sink, opts, lambda d: rt.publish_health(detail=d)
+        )
+        recorder.start()
+        log.info("recording %s to %s", rt.keys.everything(), opts.out)
+        rt.ready()
+        rt.stop.wait()
+        recorder.stop()
+    return 0

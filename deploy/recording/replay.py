@@ -1,0 +1,155 @@
+"""``plumeswarm replay``: publish a recording back onto the bus with its original timing.
+
+Messages go out on the keys they were recorded from, in file order, spaced as they were
+received (log time), divided by ``speed``. Published bus messages only: the presence plane
+(``node/*``, other nodes' health would confuse supervisors), replies the recorder asked for
+itself, and the recorder's own events are not replayed. Raw payloads that were not valid
+messages go out byte for byte, as they came.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import msgspec
+import zenoh
+
+from deploy.recording.handshake import RecorderNotListening, wait_until_recorded
+from deploy.recording.reader import Recorded, Recording, RecordingError
+from swarmbus.codec import encode
+from swarmbus.keys import KeyNameError, Keys
+from swarmbus.messages import NodeState
+from swarmbus.node import NodeContext, NodeRuntime
+from swarmbus.scenario import Scenario
+from swarmbus.session import Presence
+
+log = logging.getLogger(__name__)
+
+
+class ReplayError(RuntimeError):
+    """A replay that cannot start or finish: one line for the user."""
+
+
+@dataclass(frozen=True)
+class ReplayOptions:
+    speed: float = 1.0
+    wait_for: tuple[str, ...] = ()  # node names whose liveliness tokens must be up first
+    recorded_by: str | None = None  # a recorder that must acknowledge before and after
+    timeout_s: float = 30.0
+
+
+def recorded_world(recording: Recording) -> str:
+    world = recording.metadata.get("plumeswarm", {}).get("world", "default")
+    try:
+        return Keys(world).world
+    except KeyNameError as exc:
+        raise RecordingError(f"{recording.path}: bad world name in metadata: {exc}") from None
+
+
+def replayable(recording: Recording, keys: Keys) -> Iterator[tuple[Recorded, bytes]]:
+    """(record, payload to publish) for every message that replay sends, in order."""
+    prefix = keys.prefix + "/"
+    for rec in recording.messages():
+        if rec.origin != "bus" or not rec.topic.startswith(prefix):
+            continue
+        if keys.relative(rec.topic).startswith("node/"):
+            continue
+        message = rec.message()
+        yield rec, (encode(message) if message is not None else rec.data)
+
+
+class _Publishers:
+    def __init__(self, session: zenoh.Session) -> None:
+        self._session = session
+        self._pubs: dict[str, zenoh.Publisher] = {}
+
+    def put(self, key: str, payload: bytes) -> None:
+        pub = self._pubs.get(key)
+        if pub is None:
+            pub = self._pubs[key] = self._session.declare_publisher(key)
+        pub.put(payload)
+
+    def close(self) -> None:
+        for pub in self._pubs.values():
+            pub.undeclare()
+
+
+def _wait_for_nodes(session: zenoh.Session, keys: Keys, opts: ReplayOptions) -> None:
+    if not opts.wait_for:
+        return
+    presence = Presence(session, keys)
+    try:
+        wanted = set(opts.wait_for)
+        if not presence.wait_for(lambda alive: wanted <= alive, opts.timeout_s):
+            missing = ", ".join(sorted(wanted - presence.alive))
+            raise ReplayError(
+                f"waited {opts.timeout_s:.0f} s for node(s) {missing}; not on the bus"
+            )
+    finally:
+        presence.close()
+
+
+def _handshake(rt: NodeRuntime, opts: ReplayOptions, state: NodeState) -> None:
+    if opts.recorded_by is None:
+        return
+    try:
+        wait_until_recorded(
+            rt.session,
+            rt.keys,
+            rt.ctx.name,
+            state,
+            lambda: rt.publish_health(state),
+            recorder=opts.recorded_by,
+            timeout_s=opts.timeout_s,
+        )
+    except RecorderNotListening as exc:
+        raise ReplayError(str(exc)) from None
+
+
+def replay(recording: Recording, rt: NodeRuntime, opts: ReplayOptions) -> int:
+    """Publish ``recording``; returns the number of messages sent (stops early on rt.stop)."""
+    _wait_for_nodes(rt.session, rt.keys, opts)
+    _handshake(rt, opts, NodeState.READY)
+    rt.ready()
+    pubs = _Publishers(rt.session)
+    sent = 0
+    first_log_ns: int | None = None
+    start = time.monotonic()
+    try:
+        for rec, payload in replayable(recording, rt.keys):
+            if first_log_ns is None:
+                first_log_ns = rec.log_time_ns
+            due = start + (rec.log_time_ns - first_log_ns) / 1e9 / opts.speed
+            delay = due - time.monotonic()
+            if delay > 0 and rt.stop.wait(delay):
+                break
+            if rt.stop.is_set():
+                break
+            pubs.put(rec.topic, payload)
+            sent += 1
+    finally:
+        pubs.close()
+    if not rt.stop.is_set():
+        _handshake(rt, opts, NodeState.STOPPING)
+    return sent
+
+
+def run(path: str, scenario: Scenario, connect: list[str], opts: ReplayOptions) -> int:
+    """Open, replay, report one line; raises RecordingError / ReplayError for the CLI."""
+    if not opts.speed > 0:
+        raise ReplayError(f"--speed must be > 0, got {opts.speed}")
+    recording = Recording.open(path)
+    world = recorded_world(recording)
+    scenario = msgspec.structs.replace(
+        scenario, world=msgspec.structs.replace(scenario.world, name=world)
+    )
+    net = scenario.network.with_overrides(connect=connect or None)
+    ctx = NodeContext(scenario, net, "replay")
+    started = time.monotonic()
+    with NodeRuntime(ctx, role="replay") as rt:
+        sent = replay(recording, rt, opts)
+    log.info("replayed %d messages in %.1f s", sent, time.monotonic() - started)
+    return sent
