@@ -22,6 +22,7 @@ import sys
 import tempfile
 import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import suppress
 from pathlib import Path
 
@@ -224,7 +225,7 @@ class StubPhysics:
 
 
 def lockstep_run(
-    count: int, seconds: float, driver: str, plume: bool = True
+    count: int, seconds: float, driver: str, plume: bool = True, per_process: int = 1
 ) -> tuple[float, float, float]:
     """(ticks/s, real-time factor, machine CPU %) with ``count`` autopilot processes."""
     from agents import Swarm
@@ -247,13 +248,17 @@ def lockstep_run(
         try:
             if plume:
                 procs.start("plume")
-            for vid in ids:
-                procs.start("autopilot", "--vehicle", vid)
+            for first in range(0, count, per_process):
+                group = ids[first : first + per_process]
+                args = [a for vid in group for a in ("--vehicle", vid)]
+                if len(group) > 1:  # the derived name would outgrow 64 characters
+                    args += ["--name", f"autopilots-{first // per_process}"]
+                procs.start("autopilot", *args)
             if stub is not None:
                 stub.start()
             else:
                 procs.start("physics")
-            with Swarm(router, keys, command_timeout_s=30.0, own_session=False) as sw:
+            with Swarm(router, keys, command_timeout_s=120.0, own_session=False) as sw:
                 sw.wait_until(
                     lambda: all(sw.status(v) is not None for v in ids), 300, "all autopilots"
                 )
@@ -264,9 +269,13 @@ def lockstep_run(
                     sw.wait_until(
                         lambda: all(sw.state(v) is not None for v in ids), 120, "all states"
                     )
-                for vid in ids:
+
+                def launch(vid: str) -> None:
                     sw.command(vid).arm()
                     sw.command(vid).takeoff(HOVER_M)
+
+                with ThreadPoolExecutor(max_workers=16) as pool:  # 64 vehicles under load
+                    list(pool.map(launch, ids))
                 if stub is None:
                     sw.wait_until(
                         lambda: all(sw.status(v).mode == "hold" for v in ids), 600, "all hovering"
@@ -308,6 +317,9 @@ def main() -> int:
     parser.add_argument("--seconds", type=float, default=5.0)
     parser.add_argument("--driver", choices=["physics", "stub", "auto"], default="auto")
     parser.add_argument("--no-plume", action="store_true", help="no plume service (no sensor)")
+    parser.add_argument(
+        "--per-process", type=int, default=1, help="vehicles served by each autopilot process"
+    )
     args = parser.parse_args()
     driver = args.driver
     if driver == "auto":
@@ -317,11 +329,18 @@ def main() -> int:
     for vt in ("iris", "typhoon_h480"):
         step_us, path_us = control_cost(vt)
         print(f"{vt:>14} {step_us:9.1f} {path_us:13.1f}")
-    print(f"\nlockstep, one autopilot process per vehicle, 120 Hz control, driver={driver}:")
-    print(f"{'autopilots':>10} {'ticks/s':>9} {'RTF':>7} {'CPU %':>6}")
+    per = (
+        "one autopilot process per vehicle"
+        if args.per_process == 1
+        else (f"{args.per_process} vehicles per autopilot process")
+    )
+    print(f"\nlockstep, {per}, 120 Hz control, driver={driver}:")
+    print(f"{'vehicles':>10} {'ticks/s':>9} {'RTF':>7} {'CPU %':>6}")
     for count in [int(c) for c in args.counts.split(",")]:
         try:
-            rate, rtf, cpu = lockstep_run(count, args.seconds, driver, not args.no_plume)
+            rate, rtf, cpu = lockstep_run(
+                count, args.seconds, driver, not args.no_plume, args.per_process
+            )
         except Exception as exc:  # one failed row must not hide the others
             print(f"{count:>10} failed: {exc}", flush=True)
             continue
