@@ -91,10 +91,15 @@ def run_factory(network: tuple[Network, zenoh.Session], tmp_path: Path) -> Itera
         for vid in ids:
             procs.start("autopilot", "--vehicle", vid)
         procs.start("physics")
+        # Tick 1 is published only after every autopilot answered tick 0, i.e. after each
+        # has its first state: a state of tick 0 alone may reach us before the autopilot.
         sw.wait_until(
-            lambda: all(sw.state(v) is not None and sw.status(v) is not None for v in ids),
+            lambda: all(
+                (state := sw.state(v)) is not None and state.tick >= 1 and sw.status(v) is not None
+                for v in ids
+            ),
             120.0,
-            f"states and statuses of {ids}",
+            f"states (tick >= 1) and statuses of {ids}",
         )
         return Run(procs, sw, ids)
 
