@@ -35,6 +35,19 @@ def package_version() -> str:
         return "0+unknown"
 
 
+class StopEvent(threading.Event):
+    """Set by SIGINT/SIGTERM. ``wait()`` without a timeout wakes up every 0.25 s: the kernel may
+    deliver a signal to one of Zenoh's threads, and Python runs its handler only when the main
+    thread wakes, so a main thread blocked for good in ``wait()`` would never see the signal."""
+
+    def wait(self, timeout: float | None = None) -> bool:
+        if timeout is not None:
+            return super().wait(timeout)
+        while not super().wait(0.25):
+            pass
+        return True
+
+
 @dataclass(frozen=True)
 class NodeContext:
     """The validated configuration a role's ``main`` receives (built by the CLI or launcher)."""
@@ -57,7 +70,7 @@ class NodeRuntime:
         self.ctx = ctx
         self.role = role
         self.keys = ctx.keys
-        self.stop = threading.Event()
+        self.stop = StopEvent()
         self._install_signals = install_signals
         self._session: zenoh.Session | None = None
         self._token: zenoh.LivelinessToken | None = None
