@@ -114,7 +114,12 @@ def node(
         if not sep or not key:
             fail(f"--set expects KEY=VALUE, got {item!r}")
         opts[key] = value
-    node_name = name or (f"{role}-{'-'.join(vehicles)}" if vehicles else role)
+    if name:
+        node_name = name
+    elif len(vehicles) > 1:  # ids joined would outgrow a key segment: first id and a count
+        node_name = f"{role}-{vehicles[0]}-plus{len(vehicles) - 1}"
+    else:
+        node_name = f"{role}-{vehicles[0]}" if vehicles else role
     try:
         check_name("node", node_name)
     except KeyNameError as exc:

@@ -9,6 +9,7 @@ service keeps serving.
 from __future__ import annotations
 
 import logging
+import queue
 import threading
 from collections.abc import Callable
 from typing import TypeVar
@@ -134,27 +135,33 @@ def main(ctx: NodeContext) -> int:
                 keys.plume_info(), _handler(PlumeInfoQuery, service.info, "info")
             ),
         ]
-        # Meshes take seconds: serve them on their own thread so point queries never wait.
-        mesh_queryable = rt.session.declare_queryable(
-            keys.plume_mesh(), zenoh.handlers.FifoChannel(8)
-        )
+        # Meshes take seconds: queue them to their own thread so point queries never wait.
+        # (A blocking recv() on a zenoh channel can't be interrupted by undeclare; a Python
+        # queue with a timeout can.)
+        mesh_queue: queue.Queue[zenoh.Query] = queue.Queue(maxsize=8)
         handle_mesh = _handler(PlumeMeshQuery, service.mesh, "mesh")
+
+        def enqueue_mesh(query: zenoh.Query) -> None:
+            try:
+                mesh_queue.put_nowait(query)
+            except queue.Full:
+                query.reply_err(encode(ErrorReply(field="", reason="mesh queue full, retry later")))
 
         def mesh_worker() -> None:
             while not rt.stop.is_set():
                 try:
-                    query = mesh_queryable.recv()
-                except zenoh.ZError:  # undeclared: shutting down
-                    return
+                    query = mesh_queue.get(timeout=0.2)
+                except queue.Empty:
+                    continue
                 handle_mesh(query)
                 del query  # dropping the query finalises the reply
 
+        queryables.append(rt.session.declare_queryable(keys.plume_mesh(), enqueue_mesh))
         worker = threading.Thread(target=mesh_worker, name="plume-mesh", daemon=True)
         worker.start()
         rt.ready()
         rt.stop.wait()
+        worker.join(timeout=30.0)
         for q in queryables:
             q.undeclare()
-        mesh_queryable.undeclare()
-        worker.join(timeout=5.0)
     return 0

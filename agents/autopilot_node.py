@@ -1,0 +1,392 @@
+"""The autopilot process: ``plumeswarm node autopilot --vehicle ID [--vehicle ID2 …]``.
+
+One process serves one vehicle (or a few): it declares one liveliness token
+``node/autopilot-<id>/health`` per vehicle (the lockstep's participant list), answers every
+``sim/tick`` with an ``ActuatorCommand`` per vehicle, serves ``vehicle/<id>/cmd``, publishes
+``vehicle/<id>/status`` (on change and every ``status_period_s`` of sim time) and the sensor's
+``vehicle/<id>/concentration``.
+
+Ticks run on one worker thread reading the subscriber's channel (no Python callback thread in
+between). The sensor's plume query
+for tick k (one batched query: every vehicle's position in the tick, i.e. own + peers) is sent
+right after tick k's commands and collected before tick k+1's, so its round trip overlaps the
+physics step and a behaviour always sees the reading of the previous sensor tick — the same
+run after run. Commands are handled on Zenoh's thread under a lock.
+
+Options (``--set key=value``): ``sensor_timeout_s`` (0.2), ``status_period_s`` (0.5),
+``position_noise_m`` / ``velocity_noise_m_s`` (0: the estimate is the physics' truth).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+from contextlib import suppress
+from dataclasses import dataclass, fields
+from typing import Any
+
+import numpy as np
+import zenoh
+
+from agents.autopilot import Autopilot
+from agents.behavior import BehaviorContext, BehaviorError, load_behavior
+from agents.estimator import Estimator
+from agents.sensor import ConcentrationSensor
+from swarmbus.codec import MessageError, decode, encode
+from swarmbus.keys import Keys
+from swarmbus.messages import (
+    ActuatorCommand,
+    Command,
+    ConcentrationReading,
+    ErrorReply,
+    PeerReading,
+    PlumeQuery,
+    PlumeValues,
+    SimTick,
+    VehicleState,
+    VehicleStatus,
+)
+from swarmbus.node import NodeContext, NodeRuntime
+from swarmbus.scenario import Scenario
+
+log = logging.getLogger(__name__)
+
+IDLE_STATUS_PERIOD_S = 1.0  # wall clock: status while no ticks arrive (physics not running)
+TICK_QUEUE = 64
+
+
+@dataclass(frozen=True)
+class NodeOptions:
+    sensor_timeout_s: float = 0.2
+    status_period_s: float = 0.5
+    position_noise_m: float = 0.0
+    velocity_noise_m_s: float = 0.0
+
+    @classmethod
+    def parse(cls, options: dict[str, str]) -> NodeOptions:
+        known = {f.name for f in fields(cls)}
+        values: dict[str, float] = {}
+        for key, text in options.items():
+            if key not in known:
+                raise ValueError(f"unknown option {key!r}; options: {', '.join(sorted(known))}")
+            try:
+                value = float(text)
+            except ValueError:
+                raise ValueError(f"option {key}: {text!r} is not a number") from None
+            if not value >= 0.0 or value == float("inf"):
+                raise ValueError(f"option {key}: must be a finite number >= 0, got {text!r}")
+            values[key] = value
+        return cls(**values)
+
+
+def build_autopilot(scenario: Scenario, vehicle_id: str, options: NodeOptions) -> Autopilot:
+    index = [v.id for v in scenario.vehicles].index(vehicle_id)
+    seed = scenario.world.seed
+    estimator = Estimator(
+        options.position_noise_m,
+        options.velocity_noise_m_s,
+        np.random.SeedSequence([seed, index, 0xE57]),
+    )
+    spec = scenario.vehicle(vehicle_id).behavior
+    behavior = None
+    if spec is not None:
+        ctx = BehaviorContext(
+            vehicle_id=vehicle_id,
+            vehicle_index=index,
+            scenario=scenario,
+            control_dt_s=1.0 / scenario.time.control_hz,
+            rng=np.random.Generator(np.random.PCG64(np.random.SeedSequence([seed, index, 0xBE4]))),
+        )
+        behavior = load_behavior(spec, ctx)
+    return Autopilot(scenario, vehicle_id, estimator=estimator, behavior=behavior)
+
+
+class _Served:
+    """One served vehicle: its autopilot, sensor and publishers."""
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        keys: Keys,
+        scenario: Scenario,
+        vehicle_id: str,
+        options: NodeOptions,
+    ) -> None:
+        self.vehicle_id = vehicle_id
+        self.autopilot = build_autopilot(scenario, vehicle_id, options)
+        index = [v.id for v in scenario.vehicles].index(vehicle_id)
+        self.sensor = ConcentrationSensor(scenario.sensor, scenario.world.seed, index)
+        self.actuators = session.declare_publisher(keys.vehicle_actuators(vehicle_id))
+        self.status_pub = session.declare_publisher(keys.vehicle_status(vehicle_id))
+        self.readings_pub = session.declare_publisher(keys.vehicle_concentration(vehicle_id))
+        self.last_command = b""
+        self.last_status: VehicleStatus | None = None
+        self.last_status_time_s = -1e9
+        self.new_readings: list[ConcentrationReading] = []
+
+    def publish_status(self, force: bool, period_s: float) -> None:
+        status = self.autopilot.status()
+        last = self.last_status
+        changed = last is None or _status_key(last) != _status_key(status)
+        if force or changed or status.sim_time_s - self.last_status_time_s >= period_s:
+            self.status_pub.put(encode(status))
+            self.last_status = status
+            self.last_status_time_s = status.sim_time_s
+
+
+def _status_key(s: VehicleStatus) -> tuple[object, ...]:
+    return (
+        s.mode,
+        s.armed,
+        s.landed,
+        s.crashed,
+        s.mission_index,
+        s.mission_count,
+        s.mission_items_reached,
+        s.mission_finished,
+        s.failsafe,
+        s.health,
+    )
+
+
+@dataclass
+class _PendingSensor:
+    tick: int
+    sim_time_s: float
+    states: list[VehicleState]
+    replies: zenoh.handlers.Handler[zenoh.Reply]
+
+
+class AutopilotNode:
+    """The loop of one autopilot process (bus glue around :class:`Autopilot`)."""
+
+    def __init__(self, session: zenoh.Session, ctx: NodeContext, options: NodeOptions) -> None:
+        self.session = session
+        self.keys = ctx.keys
+        self.options = options
+        self.lock = threading.Lock()
+        self.served = {
+            vid: _Served(session, self.keys, ctx.scenario, vid, options) for vid in ctx.vehicle_ids
+        }
+        self.last_tick = -1
+        self.last_tick_wall = 0.0
+        self._tick_sub: Any = None
+        self.pending: _PendingSensor | None = None
+        self.plume_key = self.keys.plume_concentration()
+        self._declared: list[Any] = []  # subscribers and queryables, undeclared on close
+        self._tokens: list[zenoh.LivelinessToken] = []
+
+    # ------------------------------------------------------------------ set-up
+    def declare(self, node_name: str) -> None:
+        """Subscriber and queryables first, then the participants' tokens."""
+        # A Rust-side channel: no Python thread between the network and the tick loop.
+        self._tick_sub = self.session.declare_subscriber(
+            self.keys.tick(), zenoh.handlers.FifoChannel(TICK_QUEUE)
+        )
+        for vid, served in self.served.items():
+            self._declared.append(
+                self.session.declare_queryable(
+                    self.keys.vehicle_cmd(vid), self._command_handler(served)
+                )
+            )
+        for vid in self.served:
+            name = f"autopilot-{vid}"
+            if name != node_name:
+                self._tokens.append(
+                    self.session.liveliness().declare_token(self.keys.node_health(name))
+                )
+        for served in self.served.values():
+            served.publish_status(force=True, period_s=self.options.status_period_s)
+
+    def close(self) -> None:
+        for token in self._tokens:
+            with suppress(zenoh.ZError):
+                token.undeclare()
+        for entity in self._declared:
+            with suppress(zenoh.ZError):
+                entity.undeclare()
+
+    def _command_handler(self, served: _Served) -> Callable[[zenoh.Query], None]:
+        def handle(query: zenoh.Query) -> None:
+            try:
+                payload = query.payload
+                data = payload.to_bytes() if payload is not None else b""
+                command: object = decode(data, Command)  # type: ignore[arg-type]
+            except MessageError as exc:
+                log.warning("%s: bad command: %s", served.vehicle_id, exc)
+                query.reply_err(encode(ErrorReply(field=exc.field, reason=exc.reason[:1000])))
+                return
+            try:
+                with self.lock:
+                    reply = served.autopilot.handle(command)
+                    served.publish_status(force=False, period_s=self.options.status_period_s)
+                if not reply.accepted:
+                    log.info(
+                        "%s: %s refused: %s",
+                        served.vehicle_id,
+                        type(command).__name__,
+                        reply.reason,
+                    )
+                query.reply(query.key_expr, encode(reply))
+            except Exception:  # the process must outlive any one command
+                log.exception("%s: command handling failed", served.vehicle_id)
+
+        return handle
+
+    # ------------------------------------------------------------------ loop
+    def run(self, stop: threading.Event) -> None:
+        """Ticks on a worker thread; the main thread keeps statuses flowing while none arrive.
+
+        The worker blocks in the subscriber's channel; closing the session (on return from
+        ``main``) ends it — undeclaring a subscriber another thread is reading fails in zenoh.
+        """
+        worker = threading.Thread(target=self._tick_loop, args=(stop,), name="ticks", daemon=True)
+        worker.start()
+        while not stop.wait(IDLE_STATUS_PERIOD_S):
+            with self.lock:
+                if time.monotonic() - self.last_tick_wall >= IDLE_STATUS_PERIOD_S:
+                    for served in self.served.values():
+                        served.publish_status(force=True, period_s=0.0)
+
+    def _tick_loop(self, stop: threading.Event) -> None:
+        sub = self._tick_sub
+        while not stop.is_set():
+            try:
+                sample = sub.recv()
+                while (newer := sub.try_recv()) is not None:  # behind: only the latest counts
+                    sample = newer
+            except zenoh.ZError:  # the session closed
+                return
+            try:
+                tick = decode(sample.payload.to_bytes(), SimTick)
+            except MessageError as exc:
+                log.warning("ignoring bad tick: %s", exc)
+                continue
+            try:
+                self.on_tick(tick)
+            except Exception:  # never let one tick end the loop; physics would drop us
+                if stop.is_set():
+                    return
+                log.exception("tick %d failed", tick.tick)
+
+    def on_tick(self, tick: SimTick) -> None:
+        self.last_tick_wall = time.monotonic()
+        if tick.tick == self.last_tick:  # the start handshake repeats a tick: same answer
+            for served in self.served.values():
+                if served.last_command:
+                    served.actuators.put(served.last_command)
+            return
+        self.last_tick = tick.tick
+        self._collect_readings()
+        states = {s.vehicle_id: s for s in tick.states}
+        with self.lock:
+            for vid, served in self.served.items():
+                state = states.get(vid)
+                if state is None:
+                    continue
+                peers = [s for s in tick.states if s.vehicle_id != vid]
+                rotor = served.autopilot.step(state, peers, served.new_readings)
+                served.new_readings = []
+                served.last_command = encode(
+                    ActuatorCommand(vehicle_id=vid, tick=tick.tick, rotor_commands=rotor)
+                )
+                served.actuators.put(served.last_command)
+                for event in served.autopilot.modes.mission.drain_events():
+                    log.info(
+                        "%s: mission item %d reached at %.2f s", vid, event.index, event.sim_time_s
+                    )
+            for served in self.served.values():
+                served.publish_status(force=False, period_s=self.options.status_period_s)
+        if any(s.sensor.due(tick.tick) for s in self.served.values()) and tick.states:
+            self._query_plume(tick)
+
+    # ------------------------------------------------------------------ sensor
+    def _query_plume(self, tick: SimTick) -> None:
+        query = PlumeQuery(
+            points_enu_m=[s.position_enu_m for s in tick.states], sim_time_s=tick.sim_time_s
+        )
+        replies = self.session.get(
+            self.plume_key, payload=encode(query), timeout=self.options.sensor_timeout_s
+        )
+        self.pending = _PendingSensor(tick.tick, tick.sim_time_s, list(tick.states), replies)
+
+    def _collect_readings(self) -> None:
+        pending, self.pending = self.pending, None
+        if pending is None:
+            return
+        values = self._values(pending)
+        for vid, served in self.served.items():
+            if not served.sensor.due(pending.tick):
+                continue
+            own = next((k for k, s in enumerate(pending.states) if s.vehicle_id == vid), None)
+            if own is None:
+                continue
+            position = pending.states[own].position_enu_m
+            true = values[own] if values is not None else None
+            peers = (
+                [
+                    PeerReading(
+                        vehicle_id=s.vehicle_id,
+                        position_enu_m=s.position_enu_m,
+                        true_g_m3=values[k],
+                    )
+                    for k, s in enumerate(pending.states)
+                    if k != own
+                ]
+                if values is not None
+                else []
+            )
+            reading = served.sensor.reading(vid, pending.sim_time_s, position, true, peers)
+            served.autopilot.sensor_health = (
+                "" if reading.available else "sensor: the plume service did not answer"
+            )
+            served.readings_pub.put(encode(reading))
+            served.new_readings.append(reading)
+
+    def _values(self, pending: _PendingSensor) -> list[float] | None:
+        """The plume's values for the pending query, or None (no answer in time, or an error)."""
+        try:
+            for reply in pending.replies:
+                if reply.ok is None:
+                    err = reply.err
+                    log.warning("plume query refused: %s", err.payload.to_bytes() if err else "")
+                    return None
+                values = decode(reply.ok.payload.to_bytes(), PlumeValues).values_g_m3
+                if len(values) != len(pending.states):
+                    log.warning(
+                        "plume answered %d values for %d points", len(values), len(pending.states)
+                    )
+                    return None
+                return values
+        except (MessageError, zenoh.ZError) as exc:
+            log.warning("plume reply unusable: %s", exc)
+        return None
+
+
+def main(ctx: NodeContext) -> int:
+    """Serve ``ctx.vehicle_ids`` until stopped."""
+    if not ctx.vehicle_ids:
+        log.error("autopilot: no vehicle to serve (--vehicle ID)")
+        return 2
+    try:
+        options = NodeOptions.parse(ctx.options)
+        for vid in ctx.vehicle_ids:  # fail fast on a bad behaviour before joining the bus
+            ctx.scenario.vehicle(vid)
+    except (ValueError, KeyError) as exc:
+        log.error("autopilot: %s", exc)
+        return 2
+    with NodeRuntime(ctx, role="autopilot") as rt:
+        try:
+            node = AutopilotNode(rt.session, ctx, options)
+        except BehaviorError as exc:
+            log.error("autopilot: %s", exc)
+            return 2
+        node.declare(ctx.name)
+        rt.ready()
+        try:
+            node.run(rt.stop)
+        finally:
+            node.close()
+    return 0

@@ -1,0 +1,58 @@
+"""Behaviour plug-ins: ``module:Class`` in the scenario (``[[vehicles]] behavior``).
+
+The class is built once with a :class:`BehaviorContext`; while its vehicle is in offboard mode,
+``step(own, peers, readings)`` is called every control tick and returns the
+:class:`~swarmbus.messages.Setpoint` to fly (``None``: no new setpoint; the stream timeout
+then applies). ``readings`` are the vehicle's own concentration readings that arrived since the
+previous step (usually one per sensor period; a reading describes the previous sensor tick).
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
+from swarmbus.scenario import Scenario
+
+
+@dataclass(frozen=True)
+class BehaviorContext:
+    vehicle_id: str
+    vehicle_index: int
+    scenario: Scenario
+    control_dt_s: float
+    rng: np.random.Generator
+
+
+class Behavior(Protocol):
+    def step(
+        self,
+        own: VehicleState,
+        peers: Sequence[VehicleState],
+        readings: Sequence[ConcentrationReading],
+    ) -> Setpoint | None: ...
+
+
+class BehaviorError(RuntimeError):
+    pass
+
+
+def load_behavior(spec: str, ctx: BehaviorContext) -> Behavior:
+    """Import ``module:Class`` and build it with ``ctx``; :class:`BehaviorError` if it fails."""
+    module_name, sep, class_name = spec.partition(":")
+    if not sep or not module_name or not class_name:
+        raise BehaviorError(f"behavior {spec!r}: expected 'module:Class'")
+    try:
+        module = importlib.import_module(module_name)
+        cls = getattr(module, class_name)
+    except (ImportError, AttributeError) as exc:
+        raise BehaviorError(f"behavior {spec!r}: {exc}") from None
+    behavior = cls(ctx)
+    if not callable(getattr(behavior, "step", None)):
+        raise BehaviorError(f"behavior {spec!r}: {class_name} has no step() method")
+    return behavior  # type: ignore[no-any-return]

@@ -1,0 +1,1 @@
+"""Example behaviour plug-ins (``module:Class`` in a scenario's ``[[vehicles]] behavior``)."""

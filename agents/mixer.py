@@ -1,0 +1,83 @@
+"""Control allocation: collective thrust + body torques → normalised rotor commands.
+
+The allocation matrix comes from the vehicle type's rotor layout, so every multirotor (quad,
+hexa, …) shares one code path: row 0 is the collective thrust, rows 1-3 the body torques (FLU)
+produced by one newton of thrust on each rotor. A rotor at (x, y) pushing along body +z makes
+the torque r × F = (y·T, −x·T, 0); its reaction torque about z is −spin·(k_m/k_f)·T
+(docs: PREAMBLE "Rotor command"). The pseudo-inverse (exact for a quad) is computed once; the
+per-tick work is a handful of scalar multiply-adds.
+
+When the request does not fit the rotors' range, yaw gives way first, then roll/pitch are
+scaled down, so that attitude (and the vehicle) is kept before heading.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from swarmbus.vehicle_types import VehicleType
+
+
+def allocation_matrix(vehicle: VehicleType) -> np.ndarray:
+    """The 4×n matrix mapping per-rotor thrust (N) to (thrust N, τx, τy, τz N·m)."""
+    ratio = vehicle.torque_coeff_nm_per_rad2_s2 / vehicle.thrust_coeff_n_per_rad2_s2
+    cols = [(1.0, r.position_m[1], -r.position_m[0], -r.spin * ratio) for r in vehicle.rotors]
+    return np.array(cols, dtype=float).T
+
+
+class Mixer:
+    """Per-vehicle-type allocator (build once, call every control tick)."""
+
+    def __init__(self, vehicle: VehicleType) -> None:
+        self.rotor_count = len(vehicle.rotors)
+        self.k_f = vehicle.thrust_coeff_n_per_rad2_s2
+        self.omega_max = vehicle.max_rotor_speed_rad_s
+        self.max_rotor_thrust_n = self.k_f * self.omega_max**2
+        pinv = np.linalg.pinv(allocation_matrix(vehicle))  # n×4
+        rows: list[tuple[float, float, float, float]] = [
+            (float(a), float(b), float(c), float(d)) for a, b, c, d in pinv.tolist()
+        ]
+        self._rows = rows
+
+    def rotor_thrusts(
+        self, thrust_n: float, torque_x: float, torque_y: float, torque_z: float
+    ) -> list[float]:
+        """Per-rotor thrust (N) within [0, max], yaw then roll/pitch reduced to fit."""
+        t_max = self.max_rotor_thrust_n
+        rows = self._rows
+        thrust_n = min(max(thrust_n, 0.0), t_max * self.rotor_count)
+        base = [r[0] * thrust_n for r in rows]
+        rp = [r[1] * torque_x + r[2] * torque_y for r in rows]
+        yaw = [r[3] * torque_z for r in rows]
+        s_rp = _fit_scale(base, rp, t_max)
+        mid = [b + s_rp * d for b, d in zip(base, rp, strict=True)]
+        s_yaw = _fit_scale(mid, yaw, t_max)
+        return [min(max(m + s_yaw * d, 0.0), t_max) for m, d in zip(mid, yaw, strict=True)]
+
+    def commands(
+        self, thrust_n: float, torque_x: float, torque_y: float, torque_z: float
+    ) -> list[float]:
+        """Rotor commands u in [0, 1] (ω = u·ω_max, T = k_f·ω²) for the request."""
+        k_f = self.k_f
+        w_max = self.omega_max
+        return [
+            min(math.sqrt(t / k_f) / w_max, 1.0)
+            for t in self.rotor_thrusts(thrust_n, torque_x, torque_y, torque_z)
+        ]
+
+
+def _fit_scale(base: list[float], delta: list[float], t_max: float) -> float:
+    """Largest s in [0, 1] with base + s·delta inside [0, t_max] (where base itself is)."""
+    s = 1.0
+    for b, d in zip(base, delta, strict=True):
+        if d > 0.0:
+            room = t_max - b
+            if room < s * d:
+                s = max(room, 0.0) / d
+        elif d < 0.0:
+            room = b
+            if room < -s * d:
+                s = max(room, 0.0) / -d
+    return s

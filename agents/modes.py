@@ -1,0 +1,441 @@
+"""Flight modes: an explicit state machine with a transition table, and per-mode guidance.
+
+``TRANSITIONS[action][from_mode] → to_mode`` lists every allowed transition; ``REFUSALS`` says
+why an action is refused in a mode the table does not list. Guards that depend on more than the
+mode (arming in the air, an empty mission, no setpoint stream, the geofence, …) are checked in
+the action methods. Guidance (``FlightModes.guidance``) turns the mode into a controller
+:class:`~agents.control.Target` every tick and makes the automatic transitions (take-off done →
+hold, touchdown → disarmed, offboard stream lost → the configured action, …).
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from agents.control import Estimate, Target, yaw_of
+from agents.mission import Mission, MissionError
+from swarmbus.messages import FlightMode, MissionCommand, MissionItem, RejectCode, Setpoint
+from swarmbus.scenario import Failsafe, Origin
+
+M = FlightMode
+AIRBORNE = frozenset({M.TAKEOFF, M.HOLD, M.MISSION, M.LAND, M.RTL, M.OFFBOARD})
+
+TAKEOFF_DONE_M = 0.3  # altitude error at which take-off hands over to hold
+TOUCHDOWN_SPEED_M_S = 0.5
+TOUCHDOWN_TIME_S = 0.5
+LAND_SLOW_BELOW_M = 4.0  # height above home under which the descent slows down
+LAND_SLOW_SPEED_M_S = 0.6
+RTL_HOME_RADIUS_M = 1.0
+
+
+class Action(enum.StrEnum):
+    ARM = "arm"
+    DISARM = "disarm"
+    TAKEOFF = "takeoff"
+    LAND = "land"
+    RTL = "rtl"
+    HOLD = "hold"
+    GOTO = "goto"
+    MISSION = "mission"
+    OFFBOARD = "offboard"
+
+
+def _all_airborne(to: FlightMode) -> dict[FlightMode, FlightMode]:
+    return dict.fromkeys(AIRBORNE, to)
+
+
+TRANSITIONS: dict[Action, dict[FlightMode, FlightMode]] = {
+    Action.ARM: {M.DISARMED: M.ARMED},
+    Action.DISARM: {M.ARMED: M.DISARMED, **_all_airborne(M.DISARMED)},  # airborne: force
+    Action.TAKEOFF: {M.ARMED: M.TAKEOFF},
+    Action.LAND: _all_airborne(M.LAND),
+    Action.RTL: _all_airborne(M.RTL),
+    Action.HOLD: _all_airborne(M.HOLD),
+    Action.GOTO: _all_airborne(M.HOLD),
+    Action.MISSION: {M.ARMED: M.MISSION, **_all_airborne(M.MISSION)},
+    Action.OFFBOARD: {M.ARMED: M.OFFBOARD, **_all_airborne(M.OFFBOARD)},
+}
+
+_NOT_FLYING = "disarmed: not flying"
+_ON_GROUND = "on the ground: take off first"
+REFUSALS: dict[Action, dict[FlightMode, str]] = {
+    Action.ARM: {M.ARMED: "already armed", **dict.fromkeys(AIRBORNE, "already armed and flying")},
+    Action.DISARM: {M.DISARMED: "already disarmed"},
+    Action.TAKEOFF: {
+        M.DISARMED: "disarmed: arm before taking off",
+        **dict.fromkeys(AIRBORNE, "already flying: use goto, hold or a mission"),
+    },
+    Action.LAND: {M.DISARMED: _NOT_FLYING, M.ARMED: "already on the ground"},
+    Action.RTL: {M.DISARMED: _NOT_FLYING, M.ARMED: _ON_GROUND},
+    Action.HOLD: {M.DISARMED: _NOT_FLYING, M.ARMED: _ON_GROUND},
+    Action.GOTO: {M.DISARMED: _NOT_FLYING, M.ARMED: _ON_GROUND},
+    Action.MISSION: {M.DISARMED: "disarmed: arm before starting a mission"},
+    Action.OFFBOARD: {M.DISARMED: "disarmed: arm before switching to offboard"},
+}
+
+
+@dataclass(frozen=True, slots=True)
+class Refusal:
+    code: RejectCode
+    reason: str
+
+
+def denied(reason: str) -> Refusal:
+    return Refusal(RejectCode.DENIED, reason)
+
+
+def invalid(reason: str) -> Refusal:
+    return Refusal(RejectCode.INVALID, reason)
+
+
+class RtlPhase(enum.Enum):
+    CLIMB = "climb"
+    RETURN = "return"
+    DESCEND = "descend"
+
+
+class FlightModes:
+    """Mode, home, targets and mission of one vehicle; no I/O, no wall clock."""
+
+    def __init__(self, failsafe: Failsafe, origin: Origin) -> None:
+        self.failsafe = failsafe
+        self.origin = origin
+        self.mode = M.DISARMED
+        self.mission = Mission()
+        self.home: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        self.failsafe_reason = ""  # why the last automatic (failsafe) transition happened
+        self.has_behavior = False
+        self._target: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        self._yaw = 0.0
+        self._speed = 0.0
+        self._touchdown_since: float | None = None
+        self._rtl_phase = RtlPhase.CLIMB
+        self._rtl_alt = 0.0
+        self._setpoint: Setpoint | None = None
+        self._setpoint_time_s = -math.inf
+        self._item_seen = -1
+        self._land_descending = False
+        self._guidance: dict[FlightMode, Callable[[Estimate, float], Target | None]] = {
+            M.DISARMED: lambda est, now: None,
+            M.ARMED: lambda est, now: None,
+            M.TAKEOFF: self._guide_takeoff,
+            M.HOLD: self._guide_hold,
+            M.MISSION: self._guide_mission,
+            M.LAND: self._guide_land,
+            M.RTL: self._guide_rtl,
+            M.OFFBOARD: self._guide_offboard,
+        }
+
+    # ------------------------------------------------------------------ table
+    @property
+    def armed(self) -> bool:
+        return self.mode != M.DISARMED
+
+    def _allowed(self, action: Action) -> FlightMode | Refusal:
+        to = TRANSITIONS[action].get(self.mode)
+        if to is None:
+            return denied(REFUSALS[action].get(self.mode, f"not allowed in mode {self.mode}"))
+        return to
+
+    def _set_mode(self, mode: FlightMode, est: Estimate) -> None:
+        self.mode = mode
+        self._touchdown_since = None
+        if mode in (M.HOLD, M.TAKEOFF, M.OFFBOARD):
+            self._yaw = yaw_of(est.attitude_xyzw)
+
+    def _hold_here(self, est: Estimate) -> None:
+        self._target = est.position
+        self._speed = 0.0
+        self._yaw = yaw_of(est.attitude_xyzw)
+
+    def fence_violation(self, x: float, y: float, z: float) -> str | None:
+        fs = self.failsafe
+        hx, hy, hz = self.home
+        if z - hz > fs.geofence_max_alt_m:
+            limit = fs.geofence_max_alt_m
+            return f"altitude {z - hz:.1f} m above home exceeds the geofence ({limit} m)"
+        dist = math.hypot(x - hx, y - hy)
+        if dist > fs.geofence_max_distance_m:
+            return f"{dist:.1f} m from home exceeds the geofence ({fs.geofence_max_distance_m} m)"
+        return None
+
+    # ------------------------------------------------------------------ actions
+    def arm(self, est: Estimate, crashed: bool = False) -> Refusal | None:
+        to = self._allowed(Action.ARM)
+        if isinstance(to, Refusal):
+            return to
+        if crashed:
+            return denied("crashed: the vehicle cannot be armed again")
+        if not est.on_ground:
+            return denied("in the air: arming in the air is refused")
+        self.home = est.position
+        self._hold_here(est)
+        self._set_mode(to, est)
+        self.failsafe_reason = ""
+        return None
+
+    def disarm(self, est: Estimate, force: bool = False) -> Refusal | None:
+        to = self._allowed(Action.DISARM)
+        if isinstance(to, Refusal):
+            return to
+        if self.mode in AIRBORNE and not est.on_ground and not force:
+            return denied("in the air: disarming would drop the vehicle (use force)")
+        self._set_mode(to, est)
+        return None
+
+    def takeoff(self, est: Estimate, altitude_m: float) -> Refusal | None:
+        to = self._allowed(Action.TAKEOFF)
+        if isinstance(to, Refusal):
+            return to
+        x, y, _ = est.position
+        z = self.home[2] + altitude_m
+        fence = self.fence_violation(x, y, z)
+        if fence is not None:
+            return invalid(f"takeoff altitude: {fence}")
+        self._target = (x, y, z)
+        self._speed = 0.0
+        self._set_mode(to, est)
+        return None
+
+    def land(self, est: Estimate) -> Refusal | None:
+        to = self._allowed(Action.LAND)
+        if isinstance(to, Refusal):
+            return to
+        self._target = est.position
+        self._set_mode(to, est)
+        return None
+
+    def rtl(self, est: Estimate) -> Refusal | None:
+        to = self._allowed(Action.RTL)
+        if isinstance(to, Refusal):
+            return to
+        self._rtl_phase = RtlPhase.CLIMB
+        self._rtl_alt = max(est.position[2], self.home[2] + self.failsafe.rtl_altitude_m)
+        self._target = est.position
+        self._set_mode(to, est)
+        return None
+
+    def hold(self, est: Estimate) -> Refusal | None:
+        to = self._allowed(Action.HOLD)
+        if isinstance(to, Refusal):
+            return to
+        self._hold_here(est)
+        self._set_mode(to, est)
+        return None
+
+    def goto(
+        self,
+        est: Estimate,
+        position: tuple[float, float, float],
+        yaw_rad: float | None,
+        speed_m_s: float,
+    ) -> Refusal | None:
+        to = self._allowed(Action.GOTO)
+        if isinstance(to, Refusal):
+            return to
+        fence = self.fence_violation(*position)
+        if fence is not None:
+            return invalid(f"goto target: {fence}")
+        self._set_mode(to, est)
+        self._target = position
+        self._speed = speed_m_s
+        if yaw_rad is not None:
+            self._yaw = yaw_rad
+        return None
+
+    def upload_mission(self, items: list[MissionItem]) -> Refusal | None:
+        if self.mode == M.MISSION:
+            return denied("a mission is flying: pause it (hold) before replacing it")
+        try:
+            self.mission.upload(items, self.origin)
+        except MissionError as exc:
+            return invalid(str(exc))
+        for i, item in enumerate(self.mission.resolved):
+            fence = self.fence_violation(item.x, item.y, item.z)
+            if fence is not None and item.command != MissionCommand.RTL:
+                self.mission.clear()
+                return invalid(f"item {i}: {fence}")
+        self._item_seen = -1
+        return None
+
+    def clear_mission(self) -> Refusal | None:
+        if self.mode == M.MISSION:
+            return denied("a mission is flying: pause it (hold) before clearing it")
+        self.mission.clear()
+        return None
+
+    def start_mission(self, est: Estimate, start_index: int | None) -> Refusal | None:
+        """``start_index`` None resumes at the current item (set mode mission)."""
+        to = self._allowed(Action.MISSION)
+        if isinstance(to, Refusal):
+            return to
+        mission = self.mission
+        if mission.count == 0:
+            return denied("no mission uploaded")
+        if start_index is not None and start_index >= mission.count:
+            return invalid(f"start_index {start_index}: mission has {mission.count} item(s)")
+        index = start_index if start_index is not None else max(mission.index, 0)
+        if start_index is None and mission.finished:
+            return denied("mission finished: start it again with a start index")
+        if self.mode == M.ARMED and mission.resolved[index].command != MissionCommand.TAKEOFF:
+            return denied(f"on the ground: mission item {index} must be a takeoff")
+        if start_index is not None:
+            mission.start(start_index)
+        self._item_seen = -1
+        self._set_mode(to, est)
+        return None
+
+    def setpoint(self, setpoint: Setpoint, now: float) -> Refusal | None:
+        if setpoint.position_enu_m is None and setpoint.velocity_enu_m_s is None:
+            return invalid("setpoint needs a position or a velocity")
+        if setpoint.position_enu_m is not None:
+            fence = self.fence_violation(*setpoint.position_enu_m)
+            if fence is not None and self.armed:
+                return invalid(f"setpoint: {fence}")
+        self._setpoint = setpoint
+        self._setpoint_time_s = now
+        return None
+
+    def offboard(self, est: Estimate, now: float) -> Refusal | None:
+        to = self._allowed(Action.OFFBOARD)
+        if isinstance(to, Refusal):
+            return to
+        if not self.has_behavior and not self._stream_alive(now):
+            return denied("no offboard setpoint stream: send setpoints first")
+        self._hold_here(est)
+        self._set_mode(to, est)
+        if self.has_behavior:  # the behaviour is the stream; it starts now
+            self._setpoint_time_s = now
+        return None
+
+    def _stream_alive(self, now: float) -> bool:
+        return now - self._setpoint_time_s <= self.failsafe.offboard_timeout_s
+
+    # ------------------------------------------------------------------ failsafe entry
+    def failsafe_action(self, action: str, est: Estimate, reason: str) -> None:
+        """Apply a configured failsafe action ("none", "hold", "land", "rtl") when airborne."""
+        self.failsafe_reason = reason
+        if self.mode not in AIRBORNE or action == "none":
+            return
+        if action == "hold":
+            self.hold(est)
+        elif action == "land" and self.mode != M.LAND:
+            self.land(est)
+        elif action == "rtl" and self.mode not in (M.RTL, M.LAND):
+            self.rtl(est)
+
+    def crashed(self, est: Estimate) -> None:
+        self.failsafe_reason = "crash"
+        self._set_mode(M.DISARMED, est)
+
+    # ------------------------------------------------------------------ guidance
+    def guidance(self, est: Estimate, now: float) -> Target | None:
+        """The controller target for this tick (``None``: motors off or idle)."""
+        return self._guidance[self.mode](est, now)
+
+    def _position_target(self, speed: float = 0.0) -> Target:
+        x, y, z = self._target
+        return Target((x, y), z, self._yaw, max_speed_xy_m_s=speed)
+
+    def _guide_takeoff(self, est: Estimate, now: float) -> Target | None:
+        if abs(est.position[2] - self._target[2]) < TAKEOFF_DONE_M:
+            self._set_mode(M.HOLD, est)
+        return self._position_target()
+
+    def _guide_hold(self, est: Estimate, now: float) -> Target | None:
+        return self._position_target(self._speed)
+
+    def _descend(self, est: Estimate, now: float, xy: tuple[float, float]) -> Target | None:
+        """Descend over ``xy``; on touchdown disarm and return ``None``."""
+        speed = math.sqrt(est.velocity[0] ** 2 + est.velocity[1] ** 2 + est.velocity[2] ** 2)
+        if est.on_ground and speed < TOUCHDOWN_SPEED_M_S:
+            if self._touchdown_since is None:
+                self._touchdown_since = now
+            if now - self._touchdown_since >= TOUCHDOWN_TIME_S:
+                self._set_mode(M.DISARMED, est)
+                return None
+        else:
+            self._touchdown_since = None
+        height = est.position[2] - self.home[2]
+        # far above ground: as fast as allowed (the controller clips to its max descent speed)
+        vz = -LAND_SLOW_SPEED_M_S if height < LAND_SLOW_BELOW_M else -100.0
+        return Target(xy, None, self._yaw, velocity=(0.0, 0.0, vz))
+
+    def _guide_land(self, est: Estimate, now: float) -> Target | None:
+        return self._descend(est, now, (self._target[0], self._target[1]))
+
+    def _guide_rtl(self, est: Estimate, now: float) -> Target | None:
+        hx, hy, _ = self.home
+        x, y, z = est.position
+        if self._rtl_phase == RtlPhase.CLIMB:
+            if z >= self._rtl_alt - TAKEOFF_DONE_M:
+                self._rtl_phase = RtlPhase.RETURN
+            return Target((self._target[0], self._target[1]), self._rtl_alt, self._yaw)
+        if self._rtl_phase == RtlPhase.RETURN:
+            if math.hypot(x - hx, y - hy) < RTL_HOME_RADIUS_M:
+                self._rtl_phase = RtlPhase.DESCEND
+            return Target((hx, hy), self._rtl_alt, self._yaw)
+        return self._descend(est, now, (hx, hy))
+
+    def _guide_mission(self, est: Estimate, now: float) -> Target | None:
+        mission = self.mission
+        item = mission.current
+        if item is None:  # finished: hold where the last item left us
+            self._hold_here(est)
+            self._set_mode(M.HOLD, est)
+            return self._position_target()
+        if mission.index != self._item_seen:
+            self._item_seen = mission.index
+            self._target = est.position
+            self._land_descending = False
+            if item.yaw_rad is not None:
+                self._yaw = item.yaw_rad
+        x, y, z = est.position
+        if item.command == MissionCommand.RTL:
+            mission.reached(now)
+            self.rtl(est)
+            return self._guide_rtl(est, now)
+        if item.command == MissionCommand.TAKEOFF:
+            tx, ty, _ = self._target
+            if abs(z - item.z) < item.acceptance_radius_m and mission.arrived(now):
+                return self._guide_mission(est, now)
+            return Target((tx, ty), item.z, self._yaw, max_speed_xy_m_s=item.speed_m_s)
+        if item.command == MissionCommand.LAND:
+            if not self._land_descending:
+                if math.hypot(x - item.x, y - item.y) < item.acceptance_radius_m:
+                    self._land_descending = True
+                else:
+                    return Target(
+                        (item.x, item.y),
+                        self._target[2],
+                        self._yaw,
+                        max_speed_xy_m_s=item.speed_m_s,
+                    )
+            target = self._descend(est, now, (item.x, item.y))
+            if target is None:
+                mission.reached(now)
+            return target
+        dist = math.sqrt((x - item.x) ** 2 + (y - item.y) ** 2 + (z - item.z) ** 2)
+        if dist < item.acceptance_radius_m and mission.arrived(now):
+            return self._guide_mission(est, now)
+        return Target((item.x, item.y), item.z, self._yaw, max_speed_xy_m_s=item.speed_m_s)
+
+    def _guide_offboard(self, est: Estimate, now: float) -> Target | None:
+        if not self._stream_alive(now):
+            self.failsafe_action(
+                self.failsafe.offboard_loss_action, est, "offboard setpoint stream lost"
+            )
+            return self.guidance(est, now)
+        sp = self._setpoint
+        if sp is None:
+            return self._position_target()
+        if sp.yaw_deg is not None:
+            self._yaw = math.radians(sp.yaw_deg)
+        velocity = sp.velocity_enu_m_s or (0.0, 0.0, 0.0)
+        if sp.position_enu_m is None:
+            return Target(None, None, self._yaw, velocity=velocity)
+        px, py, pz = sp.position_enu_m
+        return Target((px, py), pz, self._yaw, velocity=velocity)

@@ -1,0 +1,424 @@
+"""``from agents import Swarm``: a client for swarm-algorithm researchers.
+
+::
+
+    with Swarm.connect(world="default") as sw:
+        sw.wait_until(lambda: len(sw.vehicles) == 3, 10.0, "three vehicles")
+        uav = sw.command("uav1")
+        uav.arm()
+        uav.takeoff(10.0)
+        sw.wait_until(lambda: sw.status("uav1").mode == "hold", 30.0, "uav1 hovering")
+        print(sw.reading("uav1"), sw.plume.concentration([[30.0, 0.0, 10.0]]))
+
+Latest state, status and reading of every vehicle are cached from the bus; ``subscribe`` adds
+callbacks (called on Zenoh's thread: keep them short). Every command raises a typed error when
+the vehicle refuses (:class:`CommandRejected`, with ``.code`` and ``.reason``) or does not
+answer (:class:`CommandTimeout`); every wait has a deadline (:class:`WaitTimeout`).
+
+Offboard setpoints are timed in simulated time (``failsafe.offboard_timeout_s``): in lockstep
+mode faster than real time, stream them fast enough, or use a behaviour plug-in instead.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from typing import Any, TypeVar
+
+import msgspec
+import numpy as np
+import numpy.typing as npt
+import zenoh
+
+from swarmbus.codec import MessageError, decode, encode
+from swarmbus.keys import Keys
+from swarmbus.messages import (
+    Arm,
+    CommandReply,
+    ConcentrationReading,
+    Disarm,
+    ErrorReply,
+    FlightMode,
+    GcsHeartbeat,
+    GetParams,
+    Goto,
+    Hold,
+    Land,
+    Message,
+    MissionClear,
+    MissionDownload,
+    MissionItem,
+    MissionPause,
+    MissionStart,
+    MissionUpload,
+    PlumeInfo,
+    PlumeInfoQuery,
+    PlumeQuery,
+    PlumeValues,
+    RejectCode,
+    ReturnToLaunch,
+    SetMode,
+    SetParam,
+    Setpoint,
+    Takeoff,
+    VehicleState,
+    VehicleStatus,
+)
+from swarmbus.scenario import load_scenario
+from swarmbus.session import NetworkConfig, Presence, open_session
+
+log = logging.getLogger(__name__)
+
+T = TypeVar("T")
+M = TypeVar("M", bound=Message)
+Vec3 = tuple[float, float, float]
+AUTOPILOT_PREFIX = "autopilot-"
+
+
+class SwarmError(Exception):
+    """Base of the Swarm client's errors."""
+
+
+class CommandRejected(SwarmError):
+    """The vehicle refused a command: ``code`` (RejectCode), ``reason``, and ``field`` when the
+    payload itself was invalid."""
+
+    def __init__(
+        self, vehicle_id: str, command: str, code: RejectCode, reason: str, field: str = ""
+    ) -> None:
+        self.vehicle_id = vehicle_id
+        self.command = command
+        self.code = code
+        self.reason = reason
+        self.field = field
+        where = f" ({field})" if field else ""
+        super().__init__(f"{vehicle_id}: {command} rejected [{code}]{where}: {reason}")
+
+
+class CommandTimeout(SwarmError, TimeoutError):
+    """No reply within the deadline (is the vehicle's autopilot running?)."""
+
+
+class WaitTimeout(SwarmError, TimeoutError):
+    """``wait_until`` ran out of time; the message names what did not happen."""
+
+
+class PlumeError(SwarmError):
+    """The plume service refused a query or did not answer."""
+
+
+def _query(
+    session: zenoh.Session, key: str, request: Message, timeout_s: float
+) -> tuple[bytes | None, bytes | None]:
+    """One query → (ok payload, error payload); (None, None) when nobody answered in time."""
+    for reply in session.get(key, payload=encode(request), timeout=timeout_s):
+        if reply.ok is not None:
+            return reply.ok.payload.to_bytes(), None
+        if reply.err is not None:
+            return None, reply.err.payload.to_bytes()
+    return None, None
+
+
+def _error_reply(data: bytes) -> ErrorReply:
+    try:
+        return decode(data, ErrorReply)
+    except MessageError:
+        return ErrorReply(field="", reason=data[:200].decode("utf-8", "replace"))
+
+
+class VehicleCommander:
+    """Commands to one vehicle; each returns when the vehicle accepted it, else raises."""
+
+    def __init__(self, session: zenoh.Session, keys: Keys, vehicle_id: str, timeout_s: float):
+        self.vehicle_id = vehicle_id
+        self._session = session
+        self._key = keys.vehicle_cmd(vehicle_id)
+        self.timeout_s = timeout_s
+
+    def send(self, command: Message) -> CommandReply:
+        """Send any ``Command`` message; the accepted reply, or a typed error."""
+        name = type(command).__name__
+        ok, err = _query(self._session, self._key, command, self.timeout_s)
+        if ok is None and err is None:
+            raise CommandTimeout(
+                f"{self.vehicle_id}: no reply to {name} within {self.timeout_s} s "
+                f"(is {AUTOPILOT_PREFIX}{self.vehicle_id} running?)"
+            )
+        if err is not None:
+            e = _error_reply(err)
+            raise CommandRejected(self.vehicle_id, name, RejectCode.INVALID, e.reason, e.field)
+        assert ok is not None
+        reply = decode(ok, CommandReply)
+        if not reply.accepted:
+            raise CommandRejected(self.vehicle_id, name, reply.code, reply.reason)
+        return reply
+
+    def arm(self) -> None:
+        self.send(Arm())
+
+    def disarm(self, force: bool = False) -> None:
+        self.send(Disarm(force=force))
+
+    def takeoff(self, alt_m: float) -> None:
+        self.send(Takeoff(altitude_m=alt_m))
+
+    def land(self) -> None:
+        self.send(Land())
+
+    def rtl(self) -> None:
+        self.send(ReturnToLaunch())
+
+    def hold(self) -> None:
+        self.send(Hold())
+
+    def goto(
+        self, x: float, y: float, z: float, yaw_deg: float | None = None, speed_m_s: float = 0.0
+    ) -> None:
+        """Fly to ENU (x, y, z) m and hold there (yaw: ENU degrees, 0 = east, CCW)."""
+        self.send(Goto(position_enu_m=(x, y, z), yaw_deg=yaw_deg, speed_m_s=speed_m_s))
+
+    def set_mode(self, mode: FlightMode | str) -> None:
+        self.send(SetMode(mode=FlightMode(mode)))
+
+    def offboard(self) -> None:
+        self.set_mode(FlightMode.OFFBOARD)
+
+    def upload_mission(self, items: Iterable[MissionItem | Mapping[str, Any]]) -> None:
+        mission = [
+            i if isinstance(i, MissionItem) else msgspec.convert(i, MissionItem) for i in items
+        ]
+        self.send(MissionUpload(items=mission))
+
+    def download_mission(self) -> list[MissionItem]:
+        return list(self.send(MissionDownload()).mission or [])
+
+    def clear_mission(self) -> None:
+        self.send(MissionClear())
+
+    def start_mission(self, start_index: int = 0) -> None:
+        self.send(MissionStart(start_index=start_index))
+
+    def pause_mission(self) -> None:
+        self.send(MissionPause())
+
+    def resume_mission(self) -> None:
+        self.set_mode(FlightMode.MISSION)
+
+    def setpoint(
+        self,
+        position: Sequence[float] | None = None,
+        velocity: Sequence[float] | None = None,
+        yaw_deg: float | None = None,
+    ) -> None:
+        """One offboard setpoint (position and/or velocity, ENU)."""
+        pos = (float(position[0]), float(position[1]), float(position[2])) if position else None
+        vel = (float(velocity[0]), float(velocity[1]), float(velocity[2])) if velocity else None
+        self.send(Setpoint(position_enu_m=pos, velocity_enu_m_s=vel, yaw_deg=yaw_deg))
+
+    def heartbeat(self, source: str = "swarm") -> None:
+        self.send(GcsHeartbeat(source=source))
+
+    def params(self) -> dict[str, float]:
+        return dict(self.send(GetParams()).params or {})
+
+    def set_param(self, name: str, value: float) -> dict[str, float]:
+        return dict(self.send(SetParam(name=name, value=value)).params or {})
+
+
+class PlumeClient:
+    """Queries to the plume service (one batched query per call)."""
+
+    def __init__(self, session: zenoh.Session, keys: Keys, timeout_s: float) -> None:
+        self._session = session
+        self._keys = keys
+        self.timeout_s = timeout_s
+
+    def concentration(
+        self, points: npt.ArrayLike, sim_time_s: float | None = None
+    ) -> npt.NDArray[np.float64]:
+        """Concentration (g/m³) at ENU points, shape (N, 3) → (N,)."""
+        arr = np.asarray(points, dtype=float).reshape(-1, 3)
+        pts = [(float(x), float(y), float(z)) for x, y, z in arr.tolist()]
+        values = self._ask(
+            self._keys.plume_concentration(),
+            PlumeQuery(points_enu_m=pts, sim_time_s=sim_time_s),
+            PlumeValues,
+        )
+        return np.asarray(values.values_g_m3, dtype=float)
+
+    def info(self) -> PlumeInfo:
+        return self._ask(self._keys.plume_info(), PlumeInfoQuery(), PlumeInfo)
+
+    def _ask(self, key: str, request: Message, reply_type: type[M]) -> M:
+        ok, err = _query(self._session, key, request, self.timeout_s)
+        if err is not None:
+            e = _error_reply(err)
+            raise PlumeError(f"plume refused the query: {e.field or '<payload>'}: {e.reason}")
+        if ok is None:
+            raise PlumeError(f"the plume service did not answer within {self.timeout_s} s")
+        return decode(ok, reply_type)
+
+
+class Subscription:
+    def __init__(self, swarm: Swarm, entry: tuple[Callable[..., None] | None, ...]) -> None:
+        self._swarm = swarm
+        self._entry = entry
+
+    def close(self) -> None:
+        self._swarm._unsubscribe(self._entry)
+
+
+class Swarm:
+    """A connection to one world's swarm. Use :meth:`connect` as a context manager."""
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        keys: Keys,
+        command_timeout_s: float = 2.0,
+        own_session: bool = True,
+    ) -> None:
+        self.session = session
+        self.keys = keys
+        self.command_timeout_s = command_timeout_s
+        self._own_session = own_session
+        self._lock = threading.Lock()
+        self._states: dict[str, VehicleState] = {}
+        self._status: dict[str, VehicleStatus] = {}
+        self._readings: dict[str, ConcentrationReading] = {}
+        self._callbacks: list[tuple[Callable[..., None] | None, ...]] = []
+        self.plume = PlumeClient(session, keys, command_timeout_s)
+        self._subs = [
+            session.declare_subscriber(
+                keys.all_vehicle_states(), self._on(VehicleState, self._states, 0)
+            ),
+            session.declare_subscriber(
+                keys.all_vehicle_status(), self._on(VehicleStatus, self._status, 1)
+            ),
+            session.declare_subscriber(
+                keys.all_vehicle_concentration(),
+                self._on(ConcentrationReading, self._readings, 2),
+            ),
+        ]
+        self._presence = Presence(session, keys)
+
+    @classmethod
+    def connect(
+        cls,
+        world: str = "default",
+        connect: Sequence[str] | None = None,
+        *,
+        network: NetworkConfig | None = None,
+        command_timeout_s: float = 2.0,
+    ) -> Swarm:
+        """Join ``world``. ``connect``: Zenoh endpoints (e.g. ``["tcp/10.0.0.5:7447"]``);
+        ``None`` → the default scenario's network (a router on ``tcp/127.0.0.1:7447``)."""
+        net = network or load_scenario().network
+        if connect is not None:
+            net = net.with_overrides(connect=list(connect))
+        session = open_session(net)
+        try:
+            return cls(session, Keys(world), command_timeout_s)
+        except Exception:
+            session.close()
+            raise
+
+    def __enter__(self) -> Swarm:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        for sub in self._subs:
+            sub.undeclare()
+        self._presence.close()
+        if self._own_session:
+            self.session.close()
+
+    # ------------------------------------------------------------------ data
+    def _on(self, type_: type[M], cache: dict[str, M], slot: int) -> Callable[[zenoh.Sample], None]:
+        def handle(sample: zenoh.Sample) -> None:
+            try:
+                vid = self.keys.vehicle_id_of(str(sample.key_expr))
+                msg = decode(sample.payload.to_bytes(), type_)
+            except (MessageError, ValueError) as exc:
+                log.warning("ignoring %s: %s", sample.key_expr, exc)
+                return
+            with self._lock:
+                cache[vid] = msg
+                callbacks = [c[slot] for c in self._callbacks if c[slot] is not None]
+            for cb in callbacks:
+                try:
+                    cb(msg)  # type: ignore[misc]
+                except Exception:
+                    log.exception("swarm subscriber callback failed")
+
+        return handle
+
+    @property
+    def vehicles(self) -> list[str]:
+        """Ids of the vehicles seen on the bus (an autopilot publishes its status as soon as it
+        serves commands; physics publishes states)."""
+        with self._lock:
+            return sorted(set(self._states) | set(self._status) | set(self._readings))
+
+    def autopilots_alive(self) -> list[str]:
+        """Ids of the vehicles whose autopilot token is alive right now."""
+        alive = self._presence.alive
+        n = len(AUTOPILOT_PREFIX)
+        return sorted(name[n:] for name in alive if name.startswith(AUTOPILOT_PREFIX))
+
+    def state(self, vehicle_id: str) -> VehicleState | None:
+        with self._lock:
+            return self._states.get(vehicle_id)
+
+    def status(self, vehicle_id: str) -> VehicleStatus | None:
+        with self._lock:
+            return self._status.get(vehicle_id)
+
+    def reading(self, vehicle_id: str) -> ConcentrationReading | None:
+        with self._lock:
+            return self._readings.get(vehicle_id)
+
+    def subscribe(
+        self,
+        on_state: Callable[[VehicleState], None] | None = None,
+        on_status: Callable[[VehicleStatus], None] | None = None,
+        on_reading: Callable[[ConcentrationReading], None] | None = None,
+    ) -> Subscription:
+        """Callbacks for every new state / status / reading (Zenoh's thread); ``.close()``."""
+        entry = (on_state, on_status, on_reading)
+        with self._lock:
+            self._callbacks.append(entry)
+        return Subscription(self, entry)
+
+    def _unsubscribe(self, entry: tuple[Callable[..., None] | None, ...]) -> None:
+        with self._lock:
+            if entry in self._callbacks:
+                self._callbacks.remove(entry)
+
+    def command(self, vehicle_id: str) -> VehicleCommander:
+        return VehicleCommander(self.session, self.keys, vehicle_id, self.command_timeout_s)
+
+    def wait_until(
+        self, predicate: Callable[[], T], timeout_s: float, what: str = "", poll_s: float = 0.02
+    ) -> T:
+        """Poll ``predicate`` until it returns something truthy (returned) or time runs out.
+
+        A predicate that trips over data not there yet (``None.attr``, a missing key) counts
+        as "not yet"."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            try:
+                value: T | None = predicate()
+            except (AttributeError, KeyError, TypeError):  # e.g. no status yet: not yet
+                value = None
+            if value:
+                return value
+            if time.monotonic() >= deadline:
+                name = what or getattr(predicate, "__name__", repr(predicate))
+                raise WaitTimeout(f"timed out after {timeout_s:g} s waiting for {name}")
+            time.sleep(poll_s)

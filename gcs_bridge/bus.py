@@ -1,0 +1,216 @@
+"""The gateway's side of the bus: latest vehicle data in, commands out, one event loop.
+
+Zenoh callbacks never touch MAVLink: they leave the latest payload per (kind, vehicle) in an
+inbox and wake the gateway's loop (a self-pipe), which decodes and acts. Keeping only the latest
+payload bounds the work when the simulation runs much faster than the gateway can encode.
+Commands go out as asynchronous queries, one at a time per vehicle (order matters: upload a
+mission, then start it); their replies are posted back to the loop.
+"""
+
+from __future__ import annotations
+
+import collections
+import contextlib
+import logging
+import os
+import threading
+from collections.abc import Callable
+
+import zenoh
+
+from swarmbus.codec import MessageError, decode, encode
+from swarmbus.keys import KeyNameError, Keys
+from swarmbus.messages import (
+    Command,
+    CommandReply,
+    ErrorReply,
+    GcsHeartbeat,
+    RejectCode,
+    Setpoint,
+)
+
+log = logging.getLogger(__name__)
+
+KIND_STATE = "state"
+KIND_STATUS = "status"
+KIND_READING = "concentration"
+MAX_QUEUED_COMMANDS = 64
+# Streams where only the newest matters: a queued one is replaced, never queued behind.
+_LATEST_WINS = (GcsHeartbeat, Setpoint)
+
+
+class Waker:
+    """A self-pipe: ``wake()`` from any thread makes the loop's select return."""
+
+    def __init__(self) -> None:
+        self._r, self._w = os.pipe()
+        os.set_blocking(self._r, False)
+        os.set_blocking(self._w, False)
+        self._pending = threading.Event()
+
+    def fileno(self) -> int:
+        return self._r
+
+    def wake(self) -> None:
+        if not self._pending.is_set():
+            self._pending.set()
+            with contextlib.suppress(BlockingIOError, OSError):
+                os.write(self._w, b"x")
+
+    def drain(self) -> None:
+        """Empty the pipe, then re-arm. In this order: a wake() between the two finds
+        ``pending`` still set and writes nothing, but its work is taken after ``drain``."""
+        with contextlib.suppress(BlockingIOError, OSError):
+            while os.read(self._r, 4096):
+                pass
+        self._pending.clear()
+
+    def close(self) -> None:
+        os.close(self._r)
+        os.close(self._w)
+
+
+class Inbox:
+    """Latest state / status / reading payload per vehicle, and callbacks posted to the loop."""
+
+    def __init__(self, waker: Waker) -> None:
+        self._waker = waker
+        self._lock = threading.Lock()
+        self._latest: dict[tuple[str, str], bytes] = {}
+        self._calls: collections.deque[Callable[[], None]] = collections.deque()
+
+    def put(self, kind: str, vehicle_id: str, payload: bytes) -> None:
+        with self._lock:
+            self._latest[(kind, vehicle_id)] = payload
+        self._waker.wake()
+
+    def post(self, call: Callable[[], None]) -> None:
+        self._calls.append(call)
+        self._waker.wake()
+
+    def take(self) -> tuple[dict[tuple[str, str], bytes], list[Callable[[], None]]]:
+        with self._lock:
+            latest, self._latest = self._latest, {}
+        calls = []
+        while self._calls:
+            calls.append(self._calls.popleft())
+        return latest, calls
+
+
+def subscribe_vehicles(
+    session: zenoh.Session, keys: Keys, vehicle_ids: set[str], inbox: Inbox
+) -> list[zenoh.Subscriber[None]]:
+    """Subscribe state, status and concentration of every vehicle; payloads go to ``inbox``."""
+
+    def handler(kind: str) -> Callable[[zenoh.Sample], None]:
+        def on_sample(sample: zenoh.Sample) -> None:
+            try:
+                vid = keys.vehicle_id_of(str(sample.key_expr))
+            except KeyNameError:
+                return
+            if vid in vehicle_ids:
+                inbox.put(kind, vid, sample.payload.to_bytes())
+
+        return on_sample
+
+    return [
+        session.declare_subscriber(keys.all_vehicle_states(), handler(KIND_STATE)),
+        session.declare_subscriber(keys.all_vehicle_status(), handler(KIND_STATUS)),
+        session.declare_subscriber(keys.all_vehicle_concentration(), handler(KIND_READING)),
+    ]
+
+
+Done = Callable[[CommandReply], None]
+
+
+class Commander:
+    """Sends one vehicle's commands in order, one query at a time; results go to the loop.
+
+    A query that gets no reply within ``timeout_s`` ends as FAILED ("no reply"); an error reply
+    (undecodable command) ends as INVALID. Ground-control heartbeats and offboard setpoints
+    never queue behind their own kind: a newer one replaces the one still waiting.
+    """
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        key: str,
+        vehicle_id: str,
+        timeout_s: float,
+        inbox: Inbox,
+    ) -> None:
+        self._session = session
+        self._key = key
+        self._vehicle_id = vehicle_id
+        self._timeout_s = timeout_s
+        self._inbox = inbox
+        self._lock = threading.Lock()
+        self._queue: collections.deque[tuple[Command, Done]] = collections.deque()
+        self._busy = False
+
+    def submit(self, command: Command, done: Done) -> None:
+        with self._lock:
+            if isinstance(command, _LATEST_WINS):
+                for i, (queued, _) in enumerate(self._queue):
+                    if type(queued) is type(command):
+                        self._queue[i] = (command, done)
+                        return
+            if len(self._queue) >= MAX_QUEUED_COMMANDS:
+                reply = self._failed("too many commands waiting")
+                self._inbox.post(lambda: done(reply))
+                return
+            self._queue.append((command, done))
+            if self._busy:
+                return
+            self._busy = True
+        self._start_next()
+
+    def _failed(self, reason: str, code: RejectCode = RejectCode.FAILED) -> CommandReply:
+        return CommandReply(vehicle_id=self._vehicle_id, accepted=False, code=code, reason=reason)
+
+    def _start_next(self) -> None:
+        with self._lock:
+            if not self._queue:
+                self._busy = False
+                return
+            command, done = self._queue.popleft()
+        replies: list[CommandReply] = []
+
+        def on_reply(reply: zenoh.Reply) -> None:
+            if replies:
+                return
+            try:
+                if reply.ok is not None:
+                    replies.append(decode(reply.ok.payload.to_bytes(), CommandReply))
+                elif reply.err is not None:
+                    data = reply.err.payload.to_bytes()
+                    try:
+                        err = decode(data, ErrorReply)
+                    except MessageError:  # Zenoh's own errors, e.g. "Timeout"
+                        text = data[:200].decode("utf-8", "replace")
+                        replies.append(self._failed(f"no reply from the autopilot ({text})"))
+                        return
+                    replies.append(
+                        self._failed(f"{err.field}: {err.reason}", code=RejectCode.INVALID)
+                    )
+            except MessageError as exc:
+                log.warning("%s: bad reply to %s: %s", self._key, type(command).__name__, exc)
+                replies.append(self._failed(f"bad reply: {exc}"))
+
+        def on_done() -> None:
+            result = replies[0] if replies else self._failed("no reply from the autopilot")
+            self._inbox.post(lambda: done(result))
+            self._start_next()
+
+        try:
+            self._session.get(
+                self._key,
+                zenoh.handlers.Callback(on_reply, on_done),
+                payload=encode(command),
+                timeout=self._timeout_s,
+            )
+        except zenoh.ZError as exc:
+            log.warning("%s: query failed: %s", self._key, exc)
+            reply = self._failed(f"query failed: {exc}")
+            self._inbox.post(lambda: done(reply))
+            self._start_next()

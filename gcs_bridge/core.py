@@ -1,0 +1,120 @@
+"""What every part of the gateway shares: its state, and how to send and to command.
+
+The gateway (:mod:`gcs_bridge.gateway`) is one class assembled from this core and the handlers
+of each MAVLink microservice (:mod:`gcs_bridge.handle_commands`, :mod:`gcs_bridge.handle_params`,
+:mod:`gcs_bridge.handle_missions`); they all run on the gateway's one loop thread.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from typing import Any
+
+from gcs_bridge import mission as ms
+from gcs_bridge.bus import Commander
+from gcs_bridge.commands import ACCEPTED, Facts
+from gcs_bridge.dialect import Msg, mavlink
+from gcs_bridge.links import Link
+from gcs_bridge.options import GatewayOptions
+from gcs_bridge.telemetry import StreamSchedule
+from gcs_bridge.vehicle import Vehicle
+from swarmbus.keys import Keys
+from swarmbus.messages import Command, CommandReply, RejectCode
+from swarmbus.session import Presence
+
+log = logging.getLogger(__name__)
+
+ALIVE_WITHOUT_TOKEN_S = 3.0
+STATUSTEXT_MAX = 50
+
+Handler = Callable[[Link, Vehicle, Msg, ms.Peer, float], None]
+Done = Callable[[CommandReply], None]
+
+
+def text_of(value: Any) -> str:
+    """A MAVLink char[] field as text (pymavlink gives bytes or str)."""
+    if isinstance(value, bytes | bytearray):
+        return bytes(value).split(b"\0", 1)[0].decode("ascii", "replace")
+    return str(value).split("\0", 1)[0]
+
+
+class Core:
+    """State shared by the handlers; :class:`gcs_bridge.gateway.Gateway` fills it in."""
+
+    options: GatewayOptions
+    keys: Keys
+    vehicles: dict[str, Vehicle]
+    by_sysid: dict[int, Vehicle]
+    links: dict[str, Link]
+    links_of: dict[int, list[Link]]
+    schedules: dict[tuple[str, int], StreamSchedule]
+    _commanders: dict[str, Commander]
+    _presence: Presence | None
+    _inflight: set[tuple[int, int, int, int]]
+    _param_sync: dict[str, float]
+
+    # ------------------------------------------------------------------ presence
+    def alive(self, v: Vehicle, now: float) -> bool:
+        """Is the vehicle's autopilot there (token, or a status lately)? Only then does it exist."""
+        if now - v.last_status_wall_s < ALIVE_WITHOUT_TOKEN_S:
+            return True
+        return self._presence is not None and f"autopilot-{v.id}" in self._presence.alive
+
+    # ------------------------------------------------------------------ sending
+    def _send_all(self, v: Vehicle, msg: Msg, now: float) -> None:
+        for link in self.links_of[v.sysid]:
+            link.send(v.sysid, msg, now)
+
+    def _send(self, link: Link, v: Vehicle, msg: Msg, now: float) -> None:
+        link.send(v.sysid, msg, now)
+
+    def _statustext(self, link: Link | None, v: Vehicle, text: str, now: float) -> None:
+        msg = mavlink.MAVLink_statustext_message(
+            mavlink.MAV_SEVERITY_WARNING, text[:STATUSTEXT_MAX].encode("ascii", "replace")
+        )
+        if link is None:
+            self._send_all(v, msg, now)
+        else:
+            self._send(link, v, msg, now)
+
+    def _ack(
+        self,
+        link: Link,
+        v: Vehicle,
+        command: int,
+        result: int,
+        peer: ms.Peer,
+        now: float,
+        reason: str = "",
+    ) -> None:
+        ack = mavlink.MAVLink_command_ack_message(
+            command, result, 0, 0, peer.system, peer.component
+        )
+        self._send(link, v, ack, now)
+        if result != ACCEPTED and reason:
+            self._statustext(link, v, f"{v.id}: {reason}", now)
+
+    def _submit(self, v: Vehicle, command: Command, done: Callable[[CommandReply], None]) -> None:
+        commander = self._commanders.get(v.id)
+        if commander is None:
+            done(
+                CommandReply(
+                    vehicle_id=v.id, accepted=False, code=RejectCode.FAILED, reason="no bus"
+                )
+            )
+            return
+        commander.submit(command, done)
+
+    # ------------------------------------------------------------------ commands
+    def _facts(self, v: Vehicle) -> Facts:
+        return Facts(
+            origin=v.origin,
+            home_amsl_m=v.home_amsl_m,
+            home_enu=v.home_enu,
+            position_enu=v.state.position_enu_m if v.state is not None else None,
+            landed=v.status.landed if v.status is not None else True,
+            takeoff_alt_m=v.params.value("MIS_TAKEOFF_ALT"),
+            mission_seqs=v.seqs(),
+            cruise_m_s=v.params.value("MPC_XY_CRUISE"),
+        )

@@ -1,0 +1,293 @@
+"""COMMAND_LONG / COMMAND_INT, SET_MODE, offboard setpoints and ground-station heartbeats."""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections.abc import Callable
+
+from gcs_bridge import mission as ms
+from gcs_bridge.commands import (
+    ACCEPTED,
+    DENIED,
+    TEMPORARILY_REJECTED,
+    UNSUPPORTED,
+    CommandRequest,
+    Translation,
+    refuse,
+    result_of_reply,
+    translate,
+    translate_mode,
+)
+from gcs_bridge.core import Core, Done
+from gcs_bridge.dialect import (
+    MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
+    MAV_CMD_REQUEST_PROTOCOL_VERSION,
+    MAVLINK_MSG_ID_PROTOCOL_VERSION,
+    Msg,
+    mavlink,
+    protocol_version_message,
+)
+from gcs_bridge.frames import ned_to_enu
+from gcs_bridge.links import Link
+from gcs_bridge.modes import decode_custom_mode
+from gcs_bridge.telemetry import BUILDERS, ID_MISSION_CURRENT
+from gcs_bridge.vehicle import ArmIntent, Vehicle
+from swarmbus.messages import (
+    Arm,
+    Command,
+    CommandReply,
+    Disarm,
+    FlightMode,
+    GcsHeartbeat,
+    Hold,
+    SetMode,
+    Setpoint,
+    Takeoff,
+)
+
+log = logging.getLogger(__name__)
+
+GCS_HEARTBEAT_FORWARD_S = 0.5
+GCS_LINK_TIMEOUT_S = 3.0  # wall: a GCS silent this long is gone (QGC's own is ~3.5 s)
+
+
+LocalCommand = Callable[[Link, Vehicle, CommandRequest, ms.Peer, float], None]
+
+
+class CommandHandlers(Core):
+    _local_commands: dict[int, LocalCommand]
+
+    def _command_table(self) -> dict[int, LocalCommand]:
+        """Commands the gateway answers itself (message streams and identity)."""
+        return {
+            int(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL): self._cmd_set_message_interval,
+            int(mavlink.MAV_CMD_GET_MESSAGE_INTERVAL): self._cmd_get_message_interval,
+            int(mavlink.MAV_CMD_REQUEST_MESSAGE): self._cmd_request_message,
+            MAV_CMD_REQUEST_PROTOCOL_VERSION: self._cmd_request_protocol_version,
+            MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: self._cmd_request_autopilot_version,
+        }
+
+    def _on_gcs_heartbeat(self, link: Link, now: float) -> None:
+        """A ground station is there: tell each vehicle (its data-link-loss failsafe)."""
+        link.gcs_heard_s = now
+        for sysid in link.sysids:
+            v = self.by_sysid[sysid]
+            if now - v.last_gcs_heartbeat_s >= GCS_HEARTBEAT_FORWARD_S:
+                self._forward_gcs_heartbeat(v, now)
+
+    def _forward_gcs_heartbeat(self, v: Vehicle, now: float) -> None:
+        if not self.alive(v, now):
+            return
+        v.last_gcs_heartbeat_s = now
+        if v.state is not None:
+            v.last_gcs_heartbeat_sim_s = v.state.sim_time_s
+        self._submit(v, GcsHeartbeat(source="mavlink"), lambda reply: None)
+
+    def _keep_gcs_link_alive(self, v: Vehicle, now: float) -> None:
+        """The GCS beats once per wall second, the autopilot's link timeout is in sim seconds,
+        and the simulation may run many times faster than real time. So while a GCS was heard
+        within GCS_LINK_TIMEOUT_S (wall), its heartbeat is repeated once per sim second; when it
+        falls silent the repeats stop and the autopilot's own timeout runs in sim time."""
+        if v.state is None or v.state.sim_time_s - v.last_gcs_heartbeat_sim_s < 1.0:
+            return
+        if any(now - link.gcs_heard_s <= GCS_LINK_TIMEOUT_S for link in self.links_of[v.sysid]):
+            self._forward_gcs_heartbeat(v, now)
+
+    def _select_while_disarmed(self, v: Vehicle, command: Command) -> Translation | None:
+        """PX4 lets a GCS pick takeoff or mission mode while disarmed and fly it on arming
+        (QGC's takeoff and start-mission flows). Our autopilot takes those only once armed,
+        so the gateway keeps the selection and sends it right after a successful arm."""
+        if v.status is None or v.armed:
+            return None
+        if isinstance(command, Takeoff) or (
+            isinstance(command, SetMode) and command.mode == FlightMode.MISSION
+        ):
+            why = v.armable()
+            if why is not None:
+                return refuse(TEMPORARILY_REJECTED, f"cannot select a mode to arm in: {why}")
+            if isinstance(command, Takeoff):
+                v.intent = ArmIntent(FlightMode.TAKEOFF, command.altitude_m)
+            elif v.status.mission_count == 0:
+                return refuse(TEMPORARILY_REJECTED, "no mission uploaded")
+            else:
+                v.intent = ArmIntent(FlightMode.MISSION)
+            return Translation()
+        if isinstance(command, Hold):
+            v.intent = None
+            return Translation()
+        return None
+
+    def _arm_then_intent(self, v: Vehicle, intent: ArmIntent, done: Done) -> Done:
+        """Completion of an Arm that carries a selected mode: on success, fly the mode."""
+
+        def armed(reply: CommandReply) -> None:
+            done(reply)
+            if not reply.accepted:
+                return
+            follow: Command = (
+                Takeoff(altitude_m=intent.altitude_m)
+                if intent.mode == FlightMode.TAKEOFF
+                else SetMode(mode=FlightMode.MISSION)
+            )
+
+            def flown(r: CommandReply) -> None:
+                if not r.accepted:
+                    self._statustext(
+                        None, v, f"{v.id}: {intent.mode} refused: {r.reason}", time.monotonic()
+                    )
+                    self._send_all(v, v.heartbeat(), time.monotonic())
+
+            self._submit(v, follow, flown)
+
+        return armed
+
+    def _on_command(self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float) -> None:
+        if msg.get_type() == "COMMAND_LONG":
+            req = CommandRequest.from_long(msg)
+        else:
+            req = CommandRequest.from_int(msg)
+        key = (v.sysid, peer.system, peer.component, req.command)
+        if key in self._inflight:
+            return  # a client's retry of a command still waiting for the autopilot
+        local = self._local_commands.get(req.command)
+        if local is not None:
+            local(link, v, req, peer, now)
+            return
+        t = translate(req, self._facts(v))
+        if t is None:
+            self._ack(link, v, req.command, UNSUPPORTED, peer, now)
+            return
+        if t.bus is not None:
+            t = self._select_while_disarmed(v, t.bus) or t
+            if t.bus is None and t.result == ACCEPTED:
+                self._send_all(v, v.heartbeat(), now)
+        if t.bus is None:
+            self._ack(link, v, req.command, t.result, peer, now, t.reason)
+            return
+        self._inflight.add(key)
+
+        def done(reply: CommandReply) -> None:
+            self._inflight.discard(key)
+            done_now = time.monotonic()
+            self._ack(link, v, req.command, result_of_reply(reply), peer, done_now, reply.reason)
+
+        completion: Done = done
+        if isinstance(t.bus, Disarm):
+            v.intent = None
+        elif isinstance(t.bus, Arm) and v.intent is not None:
+            intent, v.intent = v.intent, None
+            completion = self._arm_then_intent(v, intent, done)
+        self._submit(v, t.bus, completion)
+
+    def _cmd_set_message_interval(
+        self, link: Link, v: Vehicle, req: CommandRequest, peer: ms.Peer, now: float
+    ) -> None:
+        schedule = self.schedules[(link.name, v.sysid)]
+        ok = math.isfinite(req.param1) and schedule.set_interval_us(int(req.param1), req.param2)
+        self._ack(link, v, req.command, ACCEPTED if ok else DENIED, peer, now)
+
+    def _cmd_get_message_interval(
+        self, link: Link, v: Vehicle, req: CommandRequest, peer: ms.Peer, now: float
+    ) -> None:
+        if not math.isfinite(req.param1):
+            self._ack(link, v, req.command, DENIED, peer, now)
+            return
+        msg_id = int(req.param1)
+        interval = self.schedules[(link.name, v.sysid)].interval_us(msg_id)
+        self._ack(link, v, req.command, ACCEPTED, peer, now)
+        self._send(link, v, mavlink.MAVLink_message_interval_message(msg_id, interval), now)
+
+    def _requested_message(self, v: Vehicle, msg_id: int) -> Msg | None:
+        if msg_id == mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
+            return v.autopilot_version()
+        if msg_id == MAVLINK_MSG_ID_PROTOCOL_VERSION:
+            return protocol_version_message()
+        if msg_id == mavlink.MAVLINK_MSG_ID_HEARTBEAT:
+            return v.heartbeat()
+        if msg_id == ID_MISSION_CURRENT:
+            return v.mission_current_msg()
+        builder = BUILDERS.get(msg_id)
+        return builder(v.view()) if builder is not None else None
+
+    def _cmd_request_message(
+        self, link: Link, v: Vehicle, req: CommandRequest, peer: ms.Peer, now: float
+    ) -> None:
+        msg_id = int(req.param1) if math.isfinite(req.param1) else -1
+        known = msg_id in BUILDERS or msg_id in (
+            mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION,
+            MAVLINK_MSG_ID_PROTOCOL_VERSION,
+            mavlink.MAVLINK_MSG_ID_HEARTBEAT,
+            ID_MISSION_CURRENT,
+        )
+        if not known:  # AVAILABLE_MODES, COMPONENT_METADATA/INFORMATION, ...
+            self._ack(link, v, req.command, UNSUPPORTED, peer, now)
+            return
+        msg = self._requested_message(v, msg_id)
+        if msg is None:  # e.g. HOME_POSITION before the autopilot reported one
+            self._ack(link, v, req.command, TEMPORARILY_REJECTED, peer, now)
+            return
+        self._ack(link, v, req.command, ACCEPTED, peer, now)
+        self._send(link, v, msg, now)
+
+    def _cmd_request_protocol_version(
+        self, link: Link, v: Vehicle, req: CommandRequest, peer: ms.Peer, now: float
+    ) -> None:
+        self._ack(link, v, req.command, ACCEPTED, peer, now)
+        self._send(link, v, protocol_version_message(), now)
+
+    def _cmd_request_autopilot_version(
+        self, link: Link, v: Vehicle, req: CommandRequest, peer: ms.Peer, now: float
+    ) -> None:
+        self._ack(link, v, req.command, ACCEPTED, peer, now)
+        self._send(link, v, v.autopilot_version(), now)
+
+    def _on_set_mode(self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float) -> None:
+        """SET_MODE has no ACK: the client watches the heartbeat's custom_mode change."""
+        mode = decode_custom_mode(int(msg.custom_mode))
+        t = translate_mode(float(msg.base_mode), mode.main, mode.sub, self._facts(v))
+        if t.bus is not None:
+            t = self._select_while_disarmed(v, t.bus) or t
+        if t.bus is None:
+            if t.result == ACCEPTED:
+                self._send_all(v, v.heartbeat(), now)
+            else:
+                self._statustext(link, v, f"{v.id}: {t.reason}", now)
+            return
+
+        def done(reply: CommandReply) -> None:
+            done_now = time.monotonic()
+            if not reply.accepted:
+                self._statustext(link, v, f"{v.id}: mode change refused: {reply.reason}", done_now)
+            self._send_all(v, v.heartbeat(), done_now)
+
+        self._submit(v, t.bus, done)
+
+    def _on_position_target(
+        self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
+    ) -> None:
+        """Offboard setpoints (local NED, world origin) → ``Setpoint``; no ACK in MAVLink."""
+        if int(msg.coordinate_frame) != mavlink.MAV_FRAME_LOCAL_NED:
+            return
+        mask = int(msg.type_mask)
+        pos = (float(msg.x), float(msg.y), float(msg.z))
+        vel = (float(msg.vx), float(msg.vy), float(msg.vz))
+        use_pos = not mask & 0b111 and all(map(math.isfinite, pos))
+        use_vel = not mask & 0b111000 and all(map(math.isfinite, vel))
+        yaw = float(msg.yaw)
+        yaw_deg = None
+        if not mask & 1024 and math.isfinite(yaw):
+            yaw_deg = (90.0 - math.degrees(yaw) + 180.0) % 360.0 - 180.0
+        if not (use_pos or use_vel):
+            return
+        try:
+            setpoint = Setpoint(
+                position_enu_m=ned_to_enu(pos) if use_pos else None,
+                velocity_enu_m_s=ned_to_enu(vel) if use_vel and not use_pos else None,
+                yaw_deg=yaw_deg,
+            )
+        except (TypeError, ValueError) as exc:
+            log.debug("%s: unusable setpoint: %s", v.id, exc)
+            return
+        self._submit(v, setpoint, lambda reply: None)

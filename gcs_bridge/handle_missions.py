@@ -1,0 +1,225 @@
+"""The mission microservice: upload, download, clear and set-current, per vehicle."""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections.abc import Callable
+
+from gcs_bridge import mission as ms
+from gcs_bridge.core import Core
+from gcs_bridge.dialect import Msg, mavlink
+from gcs_bridge.links import Link
+from gcs_bridge.vehicle import Vehicle
+from swarmbus.messages import (
+    CommandReply,
+    MissionClear,
+    MissionDownload,
+    MissionStart,
+    MissionUpload,
+    RejectCode,
+)
+
+log = logging.getLogger(__name__)
+
+_MISSION_RESULT_OF_CODE = {
+    RejectCode.DENIED: ms.Result.DENIED,
+    RejectCode.INVALID: ms.Result.INVALID,
+    RejectCode.UNSUPPORTED: ms.Result.UNSUPPORTED,
+}
+
+
+class MissionHandlers(Core):
+    # ------------------------------------------------------------------ missions
+    def _mission_ack(
+        self, v: Vehicle, peer: ms.Peer, result: int, mission_type: int, now: float
+    ) -> None:
+        link = self.links[peer.link]
+        ack = mavlink.MAVLink_mission_ack_message(peer.system, peer.component, result, mission_type)
+        self._send(link, v, ack, now)
+
+    def _run_mission_actions(self, v: Vehicle, actions: list[ms.Action], now: float) -> None:
+        for action in actions:
+            peer = action.peer
+            if isinstance(action, ms.Request):
+                req = mavlink.MAVLink_mission_request_int_message(
+                    peer.system, peer.component, action.seq, action.mission_type
+                )
+                self._send(self.links[peer.link], v, req, now)
+            elif isinstance(action, ms.Ack):
+                self._mission_ack(v, peer, action.result, action.mission_type, now)
+            else:
+                self._complete_upload(v, action, now)
+
+    def _complete_upload(self, v: Vehicle, c: ms.Complete, now: float) -> None:
+        link = self.links[c.peer.link]
+
+        def finish(converted: ms.Converted) -> Callable[[CommandReply], None]:
+            def done(reply: CommandReply) -> None:
+                done_now = time.monotonic()
+                if reply.accepted:
+                    v.remember_upload(converted)
+                    result = ms.Result.ACCEPTED
+                else:
+                    result = _MISSION_RESULT_OF_CODE.get(reply.code, ms.Result.ERROR)
+                    self._statustext(link, v, f"{v.id}: mission refused: {reply.reason}", done_now)
+                self._mission_ack(v, c.peer, result, c.mission_type, done_now)
+
+            return done
+
+        if not c.items:
+            self._submit(v, MissionClear(), finish(ms.Converted([], [], [])))
+            return
+        try:
+            cruise = v.params.value("MPC_XY_CRUISE")
+            converted = ms.convert_upload(c.items, v.home_place(), cruise)
+            command = MissionUpload(items=converted.items)
+        except ms.MissionError as exc:
+            self._statustext(link, v, f"{v.id}: {exc}", now)
+            self._mission_ack(v, c.peer, exc.result, c.mission_type, now)
+            return
+        self._submit(v, command, finish(converted))
+
+    def _on_mission_count(
+        self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
+    ) -> None:
+        actions = v.uploader.on_count(peer, int(msg.count), int(msg.mission_type), now)
+        self._run_mission_actions(v, actions, now)
+
+    def _on_mission_item(self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float) -> None:
+        item = self._wire_item(v, msg, peer, now)
+        if item is not None:
+            self._run_mission_actions(v, v.uploader.on_item(peer, item, now), now)
+
+    def _wire_item(self, v: Vehicle, msg: Msg, peer: ms.Peer, now: float) -> ms.WireItem | None:
+        if msg.get_type() == "MISSION_ITEM_INT":
+            x, y = int(msg.x), int(msg.y)
+        else:  # MISSION_ITEM: degrees as floats (NaN: "here" for takeoff / land)
+            lat, lon = float(msg.x), float(msg.y)
+            here_ok = int(msg.command) in (ms.CMD_TAKEOFF, ms.CMD_LAND, ms.CMD_RTL)
+            bad = None
+            if not (math.isfinite(lat) and abs(lat) <= 90.0):
+                bad = ms.Result.INVALID_PARAM5_X
+            elif not (math.isfinite(lon) and abs(lon) <= 180.0):
+                bad = ms.Result.INVALID_PARAM6_Y
+            if bad is not None and not here_ok:
+                v.uploader.on_cancel(peer)
+                self._mission_ack(v, peer, bad, int(msg.mission_type), now)
+                return None
+            x, y = (0, 0) if bad is not None else (round(lat * 1e7), round(lon * 1e7))
+        return ms.WireItem(
+            seq=int(msg.seq),
+            frame=int(msg.frame),
+            command=int(msg.command),
+            param1=float(msg.param1),
+            param2=float(msg.param2),
+            param3=float(msg.param3),
+            param4=float(msg.param4),
+            x=x,
+            y=y,
+            z=float(msg.z),
+            autocontinue=int(msg.autocontinue),
+            mission_type=int(msg.mission_type),
+        )
+
+    def _plan_type(self, v: Vehicle, msg: Msg, peer: ms.Peer, now: float) -> int | None:
+        """The message's mission type if it is the mission plan; fence and rally: UNSUPPORTED."""
+        mission_type = int(msg.mission_type)
+        if mission_type != ms.MISSION_TYPE_MISSION:
+            self._mission_ack(v, peer, ms.Result.UNSUPPORTED, mission_type, now)
+            return None
+        return mission_type
+
+    def _on_mission_ack(self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float) -> None:
+        if int(msg.type) != ms.Result.ACCEPTED:
+            v.uploader.on_cancel(peer)  # the GCS gave up on its upload
+
+    def _on_mission_request_list(
+        self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
+    ) -> None:
+        mission_type = self._plan_type(v, msg, peer, now)
+        if mission_type is None:
+            return
+
+        def done(reply: CommandReply) -> None:
+            if reply.accepted and reply.mission is not None:
+                v.download = v.wire_for_download(reply.mission)
+            else:
+                log.info(
+                    "%s: MissionDownload not answered (%s); sending what MAVLink uploaded",
+                    v.id,
+                    reply.reason,
+                )
+                v.download = v.mission.wire if v.mission is not None else []
+            count = mavlink.MAVLink_mission_count_message(
+                peer.system, peer.component, len(v.download), mission_type
+            )
+            self._send(link, v, count, time.monotonic())
+
+        self._submit(v, MissionDownload(), done)
+
+    def _on_mission_request(
+        self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
+    ) -> None:
+        mission_type = self._plan_type(v, msg, peer, now)
+        if mission_type is None:
+            return
+        seq = int(msg.seq)
+        if not 0 <= seq < len(v.download):
+            self._mission_ack(v, peer, ms.Result.INVALID_SEQUENCE, mission_type, now)
+            return
+        w = v.download[seq]
+        current = 1 if seq == v.mission_current().seq else 0
+        args = (
+            w.seq,
+            w.frame,
+            w.command,
+            current,
+            w.autocontinue,
+            w.param1,
+            w.param2,
+            w.param3,
+            w.param4,
+        )
+        if msg.get_type() == "MISSION_REQUEST_INT":
+            item = mavlink.MAVLink_mission_item_int_message(
+                peer.system, peer.component, *args, w.x, w.y, w.z, mission_type
+            )
+        else:
+            item = mavlink.MAVLink_mission_item_message(
+                peer.system, peer.component, *args, w.x * 1e-7, w.y * 1e-7, w.z, mission_type
+            )
+        self._send(link, v, item, now)
+
+    def _on_mission_clear_all(
+        self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
+    ) -> None:
+        mission_type = int(msg.mission_type)
+        if mission_type not in (ms.MISSION_TYPE_MISSION, ms.MISSION_TYPE_ALL):
+            self._mission_ack(v, peer, ms.Result.UNSUPPORTED, mission_type, now)
+            return
+
+        def done(reply: CommandReply) -> None:
+            if reply.accepted:
+                v.remember_upload(ms.Converted([], [], []))
+                result = ms.Result.ACCEPTED
+            else:
+                result = _MISSION_RESULT_OF_CODE.get(reply.code, ms.Result.ERROR)
+            self._mission_ack(v, peer, result, mission_type, time.monotonic())
+
+        self._submit(v, MissionClear(), done)
+
+    def _on_mission_set_current(
+        self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
+    ) -> None:
+        """Jump to an item: restarts the mission there (our autopilot has no idle "current")."""
+        index = ms.bus_index_of_seq(v.seqs(), int(msg.seq))
+
+        def done(reply: CommandReply) -> None:
+            done_now = time.monotonic()
+            if not reply.accepted:
+                self._statustext(link, v, f"{v.id}: {reply.reason}", done_now)
+            self._send_all(v, v.mission_current_msg(), done_now)
+
+        self._submit(v, MissionStart(start_index=index), done)

@@ -1,0 +1,94 @@
+"""The parameter microservice: PARAM_REQUEST_LIST / _READ / PARAM_SET against the autopilot."""
+
+from __future__ import annotations
+
+import logging
+import time
+
+from gcs_bridge import mission as ms
+from gcs_bridge.core import Core, text_of
+from gcs_bridge.dialect import Msg, mavlink
+from gcs_bridge.links import Link
+from gcs_bridge.params import ParamError
+from gcs_bridge.vehicle import Vehicle
+from swarmbus.messages import CommandReply, GetParams, RejectCode, SetParam
+
+log = logging.getLogger(__name__)
+
+PARAM_SYNC_RETRY_S = 5.0
+
+
+class ParamHandlers(Core):
+    # ------------------------------------------------------------------ parameters
+    def _param_value(self, link: Link, v: Vehicle, name: str, now: float) -> None:
+        index = v.params.index_of(name)
+        spec = v.params.spec(name)
+        if index is None or spec is None:
+            return
+        msg = mavlink.MAVLink_param_value_message(
+            name.encode("ascii"), v.params.wire_value(name), spec.param_type, v.params.count, index
+        )
+        self._send(link, v, msg, now)
+
+    def _on_param_request_list(
+        self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
+    ) -> None:
+        for spec in v.params.specs:
+            self._param_value(link, v, spec.name, now)
+
+    def _on_param_request_read(
+        self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
+    ) -> None:
+        index = int(msg.param_index)
+        if index >= 0:
+            if index < v.params.count:
+                self._param_value(link, v, v.params.specs[index].name, now)
+            return
+        self._param_value(link, v, text_of(msg.param_id), now)
+
+    def _on_param_set(self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float) -> None:
+        name = text_of(msg.param_id)
+        spec = v.params.spec(name)
+        if spec is None:
+            log.info("%s: PARAM_SET of unknown parameter %r ignored", v.id, name)
+            return
+        try:
+            value = v.params.decode_set(name, float(msg.param_value))
+        except ParamError as exc:
+            self._statustext(link, v, f"{v.id}: {exc}", now)
+            self._param_value(link, v, name, now)  # the unchanged value says "refused"
+            return
+
+        def done(reply: CommandReply) -> None:
+            done_now = time.monotonic()
+            if reply.accepted:
+                confirmed = (reply.params or {}).get(name, value)
+                v.params.set(name, confirmed, backed=True)
+            elif reply.code == RejectCode.UNSUPPORTED and spec.gateway_side:
+                v.params.set(name, value, backed=False)
+            else:
+                self._statustext(link, v, f"{v.id}: {name} refused: {reply.reason}", done_now)
+            self._param_value(link, v, name, done_now)
+
+        self._submit(v, SetParam(name=name, value=value), done)
+
+    def _maybe_sync_params(self, v: Vehicle, now: float) -> None:
+        """Once the autopilot is there, take its parameter values (GetParams)."""
+        if v.params_synced or v.status is None:
+            return
+        next_try = self._param_sync.get(v.id, 0.0)
+        if next_try < 0 or now < next_try:
+            return
+        self._param_sync[v.id] = -1.0
+
+        def done(reply: CommandReply) -> None:
+            if reply.accepted and reply.params is not None:
+                v.params.merge_from_autopilot(reply.params)
+                v.params_synced = True
+            elif reply.code == RejectCode.UNSUPPORTED:
+                log.info("%s: autopilot has no parameters; the gateway keeps its own", v.id)
+                v.params_synced = True
+            else:
+                self._param_sync[v.id] = time.monotonic() + PARAM_SYNC_RETRY_S
+
+        self._submit(v, GetParams(), done)

@@ -1,0 +1,194 @@
+"""UDP links: one socket each, the peers heard on it, MAVLink 2 framing and optional signing.
+
+A link sends every packet to its default peer (where PX4 SITL would send: the GCS port, or a
+vehicle's API port) and to every peer it heard from recently, and replies come back to the
+socket it sends from. Each datagram is parsed on its own (UDP keeps frames whole), so garbage in
+one datagram never corrupts the next. With signing on, incoming frames must carry a valid
+signature: checked here before the timestamp is recorded (pymavlink records it first, which
+lets a forged frame push a stream's timestamp forward).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+import socket
+import struct
+import time
+from dataclasses import dataclass, field
+
+from gcs_bridge.dialect import Msg, new_mav, pack
+
+log = logging.getLogger(__name__)
+
+Addr = tuple[str, int]
+SIGNATURE_LEN = 13  # link id (1) + timestamp (6) + signature (6)
+_EPOCH_2015 = 1420070400
+_NEW_STREAM_WINDOW = 60 * 100_000  # one minute, in 10 µs units
+PEER_EXPIRY_S = 15.0
+MAX_PEERS = 16  # per link: one datagram must not buy a stranger our telemetry stream forever
+MAX_DATAGRAMS_PER_POLL = 256
+
+
+def signing_timestamp_now() -> int:
+    """MAVLink signing time: 10 µs units since 2015-01-01."""
+    return int(max(time.time() - _EPOCH_2015, 0.0) * 100_000)
+
+
+@dataclass
+class LinkStats:
+    datagrams: int = 0
+    received: int = 0
+    bad_frames: int = 0
+    refused_unsigned: int = 0
+    refused_bad_signature: int = 0
+    sent: int = 0
+    send_errors: int = 0
+
+
+@dataclass
+class Signing:
+    key: bytes
+    link_id: int
+    stream_timestamps: dict[tuple[int, int, int], int] = field(default_factory=dict)
+
+    def verify(self, msgbuf: bytes, system: int, component: int) -> str | None:
+        """None if ``msgbuf`` is validly signed with our key and fresh; else why not."""
+        if len(msgbuf) < 10 + 2 + SIGNATURE_LEN or msgbuf[0] != 0xFD or not msgbuf[2] & 0x01:
+            return "unsigned"
+        digest = hashlib.sha256(self.key + msgbuf[:-6]).digest()[:6]
+        if digest != msgbuf[-6:]:
+            return "bad signature"
+        link_id = msgbuf[-13]
+        low, high = struct.unpack("<IH", msgbuf[-12:-6])
+        stamp = low + (high << 32)
+        stream = (link_id, system, component)
+        last = self.stream_timestamps.get(stream)
+        if last is not None and stamp <= last:
+            return "replayed timestamp"
+        if last is None and stamp + _NEW_STREAM_WINDOW < signing_timestamp_now():
+            return "stale timestamp"
+        self.stream_timestamps[stream] = stamp
+        return None
+
+
+class Link:
+    """One UDP socket speaking MAVLink 2 for the vehicles (sysids) it serves."""
+
+    def __init__(
+        self,
+        name: str,
+        bind: Addr,
+        default_peer: Addr | None,
+        sysids: list[int],
+        signing_key: bytes | None = None,
+        link_id: int = 0,
+    ) -> None:
+        self.name = name
+        self.default_peer = default_peer
+        self.sysids = list(sysids)
+        self.stats = LinkStats()
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.setblocking(False)
+        self.sock.bind(bind)
+        self._peers: dict[Addr, float] = {}
+        self.gcs_heard_s = -1e9  # wall time of the last ground-station HEARTBEAT on this link
+        self.signing = Signing(signing_key, link_id) if signing_key is not None else None
+        self._encoders = {sysid: self._encoder(sysid, link_id) for sysid in self.sysids}
+
+    def _encoder(self, sysid: int, link_id: int) -> Msg:
+        mav = new_mav(sysid, 1)
+        if self.signing is not None:
+            mav.signing.secret_key = self.signing.key
+            mav.signing.link_id = link_id
+            mav.signing.timestamp = signing_timestamp_now()
+            mav.signing.sign_outgoing = True
+        return mav
+
+    @property
+    def address(self) -> Addr:
+        host, port = self.sock.getsockname()
+        return (str(host), int(port))
+
+    def fileno(self) -> int:
+        return self.sock.fileno()
+
+    def close(self) -> None:
+        self.sock.close()
+
+    # -- receiving -------------------------------------------------------------
+    def receive(self, now_s: float) -> list[tuple[Msg, Addr]]:
+        """Every valid message waiting on the socket (bounded per call), with its sender."""
+        out: list[tuple[Msg, Addr]] = []
+        for _ in range(MAX_DATAGRAMS_PER_POLL):
+            try:
+                data, addr = self.sock.recvfrom(65535)
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError as exc:  # e.g. ICMP port unreachable reported on a later recv
+                log.debug("%s: recv error %s", self.name, exc)
+                continue
+            self.stats.datagrams += 1
+            peer = (str(addr[0]), int(addr[1]))
+            accepted = self._parse(data, peer)
+            if accepted:
+                if peer not in self._peers and len(self._peers) >= MAX_PEERS:
+                    del self._peers[min(self._peers, key=self._peers.__getitem__)]
+                self._peers[peer] = now_s
+                out.extend((m, peer) for m in accepted)
+        return out
+
+    def _parse(self, data: bytes, peer: Addr) -> list[Msg]:
+        parser = new_mav(0, 0)
+        try:
+            msgs = parser.parse_buffer(data) or []
+        except Exception as exc:  # pymavlink raises a few odd types on garbage
+            self.stats.bad_frames += 1
+            log.debug("%s: unparsable datagram from %s: %s", self.name, peer, exc)
+            return []
+        if parser.buf_len() > 0:  # a truncated frame at the end of the datagram
+            self.stats.bad_frames += 1
+        good: list[Msg] = []
+        for m in msgs:
+            kind = m.get_type()
+            if kind in ("BAD_DATA", "UNKNOWN"):
+                self.stats.bad_frames += 1
+                continue
+            if self.signing is not None:
+                why = self.signing.verify(
+                    bytes(m.get_msgbuf()), m.get_srcSystem(), m.get_srcComponent()
+                )
+                if why is not None:
+                    if why == "unsigned":
+                        self.stats.refused_unsigned += 1
+                    else:
+                        self.stats.refused_bad_signature += 1
+                    log.debug("%s: refused %s from %s: %s", self.name, kind, peer, why)
+                    continue
+            self.stats.received += 1
+            good.append(m)
+        return good
+
+    # -- sending ---------------------------------------------------------------
+    def destinations(self, now_s: float) -> list[Addr]:
+        for addr, heard in list(self._peers.items()):
+            if now_s - heard > PEER_EXPIRY_S:
+                del self._peers[addr]
+        dests = list(self._peers)
+        if self.default_peer is not None and self.default_peer not in self._peers:
+            dests.append(self.default_peer)
+        return dests
+
+    def send(self, sysid: int, msg: Msg, now_s: float, to: Addr | None = None) -> None:
+        """Send ``msg`` as vehicle ``sysid`` (component 1) to ``to``, or to every peer."""
+        mav = self._encoders.get(sysid)
+        if mav is None:
+            return
+        buf = pack(mav, msg)
+        for addr in [to] if to is not None else self.destinations(now_s):
+            try:
+                self.sock.sendto(buf, addr)
+                self.stats.sent += 1
+            except OSError as exc:
+                self.stats.send_errors += 1
+                log.debug("%s: send to %s failed: %s", self.name, addr, exc)

@@ -1,0 +1,246 @@
+"""What the gateway knows and remembers of one vehicle: identity, latest bus data, home,
+parameters, the mission as MAVLink sees it, and the events its status changes imply.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from gcs_bridge.dialect import Msg, mavlink
+from gcs_bridge.frames import Vec3, enu_to_geodetic
+from gcs_bridge.mission import Converted, Place, Uploader, WireItem, seq_of_bus_index, wire_of_items
+from gcs_bridge.modes import (
+    base_mode_of,
+    custom_mode_of,
+    mav_type_of,
+    px4_mode_of,
+    system_status_of,
+)
+from gcs_bridge.params import ParamTable
+from gcs_bridge.telemetry import View
+from swarmbus.messages import (
+    ConcentrationReading,
+    FlightMode,
+    MissionItem,
+    VehicleState,
+    VehicleStatus,
+)
+from swarmbus.scenario import Origin, Scenario
+from swarmbus.vehicle_types import load_vehicle_type
+
+PX4_VERSION = (1 << 24) | (14 << 16) | (0 << 8) | 255  # "v1.14.0 release", as PX4 encodes it
+CAPABILITIES = (
+    mavlink.MAV_PROTOCOL_CAPABILITY_MISSION_INT
+    | mavlink.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+    | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
+    | mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+)
+UID_BASE = 0x504C554D45000000  # "PLUME" + sysid
+# MISSION_CURRENT.mission_mode (not named in pymavlink 2.4.50): 1 in mission mode, 2 suspended.
+MISSION_MODE_ACTIVE = 1
+MISSION_MODE_SUSPENDED = 2
+
+
+@dataclass
+class MissionCurrent:
+    seq: int
+    total: int
+    state: int
+    mode: int
+
+
+@dataclass(frozen=True)
+class ArmIntent:
+    """A mode selected while disarmed; arming then flies it (PX4 semantics, which QGC's
+    takeoff and start-mission flows rely on: NAV_TAKEOFF or SET_MODE first, then ARM)."""
+
+    mode: FlightMode
+    altitude_m: float = 0.0
+
+
+@dataclass
+class StatusEvents:
+    """What a new status means for MAVLink: a heartbeat now, items reached, a new current."""
+
+    heartbeat: bool = False
+    reached_seqs: list[int] = field(default_factory=list)
+    mission_current: bool = False
+    home_changed: bool = False
+
+
+class Vehicle:
+    def __init__(self, scenario: Scenario, vehicle_id: str, index: int, wind_enu: Vec3) -> None:
+        cfg = scenario.vehicle(vehicle_id)
+        vtype = load_vehicle_type(cfg.type)
+        self.id = vehicle_id
+        self.index = index
+        self.sysid = scenario.sysid_of(vehicle_id)
+        self.mav_type = mav_type_of(len(vtype.rotors))
+        self.origin: Origin = scenario.world.origin
+        self.wind_enu = wind_enu
+        self.params = ParamTable(scenario.failsafe_for(vehicle_id), vtype)
+        self.params_synced = False
+        self.state: VehicleState | None = None
+        self.status: VehicleStatus | None = None
+        self.reading: ConcentrationReading | None = None
+        self.spawn_enu: Vec3 = cfg.spawn_enu_m
+        self.uploader = Uploader()
+        self.mission: Converted | None = None  # as MAVLink last saw it (upload or download)
+        self.download: list[WireItem] = []
+        self._home_geo: Vec3 | None = None
+        self.intent: ArmIntent | None = None
+        self.last_status_wall_s = -1e9
+        self.last_gcs_heartbeat_s = -1e9  # wall
+        self.last_gcs_heartbeat_sim_s = -1e9
+        self._reached = 0
+        self._current: MissionCurrent | None = None
+
+    # -- identity ---------------------------------------------------------------
+    def heartbeat(self) -> Msg:
+        """Armed: the autopilot's real mode. Disarmed: the mode selected for arming, if any."""
+        custom = custom_mode_of(self.status)
+        if self.intent is not None and not self.armed:
+            custom = px4_mode_of(self.intent.mode).custom_mode
+        return mavlink.MAVLink_heartbeat_message(
+            self.mav_type,
+            mavlink.MAV_AUTOPILOT_PX4,
+            base_mode_of(self.status),
+            custom,
+            system_status_of(self.status),
+            3,
+        )
+
+    @property
+    def armed(self) -> bool:
+        return self.status is not None and self.status.armed
+
+    def armable(self) -> str | None:
+        """None if the vehicle could arm now, else why not."""
+        st = self.status
+        if st is None:
+            return "no status from the autopilot yet"
+        if st.armed:
+            return "already armed"
+        if st.crashed:
+            return "crashed"
+        if not st.landed:
+            return "not on the ground"
+        if st.health != "ok":
+            return f"unhealthy: {st.health}"
+        return None
+
+    def autopilot_version(self) -> Msg:
+        zeros = [0] * 8
+        return mavlink.MAVLink_autopilot_version_message(
+            CAPABILITIES, PX4_VERSION, 0, 0, 0, zeros, zeros, zeros, 0, 0, UID_BASE | self.sysid
+        )
+
+    # -- home -------------------------------------------------------------------
+    @property
+    def home_enu(self) -> Vec3 | None:
+        if self.status is not None:
+            return self.status.home_enu_m
+        return None
+
+    def home_place(self) -> Place:
+        """Home for mission conversion (before the autopilot reports: its spawn point)."""
+        enu = self.home_enu if self.home_enu is not None else self.spawn_enu
+        lat, lon, alt = enu_to_geodetic(enu, self.origin)
+        return Place(lat, lon, alt, self.origin)
+
+    @property
+    def home_amsl_m(self) -> float | None:
+        return self.home_place().alt_amsl_m if self.home_enu is not None else None
+
+    def view(self) -> View:
+        home = self.home_enu
+        if home is not None and self._home_geo is None:
+            self._home_geo = enu_to_geodetic(home, self.origin)
+        return View(self.state, self.status, self.reading, self._home_geo, home, self.wind_enu)
+
+    # -- mission bookkeeping ----------------------------------------------------
+    def _mapping_valid(self) -> bool:
+        return (
+            self.mission is not None
+            and self.status is not None
+            and len(self.mission.items) == self.status.mission_count
+        )
+
+    def seq_of(self, bus_index: int) -> int:
+        if self._mapping_valid() and self.mission is not None:
+            return seq_of_bus_index(self.mission.seqs, bus_index)
+        return bus_index
+
+    def seqs(self) -> list[int]:
+        if self._mapping_valid() and self.mission is not None:
+            return self.mission.seqs
+        count = self.status.mission_count if self.status is not None else 0
+        return list(range(count))
+
+    def mission_total(self) -> int:
+        if self._mapping_valid() and self.mission is not None:
+            return len(self.mission.wire)
+        return self.status.mission_count if self.status is not None else 0
+
+    def mission_current(self) -> MissionCurrent:
+        st = self.status
+        total = self.mission_total()
+        if st is None or st.mission_count == 0:
+            return MissionCurrent(0, total, mavlink.MISSION_STATE_NO_MISSION, 0)
+        index = min(max(st.mission_index, 0), st.mission_count - 1)
+        in_mission = st.mode == FlightMode.MISSION
+        if st.mission_finished:
+            state = mavlink.MISSION_STATE_COMPLETE
+        elif in_mission:
+            state = mavlink.MISSION_STATE_ACTIVE
+        elif st.mission_items_reached > 0:
+            state = mavlink.MISSION_STATE_PAUSED
+        else:
+            state = mavlink.MISSION_STATE_NOT_STARTED
+        mode = MISSION_MODE_ACTIVE if in_mission else MISSION_MODE_SUSPENDED
+        return MissionCurrent(self.seq_of(index), total, int(state), mode)
+
+    def mission_current_msg(self) -> Msg:
+        mc = self.mission_current()
+        self._current = mc
+        return mavlink.MAVLink_mission_current_message(mc.seq, mc.total, mc.state, mc.mode)
+
+    def remember_upload(self, converted: Converted) -> None:
+        self.mission = converted
+        self._reached = 0
+
+    def wire_for_download(self, items: list[MissionItem]) -> list[WireItem]:
+        """The autopilot's mission as MAVLink items: verbatim if it is what MAVLink uploaded."""
+        if self.mission is not None and self.mission.items == items:
+            return self.mission.wire
+        wire = wire_of_items(items, self.home_place())
+        self.mission = Converted(items=list(items), seqs=list(range(len(items))), wire=wire)
+        return wire
+
+    # -- status -------------------------------------------------------------------
+    def update_status(self, status: VehicleStatus, wall_s: float) -> StatusEvents:
+        old = self.status
+        self.status = status
+        self.last_status_wall_s = wall_s
+        ev = StatusEvents()
+        if status.armed or status.crashed:
+            self.intent = None  # from now on the heartbeat shows the real mode
+        if old is None or (old.mode, old.armed, old.crashed, bool(old.failsafe)) != (
+            status.mode,
+            status.armed,
+            status.crashed,
+            bool(status.failsafe),
+        ):
+            ev.heartbeat = True
+        if old is None or old.home_enu_m != status.home_enu_m:
+            ev.home_changed = True
+            self._home_geo = None
+        reached = status.mission_items_reached
+        if old is None or reached < self._reached:
+            self._reached = reached  # first sight, or a new mission: nothing to announce
+        elif reached > self._reached:
+            ev.reached_seqs = [self.seq_of(k) for k in range(self._reached, reached)]
+            self._reached = reached
+        if self._current is None or self.mission_current() != self._current:
+            ev.mission_current = True
+        return ev

@@ -1,0 +1,285 @@
+"""The autopilot's pure logic flown against simple toy dynamics (no physics process, no bus)."""
+
+from __future__ import annotations
+
+import math
+
+import msgspec
+import pytest
+
+from agents.autopilot import Autopilot
+from swarmbus.messages import (
+    Arm,
+    CommandReply,
+    Disarm,
+    FlightMode,
+    GcsHeartbeat,
+    Goto,
+    Land,
+    MissionCommand,
+    MissionItem,
+    MissionStart,
+    MissionUpload,
+    SetMode,
+    Setpoint,
+    Takeoff,
+)
+from swarmbus.scenario import Scenario, load_scenario
+from tests.agents_toy import ToyWorld
+
+
+def scenario(**failsafe: object) -> Scenario:
+    sc = load_scenario()
+    if failsafe:
+        sc = msgspec.structs.replace(sc, failsafe=msgspec.structs.replace(sc.failsafe, **failsafe))
+    return sc
+
+
+def world(sc: Scenario, ids: list[str] | None = None) -> tuple[ToyWorld, dict[str, Autopilot]]:
+    ids = ids or [v.id for v in sc.vehicles]
+    aps = {vid: Autopilot(sc, vid) for vid in ids}
+    w = ToyWorld(sc, aps)
+    w.run(0.05)
+    return w, aps
+
+
+def ok(reply: CommandReply) -> None:
+    assert reply.accepted, reply.reason
+
+
+def take_off(w: ToyWorld, aps: dict[str, Autopilot], alt: float = 10.0) -> None:
+    for ap in aps.values():
+        ok(ap.handle(Arm()))
+        ok(ap.handle(Takeoff(altitude_m=alt)))
+    w.run(15.0, until=lambda: all(ap.modes.mode == FlightMode.HOLD for ap in aps.values()))
+    assert all(ap.modes.mode == FlightMode.HOLD for ap in aps.values())
+
+
+def test_three_iris_take_off_and_hold_within_20_cm() -> None:
+    w, aps = world(scenario())
+    take_off(w, aps)
+    w.run(5.0)  # settle
+    worst = 0.0
+
+    def track() -> bool:
+        nonlocal worst
+        for vid in aps:
+            p = w.vehicles[vid].p
+            spawn = load_scenario().vehicle(vid).spawn_enu_m
+            worst = max(worst, abs(p[2] - 10.0), math.hypot(p[0] - spawn[0], p[1] - spawn[1]))
+        return False
+
+    w.run(10.0, until=track)
+    assert worst < 0.2
+
+
+@pytest.mark.parametrize("vid", ["uav1", "uav2", "uav3"])
+def test_scenario_mission_is_flown_and_ends_landed_and_disarmed(vid: str) -> None:
+    sc = scenario()
+    w, aps = world(sc, [vid])
+    ap = aps[vid]
+    ok(ap.handle(Arm()))
+    ok(ap.handle(MissionStart()))
+    w.run(120.0, until=lambda: ap.modes.mode == FlightMode.DISARMED)
+    status = ap.status()
+    assert status.mission_finished and not status.armed and status.landed
+    assert status.mission_items_reached == len(sc.vehicle(vid).mission)
+    events = ap.modes.mission.drain_events()
+    assert [e.index for e in events] == list(range(len(sc.vehicle(vid).mission)))
+    last = sc.vehicle(vid).mission[-1]
+    p = w.vehicles[vid].p
+    assert math.hypot(p[0] - last.x, p[1] - last.y) < 0.5
+
+
+def test_hexacopter_flies_a_square_and_lands() -> None:
+    sc = load_scenario()
+    hexa = msgspec.structs.replace(sc.vehicles[0], type="typhoon_h480", mission=[])
+    sc = msgspec.structs.replace(sc, vehicles=[hexa])
+    w, aps = world(sc)
+    ap = aps[hexa.id]
+    x0, y0, _ = hexa.spawn_enu_m
+    square = [
+        MissionItem(command=MissionCommand.TAKEOFF, x=x0, y=y0, z=8.0),
+        MissionItem(x=x0 + 10, y=y0, z=8.0, hold_s=1.0),
+        MissionItem(x=x0 + 10, y=y0 + 10, z=8.0),
+        MissionItem(x=x0, y=y0 + 10, z=8.0),
+        MissionItem(x=x0, y=y0, z=8.0),
+        MissionItem(command=MissionCommand.LAND, x=x0, y=y0, z=0.0),
+    ]
+    ok(ap.handle(MissionUpload(items=square)))
+    ok(ap.handle(Arm()))
+    ok(ap.handle(MissionStart()))
+    visited = set()
+
+    def corners() -> bool:
+        p = w.vehicles[hexa.id].p
+        for i, item in enumerate(square[1:5]):
+            if math.dist(p, (item.x, item.y, item.z)) < 1.0:
+                visited.add(i)
+        return ap.modes.mode == FlightMode.DISARMED
+
+    w.run(120.0, until=corners)
+    assert visited == {0, 1, 2, 3}
+    assert ap.status().mission_finished and ap.status().landed
+
+
+def test_land_command_touches_down_then_disarms() -> None:
+    w, aps = world(scenario(), ["uav1"])
+    take_off(w, aps, 5.0)
+    ap = aps["uav1"]
+    ok(ap.handle(Land()))
+    w.run(30.0, until=lambda: ap.modes.mode == FlightMode.DISARMED)
+    assert ap.modes.mode == FlightMode.DISARMED and w.vehicles["uav1"].p[2] < 0.05
+    assert not w.vehicles["uav1"].crashed
+
+
+def test_global_frame_items_resolve_through_the_scenario_origin() -> None:
+    sc = scenario()
+    _, aps = world(sc, ["uav1"])
+    ap = aps["uav1"]
+    o = sc.world.origin
+    # 0.0001° of latitude north of the origin ≈ 11.1 m north
+    item = MissionItem(x=o.lat_deg + 1e-4, y=o.lon_deg, z=o.alt_m + 5.0, frame="global")
+    ok(ap.handle(MissionUpload(items=[item])))
+    got = ap.modes.mission.resolved[0]
+    assert got.x == pytest.approx(0.0, abs=1e-3)
+    assert got.y == pytest.approx(11.1, abs=0.1)
+    assert got.z == pytest.approx(5.0, abs=1e-3)
+
+
+# ------------------------------------------------------------------ failsafes
+def test_datalink_loss_triggers_the_configured_action() -> None:
+    sc = scenario(datalink_loss_action="land", datalink_timeout_s=2.0)
+    w, aps = world(sc, ["uav1"])
+    ap = aps["uav1"]
+    ok(ap.handle(Arm()))
+    ok(ap.handle(Takeoff(altitude_m=5.0)))
+
+    def gcs_alive() -> bool:
+        ok(ap.handle(GcsHeartbeat()))
+        return False
+
+    w.run(6.0, until=gcs_alive)
+    assert ap.modes.mode == FlightMode.HOLD
+    w.run(1.9)
+    assert ap.modes.mode == FlightMode.HOLD  # not yet: the timeout is 2 s
+    w.run(0.2)
+    assert ap.modes.mode == FlightMode.LAND
+    assert ap.status().failsafe == "ground-control link lost"
+    ok(ap.handle(GcsHeartbeat()))
+    assert ap.status().failsafe == ""
+
+
+def test_no_gcs_ever_seen_never_trips_the_datalink_failsafe() -> None:
+    w, aps = world(scenario(datalink_timeout_s=1.0), ["uav1"])
+    take_off(w, aps, 3.0)
+    w.run(5.0)
+    assert aps["uav1"].modes.mode == FlightMode.HOLD
+
+
+def test_datalink_required_refuses_arming_without_a_gcs() -> None:
+    _, aps = world(scenario(datalink_required=True), ["uav1"])
+    ap = aps["uav1"]
+    reply = ap.handle(Arm())
+    assert not reply.accepted and "ground-control link" in reply.reason
+    ok(ap.handle(GcsHeartbeat()))
+    ok(ap.handle(Arm()))
+
+
+def test_geofence_breach_returns_to_launch_and_lands_home() -> None:
+    sc = scenario(geofence_max_distance_m=15.0, rtl_altitude_m=6.0)
+    w, aps = world(sc, ["uav1"])
+    ap = aps["uav1"]
+    take_off(w, aps, 4.0)
+    # a setpoint stream flies it outward, past the fence (goto outside would be refused)
+    outward = Setpoint(velocity_enu_m_s=(3.0, 0.0, 0.0))
+    ok(ap.handle(outward))
+    ok(ap.handle(SetMode(mode=FlightMode.OFFBOARD)))
+
+    def stream() -> bool:
+        ok(ap.handle(outward))
+        return ap.modes.mode == FlightMode.RTL
+
+    w.run(10.0, until=stream)
+    assert ap.modes.mode == FlightMode.RTL and ap.status().failsafe.startswith("geofence")
+    w.run(60.0, until=lambda: ap.modes.mode == FlightMode.DISARMED)
+    p = w.vehicles["uav1"].p
+    home = ap.status().home_enu_m
+    assert ap.modes.mode == FlightMode.DISARMED and math.hypot(p[0] - home[0], p[1] - home[1]) < 1
+
+
+def test_offboard_stream_loss_falls_back_to_the_configured_action() -> None:
+    w, aps = world(scenario(offboard_loss_action="land", offboard_timeout_s=0.5), ["uav1"])
+    ap = aps["uav1"]
+    take_off(w, aps, 4.0)
+    ok(ap.handle(Setpoint(position_enu_m=(22.0, -4.0, 5.0))))
+    ok(ap.handle(SetMode(mode=FlightMode.OFFBOARD)))
+    assert ap.modes.mode == FlightMode.OFFBOARD
+    w.run(1.0, until=lambda: ap.modes.mode != FlightMode.OFFBOARD)
+    assert ap.modes.mode == FlightMode.LAND
+    assert ap.status().failsafe == "offboard setpoint stream lost"
+
+
+def test_crash_disarms_and_is_reported() -> None:
+    w, aps = world(scenario(), ["uav1"])
+    ap = aps["uav1"]
+    take_off(w, aps, 6.0)
+    ok(ap.handle(Disarm(force=True)))  # motors off in the air: it falls and hits hard
+    w.run(5.0, until=lambda: w.vehicles["uav1"].crashed)
+    w.run(0.1)
+    status = ap.status()
+    assert status.crashed and not status.armed and status.failsafe == "crash"
+    reply = ap.handle(Arm())
+    assert not reply.accepted and "crashed" in reply.reason
+
+
+# ------------------------------------------------------------------ command refusals
+def refused(ap: Autopilot, cmd: object, words: str, code: str = "denied") -> None:
+    reply = ap.handle(cmd)
+    assert not reply.accepted and reply.code == code, reply
+    assert words in reply.reason, reply.reason
+
+
+def test_commands_are_refused_with_the_right_reason() -> None:
+    w, aps = world(scenario(geofence_max_alt_m=50.0), ["uav1"])
+    ap = aps["uav1"]
+    refused(ap, Takeoff(altitude_m=5.0), "disarmed: arm before taking off")
+    refused(ap, Land(), "disarmed")
+    refused(ap, Disarm(), "already disarmed")
+    ok(ap.handle(Arm()))
+    refused(ap, Arm(), "already armed")
+    refused(ap, Takeoff(altitude_m=80.0), "geofence", code="invalid")
+    refused(ap, Goto(position_enu_m=(1.0, 2.0, 3.0)), "on the ground")
+    refused(ap, SetMode(mode=FlightMode.OFFBOARD), "no offboard setpoint stream")
+    ok(ap.handle(MissionUpload(items=[])))
+    refused(ap, MissionStart(), "no mission uploaded")
+    ok(ap.handle(MissionUpload(items=[MissionItem(x=30.0, y=0.0, z=5.0)])))
+    refused(ap, MissionStart(), "must be a takeoff")
+    refused(ap, MissionStart(start_index=3), "mission has 1 item", code="invalid")
+    refused(
+        ap,
+        MissionUpload(items=[MissionItem(x=95.0, y=0.0, z=5.0, frame="global")]),
+        "latitude",
+        code="invalid",
+    )
+    ok(ap.handle(Takeoff(altitude_m=5.0)))
+    w.run(5.0)
+    refused(ap, Disarm(), "in the air")
+    refused(ap, Takeoff(altitude_m=5.0), "already flying")
+    ok(ap.handle(Land()))
+
+
+def test_arming_in_the_air_is_refused() -> None:
+    w, aps = world(scenario(), ["uav1"])
+    ap = aps["uav1"]
+    take_off(w, aps, 8.0)
+    ok(ap.handle(Disarm(force=True)))
+    w.run(0.3)
+    assert not w.vehicles["uav1"].on_ground
+    refused(ap, Arm(), "arming in the air")
+
+
+def test_commands_before_any_state_are_refused_not_crashing() -> None:
+    ap = Autopilot(load_scenario(), "uav1")
+    refused(ap, Arm(), "no vehicle state yet")
+    refused(ap, Land(), "no vehicle state yet")

@@ -1,0 +1,158 @@
+"""The mission protocol state machine and item conversion, without sockets."""
+
+from __future__ import annotations
+
+import pytest
+
+from gcs_bridge import mission as ms
+from gcs_bridge.frames import enu_to_geodetic
+from swarmbus.messages import MissionCommand, MissionItem
+from swarmbus.scenario import Origin
+
+ORIGIN = Origin()
+HOME = ms.Place(ORIGIN.lat_deg, ORIGIN.lon_deg, ORIGIN.alt_m, ORIGIN)
+QGC = ms.Peer("gcs", ("127.0.0.1", 14550), 255, 190)
+OTHER = ms.Peer("gcs", ("127.0.0.1", 14551), 254, 190)
+FENCE = 1
+
+
+def wp(seq: int, e: float, n: float, rel_alt: float, command: int = ms.CMD_WAYPOINT) -> ms.WireItem:
+    lat, lon, _ = enu_to_geodetic((e, n, 0.0), ORIGIN)
+    return ms.WireItem(
+        seq=seq,
+        frame=ms.FRAME_RELATIVE_INT,
+        command=command,
+        x=round(lat * 1e7),
+        y=round(lon * 1e7),
+        z=rel_alt,
+    )
+
+
+def test_upload_requests_every_item_in_order_then_completes() -> None:
+    up = ms.Uploader()
+    assert up.on_count(QGC, 3, ms.MISSION_TYPE_MISSION, 0.0) == [
+        ms.Request(QGC, 0, ms.MISSION_TYPE_MISSION)
+    ]
+    items = [wp(i, 10.0 * i, 0.0, 10.0) for i in range(3)]
+    assert up.on_item(QGC, items[0], 0.1) == [ms.Request(QGC, 1, ms.MISSION_TYPE_MISSION)]
+    assert up.on_item(QGC, items[0], 0.1) == []  # duplicate: ignored
+    assert up.on_item(QGC, items[1], 0.2) == [ms.Request(QGC, 2, ms.MISSION_TYPE_MISSION)]
+    (done,) = up.on_item(QGC, items[2], 0.3)
+    assert isinstance(done, ms.Complete) and done.items == items
+    assert not up.active
+
+
+def test_absurd_counts_and_other_mission_types_are_refused() -> None:
+    up = ms.Uploader()
+    assert up.on_count(QGC, 65535, ms.MISSION_TYPE_MISSION, 0.0) == [
+        ms.Ack(QGC, ms.Result.NO_SPACE, ms.MISSION_TYPE_MISSION)
+    ]
+    assert up.on_count(QGC, 3, FENCE, 0.0) == [ms.Ack(QGC, ms.Result.UNSUPPORTED, FENCE)]
+    assert not up.active
+    (clear,) = up.on_count(QGC, 0, ms.MISSION_TYPE_MISSION, 0.0)
+    assert isinstance(clear, ms.Complete) and clear.items == []
+
+
+def test_out_of_order_item_ends_the_transfer_with_invalid_sequence() -> None:
+    up = ms.Uploader()
+    up.on_count(QGC, 3, ms.MISSION_TYPE_MISSION, 0.0)
+    up.on_item(QGC, wp(0, 0, 0, 5), 0.1)
+    assert up.on_item(QGC, wp(2, 0, 0, 5), 0.2) == [
+        ms.Ack(QGC, ms.Result.INVALID_SEQUENCE, ms.MISSION_TYPE_MISSION)
+    ]
+    assert not up.active
+    assert up.on_item(QGC, wp(1, 0, 0, 5), 0.3) == []  # no transfer any more
+
+
+def test_a_second_gcs_is_denied_while_one_uploads() -> None:
+    up = ms.Uploader()
+    up.on_count(QGC, 2, ms.MISSION_TYPE_MISSION, 0.0)
+    assert up.on_count(OTHER, 2, ms.MISSION_TYPE_MISSION, 0.0) == [
+        ms.Ack(OTHER, ms.Result.DENIED, ms.MISSION_TYPE_MISSION)
+    ]
+    assert up.on_item(OTHER, wp(0, 0, 0, 5), 0.1) == [
+        ms.Ack(OTHER, ms.Result.DENIED, ms.MISSION_TYPE_MISSION)
+    ]
+    assert up.active
+
+
+def test_silence_is_re_requested_then_cancelled() -> None:
+    up = ms.Uploader(item_timeout_s=1.0, max_retries=2)
+    up.on_count(QGC, 2, ms.MISSION_TYPE_MISSION, 0.0)
+    assert up.on_timer(0.5) == []
+    assert up.on_timer(1.1) == [ms.Request(QGC, 0, ms.MISSION_TYPE_MISSION)]
+    assert up.on_timer(2.2) == [ms.Request(QGC, 0, ms.MISSION_TYPE_MISSION)]
+    assert up.on_timer(3.3) == [ms.Ack(QGC, ms.Result.OPERATION_CANCELLED, ms.MISSION_TYPE_MISSION)]
+    assert not up.active
+
+
+def test_conversion_to_enu_folds_speed_items_and_keeps_seqs() -> None:
+    wire = [
+        ms.WireItem(seq=0, frame=ms.FRAME_RELATIVE_INT, command=ms.CMD_TAKEOFF, z=10.0),
+        ms.WireItem(seq=1, frame=ms.FRAME_MISSION, command=ms.CMD_CHANGE_SPEED, param2=3.0),
+        wp(2, 30.0, -5.0, 12.0),
+        ms.WireItem(seq=3, frame=ms.FRAME_RELATIVE_INT, command=ms.CMD_LAND),
+    ]
+    c = ms.convert_upload(wire, HOME)
+    assert c.seqs == [0, 2, 3]
+    takeoff, way, land = c.items
+    assert takeoff.command == MissionCommand.TAKEOFF
+    assert (takeoff.x, takeoff.y, takeoff.z) == pytest.approx((0.0, 0.0, 10.0), abs=1e-6)
+    assert (way.x, way.y, way.z) == pytest.approx((30.0, -5.0, 12.0), abs=0.01)
+    assert way.speed_m_s == 3.0 and way.acceptance_radius_m == ms.DEFAULT_ACCEPTANCE_M
+    assert land.command == MissionCommand.LAND
+    assert ms.bus_index_of_seq(c.seqs, 1) == 1 and ms.seq_of_bus_index(c.seqs, 2) == 3
+
+
+@pytest.mark.parametrize(
+    ("item", "result"),
+    [
+        (ms.WireItem(seq=0, frame=ms.FRAME_RELATIVE_INT, command=31000), ms.Result.UNSUPPORTED),
+        (
+            ms.WireItem(seq=0, frame=10, command=ms.CMD_WAYPOINT, x=1, y=1),
+            ms.Result.UNSUPPORTED_FRAME,
+        ),
+        (
+            ms.WireItem(
+                seq=0, frame=ms.FRAME_RELATIVE_INT, command=ms.CMD_WAYPOINT, x=2_000_000_000, y=1
+            ),
+            ms.Result.INVALID_PARAM5_X,
+        ),
+        (
+            ms.WireItem(
+                seq=0,
+                frame=ms.FRAME_RELATIVE_INT,
+                command=ms.CMD_WAYPOINT,
+                x=1,
+                y=1,
+                z=float("nan"),
+            ),
+            ms.Result.INVALID_PARAM7,
+        ),
+        (
+            ms.WireItem(
+                seq=0, frame=ms.FRAME_RELATIVE_INT, command=ms.CMD_WAYPOINT, x=1, y=1, param1=-3.0
+            ),
+            ms.Result.INVALID_PARAM1,
+        ),
+    ],
+)
+def test_bad_items_give_the_right_mission_result(item: ms.WireItem, result: ms.Result) -> None:
+    with pytest.raises(ms.MissionError) as err:
+        ms.convert_upload([item], HOME)
+    assert err.value.result == result
+
+
+def test_autopilot_missions_download_as_relative_altitude_items() -> None:
+    items = [
+        MissionItem(command=MissionCommand.TAKEOFF, x=20.0, y=-4.0, z=10.0),
+        MissionItem(x=40.0, y=-4.0, z=10.0, hold_s=2.0),
+        MissionItem(command=MissionCommand.LAND, x=20.0, y=-4.0, z=0.0),
+    ]
+    wire = ms.wire_of_items(items, HOME)
+    assert [w.command for w in wire] == [ms.CMD_TAKEOFF, ms.CMD_WAYPOINT, ms.CMD_LAND]
+    assert all(w.frame == ms.FRAME_RELATIVE_INT for w in wire)
+    back = ms.convert_upload(wire, HOME).items
+    for a, b in zip(items, back, strict=True):
+        assert (b.x, b.y, b.z) == pytest.approx((a.x, a.y, a.z), abs=0.02)
+    assert back[1].hold_s == 2.0

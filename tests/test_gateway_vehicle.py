@@ -1,0 +1,88 @@
+"""What a vehicle's status changes mean in MAVLink, and the gateway's options, without I/O."""
+
+from __future__ import annotations
+
+import pytest
+
+from gcs_bridge import mission as ms
+from gcs_bridge.dialect import mavlink
+from gcs_bridge.modes import decode_custom_mode
+from gcs_bridge.options import OptionError, parse_options
+from gcs_bridge.vehicle import ArmIntent, Vehicle
+from swarmbus.messages import FlightMode, MissionItem, VehicleStatus
+from swarmbus.scenario import Gateway, load_scenario
+
+SCENARIO = load_scenario()
+
+
+def status(**kw: object) -> VehicleStatus:
+    base: dict[str, object] = dict(
+        vehicle_id="uav1", sim_time_s=1.0, mode=FlightMode.DISARMED, armed=False, landed=True
+    )
+    base.update(kw)
+    return VehicleStatus(**base)  # type: ignore[arg-type]
+
+
+def vehicle() -> Vehicle:
+    return Vehicle(SCENARIO, "uav1", 0, (6.0, 0.0, 0.0))
+
+
+def test_items_reached_become_mavlink_seqs_once_each() -> None:
+    v = vehicle()
+    items = [MissionItem(x=0, y=0, z=5), MissionItem(x=5, y=0, z=5), MissionItem(x=5, y=5, z=5)]
+    v.remember_upload(ms.Converted(items=items, seqs=[0, 2, 3], wire=[]))
+    first = v.update_status(status(mission_count=3, mission_index=0), 0.0)
+    assert first.heartbeat and first.reached_seqs == []
+    ev = v.update_status(status(mission_count=3, mission_index=2, mission_items_reached=2), 0.1)
+    assert ev.reached_seqs == [0, 2] and ev.mission_current
+    assert v.update_status(status(mission_count=3, mission_items_reached=2), 0.2).reached_seqs == []
+    ev = v.update_status(
+        status(mission_count=3, mission_items_reached=3, mission_finished=True), 0.3
+    )
+    assert ev.reached_seqs == [3]
+    assert v.mission_current().state == mavlink.MISSION_STATE_COMPLETE
+
+
+def test_first_status_mid_mission_announces_nothing_old() -> None:
+    v = vehicle()
+    ev = v.update_status(status(mission_count=7, mission_items_reached=4, mission_index=4), 0.0)
+    assert ev.reached_seqs == []
+
+
+def test_disarmed_heartbeat_shows_the_selected_mode_until_armed() -> None:
+    v = vehicle()
+    v.update_status(status(), 0.0)
+    v.intent = ArmIntent(FlightMode.TAKEOFF, 5.0)
+    mode = decode_custom_mode(v.heartbeat().custom_mode)
+    assert (mode.main, mode.sub) == (4, 2)
+    v.update_status(status(mode=FlightMode.ARMED, armed=True), 0.1)
+    assert v.intent is None
+    mode = decode_custom_mode(v.heartbeat().custom_mode)
+    assert (mode.main, mode.sub) == (4, 3)
+
+
+def test_armable_says_why_not() -> None:
+    v = vehicle()
+    assert v.armable() is not None  # no status yet
+    v.update_status(status(), 0.0)
+    assert v.armable() is None
+    v.update_status(status(health="plume service silent"), 0.1)
+    assert "plume" in (v.armable() or "")
+
+
+def test_options_are_checked_and_rates_configurable() -> None:
+    o = parse_options(Gateway(), {"rate.ATTITUDE": "10", "signed_links": "gcs", "api_links": "off"})
+    assert o.rates_hz[mavlink.MAVLINK_MSG_ID_ATTITUDE] == 10.0
+    assert o.signed_links == frozenset({"gcs"}) and not o.api_links
+    assert o.bind_host == "127.0.0.1"
+    assert parse_options(Gateway(host="192.0.2.7"), {}).bind_host == "0.0.0.0"
+    for bad in (
+        {"nope": "1"},
+        {"rate.NOT_A_MESSAGE": "1"},
+        {"rate.HEARTBEAT": "5"},
+        {"gcs_bind_port": "70000"},
+        {"cmd_timeout_s": "nan"},
+        {"api_links": "maybe"},
+    ):
+        with pytest.raises(OptionError):
+            parse_options(Gateway(), bad)
