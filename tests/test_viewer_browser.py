@@ -108,7 +108,7 @@ def flying_stand_ins(session: zenoh.Session) -> Iterator[None]:
 
 
 def chromium(
-    args: list[str], user_dir: Path, timeout_s: float = 180.0
+    args: list[str], user_dir: Path, timeout_s: float = 300.0
 ) -> subprocess.CompletedProcess[bytes]:
     assert CHROMIUM is not None
     return subprocess.run(
@@ -139,12 +139,17 @@ def test_viewer_page_shows_vehicles_and_plume(
         )
         url = health.detail.split()[0].removeprefix("url=")
         assert url.startswith("http://127.0.0.1:") and url.endswith("/static/")
-        dom = chromium(["--dump-dom", "--virtual-time-budget=6000", url], tmp_path / "u1")
+        # Software WebGL renders every frame of the virtual time: keep windows and budgets small
+        # so that a loaded 2-core machine still gets through in seconds, not minutes.
+        dom = chromium(
+            ["--dump-dom", "--window-size=480,320", "--virtual-time-budget=3000", url],
+            tmp_path / "u1",
+        )
         page = dom.stdout.decode("utf-8", "replace")
         assert dom.returncode == 0, dom.stderr[-2000:]
         shot = tmp_path / "viewer.png"
         res = chromium(
-            [f"--screenshot={shot}", "--window-size=1280,800", "--virtual-time-budget=6000", url],
+            [f"--screenshot={shot}", "--window-size=1024,640", "--virtual-time-budget=3000", url],
             tmp_path / "u2",
         )
         assert res.returncode == 0 and shot.exists(), res.stderr[-2000:]
@@ -156,7 +161,7 @@ def test_viewer_page_shows_vehicles_and_plume(
         assert f">{v.id}<" in page, f"vehicle {v.id} not in the page's scene tree"
     # Not blank: many distinct colours, and the translucent plume's purples/reds are there.
     img = matplotlib.image.imread(shot)[:, :, :3]
-    assert img.shape[0] >= 700
+    assert img.shape[:2] == (640, 1024)
     colours = np.unique((img * 255).astype(np.uint8).reshape(-1, 3), axis=0)
     assert len(colours) > 500, f"only {len(colours)} colours: blank page?"
     assert img.std() > 0.05
