@@ -1,7 +1,7 @@
 """A restarted autopilot takes its vehicle back: found in the air (not crashed) it arms itself
 and holds where it is; found on the ground it stays disarmed. The autopilot's pure logic flown
 against the toy dynamics (the process-level kill under ``plumeswarm up`` is in
-test_faults_kill.py)."""
+test_faults_stack.py)."""
 
 from __future__ import annotations
 
