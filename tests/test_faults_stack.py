@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+import random
 import signal
 import subprocess
 import sys
@@ -17,23 +18,34 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import psutil
 import pytest
 import zenoh
 
 from deploy.busview import BusView
-from swarmbus.codec import decode, encode
+from swarmbus.codec import MessageError, decode, encode
 from swarmbus.keys import Keys
 from swarmbus.messages import (
+    ActuatorCommand,
     Arm,
+    Clock,
+    Command,
     CommandReply,
     ConcentrationReading,
     FlightMode,
+    Message,
+    NodeHealth,
+    PlumeInfoQuery,
+    PlumeMeshQuery,
+    PlumeQuery,
+    SimTick,
     Takeoff,
     VehicleState,
     VehicleStatus,
 )
 from swarmbus.session import NetworkConfig, free_tcp_port, open_session
 from tests.mavclient import MavClient, write_scenario
+from tests.messages_samples import SAMPLES
 from tests.procs import REPO, keys_for, wait_until
 
 VEHICLES = ["uav1", "uav2", "uav3"]
@@ -192,6 +204,94 @@ def test_gateway_killed_clients_see_every_vehicle_again(stack: Stack) -> None:
     assert all(stack.tick_of(v) > ticks[v] for v in VEHICLES)
     assert all(stack.states[v].position_enu_m[2] > ALTITUDE_M - 3 for v in VEHICLES)
     print(f"gateway: restarted in {restart_s:.1f} s, heartbeats of all 3 back after {back_s:.1f} s")
+
+
+FUZZ_SECONDS = 40.0
+
+
+def _mutate(rng: random.Random, data: bytes) -> bytes:
+    """Random bytes, or ``data`` truncated, bit-flipped, spliced or extended."""
+    b = bytearray(data)
+    how = rng.randrange(6)
+    if how == 0 or not b:
+        return rng.randbytes(rng.randrange(0, 200))
+    if how == 1:
+        return bytes(b[: rng.randrange(len(b))])
+    if how == 2:
+        for _ in range(rng.randint(1, 8)):
+            b[rng.randrange(len(b))] ^= 1 << rng.randrange(8)
+        return bytes(b)
+    if how == 3:
+        i = rng.randrange(len(b))
+        return bytes(b[:i] + rng.randbytes(rng.randint(1, 20)) + b[i:])
+    if how == 4:
+        i, j = sorted(rng.randrange(len(b)) for _ in range(2))
+        return bytes(b[:i] + b[j:] + b[i:j])
+    return bytes(b) + rng.randbytes(rng.randint(1, 50))
+
+
+def test_fuzz_every_bus_key_while_flying(stack: Stack) -> None:
+    """Random and mutated payloads on every key (publications and queries) while the vehicles
+    hold: no process dies or restarts, the flight goes on. A mutated payload that still decodes
+    as the key's own message type is not sent on control keys (that is a valid command or
+    state, not garbage: keeping strangers off the bus is the access control's job)."""
+    keys, rng = stack.keys, random.Random(9)
+    samples = list(SAMPLES.values())
+    topics: list[tuple[str, type[Message] | None]] = [
+        (keys.tick(), SimTick),
+        (keys.clock(), Clock),
+        (keys.node_health("physics"), NodeHealth),
+        (keys.plume_info(), None),
+    ]
+    for v in VEHICLES:
+        topics += [
+            (keys.vehicle_state(v), VehicleState),
+            (keys.vehicle_actuators(v), ActuatorCommand),
+            (keys.vehicle_status(v), VehicleStatus),
+            (keys.vehicle_concentration(v), ConcentrationReading),
+        ]
+    queries: list[tuple[str, type[Message] | None]] = [
+        (keys.plume_concentration(), PlumeQuery),
+        (keys.plume_info(), PlumeInfoQuery),
+        (keys.plume_mesh(), PlumeMeshQuery),
+        *[(keys.vehicle_cmd(v), Command) for v in VEHICLES],  # type: ignore[misc]
+    ]
+
+    def garbage(own: type[Message] | None) -> bytes:
+        while True:
+            data = _mutate(rng, encode(rng.choice(samples)))
+            if own is None:
+                return data
+            try:
+                decode(data, own)
+            except MessageError:
+                return data
+
+    pids = stack.pids()
+    ticks = {v: stack.tick_of(v) for v in VEHICLES}
+    publishers = {k: stack.session.declare_publisher(k) for k, _ in topics}
+    sent = asked = 0
+    deadline = time.monotonic() + FUZZ_SECONDS
+    while time.monotonic() < deadline:
+        for _ in range(200):
+            key, own = rng.choice(topics)
+            publishers[key].put(garbage(own))
+            sent += 1
+        key, own = rng.choice(queries)
+        for _ in stack.session.get(key, payload=garbage(own), timeout=2.0):
+            pass
+        asked += 1
+    for p in publishers.values():
+        p.undeclare()
+    wait_until(lambda: all(stack.tick_of(v) > ticks[v] + 50 for v in VEHICLES), 60.0, "ticks go on")
+    assert stack.up.poll() is None
+    assert stack.pids() == pids, "a process was restarted"
+    assert all(psutil.pid_exists(p) for p in pids.values())
+    for v in VEHICLES:
+        assert stack.states[v].position_enu_m[2] > ALTITUDE_M - 3, v
+        assert stack.status[v].mode == FlightMode.HOLD and stack.status[v].armed, v
+    print(f"fuzz: {sent} publications and {asked} queries in {FUZZ_SECONDS:.0f} s, "
+          "no process died, the vehicles held")  # fmt: skip
 
 
 def test_autopilot_killed_midflight_others_fly_on_and_it_takes_back(stack: Stack) -> None:
