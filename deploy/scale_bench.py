@@ -37,6 +37,7 @@ import zenoh
 from deploy.demo import DemoError, command_until_answered
 from deploy.launcher import Launcher, LaunchError, LaunchOptions
 from deploy.scaling import scale_scenario, write_scenario
+from deploy.up import stop_on_signals
 from swarmbus.codec import MessageError, decode
 from swarmbus.keys import KeyNameError, Keys
 from swarmbus.messages import (
@@ -243,7 +244,9 @@ def drive(launcher: Launcher, sc: Scenario, state: str, deadline: float) -> None
             command_until_answered(session, keys, v.id, MissionStart(), deadline)
 
 
-def run_case(opts: ScaleOptions, n: int, state: str) -> dict[str, Any]:
+def run_case(
+    opts: ScaleOptions, n: int, state: str, stop: threading.Event | None = None
+) -> dict[str, Any]:
     run_dir = opts.out / f"{state}-{n}"
     sc, path = prepare(opts.scenario, n, run_dir)
     ids = [v.id for v in sc.vehicles]
@@ -283,6 +286,8 @@ def run_case(opts: ScaleOptions, n: int, state: str) -> dict[str, Any]:
         cpu_t0 = time.monotonic()
         end = cpu_t0 + opts.seconds
         while time.monotonic() < end:
+            if stop is not None and stop.is_set():
+                raise ScaleError("interrupted")
             usage.sample_rss()
             launcher.supervise_once()
             time.sleep(min(SAMPLE_PERIOD_S, max(0.0, end - time.monotonic())))
@@ -383,26 +388,33 @@ def run_scale(opts: ScaleOptions, echo: Callable[[str], None] = print) -> list[d
     opts.out.mkdir(parents=True, exist_ok=True)
     cases = [(n, s) for n in opts.vehicles for s in opts.states]
     rows: list[dict[str, Any]] = []
-    bar = tqdm(cases, desc="bench scale", unit="case")
-    for n, state in bar:
-        bar.set_postfix_str(f"{n} {state}")
-        try:
-            row = run_case(opts, n, state)
-        except (LaunchError, ScaleError, DemoError) as exc:
-            row = {"vehicles": n, "state": state, "error": str(exc)}
-        rows.append(row)
-        bar.write(
-            f"{n:4d} {state:<9} "
-            + (
-                f"RTF {row['real_time_factor']:6.2f}  {row['ticks_per_s']:6.0f} ticks/s  "
-                f"CPU {row['cpu_percent_total']:5.0f} %  load1 {row['load1']:.2f}"
-                if "error" not in row
-                else f"error: {row['error']}"
-            )
-        )
-        (opts.out / "scale.json").write_text(json.dumps(rows, indent=2) + "\n")
+    with stop_on_signals() as stop:
+        bar = tqdm(cases, desc="bench scale", unit="case")
+        for n, state in bar:
+            if stop.is_set():
+                break
+            rows.append(_one(opts, n, state, stop, bar))
+            (opts.out / "scale.json").write_text(json.dumps(rows, indent=2) + "\n")
     (opts.out / "scale.md").write_text(markdown(rows))
     plots(rows, opts.out)
     echo(markdown(rows))
     echo(f"written: {opts.out / 'scale.json'}, scale.md, rtf.png, cpu.png")
     return rows
+
+
+def _one(opts: ScaleOptions, n: int, state: str, stop: threading.Event, bar: Any) -> dict[str, Any]:
+    bar.set_postfix_str(f"{n} {state}")
+    try:
+        row = run_case(opts, n, state, stop)
+    except (LaunchError, ScaleError, DemoError) as exc:
+        row = {"vehicles": n, "state": state, "error": str(exc)}
+    bar.write(
+        f"{n:4d} {state:<9} "
+        + (
+            f"RTF {row['real_time_factor']:6.2f}  {row['ticks_per_s']:6.0f} ticks/s  "
+            f"CPU {row['cpu_percent_total']:5.0f} %  load1 {row['load1']:.2f}"
+            if "error" not in row
+            else f"error: {row['error']}"
+        )
+    )
+    return row
