@@ -148,6 +148,13 @@ def node(
 @click.option("--no-router", is_flag=True, help="Do not start a router (another host runs it).")
 @click.option("--hosts", "hosts_file", type=click.Path(path_type=Path), default=None)
 @click.option("--host", "host_name", default=None, help="This host's entry in --hosts.")
+@click.option(
+    "--vehicles-per-process",
+    type=click.IntRange(min=1),
+    default=1,
+    show_default=True,
+    help="Vehicles each autopilot process serves.",
+)
 def up(
     scenario_arg: str | None,
     scenario: str | None,
@@ -160,6 +167,7 @@ def up(
     no_router: bool,
     hosts_file: Path | None,
     host_name: str | None,
+    vehicles_per_process: int,
 ) -> None:
     """Start the whole swarm (plume, physics, autopilots, gateway, viewer) and supervise it."""
     from deploy.console import Console
@@ -184,6 +192,7 @@ def up(
         listen=listen,
         roles=tuple(r.strip() for r in roles.split(",") if r.strip()) if roles else None,
         router=not no_router,
+        vehicles_per_process=vehicles_per_process,
     )
     if deployment is not None or host_name is not None:
         try:
