@@ -2,13 +2,19 @@
 
 from __future__ import annotations
 
+import csv
 import json
 from pathlib import Path
+from typing import Any
 
+import numpy as np
 import pytest
+from matplotlib.image import imread
 
 from deploy.launcher import missing_roles
+from deploy.recording.report import READING_COLUMNS, TRACK_COLUMNS
 from tests.procs import run_cli
+from tests.test_report import PNGS
 
 pytestmark = pytest.mark.skipif(
     bool(missing_roles(["plume", "physics", "autopilot"])),
@@ -38,6 +44,25 @@ def test_demo_flies_the_seed_scenario_and_writes_the_summary(tmp_path: Path) -> 
             assert row["reported_g_m3"] == pytest.approx(row["model_g_m3"], rel=1e-9), (vid, row)
     pids = json.loads((tmp_path / "pids.json").read_text())
     assert {"router", "plume", "physics", "autopilot-uav1", "autopilot-uav3"} <= set(pids)
+    _report_of_the_real_flight(Path(summary["recording"]), tmp_path / "report", summary)
+
+
+def _report_of_the_real_flight(recording: Path, out: Path, summary: dict[str, Any]) -> None:
+    """``plumeswarm report`` on the demo's own recording: every PNG drawn, every reading kept."""
+    result = run_cli(["report", str(recording), "--out", str(out)], timeout_s=600)
+    assert result.returncode == 0, result.stderr[-2000:]
+    for name in PNGS:
+        pixels = imread(out / name)
+        assert np.var(pixels[..., :3]) > 1e-3, f"{name} is blank"
+    for vid, v in summary["vehicles"].items():
+        with open(out / f"{vid}_readings.csv") as f:
+            rows = list(csv.reader(f))
+        assert rows[0] == list(READING_COLUMNS)
+        # the recorder ran from before take-off: it holds at least every reading the demo saw
+        assert len(rows) - 1 >= v["readings"], vid
+        with open(out / f"{vid}_track.csv") as f:
+            track = list(csv.reader(f))
+        assert track[0] == list(TRACK_COLUMNS) and len(track) > 100, vid
 
 
 def test_demo_scales_to_more_vehicles(tmp_path: Path) -> None:

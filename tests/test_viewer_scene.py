@@ -166,17 +166,23 @@ def test_feed_keeps_only_the_newest_tick(network: tuple[Network, zenoh.Session])
     keys = keys_for()
     from swarmbus.session import open_session
 
+    def tick(k: int) -> bytes:
+        return encode(SimTick(tick=k, sim_time_s=k / 120, control_dt_s=1 / 120, states=[]))
+
     with open_session(net.client) as session:
         feed = Feed(session, keys)
+
+        def subscribed() -> bool:  # start-up handshake: the subscription reached the router
+            router.put(keys.tick(), tick(0))
+            return feed.take()[0] is not None
+
+        wait_until(subscribed, 20.0, "the feed's subscription to carry a tick", poll_s=0.05)
         for k in range(1, 51):
-            msg = SimTick(tick=k, sim_time_s=k / 120, control_dt_s=1 / 120, states=[])
-            router.put(keys.tick(), encode(msg))
+            router.put(keys.tick(), tick(k))
 
         def newest() -> bool:
             raw, _ = feed.take()
-            return raw is not None and raw == encode(
-                SimTick(tick=50, sim_time_s=50 / 120, control_dt_s=1 / 120, states=[])
-            )
+            return raw is not None and raw == tick(50)
 
         wait_until(newest, 20.0, "tick 50 as the newest frame")
         assert feed.take()[0] is None, "a frame is handed out once; stale ones are dropped"
