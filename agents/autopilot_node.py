@@ -28,6 +28,7 @@ from contextlib import suppress
 from dataclasses import dataclass, fields
 from typing import Any
 
+import msgspec
 import numpy as np
 import zenoh
 
@@ -154,11 +155,56 @@ def _status_key(s: VehicleStatus) -> tuple[object, ...]:
     )
 
 
+class _TickView(msgspec.Struct, frozen=True, tag_field="schema", tag=SimTick.__struct_config__.tag):
+    """A ``SimTick`` whose states stay undecoded: an autopilot fully decodes only its own."""
+
+    tick: int
+    sim_time_s: float
+    states: list[msgspec.Raw]
+
+
+class _StateHead(
+    msgspec.Struct, frozen=True, tag_field="schema", tag=VehicleState.__struct_config__.tag
+):
+    """What an autopilot needs of every state in a tick: who and where (the sensor query)."""
+
+    vehicle_id: str
+    position_enu_m: tuple[float, float, float]
+
+
+_head_decoder = msgspec.msgpack.Decoder(_StateHead)
+
+
+@dataclass
+class _Tick:
+    """One decoded tick: number, time, who is where, and the raw states."""
+
+    tick: int
+    sim_time_s: float
+    heads: list[_StateHead]
+    raw: list[msgspec.Raw]
+
+    @classmethod
+    def decode(cls, data: bytes) -> _Tick:
+        view = decode(data, _TickView)
+        try:
+            heads = [_head_decoder.decode(r) for r in view.states]
+        except (msgspec.ValidationError, msgspec.DecodeError) as exc:
+            raise MessageError("SimTick", "states", str(exc)) from None
+        return cls(view.tick, view.sim_time_s, heads, view.states)
+
+    @classmethod
+    def of(cls, tick: SimTick) -> _Tick:
+        raw = [msgspec.Raw(encode(s)) for s in tick.states]
+        heads = [_StateHead(s.vehicle_id, s.position_enu_m) for s in tick.states]
+        return cls(tick.tick, tick.sim_time_s, heads, raw)
+
+
 @dataclass
 class _PendingSensor:
     tick: int
     sim_time_s: float
-    states: list[VehicleState]
+    states: list[_StateHead]
     replies: zenoh.handlers.Handler[zenoh.Reply] | None  # None: no plume node was alive
 
 
@@ -285,7 +331,7 @@ class AutopilotNode:
             except zenoh.ZError:  # the session closed
                 return
             try:
-                tick = decode(sample.payload.to_bytes(), SimTick)
+                tick = _Tick.decode(sample.payload.to_bytes())
             except MessageError as exc:
                 log.warning("ignoring bad tick: %s", exc)
                 continue
@@ -296,7 +342,9 @@ class AutopilotNode:
                     return
                 log.exception("tick %d failed", tick.tick)
 
-    def on_tick(self, tick: SimTick) -> None:
+    def on_tick(self, tick: SimTick | _Tick) -> None:
+        if isinstance(tick, SimTick):
+            tick = _Tick.of(tick)
         self.last_tick_wall = time.monotonic()
         if tick.tick == self.last_tick:  # the start handshake repeats a tick: same answer
             for served in self.served.values():
@@ -305,13 +353,23 @@ class AutopilotNode:
             return
         self.last_tick = tick.tick
         self._collect_readings()
-        states = {s.vehicle_id: s for s in tick.states}
+        index = {h.vehicle_id: k for k, h in enumerate(tick.heads)}
         with self.lock:
             for vid, served in self.served.items():
-                state = states.get(vid)
-                if state is None:
+                own = index.get(vid)
+                if own is None:
                     continue
-                peers = [s for s in tick.states if s.vehicle_id != vid]
+                try:
+                    state = decode(tick.raw[own], VehicleState)
+                    # Only a behaviour looks at the peers: decode them for it alone.
+                    peers = (
+                        [decode(r, VehicleState) for k, r in enumerate(tick.raw) if k != own]
+                        if served.autopilot.behavior is not None
+                        else []
+                    )
+                except MessageError as exc:
+                    log.warning("%s: ignoring bad state in tick %d: %s", vid, tick.tick, exc)
+                    continue
                 rotor = served.autopilot.step(state, peers, served.new_readings)
                 served.new_readings = []
                 served.last_command = encode(
@@ -324,21 +382,21 @@ class AutopilotNode:
                     )
             for served in self.served.values():
                 served.publish_status(force=False, period_s=self.options.status_period_s)
-        if any(s.sensor.due(tick.tick) for s in self.served.values()) and tick.states:
+        if any(s.sensor.due(tick.tick) for s in self.served.values()) and tick.heads:
             self._query_plume(tick)
 
     # ------------------------------------------------------------------ sensor
-    def _query_plume(self, tick: SimTick) -> None:
+    def _query_plume(self, tick: _Tick) -> None:
         query = PlumeQuery(
-            points_enu_m=[s.position_enu_m for s in tick.states], sim_time_s=tick.sim_time_s
+            points_enu_m=[s.position_enu_m for s in tick.heads], sim_time_s=tick.sim_time_s
         )
         if not self.plume_nodes:
-            self.pending = _PendingSensor(tick.tick, tick.sim_time_s, list(tick.states), None)
+            self.pending = _PendingSensor(tick.tick, tick.sim_time_s, tick.heads, None)
             return
         replies = self.session.get(
             self.plume_key, payload=encode(query), timeout=self.sensor_timeout_s
         )
-        self.pending = _PendingSensor(tick.tick, tick.sim_time_s, list(tick.states), replies)
+        self.pending = _PendingSensor(tick.tick, tick.sim_time_s, tick.heads, replies)
 
     def _collect_readings(self) -> None:
         pending, self.pending = self.pending, None

@@ -148,6 +148,13 @@ def node(
 @click.option("--no-router", is_flag=True, help="Do not start a router (another host runs it).")
 @click.option("--hosts", "hosts_file", type=click.Path(path_type=Path), default=None)
 @click.option("--host", "host_name", default=None, help="This host's entry in --hosts.")
+@click.option(
+    "--vehicles-per-process",
+    type=click.IntRange(min=1),
+    default=1,
+    show_default=True,
+    help="Vehicles each autopilot process serves.",
+)
 def up(
     scenario_arg: str | None,
     scenario: str | None,
@@ -160,6 +167,7 @@ def up(
     no_router: bool,
     hosts_file: Path | None,
     host_name: str | None,
+    vehicles_per_process: int,
 ) -> None:
     """Start the whole swarm (plume, physics, autopilots, gateway, viewer) and supervise it."""
     from deploy.console import Console
@@ -184,6 +192,7 @@ def up(
         listen=listen,
         roles=tuple(r.strip() for r in roles.split(",") if r.strip()) if roles else None,
         router=not no_router,
+        vehicles_per_process=vehicles_per_process,
     )
     if deployment is not None or host_name is not None:
         try:
@@ -295,10 +304,57 @@ def report(file: str, out: Path) -> None:
     sys.exit(commands.report(file, out))
 
 
-@cli.command(context_settings={"ignore_unknown_options": True, "allow_extra_args": True})
+@cli.group()
 def bench() -> None:
-    """Scale benchmark of the full stack."""
-    not_yet("plumeswarm bench", "#10")
+    """Benchmarks of the full stack."""
+
+
+def _int_list(ctx: click.Context, param: click.Parameter, value: str) -> tuple[int, ...]:
+    try:
+        out = tuple(int(v) for v in value.split(",") if v.strip())
+    except ValueError:
+        raise click.BadParameter(f"{value!r} is not a comma-separated list of integers") from None
+    if not out or min(out) < 1:
+        raise click.BadParameter("give at least one count, each >= 1")
+    return out
+
+
+@bench.command("scale")
+@SCENARIO_OPT
+@click.option("--vehicles", default="1,2,4,8,16,32,64", callback=_int_list, show_default=True)
+@click.option("--vehicles-per-process", type=click.IntRange(min=1), default=1, show_default=True)
+@click.option("--state", "states", default="grounded,hovering,flying", show_default=True)
+@click.option("--seconds", type=click.FloatRange(min=0.5), default=8.0, show_default=True)
+@click.option("--no-gateway", is_flag=True, help="Leave the MAVLink gateway out.")
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=None)
+def bench_scale(
+    scenario: str | None,
+    vehicles: tuple[int, ...],
+    vehicles_per_process: int,
+    states: str,
+    seconds: float,
+    no_gateway: bool,
+    out: Path | None,
+) -> None:
+    """Real-time factor, CPU and memory of the whole stack against the number of vehicles."""
+    import time
+
+    from deploy.scale_bench import ScaleError, ScaleOptions, run_scale
+
+    opts = ScaleOptions(
+        scenario=scenario_from(scenario),
+        out=out or Path("runs") / time.strftime("bench-scale-%Y%m%d-%H%M%S"),
+        vehicles=vehicles,
+        states=tuple(s.strip() for s in states.split(",") if s.strip()),
+        seconds=seconds,
+        vehicles_per_process=vehicles_per_process,
+        gateway=not no_gateway,
+    )
+    try:
+        rows = run_scale(opts, click.echo)
+    except ScaleError as exc:
+        fail(str(exc))
+    sys.exit(1 if any("error" in r for r in rows) else 0)
 
 
 def _register_groups() -> None:

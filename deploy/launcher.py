@@ -76,6 +76,7 @@ class LaunchOptions:
     roles: tuple[str, ...] | None = None  # only these roles (one host of many); None: all
     router: bool = True  # start the router here
     vehicles: tuple[str, ...] | None = None  # autopilots for these vehicles; None: all
+    vehicles_per_process: int = 1  # autopilot processes serve this many vehicles each
     verbose: int = 1
     node_options: dict[str, tuple[str, ...]] = field(default_factory=dict)  # role → KEY=VALUE
 
@@ -145,8 +146,13 @@ def plan(scenario: Scenario, opts: LaunchOptions) -> list[ProcessSpec]:
         if role == "router":
             add(role, "router", [a for ep in endpoints for a in ("--listen", ep)])
         elif role == "autopilot":
-            for vid in vehicle_ids:
-                add(role, f"autopilot-{vid}", ["--vehicle", vid, *net_args])
+            k = max(1, opts.vehicles_per_process)
+            for i in range(0, len(vehicle_ids), k):
+                chunk = vehicle_ids[i : i + k]
+                name = f"autopilot-{chunk[0]}" + (
+                    f"-plus{len(chunk) - 1}" if len(chunk) > 1 else ""
+                )
+                add(role, name, [a for vid in chunk for a in ("--vehicle", vid)] + net_args)
         elif role == "recorder":
             out = opts.run_dir / "recording.mcap"
             add(role, role, [*net_args, "--set", f"out={out}"])

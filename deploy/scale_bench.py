@@ -1,0 +1,420 @@
+"""``plumeswarm bench scale``: real-time factor and cost of the full stack against vehicle count.
+
+For every vehicle count N and every state (``grounded``: nothing is commanded; ``hovering``:
+arm + take off, then measure; ``flying``: arm + a looping square mission, then measure) it starts
+the whole stack (router, plume, physics, N autopilots — K per process —, gateway; no viewer) in
+lockstep on a free loopback port with the scenario scaled to N vehicles
+(:func:`deploy.scaling.scale_scenario`), waits until the state is reached, then measures for
+``seconds`` of wall time:
+
+- real-time factor and ticks/s from two ``sim/clock`` messages (sim time and tick advance over
+  the wall time between their arrivals);
+- CPU % per role (psutil: user + system time of every process of the role, children included,
+  over the window; 100 % = one core);
+- the 1-minute load average at the end of the window (the machine may be shared);
+- peak RSS per role (the role's processes summed, sampled every 0.5 s).
+
+Rows go to ``DIR/scale.json``, a table to ``DIR/scale.md`` and plots to ``DIR/rtf.png`` and
+``DIR/cpu.png``. The bench's own session subscribes only to the clock and the statuses.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import msgspec
+import psutil
+import zenoh
+
+from deploy.demo import DemoError, command_until_answered
+from deploy.launcher import Launcher, LaunchError, LaunchOptions
+from deploy.scaling import scale_scenario, write_scenario
+from deploy.up import stop_on_signals
+from swarmbus.codec import MessageError, decode
+from swarmbus.keys import KeyNameError, Keys
+from swarmbus.messages import (
+    Arm,
+    Clock,
+    MissionCommand,
+    MissionItem,
+    MissionStart,
+    MissionUpload,
+    Takeoff,
+    VehicleStatus,
+)
+from swarmbus.scenario import Scenario
+from swarmbus.session import free_tcp_port
+
+log = logging.getLogger(__name__)
+
+STATES = ("grounded", "hovering", "flying")
+ROLES = ("router", "plume", "physics", "autopilot", "gateway")
+ALTITUDE_M = 10.0
+LAYER_M = 1.5  # vehicles on one spawn grid fly at different heights, one layer per row
+SQUARE_M = 3.0  # half side of each vehicle's looping square
+LAPS = 200
+SAMPLE_PERIOD_S = 0.5
+WARMUP_S = 1.0  # wall time between reaching the state and the window (start-up transients)
+AIRBORNE_M = 1.0
+
+
+class ScaleError(RuntimeError):
+    pass
+
+
+@dataclass(frozen=True)
+class ScaleOptions:
+    scenario: Scenario
+    out: Path
+    vehicles: tuple[int, ...] = (1, 2, 4, 8, 16, 32, 64)
+    states: tuple[str, ...] = STATES
+    seconds: float = 10.0
+    vehicles_per_process: int = 1
+    gateway: bool = True
+    startup_timeout_s: float = 120.0
+
+
+# ---------------------------------------------------------------------------- scenario
+def prepare(sc: Scenario, n: int, run_dir: Path) -> tuple[Scenario, Path]:
+    """``sc`` with ``n`` vehicles, in lockstep, on a free router port, written into run_dir."""
+    sc = scale_scenario(sc, n)
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    sc = msgspec.structs.replace(
+        sc,
+        network=msgspec.structs.replace(sc.network, connect=[endpoint]),
+        time=msgspec.structs.replace(
+            sc.time,
+            mode="lockstep",
+            duration_s=0.0,
+            startup_timeout_s=max(sc.time.startup_timeout_s, 120.0),
+        ),
+    )
+    return sc, write_scenario(sc, run_dir / "scenario.toml")
+
+
+def flight_altitude(sc: Scenario, index: int) -> float:
+    """Vehicles in one spawn row share a layer; rows stack up so squares never meet."""
+    return ALTITUDE_M + (index % 8) * LAYER_M
+
+
+def loop_mission(sc: Scenario, index: int) -> list[MissionItem]:
+    """A square of side ``2·SQUARE_M`` around the spawn point, ``LAPS`` times (no landing)."""
+    v = sc.vehicles[index]
+    x0, y0, z0 = v.spawn_enu_m
+    z = z0 + flight_altitude(sc, index)
+    items = [MissionItem(command=MissionCommand.TAKEOFF, x=x0, y=y0, z=z)]
+    corners = [(1, 1), (-1, 1), (-1, -1), (1, -1)]
+    for _ in range(LAPS):
+        items += [
+            MissionItem(x=x0 + dx * SQUARE_M, y=y0 + dy * SQUARE_M, z=z, acceptance_radius_m=1.0)
+            for dx, dy in corners
+        ]
+    return items[:1000]
+
+
+# ---------------------------------------------------------------------------- observation
+class Watch:
+    """The latest clock (with its arrival time) and each vehicle's latest status."""
+
+    def __init__(self, session: zenoh.Session, keys: Keys) -> None:
+        self.keys = keys
+        self.lock = threading.Lock()
+        self.changed = threading.Condition(self.lock)
+        self.clock: tuple[float, Clock] | None = None
+        self.status: dict[str, VehicleStatus] = {}
+        self._subs = [
+            session.declare_subscriber(keys.clock(), self._on_clock),
+            session.declare_subscriber(keys.all_vehicle_status(), self._on_status),
+        ]
+
+    def _on_clock(self, sample: zenoh.Sample) -> None:
+        now = time.monotonic()
+        try:
+            clock = decode(sample.payload.to_bytes(), Clock)
+        except MessageError:
+            return
+        with self.lock:
+            self.clock = (now, clock)
+            self.changed.notify_all()
+
+    def _on_status(self, sample: zenoh.Sample) -> None:
+        try:
+            vid = self.keys.vehicle_id_of(str(sample.key_expr))
+            st = decode(sample.payload.to_bytes(), VehicleStatus)
+        except (KeyNameError, MessageError):
+            return
+        with self.lock:
+            self.status[vid] = st
+            self.changed.notify_all()
+
+    def wait(self, pred: Callable[[Watch], bool], deadline: float, what: str) -> None:
+        with self.lock:
+            while not pred(self):
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise ScaleError(f"timed out waiting for {what}")
+                self.changed.wait(min(left, 0.5))
+
+    def next_clock(self, after: float, deadline: float) -> tuple[float, Clock]:
+        """The first clock that arrives after monotonic time ``after``."""
+        self.wait(lambda w: w.clock is not None and w.clock[0] > after, deadline, "sim/clock")
+        assert self.clock is not None
+        return self.clock
+
+    def close(self) -> None:
+        for sub in self._subs:
+            sub.undeclare()
+
+
+def _airborne(ids: Sequence[str]) -> Callable[[Watch], bool]:
+    def pred(w: Watch) -> bool:
+        return all((s := w.status.get(v)) is not None and s.armed and not s.landed for v in ids)
+
+    return pred
+
+
+class RoleUsage:
+    """CPU seconds and peak RSS per role over a window (processes and their children)."""
+
+    def __init__(self, pids_by_role: dict[str, list[int]]) -> None:
+        self.procs: dict[str, list[psutil.Process]] = {}
+        for role, pids in pids_by_role.items():
+            procs = []
+            for pid in pids:
+                try:
+                    p = psutil.Process(pid)
+                    procs += [p, *p.children(recursive=True)]
+                except psutil.Error:
+                    continue
+            self.procs[role] = procs
+        self.cpu0 = self._cpu()
+        self.peak_rss: dict[str, float] = {r: 0.0 for r in self.procs}
+
+    def _cpu(self) -> dict[str, float]:
+        out = {}
+        for role, procs in self.procs.items():
+            total = 0.0
+            for p in procs:
+                try:
+                    t = p.cpu_times()
+                    total += t.user + t.system
+                except psutil.Error:
+                    continue
+            out[role] = total
+        return out
+
+    def sample_rss(self) -> None:
+        for role, procs in self.procs.items():
+            total = 0
+            for p in procs:
+                try:
+                    total += p.memory_info().rss
+                except psutil.Error:
+                    continue
+            self.peak_rss[role] = max(self.peak_rss[role], total / 2**20)
+
+    def cpu_percent(self, wall_s: float) -> dict[str, float]:
+        cpu1 = self._cpu()
+        return {r: round(100.0 * (cpu1[r] - self.cpu0[r]) / wall_s, 1) for r in self.procs}
+
+
+# ---------------------------------------------------------------------------- one case
+def drive(launcher: Launcher, sc: Scenario, state: str, deadline: float) -> None:
+    keys = Keys(sc.world.name)
+    session = launcher.session
+    for k, v in enumerate(sc.vehicles):
+        if state == "hovering":
+            command_until_answered(session, keys, v.id, Arm(), deadline)
+            command_until_answered(
+                session, keys, v.id, Takeoff(altitude_m=flight_altitude(sc, k)), deadline
+            )
+        elif state == "flying":
+            command_until_answered(
+                session, keys, v.id, MissionUpload(items=loop_mission(sc, k)), deadline
+            )
+            command_until_answered(session, keys, v.id, Arm(), deadline)
+            command_until_answered(session, keys, v.id, MissionStart(), deadline)
+
+
+def run_case(
+    opts: ScaleOptions, n: int, state: str, stop: threading.Event | None = None
+) -> dict[str, Any]:
+    run_dir = opts.out / f"{state}-{n}"
+    sc, path = prepare(opts.scenario, n, run_dir)
+    ids = [v.id for v in sc.vehicles]
+    roles = tuple(r for r in ROLES if r != "gateway" or opts.gateway)
+    launch = LaunchOptions(
+        scenario_path=path,
+        headless=True,
+        run_dir=run_dir,
+        roles=roles,
+        vehicles_per_process=opts.vehicles_per_process,
+        verbose=0,
+    )
+    launcher = Launcher(sc, launch)
+    deadline = time.monotonic() + opts.startup_timeout_s
+    watch: Watch | None = None
+    keys = Keys(sc.world.name)
+    try:
+        launcher.start()
+        # The launcher's view subscribes to every state; the bench needs only clock + status.
+        if launcher.view is not None:
+            launcher.view.close()
+            launcher.view = None
+        watch = Watch(launcher.session, keys)
+        watch.wait(lambda w: len(w.status) >= len(ids), deadline, "every vehicle's status")
+        watch.next_clock(time.monotonic(), deadline)
+        drive(launcher, sc, state, deadline)
+        if state != "grounded":
+            watch.wait(_airborne(ids), deadline, "every vehicle airborne")
+        time.sleep(WARMUP_S)
+        by_role: dict[str, list[int]] = {}
+        pids = launcher.supervisor.pids()
+        for spec in launcher.specs:
+            if spec.name in pids:
+                by_role.setdefault(spec.role, []).append(pids[spec.name])
+        usage = RoleUsage(by_role)
+        t0, c0 = watch.next_clock(time.monotonic(), deadline)
+        cpu_t0 = time.monotonic()
+        end = cpu_t0 + opts.seconds
+        while time.monotonic() < end:
+            if stop is not None and stop.is_set():
+                raise ScaleError("interrupted")
+            usage.sample_rss()
+            launcher.supervise_once()
+            time.sleep(min(SAMPLE_PERIOD_S, max(0.0, end - time.monotonic())))
+        t1, c1 = watch.next_clock(time.monotonic() - 1e-3, time.monotonic() + 30.0)
+        cpu = usage.cpu_percent(time.monotonic() - cpu_t0)
+        usage.sample_rss()
+        load1 = os.getloadavg()[0]
+        wall = t1 - t0
+        return {
+            "vehicles": n,
+            "state": state,
+            "vehicles_per_process": opts.vehicles_per_process,
+            "control_hz": sc.time.control_hz,
+            "physics_hz": sc.time.physics_hz,
+            "real_time_factor": round((c1.sim_time_s - c0.sim_time_s) / wall, 3),
+            "ticks_per_s": round((c1.tick - c0.tick) / wall, 1),
+            "cpu_percent_by_role": cpu,
+            "cpu_percent_total": round(sum(cpu.values()), 1),
+            "load1": round(load1, 2),
+            "peak_rss_mb_by_role": {r: round(v, 1) for r, v in usage.peak_rss.items()},
+            "wall_s": round(wall, 2),
+        }
+    finally:
+        if watch is not None:
+            watch.close()
+        launcher.stop()
+
+
+# ---------------------------------------------------------------------------- output
+TABLE_CPU = ("physics", "autopilot", "plume", "gateway", "router")
+
+
+def markdown(rows: Sequence[dict[str, Any]]) -> str:
+    head = (
+        "| N | state | K | RTF | ticks/s | CPU % total | "
+        + " | ".join(f"CPU % {r}" for r in TABLE_CPU)
+        + " | load1 | RSS MB autopilots | RSS MB physics |"
+    )
+    lines = [head, "|" + "---|" * (head.count("|") - 1)]
+    for r in rows:
+        if "error" in r:
+            lines.append(f"| {r['vehicles']} | {r['state']} | error: {r['error']} |")
+            continue
+        cpu, rss = r["cpu_percent_by_role"], r["peak_rss_mb_by_role"]
+        cells = [
+            str(r["vehicles"]),
+            r["state"],
+            str(r["vehicles_per_process"]),
+            f"{r['real_time_factor']:.2f}",
+            f"{r['ticks_per_s']:.0f}",
+            f"{r['cpu_percent_total']:.0f}",
+            *(f"{cpu.get(k, 0.0):.0f}" for k in TABLE_CPU),
+            f"{r['load1']:.2f}",
+            f"{rss.get('autopilot', 0.0):.0f}",
+            f"{rss.get('physics', 0.0):.0f}",
+        ]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def plots(rows: Sequence[dict[str, Any]], out: Path) -> list[Path]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    good = [r for r in rows if "error" not in r]
+    written = []
+    for name, key, label in (
+        ("rtf.png", "real_time_factor", "real-time factor"),
+        ("cpu.png", "cpu_percent_total", "CPU % (100 = one core)"),
+    ):
+        fig, ax = plt.subplots(figsize=(6, 4))
+        for state in STATES:
+            pts = sorted((r["vehicles"], r[key]) for r in good if r["state"] == state)
+            if pts:
+                ax.plot([p[0] for p in pts], [p[1] for p in pts], marker="o", label=state)
+        ax.set_xscale("log", base=2)
+        ax.set_xlabel("vehicles")
+        ax.set_ylabel(label)
+        if key == "real_time_factor":
+            ax.axhline(1.0, color="grey", linewidth=0.8, linestyle="--")
+        ax.grid(True, alpha=0.3)
+        ax.legend()
+        fig.tight_layout()
+        fig.savefig(out / name, dpi=100)
+        plt.close(fig)
+        written.append(out / name)
+    return written
+
+
+def run_scale(opts: ScaleOptions, echo: Callable[[str], None] = print) -> list[dict[str, Any]]:
+    from tqdm import tqdm
+
+    unknown = [s for s in opts.states if s not in STATES]
+    if unknown:
+        raise ScaleError(f"unknown state(s) {', '.join(unknown)}; states: {', '.join(STATES)}")
+    opts.out.mkdir(parents=True, exist_ok=True)
+    cases = [(n, s) for n in opts.vehicles for s in opts.states]
+    rows: list[dict[str, Any]] = []
+    with stop_on_signals() as stop:
+        bar = tqdm(cases, desc="bench scale", unit="case")
+        for n, state in bar:
+            if stop.is_set():
+                break
+            rows.append(_one(opts, n, state, stop, bar))
+            (opts.out / "scale.json").write_text(json.dumps(rows, indent=2) + "\n")
+    (opts.out / "scale.md").write_text(markdown(rows))
+    plots(rows, opts.out)
+    echo(markdown(rows))
+    echo(f"written: {opts.out / 'scale.json'}, scale.md, rtf.png, cpu.png")
+    return rows
+
+
+def _one(opts: ScaleOptions, n: int, state: str, stop: threading.Event, bar: Any) -> dict[str, Any]:
+    bar.set_postfix_str(f"{n} {state}")
+    try:
+        row = run_case(opts, n, state, stop)
+    except (LaunchError, ScaleError, DemoError) as exc:
+        row = {"vehicles": n, "state": state, "error": str(exc)}
+    bar.write(
+        f"{n:4d} {state:<9} "
+        + (
+            f"RTF {row['real_time_factor']:6.2f}  {row['ticks_per_s']:6.0f} ticks/s  "
+            f"CPU {row['cpu_percent_total']:5.0f} %  load1 {row['load1']:.2f}"
+            if "error" not in row
+            else f"error: {row['error']}"
+        )
+    )
+    return row

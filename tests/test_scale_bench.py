@@ -1,0 +1,76 @@
+"""``plumeswarm bench scale`` runs tiny and writes its files (no speed assertions)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from deploy.launcher import LaunchOptions, plan
+from deploy.scale_bench import loop_mission, markdown
+from deploy.scaling import scale_scenario
+from swarmbus.scenario import load_scenario, resolve_scenario_path
+from tests.procs import run_cli
+
+COLUMNS = {
+    "vehicles",
+    "state",
+    "real_time_factor",
+    "ticks_per_s",
+    "cpu_percent_by_role",
+    "load1",
+    "peak_rss_mb_by_role",
+}
+
+
+def test_plan_packs_vehicles_per_process(tmp_path: Path) -> None:
+    sc = scale_scenario(load_scenario(resolve_scenario_path(None)), 5)
+    opts = LaunchOptions(
+        scenario_path=tmp_path / "s.toml", roles=("autopilot",), vehicles_per_process=2
+    )
+    specs = plan(sc, opts)
+    assert [s.name for s in specs] == [
+        "autopilot-uav1-plus1",
+        "autopilot-uav3-plus1",
+        "autopilot-uav5",
+    ]
+    assert specs[0].argv.count("--vehicle") == 2
+
+
+def test_loop_mission_stays_in_the_air() -> None:
+    sc = scale_scenario(load_scenario(resolve_scenario_path(None)), 3)
+    items = loop_mission(sc, 1)
+    assert items[0].command == "takeoff"
+    assert all(i.command == "waypoint" for i in items[1:])
+    assert len(items) <= 1000
+    assert markdown([{"vehicles": 1, "state": "grounded", "error": "x"}]).count("\n") == 3
+
+
+def test_bench_scale_tiny(tmp_path: Path) -> None:
+    out = tmp_path / "scale"
+    result = run_cli(
+        [
+            "bench",
+            "scale",
+            "--vehicles",
+            "1,2",
+            "--state",
+            "grounded",
+            "--seconds",
+            "2",
+            "--out",
+            str(out),
+        ],
+        timeout_s=240.0,
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
+    rows = json.loads((out / "scale.json").read_text())
+    assert [(r["vehicles"], r["state"]) for r in rows] == [(1, "grounded"), (2, "grounded")]
+    for row in rows:
+        assert row.keys() >= COLUMNS
+        roles = set(row["cpu_percent_by_role"])
+        assert roles == {"physics", "autopilot", "plume", "gateway", "router"}
+        assert row["ticks_per_s"] > 0
+    table = (out / "scale.md").read_text()
+    assert "| 2 | grounded |" in table
+    assert (out / "rtf.png").stat().st_size > 0
+    assert (out / "cpu.png").stat().st_size > 0
