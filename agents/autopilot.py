@@ -92,6 +92,7 @@ class Autopilot:
         self.now = 0.0
         # the scenario's mission is uploaded with the first state, when home is known
         self._scenario_mission = list(vehicle.mission)
+        self._spawn = vehicle.spawn_enu_m
         self._zero = [0.0] * self.mixer.rotor_count
         self._idle = [IDLE_COMMAND] * self.mixer.rotor_count
         self._handlers: dict[type[Any], Callable[[Any], CommandReply | Refusal | None]] = {
@@ -124,10 +125,16 @@ class Autopilot:
         readings: Sequence[ConcentrationReading] = (),
     ) -> list[float]:
         """Rotor commands (0..1) for this tick's state."""
+        first = self.state is None
         self.state = state
         self.now = now = state.sim_time_s
         est = self.est = self.estimator.estimate(state)
         modes = self.modes
+        if first and not state.on_ground and not state.crashed:
+            # restarted mid-flight: take the vehicle back in hold where it is (never drop it)
+            modes.resume_in_air(est, self._spawn)
+            self.controller.reset()
+            log.warning("%s: found in the air at start: armed, holding", self.vehicle_id)
         if not modes.armed:
             modes.home = est.position  # home follows the vehicle until it is armed
         if self._scenario_mission:

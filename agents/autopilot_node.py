@@ -13,8 +13,9 @@ right after tick k's commands and collected before tick k+1's, so its round trip
 physics step and a behaviour always sees the reading of the previous sensor tick — the same
 run after run. Commands are handled on Zenoh's thread under a lock.
 
-Options (``--set key=value``): ``sensor_timeout_s`` (0.2), ``status_period_s`` (0.5),
-``position_noise_m`` / ``velocity_noise_m_s`` (0: the estimate is the physics' truth).
+Options (``--set key=value``): ``sensor_timeout_s`` (0: 0.4 × participant timeout),
+``status_period_s`` (0.5), ``position_noise_m`` / ``velocity_noise_m_s`` (0: the estimate is
+the physics' truth). Plume queries go out only while a ``plume`` node's token is alive.
 """
 
 from __future__ import annotations
@@ -59,7 +60,9 @@ TICK_QUEUE = 64
 
 @dataclass(frozen=True)
 class NodeOptions:
-    sensor_timeout_s: float = 0.2
+    # 0: derived from the scenario, 0.4 × participant_timeout_s (so a slow answer on a loaded
+    # machine is still waited for, and the lockstep never drops us for waiting).
+    sensor_timeout_s: float = 0.0
     status_period_s: float = 0.5
     position_noise_m: float = 0.0
     velocity_noise_m_s: float = 0.0
@@ -156,7 +159,7 @@ class _PendingSensor:
     tick: int
     sim_time_s: float
     states: list[VehicleState]
-    replies: zenoh.handlers.Handler[zenoh.Reply]
+    replies: zenoh.handlers.Handler[zenoh.Reply] | None  # None: no plume node was alive
 
 
 class AutopilotNode:
@@ -175,12 +178,23 @@ class AutopilotNode:
         self._tick_sub: Any = None
         self.pending: _PendingSensor | None = None
         self.plume_key = self.keys.plume_concentration()
+        self.sensor_timeout_s = options.sensor_timeout_s or (
+            0.4 * ctx.scenario.time.participant_timeout_s
+        )
+        # Queries go out only while a plume node is alive: a dead service is reported as
+        # unavailable at once instead of costing every tick the full timeout.
+        self.plume_nodes: set[str] = set()
         self._declared: list[Any] = []  # subscribers and queryables, undeclared on close
         self._tokens: list[zenoh.LivelinessToken] = []
 
     # ------------------------------------------------------------------ set-up
     def declare(self, node_name: str) -> None:
         """Subscriber and queryables first, then the participants' tokens."""
+        self._declared.append(
+            self.session.liveliness().declare_subscriber(
+                self.keys.all_node_health(), self._on_presence, history=True
+            )
+        )
         # A Rust-side channel: no Python thread between the network and the tick loop.
         self._tick_sub = self.session.declare_subscriber(
             self.keys.tick(), zenoh.handlers.FifoChannel(TICK_QUEUE)
@@ -199,6 +213,17 @@ class AutopilotNode:
                 )
         for served in self.served.values():
             served.publish_status(force=True, period_s=self.options.status_period_s)
+
+    def _on_presence(self, sample: zenoh.Sample) -> None:
+        try:
+            name = self.keys.node_name_of(str(sample.key_expr))
+        except ValueError:
+            return
+        if name == "plume" or name.startswith("plume-"):
+            if sample.kind == zenoh.SampleKind.PUT:
+                self.plume_nodes.add(name)
+            else:
+                self.plume_nodes.discard(name)
 
     def close(self) -> None:
         for token in self._tokens:
@@ -307,8 +332,11 @@ class AutopilotNode:
         query = PlumeQuery(
             points_enu_m=[s.position_enu_m for s in tick.states], sim_time_s=tick.sim_time_s
         )
+        if not self.plume_nodes:
+            self.pending = _PendingSensor(tick.tick, tick.sim_time_s, list(tick.states), None)
+            return
         replies = self.session.get(
-            self.plume_key, payload=encode(query), timeout=self.options.sensor_timeout_s
+            self.plume_key, payload=encode(query), timeout=self.sensor_timeout_s
         )
         self.pending = _PendingSensor(tick.tick, tick.sim_time_s, list(tick.states), replies)
 
@@ -347,6 +375,8 @@ class AutopilotNode:
 
     def _values(self, pending: _PendingSensor) -> list[float] | None:
         """The plume's values for the pending query, or None (no answer in time, or an error)."""
+        if pending.replies is None:
+            return None
         try:
             for reply in pending.replies:
                 if reply.ok is None:

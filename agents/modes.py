@@ -177,6 +177,13 @@ class FlightModes:
         self.failsafe_reason = ""
         return None
 
+    def resume_in_air(self, est: Estimate, home: tuple[float, float, float]) -> None:
+        """Take back a vehicle found flying (a restarted autopilot): armed, holding here."""
+        self.home = home
+        self._hold_here(est)
+        self._set_mode(M.HOLD, est)
+        self.failsafe_reason = "autopilot restarted in the air: holding"
+
     def disarm(self, est: Estimate, force: bool = False) -> Refusal | None:
         to = self._allowed(Action.DISARM)
         if isinstance(to, Refusal):

@@ -48,7 +48,7 @@ def load_deployment(path: Path) -> Deployment:
     try:
         raw = tomllib.loads(path.read_text())
         dep = msgspec.convert(raw, Deployment)
-    except (OSError, tomllib.TOMLDecodeError, msgspec.ValidationError) as exc:
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError, msgspec.ValidationError) as exc:
         raise HostsError(f"{path}: {exc}") from None
     owners = [h.name for h in dep.hosts if "router" in h.roles]
     if len(owners) != 1:

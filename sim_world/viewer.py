@@ -135,6 +135,22 @@ def reading_colour(value: float, full_scale: float) -> int:
     return (r << 16) | (g << 8) | b
 
 
+class LoopbackBridge(ZMQWebSocketBridge):  # type: ignore[misc]
+    """meshcat's bridge, but its web server listens on ``host`` only (meshcat's own binds every
+    interface, whatever ``host`` says)."""
+
+    def make_app(self) -> Any:
+        app = super().make_app()
+        plain_listen = app.listen
+        host = self.host
+
+        def listen(port: int, **kwargs: Any) -> Any:
+            return plain_listen(port, address=host, **kwargs)
+
+        app.listen = listen
+        return app
+
+
 class MeshcatServer:
     """meshcat's websocket/zmq bridge on a thread of this process (no orphan server process)."""
 
@@ -142,7 +158,7 @@ class MeshcatServer:
         self.host = host
         self.http_port = http_port or free_tcp_port(host)
         self.zmq_url = f"tcp://{host}:{free_tcp_port(host)}"
-        self._bridge: ZMQWebSocketBridge | None = None
+        self._bridge: LoopbackBridge | None = None
         self._error: BaseException | None = None
         self._started = threading.Event()
         self._thread = threading.Thread(target=self._serve, name="meshcat", daemon=True)
@@ -151,9 +167,7 @@ class MeshcatServer:
         loop = asyncio.new_event_loop()
         asyncio.set_event_loop(loop)
         try:
-            self._bridge = ZMQWebSocketBridge(
-                zmq_url=self.zmq_url, host=self.host, port=self.http_port
-            )
+            self._bridge = LoopbackBridge(zmq_url=self.zmq_url, host=self.host, port=self.http_port)
         except BaseException as exc:
             self._error = exc
             self._started.set()

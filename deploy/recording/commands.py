@@ -27,6 +27,10 @@ def record(scenario: Scenario, connect: list[str], out: Path | None) -> int:
     ctx = _context(scenario, connect, "recorder", {"out": str(out)} if out else {})
     target = RecorderOptions.from_ctx(ctx).out
     ctx = _context(scenario, connect, "recorder", {"out": str(target)})
+    problem = _unwritable(target)
+    if problem:
+        click.echo(f"plumeswarm: error: cannot record to {target}: {problem}", err=True)
+        return 2
     click.echo(f"recording world {scenario.world.name!r} to {target} (Ctrl-C to stop)", err=True)
     code = run(ctx)
     if code == 0:
@@ -34,6 +38,19 @@ def record(scenario: Scenario, connect: list[str], out: Path | None) -> int:
     else:
         click.echo(f"plumeswarm: error: cannot record to {target} (see the log above)", err=True)
     return code
+
+
+def _unwritable(target: Path) -> str:
+    """Why a recording cannot be written at ``target`` ("" when it can, as far as we can tell)."""
+    if target.is_dir():
+        return "is a directory"
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        return exc.strerror or str(exc)
+    if not target.parent.is_dir():
+        return f"{target.parent} is not a directory"
+    return ""
 
 
 def replay(
