@@ -192,14 +192,3 @@ def test_live_table_lists_every_vehicle() -> None:
     )
     text = live_table(snap, {"uav1": VehicleRecord(), "uav2": VehicleRecord()}, 2)
     assert "12.50" in text and "uav2" in text and "flying 0/2" in text
-
-
-def test_demo_with_roles_missing_fails_clearly(tmp_path: Path) -> None:
-    from deploy.launcher import missing_roles
-
-    if not missing_roles(["plume", "physics", "autopilot"]):
-        pytest.skip("the stack is complete: the end-to-end demo test covers this")
-    result = run_cli(["demo", "--out", str(tmp_path), "--timeout", "60"], timeout_s=120)
-    assert result.returncode == 1
-    assert "not available yet" in result.stdout
-    assert (tmp_path / "scenario.toml").exists()

@@ -13,7 +13,7 @@ import psutil
 import pytest
 
 from swarmbus.session import NetworkConfig, Presence, free_tcp_port, open_session
-from tests.procs import REPO, keys_for, run_cli, wait_until
+from tests.procs import REPO, keys_for, wait_until
 
 
 def start_up(args: list[str], out: Path) -> subprocess.Popen[bytes]:
@@ -78,24 +78,6 @@ def test_killed_launcher_takes_its_children_along(tmp_path: Path) -> None:
         if up.poll() is None:
             up.kill()
             up.wait(10)
-
-
-def test_up_with_a_role_not_built_fails_with_one_line(tmp_path: Path) -> None:
-    missing = [r for r in ("plume", "physics", "autopilot", "gateway") if not _available(r)]
-    if not missing:
-        pytest.skip("every role is built: nothing is missing any more")
-    result = run_cli(["up", "--headless", "--out", str(tmp_path)], timeout_s=60)
-    assert result.returncode != 0
-    lines = result.stderr.strip().splitlines()
-    assert len(lines) == 1, result.stderr
-    assert "not available yet" in lines[0] and missing[0] in lines[0]
-    assert not (tmp_path / "pids.json").exists()
-
-
-def _available(role: str) -> bool:
-    from deploy.launcher import missing_roles
-
-    return not missing_roles([role])
 
 
 def test_a_role_whose_package_is_missing_fails_before_anything_starts(
