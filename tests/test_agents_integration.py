@@ -264,8 +264,17 @@ def test_failsafe_offboard_loss_and_crash(run_factory: object, tmp_path: Path) -
     uav = run.sw.command("uav1")
     uav.setpoint(position=(21.0, 0.0, 8.0))
     uav.offboard()
-    run.wait_mode("uav1", FlightMode.HOLD, 30)  # one setpoint: the stream times out
-    assert run.sw.status("uav1").failsafe == "offboard setpoint stream lost"  # type: ignore[union-attr]
+    # One setpoint: the stream times out and the vehicle holds. Wait for both together: the
+    # status saying HOLD from before the offboard switch may still be the latest one here.
+    run.sw.wait_until(
+        lambda: (
+            (st := run.sw.status("uav1")) is not None
+            and st.mode == FlightMode.HOLD
+            and st.failsafe == "offboard setpoint stream lost"
+        ),
+        30,
+        "uav1 holding after the offboard stream was lost",
+    )
     with pytest.raises(CommandRejected, match="force"):
         uav.disarm()
     uav.disarm(force=True)  # motors off at 8 m: it falls and crashes
