@@ -33,6 +33,15 @@ def encode(message: Any) -> bytes:
     return _encoder.encode(message)
 
 
+def split_validation_error(exc: msgspec.ValidationError) -> tuple[str, str]:
+    """``(field, reason)`` of a msgspec error: the ``$``-path without ``$.``, and the message."""
+    text = str(exc)
+    m = _PATH_RE.search(text)
+    if m is None:
+        return "", text
+    return m.group("path").lstrip("."), text[: m.start()]
+
+
 @cache
 def _decoder(type_: Any) -> msgspec.msgpack.Decoder[Any]:
     return msgspec.msgpack.Decoder(type_)
@@ -51,10 +60,7 @@ def decode(data: bytes | bytearray | memoryview, type_: type[T]) -> T:
     try:
         return _decoder(type_).decode(data)  # type: ignore[no-any-return,arg-type]
     except msgspec.ValidationError as exc:
-        text = str(exc)
-        m = _PATH_RE.search(text)
-        field = m.group("path").lstrip(".") if m else ""
-        reason = text[: m.start()] if m else text
+        field, reason = split_validation_error(exc)
         raise MessageError(_type_name(type_), field, reason) from None
     except msgspec.DecodeError as exc:
         raise MessageError(_type_name(type_), "", f"malformed payload: {exc}") from None

@@ -12,6 +12,7 @@ from typing import Annotated, Literal
 
 import msgspec
 
+from swarmbus.codec import split_validation_error
 from swarmbus.messages import MissionItem
 from swarmbus.session import NetworkConfig
 from swarmbus.vehicle_types import VehicleTypeError, load_vehicle_type
@@ -217,15 +218,6 @@ def _check(scenario: Scenario, source: str) -> None:
         raise ScenarioError(source, "plume.sources", "at least one source is required")
 
 
-def _field_of(exc: msgspec.ValidationError) -> tuple[str, str]:
-    text = str(exc)
-    marker = " - at `$"
-    if marker in text:
-        reason, _, path = text.partition(marker)
-        return path.rstrip("`").lstrip("."), reason
-    return "", text
-
-
 def parse_scenario(text: str, source: str = "<scenario>") -> Scenario:
     try:
         raw = tomllib.loads(text)
@@ -244,7 +236,7 @@ def parse_scenario(text: str, source: str = "<scenario>") -> Scenario:
     try:
         scenario = msgspec.convert(raw, Scenario)
     except msgspec.ValidationError as exc:
-        field, reason = _field_of(exc)
+        field, reason = split_validation_error(exc)
         raise ScenarioError(source, field, reason) from None
     _check(scenario, source)
     return scenario
