@@ -123,6 +123,14 @@ class Authority:
         )
         return cls(key, cert)
 
+    @classmethod
+    def load(cls, directory: Path) -> Authority:
+        """The CA that :func:`generate` wrote into ``directory`` (to issue more identities)."""
+        key = serialization.load_pem_private_key((directory / "ca.key").read_bytes(), None)
+        if not isinstance(key, ec.EllipticCurvePrivateKey):
+            raise CertError(f"{directory / 'ca.key'}: not an EC private key")
+        return cls(key, x509.load_pem_x509_certificate((directory / "ca.pem").read_bytes()))
+
     def issue(
         self, common_name: str, addresses: Iterable[str], days: int
     ) -> tuple[ec.EllipticCurvePrivateKey, x509.Certificate]:
