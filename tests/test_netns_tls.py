@@ -79,6 +79,8 @@ def test_seed_scenario_flies_over_mutual_tls_and_strangers_stay_out(tmp_path: Pa
             assert autopilot["marker"], autopilot
             assert leaves(autopilot["seen"]) == {"actuators"}, autopilot
             assert len(forbidden_keys(KEYS)) == 3
+            sent = (gateway["sent"], autopilot["sent"])
+            print(f"\nforged samples refused: gateway {sent[0]}, autopilot {sent[1]}")
 
             summary = fly_demo(
                 h, tmp_path / "demo", dep.router, "--hosts", str(hosts_file), "--host", "gcs"

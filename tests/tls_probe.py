@@ -56,23 +56,26 @@ def forged_puts_seen(
             markers.set()
 
     deadline = time.monotonic() + timeout_s
+    sent = 0
     with open_session(listener) as ls:
         subs = [ls.declare_subscriber(k, on_sample) for k in (keys.everything(), MARKER_KEY)]
         with open_session(publisher) as ps:
             while not markers.is_set() and time.monotonic() < deadline:
                 for key in forbidden_keys(keys):
                     ps.put(key, FORGED)
+                    sent += 1
                 ps.put(MARKER_KEY, b"marker")
                 markers.wait(0.2)
             # One more round after the first marker: routes are surely up for all keys now.
             markers.clear()
             for key in forbidden_keys(keys):
                 ps.put(key, FORGED)
+                sent += 1
             ps.put(MARKER_KEY, b"marker")
             markers.wait(max(0.0, deadline - time.monotonic()))
         for s in subs:
             s.undeclare()
-    return {"marker": markers.is_set(), "seen": sorted(seen)}
+    return {"marker": markers.is_set(), "seen": sorted(seen), "sent": sent}
 
 
 def join_error(net: NetworkConfig, tls: dict[str, Any] | None) -> str | None:
