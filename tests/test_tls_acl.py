@@ -9,6 +9,7 @@ hosts with the real processes flying.
 
 from __future__ import annotations
 
+import re
 import shutil
 from collections.abc import Iterator
 from pathlib import Path
@@ -18,11 +19,12 @@ import pytest
 
 from deploy import certs
 from deploy.certs import common_name_of
-from deploy.hosts import Deployment, load_deployment
+from deploy.hosts import Deployment, HostsError, load_deployment
 from deploy.security import access_control, host_identities, secure_network
 from swarmbus.keys import Keys
 from swarmbus.session import NetworkConfig, free_tcp_port, open_session
 from tests.procs import run_cli
+from tests.test_faults_cli import assert_one_clear_line, bad_file
 from tests.tls_probe import (
     door,
     forbidden_keys,
@@ -189,3 +191,27 @@ def test_bad_tls_files_are_one_clear_line(
     assert "Traceback" not in res.stderr, res.stderr
     lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and str(bad) in lines[0], res.stderr
+
+
+@pytest.mark.parametrize(
+    ("router", "listen", "tls", "error"),
+    [
+        ("tcp/10.0.0.1:7447", "tls/10.0.0.1:0", True, "every endpoint must be tls/"),
+        ("tls/10.0.0.1:7447", "tcp/10.0.0.1:0", True, "every endpoint must be tls/"),
+        ("tls/10.0.0.1:7447", "tls/10.0.0.1:0", False, "need a [tls] section"),
+    ],
+)
+def test_tls_endpoints_and_section_go_together(
+    tmp_path: Path, router: str, listen: str, tls: bool, error: str
+) -> None:
+    text = f'router = "{router}"\n' + ('[tls]\ncerts = "c"\n' if tls else "")
+    text += f'[[hosts]]\nname = "sim"\nroles = ["router"]\nlisten = ["{listen}"]\n'
+    (tmp_path / "hosts.toml").write_text(text)
+    with pytest.raises(HostsError, match=re.escape(error)):
+        load_deployment(tmp_path / "hosts.toml")
+
+
+@pytest.mark.parametrize("kind", ["missing", "garbage"])
+def test_certs_generate_with_a_bad_hosts_file_is_one_line(tmp_path: Path, kind: str) -> None:
+    f = bad_file(tmp_path, kind, ".toml")
+    assert_one_clear_line(["certs", "generate", "--hosts", f, "--out", str(tmp_path / "c")])
