@@ -6,9 +6,7 @@ from pathlib import Path
 
 import click
 
-from deploy.certs import CertError, common_name_of, generate
-from deploy.hosts import HostsError, load_deployment
-from deploy.security import host_identities
+# cryptography and the launcher load only when a certs command runs, not with every command.
 
 
 @click.group()
@@ -27,7 +25,10 @@ def certs() -> None:
 @click.option("--days", type=click.IntRange(1, 3650), default=365, show_default=True)
 def certs_generate(hosts_file: Path, out: Path | None, days: int) -> None:
     """A CA and one certificate per role and host (common name <role>.<host>)."""
+    from deploy.certs import CertError, generate
     from deploy.cli import fail
+    from deploy.hosts import HostsError, load_deployment
+    from deploy.security import host_identities
 
     try:
         dep = load_deployment(hosts_file)
@@ -51,6 +52,7 @@ def certs_generate(hosts_file: Path, out: Path | None, days: int) -> None:
 @click.argument("files", nargs=-1, type=click.Path(dir_okay=False, path_type=Path))
 def certs_show(files: tuple[Path, ...]) -> None:
     """The identity (common name) of each certificate FILE."""
+    from deploy.certs import common_name_of
     from deploy.cli import fail
 
     for f in files:
