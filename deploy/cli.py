@@ -73,9 +73,23 @@ HOST_OPT = click.option("--host", "host_name", default=None, help="This host's e
 def secured(
     sc: Scenario, net: NetworkConfig, hosts_file: Path | None, host_name: str | None, role: str
 ) -> NetworkConfig:
-    """``net`` as ``role`` on ``host_name`` of the deployment (TLS identity and ACL), if any."""
-    if hosts_file is None and host_name is None:
-        return net
+    """``net`` as ``role`` on ``host_name`` of the deployment (TLS identity and ACL), if any;
+    its TLS files checked (one line naming a missing or unreadable one)."""
+    from swarmbus.session import NetworkConfigError, check_tls_files
+
+    if hosts_file is not None or host_name is not None:
+        net = _as_deployed(sc, net, hosts_file, host_name, role)
+    if net.tls is not None:  # also a scenario's own [network.tls]
+        try:
+            check_tls_files(net.tls)
+        except NetworkConfigError as exc:
+            fail(str(exc))
+    return net
+
+
+def _as_deployed(
+    sc: Scenario, net: NetworkConfig, hosts_file: Path | None, host_name: str | None, role: str
+) -> NetworkConfig:
     from deploy.hosts import HostsError, load_deployment
     from deploy.security import secure_network
     from swarmbus.keys import Keys
@@ -84,7 +98,7 @@ def secured(
         fail("--hosts FILE and --host NAME go together")
     try:
         dep = load_deployment(hosts_file)
-        if not any(net.connect) or net.connect == sc.network.connect:
+        if net.connect == sc.network.connect:  # not given: the deployment's router
             net = net.with_overrides(connect=[dep.router])
         return secure_network(net, dep, host_name, role, Keys(sc.world.name))
     except HostsError as exc:
@@ -222,6 +236,7 @@ def up(
         scenario_arg or scenario or (deployment.scenario if deployment else None)
     )
     sc = scenario_from(str(path))
+    secured(sc, sc.network, None, None, "operator")  # its TLS files, if any, are readable
     opts = LaunchOptions(
         scenario_path=path,
         headless=headless,

@@ -199,7 +199,10 @@ class Launcher:
     # ------------------------------------------------------------------ start
     def _client_network(self) -> NetworkConfig:
         # The launcher's own session: a peer that only connects to the router.
-        base = self.opts.client_network or NetworkConfig()
+        own = self.scenario.network  # its TLS identity, if the scenario has one
+        base = self.opts.client_network or NetworkConfig(
+            tls=own.tls, access_control=own.access_control
+        )
         return msgspec.structs.replace(
             base, connect=router_endpoints(self.scenario, self.opts), listen=[]
         )
