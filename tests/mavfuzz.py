@@ -83,6 +83,13 @@ class Datagram:
 
 
 @dataclass(frozen=True)
+class V1:
+    """A message to frame as MAVLink 1."""
+
+    msg: Msg
+
+
+@dataclass(frozen=True)
 class Target:
     """One of our vehicles as the fuzzer sees it: sysid, in the air or not, home lat/lon."""
 
@@ -126,6 +133,21 @@ class Fuzzer:
             self.mission_request_out_of_range,
             self.bad_param_set,
             self.unknown_param,
+            self.mission_set_current_out_of_range,
+            self.broadcast,
+            self.mavlink1,
+        ]
+        # stateless one-frame cases: safe to send to every vehicle at once, or as MAVLink 1
+        self.simple: list[Callable[[Target], Case]] = [
+            self.bad_arm,
+            self.bad_takeoff,
+            self.bad_reposition,
+            self.bad_set_mode,
+            self.bad_pause,
+            self.unknown_command,
+            self.bad_message_interval,
+            self.bad_request_message,
+            self.bad_param_set,
         ]
         self.counts: dict[str, int] = {}
 
@@ -391,6 +413,26 @@ class Fuzzer:
         msg = M.MAVLink_mission_request_int_message(t.sysid, 1, self.rng.randrange(65536), 0)
         return [msg], [self._mission_ack(t, M.MAV_MISSION_INVALID_SEQUENCE)]
 
+    def mission_set_current_out_of_range(self, t: Target) -> Case:
+        """Jump to an item that does not exist: refused by the gateway (STATUSTEXT and
+        MISSION_CURRENT, neither of them counted), never a mission start."""
+        return [
+            M.MAVLink_mission_set_current_message(t.sysid, 1, self.rng.randrange(50, 65536))
+        ], []
+
+    # ------------------------------------------------------------------ addressing, framing
+    def broadcast(self, t: Target) -> Case:
+        """A simple case for target system 0: every vehicle of the link answers."""
+        msgs, replies = self.rng.choice(self.simple)(t)
+        for m in msgs:
+            m.target_system = 0
+        return msgs, [(r[0], u.sysid, r[2], r[3]) for u in self.targets for r in replies]
+
+    def mavlink1(self, t: Target) -> Case:
+        """A simple case framed as MAVLink 1 (no signing possible, still parsed)."""
+        msgs, replies = self.rng.choice(self.simple)(t)
+        return [V1(m) for m in msgs], replies
+
     # ------------------------------------------------------------------ parameters
     def bad_param_set(self, t: Target) -> Case:
         """A known parameter set to NaN / inf / out of range: PARAM_VALUE with the old value."""
@@ -503,12 +545,19 @@ class Fuzzer:
                     case = self.rng.choice(self.cases)
                     msgs, replies = case(self.rng.choice(self.targets))
                     self.counts[case.__name__] = self.counts.get(case.__name__, 0) + len(msgs)
-                    data += b"".join(pack(self.client, m) for m in msgs)
+                    data += b"".join(self._pack(m) for m in msgs)
                     expect += replies
                     count += len(msgs)
                 out.append(Datagram("client", data, count, expect))
             frames += out[-1].frames
         return out
+
+    def _pack(self, m: Msg) -> bytes:
+        if isinstance(m, V1):
+            buf: bytes = m.msg.pack(self.client, force_mavlink1=True)
+            self.client.seq = (self.client.seq + 1) % 256
+            return buf
+        return bytes(pack(self.client, m))
 
     def sentinel(self, t: Target, token: int) -> tuple[bytes, list[Reply]]:
         """GET_MESSAGE_INTERVAL of a non-stream id: its MESSAGE_INTERVAL closes a batch."""
