@@ -4,15 +4,28 @@ traffic is refused; with ``signed_links=gcs`` the API ports stay open to unsigne
 
 from __future__ import annotations
 
+import math
 import os
+import socket
+import time
 from pathlib import Path
 
-from gcs_bridge.dialect import mavlink
+import pytest
+from pymavlink import mavutil
+
+from gcs_bridge.dialect import Msg, mavlink, new_mav, pack
+from gcs_bridge.frames import enu_to_geodetic
+from gcs_bridge.links import signing_timestamp_now
+from swarmbus.messages import FlightMode
+from swarmbus.scenario import load_scenario
+from tests.buswatch import BusWatch
 from tests.gateway_stack import gateway, vehicles
-from tests.mavclient import MavClient, write_scenario
-from tests.procs import zenoh_network
+from tests.mavclient import GCS_COMPID, GCS_SYSID, MavClient, mission_item, write_scenario
+from tests.procs import wait_until, zenoh_network
 
 KEY = os.urandom(32)
+NAN = math.nan
+ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
 
 
 def standby(c: MavClient, sysid: int) -> None:
@@ -70,3 +83,223 @@ def test_signed_gcs_link_refuses_unsigned_and_wrong_keys(tmp_path: Path) -> None
         standby_or_armed = api_client.wait_type("HEARTBEAT", 1)
         assert not standby_or_armed.get_msgbuf()[2] & mavlink.MAVLINK_IFLAG_SIGNED
         assert api_client.command(1, 400, 0) == mavlink.MAV_RESULT_ACCEPTED  # disarm on ground
+
+
+# ----------------------------------------------------------------------------- real autopilot
+class SignedGcs:
+    """pymavlink's own client (``mavutil`` udpin + ``setup_signing``), speaking MAVLink 2 through
+    a dialect object we construct; every frame it sends is kept (the attacker replays them)."""
+
+    def __init__(self, port: int, key: bytes) -> None:
+        self.conn = mavutil.mavlink_connection(
+            f"udpin:127.0.0.1:{port}", source_system=GCS_SYSID, source_component=GCS_COMPID
+        )
+        self.conn.mav = mavlink.MAVLink(self.conn, srcSystem=GCS_SYSID, srcComponent=GCS_COMPID)
+        # mavutil would swap in a new (unsigned) encoder at the first MAVLink 2 byte it hears,
+        # and set MAVLINK20 in os.environ on the way: we already speak MAVLink 2
+        self.conn.first_byte = False
+        self.conn.WIRE_PROTOCOL_VERSION = "2.0"
+        self.conn.setup_signing(key, sign_outgoing=True)
+        self.sent: list[bytes] = []
+        write = self.conn.write
+
+        def keep(buf: bytes) -> None:
+            self.sent.append(bytes(buf))
+            write(buf)
+
+        self.conn.write = keep
+
+    def close(self) -> None:
+        self.conn.close()
+
+    def recv(self, kind: str | list[str], timeout_s: float = 30.0, **fields: object) -> Msg:
+        deadline = time.monotonic() + timeout_s
+        while (left := deadline - time.monotonic()) > 0:
+            m = self.conn.recv_match(type=kind, blocking=True, timeout=min(left, 0.5))
+            if m is None or m.get_srcSystem() != 1:
+                continue
+            if all(getattr(m, k) == v for k, v in fields.items()):
+                return m
+        raise AssertionError(f"no {kind} {fields} within {timeout_s} s")
+
+    def command(self, command: int, *params: float) -> int:
+        p = [*params, *([0.0] * (7 - len(params)))]
+        self.conn.mav.command_long_send(1, 1, command, 0, *p)
+        return int(self.recv("COMMAND_ACK", command=command).result)
+
+    def upload(self, items: list[Msg]) -> int:
+        self.conn.mav.mission_count_send(1, 1, len(items), 0)
+        while True:
+            m = self.recv(["MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"])
+            if m.get_type() == "MISSION_ACK":
+                return int(m.type)
+            self.conn.mav.send(items[m.seq])
+
+    def param(self, name: str) -> float:
+        self.conn.mav.param_request_read_send(1, 1, name.encode(), -1)
+        return float(self.recv("PARAM_VALUE", param_id=name).param_value)
+
+
+def attacks(lat: float, lon: float) -> list[Msg]:
+    """Everything that would change the vehicle: arm, takeoff, modes, mission upload / clear,
+    parameters, go-to."""
+    items = [
+        mission_item(1, 0, mavlink.MAV_CMD_NAV_TAKEOFF, lat, lon, 5),
+        mission_item(1, 1, mavlink.MAV_CMD_NAV_WAYPOINT, lat + 1e-4, lon, 5),
+    ]
+    return [
+        mavlink.MAVLink_command_long_message(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0),
+        mavlink.MAVLink_command_int_message(1, 1, 0, 400, 0, 0, 1, 0, 0, 0, 0, 0, 0),
+        mavlink.MAVLink_command_long_message(1, 1, 22, 0, 0, 0, 0, NAN, 0, 0, 10),
+        mavlink.MAVLink_command_long_message(1, 1, 176, 0, 1, 4, 4, 0, 0, 0, 0),
+        mavlink.MAVLink_command_long_message(1, 1, 176, 0, 1, 4, 3, 0, 0, 0, 0),
+        mavlink.MAVLink_set_mode_message(1, 1, 4 << 16 | 4 << 24),
+        mavlink.MAVLink_command_int_message(
+            1, 1, 6, 192, 0, 0, -1, 1, 0, NAN, round(lat * 1e7), round(lon * 1e7), 30
+        ),
+        mavlink.MAVLink_mission_count_message(1, 1, len(items), 0),
+        *items,
+        mavlink.MAVLink_mission_clear_all_message(1, 1, 0),
+        mavlink.MAVLink_param_set_message(1, 1, b"MIS_TAKEOFF_ALT", 33.0, 9),
+        mavlink.MAVLink_command_long_message(1, 1, 300, 0, 0, 0, 0, 0, 0, 0, 0),
+    ]
+
+
+def forged(msg: Msg, key: bytes, link_id: int, timestamp: int) -> bytes:
+    """``msg`` signed with ``key`` at ``timestamp`` (10 µs units since 2015)."""
+    mav = new_mav(GCS_SYSID, GCS_COMPID)
+    mav.signing.secret_key = key
+    mav.signing.link_id = link_id
+    mav.signing.timestamp = timestamp
+    mav.signing.sign_outgoing = True
+    return bytes(pack(mav, msg))
+
+
+def test_unsigned_forged_and_replayed_frames_change_nothing_signed_ones_fly(
+    tmp_path: Path,
+) -> None:
+    """Real autopilot, every link signed: arm, takeoff, mode changes, mission uploads and the
+    rest, unsigned (MAVLink 2 and 1), with a wrong key, replayed, or stale, have no effect on
+    the bus; the signed pymavlink client's do. Attackers hear nothing back."""
+    scenario, gcs_port, _ = write_scenario(tmp_path / "scenario.toml", 1, signing_key_hex=KEY.hex())
+    sc = load_scenario(scenario)
+    lat, lon, _ = enu_to_geodetic(sc.vehicles[0].spawn_enu_m, sc.world.origin)
+    attackers = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(2)]
+    for s in attackers:
+        s.bind(("127.0.0.1", 0))
+        s.setblocking(False)
+    with (
+        zenoh_network() as (net, router),
+        vehicles(net, scenario, tmp_path, ["uav1"], backend="real"),
+        gateway(net, scenario, tmp_path, "cmd_timeout_s=3") as gw,
+    ):
+        gcs = SignedGcs(gcs_port, KEY)
+        watch = BusWatch(router, ["uav1"])
+        try:
+            gcs.recv("HEARTBEAT", 120.0, system_status=mavlink.MAV_STATE_STANDBY)
+            wait_until(
+                lambda: (s := watch.latest_status("uav1")) is not None and s.sim_time_s > 0.5,
+                60.0,
+                "the simulation running",
+            )
+            (gw_addr,) = gcs.conn.clients  # where the gateway's GCS link speaks from
+            takeoff_alt = gcs.param("MIS_TAKEOFF_ALT")
+
+            def attack(frames: list[bytes]) -> None:
+                """Send ``frames`` from strangers, then prove they did nothing: a signed
+                PARAM_SET goes through the same per-vehicle command queue behind anything
+                they could have started, and a status newer than its answer shows the bus."""
+                watch.mark()
+                for i, frame in enumerate(frames):
+                    attackers[i % 2].sendto(frame, gw_addr)
+                gcs.conn.mav.param_set_send(1, 1, b"MIS_TAKEOFF_ALT", takeoff_alt, 9)
+                answers = ["PARAM_VALUE", "COMMAND_ACK", "MISSION_ACK", "MISSION_REQUEST_INT"]
+                while True:
+                    m = gcs.recv(answers)
+                    assert m.get_type() == "PARAM_VALUE", f"an attacker got an answer: {m}"
+                    assert m.param_value == takeoff_alt, f"an attacker set a parameter: {m}"
+                    if m.param_id == "MIS_TAKEOFF_ALT":
+                        break
+                seen = len(watch.status_window("uav1"))
+                wait_until(lambda: len(watch.status_window("uav1")) > seen, 30.0, "a newer status")
+
+            # 1. on the ground, disarmed: unsigned (MAVLink 2 and 1), wrong key, stale
+            stamp = signing_timestamp_now()
+            wrong = os.urandom(32)
+            frames: list[bytes] = []
+            unsigned = new_mav(GCS_SYSID, GCS_COMPID)
+            for msg in attacks(lat, lon):
+                frames.append(bytes(pack(unsigned, msg)))
+                if msg.id < 256:
+                    frames.append(bytes(msg.pack(unsigned, force_mavlink1=True)))
+                frames.append(forged(msg, wrong, 0, stamp))
+                frames.append(forged(msg, KEY, 7, stamp - 10 * 60 * 100_000))  # 10 min old
+            before = watch.latest_status("uav1")
+            attack(frames)
+            assert before is not None and not before.armed
+            for s in watch.status_window("uav1"):
+                assert (s.armed, s.mode, s.mission_count) == (
+                    before.armed,
+                    before.mode,
+                    before.mission_count,
+                ), f"a refused frame changed the vehicle: {s}"
+            assert gcs.param("MIS_TAKEOFF_ALT") == takeoff_alt
+
+            # 2. the signed client: upload, takeoff + arm, DO_SET_MODE hold, SET_MODE mission
+            items = [
+                mission_item(1, 0, mavlink.MAV_CMD_NAV_TAKEOFF, lat, lon, 6),
+                mission_item(1, 1, mavlink.MAV_CMD_NAV_WAYPOINT, lat + 4e-5, lon, 6),
+                mission_item(1, 2, mavlink.MAV_CMD_NAV_WAYPOINT, lat + 4e-5, lon + 4e-5, 6),
+            ]
+            assert gcs.upload(items) == mavlink.MAV_MISSION_ACCEPTED
+            wait_until(
+                lambda: (s := watch.latest_status("uav1")) is not None and s.mission_count == 3,
+                30.0,
+                "the signed upload on the bus",
+            )
+            assert gcs.command(22, 0, 0, 0, NAN, 0, 0, 8) == ACCEPTED
+            arm_frame = len(gcs.sent)
+            assert gcs.command(400, 1) == ACCEPTED
+            arm = gcs.sent[arm_frame]
+            wait_until(
+                lambda: (
+                    (s := watch.latest_status("uav1")) is not None and s.mode == FlightMode.HOLD
+                ),
+                120.0,
+                "uav1 holding after its signed takeoff",
+            )
+            gcs.conn.mav.set_mode_send(1, 1, 4 << 16 | 4 << 24)  # SET_MODE: AUTO / MISSION
+            wait_until(
+                lambda: (
+                    (s := watch.latest_status("uav1")) is not None and s.mode == FlightMode.MISSION
+                ),
+                30.0,
+                "the signed SET_MODE on the bus",
+            )
+            assert gcs.command(176, 1, 4, 3) == ACCEPTED  # DO_SET_MODE: AUTO / LOITER (hold)
+            wait_until(
+                lambda: (
+                    (s := watch.latest_status("uav1")) is not None and s.mode == FlightMode.HOLD
+                ),
+                30.0,
+                "the signed DO_SET_MODE on the bus",
+            )
+
+            # 3. in the air: replays of the signed client's own frames (the ARM, the SET_MODE
+            # to MISSION, the whole upload) and the attacks again
+            frames = [arm, *gcs.sent] + [bytes(pack(unsigned, m)) for m in attacks(lat, lon)]
+            frames += [forged(m, wrong, 0, signing_timestamp_now()) for m in attacks(lat, lon)]
+            attack(frames)
+            for s in watch.status_window("uav1"):
+                assert s.mode == FlightMode.HOLD and s.armed and s.mission_count == 3, (
+                    f"a refused frame changed the vehicle in the air: {s}"
+                )
+            for s in attackers:
+                with pytest.raises(BlockingIOError):
+                    s.recv(65535)  # the gateway never answered (nor streamed to) a stranger
+            assert gw.poll() is None
+        finally:
+            watch.close()
+            gcs.close()
+            for s in attackers:
+                s.close()
