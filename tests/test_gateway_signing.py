@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import socket
 import time
 from pathlib import Path
@@ -16,8 +17,9 @@ from pymavlink import mavutil
 from gcs_bridge.dialect import Msg, mavlink, new_mav, pack
 from gcs_bridge.frames import enu_to_geodetic
 from gcs_bridge.links import signing_timestamp_now
+from gcs_bridge.options import OptionError, parse_options, signing_key
 from swarmbus.messages import FlightMode
-from swarmbus.scenario import load_scenario
+from swarmbus.scenario import Gateway, load_scenario
 from tests.buswatch import BusWatch
 from tests.gateway_stack import gateway, vehicles
 from tests.mavclient import GCS_COMPID, GCS_SYSID, MavClient, mission_item, write_scenario
@@ -83,6 +85,37 @@ def test_signed_gcs_link_refuses_unsigned_and_wrong_keys(tmp_path: Path) -> None
         standby_or_armed = api_client.wait_type("HEARTBEAT", 1)
         assert not standby_or_armed.get_msgbuf()[2] & mavlink.MAVLINK_IFLAG_SIGNED
         assert api_client.command(1, 400, 0) == mavlink.MAV_RESULT_ACCEPTED  # disarm on ground
+
+
+# ----------------------------------------------------------------------------- the key file
+def gateway_section(**kw: str) -> Gateway:
+    return Gateway(**kw)  # type: ignore[arg-type]
+
+
+def test_the_key_file_is_read_only_when_private_to_its_owner(tmp_path: Path) -> None:
+    key_file = tmp_path / "mavlink.key"
+    key_file.write_text(KEY.hex() + "\n")
+    key_file.chmod(0o600)
+    assert signing_key(gateway_section(signing_key_file=str(key_file))) == KEY
+    assert parse_options(gateway_section(signing_key_file=str(key_file)), {}).signing_key == KEY
+    for mode in (0o640, 0o604, 0o660, 0o644):
+        key_file.chmod(mode)
+        with pytest.raises(OptionError, match=re.escape(f"chmod 600 {key_file}")):
+            signing_key(gateway_section(signing_key_file=str(key_file)))
+    key_file.chmod(0o600)
+    with pytest.raises(OptionError, match="not both"):
+        signing_key(gateway_section(signing_key_file=str(key_file), signing_key_hex=KEY.hex()))
+    bad = tmp_path / "bad.key"
+    for content in (b"", b"abc", KEY, (KEY.hex() + "00").encode(), b"\xff" * 64):
+        bad.write_bytes(content)
+        bad.chmod(0o600)
+        with pytest.raises(OptionError, match=r"64 hex digits|cannot read"):
+            signing_key(gateway_section(signing_key_file=str(bad)))
+    with pytest.raises(OptionError, match="no such file"):
+        signing_key(gateway_section(signing_key_file=str(tmp_path / "missing.key")))
+    with pytest.raises(OptionError, match="not a regular file"):
+        signing_key(gateway_section(signing_key_file=str(tmp_path)))
+    assert signing_key(gateway_section()) is None
 
 
 # ----------------------------------------------------------------------------- real autopilot
@@ -181,7 +214,10 @@ def test_unsigned_forged_and_replayed_frames_change_nothing_signed_ones_fly(
     """Real autopilot, every link signed: arm, takeoff, mode changes, mission uploads and the
     rest, unsigned (MAVLink 2 and 1), with a wrong key, replayed, or stale, have no effect on
     the bus; the signed pymavlink client's do. Attackers hear nothing back."""
-    scenario, gcs_port, _ = write_scenario(tmp_path / "scenario.toml", 1, signing_key_hex=KEY.hex())
+    key_file = tmp_path / "mavlink.key"  # the documented way: a private key file
+    key_file.write_text(KEY.hex() + "\n")
+    key_file.chmod(0o600)
+    scenario, gcs_port, _ = write_scenario(tmp_path / "scenario.toml", 1, signing_key_file=key_file)
     sc = load_scenario(scenario)
     lat, lon, _ = enu_to_geodetic(sc.vehicles[0].spawn_enu_m, sc.world.origin)
     attackers = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(2)]
