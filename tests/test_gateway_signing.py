@@ -4,6 +4,7 @@ traffic is refused; with ``signed_links=gcs`` the API ports stay open to unsigne
 
 from __future__ import annotations
 
+import hashlib
 import math
 import os
 import re
@@ -24,6 +25,7 @@ from tests.buswatch import BusWatch
 from tests.gateway_stack import gateway, vehicles
 from tests.mavclient import GCS_COMPID, GCS_SYSID, MavClient, mission_item, write_scenario
 from tests.procs import wait_until, zenoh_network
+from tests.test_gateway_mavproxy import MAVPROXY, Console
 
 KEY = os.urandom(32)
 NAN = math.nan
@@ -339,3 +341,61 @@ def test_unsigned_forged_and_replayed_frames_change_nothing_signed_ones_fly(
             gcs.close()
             for s in attackers:
                 s.close()
+
+
+# ----------------------------------------------------------------------------- MAVProxy
+@pytest.mark.skipif(not Path(MAVPROXY).exists(), reason="mavproxy not installed")
+def test_mavproxy_is_ignored_until_it_has_the_passphrase(tmp_path: Path) -> None:
+    """MAVProxy's ``signing key PASSPHRASE`` (SHA-256 of the passphrase, as QGC does) on a
+    vehicle's API link: its unsigned ARM before the key does nothing, its signed takeoff and
+    ARM after it are accepted, in that order."""
+    passphrase = "plume-test-passphrase"
+    key_file = tmp_path / "mavlink.key"
+    key_file.write_text(hashlib.sha256(passphrase.encode()).hexdigest() + "\n")
+    key_file.chmod(0o600)
+    scenario, gcs_port, api_base = write_scenario(
+        tmp_path / "scenario.toml", 1, signing_key_file=key_file
+    )
+    with (
+        zenoh_network() as (net, _router),
+        vehicles(net, scenario, tmp_path, ["uav1"], speed=2.0),
+        gateway(net, scenario, tmp_path, "cmd_timeout_s=3"),
+        MavClient(gcs_port) as watch,  # listens only: no key needed to read signed telemetry
+    ):
+        standby(watch, 1)
+        console = Console(
+            [
+                MAVPROXY,
+                f"--master=udpin:127.0.0.1:{api_base}",
+                "--mav20",
+                "--target-system=1",
+                f"--state-basedir={tmp_path}",
+            ],
+            tmp_path,
+        )
+        try:
+            console.expect("Detected vehicle 1:1")  # it reads the gateway's signed heartbeats
+            console.type("arm throttle")  # unsigned: dropped by the gateway
+            console.type(f"signing key {passphrase}")
+            console.expect("Setup signing key")
+            console.type("takeoff 7")
+            console.expect("NAV_TAKEOFF: ACCEPTED")
+            console.type("arm throttle")
+            console.expect("COMPONENT_ARM_DISARM: ACCEPTED")
+            watch.wait(
+                "uav1 armed",
+                lambda m: (
+                    m.get_type() == "HEARTBEAT"
+                    and m.get_srcSystem() == 1
+                    and m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+                ),
+            )
+            acks = [
+                line
+                for line in console.lines
+                if "Got COMMAND_ACK" in line or line.endswith("> ARMED") or line == "ARMED"
+            ]
+            assert "NAV_TAKEOFF" in acks[0], f"something answered the unsigned ARM: {acks}"
+            assert sum("COMPONENT_ARM_DISARM" in line for line in acks) == 1, acks
+        finally:
+            console.close()
