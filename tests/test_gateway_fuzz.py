@@ -53,6 +53,14 @@ def standby(c: MavClient, sysid: int) -> None:
     )
 
 
+def _result_name(kind: str, code: int) -> str:
+    enum = "MAV_RESULT" if kind == "COMMAND_ACK" else "MAV_MISSION_RESULT"
+    entry = mavlink.enums[enum].get(code)
+    return (
+        entry.name.removeprefix("MAV_RESULT_").removeprefix("MAV_MISSION_") if entry else str(code)
+    )
+
+
 def replies_until(client: MavClient, token: int, timeout_s: float) -> list[Reply]:
     """Every reply the client gets up to the sentinel's MESSAGE_INTERVAL ``token``."""
     out: list[Reply] = []
@@ -112,6 +120,7 @@ def test_gateway_survives_100k_hostile_frames(tmp_path: Path) -> None:
 
         start = time.monotonic()
         replies = 0
+        results: collections.Counter[tuple[str, int]] = collections.Counter()
         mismatches: list[str] = []
         for b, first in enumerate(range(0, len(datagrams), BATCH_DATAGRAMS)):
             batch = datagrams[first : first + BATCH_DATAGRAMS]
@@ -125,6 +134,9 @@ def test_gateway_survives_100k_hostile_frames(tmp_path: Path) -> None:
             expected.update(sentinel_replies)
             got = collections.Counter(replies_until(client, token, 30.0))
             replies += sum(got.values())
+            for (kind, _, a, b), n in got.items():
+                if kind in ("COMMAND_ACK", "MISSION_ACK"):
+                    results[(kind, b if kind == "COMMAND_ACK" else a)] += n
             if got != expected and len(mismatches) < 5:
                 mismatches.append(
                     f"batch {b}: missing {dict(expected - got)}, unexpected {dict(got - expected)}"
@@ -138,6 +150,13 @@ def test_gateway_survives_100k_hostile_frames(tmp_path: Path) -> None:
             f"{wall:.1f} s, {frames / wall:.0f} frames/s"
         )
         print(f"fuzz: client frames per case: {fuzzer.counts}")
+        print(
+            "fuzz: ACK results: "
+            + ", ".join(
+                f"{kind} {_result_name(kind, code)} {n}"
+                for (kind, code), n in sorted(results.items())
+            )
+        )
         assert not mismatches, f"seed {SEED}: wrong replies:\n" + "\n".join(mismatches)
         assert frames >= FRAMES
 
