@@ -61,13 +61,19 @@ def _result_name(kind: str, code: int) -> str:
     )
 
 
-def replies_until(client: MavClient, token: int, timeout_s: float) -> list[Reply]:
-    """Every reply the client gets up to the sentinel's MESSAGE_INTERVAL ``token``."""
+def replies_until(
+    client: MavClient, token: int, timeout_s: float, texts: collections.Counter[str]
+) -> list[Reply]:
+    """Every reply the client gets up to the sentinel's MESSAGE_INTERVAL ``token``; the
+    STATUSTEXTs on the way are counted in ``texts``."""
     out: list[Reply] = []
     deadline = time.monotonic() + timeout_s
     while True:
         while client.inbox:
-            r = reply_of(client.inbox.popleft())
+            m = client.inbox.popleft()
+            if m.get_type() == "STATUSTEXT":
+                texts[m.get_type()] += 1
+            r = reply_of(m)
             if r is None:
                 continue
             out.append(r)
@@ -121,6 +127,7 @@ def test_gateway_survives_100k_hostile_frames(tmp_path: Path) -> None:
         start = time.monotonic()
         replies = 0
         results: collections.Counter[tuple[str, int]] = collections.Counter()
+        texts: collections.Counter[str] = collections.Counter()
         mismatches: list[str] = []
         for b, first in enumerate(range(0, len(datagrams), BATCH_DATAGRAMS)):
             batch = datagrams[first : first + BATCH_DATAGRAMS]
@@ -132,7 +139,7 @@ def test_gateway_survives_100k_hostile_frames(tmp_path: Path) -> None:
             data, sentinel_replies = fuzzer.sentinel(targets[b % 2], token)
             client.sock.sendto(data, gw_addr)
             expected.update(sentinel_replies)
-            got = collections.Counter(replies_until(client, token, 30.0))
+            got = collections.Counter(replies_until(client, token, 30.0, texts))
             replies += sum(got.values())
             for (kind, _, a, b), n in got.items():
                 if kind in ("COMMAND_ACK", "MISSION_ACK"):
@@ -158,6 +165,10 @@ def test_gateway_survives_100k_hostile_frames(tmp_path: Path) -> None:
             )
         )
         assert not mismatches, f"seed {SEED}: wrong replies:\n" + "\n".join(mismatches)
+        # refusals are explained in STATUSTEXTs, but a flood of them is rate-limited
+        # (10 at once, then 5/s per vehicle and link): no amplification towards every GCS
+        print(f"fuzz: {texts['STATUSTEXT']} STATUSTEXTs")
+        assert texts["STATUSTEXT"] <= 2 * (10 + 5 * (wall + 1))
         assert frames >= FRAMES
 
         # the vehicles did nothing: uav1 held in the air, uav2 stayed disarmed, no mission
