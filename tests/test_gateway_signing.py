@@ -19,11 +19,12 @@ from gcs_bridge.dialect import Msg, mavlink, new_mav, pack
 from gcs_bridge.frames import enu_to_geodetic
 from gcs_bridge.links import signing_timestamp_now
 from gcs_bridge.options import OptionError, parse_options, signing_key
-from swarmbus.messages import FlightMode
+from swarmbus.messages import FlightMode, VehicleStatus
 from swarmbus.scenario import Gateway, load_scenario
 from tests.buswatch import BusWatch
 from tests.gateway_stack import gateway, vehicles
 from tests.mavclient import GCS_COMPID, GCS_SYSID, MavClient, mission_item, write_scenario
+from tests.mavfuzz import Fuzzer, Target
 from tests.procs import wait_until, zenoh_network
 from tests.test_gateway_mavproxy import MAVPROXY, Console
 
@@ -243,6 +244,8 @@ def test_unsigned_forged_and_replayed_frames_change_nothing_signed_ones_fly(
             (gw_addr,) = gcs.conn.clients  # where the gateway's GCS link speaks from
             takeoff_alt = gcs.param("MIS_TAKEOFF_ALT")
 
+            statuses: list[VehicleStatus] = []  # every status seen during attacks
+
             def attack(frames: list[bytes]) -> None:
                 """Send ``frames`` from strangers, then prove they did nothing: a signed
                 PARAM_SET goes through the same per-vehicle command queue behind anything
@@ -260,6 +263,7 @@ def test_unsigned_forged_and_replayed_frames_change_nothing_signed_ones_fly(
                         break
                 seen = len(watch.status_window("uav1"))
                 wait_until(lambda: len(watch.status_window("uav1")) > seen, 30.0, "a newer status")
+                statuses.extend(watch.status_window("uav1"))
 
             # 1. on the ground, disarmed: unsigned (MAVLink 2 and 1), wrong key, stale
             stamp = signing_timestamp_now()
@@ -272,10 +276,14 @@ def test_unsigned_forged_and_replayed_frames_change_nothing_signed_ones_fly(
                     frames.append(bytes(msg.pack(unsigned, force_mavlink1=True)))
                 frames.append(forged(msg, wrong, 0, stamp))
                 frames.append(forged(msg, KEY, 7, stamp - 10 * 60 * 100_000))  # 10 min old
+            # and the fuzzer's unsigned traffic (each of its client frames would be answered)
+            fuzz = [d.data for d in Fuzzer(1, [Target(1, False, lat, lon)]).datagrams(5000)]
             before = watch.latest_status("uav1")
+            for chunk in range(0, len(fuzz), 40):  # bursts the gateway's socket buffer holds
+                attack(fuzz[chunk : chunk + 40])
             attack(frames)
             assert before is not None and not before.armed
-            for s in watch.status_window("uav1"):
+            for s in statuses:
                 assert (s.armed, s.mode, s.mission_count) == (
                     before.armed,
                     before.mode,
@@ -327,8 +335,9 @@ def test_unsigned_forged_and_replayed_frames_change_nothing_signed_ones_fly(
             # to MISSION, the whole upload) and the attacks again
             frames = [arm, *gcs.sent] + [bytes(pack(unsigned, m)) for m in attacks(lat, lon)]
             frames += [forged(m, wrong, 0, signing_timestamp_now()) for m in attacks(lat, lon)]
+            statuses.clear()
             attack(frames)
-            for s in watch.status_window("uav1"):
+            for s in statuses:
                 assert s.mode == FlightMode.HOLD and s.armed and s.mission_count == 3, (
                     f"a refused frame changed the vehicle in the air: {s}"
                 )
