@@ -84,6 +84,7 @@ def replies_until(
         client.pump(0.05)
 
 
+@pytest.mark.timeout(600)  # ~1 min on a quiet 2-core machine; 3 min at load average 20
 def test_gateway_survives_100k_hostile_frames(tmp_path: Path) -> None:
     scenario, gcs_port, _ = write_scenario(tmp_path / "scenario.toml", 2)
     sc = load_scenario(scenario)
