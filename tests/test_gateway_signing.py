@@ -402,7 +402,10 @@ def test_mavproxy_is_ignored_until_it_has_the_passphrase(tmp_path: Path) -> None
             acks = [
                 line
                 for line in console.lines
-                if "Got COMMAND_ACK" in line or line.endswith("> ARMED") or line == "ARMED"
+                if "NAV_TAKEOFF:" in line
+                or "COMPONENT_ARM_DISARM:" in line
+                or line.endswith("> ARMED")
+                or line == "ARMED"
             ]
             assert "NAV_TAKEOFF" in acks[0], f"something answered the unsigned ARM: {acks}"
             assert sum("COMPONENT_ARM_DISARM" in line for line in acks) == 1, acks
