@@ -6,21 +6,31 @@ tick ``k`` (:class:`~sim_world.lockstep.Lockstep`), applies them, steps ``scenar
 physics steps and publishes tick ``k + 1``. ``sim/clock`` carries sim time and the achieved
 real-time factor about ten times a wall-clock second.
 
+With a ``checkpoint`` path it saves the world there every ``checkpoint_period_s`` of sim time
+(:mod:`sim_world.checkpoint`) and, when that file exists at start, resumes from it instead of
+the spawn: the lockstep handshake then runs on the checkpoint's tick, and the autopilots answer
+it like any tick (sim time goes back by the replayed span).
+
 Options (``--set KEY=VALUE``): ``max_ticks`` (stop once this tick is published and answered),
 ``mode`` (lockstep|realtime), ``speed_factor``, ``wait_for_autopilots`` (true|false: start
-without waiting for the configured autopilots), ``clock_period_s``.
+without waiting for the configured autopilots), ``clock_period_s``, ``checkpoint`` (a file
+path; empty: none), ``checkpoint_period_s`` (default ``time.checkpoint_period_s``; 0: never).
 """
 
 from __future__ import annotations
 
 import logging
+import sys
 import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 
 import zenoh
 
+from sim_world import checkpoint
+from sim_world.checkpoint import CheckpointError, ProgressMarker
 from sim_world.lockstep import Lockstep, participant_of
 from sim_world.world import World
 from swarmbus.codec import MessageError, decode, encode
@@ -55,6 +65,17 @@ def _positive_float(text: str) -> float:
     return value
 
 
+def _non_negative_float(text: str) -> float:
+    value = float(text)
+    if not 0.0 <= value < float("inf"):
+        raise ValueError(f"must be a finite number >= 0, got {text!r}")
+    return value
+
+
+def _path(text: str) -> Path | None:
+    return Path(text) if text.strip() else None
+
+
 def _non_negative_int(text: str) -> int:
     value = int(text)
     if value < 0:
@@ -69,6 +90,8 @@ class PhysicsOptions:
     max_ticks: int | None = None
     wait_for_autopilots: bool = True
     clock_period_s: float = 0.1
+    checkpoint: Path | None = None
+    checkpoint_period_s: float = 1.0
 
     @classmethod
     def from_context(cls, ctx: NodeContext) -> PhysicsOptions:
@@ -78,10 +101,13 @@ class PhysicsOptions:
             "max_ticks": _non_negative_int,
             "wait_for_autopilots": _bool,
             "clock_period_s": _positive_float,
+            "checkpoint": _path,
+            "checkpoint_period_s": _non_negative_float,
         }
         values: dict[str, object] = {
             "mode": SpeedMode(ctx.scenario.time.mode),
             "speed_factor": ctx.scenario.time.speed_factor,
+            "checkpoint_period_s": ctx.scenario.time.checkpoint_period_s,
         }
         for key, text in sorted(ctx.options.items()):
             if key not in parsers:
@@ -110,6 +136,16 @@ class PhysicsNode:
         )
         self.tick = 0
         self._last_tick_msg = b""
+        # Checkpoints: every `_checkpoint_ticks` ticks (the loop's only per-tick cost is one
+        # comparison); `_mark` notes each published tick in the progress marker.
+        self._checkpoint_ticks = 0
+        if options.checkpoint is not None and options.checkpoint_period_s > 0.0:
+            period = options.checkpoint_period_s * self.scenario.time.control_hz
+            self._checkpoint_ticks = max(1, round(period))
+        self._next_checkpoint = sys.maxsize
+        self._marker: ProgressMarker | None = None
+        self._checkpoint_stats = [0, 0.0, 0.0]  # count, total and longest wall seconds
+        self._resume_note = ""
         session = rt.session
         self._tick_pub = session.declare_publisher(self.keys.tick())
         self._clock_pub = session.declare_publisher(self.keys.clock())
@@ -131,6 +167,8 @@ class PhysicsNode:
     def close(self) -> None:
         self._presence.close()
         self._actuator_sub.undeclare()
+        if self._marker is not None:
+            self._marker.close()
 
     # ------------------------------------------------------------------ bus callbacks
     def _on_presence(self, name: str, alive: bool) -> None:
@@ -166,18 +204,61 @@ class PhysicsNode:
 
     # ------------------------------------------------------------------ phases
     def run(self) -> int:
+        last_run = self._resume() if self.options.checkpoint is not None else None
         self.rt.ready()
         deadline = time.monotonic() + self.scenario.time.startup_timeout_s
         if self.options.wait_for_autopilots and not self._wait_for_tokens(deadline):
             return 0 if self.rt.stop.is_set() else 1  # a stop signal is not a failure
         with self._cond:
             self.barrier.start()
-            self.barrier.begin(0, timeout_s=max(0.0, deadline - time.monotonic()))
-        self._publish_tick(self.world.states(0, 0.0))
+            self.barrier.begin(self.tick, timeout_s=max(0.0, deadline - time.monotonic()))
+        self._publish_tick(self.world.states(self.tick, self.world.sim_time_s))
         if not self._handshake():
             return 0 if self.rt.stop.is_set() else 1
+        if last_run is not None and self._resume_note:
+            self._resume_note += f", ticks stopped for {time.monotonic() - last_run:.2f} s wall"
+            log.warning("%s", self._resume_note)
         self._reset_clock()
         return self._loop()
+
+    # ------------------------------------------------------------------ checkpoints
+    def _resume(self) -> float | None:
+        """Restore the checkpoint if there is one; the last run's last tick's wall time."""
+        path = self.options.checkpoint
+        assert path is not None
+        last = ProgressMarker.read(checkpoint.marker_path(path))
+        if path.exists():
+            cp = checkpoint.load(path)
+            self.world.restore(cp)
+            self.tick = cp.tick
+            self._resume_note = (
+                f"resumed from checkpoint at tick {cp.tick} (sim t={cp.sim_time_s:.3f} s)"
+            )
+            if last is not None and last[0] >= cp.tick:
+                replayed_s = (last[0] - cp.tick) / self.scenario.time.control_hz
+                self._resume_note += f", replayed {replayed_s:.3f} s (ticks {cp.tick}..{last[0]})"
+            log.warning("%s", self._resume_note)
+        else:
+            last = None
+        if self._checkpoint_ticks:
+            self._marker = ProgressMarker(checkpoint.marker_path(path))
+            if self._resume_note:
+                self._next_checkpoint = self.tick + self._checkpoint_ticks
+            else:  # tick 0 too: a kill before the first period resumes from the spawn state
+                self._checkpoint()
+        return last[1] if last is not None else None
+
+    def _checkpoint(self) -> None:
+        """Save the world of the current tick (before it is published)."""
+        assert self.options.checkpoint is not None
+        t0 = time.monotonic()
+        checkpoint.save(self.options.checkpoint, self.world.checkpoint(self.tick))
+        took = time.monotonic() - t0
+        stats = self._checkpoint_stats
+        stats[0] += 1
+        stats[1] += took
+        stats[2] = max(stats[2], took)
+        self._next_checkpoint = self.tick + self._checkpoint_ticks
 
     def _wait_for_tokens(self, deadline: float) -> bool:
         with self._cond:
@@ -230,6 +311,8 @@ class PhysicsNode:
             self._apply(commands)
             self.world.step(self.substeps)
             self.tick += 1
+            if self.tick >= self._next_checkpoint:
+                self._checkpoint()
             sim_time = self.world.sim_time_s
             if paced:
                 self._pace(sim_time)
@@ -247,6 +330,14 @@ class PhysicsNode:
             wall,
             self.tick / wall if wall > 0 else 0.0,
         )
+        count, total, longest = self._checkpoint_stats
+        if count:
+            log.info(
+                "%d checkpoints, %.2f ms each on average, %.2f ms the longest",
+                count,
+                1e3 * total / count,
+                1e3 * longest,
+            )
         return 0
 
     def _await_commands(self) -> dict[str, list[float]] | None:
@@ -292,6 +383,8 @@ class PhysicsNode:
         )
         self._last_tick_msg = encode(msg)
         self._tick_pub.put(self._last_tick_msg)
+        if self._marker is not None:
+            self._marker.mark(self.tick)
         for pub, state in zip(self._state_pubs, states, strict=True):
             pub.put(encode(state))
 
@@ -337,7 +430,8 @@ class PhysicsNode:
         )
         if force or now - self._health_wall >= HEALTH_PERIOD_S:
             self._health_wall = now
-            self.rt.publish_health(sim_time_s=sim_time_s, detail=f"tick {self.tick}")
+            detail = f"tick {self.tick}" + (f"; {self._resume_note}" if self._resume_note else "")
+            self.rt.publish_health(sim_time_s=sim_time_s, detail=detail)
 
 
 def main(ctx: NodeContext) -> int:
@@ -351,5 +445,8 @@ def main(ctx: NodeContext) -> int:
         node = PhysicsNode(rt, world, options)
         try:
             return node.run()
+        except CheckpointError as exc:
+            log.error("%s", exc)
+            return 2
         finally:
             node.close()
