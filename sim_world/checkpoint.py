@@ -8,6 +8,9 @@ targets, enabled) and contact flags (landed, crashed, in contact, fastest speed 
 the step count and the tick. The file is one msgpack document, written atomically (temporary
 file + rename), so a reader sees the previous checkpoint or the next one, never half of one.
 
+:class:`CheckpointWriter` writes on its own thread, so the disk's latency stays out of the
+physics loop (which only captures the state and, one tick later, makes sure it is on disk).
+
 A :class:`ProgressMarker` is a tiny memory-mapped file where the physics notes every tick it
 publishes (tick number and a monotonic wall time): it survives a SIGKILL, so the process that
 resumes from the checkpoint can say how much sim time it replays and how long ticks stopped.
@@ -15,15 +18,19 @@ resumes from the checkpoint can say how much sim time it replays and how long ti
 
 from __future__ import annotations
 
+import logging
 import mmap
 import os
 import struct
 import tempfile
 import time
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from types import TracebackType
 
 import msgspec
+
+log = logging.getLogger(__name__)
 
 FORMAT = "plumeswarm/physics_checkpoint/v1"
 # pybullet writes its state to a file only; a RAM-backed directory keeps that off the disk.
@@ -104,6 +111,55 @@ def remove(path: Path) -> None:
     """Remove a checkpoint and its progress marker (a fresh run starts from spawn)."""
     for p in (path, marker_path(path)):
         p.unlink(missing_ok=True)
+
+
+class CheckpointWriter:
+    """Writes checkpoints to ``path`` one at a time on a worker thread; keeps timings."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix="checkpoint")
+        self._pending: Future[float] | None = None
+        self._tick = -1
+        self.written = 0
+        self.write_s = 0.0  # total and longest time on the worker
+        self.longest_write_s = 0.0
+        self.waited_s = 0.0  # total time callers spent in wait()
+
+    @property
+    def pending(self) -> bool:
+        return self._pending is not None
+
+    def submit(self, checkpoint: WorldCheckpoint) -> None:
+        self.wait()
+        self._tick = checkpoint.tick
+        self._pending = self._pool.submit(self._write, checkpoint)
+
+    def _write(self, checkpoint: WorldCheckpoint) -> float:
+        t0 = time.monotonic()
+        save(self.path, checkpoint)
+        return time.monotonic() - t0
+
+    def wait(self) -> None:
+        """Until the submitted checkpoint is on disk (a failed write is logged, not raised)."""
+        pending, self._pending = self._pending, None
+        if pending is None:
+            return
+        t0 = time.monotonic()
+        try:
+            took = pending.result()
+        except OSError as exc:
+            log.error("checkpoint of tick %d not written to %s: %s", self._tick, self.path, exc)
+        else:
+            self.written += 1
+            self.write_s += took
+            self.longest_write_s = max(self.longest_write_s, took)
+        finally:
+            self.waited_s += time.monotonic() - t0
+
+    def close(self) -> None:
+        self.wait()
+        self._pool.shutdown()
 
 
 def marker_path(checkpoint_path: Path) -> Path:
