@@ -32,7 +32,7 @@ import msgspec
 
 log = logging.getLogger(__name__)
 
-FORMAT = "plumeswarm/physics_checkpoint/v1"
+FORMAT = "physics_checkpoint/v1"
 # pybullet writes its state to a file only; a RAM-backed directory keeps that off the disk.
 _SCRATCH_DIR = "/dev/shm" if os.path.isdir("/dev/shm") else None
 _MARKER = struct.Struct("<qq")  # last published tick, time.monotonic_ns() at publication

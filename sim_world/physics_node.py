@@ -292,7 +292,8 @@ class PhysicsNode:
                     return False
                 if self.barrier.remaining_s() <= 0.0:
                     log.error(
-                        "no answer to tick 0 within the start-up timeout from: %s",
+                        "no answer to tick %d within the start-up timeout from: %s",
+                        self.tick,
                         ", ".join(self.barrier.missing()),
                     )
                     return False

@@ -79,6 +79,8 @@ def test_restored_world_continues_bit_for_bit(tmp_path: Path) -> None:
         got = run(resumed, 30, 300)
         assert {v: resumed.rotor_speeds(v) for v in resumed.vehicle_ids} == rotors
     assert got == expected  # every field of every state of every tick, exactly
+    with World(sc) as untouched:  # and taking a checkpoint changed nothing in the original
+        assert run(untouched, 0, 300)[30:] == expected
     # the span covers resting contact, a lift-off, a touch-down and free flight
     by_vid = {
         v: [next(s for s in t if s.vehicle_id == v) for t in expected]
