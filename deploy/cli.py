@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-import importlib
 import logging
 import sys
 from pathlib import Path
-from typing import ClassVar, NoReturn
+from typing import NoReturn
 
 import click
 
@@ -52,24 +51,7 @@ SCENARIO_OPT = click.option(
 )
 
 
-class _LazyGroup(click.Group):
-    """Command groups whose modules import heavy libraries (scipy, via the plume's mesh) load
-    on first use, so a ``plumeswarm node ...`` process starts (and restarts) seconds sooner."""
-
-    lazy: ClassVar[dict[str, str]] = {"plume": "deploy.plume_cli:plume"}
-
-    def list_commands(self, ctx: click.Context) -> list[str]:
-        return sorted([*super().list_commands(ctx), *self.lazy])
-
-    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
-        if cmd_name in self.lazy:
-            module, _, attr = self.lazy[cmd_name].partition(":")
-            command: click.Command = getattr(importlib.import_module(module), attr)
-            return command
-        return super().get_command(ctx, cmd_name)
-
-
-@click.group(cls=_LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.option("-v", "--verbose", count=True, help="More log output (-v info, -vv debug).")
 @click.version_option(package_name="plumeswarm")
 def cli(verbose: int) -> None:
@@ -373,6 +355,15 @@ def bench_scale(
     except ScaleError as exc:
         fail(str(exc))
     sys.exit(1 if any("error" in r for r in rows) else 0)
+
+
+def _register_groups() -> None:
+    from deploy.plume_cli import plume
+
+    cli.add_command(plume)
+
+
+_register_groups()
 
 
 def main() -> None:
