@@ -171,7 +171,10 @@ class ProgressMarker:
 
     def __init__(self, path: Path) -> None:
         self.path = path
-        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        except OSError as exc:
+            raise CheckpointError(f"cannot write {path}: {exc.strerror or exc}") from None
         try:
             if os.fstat(fd).st_size < _MARKER.size:
                 os.ftruncate(fd, _MARKER.size)

@@ -144,3 +144,8 @@ def test_progress_marker_survives_its_writer(tmp_path: Path) -> None:
     assert ProgressMarker.read(path) is not None
     checkpoint.remove(tmp_path / "physics.ckpt")
     assert not path.exists()
+
+
+def test_progress_marker_in_a_missing_directory_is_a_clear_error(tmp_path: Path) -> None:
+    with pytest.raises(CheckpointError, match="cannot write"):
+        ProgressMarker(tmp_path / "missing" / "physics.ckpt.progress")
