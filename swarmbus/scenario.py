@@ -53,6 +53,7 @@ class Time(_Section, frozen=True, kw_only=True):
     participant_timeout_s: Pos = 2.0
     startup_timeout_s: Pos = 60.0
     duration_s: NonNeg = 0.0  # 0: run until stopped
+    checkpoint_period_s: NonNeg = 1.0  # physics checkpoints the world every S sim s; 0: never
 
 
 class Wind(_Section, frozen=True, kw_only=True):
@@ -131,6 +132,7 @@ class Gateway(_Section, frozen=True, kw_only=True):
     gcs_port: Annotated[int, msgspec.Meta(ge=1, le=65535)] = 14550
     api_port_base: Annotated[int, msgspec.Meta(ge=1, le=65535)] = 14540
     signing_key_hex: Annotated[str, msgspec.Meta(pattern=r"^[0-9a-fA-F]{64}$")] | None = None
+    signing_key_file: Annotated[str, msgspec.Meta(min_length=1, max_length=4096)] | None = None
     telemetry_hz: Annotated[float, msgspec.Meta(gt=0.0, le=100.0)] = 4.0
 
 
