@@ -82,12 +82,19 @@ class ScaleOptions:
     vehicles_per_process: int = 1
     gateway: bool = True
     startup_timeout_s: float = 120.0
+    sensor_period_ticks: int | None = None  # None: the scenario's own sensor rate
 
 
 # ---------------------------------------------------------------------------- scenario
-def prepare(sc: Scenario, n: int, run_dir: Path) -> tuple[Scenario, Path]:
-    """``sc`` with ``n`` vehicles, in lockstep, on a free router port, written into run_dir."""
+def prepare(
+    sc: Scenario, n: int, run_dir: Path, sensor_period_ticks: int | None = None
+) -> tuple[Scenario, Path]:
+    """``sc`` with ``n`` vehicles, in lockstep, on a free router port, written into run_dir
+    (with the sensor every ``sensor_period_ticks`` control ticks when given)."""
     sc = scale_scenario(sc, n)
+    if sensor_period_ticks is not None:
+        sensor = msgspec.structs.replace(sc.sensor, period_ticks=sensor_period_ticks)
+        sc = msgspec.structs.replace(sc, sensor=sensor)
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     sc = msgspec.structs.replace(
         sc,
@@ -250,7 +257,7 @@ def run_case(
     opts: ScaleOptions, n: int, state: str, stop: threading.Event | None = None
 ) -> dict[str, Any]:
     run_dir = opts.out / f"{state}-{n}"
-    sc, path = prepare(opts.scenario, n, run_dir)
+    sc, path = prepare(opts.scenario, n, run_dir, opts.sensor_period_ticks)
     ids = [v.id for v in sc.vehicles]
     roles = tuple(r for r in ROLES if r != "gateway" or opts.gateway)
     launch = LaunchOptions(
@@ -309,6 +316,7 @@ def run_case(
             "vehicles_per_process": opts.vehicles_per_process,
             "control_hz": sc.time.control_hz,
             "physics_hz": sc.time.physics_hz,
+            "sensor_period_ticks": sc.sensor.resolved().period_ticks,
             "real_time_factor": round((c1.sim_time_s - c0.sim_time_s) / wall, 3),
             "ticks_per_s": round(ticks_per_s, 1),
             "cpu_percent_by_role": cpu,
