@@ -411,17 +411,21 @@ class AutopilotNode:
                 self._query_plume(tick)
 
     # ------------------------------------------------------------------ sensor
-    def _query_plume(self, tick: _Tick) -> None:
-        query = PlumeQuery(
-            points_enu_m=[s.position_enu_m for s in tick.heads], sim_time_s=tick.sim_time_s
-        )
+    def _ask_plume(self, pending: _PendingSensor) -> _PendingSensor:
+        """``pending`` with this autopilot's own query for its positions (no plume: none)."""
         if not self.plume_nodes:
-            self.pending = _PendingSensor(tick.tick, tick.sim_time_s, tick.heads, None)
-            return
+            return _PendingSensor(pending.tick, pending.sim_time_s, pending.states, None)
+        query = PlumeQuery(
+            points_enu_m=[s.position_enu_m for s in pending.states],
+            sim_time_s=pending.sim_time_s,
+        )
         replies = self.session.get(
             self.plume_key, payload=encode(query), timeout=self.sensor_timeout_s
         )
-        self.pending = _PendingSensor(tick.tick, tick.sim_time_s, tick.heads, replies)
+        return _PendingSensor(pending.tick, pending.sim_time_s, pending.states, replies)
+
+    def _query_plume(self, tick: _Tick) -> None:
+        self.pending = self._ask_plume(_PendingSensor(tick.tick, tick.sim_time_s, tick.heads, None))
 
     def _collect_readings(self, tick: _Tick) -> None:
         pending, self.pending = self.pending, None
@@ -462,7 +466,9 @@ class AutopilotNode:
         """The plume's values for the pending query, or None (no answer in time, or an error)."""
         if pending.by_physics:
             if from_physics is None or from_physics.tick != pending.tick:
-                return None  # the physics restarted or lost its query: unavailable this time
+                # the physics restarted (e.g. from a checkpoint) before it could answer: ask
+                pending = self._ask_plume(pending)
+                return self._values(pending, None)
             values = from_physics.values_g_m3
             if values is not None and len(values) != len(pending.states):
                 log.warning(
