@@ -428,9 +428,13 @@ class AutopilotNode:
         self.pending = self._ask_plume(_PendingSensor(tick.tick, tick.sim_time_s, tick.heads, None))
 
     def _collect_readings(self, tick: _Tick) -> None:
-        pending, self.pending = self.pending, None
+        pending = self.pending
         if pending is None:
             return
+        answer = tick.plume_values
+        if pending.by_physics and (answer is None or answer.tick != pending.tick):
+            return  # not the tick with the physics' answer (e.g. garbage on sim/tick): wait
+        self.pending = None
         values = self._values(pending, tick.plume_values)
         for vid, served in self.served.items():
             if not served.sensor.due(pending.tick):
@@ -466,9 +470,7 @@ class AutopilotNode:
         """The plume's values for the pending query, or None (no answer in time, or an error)."""
         if pending.by_physics:
             if from_physics is None or from_physics.tick != pending.tick:
-                # the physics restarted (e.g. from a checkpoint) before it could answer: ask
-                pending = self._ask_plume(pending)
-                return self._values(pending, None)
+                return None  # not reached: _collect_readings waits for the answering tick
             values = from_physics.values_g_m3
             if values is not None and len(values) != len(pending.states):
                 log.warning(

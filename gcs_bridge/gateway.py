@@ -63,9 +63,6 @@ class _StateTime(
     sim_time_s: float
 
 
-_state_time = msgspec.msgpack.Decoder(_StateTime)
-
-
 class Gateway(CommandHandlers, ParamHandlers, MissionHandlers):
     """All vehicles' MAVLink systems, their links, and the bus plumbing behind them."""
 
@@ -279,8 +276,8 @@ class Gateway(CommandHandlers, ParamHandlers, MissionHandlers):
 
     def _state_wanted(self, v: Vehicle, payload: bytes) -> bool:
         try:
-            sim_time_s = _state_time.decode(payload).sim_time_s
-        except (msgspec.ValidationError, msgspec.DecodeError):
+            sim_time_s = decode(payload, _StateTime).sim_time_s
+        except MessageError:
             return True  # let the full decode say what is wrong
         return any(
             self.schedules[(link.name, v.sysid)].wants(sim_time_s)
