@@ -220,12 +220,17 @@ def command_until_answered(
 
 
 def wait_for_world(view: BusView, vehicle_ids: Sequence[str], deadline: float) -> None:
-    """Until the lockstep runs: a state and a status of every vehicle."""
+    """Until the lockstep runs: a state past the start handshake and a status of every vehicle.
+
+    Tick 0 is re-published until every autopilot answered it, so a state of tick 0 alone does not
+    mean its autopilot has one yet (it would refuse the first command); a later tick does.
+    """
 
     def ready(snap: Snapshot) -> bool:
         return all(
             (v := snap.vehicles.get(vid)) is not None
             and v.state is not None
+            and v.state.tick >= 1
             and v.status is not None
             for vid in vehicle_ids
         )
