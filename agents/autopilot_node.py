@@ -11,7 +11,9 @@ between). The sensor's plume query
 for tick k (one batched query: every vehicle's position in the tick, i.e. own + peers) is sent
 right after tick k's commands and collected before tick k+1's, so its round trip overlaps the
 physics step and a behaviour always sees the reading of the previous sensor tick — the same
-run after run. Commands are handled on Zenoh's thread under a lock.
+run after run. When the physics sent that query itself for everyone (``SimTick.plume_queried``),
+the autopilot sends none and takes the answer from tick k+1 (``SimTick.plume_values``): the
+same values at the same tick. Commands are handled on Zenoh's thread under a lock.
 
 Options (``--set key=value``): ``sensor_timeout_s`` (0: 0.4 × participant timeout),
 ``status_period_s`` (0.5), ``position_noise_m`` / ``velocity_noise_m_s`` (0: the estimate is
@@ -45,6 +47,7 @@ from swarmbus.messages import (
     ErrorReply,
     PeerReading,
     PlumeQuery,
+    PlumeSample,
     PlumeValues,
     SimTick,
     VehicleState,
@@ -161,6 +164,8 @@ class _TickView(msgspec.Struct, frozen=True, tag_field="schema", tag=SimTick.__s
     tick: int
     sim_time_s: float
     states: list[msgspec.Raw]
+    plume_queried: bool = False
+    plume_values: PlumeSample | None = None
 
 
 class _StateHead(
@@ -183,6 +188,8 @@ class _Tick:
     sim_time_s: float
     heads: list[_StateHead]
     raw: list[msgspec.Raw]
+    plume_queried: bool = False
+    plume_values: PlumeSample | None = None
 
     @classmethod
     def decode(cls, data: bytes) -> _Tick:
@@ -191,13 +198,15 @@ class _Tick:
             heads = [_head_decoder.decode(r) for r in view.states]
         except (msgspec.ValidationError, msgspec.DecodeError) as exc:
             raise MessageError("SimTick", "states", str(exc)) from None
-        return cls(view.tick, view.sim_time_s, heads, view.states)
+        return cls(
+            view.tick, view.sim_time_s, heads, view.states, view.plume_queried, view.plume_values
+        )
 
     @classmethod
     def of(cls, tick: SimTick) -> _Tick:
         raw = [msgspec.Raw(encode(s)) for s in tick.states]
         heads = [_StateHead(s.vehicle_id, s.position_enu_m) for s in tick.states]
-        return cls(tick.tick, tick.sim_time_s, heads, raw)
+        return cls(tick.tick, tick.sim_time_s, heads, raw, tick.plume_queried, tick.plume_values)
 
 
 @dataclass
@@ -206,6 +215,7 @@ class _PendingSensor:
     sim_time_s: float
     states: list[_StateHead]
     replies: zenoh.handlers.Handler[zenoh.Reply] | None  # None: no plume node was alive
+    by_physics: bool = False  # the physics queried: the answer comes with the next tick
 
 
 class AutopilotNode:
@@ -364,7 +374,7 @@ class AutopilotNode:
             )
             self.pending = None  # the sensor query of a tick that is being replayed
         self.last_tick = tick.tick
-        self._collect_readings()
+        self._collect_readings(tick)
         index = {h.vehicle_id: k for k, h in enumerate(tick.heads)}
         with self.lock:
             for vid, served in self.served.items():
@@ -395,26 +405,37 @@ class AutopilotNode:
             for served in self.served.values():
                 served.publish_status(force=False, period_s=self.options.status_period_s)
         if any(s.sensor.due(tick.tick) for s in self.served.values()) and tick.heads:
-            self._query_plume(tick)
+            if tick.plume_queried:
+                self.pending = _PendingSensor(tick.tick, tick.sim_time_s, tick.heads, None, True)
+            else:
+                self._query_plume(tick)
 
     # ------------------------------------------------------------------ sensor
-    def _query_plume(self, tick: _Tick) -> None:
-        query = PlumeQuery(
-            points_enu_m=[s.position_enu_m for s in tick.heads], sim_time_s=tick.sim_time_s
-        )
+    def _ask_plume(self, pending: _PendingSensor) -> _PendingSensor:
+        """``pending`` with this autopilot's own query for its positions (no plume: none)."""
         if not self.plume_nodes:
-            self.pending = _PendingSensor(tick.tick, tick.sim_time_s, tick.heads, None)
-            return
+            return _PendingSensor(pending.tick, pending.sim_time_s, pending.states, None)
+        query = PlumeQuery(
+            points_enu_m=[s.position_enu_m for s in pending.states],
+            sim_time_s=pending.sim_time_s,
+        )
         replies = self.session.get(
             self.plume_key, payload=encode(query), timeout=self.sensor_timeout_s
         )
-        self.pending = _PendingSensor(tick.tick, tick.sim_time_s, tick.heads, replies)
+        return _PendingSensor(pending.tick, pending.sim_time_s, pending.states, replies)
 
-    def _collect_readings(self) -> None:
-        pending, self.pending = self.pending, None
+    def _query_plume(self, tick: _Tick) -> None:
+        self.pending = self._ask_plume(_PendingSensor(tick.tick, tick.sim_time_s, tick.heads, None))
+
+    def _collect_readings(self, tick: _Tick) -> None:
+        pending = self.pending
         if pending is None:
             return
-        values = self._values(pending)
+        answer = tick.plume_values
+        if pending.by_physics and (answer is None or answer.tick != pending.tick):
+            return  # not the tick with the physics' answer (e.g. garbage on sim/tick): wait
+        self.pending = None
+        values = self._values(pending, tick.plume_values)
         for vid, served in self.served.items():
             if not served.sensor.due(pending.tick):
                 continue
@@ -443,8 +464,20 @@ class AutopilotNode:
             served.readings_pub.put(encode(reading))
             served.new_readings.append(reading)
 
-    def _values(self, pending: _PendingSensor) -> list[float] | None:
+    def _values(
+        self, pending: _PendingSensor, from_physics: PlumeSample | None
+    ) -> list[float] | None:
         """The plume's values for the pending query, or None (no answer in time, or an error)."""
+        if pending.by_physics:
+            if from_physics is None or from_physics.tick != pending.tick:
+                return None  # not reached: _collect_readings waits for the answering tick
+            values = from_physics.values_g_m3
+            if values is not None and len(values) != len(pending.states):
+                log.warning(
+                    "physics sent %d values for %d points", len(values), len(pending.states)
+                )
+                return None
+            return values
         if pending.replies is None:
             return None
         try:

@@ -402,6 +402,12 @@ def _int_list(ctx: click.Context, param: click.Parameter, value: str) -> tuple[i
 @click.option("--state", "states", default="grounded,hovering,flying", show_default=True)
 @click.option("--seconds", type=click.FloatRange(min=0.5), default=8.0, show_default=True)
 @click.option("--no-gateway", is_flag=True, help="Leave the MAVLink gateway out.")
+@click.option(
+    "--sensor-period-ticks",
+    type=click.IntRange(min=1),
+    default=None,
+    help="Sensor every N control ticks (default: the scenario's).",
+)
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=None)
 def bench_scale(
     scenario: str | None,
@@ -410,6 +416,7 @@ def bench_scale(
     states: str,
     seconds: float,
     no_gateway: bool,
+    sensor_period_ticks: int | None,
     out: Path | None,
 ) -> None:
     """Real-time factor, CPU and memory of the whole stack against the number of vehicles."""
@@ -425,6 +432,7 @@ def bench_scale(
         seconds=seconds,
         vehicles_per_process=vehicles_per_process,
         gateway=not no_gateway,
+        sensor_period_ticks=sensor_period_ticks,
     )
     try:
         rows = run_scale(opts, click.echo)

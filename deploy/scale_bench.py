@@ -12,7 +12,9 @@ lockstep on a free loopback port with the scenario scaled to N vehicles
 - CPU % per role (psutil: user + system time of every process of the role, children included,
   over the window; 100 % = one core);
 - the 1-minute load average at the end of the window (the machine may be shared);
-- peak RSS per role (the role's processes summed, sampled every 0.5 s).
+- peak RSS per role (the role's processes summed, sampled every 0.5 s);
+- CPU milliseconds per tick per role (CPU seconds over the window / ticks in it): what a tick
+  costs, much less sensitive to a shared machine's load than the real-time factor.
 
 Rows go to ``DIR/scale.json``, a table to ``DIR/scale.md`` and plots to ``DIR/rtf.png`` and
 ``DIR/cpu.png``. The bench's own session subscribes only to the clock and the statuses.
@@ -80,12 +82,19 @@ class ScaleOptions:
     vehicles_per_process: int = 1
     gateway: bool = True
     startup_timeout_s: float = 120.0
+    sensor_period_ticks: int | None = None  # None: the scenario's own sensor rate
 
 
 # ---------------------------------------------------------------------------- scenario
-def prepare(sc: Scenario, n: int, run_dir: Path) -> tuple[Scenario, Path]:
-    """``sc`` with ``n`` vehicles, in lockstep, on a free router port, written into run_dir."""
+def prepare(
+    sc: Scenario, n: int, run_dir: Path, sensor_period_ticks: int | None = None
+) -> tuple[Scenario, Path]:
+    """``sc`` with ``n`` vehicles, in lockstep, on a free router port, written into run_dir
+    (with the sensor every ``sensor_period_ticks`` control ticks when given)."""
     sc = scale_scenario(sc, n)
+    if sensor_period_ticks is not None:
+        sensor = msgspec.structs.replace(sc.sensor, period_ticks=sensor_period_ticks)
+        sc = msgspec.structs.replace(sc, sensor=sensor)
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     sc = msgspec.structs.replace(
         sc,
@@ -221,9 +230,9 @@ class RoleUsage:
                     continue
             self.peak_rss[role] = max(self.peak_rss[role], total / 2**20)
 
-    def cpu_percent(self, wall_s: float) -> dict[str, float]:
+    def cpu_seconds(self) -> dict[str, float]:
         cpu1 = self._cpu()
-        return {r: round(100.0 * (cpu1[r] - self.cpu0[r]) / wall_s, 1) for r in self.procs}
+        return {r: cpu1[r] - self.cpu0[r] for r in self.procs}
 
 
 # ---------------------------------------------------------------------------- one case
@@ -248,7 +257,7 @@ def run_case(
     opts: ScaleOptions, n: int, state: str, stop: threading.Event | None = None
 ) -> dict[str, Any]:
     run_dir = opts.out / f"{state}-{n}"
-    sc, path = prepare(opts.scenario, n, run_dir)
+    sc, path = prepare(opts.scenario, n, run_dir, opts.sensor_period_ticks)
     ids = [v.id for v in sc.vehicles]
     roles = tuple(r for r in ROLES if r != "gateway" or opts.gateway)
     launch = LaunchOptions(
@@ -292,20 +301,28 @@ def run_case(
             launcher.supervise_once()
             time.sleep(min(SAMPLE_PERIOD_S, max(0.0, end - time.monotonic())))
         t1, c1 = watch.next_clock(time.monotonic() - 1e-3, time.monotonic() + 30.0)
-        cpu = usage.cpu_percent(time.monotonic() - cpu_t0)
+        cpu_wall = time.monotonic() - cpu_t0
+        cpu_s = usage.cpu_seconds()
+        cpu = {r: round(100.0 * s / cpu_wall, 1) for r, s in cpu_s.items()}
         usage.sample_rss()
         load1 = os.getloadavg()[0]
         wall = t1 - t0
+        ticks_per_s = (c1.tick - c0.tick) / wall
+        ticks = max(ticks_per_s * cpu_wall, 1.0)  # ticks in the CPU window
+        per_tick = {r: round(1e3 * s / ticks, 3) for r, s in cpu_s.items()}
         return {
             "vehicles": n,
             "state": state,
             "vehicles_per_process": opts.vehicles_per_process,
             "control_hz": sc.time.control_hz,
             "physics_hz": sc.time.physics_hz,
+            "sensor_period_ticks": sc.sensor.resolved().period_ticks,
             "real_time_factor": round((c1.sim_time_s - c0.sim_time_s) / wall, 3),
-            "ticks_per_s": round((c1.tick - c0.tick) / wall, 1),
+            "ticks_per_s": round(ticks_per_s, 1),
             "cpu_percent_by_role": cpu,
             "cpu_percent_total": round(sum(cpu.values()), 1),
+            "cpu_ms_per_tick_by_role": per_tick,
+            "cpu_ms_per_tick_total": round(sum(per_tick.values()), 3),
             "load1": round(load1, 2),
             "peak_rss_mb_by_role": {r: round(v, 1) for r, v in usage.peak_rss.items()},
             "wall_s": round(wall, 2),
@@ -324,6 +341,8 @@ def markdown(rows: Sequence[dict[str, Any]]) -> str:
     head = (
         "| N | state | K | RTF | ticks/s | CPU % total | "
         + " | ".join(f"CPU % {r}" for r in TABLE_CPU)
+        + " | CPU ms/tick total | "
+        + " | ".join(f"ms/tick {r}" for r in TABLE_CPU)
         + " | load1 | RSS MB autopilots | RSS MB physics |"
     )
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
@@ -332,6 +351,7 @@ def markdown(rows: Sequence[dict[str, Any]]) -> str:
             lines.append(f"| {r['vehicles']} | {r['state']} | error: {r['error']} |")
             continue
         cpu, rss = r["cpu_percent_by_role"], r["peak_rss_mb_by_role"]
+        per_tick = r.get("cpu_ms_per_tick_by_role", {})
         cells = [
             str(r["vehicles"]),
             r["state"],
@@ -340,6 +360,8 @@ def markdown(rows: Sequence[dict[str, Any]]) -> str:
             f"{r['ticks_per_s']:.0f}",
             f"{r['cpu_percent_total']:.0f}",
             *(f"{cpu.get(k, 0.0):.0f}" for k in TABLE_CPU),
+            f"{r.get('cpu_ms_per_tick_total', 0.0):.3f}",
+            *(f"{per_tick.get(k, 0.0):.3f}" for k in TABLE_CPU),
             f"{r['load1']:.2f}",
             f"{rss.get('autopilot', 0.0):.0f}",
             f"{rss.get('physics', 0.0):.0f}",
@@ -412,7 +434,8 @@ def _one(opts: ScaleOptions, n: int, state: str, stop: threading.Event, bar: Any
         f"{n:4d} {state:<9} "
         + (
             f"RTF {row['real_time_factor']:6.2f}  {row['ticks_per_s']:6.0f} ticks/s  "
-            f"CPU {row['cpu_percent_total']:5.0f} %  load1 {row['load1']:.2f}"
+            f"CPU {row['cpu_percent_total']:5.0f} %  "
+            f"{row['cpu_ms_per_tick_total']:.3f} CPU ms/tick  load1 {row['load1']:.2f}"
             if "error" not in row
             else f"error: {row['error']}"
         )

@@ -5,6 +5,12 @@ inbox and wake the gateway's loop (a self-pipe), which decodes and acts. Keeping
 payload bounds the work when the simulation runs much faster than the gateway can encode.
 Commands go out as asynchronous queries, one at a time per vehicle (order matters: upload a
 mission, then start it); their replies are posted back to the loop.
+
+States and readings arrive every control tick for every vehicle (N·2 samples per tick): they
+are not handed to Python one by one but wait in Zenoh's Rust-side ring buffers
+(:class:`Streams`), which the loop empties every few milliseconds while they flow — no Python
+callback, lock or wake-up per sample. Statuses (rare, and ordered before command replies) keep
+their callback and wake the loop at once.
 """
 
 from __future__ import annotations
@@ -35,6 +41,8 @@ KIND_STATE = "state"
 KIND_STATUS = "status"
 KIND_READING = "concentration"
 MAX_QUEUED_COMMANDS = 64
+STREAM_POLL_S = 0.002  # while states / readings flow: how often the loop takes the newest
+STREAM_IDLE_POLL_S = 0.05  # while they do not
 # Streams where only the newest matters: a queued one is replaced, never queued behind.
 _LATEST_WINS = (GcsHeartbeat, Setpoint)
 
@@ -97,27 +105,67 @@ class Inbox:
         return latest, calls
 
 
-def subscribe_vehicles(
+class Streams:
+    """Every vehicle's states and readings in ring buffers; the loop takes the newest of each."""
+
+    def __init__(self, session: zenoh.Session, keys: Keys, vehicle_ids: set[str]) -> None:
+        self._keys = keys
+        self._ids = vehicle_ids
+        capacity = max(1024, 16 * len(vehicle_ids))  # the newest sample of each vehicle stays
+        self._subs = [
+            (kind, session.declare_subscriber(key, zenoh.handlers.RingChannel(capacity)))
+            for kind, key in (
+                (KIND_STATE, keys.all_vehicle_states()),
+                (KIND_READING, keys.all_vehicle_concentration()),
+            )
+        ]
+
+    def drain(self, latest: dict[tuple[str, str], bytes], states: dict[str, list[bytes]]) -> int:
+        """The newest reading per vehicle into ``latest``, every state (in order) into
+        ``states`` (a telemetry stream may be due at any of them); how many samples came."""
+        count = 0
+        vehicle_id_of = self._keys.vehicle_id_of
+        for kind, sub in self._subs:
+            while (sample := sub.try_recv()) is not None:
+                count += 1
+                try:
+                    vid = vehicle_id_of(str(sample.key_expr))
+                except KeyNameError:
+                    continue
+                if vid not in self._ids:
+                    continue
+                if kind == KIND_STATE:
+                    states.setdefault(vid, []).append(sample.payload.to_bytes())
+                else:
+                    latest[(kind, vid)] = sample.payload.to_bytes()
+        return count
+
+    def undeclare(self) -> None:
+        for _, sub in self._subs:
+            sub.undeclare()
+
+
+def subscribe_statuses(
     session: zenoh.Session, keys: Keys, vehicle_ids: set[str], inbox: Inbox
-) -> list[zenoh.Subscriber[None]]:
-    """Subscribe state, status and concentration of every vehicle; payloads go to ``inbox``."""
+) -> zenoh.Subscriber[None]:
+    """Every vehicle's status into ``inbox`` (which wakes the loop)."""
+    return session.declare_subscriber(
+        keys.all_vehicle_status(), _handler(keys, vehicle_ids, inbox, KIND_STATUS)
+    )
 
-    def handler(kind: str) -> Callable[[zenoh.Sample], None]:
-        def on_sample(sample: zenoh.Sample) -> None:
-            try:
-                vid = keys.vehicle_id_of(str(sample.key_expr))
-            except KeyNameError:
-                return
-            if vid in vehicle_ids:
-                inbox.put(kind, vid, sample.payload.to_bytes())
 
-        return on_sample
+def _handler(
+    keys: Keys, vehicle_ids: set[str], inbox: Inbox, kind: str
+) -> Callable[[zenoh.Sample], None]:
+    def on_sample(sample: zenoh.Sample) -> None:
+        try:
+            vid = keys.vehicle_id_of(str(sample.key_expr))
+        except KeyNameError:
+            return
+        if vid in vehicle_ids:
+            inbox.put(kind, vid, sample.payload.to_bytes())
 
-    return [
-        session.declare_subscriber(keys.all_vehicle_states(), handler(KIND_STATE)),
-        session.declare_subscriber(keys.all_vehicle_status(), handler(KIND_STATUS)),
-        session.declare_subscriber(keys.all_vehicle_concentration(), handler(KIND_READING)),
-    ]
+    return on_sample
 
 
 Done = Callable[[CommandReply], None]

@@ -20,6 +20,7 @@ import time
 from types import TracebackType
 from typing import Any
 
+import msgspec
 import zenoh
 
 from gcs_bridge import mission as ms
@@ -27,10 +28,13 @@ from gcs_bridge.bus import (
     KIND_READING,
     KIND_STATE,
     KIND_STATUS,
+    STREAM_IDLE_POLL_S,
+    STREAM_POLL_S,
     Commander,
     Inbox,
+    Streams,
     Waker,
-    subscribe_vehicles,
+    subscribe_statuses,
 )
 from gcs_bridge.core import Handler
 from gcs_bridge.dialect import Msg, mavlink
@@ -51,6 +55,12 @@ from swarmbus.session import Presence
 log = logging.getLogger(__name__)
 
 TICK_S = 0.1  # wall-clock housekeeping: heartbeats, transfer timeouts, parameter sync
+
+
+class _StateTime(
+    msgspec.Struct, frozen=True, tag_field="schema", tag=VehicleState.__struct_config__.tag
+):
+    sim_time_s: float
 
 
 class Gateway(CommandHandlers, ParamHandlers, MissionHandlers):
@@ -83,6 +93,8 @@ class Gateway(CommandHandlers, ParamHandlers, MissionHandlers):
         self._session = session
         self._commanders: dict[str, Commander] = {}
         self._subs: list[Any] = []
+        self._streams: Streams | None = None
+        self._stream_poll_s = STREAM_IDLE_POLL_S
         self._presence: Presence | None = None
         if session is not None:
             for v in self.vehicles.values():
@@ -90,7 +102,8 @@ class Gateway(CommandHandlers, ParamHandlers, MissionHandlers):
                     session, keys.vehicle_cmd(v.id), v.id, options.cmd_timeout_s, self.inbox
                 )
             self._presence = Presence(session, keys)
-            self._subs = subscribe_vehicles(session, keys, set(self.vehicles), self.inbox)
+            self._subs = [subscribe_statuses(session, keys, set(self.vehicles), self.inbox)]
+            self._streams = Streams(session, keys, set(self.vehicles))
         self._inflight: set[tuple[int, int, int, int]] = set()
         self._text_budget: dict[tuple[str | None, int], tuple[float, float]] = {}
         self._param_sync: dict[str, float] = {}  # vehicle id → next attempt (wall s); -1 busy
@@ -165,6 +178,9 @@ class Gateway(CommandHandlers, ParamHandlers, MissionHandlers):
         for sub in self._subs:
             with contextlib.suppress(zenoh.ZError):
                 sub.undeclare()
+        if self._streams is not None:
+            with contextlib.suppress(zenoh.ZError):
+                self._streams.undeclare()
         if self._presence is not None:
             with contextlib.suppress(zenoh.ZError):
                 self._presence.close()
@@ -191,6 +207,8 @@ class Gateway(CommandHandlers, ParamHandlers, MissionHandlers):
         """Wait for traffic (at most ``max_wait_s``), handle all of it, do due housekeeping."""
         now = time.monotonic()
         timeout = max(0.0, min(max_wait_s, self._next_tick_s - now))
+        if self._streams is not None:
+            timeout = min(timeout, self._stream_poll_s)
         sources: list[Any] = [self.waker, *self.links.values()]
         ready, _, _ = select.select(sources, [], [], timeout)
         now = time.monotonic()
@@ -213,16 +231,24 @@ class Gateway(CommandHandlers, ParamHandlers, MissionHandlers):
 
     def _drain_inbox(self, now: float) -> None:
         latest, calls = self.inbox.take()
+        states: dict[str, list[bytes]] = {}
+        if self._streams is not None:
+            flowing = self._streams.drain(latest, states) > 0
+            self._stream_poll_s = STREAM_POLL_S if flowing else STREAM_IDLE_POLL_S
         # Status first (telemetry for a state carries the newest status), and bus data before
         # command completions: the autopilot publishes its status before it replies, so an
         # ACK never goes out while the gateway still holds the status from before the command.
         for kind in (KIND_STATUS, KIND_READING, KIND_STATE):
             for (k, vid), payload in latest.items():
                 if k == kind:
-                    try:
-                        self._on_bus(kind, self.vehicles[vid], payload, now)
-                    except Exception:
-                        log.exception("error handling %s of %s", kind, vid)
+                    self._on_bus_safely(kind, self.vehicles[vid], payload, now)
+        for vid, payloads in states.items():
+            v = self.vehicles[vid]
+            last = len(payloads) - 1
+            for i, payload in enumerate(payloads):
+                # older states only where a telemetry stream falls due (rates per sim second)
+                if i == last or self._state_wanted(v, payload):
+                    self._on_bus_safely(KIND_STATE, v, payload, now)
         for call in calls:
             try:
                 call()
@@ -243,6 +269,22 @@ class Gateway(CommandHandlers, ParamHandlers, MissionHandlers):
             self._maybe_sync_params(v, now)
 
     # ------------------------------------------------------------------ bus data
+    def _on_bus_safely(self, kind: str, v: Vehicle, payload: bytes, now: float) -> None:
+        try:
+            self._on_bus(kind, v, payload, now)
+        except Exception:
+            log.exception("error handling %s of %s", kind, v.id)
+
+    def _state_wanted(self, v: Vehicle, payload: bytes) -> bool:
+        try:
+            sim_time_s = decode(payload, _StateTime).sim_time_s
+        except MessageError:
+            return True  # let the full decode say what is wrong
+        return any(
+            self.schedules[(link.name, v.sysid)].wants(sim_time_s)
+            for link in self.links_of[v.sysid]
+        )
+
     def _on_bus(self, kind: str, v: Vehicle, payload: bytes, now: float) -> None:
         try:
             if kind == KIND_STATE:

@@ -115,6 +115,17 @@ class StreamSchedule:
         interval = self._interval_s.get(msg_id)
         return -1 if interval is None else round(interval * 1e6)
 
+    def wants(self, sim_time_s: float) -> bool:
+        """Whether :meth:`due` would return any stream at ``sim_time_s`` (changes nothing)."""
+        if self._last_s is not None and sim_time_s < self._last_s - 1e-6:
+            return True
+        for msg_id, interval in self._interval_s.items():
+            if interval is not None:
+                next_s = self._next_s.get(msg_id)
+                if next_s is None or sim_time_s >= next_s - 1e-9:
+                    return True
+        return False
+
     def due(self, sim_time_s: float) -> list[int]:
         """Streams due at ``sim_time_s``; each one's next due time moves one interval on."""
         if self._last_s is not None and sim_time_s < self._last_s - 1e-6:

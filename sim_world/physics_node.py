@@ -6,6 +6,12 @@ tick ``k`` (:class:`~sim_world.lockstep.Lockstep`), applies them, steps ``scenar
 physics steps and publishes tick ``k + 1``. ``sim/clock`` carries sim time and the achieved
 real-time factor about ten times a wall-clock second.
 
+The sensor's plume query: on every sensor tick (``sensor.period_ticks``) while a plume node is
+alive, the physics sends ONE query with every vehicle's position right after publishing the
+tick, and puts the answer into the next tick (``SimTick.plume_values``); the autopilots build
+their readings from it instead of each sending the same query (N round trips per tick → 1).
+The answer is awaited after the tick's commands, so it overlaps the autopilots' work.
+
 With a ``checkpoint`` path it saves the world there every ``checkpoint_period_s`` of sim time
 (:mod:`sim_world.checkpoint`) and, when that file exists at start, resumes from it instead of
 the spawn: the lockstep handshake then runs on the checkpoint's tick, and the autopilots answer
@@ -14,7 +20,8 @@ it like any tick (sim time goes back by the replayed span).
 Options (``--set KEY=VALUE``): ``max_ticks`` (stop once this tick is published and answered),
 ``mode`` (lockstep|realtime), ``speed_factor``, ``wait_for_autopilots`` (true|false: start
 without waiting for the configured autopilots), ``clock_period_s``, ``checkpoint`` (a file
-path; empty: none), ``checkpoint_period_s`` (default ``time.checkpoint_period_s``; 0: never).
+path; empty: none), ``checkpoint_period_s`` (default ``time.checkpoint_period_s``; 0: never),
+``shared_plume_query`` (true|false: false leaves the sensor query to every autopilot).
 """
 
 from __future__ import annotations
@@ -26,6 +33,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import zenoh
 
@@ -34,7 +42,16 @@ from sim_world.checkpoint import CheckpointError, CheckpointWriter, ProgressMark
 from sim_world.lockstep import Lockstep, participant_of
 from sim_world.world import World
 from swarmbus.codec import MessageError, decode, encode
-from swarmbus.messages import ActuatorCommand, Clock, SimTick, SpeedMode, VehicleState
+from swarmbus.messages import (
+    ActuatorCommand,
+    Clock,
+    PlumeQuery,
+    PlumeSample,
+    PlumeValues,
+    SimTick,
+    SpeedMode,
+    VehicleState,
+)
 from swarmbus.node import NodeContext, NodeRuntime
 from swarmbus.session import Presence
 
@@ -90,6 +107,7 @@ class PhysicsOptions:
     max_ticks: int | None = None
     wait_for_autopilots: bool = True
     clock_period_s: float = 0.1
+    shared_plume_query: bool = True
     checkpoint: Path | None = None
     checkpoint_period_s: float = 1.0
 
@@ -101,6 +119,7 @@ class PhysicsOptions:
             "max_ticks": _non_negative_int,
             "wait_for_autopilots": _bool,
             "clock_period_s": _positive_float,
+            "shared_plume_query": _bool,
             "checkpoint": _path,
             "checkpoint_period_s": _non_negative_float,
         }
@@ -156,6 +175,12 @@ class PhysicsNode:
         self._actuator_sub = session.declare_subscriber(
             self.keys.all_vehicle_actuators(), self._on_actuators
         )
+        # The shared sensor query (see the module doc).
+        self._plume_key = self.keys.plume_concentration()
+        self._sensor_period = self.scenario.sensor.resolved().period_ticks
+        self._plume_timeout_s = 0.4 * self.scenario.time.participant_timeout_s
+        self._plume_nodes: set[str] = set()
+        self._plume_pending: tuple[int, int, Any] | None = None  # tick, points, replies
         self._presence = Presence(session, self.keys, self._on_presence)
         # Clock bookkeeping (wall clock only measures; it never drives the physics).
         self._wall_start = time.monotonic()
@@ -175,6 +200,13 @@ class PhysicsNode:
 
     # ------------------------------------------------------------------ bus callbacks
     def _on_presence(self, name: str, alive: bool) -> None:
+        if name == "plume" or name.startswith("plume-"):
+            with self._cond:
+                if alive:
+                    self._plume_nodes.add(name)
+                else:
+                    self._plume_nodes.discard(name)
+            return
         vid = participant_of(name, self.world.vehicle_ids)
         if vid is None:
             return
@@ -386,18 +418,61 @@ class PhysicsNode:
 
     # ------------------------------------------------------------------ output
     def _publish_tick(self, states: list[VehicleState]) -> None:
+        plume_values = self._plume_answer()
+        query = (
+            self.options.shared_plume_query
+            and self.tick % self._sensor_period == 0
+            and bool(self._plume_nodes)
+            and bool(states)
+        )
         msg = SimTick(
             tick=self.tick,
             sim_time_s=self.world.sim_time_s,
             control_dt_s=self.control_dt_s,
             states=states,
+            plume_queried=query,
+            plume_values=plume_values,
         )
         self._last_tick_msg = encode(msg)
         self._tick_pub.put(self._last_tick_msg)
+        if query:
+            self._plume_query(states)
         if self._marker is not None:
             self._marker.mark(self.tick)
         for pub, state in zip(self._state_pubs, states, strict=True):
             pub.put(encode(state))
+
+    def _plume_query(self, states: list[VehicleState]) -> None:
+        query = PlumeQuery(
+            points_enu_m=[s.position_enu_m for s in states], sim_time_s=self.world.sim_time_s
+        )
+        replies = self.rt.session.get(
+            self._plume_key, payload=encode(query), timeout=self._plume_timeout_s
+        )
+        self._plume_pending = (self.tick, len(states), replies)
+
+    def _plume_answer(self) -> PlumeSample | None:
+        """The answer to the pending sensor query (waits for it up to its timeout)."""
+        pending, self._plume_pending = self._plume_pending, None
+        if pending is None:
+            return None
+        tick, count, replies = pending
+        values: list[float] | None = None
+        try:
+            for reply in replies:
+                if reply.ok is None:
+                    err = reply.err
+                    log.warning("plume query refused: %s", err.payload.to_bytes() if err else "")
+                    break
+                got = decode(reply.ok.payload.to_bytes(), PlumeValues).values_g_m3
+                if len(got) == count:
+                    values = got
+                else:
+                    log.warning("plume answered %d values for %d points", len(got), count)
+                break
+        except (MessageError, zenoh.ZError) as exc:
+            log.warning("plume reply unusable: %s", exc)
+        return PlumeSample(tick=tick, values_g_m3=values)
 
     def _pace(self, sim_time_s: float) -> None:
         """Realtime mode: hold tick ``k`` until the wall clock reaches its sim time / factor."""

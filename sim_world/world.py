@@ -22,11 +22,10 @@ import math
 from collections.abc import Mapping, Sequence
 from types import TracebackType
 
-import numpy as np
 import pybullet as pb
-import pymap3d
 
 from sim_world.checkpoint import CheckpointError, VehicleCheckpoint, WorldCheckpoint, scratch_file
+from sim_world.geodesy import EnuToGeodetic
 from swarmbus.messages import VehicleState
 from swarmbus.scenario import Scenario
 from swarmbus.scenario import Vehicle as VehicleSpec
@@ -169,7 +168,7 @@ class World:
         self.dt_s = 1.0 / self.physics_hz
         self.wind_enu_m_s = wind_vector_enu(scenario.wind.speed_m_s, scenario.wind.from_deg)
         origin = scenario.world.origin
-        self._origin = (origin.lat_deg, origin.lon_deg, origin.alt_m)
+        self._geodetic = EnuToGeodetic(origin.lat_deg, origin.lon_deg, origin.alt_m)
         self.step_count = 0
         self._fresh: list[tuple[Sequence[float], Sequence[float]]] = []
         self._fresh_step = -1
@@ -456,26 +455,14 @@ class World:
         """Ground truth of every vehicle, in scenario order."""
         c = self._client
         t = self.sim_time_s if sim_time_s is None else sim_time_s
-        poses = []
-        east: list[float] = []
-        north: list[float] = []
-        up: list[float] = []
+        geodetic = self._geodetic
+        fresh = []
+        out = []
         for v in self._vehicles:
             pos, q = pb.getBasePositionAndOrientation(v.body, physicsClientId=c)
             lin, ang = pb.getBaseVelocity(v.body, physicsClientId=c)
-            poses.append((pos, q, lin, ang))
-            east.append(pos[0])
-            north.append(pos[1])
-            up.append(pos[2])
-        self._fresh = [(p[1], p[2]) for p in poses]
-        self._fresh_step = self.step_count
-        lat0, lon0, h0 = self._origin
-        lats, lons, alts = pymap3d.enu2geodetic(
-            np.array(east), np.array(north), np.array(up), lat0, lon0, h0
-        )
-        out = []
-        for i, v in enumerate(self._vehicles):
-            pos, q, lin, ang = poses[i]
+            fresh.append((q, lin))
+            lat, lon, alt = geodetic(pos[0], pos[1], pos[2])
             out.append(
                 VehicleState(
                     vehicle_id=v.id,
@@ -485,12 +472,14 @@ class World:
                     velocity_enu_m_s=lin,
                     attitude_xyzw=q,
                     body_rates_rad_s=rotate_to_body(q, *ang),
-                    lat_deg=float(lats[i]),
-                    lon_deg=float(lons[i]),
-                    alt_m=float(alts[i]),
+                    lat_deg=lat,
+                    lon_deg=lon,
+                    alt_m=alt,
                     on_ground=v.on_ground,
                     crashed=v.crashed,
                     motors_enabled=v.motors_enabled,
                 )
             )
+        self._fresh = fresh
+        self._fresh_step = self.step_count
         return out

@@ -81,13 +81,28 @@ class VehicleState(Message, frozen=True, kw_only=True, tag=_tag("vehicle_state")
     motors_enabled: bool = True
 
 
+class PlumeSample(msgspec.Struct, frozen=True, kw_only=True):
+    """The plume's values at the positions of every state of tick ``tick``, in that order;
+    ``None`` when the plume service did not answer (readings are then unavailable)."""
+
+    tick: Tick
+    values_g_m3: list[NonNegative] | None
+
+
 class SimTick(Message, frozen=True, kw_only=True, tag=_tag("sim_tick")):
-    """``sim/tick``: all vehicle states of tick k in one message (the lockstep's go signal)."""
+    """``sim/tick``: all vehicle states of tick k in one message (the lockstep's go signal).
+
+    ``plume_queried``: the physics sent the sensor's plume query for this tick's positions
+    itself (one query for every vehicle instead of one per autopilot); its answer comes in
+    ``plume_values`` of the next tick. Autopilots query the plume themselves otherwise.
+    """
 
     tick: Tick
     sim_time_s: SimTime
     control_dt_s: Positive
     states: list[VehicleState]
+    plume_queried: bool = False
+    plume_values: PlumeSample | None = None
 
 
 class ActuatorCommand(Message, frozen=True, kw_only=True, tag=_tag("actuators")):

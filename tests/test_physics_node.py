@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import itertools
 import json
 import os
 import subprocess
@@ -16,7 +17,8 @@ import zenoh
 
 from swarmbus.codec import decode, encode
 from swarmbus.keys import Keys
-from swarmbus.messages import ActuatorCommand, Clock, SimTick
+from swarmbus.messages import ActuatorCommand, Clock, PlumeQuery, PlumeValues, SimTick
+from swarmbus.session import Presence
 from tests.procs import REPO, Network, NodeProcs, run_cli, wait_until
 
 WORLD = "physics-test"
@@ -253,6 +255,35 @@ def test_two_runs_of_the_same_scenario_give_identical_state_streams(
     first = stream_hash(procs, watch, sc, 240, "run1")
     second = stream_hash(procs, watch, sc, 240, "run2")
     assert first == second
+
+
+def test_one_shared_plume_query_per_sensor_tick_answered_in_the_next_tick(
+    setup: tuple[NodeProcs, Watch], tmp_path: Path
+) -> None:
+    procs, watch = setup
+    sc = write_scenario(tmp_path)
+    procs.start("plume", "--scenario", str(sc), name="plume")
+    presence = Presence(watch.session, KEYS)
+    assert presence.wait_for(lambda alive: "plume" in alive, 60.0), sorted(presence.alive)
+    presence.close()
+    physics = procs.start(
+        "physics", "--scenario", str(sc), "--set", "max_ticks=20",
+        "--set", "wait_for_autopilots=false", name="physics",
+    )  # fmt: skip
+    assert exit_code(physics, "physics") == 0
+    wait_until(lambda: len(watch.raw) == 21, 10.0, "ticks 0..20 at the subscriber")
+    ticks = [decode(watch.raw[k], SimTick) for k in range(21)]
+    assert all(t.plume_queried for t in ticks)  # sensor every tick in this scenario
+    assert ticks[0].plume_values is None
+    for prev, t in itertools.pairwise(ticks):
+        assert t.plume_values is not None and t.plume_values.tick == prev.tick
+        points = [s.position_enu_m for s in prev.states]
+        (reply,) = watch.session.get(
+            KEYS.plume_concentration(), payload=encode(PlumeQuery(points_enu_m=points)), timeout=10
+        )
+        assert reply.ok is not None
+        expected = decode(reply.ok.payload.to_bytes(), PlumeValues).values_g_m3
+        assert t.plume_values.values_g_m3 == expected
 
 
 def test_missing_autopilots_fail_start_up_naming_them(

@@ -252,3 +252,16 @@ def test_reading_states_between_steps_does_not_change_the_trajectory() -> None:
             return msgspec.msgpack.encode(world.states(0))
 
     assert run(True) == run(False)
+
+
+def test_scalar_geodetic_matches_pymap3d() -> None:
+    from sim_world.geodesy import EnuToGeodetic
+
+    origin = (47.397742, 8.545594, 488.0)
+    to_geodetic = EnuToGeodetic(*origin)
+    for e, n, u in [(0.0, 0.0, 0.0), (123.4, -56.7, 10.0), (-480.0, 499.0, 150.0), (3, 4, -2)]:
+        lat, lon, alt = pymap3d.enu2geodetic(e, n, u, *origin)
+        got = to_geodetic(e, n, u)
+        assert got[0] == pytest.approx(float(lat), abs=1e-12)
+        assert got[1] == pytest.approx(float(lon), abs=1e-12)
+        assert got[2] == pytest.approx(float(alt), abs=1e-7)

@@ -19,6 +19,7 @@ COLUMNS = {
     "cpu_percent_by_role",
     "load1",
     "peak_rss_mb_by_role",
+    "cpu_ms_per_tick_by_role",
 }
 
 
