@@ -52,7 +52,7 @@ STOP_STAGE = {
 RESTART = {
     "router": RestartPolicy(),
     "physics": RestartPolicy(),
-    "recorder": RestartPolicy(),
+    "recorder": RestartPolicy(RestartMode.ON_FAILURE, max_restarts=3),
     "plume": RestartPolicy(RestartMode.ON_FAILURE, max_restarts=3),
     "autopilot": RestartPolicy(RestartMode.ON_FAILURE, max_restarts=3),
     "gateway": RestartPolicy(RestartMode.ON_FAILURE, max_restarts=3),
@@ -155,7 +155,8 @@ def plan(scenario: Scenario, opts: LaunchOptions) -> list[ProcessSpec]:
                 add(role, name, [a for vid in chunk for a in ("--vehicle", vid)] + net_args)
         elif role == "recorder":
             out = opts.run_dir / "recording.mcap"
-            add(role, role, [*net_args, "--set", f"out={out}"])
+            # resume: a restarted recorder continues in the next segment (recording.1.mcap …)
+            add(role, role, [*net_args, "--set", f"out={out}", "--set", "resume=true"])
         else:
             add(role, role, net_args)
     return specs
