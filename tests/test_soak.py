@@ -140,7 +140,8 @@ def test_soak_32_vehicles_ten_sim_minutes(tmp_path: Path) -> None:
         obs = Observer(session, keys)
         deadline = time.monotonic() + 300.0
         for k, vid in enumerate(ids):
-            command_until_answered(session, keys, vid, MissionUpload(items=loop_mission(sc, k)), deadline)  # fmt: skip
+            upload = MissionUpload(items=loop_mission(sc, k))
+            command_until_answered(session, keys, vid, upload, deadline)
             command_until_answered(session, keys, vid, Arm(), deadline)
             command_until_answered(session, keys, vid, MissionStart(), deadline)
         pids = up.pids()
