@@ -192,11 +192,12 @@ def test_recorder_killed_continues_in_a_new_segment_with_the_gap(
         lambda: seg0.exists() and (segment_end(seg0).last_tick or 0) > 100,
         60.0,
         "ticks in the first segment",
+        poll_s=1.0,
     )
     _, restart_s, kill_ns = stack.kill("recorder")
     t0 = time.monotonic()
     found = wait_until(
-        lambda: _gap_and_new_ticks(seg1), 90.0, "the gap and new ticks in recording.1.mcap", 0.5
+        lambda: _gap_and_new_ticks(seg1), 90.0, "the gap and new ticks in recording.1.mcap", 1.0
     )
     back_s = time.monotonic() - t0 + restart_s
     gap, new_ticks = found
