@@ -11,6 +11,7 @@ the last window. Numbers are printed (-s). ``PLUMESWARM_SOAK_SIM_S`` shortens th
 from __future__ import annotations
 
 import os
+import re
 import statistics
 import threading
 import time
@@ -105,8 +106,9 @@ class Observer:
 
     def physics_dropped(self) -> int:
         assert self.physics is not None, "no physics health heard"
-        words = self.physics.detail.split()
-        return int(words[words.index("dropped") + 1])
+        found = re.search(r"\bdropped (\d+)", self.physics.detail)
+        assert found, f"no dropped count in physics's health: {self.physics.detail!r}"
+        return int(found[1])
 
     def close(self) -> None:
         for s in self._subs:
