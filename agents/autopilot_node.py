@@ -221,6 +221,7 @@ class AutopilotNode:
         }
         self.last_tick = -1
         self.last_tick_wall = 0.0
+        self.control_dt_s = 1.0 / ctx.scenario.time.control_hz
         self._tick_sub: Any = None
         self.pending: _PendingSensor | None = None
         self.plume_key = self.keys.plume_concentration()
@@ -351,6 +352,17 @@ class AutopilotNode:
                 if served.last_command:
                     served.actuators.put(served.last_command)
             return
+        if tick.tick < self.last_tick:
+            # Physics restarted from a checkpoint: fly on from its tick (timers stretch by it).
+            log.warning(
+                "sim time went back from tick %d to %d (t=%.3f s): physics resumed from a "
+                "checkpoint, replaying %.3f s",
+                self.last_tick,
+                tick.tick,
+                tick.sim_time_s,
+                (self.last_tick - tick.tick) * self.control_dt_s,
+            )
+            self.pending = None  # the sensor query of a tick that is being replayed
         self.last_tick = tick.tick
         self._collect_readings()
         index = {h.vehicle_id: k for k, h in enumerate(tick.heads)}

@@ -5,6 +5,10 @@ scenario and the options (:func:`plan`); :class:`Launcher` carries it out with a
 :class:`~deploy.supervisor.Supervisor`, learns readiness from liveliness tokens
 (:class:`~swarmbus.session.Presence`) and never from sleeps, and writes ``pids.json`` into the run
 directory.
+
+Physics saves its world to ``physics.ckpt`` in the run directory; after a crash the supervisor
+restarts it (on-failure) and it resumes from that checkpoint. A new run removes a checkpoint
+left in the directory by an earlier one, so it starts from the spawn.
 """
 
 from __future__ import annotations
@@ -31,6 +35,7 @@ from deploy.supervisor import (
     RestartPolicy,
     Supervisor,
 )
+from sim_world import checkpoint
 from swarmbus.keys import Keys
 from swarmbus.scenario import Scenario
 from swarmbus.session import DEFAULT_ROUTER, NetworkConfig, open_session
@@ -51,8 +56,8 @@ STOP_STAGE = {
 }
 RESTART = {
     "router": RestartPolicy(),
-    "physics": RestartPolicy(),
-    "recorder": RestartPolicy(RestartMode.ON_FAILURE, max_restarts=3),
+    "physics": RestartPolicy(RestartMode.ON_FAILURE, max_restarts=3),  # from its checkpoint
+    "recorder": RestartPolicy(RestartMode.ON_FAILURE, max_restarts=3),  # in a new segment
     "plume": RestartPolicy(RestartMode.ON_FAILURE, max_restarts=3),
     "autopilot": RestartPolicy(RestartMode.ON_FAILURE, max_restarts=3),
     "gateway": RestartPolicy(RestartMode.ON_FAILURE, max_restarts=3),
@@ -153,6 +158,8 @@ def plan(scenario: Scenario, opts: LaunchOptions) -> list[ProcessSpec]:
                     f"-plus{len(chunk) - 1}" if len(chunk) > 1 else ""
                 )
                 add(role, name, [a for vid in chunk for a in ("--vehicle", vid)] + net_args)
+        elif role == "physics":
+            add(role, role, [*net_args, "--set", f"checkpoint={checkpoint_path(opts)}"])
         elif role == "recorder":
             out = opts.run_dir / "recording.mcap"
             # resume: a restarted recorder continues in the next segment (recording.1.mcap …)
@@ -160,6 +167,10 @@ def plan(scenario: Scenario, opts: LaunchOptions) -> list[ProcessSpec]:
         else:
             add(role, role, net_args)
     return specs
+
+
+def checkpoint_path(opts: LaunchOptions) -> Path:
+    return opts.run_dir / "physics.ckpt"
 
 
 def default_run_dir(root: Path = Path("runs")) -> Path:
@@ -218,6 +229,8 @@ class Launcher:
                 )
             )
         self.run_dir.mkdir(parents=True, exist_ok=True)
+        if any(s.role == "physics" for s in self.specs):
+            checkpoint.remove(checkpoint_path(self.opts))  # an earlier run's: start from spawn
         timeout = self.scenario.time.startup_timeout_s
         first = [s.name for s in self.specs if s.role == "router"]
         if first:

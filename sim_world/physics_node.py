@@ -6,21 +6,31 @@ tick ``k`` (:class:`~sim_world.lockstep.Lockstep`), applies them, steps ``scenar
 physics steps and publishes tick ``k + 1``. ``sim/clock`` carries sim time and the achieved
 real-time factor about ten times a wall-clock second.
 
+With a ``checkpoint`` path it saves the world there every ``checkpoint_period_s`` of sim time
+(:mod:`sim_world.checkpoint`) and, when that file exists at start, resumes from it instead of
+the spawn: the lockstep handshake then runs on the checkpoint's tick, and the autopilots answer
+it like any tick (sim time goes back by the replayed span).
+
 Options (``--set KEY=VALUE``): ``max_ticks`` (stop once this tick is published and answered),
 ``mode`` (lockstep|realtime), ``speed_factor``, ``wait_for_autopilots`` (true|false: start
-without waiting for the configured autopilots), ``clock_period_s``.
+without waiting for the configured autopilots), ``clock_period_s``, ``checkpoint`` (a file
+path; empty: none), ``checkpoint_period_s`` (default ``time.checkpoint_period_s``; 0: never).
 """
 
 from __future__ import annotations
 
 import logging
+import sys
 import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 
 import zenoh
 
+from sim_world import checkpoint
+from sim_world.checkpoint import CheckpointError, CheckpointWriter, ProgressMarker
 from sim_world.lockstep import Lockstep, participant_of
 from sim_world.world import World
 from swarmbus.codec import MessageError, decode, encode
@@ -55,6 +65,17 @@ def _positive_float(text: str) -> float:
     return value
 
 
+def _non_negative_float(text: str) -> float:
+    value = float(text)
+    if not 0.0 <= value < float("inf"):
+        raise ValueError(f"must be a finite number >= 0, got {text!r}")
+    return value
+
+
+def _path(text: str) -> Path | None:
+    return Path(text) if text.strip() else None
+
+
 def _non_negative_int(text: str) -> int:
     value = int(text)
     if value < 0:
@@ -69,6 +90,8 @@ class PhysicsOptions:
     max_ticks: int | None = None
     wait_for_autopilots: bool = True
     clock_period_s: float = 0.1
+    checkpoint: Path | None = None
+    checkpoint_period_s: float = 1.0
 
     @classmethod
     def from_context(cls, ctx: NodeContext) -> PhysicsOptions:
@@ -78,10 +101,13 @@ class PhysicsOptions:
             "max_ticks": _non_negative_int,
             "wait_for_autopilots": _bool,
             "clock_period_s": _positive_float,
+            "checkpoint": _path,
+            "checkpoint_period_s": _non_negative_float,
         }
         values: dict[str, object] = {
             "mode": SpeedMode(ctx.scenario.time.mode),
             "speed_factor": ctx.scenario.time.speed_factor,
+            "checkpoint_period_s": ctx.scenario.time.checkpoint_period_s,
         }
         for key, text in sorted(ctx.options.items()):
             if key not in parsers:
@@ -110,6 +136,17 @@ class PhysicsNode:
         )
         self.tick = 0
         self._last_tick_msg = b""
+        # Checkpoints every `_checkpoint_ticks` ticks; the loop's per-tick cost is one
+        # comparison with `_next_checkpoint`. The marker notes each published tick.
+        self._checkpoint_ticks = 0
+        if options.checkpoint is not None and options.checkpoint_period_s > 0.0:
+            period = options.checkpoint_period_s * self.scenario.time.control_hz
+            self._checkpoint_ticks = max(1, round(period))
+        self._next_checkpoint = self._due_checkpoint = sys.maxsize
+        self._writer: CheckpointWriter | None = None
+        self._capture_s = 0.0
+        self._marker: ProgressMarker | None = None
+        self._resume_note = ""
         session = rt.session
         self._tick_pub = session.declare_publisher(self.keys.tick())
         self._clock_pub = session.declare_publisher(self.keys.clock())
@@ -132,6 +169,10 @@ class PhysicsNode:
     def close(self) -> None:
         self._presence.close()
         self._actuator_sub.undeclare()
+        if self._writer is not None:
+            self._writer.close()
+        if self._marker is not None:
+            self._marker.close()
 
     # ------------------------------------------------------------------ bus callbacks
     def _on_presence(self, name: str, alive: bool) -> None:
@@ -167,18 +208,63 @@ class PhysicsNode:
 
     # ------------------------------------------------------------------ phases
     def run(self) -> int:
+        last_run = self._resume() if self.options.checkpoint is not None else None
         self.rt.ready()
         deadline = time.monotonic() + self.scenario.time.startup_timeout_s
         if self.options.wait_for_autopilots and not self._wait_for_tokens(deadline):
             return 0 if self.rt.stop.is_set() else 1  # a stop signal is not a failure
         with self._cond:
             self.barrier.start()
-            self.barrier.begin(0, timeout_s=max(0.0, deadline - time.monotonic()))
-        self._publish_tick(self.world.states(0, 0.0))
+            self.barrier.begin(self.tick, timeout_s=max(0.0, deadline - time.monotonic()))
+        self._publish_tick(self.world.states(self.tick, self.world.sim_time_s))
         if not self._handshake():
             return 0 if self.rt.stop.is_set() else 1
+        if last_run is not None and self._resume_note:
+            self._resume_note += f", ticks stopped for {time.monotonic() - last_run:.2f} s wall"
+            log.warning("%s", self._resume_note)
         self._reset_clock()
         return self._loop()
+
+    # ------------------------------------------------------------------ checkpoints
+    def _resume(self) -> float | None:
+        """Restore the checkpoint if there is one; the last run's last tick's wall time."""
+        path = self.options.checkpoint
+        assert path is not None
+        last = ProgressMarker.read(checkpoint.marker_path(path))
+        if path.exists():
+            cp = checkpoint.load(path)
+            self.world.restore(cp)
+            self.tick = cp.tick
+            self._resume_note = (
+                f"resumed from checkpoint at tick {cp.tick} (sim t={cp.sim_time_s:.3f} s)"
+            )
+            if last is not None and last[0] >= cp.tick:
+                replayed_s = (last[0] - cp.tick) / self.scenario.time.control_hz
+                self._resume_note += f", replayed {replayed_s:.3f} s (ticks {cp.tick}..{last[0]})"
+            log.warning("%s", self._resume_note)
+        else:
+            last = None
+        if self._checkpoint_ticks:
+            self._marker = ProgressMarker(checkpoint.marker_path(path))
+            self._writer = CheckpointWriter(path)
+            # tick 0 too: a kill before the first period resumes from the spawn state
+            self._due_checkpoint = self.tick + (self._checkpoint_ticks if self._resume_note else 0)
+            self._checkpoint()
+        return last[1] if last is not None else None
+
+    def _checkpoint(self) -> None:
+        """Capture the world of a due tick before it is published; the writer saves it while
+        the tick's round trip runs, and the next tick waits until it is on disk, so the file
+        is never more than one period behind a published tick (the most a restart replays)."""
+        writer = self._writer
+        assert writer is not None
+        writer.wait()
+        if self.tick >= self._due_checkpoint:
+            t0 = time.monotonic()
+            writer.submit(self.world.checkpoint(self.tick))
+            self._capture_s += time.monotonic() - t0
+            self._due_checkpoint = self.tick + self._checkpoint_ticks
+        self._next_checkpoint = self.tick + 1 if writer.pending else self._due_checkpoint
 
     def _wait_for_tokens(self, deadline: float) -> bool:
         with self._cond:
@@ -199,21 +285,23 @@ class PhysicsNode:
         return True
 
     def _handshake(self) -> bool:
-        """Re-publish tick 0 until every participant answered it (beats start-up loss)."""
+        """Re-publish the first tick (0, or the checkpoint's) until every participant answered
+        it (beats start-up loss)."""
         with self._cond:
             while not self.barrier.complete():
                 if self.rt.stop.is_set():
                     return False
                 if self.barrier.remaining_s() <= 0.0:
                     log.error(
-                        "no answer to tick 0 within the start-up timeout from: %s",
+                        "no answer to tick %d within the start-up timeout from: %s",
+                        self.tick,
                         ", ".join(self.barrier.missing()),
                     )
                     return False
                 self._cond.wait(min(HANDSHAKE_REPUBLISH_S, self.barrier.remaining_s()))
                 if not self.barrier.complete():
                     self._tick_pub.put(self._last_tick_msg)
-        log.info("tick 0 handshake done with %d participants", len(self.barrier.active))
+        log.info("tick %d handshake done with %d participants", self.tick, len(self.barrier.active))
         return True
 
     def _loop(self) -> int:
@@ -231,6 +319,8 @@ class PhysicsNode:
             self._apply(commands)
             self.world.step(self.substeps)
             self.tick += 1
+            if self.tick >= self._next_checkpoint:
+                self._checkpoint()
             sim_time = self.world.sim_time_s
             if paced:
                 self._pace(sim_time)
@@ -248,6 +338,18 @@ class PhysicsNode:
             wall,
             self.tick / wall if wall > 0 else 0.0,
         )
+        if self._writer is not None:
+            self._writer.wait()
+            w = self._writer
+            log.info(
+                "%d checkpoints: capture %.2f ms, write %.2f ms (longest %.2f ms) on average; "
+                "the loop waited %.1f ms for writes in all",
+                w.written,
+                1e3 * self._capture_s / max(1, w.written),
+                1e3 * w.write_s / max(1, w.written),
+                1e3 * w.longest_write_s,
+                1e3 * w.waited_s,
+            )
         return 0
 
     def _await_commands(self) -> dict[str, list[float]] | None:
@@ -294,6 +396,8 @@ class PhysicsNode:
         )
         self._last_tick_msg = encode(msg)
         self._tick_pub.put(self._last_tick_msg)
+        if self._marker is not None:
+            self._marker.mark(self.tick)
         for pub, state in zip(self._state_pubs, states, strict=True):
             pub.put(encode(state))
 
@@ -339,9 +443,10 @@ class PhysicsNode:
         )
         if force or now - self._health_wall >= HEALTH_PERIOD_S:
             self._health_wall = now
-            self.rt.publish_health(
-                sim_time_s=sim_time_s, detail=f"tick {self.tick} dropped {self.dropped_total}"
+            detail = f"tick {self.tick} dropped {self.dropped_total}" + (
+                f"; {self._resume_note}" if self._resume_note else ""
             )
+            self.rt.publish_health(sim_time_s=sim_time_s, detail=detail)
 
 
 def main(ctx: NodeContext) -> int:
@@ -355,5 +460,8 @@ def main(ctx: NodeContext) -> int:
         node = PhysicsNode(rt, world, options)
         try:
             return node.run()
+        except CheckpointError as exc:
+            log.error("%s", exc)
+            return 2
         finally:
             node.close()

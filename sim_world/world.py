@@ -26,6 +26,7 @@ import numpy as np
 import pybullet as pb
 import pymap3d
 
+from sim_world.checkpoint import CheckpointError, VehicleCheckpoint, WorldCheckpoint, scratch_file
 from swarmbus.messages import VehicleState
 from swarmbus.scenario import Scenario
 from swarmbus.scenario import Vehicle as VehicleSpec
@@ -362,6 +363,93 @@ class World:
             v.in_contact = touching
             v.on_ground = touching
             v.max_speed2 = 0.0
+
+    # ------------------------------------------------------------------ checkpoints
+    def checkpoint(self, tick: int) -> WorldCheckpoint:
+        """Everything needed to continue identically from here (``tick`` is the caller's)."""
+        c = self._client
+        scratch = scratch_file(".bullet")
+        try:
+            pb.saveBullet(str(scratch), physicsClientId=c)
+            bullet = scratch.read_bytes()
+        finally:
+            scratch.unlink(missing_ok=True)
+        vehicles = []
+        for v in self._vehicles:
+            pos, q = pb.getBasePositionAndOrientation(v.body, physicsClientId=c)
+            lin, ang = pb.getBaseVelocity(v.body, physicsClientId=c)
+            vehicles.append(
+                VehicleCheckpoint(
+                    vehicle_id=v.id,
+                    vehicle_type=v.type.name,
+                    omega_rad_s=list(v.omega),
+                    target_rad_s=list(v.target),
+                    settled=v.settled,
+                    wrench=v.wrench,
+                    motors_enabled=v.motors_enabled,
+                    crashed=v.crashed,
+                    on_ground=v.on_ground,
+                    in_contact=v.in_contact,
+                    max_speed2=v.max_speed2,
+                    position_enu_m=pos,
+                    attitude_xyzw=q,
+                    velocity_enu_m_s=lin,
+                    angular_velocity_enu_rad_s=ang,
+                )
+            )
+        return WorldCheckpoint(
+            world=self.scenario.world.name,
+            physics_hz=self.physics_hz,
+            control_hz=self.scenario.time.control_hz,
+            tick=tick,
+            step_count=self.step_count,
+            sim_time_s=self.sim_time_s,
+            vehicles=vehicles,
+            bullet=bullet,
+        )
+
+    def restore(self, cp: WorldCheckpoint) -> None:
+        """Continue from ``cp`` (a checkpoint of this scenario's world); CheckpointError if not."""
+        mine = [(v.id, v.type.name) for v in self._vehicles]
+        theirs = [(v.vehicle_id, v.vehicle_type) for v in cp.vehicles]
+        rates = (self.physics_hz, self.scenario.time.control_hz)
+        if (
+            cp.world != self.scenario.world.name
+            or theirs != mine
+            or (cp.physics_hz, cp.control_hz) != rates
+        ):
+            raise CheckpointError(
+                f"the checkpoint is of world {cp.world!r} with vehicles {theirs} at "
+                f"{cp.physics_hz}/{cp.control_hz} Hz; this scenario is "
+                f"{self.scenario.world.name!r} with {mine} at {rates[0]}/{rates[1]} Hz"
+            )
+        c = self._client
+        scratch = scratch_file(".bullet")
+        try:
+            scratch.write_bytes(cp.bullet)
+            pb.restoreState(fileName=str(scratch), physicsClientId=c)
+        except pb.error as exc:
+            raise CheckpointError(f"pybullet could not restore the checkpoint: {exc}") from None
+        finally:
+            scratch.unlink(missing_ok=True)
+        for v, saved in zip(self._vehicles, cp.vehicles, strict=True):
+            pos, q = pb.getBasePositionAndOrientation(v.body, physicsClientId=c)
+            if pos != saved.position_enu_m or q != saved.attitude_xyzw:
+                raise CheckpointError(
+                    f"restored {v.id} at {pos} {q}, the checkpoint says "
+                    f"{saved.position_enu_m} {saved.attitude_xyzw}"
+                )
+            v.omega[:] = saved.omega_rad_s
+            v.target[:] = saved.target_rad_s
+            v.settled = saved.settled
+            v.wrench = saved.wrench
+            v.motors_enabled = saved.motors_enabled
+            v.crashed = saved.crashed
+            v.on_ground = saved.on_ground
+            v.in_contact = saved.in_contact
+            v.max_speed2 = saved.max_speed2
+        self.step_count = cp.step_count
+        self._fresh_step = -1
 
     # ------------------------------------------------------------------ outputs
     def states(self, tick: int, sim_time_s: float | None = None) -> list[VehicleState]:

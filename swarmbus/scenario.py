@@ -53,6 +53,7 @@ class Time(_Section, frozen=True, kw_only=True):
     participant_timeout_s: Pos = 2.0
     startup_timeout_s: Pos = 60.0
     duration_s: NonNeg = 0.0  # 0: run until stopped
+    checkpoint_period_s: NonNeg = 1.0  # physics checkpoints the world every S sim s; 0: never
 
 
 class Wind(_Section, frozen=True, kw_only=True):
