@@ -11,6 +11,7 @@ import click
 
 from deploy.roles import ROLES, RoleUnavailable, role_entry
 from swarmbus.scenario import Scenario, ScenarioError, load_scenario, resolve_scenario_path
+from swarmbus.session import NetworkConfig
 
 log = logging.getLogger(__name__)
 
@@ -59,6 +60,51 @@ def cli(verbose: int) -> None:
     setup_logging(verbose)
 
 
+HOSTS_FILE_OPT = click.option(
+    "--hosts",
+    "hosts_file",
+    type=click.Path(path_type=Path),
+    default=None,
+    help="Hosts file of a deployment (with [tls]: this process's certificate and the ACL).",
+)
+HOST_OPT = click.option("--host", "host_name", default=None, help="This host's entry in --hosts.")
+
+
+def secured(
+    sc: Scenario, net: NetworkConfig, hosts_file: Path | None, host_name: str | None, role: str
+) -> NetworkConfig:
+    """``net`` as ``role`` on ``host_name`` of the deployment (TLS identity and ACL), if any;
+    its TLS files checked (one line naming a missing or unreadable one)."""
+    from swarmbus.session import NetworkConfigError, check_tls_files
+
+    if hosts_file is not None or host_name is not None:
+        net = _as_deployed(sc, net, hosts_file, host_name, role)
+    if net.tls is not None:  # also a scenario's own [network.tls]
+        try:
+            check_tls_files(net.tls)
+        except NetworkConfigError as exc:
+            fail(str(exc))
+    return net
+
+
+def _as_deployed(
+    sc: Scenario, net: NetworkConfig, hosts_file: Path | None, host_name: str | None, role: str
+) -> NetworkConfig:
+    from deploy.hosts import HostsError, load_deployment
+    from deploy.security import secure_network
+    from swarmbus.keys import Keys
+
+    if hosts_file is None or host_name is None:
+        fail("--hosts FILE and --host NAME go together")
+    try:
+        dep = load_deployment(hosts_file)
+        if net.connect == sc.network.connect:  # not given: the deployment's router
+            net = net.with_overrides(connect=[dep.router])
+        return secure_network(net, dep, host_name, role, Keys(sc.world.name))
+    except HostsError as exc:
+        fail(str(exc))
+
+
 # ---------------------------------------------------------------------------- scenario
 @cli.group()
 def scenario() -> None:
@@ -87,6 +133,8 @@ def scenario_check(file: Path) -> None:
 @click.option("--listen", multiple=True, help="Zenoh endpoint to listen on (repeatable).")
 @click.option("--mode", type=click.Choice(["peer", "client", "router"]), default=None)
 @click.option("--set", "options", multiple=True, metavar="KEY=VALUE", help="Role option.")
+@HOSTS_FILE_OPT
+@HOST_OPT
 def node(
     role: str,
     scenario: str | None,
@@ -96,6 +144,8 @@ def node(
     listen: tuple[str, ...],
     mode: str | None,
     options: tuple[str, ...],
+    hosts_file: Path | None,
+    host_name: str | None,
 ) -> None:
     """Run one ROLE alone (for deployments across machines)."""
     from swarmbus.keys import KeyNameError, check_name
@@ -127,6 +177,7 @@ def node(
     net = sc.network.with_overrides(
         mode=mode, connect=list(connect) or None, listen=list(listen) or None
     )
+    net = secured(sc, net, hosts_file, host_name, role)
     try:
         entry = role_entry(role)
     except RoleUnavailable as exc:
@@ -173,7 +224,9 @@ def up(
     from deploy.console import Console
     from deploy.hosts import HostsError, load_deployment, options_for_host
     from deploy.launcher import LaunchError, LaunchOptions, default_run_dir
+    from deploy.security import secure_launch
     from deploy.up import run_up
+    from swarmbus.keys import Keys
 
     try:
         deployment = load_deployment(hosts_file) if hosts_file is not None else None
@@ -183,6 +236,7 @@ def up(
         scenario_arg or scenario or (deployment.scenario if deployment else None)
     )
     sc = scenario_from(str(path))
+    secured(sc, sc.network, None, None, "operator")  # its TLS files, if any, are readable
     opts = LaunchOptions(
         scenario_path=path,
         headless=headless,
@@ -197,6 +251,9 @@ def up(
     if deployment is not None or host_name is not None:
         try:
             opts = options_for_host(opts, deployment, host_name)
+            assert deployment is not None and hosts_file is not None and host_name is not None
+            keys = Keys(sc.world.name)
+            opts = secure_launch(opts, deployment, hosts_file, host_name, sc.network, keys)
         except HostsError as exc:
             fail(str(exc))
     try:
@@ -214,6 +271,8 @@ def up(
 @click.option(
     "--record/--no-record", default=True, help="Record the run (when the recorder exists)."
 )
+@HOSTS_FILE_OPT
+@HOST_OPT
 def demo(
     scenario: str | None,
     vehicles: int | None,
@@ -221,6 +280,8 @@ def demo(
     timeout_s: float,
     attach: tuple[str, ...],
     record: bool,
+    hosts_file: Path | None,
+    host_name: str | None,
 ) -> None:
     """Fly the default scenario end to end, headless, and print the accuracy table."""
     from deploy.console import Console
@@ -228,14 +289,19 @@ def demo(
     from deploy.launcher import default_run_dir
 
     path = resolve_scenario_path(scenario)
+    sc = scenario_from(str(path))
+    if (hosts_file or host_name) and not attach:
+        fail("--hosts/--host go with --attach (the demo joins that deployment as its operator)")
+    net = secured(sc, sc.network, hosts_file, host_name, "operator")
     opts = DemoOptions(
-        scenario_from(str(path)),
+        sc,
         path,
         out or default_run_dir(),
         vehicles,
         timeout_s,
         attach=attach,
         record=record,
+        network=net,
     )
     sys.exit(run_demo(opts, Console()))
 
@@ -245,7 +311,16 @@ def demo(
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
 @click.option("--connect", multiple=True, help="Router endpoint (default: the scenario's).")
 @click.option("--timeout", "timeout_s", type=float, default=5.0, show_default=True)
-def status(scenario: str | None, as_json: bool, connect: tuple[str, ...], timeout_s: float) -> None:
+@HOSTS_FILE_OPT
+@HOST_OPT
+def status(
+    scenario: str | None,
+    as_json: bool,
+    connect: tuple[str, ...],
+    timeout_s: float,
+    hosts_file: Path | None,
+    host_name: str | None,
+) -> None:
     """Ask the bus what is running: nodes, sim time, vehicles."""
     import json
 
@@ -254,6 +329,7 @@ def status(scenario: str | None, as_json: bool, connect: tuple[str, ...], timeou
 
     sc = scenario_from(scenario)
     net = sc.network.with_overrides(connect=list(connect) or None)
+    net = secured(sc, net, hosts_file, host_name, "operator")
     try:
         snap = query_status(net, Keys(sc.world.name), [v.id for v in sc.vehicles], timeout_s)
     except NothingRunning as exc:
@@ -358,9 +434,11 @@ def bench_scale(
 
 
 def _register_groups() -> None:
+    from deploy.certs_cli import certs
     from deploy.plume_cli import plume
 
     cli.add_command(plume)
+    cli.add_command(certs)
 
 
 _register_groups()

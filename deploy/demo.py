@@ -220,12 +220,17 @@ def command_until_answered(
 
 
 def wait_for_world(view: BusView, vehicle_ids: Sequence[str], deadline: float) -> None:
-    """Until the lockstep runs: a state and a status of every vehicle."""
+    """Until the lockstep runs: a state past the start handshake and a status of every vehicle.
+
+    Tick 0 is re-published until every autopilot answered it, so a state of tick 0 alone does not
+    mean its autopilot has one yet (it would refuse the first command); a later tick does.
+    """
 
     def ready(snap: Snapshot) -> bool:
         return all(
             (v := snap.vehicles.get(vid)) is not None
             and v.state is not None
+            and v.state.tick >= 1
             and v.status is not None
             for vid in vehicle_ids
         )
@@ -373,15 +378,18 @@ class DemoOptions:
     timeout_s: float = 900.0
     table_period_s: float = 1.0
     attach: tuple[str, ...] = ()  # fly a stack already running behind this router endpoint
+    network: NetworkConfig | None = None  # how to join it (default: the scenario's, e.g. TLS)
     record: bool = True  # run the recorder too, when it is installed
 
 
 class AttachedStack:
     """A stack someone else started (on this host or others): we only join its bus."""
 
-    def __init__(self, scenario: Scenario, connect: Sequence[str]) -> None:
+    def __init__(
+        self, scenario: Scenario, connect: Sequence[str], net: NetworkConfig | None = None
+    ) -> None:
         self.scenario = scenario
-        self.net = NetworkConfig(connect=list(connect), listen=[])
+        self.net = msgspec.structs.replace(net or NetworkConfig(), connect=list(connect), listen=[])
         self.keys = Keys(scenario.world.name)
         self.specs: Sequence[object] = ()
         self._session: zenoh.Session | None = None
@@ -443,7 +451,7 @@ def run_demo(opts: DemoOptions, console: Console) -> int:
         scenario_path=path, headless=True, record=record, run_dir=opts.out, roles=roles
     )
     launcher: Launcher | AttachedStack = (
-        AttachedStack(sc, opts.attach) if opts.attach else Launcher(sc, launch)
+        AttachedStack(sc, opts.attach, opts.network) if opts.attach else Launcher(sc, launch)
     )
     collector: Collector | None = None
     deadline = time.monotonic() + opts.timeout_s

@@ -2,7 +2,9 @@
 
 A hosts file (see ``deploy/hosts.example.toml``) names one router endpoint that every process
 connects to, and per host the roles it runs and the endpoint its processes listen on.
-``plumeswarm up --hosts FILE --host NAME`` runs that host's share.
+``plumeswarm up --hosts FILE --host NAME`` runs that host's share. With a ``[tls]`` section every
+link is mutual TLS with the certificates of ``plumeswarm certs generate`` and every process
+enforces the ``[acl]`` (see :mod:`deploy.security`).
 """
 
 from __future__ import annotations
@@ -32,9 +34,34 @@ class Host(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True
     listen: list[Endpoint] = msgspec.field(default_factory=list)
 
 
+class TlsSection(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    certs: str  # directory written by `plumeswarm certs generate` (relative to the hosts file)
+    verify_name: bool = True  # a host's certificate must name the address connected to
+
+
+def _default_actuators() -> list[str]:
+    return ["autopilot"]
+
+
+def _default_world() -> list[str]:
+    return ["physics"]
+
+
+class AclSection(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    """Who may publish what (roles); everything else is open to every identity of the
+    deployment and closed to anybody else. Enforced only with ``[tls]`` (identities are the
+    certificates' common names)."""
+
+    enabled: bool = True
+    actuators: list[RoleName] = msgspec.field(default_factory=_default_actuators)
+    world: list[RoleName] = msgspec.field(default_factory=_default_world)  # ticks, states, clock
+
+
 class Deployment(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     router: Endpoint
     scenario: str | None = None
+    tls: TlsSection | None = None
+    acl: AclSection = msgspec.field(default_factory=AclSection)
     hosts: list[Host]
 
     def host(self, name: str) -> Host:
@@ -53,6 +80,18 @@ def load_deployment(path: Path) -> Deployment:
     owners = [h.name for h in dep.hosts if "router" in h.roles]
     if len(owners) != 1:
         raise HostsError(f"{path}: exactly one host must run the router, got {owners or 'none'}")
+    names = [h.name for h in dep.hosts]
+    if len(set(names)) != len(names):
+        raise HostsError(f"{path}: host names must be unique, got {names}")
+    endpoints = [dep.router, *(e for h in dep.hosts for e in h.listen)]
+    if dep.tls is not None:
+        plain = [e for e in endpoints if not e.startswith("tls/")]
+        if plain:
+            raise HostsError(f"{path}: with [tls] every endpoint must be tls/..., not {plain[0]}")
+        certs = (path.parent / dep.tls.certs).absolute()
+        dep = msgspec.structs.replace(dep, tls=msgspec.structs.replace(dep.tls, certs=str(certs)))
+    elif any(e.startswith("tls/") for e in endpoints):
+        raise HostsError(f"{path}: tls/ endpoints need a [tls] section (certs = DIR)")
     return dep
 
 

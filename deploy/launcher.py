@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
 
+import msgspec
 import zenoh
 
 from deploy.busview import BusView, status_line
@@ -84,6 +85,8 @@ class LaunchOptions:
     vehicles_per_process: int = 1  # autopilot processes serve this many vehicles each
     verbose: int = 1
     node_options: dict[str, tuple[str, ...]] = field(default_factory=dict)  # role → KEY=VALUE
+    node_args: tuple[str, ...] = ()  # for every node (e.g. --hosts/--host: its TLS identity)
+    client_network: NetworkConfig | None = None  # the launcher's own session (e.g. with TLS)
 
 
 def router_endpoints(scenario: Scenario, opts: LaunchOptions) -> list[str]:
@@ -130,7 +133,7 @@ def plan(scenario: Scenario, opts: LaunchOptions) -> list[ProcessSpec]:
     specs: list[ProcessSpec] = []
 
     def add(role: str, name: str, extra: Sequence[str]) -> None:
-        args = [*base, "node", role, *common, *extra]
+        args = [*base, "node", role, *common, *extra, *opts.node_args]
         for item in opts.node_options.get(role, ()):
             args += ["--set", item]
         specs.append(
@@ -208,7 +211,13 @@ class Launcher:
     # ------------------------------------------------------------------ start
     def _client_network(self) -> NetworkConfig:
         # The launcher's own session: a peer that only connects to the router.
-        return NetworkConfig(connect=router_endpoints(self.scenario, self.opts), listen=[])
+        own = self.scenario.network  # its TLS identity, if the scenario has one
+        base = self.opts.client_network or NetworkConfig(
+            tls=own.tls, access_control=own.access_control
+        )
+        return msgspec.structs.replace(
+            base, connect=router_endpoints(self.scenario, self.opts), listen=[]
+        )
 
     @property
     def session(self) -> zenoh.Session:
@@ -260,7 +269,7 @@ class Launcher:
         deadline = time.monotonic() + timeout_s
         for ep in endpoints:
             proto, _, addr = ep.partition("/")
-            if proto != "tcp":
+            if proto not in ("tcp", "tls"):  # a TLS listener accepts TCP connections first
                 continue
             host, _, port = addr.rpartition(":")
             while True:

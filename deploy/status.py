@@ -5,6 +5,8 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 
+import msgspec
+
 from deploy.busview import BusView, Snapshot
 from swarmbus.keys import Keys
 from swarmbus.session import NetworkConfig, open_session
@@ -35,7 +37,7 @@ def query_status(
     net: NetworkConfig, keys: Keys, vehicle_ids: Sequence[str] = (), timeout_s: float = 5.0
 ) -> Snapshot:
     """What the bus says within ``timeout_s``; :class:`NothingRunning` if no node is alive."""
-    client = NetworkConfig(connect=list(net.connect), listen=[], mode="peer")
+    client = msgspec.structs.replace(net, listen=[], mode="peer")  # keeps its TLS identity
     with open_session(client) as session:
         view = BusView(session, keys)
         try:

@@ -144,8 +144,10 @@ def _takeoff(req: CommandRequest, facts: Facts) -> Translation:
     if facts.home_amsl_m is None:
         return refuse(TEMPORARILY_REJECTED, "no home position yet")
     z = req.z
-    if not _finite(z):
+    if math.isnan(z):  # "absent" (MAVSDK): MIS_TAKEOFF_ALT
         altitude = facts.takeoff_alt_m
+    elif not _finite(z):
+        return refuse(DENIED, f"takeoff altitude {z} is not usable")
     elif req.frame in _RELATIVE:
         altitude = z
     elif req.frame in _GLOBAL:
@@ -160,7 +162,10 @@ def _takeoff(req: CommandRequest, facts: Facts) -> Translation:
 
 
 def _reposition(req: CommandRequest, facts: Facts) -> Translation:
-    """DO_REPOSITION: go to lat/lon/alt; absent values keep the current ones; none → hold."""
+    """DO_REPOSITION: go to lat/lon/alt; absent (NaN) values keep the current ones; none →
+    hold. An infinite value is garbage, never "absent"."""
+    if any(math.isinf(v) for v in (req.x, req.y, req.z)):
+        return refuse(DENIED, "reposition target is not finite")
     if not (_finite(req.x) or _finite(req.y) or _finite(req.z)):
         return Translation(Hold())
     if facts.position_enu is None or facts.home_amsl_m is None:

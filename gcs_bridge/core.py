@@ -27,6 +27,8 @@ log = logging.getLogger(__name__)
 
 ALIVE_WITHOUT_TOKEN_S = 3.0
 STATUSTEXT_MAX = 50
+STATUSTEXT_BURST = 10  # refusal texts per vehicle and link, then STATUSTEXT_RATE_HZ
+STATUSTEXT_RATE_HZ = 5.0
 
 Handler = Callable[[Link, Vehicle, Msg, ms.Peer, float], None]
 Done = Callable[[CommandReply], None]
@@ -53,6 +55,7 @@ class Core:
     _presence: Presence | None
     _inflight: set[tuple[int, int, int, int]]
     _param_sync: dict[str, float]
+    _text_budget: dict[tuple[str | None, int], tuple[float, float]]  # → (tokens, last wall s)
 
     # ------------------------------------------------------------------ presence
     def alive(self, v: Vehicle, now: float) -> bool:
@@ -69,7 +72,20 @@ class Core:
     def _send(self, link: Link, v: Vehicle, msg: Msg, now: float) -> None:
         link.send(v.sysid, msg, now)
 
+    def _text_allowed(self, link: Link | None, v: Vehicle, now: float) -> bool:
+        """A token bucket per vehicle and link: a flood of refused frames must not become a
+        flood of STATUSTEXTs to every ground station (the ACKs still answer each frame)."""
+        key = (link.name if link is not None else None, v.sysid)
+        tokens, last = self._text_budget.get(key, (float(STATUSTEXT_BURST), now))
+        tokens = min(float(STATUSTEXT_BURST), tokens + (now - last) * STATUSTEXT_RATE_HZ)
+        allowed = tokens >= 1.0
+        self._text_budget[key] = (tokens - 1.0 if allowed else tokens, now)
+        return allowed
+
     def _statustext(self, link: Link | None, v: Vehicle, text: str, now: float) -> None:
+        if not self._text_allowed(link, v, now):
+            log.debug("%s: STATUSTEXT dropped (rate): %s", v.id, text)
+            return
         msg = mavlink.MAVLink_statustext_message(
             mavlink.MAV_SEVERITY_WARNING, text[:STATUSTEXT_MAX].encode("ascii", "replace")
         )

@@ -92,6 +92,7 @@ class Gateway(CommandHandlers, ParamHandlers, MissionHandlers):
             self._presence = Presence(session, keys)
             self._subs = subscribe_vehicles(session, keys, set(self.vehicles), self.inbox)
         self._inflight: set[tuple[int, int, int, int]] = set()
+        self._text_budget: dict[tuple[str | None, int], tuple[float, float]] = {}
         self._param_sync: dict[str, float] = {}  # vehicle id → next attempt (wall s); -1 busy
         self._next_heartbeat_s = 0.0
         self._next_tick_s = 0.0

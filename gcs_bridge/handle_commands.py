@@ -50,6 +50,10 @@ from swarmbus.messages import (
 log = logging.getLogger(__name__)
 
 GCS_HEARTBEAT_FORWARD_S = 0.5
+MAX_MESSAGE_ID = 65535  # MESSAGE_INTERVAL.message_id is a uint16
+MAX_SETPOINT_M = 1e7  # |east|, |north| of an offboard position (the bus carries ≤ 1e9)
+MAX_SETPOINT_UP_M = 1e5
+MAX_SETPOINT_M_S = 1e3
 GCS_LINK_TIMEOUT_S = 3.0  # wall: a GCS silent this long is gone (QGC's own is ~3.5 s)
 
 
@@ -191,8 +195,8 @@ class CommandHandlers(Core):
     def _cmd_get_message_interval(
         self, link: Link, v: Vehicle, req: CommandRequest, peer: ms.Peer, now: float
     ) -> None:
-        if not math.isfinite(req.param1):
-            self._ack(link, v, req.command, DENIED, peer, now)
+        if not (math.isfinite(req.param1) and 0 <= req.param1 <= MAX_MESSAGE_ID):
+            self._ack(link, v, req.command, DENIED, peer, now)  # MESSAGE_INTERVAL has a uint16
             return
         msg_id = int(req.param1)
         interval = self.schedules[(link.name, v.sysid)].interval_us(msg_id)
@@ -273,8 +277,8 @@ class CommandHandlers(Core):
         mask = int(msg.type_mask)
         pos = (float(msg.x), float(msg.y), float(msg.z))
         vel = (float(msg.vx), float(msg.vy), float(msg.vz))
-        use_pos = not mask & 0b111 and all(map(math.isfinite, pos))
-        use_vel = not mask & 0b111000 and all(map(math.isfinite, vel))
+        use_pos = not mask & 0b111 and _within(pos, MAX_SETPOINT_M, MAX_SETPOINT_UP_M)
+        use_vel = not mask & 0b111000 and _within(vel, MAX_SETPOINT_M_S, MAX_SETPOINT_M_S)
         yaw = float(msg.yaw)
         yaw_deg = None
         if not mask & 1024 and math.isfinite(yaw):
@@ -291,3 +295,13 @@ class CommandHandlers(Core):
             log.debug("%s: unusable setpoint: %s", v.id, exc)
             return
         self._submit(v, setpoint, lambda reply: None)
+
+
+def _within(v: tuple[float, float, float], horizontal: float, vertical: float) -> bool:
+    """Finite, and within the bounds (NED: x, y horizontal, z vertical)."""
+    return (
+        all(map(math.isfinite, v))
+        and abs(v[0]) <= horizontal
+        and abs(v[1]) <= horizontal
+        and abs(v[2]) <= vertical
+    )

@@ -213,8 +213,14 @@ class MissionHandlers(Core):
     def _on_mission_set_current(
         self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
     ) -> None:
-        """Jump to an item: restarts the mission there (our autopilot has no idle "current")."""
-        index = ms.bus_index_of_seq(v.seqs(), int(msg.seq))
+        """Jump to an item: restarts the mission there (our autopilot has no idle "current").
+        An item that does not exist is refused here (STATUSTEXT, MISSION_CURRENT unchanged)."""
+        seq = int(msg.seq)
+        if seq >= v.mission_total():
+            self._statustext(link, v, f"{v.id}: mission item {seq} does not exist", now)
+            self._send_all(v, v.mission_current_msg(), now)
+            return
+        index = ms.bus_index_of_seq(v.seqs(), seq)
 
         def done(reply: CommandReply) -> None:
             done_now = time.monotonic()

@@ -50,7 +50,7 @@ class ParamHandlers(Core):
         name = text_of(msg.param_id)
         spec = v.params.spec(name)
         if spec is None:
-            log.info("%s: PARAM_SET of unknown parameter %r ignored", v.id, name)
+            log.debug("%s: PARAM_SET of unknown parameter %r ignored", v.id, name)
             return
         try:
             value = v.params.decode_set(name, float(msg.param_value))

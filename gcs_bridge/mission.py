@@ -167,6 +167,8 @@ def convert_upload(wire: list[WireItem], here: Place, cruise_m_s: float = 0.0) -
             if not _finite(w.param1) or not 0.0 <= w.param1 <= 3600.0:
                 raise MissionError(Result.INVALID_PARAM1, w.seq, f"hold time {w.param1}")
             hold = float(w.param1)
+        if w.command == CMD_WAYPOINT and math.isinf(w.param2):
+            raise MissionError(Result.INVALID_PARAM2, w.seq, f"acceptance {w.param2}")
         if w.command == CMD_WAYPOINT and _finite(w.param2) and w.param2 > 0:
             if w.param2 > 1000.0:
                 raise MissionError(Result.INVALID_PARAM2, w.seq, f"acceptance {w.param2}")
@@ -310,7 +312,8 @@ class Uploader:
         if t.peer != peer:
             return [Ack(peer, Result.DENIED, item.mission_type)]
         if item.mission_type != t.mission_type:
-            return [Ack(peer, Result.INVALID, item.mission_type)]
+            self._transfer = None  # the upload is broken: the client starts again
+            return [Ack(peer, Result.INVALID, t.mission_type)]
         if item.seq < t.next_seq:
             return []  # duplicate of an item we already have
         if item.seq > t.next_seq:

@@ -14,13 +14,20 @@ Options (``plumeswarm node gateway --set KEY=VALUE``):
   ``all`` (default), ``gcs``, ``api`` or ``none``;
 - ``cmd_timeout_s``: how long a command waits for the autopilot's reply (default 1.5; MAVSDK
   gives up after 3 × 0.5 s, QGC after about 3 s).
+
+The MAVLink 2 signing key comes from the scenario: ``[gateway] signing_key_file`` (a file
+holding 64 hex digits, readable by its owner only — the gateway refuses a key file that group
+or others may read or write) or, for tests, ``signing_key_hex`` inline.
 """
 
 from __future__ import annotations
 
 import ipaddress
 import math
+import re
+import stat
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from gcs_bridge.dialect import mavlink
 from gcs_bridge.telemetry import default_rates
@@ -126,16 +133,50 @@ def parse_options(section: Gateway, options: dict[str, str]) -> GatewayOptions:
         if msg_id not in rates:
             raise OptionError(f"--set rate.*: message {msg_id} is not a telemetry stream")
         rates[msg_id] = hz
-    key_hex = section.signing_key_hex
     return GatewayOptions(
         host=section.host,
         gcs_port=section.gcs_port,
         api_port_base=section.api_port_base,
         bind_host=str(values.pop("bind_host", "127.0.0.1" if loopback else "0.0.0.0")),
-        signing_key=bytes.fromhex(key_hex) if key_hex else None,
+        signing_key=signing_key(section),
         rates_hz=rates,
         **values,  # type: ignore[arg-type]
     )
+
+
+_KEY_HEX = re.compile(r"[0-9a-fA-F]{64}")
+
+
+def signing_key(section: Gateway) -> bytes | None:
+    """The 32-byte signing key of ``[gateway]`` (None: signing off), or :class:`OptionError`."""
+    if section.signing_key_hex and section.signing_key_file:
+        raise OptionError("[gateway]: give signing_key_file or signing_key_hex, not both")
+    if section.signing_key_hex:
+        return bytes.fromhex(section.signing_key_hex)
+    if section.signing_key_file:
+        return read_key_file(Path(section.signing_key_file).expanduser())
+    return None
+
+
+def read_key_file(path: Path) -> bytes:
+    """A key file's 32 bytes: 64 hex digits, the file private to its owner (like ssh keys)."""
+    try:
+        mode = path.stat().st_mode
+        if not stat.S_ISREG(mode):
+            raise OptionError(f"signing key file {path}: not a regular file")
+        if mode & 0o077:
+            raise OptionError(
+                f"signing key file {path}: group/others may access it "
+                f"(mode {stat.S_IMODE(mode):04o}); run chmod 600 {path}"
+            )
+        text = path.read_text(encoding="ascii").strip()
+    except FileNotFoundError:
+        raise OptionError(f"signing key file {path}: no such file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise OptionError(f"signing key file {path}: cannot read it ({exc})") from None
+    if not _KEY_HEX.fullmatch(text):
+        raise OptionError(f"signing key file {path}: expected 64 hex digits (32 bytes)")
+    return bytes.fromhex(text)
 
 
 def _is_loopback(host: str) -> bool:

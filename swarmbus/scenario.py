@@ -132,6 +132,7 @@ class Gateway(_Section, frozen=True, kw_only=True):
     gcs_port: Annotated[int, msgspec.Meta(ge=1, le=65535)] = 14550
     api_port_base: Annotated[int, msgspec.Meta(ge=1, le=65535)] = 14540
     signing_key_hex: Annotated[str, msgspec.Meta(pattern=r"^[0-9a-fA-F]{64}$")] | None = None
+    signing_key_file: Annotated[str, msgspec.Meta(min_length=1, max_length=4096)] | None = None
     telemetry_hz: Annotated[float, msgspec.Meta(gt=0.0, le=100.0)] = 4.0
 
 

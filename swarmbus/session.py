@@ -27,6 +27,21 @@ DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
 Endpoint = Annotated[str, msgspec.Meta(pattern=r"^(tcp|udp|tls|quic|unixsock-stream)/.+$")]
 
 
+class NetworkConfigError(ValueError):
+    """The network configuration cannot be used (e.g. a TLS file is missing): one line why."""
+
+
+class TlsConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
+    """Mutual TLS on every ``tls/`` link: this process's identity (certificate and key, PEM) and
+    the CA that every peer's certificate must be signed by. The certificate's common name is
+    the identity the access-control list matches on."""
+
+    root_ca: str
+    cert: str
+    key: str
+    verify_name: bool = True  # the certificate of the host connected to must name its address
+
+
 class NetworkConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """How a process joins the Zenoh network."""
 
@@ -35,8 +50,8 @@ class NetworkConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
     listen: list[Endpoint] = msgspec.field(default_factory=lambda: ["tcp/127.0.0.1:0"])
     multicast_scouting: bool = False
     low_latency: bool = False
-    tls: dict[str, str] | None = None  # raw zenoh transport/link/tls settings
-    access_control: dict[str, Any] | None = None  # raw zenoh access_control section
+    tls: TlsConfig | None = None
+    access_control: dict[str, Any] | None = None  # zenoh's access_control section, as is
 
     def with_overrides(
         self,
@@ -63,12 +78,48 @@ def zenoh_config(net: NetworkConfig) -> zenoh.Config:
     if net.low_latency:
         conf.insert_json5("transport/unicast/lowlatency", "true")
         conf.insert_json5("transport/unicast/qos/enabled", "false")
-    if net.tls:
-        for key, value in net.tls.items():
+    if net.tls is not None:
+        for key, value in tls_settings(net.tls).items():
             conf.insert_json5(f"transport/link/tls/{key}", json.dumps(value))
     if net.access_control:
         conf.insert_json5("access_control", json.dumps(net.access_control))
     return conf
+
+
+def tls_settings(tls: TlsConfig) -> dict[str, str | bool]:
+    """Zenoh's ``transport/link/tls`` for ``tls``: the same identity when listening and
+    connecting, and client certificates required (mTLS) on every listener."""
+    check_tls_files(tls)
+    return {
+        "root_ca_certificate": tls.root_ca,
+        "listen_certificate": tls.cert,
+        "listen_private_key": tls.key,
+        "connect_certificate": tls.cert,
+        "connect_private_key": tls.key,
+        "enable_mtls": True,
+        "verify_name_on_connect": tls.verify_name,
+    }
+
+
+def check_tls_files(tls: TlsConfig) -> None:
+    """:class:`NetworkConfigError` naming the first TLS file that is missing, unreadable or not
+    PEM (Zenoh itself would only say that no endpoint could be reached)."""
+    for kind, path, marker in (
+        ("CA certificate", tls.root_ca, b"-----BEGIN CERTIFICATE-----"),
+        ("certificate", tls.cert, b"-----BEGIN CERTIFICATE-----"),
+        ("private key", tls.key, b"PRIVATE KEY-----"),
+    ):
+        try:
+            with open(path, "rb") as f:
+                data = f.read()
+        except FileNotFoundError:
+            raise NetworkConfigError(f"TLS {kind} {path}: no such file") from None
+        except IsADirectoryError:
+            raise NetworkConfigError(f"TLS {kind} {path}: is a directory") from None
+        except OSError as exc:
+            raise NetworkConfigError(f"TLS {kind} {path}: {exc.strerror or exc}") from None
+        if marker not in data:
+            raise NetworkConfigError(f"TLS {kind} {path}: not PEM ({marker.decode()} missing)")
 
 
 def open_session(net: NetworkConfig) -> zenoh.Session:

@@ -52,6 +52,7 @@ def scenario_text(
     api_base: int,
     signing_key_hex: str | None = None,
     telemetry_hz: float = 4.0,
+    signing_key_file: Path | None = None,
 ) -> str:
     """The novak2018 scenario with test ports and ``vehicles`` Iris quads in a row."""
     base = (REPO / "deploy" / "scenarios" / "novak2018.toml").read_text()
@@ -66,6 +67,8 @@ def scenario_text(
     ]
     if signing_key_hex:
         lines.append(f'signing_key_hex = "{signing_key_hex}"')
+    if signing_key_file:
+        lines.append(f'signing_key_file = "{signing_key_file}"')
     for i in range(vehicles):
         y = 4.0 * i - 2.0 * (vehicles - 1)
         lines += [

@@ -61,6 +61,7 @@ PUBLIC_COMMANDS = {
     "replay",
     "report",
     "bench",
+    "certs",
 }
 
 

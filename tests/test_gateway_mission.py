@@ -64,6 +64,14 @@ def test_out_of_order_item_ends_the_transfer_with_invalid_sequence() -> None:
     assert up.on_item(QGC, wp(1, 0, 0, 5), 0.3) == []  # no transfer any more
 
 
+def test_an_item_of_another_mission_type_ends_the_transfer() -> None:
+    up = ms.Uploader()
+    up.on_count(QGC, 3, ms.MISSION_TYPE_MISSION, 0.0)
+    fence = ms.WireItem(seq=0, frame=ms.FRAME_RELATIVE_INT, command=16, mission_type=1)
+    assert up.on_item(QGC, fence, 0.1) == [ms.Ack(QGC, ms.Result.INVALID, ms.MISSION_TYPE_MISSION)]
+    assert not up.active  # no re-requests for a transfer the client broke
+
+
 def test_a_second_gcs_is_denied_while_one_uploads() -> None:
     up = ms.Uploader()
     up.on_count(QGC, 2, ms.MISSION_TYPE_MISSION, 0.0)
@@ -134,6 +142,12 @@ def test_conversion_to_enu_folds_speed_items_and_keeps_seqs() -> None:
                 seq=0, frame=ms.FRAME_RELATIVE_INT, command=ms.CMD_WAYPOINT, x=1, y=1, param1=-3.0
             ),
             ms.Result.INVALID_PARAM1,
+        ),
+        (
+            ms.WireItem(
+                seq=0, frame=ms.FRAME_RELATIVE_INT, command=ms.CMD_WAYPOINT, param2=float("inf")
+            ),
+            ms.Result.INVALID_PARAM2,
         ),
     ],
 )

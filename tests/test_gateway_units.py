@@ -233,6 +233,23 @@ def test_takeoff_below_home_is_refused_not_sent() -> None:
     assert t is not None and t.bus is None and t.result == DENIED
 
 
+@pytest.mark.parametrize("z", [math.inf, -math.inf])
+def test_an_infinite_takeoff_altitude_is_refused_not_the_default(z: float) -> None:
+    """Only NaN means "absent" (MIS_TAKEOFF_ALT); found by tests/test_gateway_fuzz.py."""
+    t = translate(CommandRequest(TAKEOFF, z=z), facts())
+    assert t is not None and t.bus is None and t.result == DENIED
+
+
+@pytest.mark.parametrize(
+    ("x", "y", "z"),
+    [(math.inf, 8.0, 500.0), (47.0, -math.inf, 500.0), (math.nan, math.nan, math.inf)],
+)
+def test_an_infinite_reposition_is_refused_not_kept(x: float, y: float, z: float) -> None:
+    rep = int(mavlink.MAV_CMD_DO_REPOSITION)
+    t = translate(CommandRequest(rep, -1.0, 1.0, 0.0, math.nan, x, y, z), facts())
+    assert t is not None and t.bus is None and t.result == DENIED
+
+
 def test_arm_disarm_and_forced_disarm_in_the_air() -> None:
     arm = int(mavlink.MAV_CMD_COMPONENT_ARM_DISARM)
     t = translate(CommandRequest(arm, 1.0), facts())

@@ -15,7 +15,9 @@ import signal
 import subprocess
 import sys
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import psutil
 import pytest
@@ -52,6 +54,13 @@ def _namespaces_allowed() -> str | None:
 @pytest.fixture
 def hosts(tmp_path: Path) -> Iterator[dict[str, str]]:
     """Three namespaces on one bridge: host name → namespace name."""
+    with three_namespaces() as ns:
+        yield ns
+
+
+@contextmanager
+def three_namespaces() -> Iterator[dict[str, str]]:
+    """Three namespaces on one bridge (skips the test without root): host → namespace."""
     why = _namespaces_allowed()
     if why is not None:
         pytest.skip(f"network namespaces unavailable: {why}")
@@ -92,15 +101,19 @@ def hosts(tmp_path: Path) -> Iterator[dict[str, str]]:
             subprocess.run(["ip", "netns", "del", name], capture_output=True, timeout=30)
 
 
-def write_hosts(path: Path, roles: dict[str, list[str]]) -> Path:
-    lines = [f'router = "{ROUTER}"', ""]
+def write_hosts(path: Path, roles: dict[str, list[str]], tls_certs: str | None = None) -> Path:
+    """A hosts file; with ``tls_certs`` (a directory) every endpoint is ``tls/``."""
+    scheme = "tls" if tls_certs else "tcp"
+    lines = [f'router = "{ROUTER.replace("tcp/", f"{scheme}/", 1)}"', ""]
+    if tls_certs:
+        lines += ["[tls]", f'certs = "{tls_certs}"', ""]
     for host, rs in roles.items():
         lines += [
             "[[hosts]]",
             f'name = "{host}"',
             f'address = "{ADDRESSES[host]}"',
             "roles = [" + ", ".join(f'"{r}"' for r in rs) + "]",
-            f'listen = ["tcp/{ADDRESSES[host]}:0"]',
+            f'listen = ["{scheme}/{ADDRESSES[host]}:0"]',
             "",
         ]
     path.write_text("\n".join(lines))
@@ -161,9 +174,12 @@ class Hosts:
         self.family += [root, *root.children(recursive=True)]
         return json.loads(pids_file.read_text())
 
-    def run(self, host: str, *args: str, timeout_s: float) -> subprocess.CompletedProcess[str]:
+    def run(
+        self, host: str, *args: str, timeout_s: float, module: str = "deploy"
+    ) -> subprocess.CompletedProcess[str]:
+        """``python -m MODULE ARGS`` inside ``host``'s namespace, to completion."""
         return subprocess.run(
-            ["ip", "netns", "exec", self.ns[host], sys.executable, "-m", "deploy", *args],
+            ["ip", "netns", "exec", self.ns[host], sys.executable, "-m", module, *args],
             cwd=REPO,
             env=self.env(),
             capture_output=True,
@@ -185,6 +201,29 @@ class Hosts:
         for p in alive:
             p.kill()
         assert alive == [], f"processes left behind: {alive}"
+
+
+def fly_demo(h: Hosts, out: Path, router: str, *extra: str) -> dict[str, Any]:
+    """``plumeswarm demo --attach ROUTER`` from ``gcs``: every vehicle completes and lands."""
+    result = h.run(
+        "gcs",
+        "demo",
+        "--attach",
+        router,
+        *extra,
+        "--out",
+        str(out),
+        "--timeout",
+        "900",
+        timeout_s=1000,
+    )
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-2000:]
+    summary: dict[str, Any] = json.loads((out / "summary.json").read_text())
+    assert summary["ok"]
+    for vid, v in summary["vehicles"].items():
+        assert v["mission_completed"] and v["landed"], vid
+        assert v["readings"] > 0 and v["max_concentration_g_m3"] > 0.0, vid
+    return summary
 
 
 def netns_of(pid: int) -> int:
@@ -228,23 +267,6 @@ def test_seed_scenario_flies_across_three_namespaces(hosts: dict[str, str], tmp_
         assert len(spaces) == (3 if gcs_roles else 2), "one namespace per host"
         assert netns_of(sim["physics"]) != netns_of(os.getpid())
         # The demo driver joins from the gcs namespace: the third host in every case.
-        out = tmp_path / "demo"
-        result = h.run(
-            "gcs",
-            "demo",
-            "--attach",
-            ROUTER,
-            "--out",
-            str(out),
-            "--timeout",
-            "900",
-            timeout_s=1000,
-        )
-        assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-2000:]
-        summary = json.loads((out / "summary.json").read_text())
-        assert summary["ok"]
-        for vid, v in summary["vehicles"].items():
-            assert v["mission_completed"] and v["landed"], vid
-            assert v["readings"] > 0 and v["max_concentration_g_m3"] > 0.0, vid
+        fly_demo(h, tmp_path / "demo", ROUTER)
     finally:
         h.stop()

@@ -1,0 +1,160 @@
+"""Identities, TLS settings and the access-control list of a deployment (hosts file).
+
+Every process of a host runs as the identity ``<role>.<host>`` (the common name of its
+certificate); the operator's tools on a host (``up``'s own session, ``demo --attach``,
+``status``) as ``operator.<host>``. Every process, the router included, enforces the same
+Zenoh ``access_control`` on its own links, so a direct peer-to-peer link is guarded as well as a
+link to the router:
+
+- default deny: a certificate of the deployment's CA whose common name is not one of the
+  deployment's identities can connect but nothing flows to or from it;
+- every identity may do everything on every key, except
+- publishing (put/delete) actuators (``vehicle/*/actuators``) unless it is an autopilot, and
+  publishing the world (``sim/tick``, ``sim/clock``, ``vehicle/*/state``) unless it is physics
+  (roles configurable in ``[acl]``).
+
+The router's identity is not denied: it forwards what others publish, and checked them when
+they arrived.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import msgspec
+
+from deploy.certs import OPERATOR, HostIdentities, identity
+from deploy.hosts import Deployment, HostsError
+from deploy.launcher import LaunchOptions
+from swarmbus.keys import Keys
+from swarmbus.session import NetworkConfig, NetworkConfigError, TlsConfig, check_tls_files
+
+MESSAGES = (
+    "put",
+    "delete",
+    "declare_subscriber",
+    "query",
+    "reply",
+    "declare_queryable",
+    "liveliness_token",
+    "liveliness_query",
+    "declare_liveliness_subscriber",
+)
+
+
+def host_identities(dep: Deployment) -> list[HostIdentities]:
+    """Per host: its address(es) and the identities of its roles and its operator."""
+    out = []
+    for h in dep.hosts:
+        addresses = [h.address] if h.address else []
+        addresses += [_address_of(e) for e in h.listen]
+        if "router" in h.roles:
+            addresses.append(_address_of(dep.router))
+        names = [identity(r, h.name) for r in dict.fromkeys([*h.roles, OPERATOR])]
+        out.append(HostIdentities(h.name, tuple(dict.fromkeys(addresses)), tuple(names)))
+    return out
+
+
+def _address_of(endpoint: str) -> str:
+    host = endpoint.partition("/")[2].rpartition(":")[0]
+    return host.strip("[]")
+
+
+def _role_of(name: str) -> str:
+    return name.partition(".")[0]
+
+
+def access_control(dep: Deployment, keys: Keys) -> dict[str, Any]:
+    """Zenoh's ``access_control`` section for ``dep``."""
+    members = sorted(n for h in host_identities(dep) for n in h.identities)
+    rules: list[dict[str, Any]] = [
+        {
+            "id": "members",
+            "permission": "allow",
+            "flows": ["ingress", "egress"],
+            "messages": list(MESSAGES),
+            "key_exprs": ["**"],
+        }
+    ]
+    subjects: list[dict[str, Any]] = [{"id": "members", "cert_common_names": members}]
+    policies: list[dict[str, Any]] = [{"rules": ["members"], "subjects": ["members"]}]
+    planes = {
+        "actuators": ([keys.all_vehicle_actuators()], dep.acl.actuators),
+        "world": ([keys.tick(), keys.clock(), keys.all_vehicle_states()], dep.acl.world),
+    }
+    for plane, (key_exprs, roles) in planes.items():
+        others = [n for n in members if _role_of(n) not in {*roles, "router"}]
+        if not others:
+            continue
+        rules.append(
+            {
+                "id": f"publish-{plane}",
+                "permission": "deny",
+                "flows": ["ingress"],
+                "messages": ["put", "delete"],
+                "key_exprs": key_exprs,
+            }
+        )
+        subjects.append({"id": f"not-{plane}-publishers", "cert_common_names": others})
+        policies.append({"rules": [f"publish-{plane}"], "subjects": [f"not-{plane}-publishers"]})
+    return {
+        "enabled": True,
+        "default_permission": "deny",
+        "rules": rules,
+        "subjects": subjects,
+        "policies": policies,
+    }
+
+
+def tls_for(dep: Deployment, host: str, name: str) -> TlsConfig | None:
+    """The TLS identity ``name`` on ``host`` (paths of ``certs generate``); None without TLS."""
+    if dep.tls is None:
+        return None
+    dep.host(host)
+    certs = Path(dep.tls.certs)
+    return TlsConfig(
+        root_ca=str(certs / "ca.pem"),
+        cert=str(certs / host / f"{name}.pem"),
+        key=str(certs / host / f"{name}.key"),
+        verify_name=dep.tls.verify_name,
+    )
+
+
+def secure_network(
+    net: NetworkConfig, dep: Deployment, host: str, role: str, keys: Keys
+) -> NetworkConfig:
+    """``net`` as the identity of ``role`` on ``host``: TLS and the access-control list.
+
+    Raises :class:`HostsError` (one line) when a TLS file is missing or unreadable."""
+    tls = tls_for(dep, host, identity(role, host))
+    if tls is None:
+        return net
+    try:
+        check_tls_files(tls)
+    except NetworkConfigError as exc:
+        raise HostsError(f"{exc} (make them with `plumeswarm certs generate`)") from None
+    acl = access_control(dep, keys) if dep.acl.enabled else None
+    return msgspec.structs.replace(net, tls=tls, access_control=acl)
+
+
+def secure_launch(
+    opts: LaunchOptions,
+    dep: Deployment,
+    hosts_file: Path,
+    host: str,
+    net: NetworkConfig,
+    keys: Keys,
+) -> LaunchOptions:
+    """``opts`` of one host with TLS: every node gets ``--hosts/--host`` (its identity) and the
+    launcher's own session runs as the host's operator."""
+    if dep.tls is None:
+        return opts
+    for role in dep.host(host).roles:
+        secure_network(net, dep, host, role, keys)  # fail before anything starts
+    return replace(
+        opts,
+        node_args=("--hosts", str(hosts_file.absolute()), "--host", host),
+        client_network=secure_network(net, dep, host, OPERATOR, keys),
+    )
