@@ -58,7 +58,7 @@ STOP_STAGE = {
 RESTART = {
     "router": RestartPolicy(),
     "physics": RestartPolicy(RestartMode.ON_FAILURE, max_restarts=3),  # from its checkpoint
-    "recorder": RestartPolicy(),
+    "recorder": RestartPolicy(RestartMode.ON_FAILURE, max_restarts=3),  # in a new segment
     "plume": RestartPolicy(RestartMode.ON_FAILURE, max_restarts=3),
     "autopilot": RestartPolicy(RestartMode.ON_FAILURE, max_restarts=3),
     "gateway": RestartPolicy(RestartMode.ON_FAILURE, max_restarts=3),
@@ -165,7 +165,8 @@ def plan(scenario: Scenario, opts: LaunchOptions) -> list[ProcessSpec]:
             add(role, role, [*net_args, "--set", f"checkpoint={checkpoint_path(opts)}"])
         elif role == "recorder":
             out = opts.run_dir / "recording.mcap"
-            add(role, role, [*net_args, "--set", f"out={out}"])
+            # resume: a restarted recorder continues in the next segment (recording.1.mcap …)
+            add(role, role, [*net_args, "--set", f"out={out}", "--set", "resume=true"])
         else:
             add(role, role, net_args)
     return specs

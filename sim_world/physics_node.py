@@ -189,6 +189,7 @@ class PhysicsNode:
         self._clock_sim = 0.0
         self._health_wall = self._wall_start
         self.real_time_factor = 0.0
+        self.dropped_total = 0  # participants dropped for a missed deadline (health detail)
 
     def close(self) -> None:
         self._presence.close()
@@ -393,6 +394,7 @@ class PhysicsNode:
                 remaining = barrier.remaining_s()
                 if remaining <= 0.0:
                     dropped = barrier.expire()
+                    self.dropped_total += len(dropped)
                     log.warning(
                         "tick %d: dropped %s after %.2f s without actuators (motors off)",
                         self.tick,
@@ -516,7 +518,9 @@ class PhysicsNode:
         )
         if force or now - self._health_wall >= HEALTH_PERIOD_S:
             self._health_wall = now
-            detail = f"tick {self.tick}" + (f"; {self._resume_note}" if self._resume_note else "")
+            detail = f"tick {self.tick} dropped {self.dropped_total}" + (
+                f"; {self._resume_note}" if self._resume_note else ""
+            )
             self.rt.publish_health(sim_time_s=sim_time_s, detail=detail)
 
 

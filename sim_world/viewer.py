@@ -70,6 +70,7 @@ TRAIL_MAX_POINTS = 2000
 MESH_RETRY_S = 2.0
 READING_BINS = 16
 WORLD_ROOT = "/world"
+HEALTH_PERIOD_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -249,6 +250,7 @@ class Scene:
         self.opts = opts
         self.paths: set[str] = set()
         self.vehicles: dict[str, VehicleDrawing] = {}
+        self.drawn_tick: int | None = None  # the newest tick drawn
         sensor = scenario.sensor.resolved()
         self.full_scale = sensor.saturation_g_m3 or max(default_levels(scenario))
 
@@ -490,6 +492,7 @@ def render(scene: Scene, feed: Feed, meshes: MeshFetcher) -> int:
         try:
             tick = decode(tick_raw, SimTick)
             scene.update_states(tick.states, tick.sim_time_s)
+            scene.drawn_tick = tick.tick
         except MessageError as exc:
             log.warning("ignoring tick: %s", exc)
     for vid, raw in readings_raw.items():
@@ -523,13 +526,19 @@ def main(ctx: NodeContext) -> int:
         rt.publish_health(detail=f"url={srv.web_url} plume=0/{levels}")
         rt.ready()
         period = 1.0 / opts.rate_hz
+        next_health = time.monotonic() + HEALTH_PERIOD_S
         try:
             while not rt.stop.is_set():
                 t0 = time.monotonic()
                 arrived = render(scene, feed, meshes)
-                if arrived:
-                    answered += arrived
-                    rt.publish_health(detail=f"url={srv.web_url} plume={answered}/{levels}")
+                answered += arrived
+                if arrived or t0 >= next_health:
+                    # the newest drawn tick tells a supervisor (and a test) the scene is fed
+                    next_health = t0 + HEALTH_PERIOD_S
+                    rt.publish_health(
+                        detail=f"url={srv.web_url} plume={answered}/{levels} "
+                        f"tick={'-' if scene.drawn_tick is None else scene.drawn_tick}"
+                    )
                 rt.stop.wait(max(0.0, period - (time.monotonic() - t0)))
         finally:
             feed.close()

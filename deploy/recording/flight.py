@@ -18,7 +18,13 @@ import numpy.typing as npt
 from tqdm import tqdm
 
 from deploy.recording.reader import Recorded, Recording, RecordingError
-from deploy.recording.schema import EVENTS_TOPIC, RecorderEvent
+from deploy.recording.schema import (
+    EVENTS_TOPIC,
+    GAPS_TOPIC,
+    RecorderEvent,
+    SegmentGap,
+    gap_from_json,
+)
 from swarmbus.keys import KeyNameError, Keys
 from swarmbus.messages import (
     ConcentrationReading,
@@ -73,6 +79,8 @@ class Flight:
     events: list[RecorderEvent] = field(default_factory=list)
     message_count: int = 0
     truncated: bool = False
+    segments: list[str] = field(default_factory=list)  # file names, in order
+    gaps: list[SegmentGap] = field(default_factory=list)  # not recorded between segments
 
     @property
     def vehicles(self) -> list[str]:
@@ -137,6 +145,7 @@ class _Collector:
         self.modes: dict[str, list[tuple[float, str]]] = defaultdict(list)
         self.plume_info: PlumeInfo | None = None
         self.events: list[RecorderEvent] = []
+        self.gaps: list[SegmentGap] = []
         leaf: dict[str, Callable[[Recorded], None]] = {
             "state": self._state,
             "concentration": self._reading,
@@ -149,6 +158,9 @@ class _Collector:
             event = rec.event()
             if event is not None:
                 self.events.append(event)
+            return
+        if rec.topic == GAPS_TOPIC:
+            self.gaps.append(gap_from_json(rec.data))
             return
         if not rec.is_bus_message:
             return
@@ -224,6 +236,8 @@ def load_flight(recording: Recording, progress: bool | None = None) -> Flight:
         events=collector.events,
         message_count=count,
         truncated=recording.truncated,
+        segments=[p.name for p in recording.segments],
+        gaps=collector.gaps,
     )
     for vid in sorted(set(collector.states) | set(collector.tick_states)):
         rows = collector.states.get(vid) or collector.tick_states[vid]

@@ -22,7 +22,10 @@ from mcap.records import Channel, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 
 from deploy.recording import schema as sch
+from deploy.recording.schema import SegmentGap, gap_from_json
+from deploy.recording.segments import SegmentError, recording_files
 from swarmbus.messages import Message as BusMessage
+from swarmbus.messages import SimTick
 
 log = logging.getLogger(__name__)
 
@@ -67,43 +70,57 @@ class Recorded:
 
 @dataclass
 class Recording:
-    """A recording file; iterate :meth:`messages` (once or many times)."""
+    """A recording: one MCAP file, or the segments of one (a recorder restarted after a crash
+    continues in ``<name>.1.mcap`` …); iterate :meth:`messages` (once or many times)."""
 
     path: Path
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
-    truncated: bool = False
-    message_count: int | None = None  # from the summary, when the file has one
+    truncated: bool = False  # a segment ends without its summary (its recorder was killed)
+    message_count: int | None = None  # from the summaries, when every segment has one
+    segments: list[Path] = field(default_factory=list)  # the files, in order
+
+    def __post_init__(self) -> None:
+        if not self.segments:
+            self.segments = [self.path]
 
     @classmethod
     def open(cls, path: str | Path) -> Recording:
+        """``path``: a recording's first segment (its later segments are read too), one later
+        segment alone, or the directory holding one recording's segments."""
         p = Path(path)
         if not p.exists():
             raise RecordingError(f"{p}: no such file")
-        if p.is_dir():
-            raise RecordingError(f"{p}: is a directory, not a recording")
         try:
-            with open(p, "rb") as f:
-                magic = f.read(len(MCAP_MAGIC))
-                if magic != MCAP_MAGIC:
-                    raise RecordingError(f"{p}: not an MCAP file")
-                count = _summary_count(f)
+            files = recording_files(p)
+        except SegmentError as exc:
+            raise RecordingError(str(exc)) from None
         except OSError as exc:
             raise RecordingError(f"{p}: cannot read: {exc.strerror or exc}") from None
-        rec = cls(p, message_count=count)
+        counts = [_check_mcap(f) for f in files]
+        total = None if None in counts else sum(c for c in counts if c is not None)
+        if len(files) > 1:
+            log.info("%s: %d segments (%s)", p, len(files), ", ".join(f.name for f in files))
+        rec = cls(p, message_count=total, segments=files)
         rec.read_metadata()
         return rec
 
     def read_metadata(self) -> dict[str, dict[str, str]]:
-        """Metadata records before the first message (the recorder writes them first)."""
-        for _ in self._records(stop_at_first_message=True):
+        """Metadata records of the first segment before its first message (the recorder
+        writes them first)."""
+        for _ in self._records(self.segments[0], stop_at_first_message=True):
             pass
         return self.metadata
 
     def messages(self) -> Iterator[Recorded]:
-        """Every message in file order (the order the recorder received them)."""
+        """Every message in file order (the order the recorder received them), segment after
+        segment."""
+        for path in self.segments:
+            yield from self._messages(path)
+
+    def _messages(self, path: Path) -> Iterator[Recorded]:
         channels: dict[int, Channel] = {}
         schemas: dict[int, Schema] = {}
-        for record in self._records():
+        for record in self._records(path):
             if isinstance(record, Schema):
                 schemas[record.id] = record
             elif isinstance(record, Channel):
@@ -111,7 +128,7 @@ class Recording:
             elif isinstance(record, Message):
                 ch = channels.get(record.channel_id)
                 if ch is None:
-                    raise RecordingError(f"{self.path}: message on unknown channel")
+                    raise RecordingError(f"{path}: message on unknown channel")
                 sc = schemas.get(ch.schema_id)
                 yield Recorded(
                     topic=ch.topic,
@@ -124,9 +141,10 @@ class Recording:
                     data=record.data,
                 )
 
-    def _records(self, stop_at_first_message: bool = False) -> Iterator[object]:
+    def _records(self, path: Path, stop_at_first_message: bool = False) -> Iterator[object]:
+        first = path == self.segments[0]
         try:
-            with open(self.path, "rb") as f:
+            with open(path, "rb") as f:
                 reader = StreamReader(f, validate_crcs=True)
                 it = reader.records
                 while True:
@@ -136,26 +154,76 @@ class Recording:
                         return
                     except Exception as exc:  # any parser error of a foreign file: judged below
                         if _at_end(f):
-                            self._mark_truncated(exc)
+                            self._mark_truncated(path, exc)
                             return
-                        raise RecordingError(f"{self.path}: damaged recording: {exc}") from None
-                    if isinstance(record, Metadata):
+                        raise RecordingError(f"{path}: damaged recording: {exc}") from None
+                    if isinstance(record, Metadata) and first:
                         self.metadata[record.name] = dict(record.metadata)
                     elif isinstance(record, Message) and stop_at_first_message:
                         return
                     yield record
         except OSError as exc:
-            raise RecordingError(f"{self.path}: cannot read: {exc.strerror or exc}") from None
+            raise RecordingError(f"{path}: cannot read: {exc.strerror or exc}") from None
 
-    def _mark_truncated(self, exc: Exception) -> None:
+    def _mark_truncated(self, path: Path, exc: Exception) -> None:
         if not self.truncated:
             log.warning(
                 "%s ends without its summary (recorder killed?): read up to the last complete "
                 "chunk (%s)",
-                self.path,
+                path,
                 type(exc).__name__,
             )
         self.truncated = True
+
+    def gaps(self) -> list[SegmentGap]:
+        """The gaps restarted recorders recorded between segments."""
+        return [gap_from_json(r.data) for r in self.messages() if r.topic == sch.GAPS_TOPIC]
+
+
+@dataclass(frozen=True)
+class SegmentEnd:
+    """The last things a (possibly killed) segment holds, for the next segment's gap record."""
+
+    messages: int
+    truncated: bool
+    last_log_time_ns: int | None
+    last_tick: int | None
+    last_sim_time_s: float | None
+
+
+def segment_end(path: Path) -> SegmentEnd:
+    """Read one segment to its end (to its last complete chunk when it was cut short)."""
+    recording = Recording(path, segments=[path])
+    count = 0
+    last_ns: int | None = None
+    last_tick: Recorded | None = None
+    tick_schema = sch.schema_name(SimTick)
+    for rec in recording.messages():
+        count += 1
+        last_ns = rec.log_time_ns if last_ns is None else max(last_ns, rec.log_time_ns)
+        if rec.schema_name == tick_schema and rec.is_bus_message:
+            last_tick = rec
+    tick = last_tick.message() if last_tick is not None else None
+    return SegmentEnd(
+        messages=count,
+        truncated=recording.truncated,
+        last_log_time_ns=last_ns,
+        last_tick=tick.tick if isinstance(tick, SimTick) else None,
+        last_sim_time_s=tick.sim_time_s if isinstance(tick, SimTick) else None,
+    )
+
+
+def _check_mcap(path: Path) -> int | None:
+    """The message count of ``path``'s summary (None without one); raises for a non-MCAP."""
+    if path.is_dir():
+        raise RecordingError(f"{path}: is a directory, not a recording")
+    try:
+        with open(path, "rb") as f:
+            if f.read(len(MCAP_MAGIC)) != MCAP_MAGIC:
+                raise RecordingError(f"{path}: not an MCAP file")
+            return _summary_count(f)
+    except OSError as exc:
+        raise RecordingError(f"{path}: cannot read: {exc.strerror or exc}") from None
 
 
 def _at_end(f: IO[bytes]) -> bool:

@@ -31,6 +31,8 @@ import msgspec
 import zenoh
 
 from deploy.recording import schema as sch
+from deploy.recording.reader import RecordingError, SegmentEnd, segment_end
+from deploy.recording.segments import next_segment
 from deploy.recording.sink import DEFAULT_CHUNK_BYTES, DEFAULT_CHUNK_INTERVAL_S, McapSink
 from swarmbus.codec import MessageError, decode, encode
 from swarmbus.keys import Keys
@@ -52,6 +54,7 @@ class RecorderOptions:
     behind_age_s: float = 2.0  # ... or when the oldest written message waited this long
     health_period_s: float = 1.0
     query_plume_info: bool = True
+    resume: bool = False  # ``out`` exists (a killed predecessor's): continue in its next segment
 
     @classmethod
     def from_ctx(cls, ctx: NodeContext) -> RecorderOptions:
@@ -64,6 +67,7 @@ class RecorderOptions:
             chunk_bytes=int(opts.get("chunk_bytes", DEFAULT_CHUNK_BYTES)),
             max_backlog=int(opts.get("max_backlog", 2_000_000)),
             query_plume_info=opts.get("query_plume_info", "true").lower() != "false",
+            resume=opts.get("resume", "false").lower() == "true",
         )
 
 
@@ -81,6 +85,7 @@ class Recorder:
         sink: McapSink,
         options: RecorderOptions,
         publish_health: HealthPublisher,
+        previous_segment: Path | None = None,
     ) -> None:
         self._session = session
         self._keys = keys
@@ -107,6 +112,18 @@ class Recorder:
         self._info_thread = threading.Thread(
             target=self._query_plume_info, name="recorder-plume-info", daemon=True
         )
+        # A restarted recorder: the gap since the previous segment, written once the previous
+        # segment has been read (on its own thread: recording starts at once) and the first
+        # tick of this segment has arrived.
+        self._previous = previous_segment
+        self._previous_end: SegmentEnd | None = None
+        self._gap_pending = previous_segment is not None
+        self._first_log_ns: int | None = None
+        self._first_tick: SimTick | None = None
+        self._started_s = time.monotonic()
+        self._scan_thread = threading.Thread(
+            target=self._scan_previous, name="recorder-previous-segment", daemon=True
+        )
 
     # -- Zenoh thread --------------------------------------------------------------------------
     def _on_sample(self, sample: zenoh.Sample) -> None:
@@ -124,6 +141,8 @@ class Recorder:
     # -- lifecycle -----------------------------------------------------------------------------
     def start(self) -> None:
         self._sink.write_event(sch.RecorderEvent(kind=sch.EventKind.STARTED, detail=self._name))
+        if self._gap_pending:
+            self._scan_thread.start()
         self._thread.start()
         self._sub = self._session.declare_subscriber(self._keys.everything(), self._on_sample)
         if self._opts.query_plume_info:
@@ -142,6 +161,9 @@ class Recorder:
             log.error("recorder writer did not finish within %.0f s", timeout_s)
         self._report_drops()
         self._report_gaps()
+        if self._gap_pending:
+            self._scan_thread.join(GAP_SCAN_TIMEOUT_S)
+            self._write_segment_gap(force=True)
         self._sink.write_event(self._event(sch.EventKind.STOPPED))
         self._sink.close(self.summary())
         log.info("recording closed: %s (%d messages)", self._sink.path, self.written_total)
@@ -205,6 +227,10 @@ class Recorder:
         with self._lock:
             self._taken_total += 1
         message = self._sink.write_bus(key, payload, log_time_ns)
+        if self._first_log_ns is None:
+            self._first_log_ns = log_time_ns
+        if isinstance(message, SimTick) and self._first_tick is None:
+            self._first_tick = message
         if isinstance(message, VehicleState | SimTick):
             self._check_tick(key, message.tick)
         elif isinstance(message, NodeHealth) and message.name != self._name:
@@ -217,6 +243,8 @@ class Recorder:
             self.tick_gaps[key] += tick - last - 1
 
     def _housekeeping(self, age_s: float = 0.0) -> None:
+        if self._gap_pending:
+            self._write_segment_gap()
         self._sink.maybe_close_chunk()
         self._watch_backlog(age_s)
         self._report_drops()
@@ -265,6 +293,60 @@ class Recorder:
             self._sink.write_event(self._event(sch.EventKind.DROPPED, detail))
             self._dropped_reported = dropped
 
+    # -- a restarted recorder's gap ------------------------------------------------------------
+    def _scan_previous(self) -> None:
+        assert self._previous is not None
+        try:
+            end = segment_end(self._previous)
+        except RecordingError as exc:
+            log.error("cannot read the previous segment for the gap record: %s", exc)
+            end = SegmentEnd(0, True, None, None, None)
+        self._previous_end = end
+
+    def _write_segment_gap(self, force: bool = False) -> None:
+        """Once the previous segment is read and this one's first tick is here (or waiting for
+        it is pointless), write the gap on its channel and a ``resumed`` event."""
+        end = self._previous_end
+        if end is None or self._previous is None:
+            if force:
+                log.error("previous segment %s not read in time: no gap record", self._previous)
+                self._gap_pending = False
+            return
+        waited = time.monotonic() - self._started_s
+        if self._first_tick is None and not force and waited < GAP_TICK_WAIT_S:
+            return
+        self._gap_pending = False
+        first = self._first_tick
+        gap_s = None
+        if end.last_log_time_ns is not None and self._first_log_ns is not None:
+            gap_s = (self._first_log_ns - end.last_log_time_ns) / 1e9
+        missing = None
+        if end.last_tick is not None and first is not None:
+            missing = first.tick - end.last_tick - 1
+        gap = sch.SegmentGap(
+            previous_segment=self._previous.name,
+            previous_truncated=end.truncated,
+            previous_messages=end.messages,
+            previous_last_log_time_ns=end.last_log_time_ns,
+            previous_last_tick=end.last_tick,
+            previous_last_sim_time_s=end.last_sim_time_s,
+            first_log_time_ns=self._first_log_ns,
+            first_tick=first.tick if first is not None else None,
+            first_sim_time_s=first.sim_time_s if first is not None else None,
+            gap_s=gap_s,
+            ticks_missing=missing,
+        )
+        self._sink.write_gap(gap)
+        detail = (
+            f"continuing after {self._previous.name} ({end.messages} messages"
+            f"{', cut short' if end.truncated else ''}): "
+            + (f"{gap_s:.2f} s" if gap_s is not None else "unknown time")
+            + " not recorded"
+            + (f", ticks {end.last_tick} → {first.tick}" if missing is not None and first else "")
+        )
+        log.warning("RECORDER RESUMED: %s", detail)
+        self._sink.write_event(self._event(sch.EventKind.RESUMED, detail))
+
     def _query_plume_info(self) -> None:
         # plume/info is a queryable, not a publication: ask until answered, so that a report
         # can draw the field the vehicles flew through.
@@ -288,6 +370,8 @@ class Recorder:
 # to the switch interval (5 ms by default); a stalled receive thread back-pressures the link and
 # upstream drops follow. A shorter interval reduced that loss at 61k msg/s in bench/recorder.py.
 GIL_SWITCH_INTERVAL_S = 0.0005
+GAP_TICK_WAIT_S = 10.0  # wall: a lockstep that does not tick (paused, gone) gets a gap without
+GAP_SCAN_TIMEOUT_S = 60.0
 
 
 def run(ctx: NodeContext) -> int:
@@ -301,23 +385,34 @@ def run(ctx: NodeContext) -> int:
         "started_utc": datetime.now(UTC).isoformat(),
         "scenario": msgspec.json.encode(ctx.scenario).decode(),
     }
+    out, previous = opts.out, None
+    if opts.resume:
+        previous, out = next_segment(opts.out)
+    if previous is not None:
+        log.warning("%s exists (recorder restarted): continuing in %s", previous, out.name)
     try:
         opts.out.parent.mkdir(parents=True, exist_ok=True)
         sink = McapSink(
-            opts.out,
+            out,
             chunk_interval_s=opts.chunk_interval_s,
             chunk_bytes=opts.chunk_bytes,
             metadata=metadata,
         )
     except OSError as exc:
-        log.error("cannot write recording %s: %s", opts.out, exc.strerror or exc)
+        log.error("cannot write recording %s: %s", out, exc.strerror or exc)
         return 2
     with NodeRuntime(ctx, role="recorder") as rt:
         recorder = Recorder(
-            rt.session, rt.keys, ctx.name, sink, opts, lambda d: rt.publish_health(detail=d)
+            rt.session,
+            rt.keys,
+            ctx.name,
+            sink,
+            opts,
+            lambda d: rt.publish_health(detail=d),
+            previous_segment=previous,
         )
         recorder.start()
-        log.info("recording %s to %s", rt.keys.everything(), opts.out)
+        log.info("recording %s to %s", rt.keys.everything(), out)
         rt.ready()
         rt.stop.wait()
         recorder.stop()

@@ -166,6 +166,7 @@ def _facts(flight: Flight, source: Path) -> list[tuple[str, str]]:
         ("sim time", span),
         ("messages", str(flight.message_count)),
         ("file", "cut short (recorder killed?)" if flight.truncated else "complete"),
+        ("segments", _segments(flight)),
         (
             "recorder",
             f"fell behind {behind}×, dropped {dropped}, {lost} missing from per-tick streams"
@@ -174,6 +175,20 @@ def _facts(flight: Flight, source: Path) -> list[tuple[str, str]]:
         ),
         ("plume", plume),
     ]
+
+
+def _segments(flight: Flight) -> str:
+    """The files read and what was not recorded between them (restarted recorders)."""
+    text = ", ".join(flight.segments) or "—"
+    for g in flight.gaps:
+        lost = f"{g.gap_s:.2f} s" if g.gap_s is not None else "an unknown time"
+        ticks = (
+            f", ticks {g.previous_last_tick} → {g.first_tick} ({g.ticks_missing} missing)"
+            if g.ticks_missing is not None
+            else ""
+        )
+        text += f"; not recorded after {g.previous_segment}: {lost}{ticks}"
+    return text
 
 
 FIGURES: dict[str, tuple[str, Callable[[Flight], Figure]]] = {

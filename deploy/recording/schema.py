@@ -24,6 +24,7 @@ RAW_MSGPACK_ENCODING = "msgpack"
 RAW_BYTES_ENCODING = "application/octet-stream"
 SCHEMA_PREFIX = "plumeswarm."
 EVENTS_TOPIC = "recorder/events"  # an MCAP topic, not a bus key (replay never publishes it)
+GAPS_TOPIC = "recorder/gaps"  # a restarted recorder's gap between segments (its own channel)
 PROFILE = "plumeswarm"
 
 # msgspec decodes a tagged union of every message in one pass (the ``schema`` field picks).
@@ -42,6 +43,7 @@ class EventKind(enum.StrEnum):
     UNDECODABLE = "undecodable"  # a payload that is not a valid message (kept raw)
     GAP = "gap"  # ticks missing from a per-tick stream: lost before reaching the recorder
     STOPPED = "stopped"
+    RESUMED = "resumed"  # a restarted recorder continues in a new segment (see SegmentGap)
 
 
 class RecorderEvent(msgspec.Struct, frozen=True, kw_only=True):
@@ -55,6 +57,30 @@ class RecorderEvent(msgspec.Struct, frozen=True, kw_only=True):
     received: int = 0
     written: int = 0
     lost_upstream: int = 0  # total messages missing from per-tick streams so far
+
+
+class SegmentGap(msgspec.Struct, frozen=True, kw_only=True):
+    """What a restarted recorder did not record: between the end of the previous segment (what
+    was flushed to it before the old recorder died) and the first messages of this one. On the
+    ``recorder/gaps`` channel of the new segment. Times are the recorder's receive times (log
+    time, ns since the epoch); ticks and sim times are those of ``sim/tick``. ``None``: unknown
+    (no such message in that segment)."""
+
+    previous_segment: str  # file name, next to this one
+    previous_truncated: bool  # the previous segment ends without its summary (killed)
+    previous_messages: int
+    previous_last_log_time_ns: int | None
+    previous_last_tick: int | None
+    previous_last_sim_time_s: float | None
+    first_log_time_ns: int | None  # the first bus message of this segment
+    first_tick: int | None
+    first_sim_time_s: float | None
+    gap_s: float | None  # wall seconds between the two log times
+    ticks_missing: int | None  # first_tick - previous_last_tick - 1
+
+
+def gap_from_json(data: bytes) -> SegmentGap:
+    return msgspec.json.decode(data, type=SegmentGap)
 
 
 def decode_bus(payload: bytes) -> Message:

@@ -133,6 +133,11 @@ class McapSink:
         )
         self._add(cid, sch.EVENTS_TOPIC, msgspec.json.encode(event), now, now)
 
+    def write_gap(self, gap: sch.SegmentGap, log_time_ns: int | None = None) -> None:
+        now = log_time_ns if log_time_ns is not None else time.time_ns()
+        cid = self._channel_id(sch.GAPS_TOPIC, sch.MESSAGE_ENCODING, sch.SegmentGap, "recorder")
+        self._add(cid, sch.GAPS_TOPIC, msgspec.json.encode(gap), now, now)
+
     def maybe_close_chunk(self, now_monotonic: float | None = None) -> bool:
         """Close the open chunk (and flush it to the OS) when it is old or big enough."""
         now = now_monotonic if now_monotonic is not None else time.monotonic()
