@@ -75,6 +75,9 @@ def zenoh_config(net: NetworkConfig) -> zenoh.Config:
     conf.insert_json5("connect/endpoints", json.dumps(list(net.connect)))
     conf.insert_json5("listen/endpoints", json.dumps(list(net.listen)))
     conf.insert_json5("scouting/multicast/enabled", json.dumps(net.multicast_scouting))
+    # Every sample carries its publisher's (HLC) time: recordings keep when a message was
+    # published, not only when the recorder got it, and replay reproduces that timing.
+    conf.insert_json5("timestamping/enabled", "true")
     if net.low_latency:
         conf.insert_json5("transport/unicast/lowlatency", "true")
         conf.insert_json5("transport/unicast/qos/enabled", "false")

@@ -85,6 +85,12 @@ def test_round_trip_same_messages_in_order(
     assert not recording.truncated
     expected = [(key, bytes.fromhex(payload)) for key, payload, _ in published["published"]]
     assert vehicle_messages(recording) == expected
+    # publish_time is the publisher's own clock: between its readings after the previous put and
+    # after this one (the scripted publisher notes time.time_ns() after each put).
+    times = [r.publish_time_ns for r in recording.messages() if "/vehicle/" in r.topic]
+    after_put = [t for _, _, t in published["published"]]
+    for i, (t, after) in enumerate(zip(times, after_put, strict=True)):
+        assert (after_put[i - 1] if i else 0) <= t <= after, f"message {i}: publish time {t}"
     assert recording.metadata["plumeswarm"]["world"] == "default"
     summary = recording.metadata["plumeswarm.summary"]
     assert json.loads(summary["dropped_total"]) == 0

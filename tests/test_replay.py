@@ -19,8 +19,12 @@ STALL_TOLERANCE_S = 0.25
 
 
 def timeline(path: Path) -> list[tuple[str, bytes, float]]:
-    """(key, stored data, seconds since the first) of vehicle messages, in file order."""
-    rows = [(m.topic, m.data, m.log_time_ns) for m in Recording.open(path).messages()]
+    """(key, stored data, seconds since the first) of vehicle messages, in file order.
+
+    Times are publish times (the publishers' Zenoh timestamps): the original publisher's, then
+    the replay's, so the comparison measures the replay's timing, not the recorder's wake-ups.
+    """
+    rows = [(m.topic, m.data, m.publish_time_ns) for m in Recording.open(path).messages()]
     rows = [r for r in rows if "/vehicle/" in r[0]]
     t0 = rows[0][2]
     return [(k, d, (t - t0) / 1e9) for k, d, t in rows]

@@ -71,7 +71,15 @@ class RecorderOptions:
         )
 
 
-Item = tuple[str, bytes, int, bool]  # key, payload, receive time (ns), is a query reply
+# key, payload, receive time (ns), publish time (ns, the sample's timestamp), is a query reply
+Item = tuple[str, bytes, int, int | None, bool]
+
+
+def publish_time_ns(sample: zenoh.Sample) -> int | None:
+    """The publisher's time of ``sample`` (ns since the Unix epoch), None if it has none."""
+    if sample.timestamp is None:
+        return None
+    return int(sample.timestamp.get_time_as_ntp64().as_nanos())
 
 
 class Recorder:
@@ -136,7 +144,7 @@ class Recorder:
                 return
             self.received[key] += 1
             self._received_total += 1
-        self._queue.put((key, sample.payload.to_bytes(), now, False))
+        self._queue.put((key, sample.payload.to_bytes(), now, publish_time_ns(sample), False))
 
     # -- lifecycle -----------------------------------------------------------------------------
     def start(self) -> None:
@@ -220,13 +228,13 @@ class Recorder:
             self._housekeeping(age_s=(time.time_ns() - item[2]) / 1e9)
 
     def _write(self, item: Item) -> None:
-        key, payload, log_time_ns, is_reply = item
+        key, payload, log_time_ns, publish_ns, is_reply = item
         if is_reply:
             self._sink.write_reply(key, decode(payload, PlumeInfo), log_time_ns)
             return
         with self._lock:
             self._taken_total += 1
-        message = self._sink.write_bus(key, payload, log_time_ns)
+        message = self._sink.write_bus(key, payload, log_time_ns, publish_ns)
         if self._first_log_ns is None:
             self._first_log_ns = log_time_ns
         if isinstance(message, SimTick) and self._first_tick is None:
@@ -358,7 +366,7 @@ class Recorder:
                         continue
                     payload = reply.ok.payload.to_bytes()
                     decode(payload, PlumeInfo)
-                    self._queue.put((key, payload, time.time_ns(), True))
+                    self._queue.put((key, payload, time.time_ns(), None, True))
                     log.info("recorded the plume's info")
                     return
             except (zenoh.ZError, MessageError) as exc:

@@ -1,7 +1,8 @@
 """``plumeswarm replay``: publish a recording back onto the bus with its original timing.
 
 Messages go out on the keys they were recorded from, in file order, spaced as they were
-received (log time), divided by ``speed``. Published bus messages only: the presence plane
+published (publish time: the publisher's Zenoh timestamp; the receive time in recordings made
+without one), divided by ``speed``. Published bus messages only: the presence plane
 (``node/*``, other nodes' health would confuse supervisors), replies the recorder asked for
 itself, and the recorder's own events are not replayed. Raw payloads that were not valid
 messages go out byte for byte, as they came.
@@ -116,13 +117,13 @@ def replay(recording: Recording, rt: NodeRuntime, opts: ReplayOptions) -> int:
     rt.ready()
     pubs = _Publishers(rt.session)
     sent = 0
-    first_log_ns: int | None = None
+    first_ns: int | None = None
     start = time.monotonic()
     try:
         for rec, payload in replayable(recording, rt.keys):
-            if first_log_ns is None:
-                first_log_ns = rec.log_time_ns
-            due = start + (rec.log_time_ns - first_log_ns) / 1e9 / opts.speed
+            if first_ns is None:
+                first_ns = rec.publish_time_ns
+            due = start + (rec.publish_time_ns - first_ns) / 1e9 / opts.speed
             delay = due - time.monotonic()
             if delay > 0 and rt.stop.wait(delay):
                 break
