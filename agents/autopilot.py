@@ -33,6 +33,7 @@ from swarmbus.messages import (
     Land,
     MissionClear,
     MissionDownload,
+    MissionItem,
     MissionPause,
     MissionStart,
     MissionUpload,
@@ -110,12 +111,20 @@ class Autopilot:
             ),
             MissionPause: self._pause,
             MissionClear: lambda c: self.modes.clear_mission(),
-            MissionDownload: lambda c: self._reply(mission=list(self.modes.mission.items)),
+            MissionDownload: lambda c: self._reply(mission=self.mission_items()),
             Setpoint: lambda c: self.modes.setpoint(c, self.now),
             GcsHeartbeat: self._heartbeat,
             SetParam: self._set_param,
             GetParams: lambda c: self._reply(params=self.params()),
         }
+
+    def mission_items(self) -> list[MissionItem]:
+        """The mission, including the scenario's before its upload at the first state.
+
+        A ground station that connects before the lockstep runs downloads what the vehicle will
+        fly, not an empty mission.
+        """
+        return list(self._scenario_mission or self.modes.mission.items)
 
     # ------------------------------------------------------------------ control tick
     def step(
@@ -296,7 +305,7 @@ class Autopilot:
             landed=state.on_ground if state is not None else True,
             crashed=self.monitor.crashed,
             mission_index=mission.index,
-            mission_count=mission.count,
+            mission_count=mission.count or len(self._scenario_mission),  # see mission_items
             mission_items_reached=mission.items_reached,
             mission_finished=mission.finished,
             home_enu_m=m.home,

@@ -17,6 +17,7 @@ from swarmbus.messages import (
     Goto,
     Land,
     MissionCommand,
+    MissionDownload,
     MissionItem,
     MissionStart,
     MissionUpload,
@@ -283,3 +284,18 @@ def test_commands_before_any_state_are_refused_not_crashing() -> None:
     ap = Autopilot(load_scenario(), "uav1")
     refused(ap, Arm(), "no vehicle state yet")
     refused(ap, Land(), "no vehicle state yet")
+
+
+def test_scenario_mission_is_downloadable_before_the_first_state() -> None:
+    """A ground station that connects before the lockstep runs sees the scenario's mission."""
+    sc = load_scenario()
+    want = sc.vehicle("uav1").mission
+    assert want, "the default scenario gives uav1 a mission"
+    ap = Autopilot(sc, "uav1")
+    reply = ap.handle(MissionDownload())
+    assert reply.accepted and reply.mission == list(want)
+    assert ap.status().mission_count == len(want)
+    w, aps = world(sc, ["uav1"])  # after the first state: the uploaded mission, same items
+    w.run(0.1)
+    assert aps["uav1"].handle(MissionDownload()).mission == list(want)
+    assert aps["uav1"].status().mission_count == len(want)
