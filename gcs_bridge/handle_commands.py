@@ -99,11 +99,14 @@ class CommandHandlers(Core):
         if any(now - link.gcs_heard_s <= GCS_LINK_TIMEOUT_S for link in self.links_of[v.sysid]):
             self._forward_gcs_heartbeat(v, now)
 
-    def _select_while_disarmed(self, v: Vehicle, command: Command) -> Translation | None:
+    def _select_while_disarmed(
+        self, v: Vehicle, command: Command, now: float
+    ) -> Translation | None:
         """PX4 lets a GCS pick takeoff or mission mode while disarmed and fly it on arming
         (QGC's takeoff and start-mission flows). Our autopilot takes those only once armed,
-        so the gateway keeps the selection and sends it right after a successful arm."""
-        if v.status is None or v.armed:
+        so the gateway keeps the selection and sends it right after a successful arm. Once an
+        Arm is on its way the vehicle counts as armed: the command follows it to the autopilot."""
+        if v.status is None or v.armed or v.arming(now):
             return None
         if isinstance(command, Takeoff) or (
             isinstance(command, SetMode) and command.mode == FlightMode.MISSION
@@ -164,7 +167,7 @@ class CommandHandlers(Core):
             self._ack(link, v, req.command, UNSUPPORTED, peer, now)
             return
         if t.bus is not None:
-            t = self._select_while_disarmed(v, t.bus) or t
+            t = self._select_while_disarmed(v, t.bus, now) or t
             if t.bus is None and t.result == ACCEPTED:
                 self._send_all(v, v.heartbeat(), now)
         if t.bus is None:
@@ -180,10 +183,24 @@ class CommandHandlers(Core):
         completion: Done = done
         if isinstance(t.bus, Disarm):
             v.intent = None
-        elif isinstance(t.bus, Arm) and v.intent is not None:
-            intent, v.intent = v.intent, None
-            completion = self._arm_then_intent(v, intent, done)
+            v.arming_since_s = None
+        elif isinstance(t.bus, Arm):
+            completion = self._arming(v, now, done)
+            if v.intent is not None:
+                intent, v.intent = v.intent, None
+                completion = self._arm_then_intent(v, intent, completion)
         self._submit(v, t.bus, completion)
+
+    def _arming(self, v: Vehicle, now: float, done: Done) -> Done:
+        """Completion of an Arm: until a status says armed, the vehicle counts as arming."""
+        v.arming_since_s = now
+
+        def replied(reply: CommandReply) -> None:
+            if not reply.accepted:
+                v.arming_since_s = None
+            done(reply)
+
+        return replied
 
     def _cmd_set_message_interval(
         self, link: Link, v: Vehicle, req: CommandRequest, peer: ms.Peer, now: float
@@ -252,7 +269,7 @@ class CommandHandlers(Core):
         mode = decode_custom_mode(int(msg.custom_mode))
         t = translate_mode(float(msg.base_mode), mode.main, mode.sub, self._facts(v))
         if t.bus is not None:
-            t = self._select_while_disarmed(v, t.bus) or t
+            t = self._select_while_disarmed(v, t.bus, now) or t
         if t.bus is None:
             if t.result == ACCEPTED:
                 self._send_all(v, v.heartbeat(), now)

@@ -39,6 +39,7 @@ UID_BASE = 0x504C554D45000000  # "PLUME" + sysid
 # MISSION_CURRENT.mission_mode (not named in pymavlink 2.4.50): 1 in mission mode, 2 suspended.
 MISSION_MODE_ACTIVE = 1
 MISSION_MODE_SUSPENDED = 2
+ARMING_SETTLE_S = 5.0  # wall: how long an accepted Arm stands in for a status saying armed
 
 
 @dataclass
@@ -89,6 +90,7 @@ class Vehicle:
         self.download: list[WireItem] = []
         self._home_geo: Vec3 | None = None
         self.intent: ArmIntent | None = None
+        self.arming_since_s: float | None = None  # wall: an Arm sent, no armed status yet
         self.last_status_wall_s = -1e9
         self.last_gcs_heartbeat_s = -1e9  # wall
         self.last_gcs_heartbeat_sim_s = -1e9
@@ -113,6 +115,14 @@ class Vehicle:
     @property
     def armed(self) -> bool:
         return self.status is not None and self.status.armed
+
+    def arming(self, now: float) -> bool:
+        """An Arm is on its way or was accepted, and no status saying armed has arrived yet.
+
+        The autopilot publishes its status before it replies, but the gateway may handle the
+        reply first (they reach it by different paths), so a GCS that sends its next command
+        as soon as the ARM's ACK arrives must not find the vehicle "still disarmed"."""
+        return self.arming_since_s is not None and now - self.arming_since_s < ARMING_SETTLE_S
 
     def armable(self) -> str | None:
         """None if the vehicle could arm now, else why not."""
@@ -225,6 +235,7 @@ class Vehicle:
         ev = StatusEvents()
         if status.armed or status.crashed:
             self.intent = None  # from now on the heartbeat shows the real mode
+            self.arming_since_s = None
         if old is None or (old.mode, old.armed, old.crashed, bool(old.failsafe)) != (
             status.mode,
             status.armed,

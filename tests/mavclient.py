@@ -174,15 +174,40 @@ class MavClient:
                 if pred(m):
                     return m
             if time.monotonic() > deadline:
-                raise AssertionError(f"timed out after {timeout_s:.0f} s waiting for {what}")
+                raise AssertionError(
+                    f"timed out after {timeout_s:.0f} s waiting for {what}\n{self.last_words()}"
+                )
             self.pump()
+
+    def last_words(self) -> str:
+        """What the vehicles said last (heartbeat mode, STATUSTEXTs): CI shows only the tail."""
+        lines = []
+        for sysid in sorted(self.addr_of):
+            hb = next(
+                (
+                    m
+                    for m in reversed(self.log)
+                    if m.get_type() == "HEARTBEAT" and m.get_srcSystem() == sysid
+                ),
+                None,
+            )
+            if hb is not None:
+                lines.append(
+                    f"  sysid {sysid}: custom_mode {hb.custom_mode:#x} base_mode {hb.base_mode:#x}"
+                    f" status {hb.system_status}"
+                )
+            texts = [m.text for m in self.logged("STATUSTEXT", sysid)][-5:]
+            lines.extend(f"  sysid {sysid} said: {t}" for t in texts)
+        return "last heard:\n" + "\n".join(lines)
 
     def until(self, what: str, cond: Callable[[], bool], timeout_s: float = 60.0) -> None:
         """Pump until ``cond()`` holds (it may look at ``self.log``, which keeps everything)."""
         deadline = time.monotonic() + timeout_s
         while not cond():
             if time.monotonic() > deadline:
-                raise AssertionError(f"timed out after {timeout_s:.0f} s waiting for {what}")
+                raise AssertionError(
+                    f"timed out after {timeout_s:.0f} s waiting for {what}\n{self.last_words()}"
+                )
             self.pump()
 
     def logged(self, kind: str, sysid: int) -> list[Msg]:

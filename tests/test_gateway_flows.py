@@ -270,6 +270,58 @@ def test_qgc_takeoff_then_modes_by_set_mode(swarm: Swarm) -> None:
     assert c.command(1, 400, 0) == TEMP_REJECTED  # already disarmed: the autopilot says no
 
 
+def test_a_command_right_after_arm_follows_the_arm(swarm: Swarm) -> None:
+    """The autopilot publishes its status before replying, but the gateway may handle the reply
+    first. A takeoff sent the moment the ARM's ACK arrives (MAVSDK: arm, then takeoff), or while
+    the Arm is still on its way, goes to the autopilot after the Arm — it is not kept back as
+    a "selected while disarmed" mode that nothing would ever fly (CI saw exactly that)."""
+    c, v = swarm.gcs, swarm.uav3
+    from swarmbus.messages import Arm, Disarm, Takeoff
+
+    ready(c, UAV3)
+    takeoff_amsl = ORIGIN.alt_m + 6.0
+    try:
+        # 1. ACK before any status says armed: uav3 accepts and keeps publishing "disarmed"
+        before = len(v.received)
+        assert c.command(UAV3, 400, 1) == ACCEPTED
+        assert c.command(UAV3, 22, -1, 0, 0, NAN, NAN, NAN, takeoff_amsl) == ACCEPTED
+        wait_until(
+            lambda: v.commands(Takeoff) != [] and len(v.received) >= before + 2,
+            10.0,
+            "the takeoff on the bus",
+        )
+        assert [type(m) for m in v.received[before:] if isinstance(m, (Arm, Takeoff))] == [
+            Arm,
+            Takeoff,
+        ]
+        assert c.command(UAV3, 400, 0) == ACCEPTED  # Disarm: selections work as before again
+        # 2. the Arm still on its way when the takeoff comes
+        v.replies[Arm] = lambda cmd: (
+            time.sleep(0.5),
+            CommandReply(vehicle_id="uav3", accepted=True),
+        )[1]
+        before = len(v.received)
+        c.drain()
+        c.send(UAV3, mavlink.MAVLink_command_long_message(UAV3, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0))
+        c.send(
+            UAV3,
+            mavlink.MAVLink_command_long_message(
+                UAV3, 1, 22, 0, -1, 0, 0, NAN, NAN, NAN, takeoff_amsl
+            ),
+        )
+        assert c.wait_type("COMMAND_ACK", UAV3, command=400).result == ACCEPTED
+        assert c.wait_type("COMMAND_ACK", UAV3, command=22).result == ACCEPTED
+        wait_until(lambda: len(v.received) >= before + 2, 10.0, "arm and takeoff on the bus")
+        assert [type(m) for m in v.received[before:] if isinstance(m, (Arm, Takeoff))] == [
+            Arm,
+            Takeoff,
+        ]
+    finally:
+        v.replies.pop(Arm, None)
+        assert c.command(UAV3, 400, 0) == ACCEPTED
+        assert isinstance(v.received[-1], Disarm)
+
+
 def test_mission_upload_start_reached_and_download(swarm: Swarm) -> None:
     c = swarm.gcs
     ready(c, 2)
