@@ -45,7 +45,7 @@ def resume_index(seq: list[Seen], t_new: float) -> int:
 
 
 def test_physics_killed_resumes_from_checkpoint_and_vehicles_fly_on(stack: Stack) -> None:
-    scenario = load_scenario(stack.run.parent / "scenario.toml")
+    scenario = load_scenario(stack.up.run.parent / "scenario.toml")
     control_hz = scenario.time.control_hz
     period_ticks = round(scenario.time.checkpoint_period_s * control_hz)
     assert period_ticks > 0
