@@ -12,6 +12,7 @@ import threading
 from collections.abc import Iterator
 from pathlib import Path
 
+import msgspec
 import pytest
 import zenoh
 
@@ -225,7 +226,9 @@ def test_late_joiner_is_admitted(setup: tuple[NodeProcs, Watch], tmp_path: Path)
     wait_until(lambda: watch.first_tick_after(joined_from, "b", True), 60.0, "b admitted")
 
 
-def stream_hash(procs: NodeProcs, watch: Watch, sc: Path, ticks: int, label: str) -> str:
+def stream_hash(
+    procs: NodeProcs, watch: Watch, sc: Path, ticks: int, label: str, *script_args: str
+) -> str:
     with watch.lock:
         watch.raw.clear()
         watch.last_tick = -1
@@ -234,7 +237,7 @@ def stream_hash(procs: NodeProcs, watch: Watch, sc: Path, ticks: int, label: str
     )
     script = start_script(
         procs, sc, "--vehicle", "a", "--vehicle", "b", "--altitude", "3.0",
-        "--max-tick", str(ticks), label=label,
+        "--max-tick", str(ticks), *script_args, label=label,
     )  # fmt: skip
     assert exit_code(physics, "physics") == 0
     assert exit_code(script, "participant") == 0
@@ -255,6 +258,53 @@ def test_two_runs_of_the_same_scenario_give_identical_state_streams(
     first = stream_hash(procs, watch, sc, 240, "run1")
     second = stream_hash(procs, watch, sc, 240, "run2")
     assert first == second
+
+
+def test_one_batch_per_process_gives_the_state_stream_of_one_command_per_vehicle(
+    setup: tuple[NodeProcs, Watch], tmp_path: Path
+) -> None:
+    procs, watch = setup
+    sc = write_scenario(tmp_path)
+    singles = stream_hash(procs, watch, sc, 240, "singles")
+    batched = stream_hash(procs, watch, sc, 240, "batched", "--batch")
+    assert singles == batched
+
+
+def test_bad_entries_of_a_batch_are_dropped_and_logged(
+    setup: tuple[NodeProcs, Watch], tmp_path: Path
+) -> None:
+    procs, watch = setup
+    sc = write_scenario(tmp_path, timeout_s=1.0)
+    procs.start(
+        "physics", "--scenario", str(sc), "--set", "wait_for_autopilots=false", name="physics"
+    )
+    start_script(procs, sc, "--vehicle", "a", "--throttle", "0.2", "--batch", label="script-a")
+    wait_until(lambda: watch.first_tick_after(0, "a", True), 60.0, "a's motors on (a batch)")
+    key = KEYS.autopilot_actuators("intruder")
+    watch.session.put(key, b"\x00garbage")
+    tick = watch.last_tick
+    good = {"vehicle_id": "b", "tick": tick, "rotor_commands": [1.0] * 6}
+    entries = [
+        {**good, "vehicle_id": "zz"},  # unknown vehicle
+        {**good, "tick": tick + 1},  # another tick than the batch's
+        {**good, "rotor_commands": [1.5] * 6},  # out of range
+        good,  # b has no token: not a participant, its command is ignored
+    ]
+    batch = {"schema": "actuator_batch/v1", "tick": tick, "commands": entries}
+    watch.session.put(key, msgspec.msgpack.encode(batch))
+    wait_until(lambda: watch.last_tick >= tick + 50, 30.0, "ticks go on")
+    assert watch.first_tick_after(tick, "b", True) == 0
+    log = wait_until(
+        lambda: (text := (tmp_path / "physics.log").read_text()).count("ignoring") >= 4 and text,
+        10.0,
+        "four log lines",
+    )
+    assert "ignoring actuator batch on" in log
+    assert "ignoring actuators for zz" in log
+    assert f"ignoring actuators for b of tick {tick + 1} in the batch of tick {tick}" in log
+    assert "ignoring entry 2 of the actuator batch" in log and "rotor_commands" in log
+    start_script(procs, sc, "--vehicle", "b", "--throttle", "0.2", "--batch", label="script-b")
+    wait_until(lambda: watch.first_tick_after(tick, "b", True), 60.0, "b admitted by a batch")
 
 
 def test_one_shared_plume_query_per_sensor_tick_answered_in_the_next_tick(
