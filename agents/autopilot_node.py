@@ -457,27 +457,32 @@ class AutopilotNode:
             return  # not the tick with the physics' answer (e.g. garbage on sim/tick): wait
         self.pending = None
         values = self._values(pending, tick.plume_values)
+        index: dict[str, int] = {}
+        for k, s in enumerate(pending.states):
+            index.setdefault(s.vehicle_id, k)
+        # Every vehicle's PeerReading, built once per tick and shared by the served vehicles'
+        # readings (frozen): K x N constructions per tick would be N.
+        everyone: list[PeerReading] | None = None
         for vid, served in self.served.items():
             if not served.sensor.due(pending.tick):
                 continue
-            own = next((k for k, s in enumerate(pending.states) if s.vehicle_id == vid), None)
+            own = index.get(vid)
             if own is None:
                 continue
             position = pending.states[own].position_enu_m
             true = values[own] if values is not None else None
-            peers = (
-                [
-                    PeerReading(
-                        vehicle_id=s.vehicle_id,
-                        position_enu_m=s.position_enu_m,
-                        true_g_m3=values[k],
-                    )
-                    for k, s in enumerate(pending.states)
-                    if k != own
-                ]
-                if values is not None
-                else []
-            )
+            peers: list[PeerReading] = []
+            if values is not None:
+                if everyone is None:
+                    everyone = [
+                        PeerReading(
+                            vehicle_id=s.vehicle_id,
+                            position_enu_m=s.position_enu_m,
+                            true_g_m3=values[k],
+                        )
+                        for k, s in enumerate(pending.states)
+                    ]
+                peers = everyone[:own] + everyone[own + 1 :]
             reading = served.sensor.reading(vid, pending.sim_time_s, position, true, peers)
             served.autopilot.sensor_health = (
                 "" if reading.available else "sensor: the plume service did not answer"

@@ -33,7 +33,7 @@ import logging
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any
@@ -450,7 +450,7 @@ class PhysicsNode:
             )
         return 0
 
-    def _await_commands(self) -> dict[str, list[float]] | None:
+    def _await_commands(self) -> dict[str, Sequence[float]] | None:
         """Block until the current tick is complete or its deadline passed (then drop)."""
         with self._cond:
             barrier = self.barrier
@@ -469,9 +469,9 @@ class PhysicsNode:
                     )
                     break
                 self._cond.wait(min(remaining, STOP_POLL_S))
-            return {v: list(c) for v, c in barrier.commands().items()}
+            return barrier.commands()  # a new dict of the decoded (never mutated) lists
 
-    def _apply(self, commands: dict[str, list[float]]) -> None:
+    def _apply(self, commands: Mapping[str, Sequence[float]]) -> None:
         world = self.world
         for vid in world.vehicle_ids:
             cmd = commands.get(vid)
