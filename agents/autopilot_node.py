@@ -2,9 +2,11 @@
 
 One process serves one vehicle (or a few): it declares one liveliness token
 ``node/autopilot-<id>/health`` per vehicle (the lockstep's participant list), answers every
-``sim/tick`` with an ``ActuatorCommand`` per vehicle, serves ``vehicle/<id>/cmd``, publishes
-``vehicle/<id>/status`` (on change and every ``status_period_s`` of sim time) and the sensor's
-``vehicle/<id>/concentration``.
+``sim/tick`` with an ``ActuatorCommand`` on ``vehicle/<id>/actuators`` — a process serving
+several vehicles puts one ``ActuatorBatch`` of all their commands on
+``autopilot/<node>/actuators`` instead (one message per process per tick) — serves
+``vehicle/<id>/cmd``, publishes ``vehicle/<id>/status`` (on change and every
+``status_period_s`` of sim time) and the sensor's ``vehicle/<id>/concentration``.
 
 Ticks run on one worker thread reading the subscriber's channel (no Python callback thread in
 between). The sensor's plume query
@@ -41,6 +43,7 @@ from agents.sensor import ConcentrationSensor
 from swarmbus.codec import MessageError, decode, encode
 from swarmbus.keys import Keys
 from swarmbus.messages import (
+    ActuatorBatch,
     ActuatorCommand,
     Command,
     ConcentrationReading,
@@ -120,12 +123,16 @@ class _Served:
         scenario: Scenario,
         vehicle_id: str,
         options: NodeOptions,
+        own_actuators: bool = True,
     ) -> None:
         self.vehicle_id = vehicle_id
         self.autopilot = build_autopilot(scenario, vehicle_id, options)
         index = [v.id for v in scenario.vehicles].index(vehicle_id)
         self.sensor = ConcentrationSensor(scenario.sensor, scenario.world.seed, index)
-        self.actuators = session.declare_publisher(keys.vehicle_actuators(vehicle_id))
+        # None: the process batches its vehicles' commands (AutopilotNode.batch_pub)
+        self.actuators = (
+            session.declare_publisher(keys.vehicle_actuators(vehicle_id)) if own_actuators else None
+        )
         self.status_pub = session.declare_publisher(keys.vehicle_status(vehicle_id))
         self.readings_pub = session.declare_publisher(keys.vehicle_concentration(vehicle_id))
         self.last_command = b""
@@ -226,9 +233,15 @@ class AutopilotNode:
         self.keys = ctx.keys
         self.options = options
         self.lock = threading.Lock()
+        batched = len(ctx.vehicle_ids) > 1
         self.served = {
-            vid: _Served(session, self.keys, ctx.scenario, vid, options) for vid in ctx.vehicle_ids
+            vid: _Served(session, self.keys, ctx.scenario, vid, options, not batched)
+            for vid in ctx.vehicle_ids
         }
+        self.batch_pub = (
+            session.declare_publisher(self.keys.autopilot_actuators(ctx.name)) if batched else None
+        )
+        self.last_batch = b""
         self.last_tick = -1
         self.last_tick_wall = 0.0
         self.control_dt_s = 1.0 / ctx.scenario.time.control_hz
@@ -358,8 +371,10 @@ class AutopilotNode:
             tick = _Tick.of(tick)
         self.last_tick_wall = time.monotonic()
         if tick.tick == self.last_tick:  # the start handshake repeats a tick: same answer
+            if self.batch_pub is not None and self.last_batch:
+                self.batch_pub.put(self.last_batch)
             for served in self.served.values():
-                if served.last_command:
+                if served.actuators is not None and served.last_command:
                     served.actuators.put(served.last_command)
             return
         if tick.tick < self.last_tick:
@@ -376,6 +391,7 @@ class AutopilotNode:
         self.last_tick = tick.tick
         self._collect_readings(tick)
         index = {h.vehicle_id: k for k, h in enumerate(tick.heads)}
+        batch: list[ActuatorCommand] = []
         with self.lock:
             for vid, served in self.served.items():
                 own = index.get(vid)
@@ -394,14 +410,19 @@ class AutopilotNode:
                     continue
                 rotor = served.autopilot.step(state, peers, served.new_readings)
                 served.new_readings = []
-                served.last_command = encode(
-                    ActuatorCommand(vehicle_id=vid, tick=tick.tick, rotor_commands=rotor)
-                )
-                served.actuators.put(served.last_command)
+                command = ActuatorCommand(vehicle_id=vid, tick=tick.tick, rotor_commands=rotor)
+                if served.actuators is None:
+                    batch.append(command)
+                else:
+                    served.last_command = encode(command)
+                    served.actuators.put(served.last_command)
                 for event in served.autopilot.modes.mission.drain_events():
                     log.info(
                         "%s: mission item %d reached at %.2f s", vid, event.index, event.sim_time_s
                     )
+            if self.batch_pub is not None and batch:
+                self.last_batch = encode(ActuatorBatch(tick=tick.tick, commands=batch))
+                self.batch_pub.put(self.last_batch)
             for served in self.served.values():
                 served.publish_status(force=False, period_s=self.options.status_period_s)
         if any(s.sensor.due(tick.tick) for s in self.served.values()) and tick.heads:
@@ -436,27 +457,32 @@ class AutopilotNode:
             return  # not the tick with the physics' answer (e.g. garbage on sim/tick): wait
         self.pending = None
         values = self._values(pending, tick.plume_values)
+        index: dict[str, int] = {}
+        for k, s in enumerate(pending.states):
+            index.setdefault(s.vehicle_id, k)
+        # Every vehicle's PeerReading, built once per tick and shared by the served vehicles'
+        # readings (frozen): K x N constructions per tick would be N.
+        everyone: list[PeerReading] | None = None
         for vid, served in self.served.items():
             if not served.sensor.due(pending.tick):
                 continue
-            own = next((k for k, s in enumerate(pending.states) if s.vehicle_id == vid), None)
+            own = index.get(vid)
             if own is None:
                 continue
             position = pending.states[own].position_enu_m
             true = values[own] if values is not None else None
-            peers = (
-                [
-                    PeerReading(
-                        vehicle_id=s.vehicle_id,
-                        position_enu_m=s.position_enu_m,
-                        true_g_m3=values[k],
-                    )
-                    for k, s in enumerate(pending.states)
-                    if k != own
-                ]
-                if values is not None
-                else []
-            )
+            peers: list[PeerReading] = []
+            if values is not None:
+                if everyone is None:
+                    everyone = [
+                        PeerReading(
+                            vehicle_id=s.vehicle_id,
+                            position_enu_m=s.position_enu_m,
+                            true_g_m3=values[k],
+                        )
+                        for k, s in enumerate(pending.states)
+                    ]
+                peers = everyone[:own] + everyone[own + 1 :]
             reading = served.sensor.reading(vid, pending.sim_time_s, position, true, peers)
             served.autopilot.sensor_health = (
                 "" if reading.available else "sensor: the plume service did not answer"

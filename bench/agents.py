@@ -31,7 +31,15 @@ import psutil
 from agents.autopilot import Autopilot
 from swarmbus.codec import decode, encode
 from swarmbus.keys import Keys
-from swarmbus.messages import ActuatorCommand, Arm, Clock, SimTick, Takeoff, VehicleState
+from swarmbus.messages import (
+    ActuatorBatch,
+    ActuatorCommand,
+    Arm,
+    Clock,
+    SimTick,
+    Takeoff,
+    VehicleState,
+)
 from swarmbus.scenario import load_scenario
 from swarmbus.session import NetworkConfig, free_tcp_port, open_session
 
@@ -167,14 +175,19 @@ class StubPhysics:
         self.answered: dict[str, int] = {}
         self.pub = session.declare_publisher(keys.tick())
         self.clock = session.declare_publisher(keys.clock())
-        self.sub = session.declare_subscriber(keys.all_vehicle_actuators(), self._on)
+        self.subs = [
+            session.declare_subscriber(keys.all_vehicle_actuators(), self._on),
+            session.declare_subscriber(keys.all_autopilot_actuators(), self._on),
+        ]
         self.stop_event = threading.Event()
         self.thread = threading.Thread(target=self._run, daemon=True)
 
     def _on(self, sample: object) -> None:
-        cmd = decode(sample.payload.to_bytes(), ActuatorCommand)  # type: ignore[attr-defined]
+        data = sample.payload.to_bytes()  # type: ignore[attr-defined]
+        msg = decode(data, ActuatorCommand | ActuatorBatch)  # type: ignore[arg-type]
         with self.cond:
-            self.answered[cmd.vehicle_id] = cmd.tick
+            for cmd in msg.commands if isinstance(msg, ActuatorBatch) else [msg]:
+                self.answered[cmd.vehicle_id] = cmd.tick
             self.cond.notify_all()
 
     def _run(self) -> None:

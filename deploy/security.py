@@ -9,7 +9,8 @@ link to the router:
 - default deny: a certificate of the deployment's CA whose common name is not one of the
   deployment's identities can connect but nothing flows to or from it;
 - every identity may do everything on every key, except
-- publishing (put/delete) actuators (``vehicle/*/actuators``) unless it is an autopilot, and
+- publishing (put/delete) actuators (``vehicle/*/actuators`` and the batched
+  ``autopilot/*/actuators``) unless it is an autopilot, and
   publishing the world (``sim/tick``, ``sim/clock``, ``vehicle/*/state``) unless it is physics
   (roles configurable in ``[acl]``).
 
@@ -81,7 +82,10 @@ def access_control(dep: Deployment, keys: Keys) -> dict[str, Any]:
     subjects: list[dict[str, Any]] = [{"id": "members", "cert_common_names": members}]
     policies: list[dict[str, Any]] = [{"rules": ["members"], "subjects": ["members"]}]
     planes = {
-        "actuators": ([keys.all_vehicle_actuators()], dep.acl.actuators),
+        "actuators": (
+            [keys.all_vehicle_actuators(), keys.all_autopilot_actuators()],
+            dep.acl.actuators,
+        ),
         "world": ([keys.tick(), keys.clock(), keys.all_vehicle_states()], dep.acl.world),
     }
     for plane, (key_exprs, roles) in planes.items():

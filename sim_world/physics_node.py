@@ -2,7 +2,10 @@
 
 Each control tick ``k`` it publishes all vehicle states in one ``SimTick`` on ``sim/tick`` and
 each state on ``vehicle/<id>/state``, waits for every live autopilot's ``ActuatorCommand`` for
-tick ``k`` (:class:`~sim_world.lockstep.Lockstep`), applies them, steps ``scenario.substeps``
+tick ``k`` (:class:`~sim_world.lockstep.Lockstep`) — on ``vehicle/<id>/actuators``, or as an
+entry of an autopilot process's ``ActuatorBatch`` on ``autopilot/<node>/actuators`` (one message
+for the K vehicles it serves; each entry counts as that vehicle's command, a bad entry is
+dropped with a log line like a bad single command) — applies them, steps ``scenario.substeps``
 physics steps and publishes tick ``k + 1``. ``sim/clock`` carries sim time and the achieved
 real-time factor about ten times a wall-clock second.
 
@@ -30,11 +33,12 @@ import logging
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
+import msgspec
 import zenoh
 
 from sim_world import checkpoint
@@ -43,6 +47,8 @@ from sim_world.lockstep import Lockstep, participant_of
 from sim_world.world import World
 from swarmbus.codec import MessageError, decode, encode
 from swarmbus.messages import (
+    MAX_BATCH_COMMANDS,
+    ActuatorBatch,
     ActuatorCommand,
     Clock,
     PlumeQuery,
@@ -50,6 +56,7 @@ from swarmbus.messages import (
     PlumeValues,
     SimTick,
     SpeedMode,
+    Tick,
     VehicleState,
 )
 from swarmbus.node import NodeContext, NodeRuntime
@@ -64,6 +71,15 @@ HEALTH_PERIOD_S = 1.0
 
 class OptionError(ValueError):
     pass
+
+
+class _BatchView(
+    msgspec.Struct, frozen=True, tag_field="schema", tag=ActuatorBatch.__struct_config__.tag
+):
+    """An ``ActuatorBatch`` with undecoded entries: one bad entry does not sink the others."""
+
+    tick: Tick
+    commands: Annotated[list[msgspec.Raw], msgspec.Meta(max_length=MAX_BATCH_COMMANDS)]
 
 
 def _bool(text: str) -> bool:
@@ -172,9 +188,11 @@ class PhysicsNode:
         self._state_pubs = [
             session.declare_publisher(self.keys.vehicle_state(v)) for v in world.vehicle_ids
         ]
-        self._actuator_sub = session.declare_subscriber(
-            self.keys.all_vehicle_actuators(), self._on_actuators
-        )
+        self._actuator_subs = [
+            session.declare_subscriber(self.keys.all_vehicle_actuators(), self._on_actuators),
+            session.declare_subscriber(self.keys.all_autopilot_actuators(), self._on_batch),
+        ]
+        self._known = frozenset(world.vehicle_ids)
         # The shared sensor query (see the module doc).
         self._plume_key = self.keys.plume_concentration()
         self._sensor_period = self.scenario.sensor.resolved().period_ticks
@@ -193,7 +211,8 @@ class PhysicsNode:
 
     def close(self) -> None:
         self._presence.close()
-        self._actuator_sub.undeclare()
+        for sub in self._actuator_subs:
+            sub.undeclare()
         if self._writer is not None:
             self._writer.close()
         if self._marker is not None:
@@ -237,6 +256,53 @@ class PhysicsNode:
             counted = self.barrier.receive(cmd.vehicle_id, cmd.tick, cmd.rotor_commands)
             if counted and self.barrier.complete():
                 self._cond.notify_all()
+
+    def _on_batch(self, sample: zenoh.Sample) -> None:
+        data = sample.payload.to_bytes()
+        try:
+            batch = decode(data, ActuatorBatch)
+            tick, commands = batch.tick, batch.commands
+        except MessageError as exc:
+            salvaged = self._salvage(sample.key_expr, data, exc)
+            if salvaged is None:
+                return
+            tick, commands = salvaged
+        counted = False
+        with self._cond:
+            barrier = self.barrier
+            for cmd in commands:
+                vid = cmd.vehicle_id
+                if cmd.tick != tick or vid not in self._known:
+                    log.warning(
+                        "ignoring actuators for %s of tick %d in the batch of tick %d on %s",
+                        vid,
+                        cmd.tick,
+                        tick,
+                        sample.key_expr,
+                    )
+                    continue
+                counted = barrier.receive(vid, tick, cmd.rotor_commands) or counted
+            # Wake the loop once per tick, not once per command.
+            if counted and barrier.complete():
+                self._cond.notify_all()
+
+    @staticmethod
+    def _salvage(
+        key: object, data: bytes, exc: MessageError
+    ) -> tuple[int, list[ActuatorCommand]] | None:
+        """The good entries of a batch that failed to decode (each bad one is logged)."""
+        try:
+            view = decode(data, _BatchView)
+        except MessageError:
+            log.warning("ignoring actuator batch on %s: %s", key, exc)
+            return None
+        good = []
+        for k, raw in enumerate(view.commands):
+            try:
+                good.append(decode(raw, ActuatorCommand))
+            except MessageError as bad:
+                log.warning("ignoring entry %d of the actuator batch on %s: %s", k, key, bad)
+        return view.tick, good
 
     # ------------------------------------------------------------------ phases
     def run(self) -> int:
@@ -384,7 +450,7 @@ class PhysicsNode:
             )
         return 0
 
-    def _await_commands(self) -> dict[str, list[float]] | None:
+    def _await_commands(self) -> dict[str, Sequence[float]] | None:
         """Block until the current tick is complete or its deadline passed (then drop)."""
         with self._cond:
             barrier = self.barrier
@@ -403,9 +469,9 @@ class PhysicsNode:
                     )
                     break
                 self._cond.wait(min(remaining, STOP_POLL_S))
-            return {v: list(c) for v, c in barrier.commands().items()}
+            return barrier.commands()  # a new dict of the decoded (never mutated) lists
 
-    def _apply(self, commands: dict[str, list[float]]) -> None:
+    def _apply(self, commands: Mapping[str, Sequence[float]]) -> None:
         world = self.world
         for vid in world.vehicle_ids:
             cmd = commands.get(vid)

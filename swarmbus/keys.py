@@ -4,6 +4,13 @@ All keys live under ``plumeswarm/<world>/``. Three planes are kept apart so that
 wildcard never crosses them: ``sim/`` and ``vehicle/*/{state,actuators,status,concentration}``
 carry data, ``vehicle/*/cmd`` and ``plume/*`` are queryables (control), ``node/*`` is presence.
 No other module formats a key expression.
+
+One departure from DESIGN.md's key table: ``autopilot/<node>/actuators`` carries an
+``ActuatorBatch`` (the commands of every vehicle an autopilot process serves, one put per process
+per tick). A process serving K vehicles would otherwise put K ``vehicle/<id>/actuators`` per
+tick and the physics would wake K times; it is not per vehicle, so it cannot live under
+``vehicle/<id>/``, and it is not the physics' ``sim/`` plane. ``<node>`` is the process's node
+name. A process serving one vehicle still uses ``vehicle/<id>/actuators``.
 """
 
 from __future__ import annotations
@@ -83,6 +90,14 @@ class Keys:
 
     def all_vehicle_concentration(self) -> str:
         return f"{self.prefix}/vehicle/*/concentration"
+
+    # -- autopilot process data plane ------------------------------------------
+    def autopilot_actuators(self, node_name: str) -> str:
+        """One autopilot process's ``ActuatorBatch`` (see the module doc)."""
+        return f"{self.prefix}/autopilot/{check_name('node', node_name)}/actuators"
+
+    def all_autopilot_actuators(self) -> str:
+        return f"{self.prefix}/autopilot/*/actuators"
 
     # -- plume control plane ---------------------------------------------------
     def plume_concentration(self) -> str:

@@ -32,6 +32,7 @@ Quat = tuple[Finite, Finite, Finite, Finite]
 MAX_BATCH_POINTS = 100_000
 MAX_ROTORS = 16
 MAX_MISSION_ITEMS = 1000
+MAX_BATCH_COMMANDS = 1024  # vehicles one autopilot process may serve (ActuatorBatch)
 
 
 def _tag(name: str) -> str:
@@ -111,6 +112,16 @@ class ActuatorCommand(Message, frozen=True, kw_only=True, tag=_tag("actuators"))
     vehicle_id: Name
     tick: Tick
     rotor_commands: Annotated[list[Unit], msgspec.Meta(max_length=MAX_ROTORS)]
+
+
+class ActuatorBatch(Message, frozen=True, kw_only=True, tag=_tag("actuator_batch")):
+    """``autopilot/<node>/actuators``: the commands of every vehicle one autopilot process
+    serves for tick ``tick``, in one message (one put per process per tick instead of one per
+    vehicle). Each entry counts as that vehicle's ``ActuatorCommand``; the physics drops an
+    entry whose ``tick`` is not the batch's."""
+
+    tick: Tick
+    commands: Annotated[list[ActuatorCommand], msgspec.Meta(max_length=MAX_BATCH_COMMANDS)]
 
 
 # --------------------------------------------------------------------------- vehicle status
@@ -393,6 +404,7 @@ ALL_MESSAGES: tuple[type[Message], ...] = (
     VehicleState,
     SimTick,
     ActuatorCommand,
+    ActuatorBatch,
     VehicleStatus,
     ConcentrationReading,
     Arm,

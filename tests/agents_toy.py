@@ -246,7 +246,10 @@ class BusToyPhysics:
         self._commands: dict[str, tuple[int, list[float]]] = {}
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
-        self._sub = session.declare_subscriber(self.keys.all_vehicle_actuators(), self._on_cmd)
+        self._subs = [
+            session.declare_subscriber(self.keys.all_vehicle_actuators(), self._on_cmd),
+            session.declare_subscriber(self.keys.all_autopilot_actuators(), self._on_cmd),
+        ]
         self._pub = session.declare_publisher(self.keys.tick())
         self._state_pubs = {
             vid: session.declare_publisher(self.keys.vehicle_state(vid)) for vid in self.vehicles
@@ -254,11 +257,12 @@ class BusToyPhysics:
 
     def _on_cmd(self, sample: zenoh.Sample) -> None:
         from swarmbus.codec import decode
-        from swarmbus.messages import ActuatorCommand
+        from swarmbus.messages import ActuatorBatch, ActuatorCommand
 
-        cmd = decode(sample.payload.to_bytes(), ActuatorCommand)
+        msg = decode(sample.payload.to_bytes(), ActuatorCommand | ActuatorBatch)  # type: ignore[arg-type]
         with self._cond:
-            self._commands[cmd.vehicle_id] = (cmd.tick, list(cmd.rotor_commands))
+            for cmd in msg.commands if isinstance(msg, ActuatorBatch) else [msg]:
+                self._commands[cmd.vehicle_id] = (cmd.tick, list(cmd.rotor_commands))
             self._cond.notify_all()
 
     def start(self) -> BusToyPhysics:
@@ -268,7 +272,8 @@ class BusToyPhysics:
     def stop(self) -> None:
         self._stop.set()
         self._thread.join(timeout=10)
-        self._sub.undeclare()
+        for sub in self._subs:
+            sub.undeclare()
 
     @property
     def sim_time_s(self) -> float:

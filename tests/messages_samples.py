@@ -28,6 +28,13 @@ SAMPLES: dict[type[m.Message], m.Message] = {
     m.ActuatorCommand: m.ActuatorCommand(
         vehicle_id="uav1", tick=42, rotor_commands=[0.5, 0.5, 0.5, 0.5]
     ),
+    m.ActuatorBatch: m.ActuatorBatch(
+        tick=42,
+        commands=[
+            m.ActuatorCommand(vehicle_id="uav1", tick=42, rotor_commands=[0.5, 0.5, 0.5, 0.5]),
+            m.ActuatorCommand(vehicle_id="uav2", tick=42, rotor_commands=[0.0] * 6),
+        ],
+    ),
     m.VehicleStatus: m.VehicleStatus(
         vehicle_id="uav1", sim_time_s=1.0, mode=m.FlightMode.MISSION, armed=True, landed=False
     ),

@@ -3,7 +3,8 @@
 ``python -m tests.scripted_autopilot --connect EP --scenario F --vehicle a --vehicle b ...``
 declares one ``autopilot-<id>`` liveliness token per vehicle and answers every ``sim/tick`` with
 an ``ActuatorCommand`` per vehicle: a fixed throttle, the open-loop hover throttle, or a simple
-altitude hold (so the commands depend on the states it receives). It can delay one answer or
+altitude hold (so the commands depend on the states it receives); ``--batch`` sends them as one
+``ActuatorBatch`` per tick. It can delay one answer (for a time, or until a file exists) or
 stall for a while, and writes a JSON report on exit: how many ticks it answered and whether it
 ever saw tick ``k + 1`` before it had answered tick ``k`` (a lockstep violation).
 """
@@ -17,6 +18,7 @@ import queue
 import signal
 import sys
 import threading
+import time
 from pathlib import Path
 from typing import Any
 
@@ -24,7 +26,7 @@ import zenoh
 
 from swarmbus.codec import MessageError, decode, encode
 from swarmbus.keys import Keys
-from swarmbus.messages import ActuatorCommand, SimTick, VehicleState
+from swarmbus.messages import ActuatorBatch, ActuatorCommand, SimTick, VehicleState
 from swarmbus.scenario import load_scenario
 from swarmbus.session import NetworkConfig, open_session
 from swarmbus.vehicle_types import VehicleType, load_vehicle_type
@@ -104,22 +106,39 @@ class Script:
             self.delayed = True
             with self.lock:
                 self.delaying = True
-            self.stop.wait(a.delay_s)
+            self.hold(a.delay_s)
             with self.lock:
                 self.delaying = False
         with self.lock:  # before the puts: tick k + 1 may arrive as soon as they are out
             self.answered = max(self.answered, msg.tick)
             self.answers += 1
-        for state in msg.states:
-            if state.vehicle_id in self.pubs:
-                cmd = ActuatorCommand(
-                    vehicle_id=state.vehicle_id,
-                    tick=msg.tick,
-                    rotor_commands=self.rotor_commands(state),
-                )
-                self.pubs[state.vehicle_id].put(encode(cmd))
+        commands = [
+            ActuatorCommand(
+                vehicle_id=state.vehicle_id,
+                tick=msg.tick,
+                rotor_commands=self.rotor_commands(state),
+            )
+            for state in msg.states
+            if state.vehicle_id in self.types
+        ]
+        if a.batch:
+            self.batch_pub.put(encode(ActuatorBatch(tick=msg.tick, commands=commands)))
+        else:
+            for cmd in commands:
+                self.pubs[cmd.vehicle_id].put(encode(cmd))
         if a.max_tick is not None and msg.tick >= a.max_tick:
             self.stop.set()
+
+    def hold(self, seconds: float) -> None:
+        """The delay: ``seconds``, or until ``--release-file`` exists (within ``seconds``)."""
+        release = self.args.release_file
+        if release is None:
+            self.stop.wait(seconds)
+            return
+        deadline = time.monotonic() + seconds
+        while not Path(release).exists() and time.monotonic() < deadline:
+            if self.stop.wait(0.02):
+                return
 
     def drain(self) -> None:
         """After a stall: answer only the newest tick (skip the backlog)."""
@@ -141,6 +160,7 @@ class Script:
             self.pubs = {
                 v: session.declare_publisher(self.keys.vehicle_actuators(v)) for v in a.vehicle
             }
+            self.batch_pub = session.declare_publisher(self.keys.autopilot_actuators("script"))
             sub = session.declare_subscriber(self.keys.tick(), self.on_tick)
             tokens = [
                 session.liveliness().declare_token(self.keys.node_health(f"autopilot-{v}"))
@@ -188,6 +208,8 @@ def parse(argv: list[str]) -> argparse.Namespace:
     p.add_argument("--max-tick", type=int, default=None, help="exit after answering this tick")
     p.add_argument("--inline", action="store_true", help="answer in the subscriber callback")
     p.add_argument("--report", default=None)
+    p.add_argument("--batch", action="store_true", help="one ActuatorBatch per tick")
+    p.add_argument("--release-file", default=None, help="the delay ends when this file exists")
     return p.parse_args(argv)
 
 

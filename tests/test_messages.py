@@ -68,6 +68,9 @@ def _mutated(cls: type[m.Message], field: str, value: object) -> bytes:
         (m.VehicleState, "tick", -1, "tick"),
         (m.ActuatorCommand, "rotor_commands.1", 1.5, "rotor_commands[1]"),
         (m.ActuatorCommand, "tick", "7", "tick"),
+        (m.ActuatorBatch, "commands.1.rotor_commands.0", -0.1, "commands[1].rotor_commands[0]"),
+        (m.ActuatorBatch, "commands.0.vehicle_id", "uav/1", "commands[0].vehicle_id"),
+        (m.ActuatorBatch, "tick", -1, "tick"),
         (m.Takeoff, "altitude_m", -3.0, "altitude_m"),
         (m.PlumeQuery, "points_enu_m.1.2", math.nan, "points_enu_m[1][2]"),
         (m.SimTick, "states.0.attitude_xyzw.3", math.inf, "states[0].attitude_xyzw[3]"),
@@ -84,6 +87,16 @@ def test_bad_field_is_named(
         decode(_mutated(cls, field, value), cls)
     assert err.value.field == expected_field
     assert cls.__name__ in str(err.value)
+
+
+def test_actuator_batch_length_is_bounded() -> None:
+    one = m.ActuatorCommand(vehicle_id="uav1", tick=1, rotor_commands=[0.5] * 4)
+    data = msgspec.msgpack.encode(
+        {"schema": "actuator_batch/v1", "tick": 1, "commands": [one] * (m.MAX_BATCH_COMMANDS + 1)}
+    )
+    with pytest.raises(MessageError) as err:
+        decode(data, m.ActuatorBatch)
+    assert err.value.field == "commands"
 
 
 def test_missing_field_is_named() -> None:

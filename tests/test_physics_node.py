@@ -12,12 +12,21 @@ import threading
 from collections.abc import Iterator
 from pathlib import Path
 
+import msgspec
 import pytest
 import zenoh
 
+from agents import Swarm
 from swarmbus.codec import decode, encode
 from swarmbus.keys import Keys
-from swarmbus.messages import ActuatorCommand, Clock, PlumeQuery, PlumeValues, SimTick
+from swarmbus.messages import (
+    ActuatorBatch,
+    ActuatorCommand,
+    Clock,
+    PlumeQuery,
+    PlumeValues,
+    SimTick,
+)
 from swarmbus.session import Presence
 from tests.procs import REPO, Network, NodeProcs, run_cli, wait_until
 
@@ -225,7 +234,9 @@ def test_late_joiner_is_admitted(setup: tuple[NodeProcs, Watch], tmp_path: Path)
     wait_until(lambda: watch.first_tick_after(joined_from, "b", True), 60.0, "b admitted")
 
 
-def stream_hash(procs: NodeProcs, watch: Watch, sc: Path, ticks: int, label: str) -> str:
+def stream_hash(
+    procs: NodeProcs, watch: Watch, sc: Path, ticks: int, label: str, *script_args: str
+) -> str:
     with watch.lock:
         watch.raw.clear()
         watch.last_tick = -1
@@ -234,7 +245,7 @@ def stream_hash(procs: NodeProcs, watch: Watch, sc: Path, ticks: int, label: str
     )
     script = start_script(
         procs, sc, "--vehicle", "a", "--vehicle", "b", "--altitude", "3.0",
-        "--max-tick", str(ticks), label=label,
+        "--max-tick", str(ticks), *script_args, label=label,
     )  # fmt: skip
     assert exit_code(physics, "physics") == 0
     assert exit_code(script, "participant") == 0
@@ -255,6 +266,165 @@ def test_two_runs_of_the_same_scenario_give_identical_state_streams(
     first = stream_hash(procs, watch, sc, 240, "run1")
     second = stream_hash(procs, watch, sc, 240, "run2")
     assert first == second
+
+
+def test_one_batch_per_process_gives_the_state_stream_of_one_command_per_vehicle(
+    setup: tuple[NodeProcs, Watch], tmp_path: Path
+) -> None:
+    procs, watch = setup
+    sc = write_scenario(tmp_path)
+    singles = stream_hash(procs, watch, sc, 240, "singles")
+    batched = stream_hash(procs, watch, sc, 240, "batched", "--batch")
+    assert singles == batched
+
+
+def test_bad_entries_of_a_batch_are_dropped_and_logged(
+    setup: tuple[NodeProcs, Watch], tmp_path: Path
+) -> None:
+    procs, watch = setup
+    sc = write_scenario(tmp_path, timeout_s=1.0)
+    procs.start(
+        "physics", "--scenario", str(sc), "--set", "wait_for_autopilots=false", name="physics"
+    )
+    start_script(procs, sc, "--vehicle", "a", "--throttle", "0.2", "--batch", label="script-a")
+    wait_until(lambda: watch.first_tick_after(0, "a", True), 60.0, "a's motors on (a batch)")
+    key = KEYS.autopilot_actuators("intruder")
+    watch.session.put(key, b"\x00garbage")
+    tick = watch.last_tick
+    good = {"vehicle_id": "b", "tick": tick, "rotor_commands": [1.0] * 6}
+    entries = [
+        {**good, "vehicle_id": "zz"},  # unknown vehicle
+        {**good, "tick": tick + 1},  # another tick than the batch's
+        {**good, "rotor_commands": [1.5] * 6},  # out of range
+        good,  # b has no token: not a participant, its command is ignored
+    ]
+    batch = {"schema": "actuator_batch/v1", "tick": tick, "commands": entries}
+    watch.session.put(key, msgspec.msgpack.encode(batch))
+    wait_until(lambda: watch.last_tick >= tick + 50, 30.0, "ticks go on")
+    assert watch.first_tick_after(tick, "b", True) == 0
+    log = wait_until(
+        lambda: (text := (tmp_path / "physics.log").read_text()).count("ignoring") >= 4 and text,
+        10.0,
+        "four log lines",
+    )
+    assert "ignoring actuator batch on" in log
+    assert "ignoring actuators for zz" in log
+    assert f"ignoring actuators for b of tick {tick + 1} in the batch of tick {tick}" in log
+    assert "ignoring entry 2 of the actuator batch" in log and "rotor_commands" in log
+    start_script(procs, sc, "--vehicle", "b", "--throttle", "0.2", "--batch", label="script-b")
+    wait_until(lambda: watch.first_tick_after(tick, "b", True), 60.0, "b admitted by a batch")
+
+
+PACKED = ("a", "b", "c", "d")
+
+
+def write_packing_scenario(tmp_path: Path) -> Path:
+    """Four vehicles flown by autopilots and a scripted ``gate`` that holds tick 1."""
+    path = tmp_path / "packing.toml"
+    vehicles = "".join(
+        f'[[vehicles]]\nid = "{v}"\ntype = "{"typhoon_h480" if v == "b" else "iris"}"\n'
+        f"spawn_enu_m = [{5.0 * k}, 0.0, 0.0]\n"
+        for k, v in enumerate([*PACKED, "gate"])
+    )
+    path.write_text(
+        f'[world]\nname = "{WORLD}"\nseed = 7\n[time]\nphysics_hz = 240\ncontrol_hz = 120\n'
+        f"participant_timeout_s = 30.0\nstartup_timeout_s = 60.0\n{vehicles}"
+    )
+    return path
+
+
+class Answers:
+    """The last tick each vehicle's actuators answered, singly or in a batch."""
+
+    def __init__(self, session: zenoh.Session) -> None:
+        self.lock = threading.Lock()
+        self.tick: dict[str, int] = {}
+        self._subs = [
+            session.declare_subscriber(KEYS.all_vehicle_actuators(), self._on),
+            session.declare_subscriber(KEYS.all_autopilot_actuators(), self._on),
+        ]
+
+    def _on(self, sample: zenoh.Sample) -> None:
+        msg = decode(sample.payload.to_bytes(), ActuatorCommand | ActuatorBatch)  # type: ignore[arg-type]
+        with self.lock:
+            for cmd in msg.commands if isinstance(msg, ActuatorBatch) else [msg]:
+                self.tick[cmd.vehicle_id] = max(cmd.tick, self.tick.get(cmd.vehicle_id, -1))
+
+    def close(self) -> None:
+        for sub in self._subs:
+            sub.undeclare()
+
+
+def packed_flight_hash(
+    procs: NodeProcs, watch: Watch, sc: Path, per_process: int, tmp_path: Path
+) -> str:
+    """Arm and take off all four while the gate holds tick 1, fly 3 s; the SimTick stream's hash."""
+    ticks = 360
+    with watch.lock:
+        watch.raw.clear()
+        watch.last_tick = -1
+    release = tmp_path / f"release-{per_process}"
+    answers = Answers(watch.session)
+    physics = procs.start(
+        "physics",
+        "--scenario",
+        str(sc),
+        "--set",
+        f"max_ticks={ticks}",
+        name=f"physics-{per_process}",
+    )
+    autopilots = [
+        procs.start(
+            "autopilot",
+            "--scenario",
+            str(sc),
+            *[a for v in group for a in ("--vehicle", v)],
+            name=f"autopilot-k{per_process}-{group[0]}",
+        )
+        for group in (PACKED[i : i + per_process] for i in range(0, len(PACKED), per_process))
+    ]
+    gate = start_script(
+        procs, sc, "--vehicle", "gate", "--throttle", "0", "--delay-tick", "1",
+        "--delay-s", "60", "--release-file", str(release), "--max-tick", str(ticks),
+        label=f"gate-{per_process}",
+    )  # fmt: skip
+    try:
+        wait_until(
+            lambda: all(answers.tick.get(v, -1) >= 1 for v in PACKED), 120.0, "answers to tick 1"
+        )
+        assert watch.last_tick == 1  # the gate holds it
+        with Swarm.connect(WORLD, [procs.net.endpoint], command_timeout_s=20.0) as sw:
+            sw.wait_until(lambda: set(PACKED) <= set(sw.vehicles), 30.0, "the autopilots")
+            for vid in PACKED:
+                sw.command(vid).arm()
+                sw.command(vid).takeoff(3.0)
+        release.touch()
+        assert exit_code(physics, "physics") == 0
+        assert exit_code(gate, "gate") == 0
+    finally:
+        answers.close()
+        for proc in autopilots:
+            procs.kill(proc)
+    presence = Presence(watch.session, KEYS)
+    assert presence.wait_for(lambda alive: not any(n.startswith("autopilot-") for n in alive), 30)
+    presence.close()
+    wait_until(lambda: len(watch.raw) == ticks + 1, 10.0, f"ticks 0..{ticks} at the subscriber")
+    last = decode(watch.raw[ticks], SimTick)
+    assert all(s.position_enu_m[2] > 1.0 for s in last.states if s.vehicle_id in PACKED)
+    digest = hashlib.sha256()
+    for k in range(ticks + 1):
+        digest.update(watch.raw[k])
+    return digest.hexdigest()
+
+
+def test_four_vehicles_fly_identically_packed_in_one_process_or_one_process_each(
+    setup: tuple[NodeProcs, Watch], tmp_path: Path
+) -> None:
+    procs, watch = setup
+    sc = write_packing_scenario(tmp_path)
+    one_each = packed_flight_hash(procs, watch, sc, 1, tmp_path)
+    packed = packed_flight_hash(procs, watch, sc, 4, tmp_path)
+    assert one_each == packed
 
 
 def test_one_shared_plume_query_per_sensor_tick_answered_in_the_next_tick(
