@@ -4,7 +4,10 @@ parameters, the mission as MAVLink sees it, and the events its status changes im
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, field
+
+import msgspec
 
 from gcs_bridge.dialect import Msg, mavlink
 from gcs_bridge.frames import Vec3, enu_to_geodetic
@@ -18,6 +21,7 @@ from gcs_bridge.modes import (
 )
 from gcs_bridge.params import ParamTable
 from gcs_bridge.telemetry import View
+from swarmbus.codec import MessageError, decode
 from swarmbus.messages import (
     ConcentrationReading,
     FlightMode,
@@ -35,6 +39,8 @@ CAPABILITIES = (
     | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
     | mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2
 )
+log = logging.getLogger(__name__)
+
 UID_BASE = 0x504C554D45000000  # "PLUME" + sysid
 # MISSION_CURRENT.mission_mode (not named in pymavlink 2.4.50): 1 in mission mode, 2 suspended.
 MISSION_MODE_ACTIVE = 1
@@ -81,7 +87,8 @@ class Vehicle:
         self.wind_enu = wind_enu
         self.params = ParamTable(scenario.failsafe_for(vehicle_id), vtype)
         self.params_synced = False
-        self.state: VehicleState | None = None
+        self._state: VehicleState | None = None
+        self._state_raw: msgspec.Raw | None = None  # a newer state, decoded when first read
         self.status: VehicleStatus | None = None
         self.reading: ConcentrationReading | None = None
         self.spawn_enu: Vec3 = cfg.spawn_enu_m
@@ -96,6 +103,31 @@ class Vehicle:
         self.last_gcs_heartbeat_sim_s = -1e9
         self._reached = 0
         self._current: MissionCurrent | None = None
+
+    # -- the latest state ---------------------------------------------------------
+    @property
+    def state(self) -> VehicleState | None:
+        """The newest valid state (one fed undecoded is decoded here, when first needed)."""
+        raw = self._state_raw
+        if raw is not None:
+            self._state_raw = None
+            try:
+                state = decode(memoryview(raw), VehicleState)
+            except MessageError as exc:
+                log.warning("state of %s: %s", self.id, exc)
+            else:
+                if state.vehicle_id == self.id:
+                    self._state = state
+        return self._state
+
+    @state.setter
+    def state(self, state: VehicleState | None) -> None:
+        self._state = state
+        self._state_raw = None
+
+    def feed_state(self, raw: msgspec.Raw) -> None:
+        """A newer state, still encoded: decoded only if someone reads :attr:`state`."""
+        self._state_raw = raw
 
     # -- identity ---------------------------------------------------------------
     def heartbeat(self) -> Msg:
