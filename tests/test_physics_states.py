@@ -89,6 +89,7 @@ def test_no_state_puts_without_a_subscriber_and_a_late_subscriber_gets_every_sta
     session, watch, health = running
     wait_until(lambda: watch.last_tick >= 60, 60.0, "tick 60")
     quiet = wait_until(lambda: health.after(60), 30.0, "a physics health report after tick 60")
+    assert quiet is not None
     assert quiet[1] == 0, f"the physics put {quiet[1]} states that nobody subscribed to"
 
     joined_at = watch.last_tick
@@ -102,7 +103,7 @@ def test_no_state_puts_without_a_subscriber_and_a_late_subscriber_gets_every_sta
             assert first >= joined_at, vid
             assert ticks == list(range(first, first + len(ticks))), f"{vid}: a gap or a repeat"
         sending = wait_until(lambda: health.after(watch.last_tick), 30.0, "a report while heard")
-        assert sending[1] > 0
+        assert sending is not None and sending[1] > 0
     finally:
         states.close()
 
