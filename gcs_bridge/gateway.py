@@ -289,8 +289,8 @@ class Gateway(CommandHandlers, ParamHandlers, MissionHandlers):
         vehicles = list(self.vehicles.values())
         names = self._presence.alive if self._presence is not None else frozenset()
         windows = {v.id: self._window(v, now, names) for v in vehicles}
-        lo_all = max(w[0] for w in windows.values())
-        hi_all = min(w[1] for w in windows.values())
+        lo_all = max((w[0] for w in windows.values()), default=-math.inf)
+        hi_all = min((w[1] for w in windows.values()), default=math.inf)
         last = ticks[-1]
         for view in ticks:
             t = view.sim_time_s
@@ -298,8 +298,8 @@ class Gateway(CommandHandlers, ParamHandlers, MissionHandlers):
                 for v in vehicles:
                     v.last_gcs_heartbeat_sim_s = -1e9
                     windows[v.id] = self._window(v, now, names)
-                lo_all = max(w[0] for w in windows.values())
-                hi_all = min(w[1] for w in windows.values())
+                lo_all = max((w[0] for w in windows.values()), default=-math.inf)
+                hi_all = min((w[1] for w in windows.values()), default=math.inf)
             self._fed_sim_s = t
             if view is last:
                 for v in vehicles:
@@ -314,8 +314,8 @@ class Gateway(CommandHandlers, ParamHandlers, MissionHandlers):
                     continue
                 self._on_state_raw(view, v, now)
                 windows[v.id] = self._window(v, now, names)
-            lo_all = max(w[0] for w in windows.values())
-            hi_all = min(w[1] for w in windows.values())
+            lo_all = max((w[0] for w in windows.values()), default=-math.inf)
+            hi_all = min((w[1] for w in windows.values()), default=math.inf)
 
     def _on_state_raw(self, view: TickView, v: Vehicle, now: float) -> None:
         assert self._streams is not None
