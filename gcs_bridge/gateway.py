@@ -48,7 +48,7 @@ from gcs_bridge.telemetry import BUILDERS, ID_MISSION_CURRENT, StreamSchedule, w
 from gcs_bridge.vehicle import Vehicle
 from swarmbus.codec import MessageError, decode
 from swarmbus.keys import Keys
-from swarmbus.messages import ConcentrationReading, VehicleState, VehicleStatus
+from swarmbus.messages import VehicleState, VehicleStatus
 from swarmbus.node import NodeContext, NodeRuntime
 from swarmbus.scenario import Scenario
 from swarmbus.session import Presence
@@ -344,9 +344,7 @@ class Gateway(CommandHandlers, ParamHandlers, MissionHandlers):
                 if status.vehicle_id == v.id:
                     self._on_status(v, status, now)
             else:
-                reading = decode(payload, ConcentrationReading)
-                if reading.vehicle_id == v.id:
-                    v.reading = reading
+                v.feed_reading(payload)  # decoded when telemetry needs it
         except MessageError as exc:
             log.warning("%s of %s: %s", kind, v.id, exc)
 
