@@ -126,9 +126,6 @@ class _StateId(
     vehicle_id: str
 
 
-_id_decoder = msgspec.msgpack.Decoder(_StateId)
-
-
 class Streams:
     """Ticks (every vehicle's state in one ``sim/tick`` message) and every vehicle's readings
     in ring buffers; the loop takes all ticks (a telemetry stream may be due at any of them)
@@ -176,9 +173,9 @@ class Streams:
     def learn(self, view: TickView) -> bool:
         """Where each served vehicle's state is in ``view`` (the physics keeps the order, so
         this runs once, and again only when a tick's layout changes)."""
-        try:
-            ids = [_id_decoder.decode(raw).vehicle_id for raw in view.states]
-        except (msgspec.ValidationError, msgspec.DecodeError) as exc:
+        try:  # through swarmbus.codec: garbage may also raise UnicodeDecodeError
+            ids = [decode(memoryview(raw), _StateId).vehicle_id for raw in view.states]
+        except MessageError as exc:
             log.warning("%s: states: %s", self._keys.tick(), exc)
             return False
         self._index = {vid: i for i, vid in enumerate(ids) if vid in self._ids}

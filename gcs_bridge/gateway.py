@@ -239,7 +239,10 @@ class Gateway(CommandHandlers, ParamHandlers, MissionHandlers):
                 if k == kind:
                     self._on_bus_safely(kind, self.vehicles[vid], payload, now)
         if ticks:
-            self._on_ticks(ticks, now)
+            try:
+                self._on_ticks(ticks, now)
+            except Exception:  # garbage on sim/tick must never end the gateway
+                log.exception("error handling %d ticks", len(ticks))
         for call in calls:
             try:
                 call()

@@ -9,6 +9,7 @@ import random
 import time
 from pathlib import Path
 
+import msgspec
 import zenoh
 
 from gcs_bridge.dialect import mavlink
@@ -106,6 +107,21 @@ def test_states_come_from_ticks_only(
         assert last is not None and last.tick == 120
         pos = client.logged("GLOBAL_POSITION_INT", 2)[-1]
         assert pos.vx == 0 and pos.vy == 120  # 1.2 m/s east = NED y, cm/s
+
+        # garbage on sim/tick (a non-UTF-8 vehicle id in a new layout, a tick that is no
+        # tick) is logged and skipped; the gateway goes on
+        ok = encode(state("uav2", 121))
+        bad_id = ok.replace(b"uav2", b"\xff\xfe\xfd\xfc")
+        assert bad_id != ok
+        bad_tick = {"schema": "sim_tick/v1", "tick": 121, "sim_time_s": 1.0, "control_dt_s": DT}
+        for payload in (
+            b"\x93garbage",
+            encode(SimTick(tick=121, sim_time_s=1.0, control_dt_s=DT, states=[])),
+            encode({**bad_tick, "states": [msgspec.Raw(bad_id)]}),
+        ):
+            pub.put(payload)
+        for _ in range(20):
+            gw.poll(0.01)
 
         client.log.clear()
         run(range(0, 30), broken=-1)  # a new simulation: the streams start again
