@@ -9,6 +9,7 @@ liveliness token once the role serves.
 
 from __future__ import annotations
 
+import functools
 import logging
 import signal
 import threading
@@ -28,7 +29,9 @@ log = logging.getLogger(__name__)
 HEALTH_PERIOD_S = 1.0
 
 
+@functools.cache
 def package_version() -> str:
+    """Read once: importlib.metadata parses the METADATA file on every call (~1 ms)."""
     try:
         return version("plumeswarm")
     except PackageNotFoundError:

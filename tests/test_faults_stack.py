@@ -6,17 +6,13 @@ the air, or disarmed if it hit the ground meanwhile). Recovery times are printed
 
 from __future__ import annotations
 
-import json
 import os
 import random
 import signal
-import subprocess
-import sys
 import threading
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import psutil
 import pytest
@@ -43,10 +39,11 @@ from swarmbus.messages import (
     VehicleState,
     VehicleStatus,
 )
-from swarmbus.session import NetworkConfig, free_tcp_port, open_session
+from swarmbus.session import NetworkConfig, open_session
 from tests.mavclient import MavClient, write_scenario
 from tests.messages_samples import SAMPLES
-from tests.procs import REPO, keys_for, wait_until
+from tests.procs import keys_for, wait_until
+from tests.upstack import Up, plumeswarm_up
 
 VEHICLES = ["uav1", "uav2", "uav3"]
 ALTITUDE_M = 40.0
@@ -54,8 +51,7 @@ ALTITUDE_M = 40.0
 
 @dataclass
 class Stack:
-    up: subprocess.Popen[bytes]
-    run: Path
+    up: Up
     session: zenoh.Session
     keys: Keys
     view: BusView
@@ -66,7 +62,7 @@ class Stack:
     status: dict[str, VehicleStatus] = field(default_factory=dict)
 
     def pids(self) -> dict[str, int]:
-        return dict(json.loads((self.run / "pids.json").read_text()))
+        return self.up.pids()
 
     def command(self, vid: str, cmd: object) -> CommandReply:
         reply = wait_until(
@@ -83,13 +79,8 @@ class Stack:
         old = self.pids()[name]
         t0 = time.monotonic()
         os.killpg(old, signal.SIGKILL)
-        new = wait_until(
-            lambda: (p := self.pids().get(name)) not in (None, old) and p,
-            60.0,
-            f"{name} to be restarted",
-            poll_s=0.05,
-        )
-        return int(new), time.monotonic() - t0
+        new = self.up.restarted(name, old)
+        return new, time.monotonic() - t0
 
     def tick_of(self, vid: str) -> int:
         with self.lock:
@@ -100,70 +91,47 @@ class Stack:
 def stack(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Stack]:
     tmp = tmp_path_factory.mktemp("kill")
     scenario, gcs_port, _ = write_scenario(tmp / "scenario.toml", len(VEHICLES))
-    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
-    run = tmp / "run"
-    env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONUNBUFFERED="1")
-    with open(tmp / "console.txt", "wb") as console:
-        up = subprocess.Popen(
-            [sys.executable, "-m", "deploy", "up", str(scenario), "--headless", "--connect",
-             endpoint, "--out", str(run)],
-            cwd=REPO, env=env, stdout=console, stderr=subprocess.STDOUT, start_new_session=True,
-        )  # fmt: skip
-    try:
-        console_txt = tmp / "console.txt"
+    with (
+        plumeswarm_up(scenario, tmp, "--headless") as up,
+        open_session(NetworkConfig(connect=[up.endpoint], listen=[])) as session,
+    ):
+        keys = keys_for()
+        st = Stack(up, session, keys, BusView(session, keys), gcs_port)
+
+        def on_reading(sample: zenoh.Sample) -> None:
+            r = decode(sample.payload.to_bytes(), ConcentrationReading)
+            with st.lock:
+                st.readings.append(r)
+
+        def on_state(sample: zenoh.Sample) -> None:
+            s = decode(sample.payload.to_bytes(), VehicleState)
+            with st.lock:
+                st.states[s.vehicle_id] = s
+
+        def on_status(sample: zenoh.Sample) -> None:
+            s = decode(sample.payload.to_bytes(), VehicleStatus)
+            with st.lock:
+                st.status[s.vehicle_id] = s
+
+        subs = [
+            session.declare_subscriber(keys.all_vehicle_concentration(), on_reading),
+            session.declare_subscriber(keys.all_vehicle_states(), on_state),
+            session.declare_subscriber(keys.all_vehicle_status(), on_status),
+        ]
+        wait_until(lambda: all(st.tick_of(v) > 1 for v in VEHICLES), 60.0, "ticks")
+        for vid in VEHICLES:
+            assert st.command(vid, Arm()).accepted
+            assert st.command(vid, Takeoff(altitude_m=ALTITUDE_M)).accepted
         wait_until(
-            lambda: "processes ready" in console_txt.read_text() or up.poll() is not None,
-            180.0,
-            "plumeswarm up ready",
-            poll_s=0.5,
+            lambda: all(st.states[v].position_enu_m[2] > ALTITUDE_M - 2 for v in VEHICLES),
+            240.0,
+            "all vehicles at altitude",
+            poll_s=0.2,
         )
-        assert up.poll() is None, console_txt.read_text()
-        with open_session(NetworkConfig(connect=[endpoint], listen=[])) as session:
-            keys = keys_for()
-            st = Stack(up, run, session, keys, BusView(session, keys), gcs_port)
-
-            def on_reading(sample: zenoh.Sample) -> None:
-                r = decode(sample.payload.to_bytes(), ConcentrationReading)
-                with st.lock:
-                    st.readings.append(r)
-
-            def on_state(sample: zenoh.Sample) -> None:
-                s = decode(sample.payload.to_bytes(), VehicleState)
-                with st.lock:
-                    st.states[s.vehicle_id] = s
-
-            def on_status(sample: zenoh.Sample) -> None:
-                s = decode(sample.payload.to_bytes(), VehicleStatus)
-                with st.lock:
-                    st.status[s.vehicle_id] = s
-
-            subs = [
-                session.declare_subscriber(keys.all_vehicle_concentration(), on_reading),
-                session.declare_subscriber(keys.all_vehicle_states(), on_state),
-                session.declare_subscriber(keys.all_vehicle_status(), on_status),
-            ]
-            wait_until(lambda: all(st.tick_of(v) > 1 for v in VEHICLES), 60.0, "ticks")
-            for vid in VEHICLES:
-                assert st.command(vid, Arm()).accepted
-                assert st.command(vid, Takeoff(altitude_m=ALTITUDE_M)).accepted
-            wait_until(
-                lambda: all(st.states[v].position_enu_m[2] > ALTITUDE_M - 2 for v in VEHICLES),
-                240.0,
-                "all vehicles at altitude",
-                poll_s=0.2,
-            )
-            yield st
-            for s in subs:
-                s.undeclare()
-            st.view.close()
-    finally:
-        if up.poll() is None:
-            os.kill(up.pid, signal.SIGTERM)
-            try:
-                up.wait(timeout=40)
-            except subprocess.TimeoutExpired:
-                os.killpg(up.pid, signal.SIGKILL)
-                up.wait(10)
+        yield st
+        for s in subs:
+            s.undeclare()
+        st.view.close()
 
 
 def test_plume_killed_readings_unavailable_then_back(stack: Stack) -> None:
@@ -284,7 +252,7 @@ def test_fuzz_every_bus_key_while_flying(stack: Stack) -> None:
     for p in publishers.values():
         p.undeclare()
     wait_until(lambda: all(stack.tick_of(v) > ticks[v] + 50 for v in VEHICLES), 60.0, "ticks go on")
-    assert stack.up.poll() is None
+    assert stack.up.proc.poll() is None
     assert stack.pids() == pids, "a process was restarted"
     assert all(psutil.pid_exists(p) for p in pids.values())
     for v in VEHICLES:

@@ -5,28 +5,14 @@ from __future__ import annotations
 import json
 import os
 import signal
-import subprocess
-import sys
 from pathlib import Path
 
 import psutil
 import pytest
 
 from swarmbus.session import NetworkConfig, Presence, free_tcp_port, open_session
-from tests.procs import REPO, keys_for, wait_until
-
-
-def start_up(args: list[str], out: Path) -> subprocess.Popen[bytes]:
-    env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONUNBUFFERED="1")
-    with open(out / "console.txt", "wb") as console:
-        return subprocess.Popen(
-            [sys.executable, "-m", "deploy", "up", "--out", str(out / "run"), *args],
-            cwd=REPO,
-            env=env,
-            stdout=console,
-            stderr=subprocess.STDOUT,
-            start_new_session=True,
-        )
+from tests.procs import keys_for, wait_until
+from tests.upstack import spawn_up
 
 
 def family_of(pid: int) -> list[psutil.Process]:
@@ -37,7 +23,7 @@ def family_of(pid: int) -> list[psutil.Process]:
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
 def test_up_writes_pids_and_stops_everything_on_signal(tmp_path: Path, sig: int) -> None:
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
-    up = start_up(["--roles", "router", "--connect", endpoint], tmp_path)
+    up = spawn_up(["--roles", "router", "--connect", endpoint], tmp_path)
     try:
         pids_file = tmp_path / "run" / "pids.json"
         wait_until(pids_file.exists, 60.0, "pids.json")
@@ -66,7 +52,7 @@ def test_up_writes_pids_and_stops_everything_on_signal(tmp_path: Path, sig: int)
 
 def test_killed_launcher_takes_its_children_along(tmp_path: Path) -> None:
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
-    up = start_up(["--roles", "router", "--connect", endpoint], tmp_path)
+    up = spawn_up(["--roles", "router", "--connect", endpoint], tmp_path)
     try:
         wait_until((tmp_path / "run" / "pids.json").exists, 60.0, "pids.json")
         family = family_of(up.pid)

@@ -8,7 +8,7 @@ import os
 import signal
 import subprocess
 import sys
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,20 +39,38 @@ class Up:
         )
 
 
+def spawn_up(args: Sequence[str], out: Path) -> subprocess.Popen[bytes]:
+    """``plumeswarm up ARGS --out OUT/run`` in its own process group; console in OUT/console.txt."""
+    env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONUNBUFFERED="1")
+    with open(out / "console.txt", "wb") as console:
+        return subprocess.Popen(
+            [sys.executable, "-m", "deploy", "up", "--out", str(out / "run"), *args],
+            cwd=REPO, env=env, stdout=console, stderr=subprocess.STDOUT, start_new_session=True,
+        )  # fmt: skip
+
+
+def stop_up(proc: subprocess.Popen[bytes], timeout_s: float = 60.0) -> None:
+    """SIGTERM (the launcher's ordered stop); SIGKILL of its group after ``timeout_s``."""
+    if proc.poll() is not None:
+        return
+    os.kill(proc.pid, signal.SIGTERM)
+    try:
+        proc.wait(timeout=timeout_s)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait(10)
+
+
 @contextmanager
 def plumeswarm_up(
-    scenario: Path, tmp: Path, *args: str, ready_timeout_s: float = 180.0
+    scenario: Path | None, tmp: Path, *args: str, ready_timeout_s: float = 180.0
 ) -> Iterator[Up]:
+    """``plumeswarm up`` on a free router port (``scenario`` None: the bundled default), until
+    it says "processes ready"; stopped on exit."""
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
-    run = tmp / "run"
     console = tmp / "console.txt"
-    env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONUNBUFFERED="1")
-    with open(console, "wb") as out:
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "deploy", "up", str(scenario), "--connect", endpoint,
-             "--out", str(run), *args],
-            cwd=REPO, env=env, stdout=out, stderr=subprocess.STDOUT, start_new_session=True,
-        )  # fmt: skip
+    scenario_args = [str(scenario)] if scenario is not None else []
+    proc = spawn_up([*scenario_args, "--connect", endpoint, *args], tmp)
     try:
         wait_until(
             lambda: "processes ready" in console.read_text() or proc.poll() is not None,
@@ -61,12 +79,6 @@ def plumeswarm_up(
             poll_s=0.5,
         )
         assert proc.poll() is None, console.read_text()[-3000:]
-        yield Up(proc, run, endpoint, console)
+        yield Up(proc, tmp / "run", endpoint, console)
     finally:
-        if proc.poll() is None:
-            os.kill(proc.pid, signal.SIGTERM)
-            try:
-                proc.wait(timeout=60)
-            except subprocess.TimeoutExpired:
-                os.killpg(proc.pid, signal.SIGKILL)
-                proc.wait(10)
+        stop_up(proc)
