@@ -6,11 +6,12 @@ payload bounds the work when the simulation runs much faster than the gateway ca
 Commands go out as asynchronous queries, one at a time per vehicle (order matters: upload a
 mission, then start it); their replies are posted back to the loop.
 
-States and readings arrive every control tick for every vehicle (N·2 samples per tick): they
-are not handed to Python one by one but wait in Zenoh's Rust-side ring buffers
-(:class:`Streams`), which the loop empties every few milliseconds while they flow — no Python
-callback, lock or wake-up per sample. Statuses (rare, and ordered before command replies) keep
-their callback and wake the loop at once.
+States come in ``sim/tick`` (every vehicle's state in one message per control tick, rather than
+N per-vehicle ``vehicle/<id>/state`` puts, which the physics then need not send) and readings
+arrive for every vehicle: they are not handed to Python one by one but wait in Zenoh's
+Rust-side ring buffers (:class:`Streams`), which the loop empties every few milliseconds while
+they flow — no Python callback, lock or wake-up per sample. Statuses (rare, and ordered before
+command replies) keep their callback and wake the loop at once.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import os
 import threading
 from collections.abc import Callable
 
+import msgspec
 import zenoh
 
 from swarmbus.codec import MessageError, decode, encode
@@ -33,6 +35,10 @@ from swarmbus.messages import (
     GcsHeartbeat,
     RejectCode,
     Setpoint,
+    SimTick,
+    SimTime,
+    Tick,
+    VehicleState,
 )
 
 log = logging.getLogger(__name__)
@@ -105,44 +111,84 @@ class Inbox:
         return latest, calls
 
 
+class TickView(msgspec.Struct, frozen=True, tag_field="schema", tag=SimTick.__struct_config__.tag):
+    """A ``SimTick`` whose states stay undecoded (the gateway decodes a vehicle's state only
+    when its telemetry falls due or someone asks for it)."""
+
+    tick: Tick
+    sim_time_s: SimTime
+    states: list[msgspec.Raw]
+
+
+class _StateId(
+    msgspec.Struct, frozen=True, tag_field="schema", tag=VehicleState.__struct_config__.tag
+):
+    vehicle_id: str
+
+
 class Streams:
-    """Every vehicle's states and readings in ring buffers; the loop takes the newest of each."""
+    """Ticks (every vehicle's state in one ``sim/tick`` message) and every vehicle's readings
+    in ring buffers; the loop takes all ticks (a telemetry stream may be due at any of them)
+    and the newest reading of each vehicle."""
 
     def __init__(self, session: zenoh.Session, keys: Keys, vehicle_ids: set[str]) -> None:
         self._keys = keys
         self._ids = vehicle_ids
-        capacity = max(1024, 16 * len(vehicle_ids))  # the newest sample of each vehicle stays
-        self._subs = [
-            (kind, session.declare_subscriber(key, zenoh.handlers.RingChannel(capacity)))
-            for kind, key in (
-                (KIND_STATE, keys.all_vehicle_states()),
-                (KIND_READING, keys.all_vehicle_concentration()),
-            )
-        ]
+        n = max(1, len(vehicle_ids))
+        self._readings = session.declare_subscriber(
+            keys.all_vehicle_concentration(),
+            zenoh.handlers.RingChannel(max(1024, 16 * n)),  # the newest of each vehicle stays
+        )
+        # as many ticks as the per-vehicle state rings held states (>= 16 ticks)
+        self._ticks = session.declare_subscriber(
+            keys.tick(), zenoh.handlers.RingChannel(max(16, 1024 // n))
+        )
+        self._index: dict[str, int] = {}  # vehicle id → position of its state in a tick
+        self._index_len = -1  # the number of states the index was learnt from
 
-    def drain(self, latest: dict[tuple[str, str], bytes], states: dict[str, list[bytes]]) -> int:
-        """The newest reading per vehicle into ``latest``, every state (in order) into
-        ``states`` (a telemetry stream may be due at any of them); how many samples came."""
+    def drain(self, latest: dict[tuple[str, str], bytes], ticks: list[TickView]) -> int:
+        """The newest reading per vehicle into ``latest``, every tick (in order) into
+        ``ticks``; how many samples came."""
         count = 0
         vehicle_id_of = self._keys.vehicle_id_of
-        for kind, sub in self._subs:
-            while (sample := sub.try_recv()) is not None:
-                count += 1
-                try:
-                    vid = vehicle_id_of(str(sample.key_expr))
-                except KeyNameError:
-                    continue
-                if vid not in self._ids:
-                    continue
-                if kind == KIND_STATE:
-                    states.setdefault(vid, []).append(sample.payload.to_bytes())
-                else:
-                    latest[(kind, vid)] = sample.payload.to_bytes()
+        while (sample := self._readings.try_recv()) is not None:
+            count += 1
+            try:
+                vid = vehicle_id_of(str(sample.key_expr))
+            except KeyNameError:
+                continue
+            if vid in self._ids:
+                latest[(KIND_READING, vid)] = sample.payload.to_bytes()
+        while (sample := self._ticks.try_recv()) is not None:
+            count += 1
+            try:
+                view = decode(sample.payload.to_bytes(), TickView)
+            except MessageError as exc:
+                log.warning("%s: %s", self._keys.tick(), exc)
+                continue
+            if len(view.states) == self._index_len or self.learn(view):
+                ticks.append(view)
         return count
 
+    def learn(self, view: TickView) -> bool:
+        """Where each served vehicle's state is in ``view`` (the physics keeps the order, so
+        this runs once, and again only when a tick's layout changes)."""
+        try:  # through swarmbus.codec: garbage may also raise UnicodeDecodeError
+            ids = [decode(memoryview(raw), _StateId).vehicle_id for raw in view.states]
+        except MessageError as exc:
+            log.warning("%s: states: %s", self._keys.tick(), exc)
+            return False
+        self._index = {vid: i for i, vid in enumerate(ids) if vid in self._ids}
+        self._index_len = len(ids)
+        return True
+
+    def raw_state(self, view: TickView, vehicle_id: str) -> msgspec.Raw | None:
+        i = self._index.get(vehicle_id)
+        return view.states[i] if i is not None and i < len(view.states) else None
+
     def undeclare(self) -> None:
-        for _, sub in self._subs:
-            sub.undeclare()
+        self._readings.undeclare()
+        self._ticks.undeclare()
 
 
 def subscribe_statuses(

@@ -64,6 +64,10 @@ class Core:
             return True
         return self._presence is not None and f"autopilot-{v.id}" in self._presence.alive
 
+    def alive_in(self, v: Vehicle, now: float, names: frozenset[str]) -> bool:
+        """:meth:`alive` against ``names``, one copy of the alive names for many vehicles."""
+        return now - v.last_status_wall_s < ALIVE_WITHOUT_TOKEN_S or f"autopilot-{v.id}" in names
+
     # ------------------------------------------------------------------ sending
     def _send_all(self, v: Vehicle, msg: Msg, now: float) -> None:
         for link in self.links_of[v.sysid]:

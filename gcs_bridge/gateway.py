@@ -2,7 +2,8 @@
 
 Every vehicle of the scenario is one MAVLink system (its sysid, component 1, PX4 conventions),
 reachable on the shared GCS link and on its own API link. The gateway talks to autopilots only
-over the bus contract: it subscribes ``vehicle/*/{state,status,concentration}`` and sends
+over the bus contract: it subscribes ``sim/tick`` (every vehicle's state) and
+``vehicle/*/{status,concentration}`` and sends
 ``Command`` queries to ``vehicle/<id>/cmd``, answering MAVLink with the autopilot's real result.
 
 One thread runs the loop (UDP sockets + a self-pipe woken by Zenoh callbacks), so MAVLink
@@ -14,31 +15,31 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import math
 import select
 import threading
 import time
 from types import TracebackType
 from typing import Any
 
-import msgspec
 import zenoh
 
 from gcs_bridge import mission as ms
 from gcs_bridge.bus import (
     KIND_READING,
-    KIND_STATE,
     KIND_STATUS,
     STREAM_IDLE_POLL_S,
     STREAM_POLL_S,
     Commander,
     Inbox,
     Streams,
+    TickView,
     Waker,
     subscribe_statuses,
 )
 from gcs_bridge.core import Handler
 from gcs_bridge.dialect import Msg, mavlink
-from gcs_bridge.handle_commands import CommandHandlers
+from gcs_bridge.handle_commands import GCS_LINK_TIMEOUT_S, CommandHandlers
 from gcs_bridge.handle_missions import MissionHandlers
 from gcs_bridge.handle_params import ParamHandlers
 from gcs_bridge.links import Link
@@ -47,7 +48,7 @@ from gcs_bridge.telemetry import BUILDERS, ID_MISSION_CURRENT, StreamSchedule, w
 from gcs_bridge.vehicle import Vehicle
 from swarmbus.codec import MessageError, decode
 from swarmbus.keys import Keys
-from swarmbus.messages import ConcentrationReading, VehicleState, VehicleStatus
+from swarmbus.messages import VehicleState, VehicleStatus
 from swarmbus.node import NodeContext, NodeRuntime
 from swarmbus.scenario import Scenario
 from swarmbus.session import Presence
@@ -55,12 +56,6 @@ from swarmbus.session import Presence
 log = logging.getLogger(__name__)
 
 TICK_S = 0.1  # wall-clock housekeeping: heartbeats, transfer timeouts, parameter sync
-
-
-class _StateTime(
-    msgspec.Struct, frozen=True, tag_field="schema", tag=VehicleState.__struct_config__.tag
-):
-    sim_time_s: float
 
 
 class Gateway(CommandHandlers, ParamHandlers, MissionHandlers):
@@ -95,6 +90,7 @@ class Gateway(CommandHandlers, ParamHandlers, MissionHandlers):
         self._subs: list[Any] = []
         self._streams: Streams | None = None
         self._stream_poll_s = STREAM_IDLE_POLL_S
+        self._fed_sim_s = -math.inf  # sim time of the last tick taken (back: a new simulation)
         self._presence: Presence | None = None
         if session is not None:
             for v in self.vehicles.values():
@@ -231,24 +227,22 @@ class Gateway(CommandHandlers, ParamHandlers, MissionHandlers):
 
     def _drain_inbox(self, now: float) -> None:
         latest, calls = self.inbox.take()
-        states: dict[str, list[bytes]] = {}
+        ticks: list[TickView] = []
         if self._streams is not None:
-            flowing = self._streams.drain(latest, states) > 0
+            flowing = self._streams.drain(latest, ticks) > 0
             self._stream_poll_s = STREAM_POLL_S if flowing else STREAM_IDLE_POLL_S
         # Status first (telemetry for a state carries the newest status), and bus data before
         # command completions: the autopilot publishes its status before it replies, so an
         # ACK never goes out while the gateway still holds the status from before the command.
-        for kind in (KIND_STATUS, KIND_READING, KIND_STATE):
+        for kind in (KIND_STATUS, KIND_READING):
             for (k, vid), payload in latest.items():
                 if k == kind:
                     self._on_bus_safely(kind, self.vehicles[vid], payload, now)
-        for vid, payloads in states.items():
-            v = self.vehicles[vid]
-            last = len(payloads) - 1
-            for i, payload in enumerate(payloads):
-                # older states only where a telemetry stream falls due (rates per sim second)
-                if i == last or self._state_wanted(v, payload):
-                    self._on_bus_safely(KIND_STATE, v, payload, now)
+        if ticks:
+            try:
+                self._on_ticks(ticks, now)
+            except Exception:  # garbage on sim/tick must never end the gateway
+                log.exception("error handling %d ticks", len(ticks))
         for call in calls:
             try:
                 call()
@@ -275,36 +269,89 @@ class Gateway(CommandHandlers, ParamHandlers, MissionHandlers):
         except Exception:
             log.exception("error handling %s of %s", kind, v.id)
 
-    def _state_wanted(self, v: Vehicle, payload: bytes) -> bool:
-        try:
-            sim_time_s = decode(payload, _StateTime).sim_time_s
-        except MessageError:
-            return True  # let the full decode say what is wrong
-        return any(
-            self.schedules[(link.name, v.sysid)].wants(sim_time_s)
-            for link in self.links_of[v.sysid]
-        )
+    def _window(self, v: Vehicle, now: float, names: frozenset[str]) -> tuple[float, float]:
+        """``(lo, hi)``: nothing is due for ``v`` at a sim time t with lo <= t < hi (then its
+        state need not even be decoded); a superset of the times something may be due."""
+        if not self.alive_in(v, now, names):
+            return -math.inf, math.inf
+        lo, hi = -math.inf, math.inf
+        for link in self.links_of[v.sysid]:
+            schedule = self.schedules[(link.name, v.sysid)]
+            lo = max(lo, schedule.lo - 1e-6)
+            hi = min(hi, schedule.hi - 1e-9)
+            if now - link.gcs_heard_s <= GCS_LINK_TIMEOUT_S:  # the GCS link keep-alive
+                hi = min(hi, v.last_gcs_heartbeat_sim_s + 1.0 - 1e-6)
+        return lo, hi
+
+    def _on_ticks(self, ticks: list[TickView], now: float) -> None:
+        """Every tick's sim time against each vehicle's window; a vehicle's state is decoded
+        and handled only where its telemetry (or keep-alive) falls due. The newest tick's
+        states are left with the vehicles, decoded only if something reads them."""
+        assert self._streams is not None
+        streams = self._streams
+        vehicles = list(self.vehicles.values())
+        names = self._presence.alive if self._presence is not None else frozenset()
+        windows = {v.id: self._window(v, now, names) for v in vehicles}
+        lo_all = max((w[0] for w in windows.values()), default=-math.inf)
+        hi_all = min((w[1] for w in windows.values()), default=math.inf)
+        last = ticks[-1]
+        for view in ticks:
+            t = view.sim_time_s
+            if t < self._fed_sim_s:  # a new simulation
+                for v in vehicles:
+                    v.last_gcs_heartbeat_sim_s = -1e9
+                    windows[v.id] = self._window(v, now, names)
+                lo_all = max((w[0] for w in windows.values()), default=-math.inf)
+                hi_all = min((w[1] for w in windows.values()), default=math.inf)
+            self._fed_sim_s = t
+            if view is last:
+                for v in vehicles:
+                    raw = streams.raw_state(view, v.id)
+                    if raw is not None:
+                        v.feed_state(raw)
+            if lo_all <= t < hi_all:
+                continue
+            for v in vehicles:
+                lo, hi = windows[v.id]
+                if lo <= t < hi:
+                    continue
+                self._on_state_raw(view, v, now)
+                windows[v.id] = self._window(v, now, names)
+            lo_all = max((w[0] for w in windows.values()), default=-math.inf)
+            hi_all = min((w[1] for w in windows.values()), default=math.inf)
+
+    def _on_state_raw(self, view: TickView, v: Vehicle, now: float) -> None:
+        assert self._streams is not None
+        for attempt in range(2):
+            raw = self._streams.raw_state(view, v.id)
+            if raw is None:
+                return
+            try:
+                state = decode(memoryview(raw), VehicleState)
+            except MessageError as exc:
+                log.warning("state of %s: %s", v.id, exc)
+                return
+            if state.vehicle_id == v.id:
+                try:
+                    self._on_state(v, state, now)
+                except Exception:
+                    log.exception("error handling the state of %s", v.id)
+                return
+            if attempt or not self._streams.learn(view):  # the tick's layout changed
+                return
 
     def _on_bus(self, kind: str, v: Vehicle, payload: bytes, now: float) -> None:
         try:
-            if kind == KIND_STATE:
-                state = decode(payload, VehicleState)
-                if state.vehicle_id == v.id:
-                    self._on_state(v, state, now)
-            elif kind == KIND_STATUS:
+            if kind == KIND_STATUS:
                 status = decode(payload, VehicleStatus)
                 if status.vehicle_id == v.id:
                     self._on_status(v, status, now)
             else:
-                reading = decode(payload, ConcentrationReading)
-                if reading.vehicle_id == v.id:
-                    v.reading = reading
+                v.feed_reading(payload)  # decoded when telemetry needs it
         except MessageError as exc:
             log.warning("%s of %s: %s", kind, v.id, exc)
 
     def _on_state(self, v: Vehicle, state: VehicleState, now: float) -> None:
-        if v.state is not None and state.sim_time_s < v.state.sim_time_s:
-            v.last_gcs_heartbeat_sim_s = -1e9  # a new simulation
         v.state = state
         if not self.alive(v, now):
             return

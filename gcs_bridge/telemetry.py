@@ -90,6 +90,18 @@ class StreamSchedule:
         }
         self._next_s: dict[int, float] = {}
         self._last_s: float | None = None
+        # :meth:`wants` is false exactly while lo - 1e-6 <= t < hi - 1e-9 (kept up to date):
+        self.lo = -math.inf  # the last sim time streams were due at (before it: a restart)
+        self.hi = -math.inf  # the earliest next due time of an enabled stream
+        self._refresh()
+
+    def _refresh(self) -> None:
+        self.lo = -math.inf if self._last_s is None else self._last_s
+        hi = math.inf
+        for msg_id, interval in self._interval_s.items():
+            if interval is not None:
+                hi = min(hi, self._next_s.get(msg_id, -math.inf))
+        self.hi = hi
 
     def knows(self, msg_id: int) -> bool:
         return msg_id in self._default_hz
@@ -106,6 +118,7 @@ class StreamSchedule:
         else:
             self._interval_s[msg_id] = max(interval_us * 1e-6, 1e-3)
         self._next_s.pop(msg_id, None)
+        self._refresh()
         return True
 
     def interval_us(self, msg_id: int) -> int:
@@ -142,6 +155,7 @@ class StreamSchedule:
                 if nxt <= sim_time_s:  # fell behind: skip, never burst
                     nxt = sim_time_s + interval
                 self._next_s[msg_id] = nxt
+        self._refresh()
         return out
 
 

@@ -4,7 +4,11 @@ parameters, the mission as MAVLink sees it, and the events its status changes im
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, field
+from typing import Generic, Protocol, TypeVar
+
+import msgspec
 
 from gcs_bridge.dialect import Msg, mavlink
 from gcs_bridge.frames import Vec3, enu_to_geodetic
@@ -18,6 +22,7 @@ from gcs_bridge.modes import (
 )
 from gcs_bridge.params import ParamTable
 from gcs_bridge.telemetry import View
+from swarmbus.codec import MessageError, decode
 from swarmbus.messages import (
     ConcentrationReading,
     FlightMode,
@@ -35,11 +40,56 @@ CAPABILITIES = (
     | mavlink.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE
     | mavlink.MAV_PROTOCOL_CAPABILITY_MAVLINK2
 )
+log = logging.getLogger(__name__)
+
 UID_BASE = 0x504C554D45000000  # "PLUME" + sysid
 # MISSION_CURRENT.mission_mode (not named in pymavlink 2.4.50): 1 in mission mode, 2 suspended.
 MISSION_MODE_ACTIVE = 1
 MISSION_MODE_SUSPENDED = 2
 ARMING_SETTLE_S = 5.0  # wall: how long an accepted Arm stands in for a status saying armed
+
+
+Buffer = bytes | msgspec.Raw
+
+
+class _OfVehicle(Protocol):
+    @property
+    def vehicle_id(self) -> str: ...
+
+
+M = TypeVar("M", bound=_OfVehicle)
+
+
+class Latest(Generic[M]):
+    """The newest valid message of one kind about one vehicle. A newer payload is kept encoded
+    and decoded only when read (most are replaced before anyone reads them: the bus brings
+    one per control tick, telemetry wants a few per second); an invalid one, or one about
+    another vehicle, is logged and leaves the previous message."""
+
+    def __init__(self, kind: type[M], vehicle_id: str) -> None:
+        self._kind = kind
+        self._vehicle_id = vehicle_id
+        self._value: M | None = None
+        self._raw: Buffer | None = None
+
+    def feed(self, raw: Buffer) -> None:
+        self._raw = raw
+
+    def set(self, value: M | None) -> None:
+        self._value, self._raw = value, None
+
+    def get(self) -> M | None:
+        raw = self._raw
+        if raw is not None:
+            self._raw = None
+            try:
+                value = decode(memoryview(raw), self._kind)
+            except MessageError as exc:
+                log.warning("%s of %s: %s", self._kind.__name__, self._vehicle_id, exc)
+            else:
+                if value.vehicle_id == self._vehicle_id:
+                    self._value = value
+        return self._value
 
 
 @dataclass
@@ -81,9 +131,9 @@ class Vehicle:
         self.wind_enu = wind_enu
         self.params = ParamTable(scenario.failsafe_for(vehicle_id), vtype)
         self.params_synced = False
-        self.state: VehicleState | None = None
+        self._state = Latest(VehicleState, vehicle_id)
         self.status: VehicleStatus | None = None
-        self.reading: ConcentrationReading | None = None
+        self._reading = Latest(ConcentrationReading, vehicle_id)
         self.spawn_enu: Vec3 = cfg.spawn_enu_m
         self.uploader = Uploader()
         self.mission: Converted | None = None  # as MAVLink last saw it (upload or download)
@@ -96,6 +146,32 @@ class Vehicle:
         self.last_gcs_heartbeat_sim_s = -1e9
         self._reached = 0
         self._current: MissionCurrent | None = None
+
+    # -- the latest bus data -------------------------------------------------------
+    @property
+    def state(self) -> VehicleState | None:
+        """The newest valid state (one fed undecoded is decoded here, when first needed)."""
+        return self._state.get()
+
+    @state.setter
+    def state(self, state: VehicleState | None) -> None:
+        self._state.set(state)
+
+    def feed_state(self, raw: Buffer) -> None:
+        """A newer state, still encoded: decoded only if someone reads :attr:`state`."""
+        self._state.feed(raw)
+
+    @property
+    def reading(self) -> ConcentrationReading | None:
+        """The newest valid reading (decoded when first needed, like :attr:`state`)."""
+        return self._reading.get()
+
+    @reading.setter
+    def reading(self, reading: ConcentrationReading | None) -> None:
+        self._reading.set(reading)
+
+    def feed_reading(self, raw: Buffer) -> None:
+        self._reading.feed(raw)
 
     # -- identity ---------------------------------------------------------------
     def heartbeat(self) -> Msg:

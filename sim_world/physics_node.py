@@ -1,13 +1,15 @@
 """The physics process (``plumeswarm node physics``): owner of simulated time and the lockstep.
 
 Each control tick ``k`` it publishes all vehicle states in one ``SimTick`` on ``sim/tick`` and
-each state on ``vehicle/<id>/state``, waits for every live autopilot's ``ActuatorCommand`` for
-tick ``k`` (:class:`~sim_world.lockstep.Lockstep`) — on ``vehicle/<id>/actuators``, or as an
-entry of an autopilot process's ``ActuatorBatch`` on ``autopilot/<node>/actuators`` (one message
-for the K vehicles it serves; each entry counts as that vehicle's command, a bad entry is
-dropped with a log line like a bad single command) — applies them, steps ``scenario.substeps``
-physics steps and publishes tick ``k + 1``. ``sim/clock`` carries sim time and the achieved
-real-time factor about ten times a wall-clock second.
+each state on ``vehicle/<id>/state`` (only while a subscriber matches that key: most readers
+take the tick, and N puts per tick that nobody receives cost real time), waits for every live
+autopilot's ``ActuatorCommand`` for tick ``k`` (:class:`~sim_world.lockstep.Lockstep`) — on
+``vehicle/<id>/actuators``, or as an entry of an autopilot process's ``ActuatorBatch`` on
+``autopilot/<node>/actuators`` (one message for the K vehicles it serves; each entry counts as
+that vehicle's command, a bad entry is dropped with a log line like a bad single command) —
+applies them, steps ``scenario.substeps`` physics steps and publishes tick ``k + 1``.
+``sim/clock`` carries sim time and the achieved real-time factor about ten times a wall-clock
+second.
 
 The sensor's plume query: on every sensor tick (``sensor.period_ticks``) while a plume node is
 alive, the physics sends ONE query with every vehicle's position right after publishing the
@@ -186,8 +188,9 @@ class PhysicsNode:
         self._tick_pub = session.declare_publisher(self.keys.tick())
         self._clock_pub = session.declare_publisher(self.keys.clock())
         self._state_pubs = [
-            session.declare_publisher(self.keys.vehicle_state(v)) for v in world.vehicle_ids
+            _StatePublisher(session, self.keys.vehicle_state(v)) for v in world.vehicle_ids
         ]
+        self.states_sent = 0  # per-vehicle state puts (health detail)
         self._actuator_subs = [
             session.declare_subscriber(self.keys.all_vehicle_actuators(), self._on_actuators),
             session.declare_subscriber(self.keys.all_autopilot_actuators(), self._on_batch),
@@ -213,6 +216,8 @@ class PhysicsNode:
         self._presence.close()
         for sub in self._actuator_subs:
             sub.undeclare()
+        for pub in self._state_pubs:
+            pub.close()
         if self._writer is not None:
             self._writer.close()
         if self._marker is not None:
@@ -508,7 +513,9 @@ class PhysicsNode:
         if self._marker is not None:
             self._marker.mark(self.tick)
         for pub, state in zip(self._state_pubs, states, strict=True):
-            pub.put(encode(state))
+            if pub.matching:  # nobody listens: the state is in the tick already
+                pub.put(encode(state))
+                self.states_sent += 1
 
     def _plume_query(self, states: list[VehicleState]) -> None:
         query = PlumeQuery(
@@ -584,10 +591,34 @@ class PhysicsNode:
         )
         if force or now - self._health_wall >= HEALTH_PERIOD_S:
             self._health_wall = now
-            detail = f"tick {self.tick} dropped {self.dropped_total}" + (
-                f"; {self._resume_note}" if self._resume_note else ""
-            )
+            detail = f"tick {self.tick} dropped {self.dropped_total} states {self.states_sent}"
+            if self._resume_note:
+                detail += f"; {self._resume_note}"
             self.rt.publish_health(sim_time_s=sim_time_s, detail=detail)
+
+
+class _StatePublisher:
+    """A ``vehicle/<id>/state`` publisher that knows whether anyone subscribes (Zenoh's
+    matching status, kept up to date by a listener): the physics skips encoding and putting a
+    state nobody would receive. A subscriber declared later is matched before a put could
+    reach it anyway (both follow the same subscription declarations), so it misses nothing."""
+
+    def __init__(self, session: zenoh.Session, key: str) -> None:
+        self._pub = session.declare_publisher(key)
+        self.matching = False
+        self._listener = self._pub.declare_matching_listener(self._on_matching)
+        status: Any = self._pub.matching_status  # a MatchingStatus (the stub says bool)
+        self.matching = bool(status.matching)
+
+    def _on_matching(self, status: zenoh.MatchingStatus) -> None:
+        self.matching = status.matching
+
+    def put(self, payload: bytes) -> None:
+        self._pub.put(payload)
+
+    def close(self) -> None:
+        self._listener.undeclare()
+        self._pub.undeclare()
 
 
 def main(ctx: NodeContext) -> int:

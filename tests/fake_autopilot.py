@@ -4,10 +4,10 @@
 serves every vehicle of the scenario but the skipped ones: a liveliness token
 ``autopilot-<id>``, the ``vehicle/<id>/cmd`` queryable with the contract's replies (the same
 mode rules as the autopilot: arm on the ground, take off only when armed, missions need an
-upload, …), and state / status / concentration publications with kinematic motion at 120 Hz of
-sim time, paced at ``--speed`` × real time. It lets the gateway's own logic be tested before the
-real autopilot and physics are on main; it flies nothing for real. ``--mute ID`` leaves one
-vehicle's commands unanswered.
+upload, …), and tick (``sim/tick``, as the physics) / state / status / concentration
+publications with kinematic motion at 120 Hz of sim time, paced at ``--speed`` × real time.
+It lets the gateway's own logic be tested before the real autopilot and physics are on main;
+it flies nothing for real. ``--mute ID`` leaves one vehicle's commands unanswered.
 """
 
 from __future__ import annotations
@@ -49,6 +49,7 @@ from swarmbus.messages import (
     SetMode,
     SetParam,
     Setpoint,
+    SimTick,
     Takeoff,
     VehicleState,
     VehicleStatus,
@@ -347,6 +348,7 @@ def main() -> None:
             session.liveliness().declare_token(keys.node_health(f"autopilot-{f.vid}"))
             for f in world.vehicles.values()
         ]
+        tick_pub = session.declare_publisher(keys.tick())
         start = time.monotonic()
         tick = 0
         last_status: dict[str, tuple[object, ...]] = {}
@@ -357,13 +359,15 @@ def main() -> None:
                     time.sleep(min(0.01, world.t / args.speed - wall))
                     continue
                 out: list[tuple[Any, bytes]] = []
+                states: list[VehicleState] = []
                 with world.lock:  # step under the lock, publish outside it
                     tick += 1
                     world.t = tick * DT
                     for f in world.vehicles.values():
                         world.step(f)
                         st_pub, status_pub, conc_pub = pubs[f.vid]
-                        out.append((st_pub, encode(world.state(f, tick))))
+                        states.append(world.state(f, tick))
+                        out.append((st_pub, encode(states[-1])))
                         status = world.status(f)
                         key = (
                             status.mode,
@@ -389,6 +393,11 @@ def main() -> None:
                                 true_g_m3=value,
                             )
                             out.append((conc_pub, encode(reading)))
+                    # as the physics: every state in one tick (the gateway reads these)
+                    tick_msg = SimTick(
+                        tick=tick, sim_time_s=world.t, control_dt_s=DT, states=states
+                    )
+                    out.insert(0, (tick_pub, encode(tick_msg)))
                 for pub, payload in out:
                     pub.put(payload)
         except KeyboardInterrupt:
