@@ -8,8 +8,13 @@ several vehicles puts one ``ActuatorBatch`` of all their commands on
 ``vehicle/<id>/cmd``, publishes ``vehicle/<id>/status`` (on change and every
 ``status_period_s`` of sim time) and the sensor's ``vehicle/<id>/concentration``.
 
-Ticks run on one worker thread reading the subscriber's channel (no Python callback thread in
-between). The sensor's plume query
+Ticks are handled in the ``sim/tick`` subscriber's callback, one at a time and in arrival order;
+when ticks pile up only the newest is handled (a repeated tick, the start handshake's, gets the
+same answer again). The rare tick that has to wait for this process's own plume query (the
+physics did not send it) is handed to a worker thread instead of blocking the callback. The
+process runs Zenoh on ONE runtime thread (``ZENOH_RUNTIME``, set in :func:`main` unless the
+environment sets it): per tick, fewer thread hand-overs and wake-ups — the autopilot's CPU per
+tick fell 10–30 % in the scale bench (docs/agents.md, Performance). The sensor's plume query
 for tick k (one batched query: every vehicle's position in the tick, i.e. own + peers) is sent
 right after tick k's commands and collected before tick k+1's, so its round trip overlaps the
 physics step and a behaviour always sees the reading of the previous sensor tick — the same
@@ -25,6 +30,7 @@ the physics' truth). Plume queries go out only while a ``plume`` node's token is
 from __future__ import annotations
 
 import logging
+import os
 import threading
 import time
 from collections.abc import Callable
@@ -61,8 +67,13 @@ from swarmbus.scenario import Scenario
 
 log = logging.getLogger(__name__)
 
+# One Zenoh runtime thread for the whole process (receive, send, network, application): a
+# tick is received, handled and answered on one thread with no hand-over between threads.
+ZENOH_RUNTIME = (
+    "(app: (worker_threads: 1), acc: (handover: app), tx: (handover: app),"
+    " rx: (handover: app), net: (handover: app))"
+)
 IDLE_STATUS_PERIOD_S = 1.0  # wall clock: status while no ticks arrive (physics not running)
-TICK_QUEUE = 64
 
 
 @dataclass(frozen=True)
@@ -245,7 +256,11 @@ class AutopilotNode:
         self.last_tick = -1
         self.last_tick_wall = 0.0
         self.control_dt_s = 1.0 / ctx.scenario.time.control_hz
-        self._tick_sub: Any = None
+        self._slot_lock = threading.Lock()  # guards _latest and _draining
+        self._latest: zenoh.Sample | None = None  # the newest tick not handled yet
+        self._draining = False  # a thread is handling ticks
+        self._handoff = threading.Event()  # the worker thread takes over the draining
+        self._stop = threading.Event()
         self.pending: _PendingSensor | None = None
         self.plume_key = self.keys.plume_concentration()
         self.sensor_timeout_s = options.sensor_timeout_s or (
@@ -265,9 +280,10 @@ class AutopilotNode:
                 self.keys.all_node_health(), self._on_presence, history=True
             )
         )
-        # A Rust-side channel: no Python thread between the network and the tick loop.
-        self._tick_sub = self.session.declare_subscriber(
-            self.keys.tick(), zenoh.handlers.FifoChannel(TICK_QUEUE)
+        # A callback subscriber (zenoh-python runs it on its callback thread, not on a Zenoh
+        # runtime thread): see _on_tick_sample for order, exclusion and the blocking case.
+        self._declared.append(
+            self.session.declare_subscriber(self.keys.tick(), self._on_tick_sample)
         )
         for vid, served in self.served.items():
             self._declared.append(
@@ -332,38 +348,70 @@ class AutopilotNode:
 
     # ------------------------------------------------------------------ loop
     def run(self, stop: threading.Event) -> None:
-        """Ticks on a worker thread; the main thread keeps statuses flowing while none arrive.
-
-        The worker blocks in the subscriber's channel; closing the session (on return from
-        ``main``) ends it — undeclaring a subscriber another thread is reading fails in zenoh.
-        """
-        worker = threading.Thread(target=self._tick_loop, args=(stop,), name="ticks", daemon=True)
+        """Ticks run in the subscriber's callback (and on a worker for the rare blocking case);
+        the main thread keeps statuses flowing while none arrive."""
+        self._stop = stop
+        worker = threading.Thread(
+            target=self._blocking_ticks, args=(stop,), name="ticks", daemon=True
+        )
         worker.start()
         while not stop.wait(IDLE_STATUS_PERIOD_S):
             with self.lock:
                 if time.monotonic() - self.last_tick_wall >= IDLE_STATUS_PERIOD_S:
                     for served in self.served.values():
                         served.publish_status(force=True, period_s=0.0)
+        self._handoff.set()  # wake the worker to end
 
-    def _tick_loop(self, stop: threading.Event) -> None:
-        sub = self._tick_sub
-        while not stop.is_set():
-            try:
-                sample = sub.recv()
-                while (newer := sub.try_recv()) is not None:  # behind: only the latest counts
-                    sample = newer
-            except zenoh.ZError:  # the session closed
+    def _on_tick_sample(self, sample: zenoh.Sample) -> None:
+        """The tick subscriber's callback (zenoh-python's callback thread; written to be safe on
+        any number of Zenoh rx threads too, should the callback be made direct).
+
+        One thread at a time drains ticks: a sample that arrives while another thread drains is
+        left in the slot and the draining thread takes it next; a newer sample replaces an
+        unhandled one (behind: only the latest counts), so ticks stay in arrival order and never
+        run concurrently. A tick that would wait for this autopilot's own plume query (the
+        physics did not query) is not handled here — blocking a callback thread could hold up the
+        reply it waits for, and other callbacks — but handed to the worker thread, which drains
+        until no tick is left.
+        """
+        with self._slot_lock:
+            self._latest = sample
+            if self._draining:
                 return
-            try:
-                tick = _Tick.decode(sample.payload.to_bytes())
-            except MessageError as exc:
-                log.warning("ignoring bad tick: %s", exc)
-                continue
-            try:
-                self.on_tick(tick)
-            except Exception:  # never let one tick end the loop; physics would drop us
-                if stop.is_set():
+            self._draining = True
+        self._drain(may_block=False)
+
+    def _drain(self, may_block: bool) -> None:
+        while True:
+            with self._slot_lock:
+                sample = self._latest
+                if sample is None or self._stop.is_set():
+                    self._draining = False
                     return
+                if not may_block and self.pending is not None and self.pending.replies is not None:
+                    self._handoff.set()  # the worker drains on (the flag stays set for it)
+                    return
+                self._latest = None
+            self._handle_sample(sample)
+
+    def _blocking_ticks(self, stop: threading.Event) -> None:
+        while not stop.is_set():
+            self._handoff.wait()
+            self._handoff.clear()
+            if stop.is_set():
+                return
+            self._drain(may_block=True)
+
+    def _handle_sample(self, sample: zenoh.Sample) -> None:
+        try:
+            tick = _Tick.decode(sample.payload.to_bytes())
+        except MessageError as exc:
+            log.warning("ignoring bad tick: %s", exc)
+            return
+        try:
+            self.on_tick(tick)
+        except Exception:  # never let one tick end the ticks; physics would drop us
+            if not self._stop.is_set():
                 log.exception("tick %d failed", tick.tick)
 
     def on_tick(self, tick: SimTick | _Tick) -> None:
@@ -536,6 +584,9 @@ def main(ctx: NodeContext) -> int:
     except (ValueError, KeyError) as exc:
         log.error("autopilot: %s", exc)
         return 2
+    # Before the session opens (Zenoh reads it once, when its runtime starts); an operator's
+    # own ZENOH_RUNTIME wins.
+    os.environ.setdefault("ZENOH_RUNTIME", ZENOH_RUNTIME)
     with NodeRuntime(ctx, role="autopilot") as rt:
         try:
             node = AutopilotNode(rt.session, ctx, options)
