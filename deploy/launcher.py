@@ -251,8 +251,9 @@ class Launcher:
             self.wait_ready(first, timeout)
         if on_bus is not None:
             on_bus(self._session)
-        # The recorder before anything publishes; then everything else together.
-        early = [s.name for s in self.specs if s.role == "recorder"]
+        # The recorder before anything publishes, the plume before the lockstep starts (the
+        # first sensor ticks are answered); then everything else together.
+        early = [s.name for s in self.specs if s.role in ("recorder", "plume")]
         if early:
             self.supervisor.start_all(early)
             self.wait_ready(early, timeout)

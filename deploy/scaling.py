@@ -58,7 +58,7 @@ def scale_scenario(
             msgspec.structs.replace(
                 template,
                 id=f"uav{k + 1}",
-                sysid=k + 1,
+                sysid=None,  # index + 1 for the first 254; MAVLink has no id for the rest
                 spawn_enu_m=spawn,
                 mission=mission,
             )

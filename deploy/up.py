@@ -11,7 +11,7 @@ from types import FrameType
 
 from deploy.console import Console
 from deploy.launcher import Launcher, LaunchError, LaunchOptions
-from swarmbus.scenario import Scenario
+from swarmbus.scenario import Scenario, not_on_mavlink_note
 
 log = logging.getLogger(__name__)
 
@@ -41,6 +41,10 @@ def run_up(scenario: Scenario, opts: LaunchOptions, console: Console) -> int:
         except BaseException:
             launcher.stop()
             raise
+        if any(s.role == "gateway" for s in launcher.specs):
+            off = scenario.not_on_mavlink()  # the gateway serves the whole scenario
+            if off:
+                console.line(f"plumeswarm: {not_on_mavlink_note(len(off))}")
         console.line(
             f"plumeswarm: {len(launcher.specs)} processes ready; run directory {opts.run_dir}"
             " (Ctrl-C stops)"

@@ -1,10 +1,11 @@
 """``plumeswarm node gateway``: the MAVLink 2 gateway between ground stations and the bus.
 
-Every vehicle of the scenario is one MAVLink system (its sysid, component 1, PX4 conventions),
-reachable on the shared GCS link and on its own API link. The gateway talks to autopilots only
-over the bus contract: it subscribes ``sim/tick`` (every vehicle's state) and
-``vehicle/*/{status,concentration}`` and sends
-``Command`` queries to ``vehicle/<id>/cmd``, answering MAVLink with the autopilot's real result.
+Every vehicle of the scenario that has a sysid is one MAVLink system (its sysid, component 1,
+PX4 conventions), reachable on the shared GCS link and on its own API link; MAVLink addresses
+systems 1–254 only, so a larger scenario's other vehicles are not served (one line says so).
+The gateway talks to autopilots only over the bus contract: it subscribes ``sim/tick`` (every
+vehicle's state) and ``vehicle/*/{status,concentration}`` and sends ``Command`` queries to
+``vehicle/<id>/cmd``, answering MAVLink with the autopilot's real result.
 
 One thread runs the loop (UDP sockets + a self-pipe woken by Zenoh callbacks), so MAVLink
 encoding, sequence numbers and per-vehicle protocol state never race. This module is the loop,
@@ -50,7 +51,7 @@ from swarmbus.codec import MessageError, decode
 from swarmbus.keys import Keys
 from swarmbus.messages import VehicleState, VehicleStatus
 from swarmbus.node import NodeContext, NodeRuntime
-from swarmbus.scenario import Scenario
+from swarmbus.scenario import Scenario, not_on_mavlink_note
 from swarmbus.session import Presence
 
 log = logging.getLogger(__name__)
@@ -73,7 +74,14 @@ class Gateway(CommandHandlers, ParamHandlers, MissionHandlers):
         self.keys = keys
         wind = wind_enu(scenario.wind.speed_m_s, scenario.wind.from_deg)
         index_of = {v.id: i for i, v in enumerate(scenario.vehicles)}
-        self.vehicles = {vid: Vehicle(scenario, vid, index_of[vid], wind) for vid in vehicle_ids}
+        off_mavlink = set(scenario.not_on_mavlink(vehicle_ids))
+        if off_mavlink:
+            log.warning("%s", not_on_mavlink_note(len(off_mavlink)))
+        self.vehicles = {
+            vid: Vehicle(scenario, vid, index_of[vid], wind)
+            for vid in vehicle_ids
+            if vid not in off_mavlink
+        }
         self.by_sysid = {v.sysid: v for v in self.vehicles.values()}
         self.waker = Waker()
         self.inbox = Inbox(self.waker)

@@ -125,7 +125,10 @@ class Vehicle:
         vtype = load_vehicle_type(cfg.type)
         self.id = vehicle_id
         self.index = index
-        self.sysid = scenario.sysid_of(vehicle_id)
+        sysid = scenario.sysid_of(vehicle_id)
+        if sysid is None:
+            raise ValueError(f"vehicle {vehicle_id!r} has no MAVLink sysid")
+        self.sysid = sysid
         self.mav_type = mav_type_of(len(vtype.rotors))
         self.origin: Origin = scenario.world.origin
         self.wind_enu = wind_enu

@@ -316,6 +316,8 @@ class PhysicsNode:
         deadline = time.monotonic() + self.scenario.time.startup_timeout_s
         if self.options.wait_for_autopilots and not self._wait_for_tokens(deadline):
             return 0 if self.rt.stop.is_set() else 1  # a stop signal is not a failure
+        # Who is alive now (the plume, for tick 0's sensor query), not when history arrives.
+        self._presence.sync(timeout_s=min(2.0, max(0.1, deadline - time.monotonic())))
         with self._cond:
             self.barrier.start()
             self.barrier.begin(self.tick, timeout_s=max(0.0, deadline - time.monotonic()))

@@ -7,6 +7,7 @@ A bad file gives one line naming the file, the field and what is wrong
 from __future__ import annotations
 
 import tomllib
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Annotated, Literal
 
@@ -19,6 +20,8 @@ from swarmbus.vehicle_types import VehicleTypeError, load_vehicle_type
 
 SCENARIOS_DIR = Path(__file__).resolve().parent.parent / "deploy" / "scenarios"
 DEFAULT_SCENARIO = SCENARIOS_DIR / "novak2018.toml"
+MAVLINK_MAX_SYSID = 254  # MAVLink systems are 1–254 (0 is broadcast, 255 ground stations)
+MAX_VEHICLES = 1024  # per scenario; past MAVLINK_MAX_SYSID vehicles are on the bus only
 
 Pos = Annotated[float, msgspec.Meta(gt=0.0, le=1e9)]
 NonNeg = Annotated[float, msgspec.Meta(ge=0.0, le=1e9)]
@@ -119,7 +122,8 @@ class Failsafe(_Section, frozen=True, kw_only=True):
 class Vehicle(_Section, frozen=True, kw_only=True):
     id: Name
     type: Name = "iris"
-    sysid: Annotated[int, msgspec.Meta(ge=1, le=254)] | None = None
+    # MAVLink system id for the gateway; default: index + 1 for the first 254 vehicles, none after
+    sysid: Annotated[int, msgspec.Meta(ge=1, le=MAVLINK_MAX_SYSID)] | None = None
     spawn_enu_m: tuple[Fin, Fin, Fin] = (0.0, 0.0, 0.0)
     spawn_yaw_deg: Degrees = 0.0
     mission: list[MissionItem] = []
@@ -145,7 +149,7 @@ class Scenario(_Section, frozen=True, kw_only=True):
     sensor: Sensor = Sensor()
     failsafe: Failsafe = Failsafe()
     gateway: Gateway = Gateway()
-    vehicles: Annotated[list[Vehicle], msgspec.Meta(min_length=1, max_length=1024)]
+    vehicles: Annotated[list[Vehicle], msgspec.Meta(min_length=1, max_length=MAX_VEHICLES)]
 
     def vehicle(self, vehicle_id: str) -> Vehicle:
         for v in self.vehicles:
@@ -156,15 +160,41 @@ class Scenario(_Section, frozen=True, kw_only=True):
     def failsafe_for(self, vehicle_id: str) -> Failsafe:
         return self.vehicle(vehicle_id).failsafe or self.failsafe
 
-    def sysid_of(self, vehicle_id: str) -> int:
+    def sysid_of(self, vehicle_id: str) -> int | None:
+        """The vehicle's MAVLink system id: its ``sysid``, else its index + 1 for the first 254
+        vehicles; None for the others (MAVLink addresses systems 1–254: not on MAVLink)."""
         for index, v in enumerate(self.vehicles):
             if v.id == vehicle_id:
-                return v.sysid if v.sysid is not None else index + 1
+                return _sysid_at(index, v)
         raise KeyError(vehicle_id)
+
+    def not_on_mavlink(self, vehicle_ids: Iterable[str] | None = None) -> list[str]:
+        """Those of ``vehicle_ids`` (default: all) that have no MAVLink sysid."""
+        wanted = None if vehicle_ids is None else set(vehicle_ids)
+        return [
+            v.id
+            for i, v in enumerate(self.vehicles)
+            if _sysid_at(i, v) is None and (wanted is None or v.id in wanted)
+        ]
 
     @property
     def substeps(self) -> int:
         return self.time.physics_hz // self.time.control_hz
+
+
+def _sysid_at(index: int, v: Vehicle) -> int | None:
+    if v.sysid is not None:
+        return v.sysid
+    return index + 1 if index < MAVLINK_MAX_SYSID else None
+
+
+def not_on_mavlink_note(count: int) -> str:
+    """The one line the gateway and ``plumeswarm up`` print when vehicles have no sysid."""
+    return (
+        f"{count} vehicle(s) not on MAVLink: MAVLink addresses systems 1–{MAVLINK_MAX_SYSID}, "
+        f"so only vehicles with a sysid (explicit, or the first {MAVLINK_MAX_SYSID} in scenario "
+        "order) are served by the gateway; the others fly on the bus as usual"
+    )
 
 
 class ScenarioError(ValueError):
@@ -199,12 +229,13 @@ def _check(scenario: Scenario, source: str) -> None:
             load_vehicle_type(v.type)
         except VehicleTypeError as exc:
             raise ScenarioError(source, f"vehicles[{i}].type", str(exc)) from None
-        sysid = scenario.sysid_of(v.id)
-        if sysid in sysids:
+        sysid = _sysid_at(i, v)
+        if sysid is not None and sysid in sysids:
             raise ScenarioError(
                 source, f"vehicles[{i}].sysid", f"sysid {sysid} already used by {sysids[sysid]!r}"
             )
-        sysids[sysid] = v.id
+        if sysid is not None:
+            sysids[sysid] = v.id
         if v.behavior is not None and ":" not in v.behavior:
             raise ScenarioError(
                 source, f"vehicles[{i}].behavior", f"expected 'module:Class', got {v.behavior!r}"
@@ -235,6 +266,13 @@ def parse_scenario(text: str, source: str = "<scenario>") -> Scenario:
         )
         raw.setdefault("wind", {}).setdefault("speed_m_s", 6.0)
         raw["wind"].setdefault("from_deg", 270.0)
+    vehicles = raw.get("vehicles")
+    if isinstance(vehicles, list) and len(vehicles) > MAX_VEHICLES:
+        raise ScenarioError(
+            source,
+            "vehicles",
+            f"at most {MAX_VEHICLES} vehicles per scenario, got {len(vehicles)}",
+        )
     try:
         scenario = msgspec.convert(raw, Scenario)
     except msgspec.ValidationError as exc:

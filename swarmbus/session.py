@@ -145,7 +145,8 @@ def announce(session: zenoh.Session, keys: Keys, node_name: str) -> zenoh.Liveli
 class Presence:
     """Who is alive, learned from liveliness tokens (PUT on arrival, DELETE on departure).
 
-    ``on_change(name, alive)`` is called from Zenoh's thread on every arrival and departure.
+    ``on_change(name, alive)`` is called from Zenoh's thread on every arrival and departure
+    (once per change: a token reported twice, by the history and by :meth:`sync`, is one).
     """
 
     def __init__(
@@ -154,8 +155,10 @@ class Presence:
         keys: Keys,
         on_change: Callable[[str, bool], None] | None = None,
     ) -> None:
+        self._session = session
         self._keys = keys
         self._alive: set[str] = set()
+        self._heard: set[str] = set()  # names the subscriber reported (arrival or departure)
         self._lock = threading.Condition()
         self._on_change = on_change
         self._sub = session.liveliness().declare_subscriber(
@@ -170,13 +173,40 @@ class Presence:
             return
         alive = sample.kind == zenoh.SampleKind.PUT
         with self._lock:
+            self._heard.add(name)
+            changed = (name in self._alive) != alive
             if alive:
                 self._alive.add(name)
             else:
                 self._alive.discard(name)
             self._lock.notify_all()
-        if self._on_change is not None:
+        if changed and self._on_change is not None:
             self._on_change(name, alive)
+
+    def sync(self, timeout_s: float = 2.0) -> None:
+        """Learn who is alive right now, before going on (a liveliness query, answered when
+        every reachable node replied or ``timeout_s`` passed).
+
+        The subscriber's ``history`` delivers the tokens present at its declaration
+        asynchronously, so a caller that must know them before it acts (the physics, before
+        its first tick) asks here. A name the subscriber already reported is left to it: its
+        departure may have arrived before this answer."""
+        replies = self._session.liveliness().get(self._keys.all_node_health(), timeout=timeout_s)
+        for reply in replies:
+            if reply.ok is None:
+                continue
+            try:
+                name = self._keys.node_name_of(str(reply.ok.key_expr))
+            except ValueError:
+                continue
+            with self._lock:
+                if name in self._heard:
+                    continue
+                self._heard.add(name)
+                self._alive.add(name)
+                self._lock.notify_all()
+            if self._on_change is not None:
+                self._on_change(name, True)
 
     @property
     def alive(self) -> frozenset[str]:

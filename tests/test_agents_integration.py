@@ -16,7 +16,8 @@ from deploy.roles import RoleUnavailable, role_entry
 from plume_service import GaussianPlume
 from swarmbus.messages import ConcentrationReading, FlightMode, VehicleState
 from swarmbus.scenario import DEFAULT_SCENARIO, load_scenario
-from tests.procs import Network, NodeProcs
+from swarmbus.session import Presence
+from tests.procs import Network, NodeProcs, keys_for
 
 
 def _physics_available() -> bool:
@@ -80,7 +81,7 @@ class Run:
 
 @pytest.fixture
 def run_factory(network: tuple[Network, zenoh.Session], tmp_path: Path) -> Iterator[object]:
-    net, _ = network
+    net, session = network
     stack: list[tuple[NodeProcs, Swarm]] = []
 
     def start(scenario: Path, ids: list[str]) -> Run:
@@ -90,6 +91,11 @@ def run_factory(network: tuple[Network, zenoh.Session], tmp_path: Path) -> Itera
         procs.start("plume")
         for vid in ids:
             procs.start("autopilot", "--vehicle", vid)
+        # as `plumeswarm up` does: the plume is serving before the lockstep starts, so every
+        # reading, from the first sensor tick on, has an answer
+        presence = Presence(session, keys_for())
+        assert presence.wait_for(lambda alive: "plume" in alive, 60.0), sorted(presence.alive)
+        presence.close()
         procs.start("physics")
         # Tick 1 is published only after every autopilot answered tick 0, i.e. after each
         # has its first state: a state of tick 0 alone may reach us before the autopilot.

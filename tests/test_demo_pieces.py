@@ -192,3 +192,10 @@ def test_live_table_lists_every_vehicle() -> None:
     )
     text = live_table(snap, {"uav1": VehicleRecord(), "uav2": VehicleRecord()}, 2)
     assert "12.50" in text and "uav2" in text and "flying 0/2" in text
+
+
+def test_scaling_past_mavlink_keeps_sysids_for_the_first_254_only(tmp_path: Path) -> None:
+    scaled = scale_scenario(load_scenario(), 256)
+    back = load_scenario(write_scenario(scaled, tmp_path / "s256.toml"))
+    assert [back.sysid_of(f"uav{k}") for k in (1, 254, 255, 256)] == [1, 254, None, None]
+    assert back.not_on_mavlink() == ["uav255", "uav256"]

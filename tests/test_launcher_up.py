@@ -7,10 +7,14 @@ import os
 import signal
 from pathlib import Path
 
+import msgspec
 import psutil
 import pytest
 
+from deploy.scaling import scale_scenario, write_scenario
+from swarmbus.scenario import load_scenario
 from swarmbus.session import NetworkConfig, Presence, free_tcp_port, open_session
+from tests.mavclient import free_udp_block
 from tests.procs import keys_for, wait_until
 from tests.upstack import spawn_up
 
@@ -81,3 +85,28 @@ def test_a_role_whose_package_is_missing_fails_before_anything_starts(
     message = str(info.value)
     assert "\n" not in message and "plume (no_such_package.service, issue #3)" in message
     assert list(tmp_path.iterdir()) == [], "nothing was started"
+
+
+def test_up_says_once_which_vehicles_are_not_on_mavlink(tmp_path: Path) -> None:
+    base = scale_scenario(load_scenario(), 256)
+    gateway = msgspec.structs.replace(
+        base.gateway, gcs_port=free_udp_block(1), api_port_base=free_udp_block(254)
+    )
+    scenario = write_scenario(
+        msgspec.structs.replace(base, gateway=gateway), tmp_path / "s256.toml"
+    )
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    up = spawn_up([str(scenario), "--roles", "router,gateway", "--connect", endpoint], tmp_path)
+    console = tmp_path / "console.txt"
+    try:
+        wait_until(lambda: "processes ready" in console.read_text(), 120.0, "up ready")
+        os.kill(up.pid, signal.SIGTERM)
+        up.wait(timeout=30)
+        out = console.read_text()
+        note = "2 vehicle(s) not on MAVLink: MAVLink addresses systems 1–254"
+        assert out.count(f"plumeswarm: {note}") == 1, out
+        assert (tmp_path / "run" / "gateway.log").read_text().count(note) == 1
+    finally:
+        if up.poll() is None:
+            os.killpg(up.pid, signal.SIGKILL)
+            up.wait(10)

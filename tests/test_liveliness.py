@@ -9,7 +9,7 @@ import sys
 
 import zenoh
 
-from swarmbus.session import Presence
+from swarmbus.session import NetworkConfig, Presence, open_session
 from tests.procs import REPO, Network, keys_for
 
 
@@ -40,3 +40,35 @@ def test_token_appears_and_disappears_on_sigkill(network: tuple[Network, zenoh.S
         assert proc.stdout is not None
         proc.stdout.close()
         presence.close()
+
+
+def test_sync_knows_the_present_tokens_when_it_returns(
+    network: tuple[Network, zenoh.Session],
+) -> None:
+    """A token already on the bus is known once ``sync()`` returns, without waiting for the
+    subscriber's history; a token that left since is not resurrected, and each arrival is
+    reported once even when both the history and the query bring it."""
+    net, router = network
+    keys = keys_for()
+    with open_session(NetworkConfig(connect=[net.endpoint], listen=[])) as peer:
+        tokens = [peer.liveliness().declare_token(keys.node_health(f"early-{k}")) for k in range(3)]
+        probe = Presence(router, keys)  # tokens seen from the router's side first
+        assert probe.wait_for(lambda a: {"early-0", "early-1", "early-2"} <= a, 30.0)
+        probe.close()
+        for _ in range(5):  # several fresh observers: each knows all three on return
+            changes: list[tuple[str, bool]] = []
+            presence = Presence(router, keys, on_change=lambda n, a, c=changes: c.append((n, a)))
+            presence.sync(timeout_s=5.0)
+            assert {"early-0", "early-1", "early-2"} <= presence.alive
+            presence.wait_for(lambda a: False, 0.2)  # let the history arrive as well
+            assert sorted(changes) == [("early-0", True), ("early-1", True), ("early-2", True)]
+            presence.close()
+        presence = Presence(router, keys)
+        assert presence.wait_for(lambda a: "early-2" in a, 30.0)
+        tokens[2].undeclare()
+        assert presence.wait_for(lambda a: "early-2" not in a, 30.0)
+        presence.sync(timeout_s=5.0)
+        assert "early-2" not in presence.alive
+        presence.close()
+        for t in tokens[:2]:
+            t.undeclare()

@@ -6,7 +6,13 @@ from pathlib import Path
 
 import pytest
 
-from swarmbus.scenario import DEFAULT_SCENARIO, ScenarioError, load_scenario, parse_scenario
+from swarmbus.scenario import (
+    DEFAULT_SCENARIO,
+    MAX_VEHICLES,
+    ScenarioError,
+    load_scenario,
+    parse_scenario,
+)
 from tests.procs import run_cli
 
 GOOD_VEHICLE = '[[vehicles]]\nid = "uav1"\n'
@@ -83,6 +89,51 @@ def test_broken_scenario_names_the_field(text: str, field: str) -> None:
     line = str(err.value)
     assert "\n" not in line
     assert line.startswith("broken.toml: ")
+
+
+def many(n: int, sysids: dict[int, int] | None = None) -> str:
+    """``n`` vehicles uav1…uavN; ``sysids`` gives some (by index) an explicit sysid."""
+    out = []
+    for i in range(n):
+        out.append(f'[[vehicles]]\nid = "uav{i + 1}"\n')
+        if sysids and i in sysids:
+            out.append(f"sysid = {sysids[i]}\n")
+    return "".join(out)
+
+
+def test_more_vehicles_than_mavlink_addresses_load_and_the_rest_have_no_sysid() -> None:
+    sc = parse_scenario(many(300, {0: 2, 1: 1}))  # two explicit sysids, swapped
+    assert len(sc.vehicles) == 300
+    assert [sc.sysid_of(f"uav{k}") for k in (1, 2, 3, 254)] == [2, 1, 3, 254]
+    assert sc.sysid_of("uav255") is None and sc.sysid_of("uav300") is None
+    assert sc.not_on_mavlink() == [f"uav{k}" for k in range(255, 301)]
+    assert sc.not_on_mavlink(["uav1", "uav260", "uav254"]) == ["uav260"]
+    assert parse_scenario(many(254)).not_on_mavlink() == []
+
+
+@pytest.mark.parametrize(
+    ("sysids", "field"),
+    [
+        ({255: 255}, "vehicles[255].sysid"),  # out of range, also past the first 254
+        ({255: 0}, "vehicles[255].sysid"),
+        ({255: 3}, "vehicles[255].sysid"),  # uav3 has 3 already
+        ({0: 254}, "vehicles[253].sysid"),  # uav254's own 254 is taken
+    ],
+)
+def test_sysids_of_a_large_scenario_are_still_unique_and_in_range(
+    sysids: dict[int, int], field: str
+) -> None:
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario(many(260, sysids), "big.toml")
+    assert err.value.field == field
+
+
+def test_vehicles_per_scenario_are_bounded() -> None:
+    assert len(parse_scenario(many(MAX_VEHICLES)).vehicles) == MAX_VEHICLES
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario(many(MAX_VEHICLES + 1), "huge.toml")
+    assert err.value.field == "vehicles"
+    assert f"at most {MAX_VEHICLES} vehicles" in str(err.value)
 
 
 def test_unknown_section_is_reported_by_name() -> None:
