@@ -191,22 +191,30 @@ class Presence:
         asynchronously, so a caller that must know them before it acts (the physics, before
         its first tick) asks here. A name the subscriber already reported is left to it: its
         departure may have arrived before this answer."""
-        replies = self._session.liveliness().get(self._keys.all_node_health(), timeout=timeout_s)
-        for reply in replies:
-            if reply.ok is None:
-                continue
-            try:
-                name = self._keys.node_name_of(str(reply.ok.key_expr))
-            except ValueError:
-                continue
-            with self._lock:
-                if name in self._heard:
-                    continue
-                self._heard.add(name)
-                self._alive.add(name)
-                self._lock.notify_all()
-            if self._on_change is not None:
-                self._on_change(name, True)
+        done = threading.Event()
+        # A callback, not a channel: a swarm has more tokens than a channel's default capacity.
+        self._session.liveliness().get(
+            self._keys.all_node_health(),
+            zenoh.handlers.Callback(self._on_sync_reply, done.set),
+            timeout=timeout_s,
+        )
+        done.wait(timeout_s + 1.0)
+
+    def _on_sync_reply(self, reply: zenoh.Reply) -> None:
+        if reply.ok is None:
+            return
+        try:
+            name = self._keys.node_name_of(str(reply.ok.key_expr))
+        except ValueError:
+            return
+        with self._lock:
+            if name in self._heard:
+                return
+            self._heard.add(name)
+            self._alive.add(name)
+            self._lock.notify_all()
+        if self._on_change is not None:
+            self._on_change(name, True)
 
     @property
     def alive(self) -> frozenset[str]:

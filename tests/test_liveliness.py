@@ -6,6 +6,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 
 import zenoh
 
@@ -71,4 +72,26 @@ def test_sync_knows_the_present_tokens_when_it_returns(
         assert "early-2" not in presence.alive
         presence.close()
         for t in tokens[:2]:
+            t.undeclare()
+
+
+def test_sync_with_a_swarm_of_tokens(network: tuple[Network, zenoh.Session]) -> None:
+    """More tokens than a Zenoh channel holds by default (a 254-vehicle run has ~260): sync
+    returns, knowing every one (it once hung here, with the physics stuck before tick 0)."""
+    net, router = network
+    keys = keys_for()
+    with open_session(NetworkConfig(connect=[net.endpoint], listen=[])) as peer:
+        names = [f"autopilot-uav{k}" for k in range(600)]
+        tokens = [peer.liveliness().declare_token(keys.node_health(n)) for n in names]
+        probe = Presence(router, keys)
+        assert probe.wait_for(lambda a: set(names) <= a, 60.0)
+        probe.close()
+        presence = Presence(router, keys)
+        worker = threading.Thread(target=presence.sync, kwargs={"timeout_s": 5.0}, daemon=True)
+        worker.start()
+        worker.join(30.0)
+        assert not worker.is_alive(), "sync did not return"
+        assert set(names) <= presence.alive
+        presence.close()
+        for t in tokens:
             t.undeclare()
