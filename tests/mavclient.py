@@ -213,6 +213,12 @@ class MavClient:
     def logged(self, kind: str, sysid: int) -> list[Msg]:
         return [m for m in self.log if m.get_type() == kind and m.get_srcSystem() == sysid]
 
+    def wait_standby(self, sysid: int, timeout_s: float = 120.0) -> Msg:
+        """A HEARTBEAT of ``sysid`` saying MAV_STATE_STANDBY (its autopilot's status arrived)."""
+        return self.wait_type(
+            "HEARTBEAT", sysid, timeout_s, system_status=mavlink.MAV_STATE_STANDBY
+        )
+
     def wait_type(self, kind: str, sysid: int, timeout_s: float = 60.0, **fields: Any) -> Msg:
         def match(m: Msg) -> bool:
             return (

@@ -124,15 +124,7 @@ def swarm(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Swarm]:
         try:
             with MavClient(gcs_port) as gcs:
                 for sysid in (1, 2):  # statuses arrived: the fake's vehicles are standing by
-                    gcs.wait(
-                        "standby",
-                        lambda m, s=sysid: (
-                            m.get_type() == "HEARTBEAT"
-                            and m.get_srcSystem() == s
-                            and m.system_status == mavlink.MAV_STATE_STANDBY
-                        ),
-                        60.0,
-                    )
+                    gcs.wait_standby(sysid, 60.0)
 
                 def uav3_ready() -> bool:
                     uav3.publish_status()
@@ -153,14 +145,7 @@ def swarm(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Swarm]:
 
 def ready(c: MavClient, sysid: int) -> None:
     c.drain()
-    c.wait(
-        "standby",
-        lambda m: (
-            m.get_type() == "HEARTBEAT"
-            and m.get_srcSystem() == sysid
-            and m.system_status == mavlink.MAV_STATE_STANDBY
-        ),
-    )
+    c.wait_standby(sysid, 60.0)
 
 
 # ----------------------------------------------------------------------------- connect

@@ -41,18 +41,6 @@ NAN = math.nan
 ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
 
 
-def standby(c: MavClient, sysid: int) -> None:
-    c.wait(
-        f"sysid {sysid} standing by",
-        lambda m: (
-            m.get_type() == "HEARTBEAT"
-            and m.get_srcSystem() == sysid
-            and m.system_status == mavlink.MAV_STATE_STANDBY
-        ),
-        120.0,
-    )
-
-
 def _result_name(kind: str, code: int) -> str:
     enum = "MAV_RESULT" if kind == "COMMAND_ACK" else "MAV_MISSION_RESULT"
     entry = mavlink.enums[enum].get(code)
@@ -107,7 +95,7 @@ def test_gateway_survives_100k_hostile_frames(tmp_path: Path) -> None:
     ):
         watch = BusWatch(router, ["uav1", "uav2"])
         for s in (1, 2):
-            standby(gcs, s)
+            gcs.wait_standby(s)
         # uav1 takes off (MAVProxy's way: relative altitude, lat/lon 0) and holds at 10 m
         assert gcs.command(1, 22, 0, 0, 0, NAN, 0, 0, 10) == ACCEPTED
         assert gcs.command(1, 400, 1) == ACCEPTED

@@ -17,7 +17,6 @@ from pathlib import Path
 
 import pytest
 
-from gcs_bridge.dialect import mavlink
 from tests.gateway_stack import gateway, real_stack_available, vehicles
 from tests.mavclient import MavClient, write_scenario
 from tests.procs import zenoh_network
@@ -84,6 +83,20 @@ class Console:
                 pipe.close()
 
 
+def mavproxy_console(api_base: int, sysid: int, tmp_path: Path) -> Console:
+    """MAVProxy on the vehicle's API port (MAVLink 2), its state files under ``tmp_path``."""
+    return Console(
+        [
+            MAVPROXY,
+            f"--master=udpin:127.0.0.1:{api_base}",
+            "--mav20",
+            f"--target-system={sysid}",
+            f"--state-basedir={tmp_path}",
+        ],
+        tmp_path,
+    )
+
+
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_mavproxy_arms_takes_off_and_lands(backend: str, tmp_path: Path) -> None:
     scenario, gcs_port, api_base = write_scenario(tmp_path / "scenario.toml", 2)
@@ -93,25 +106,8 @@ def test_mavproxy_arms_takes_off_and_lands(backend: str, tmp_path: Path) -> None
         gateway(net, scenario, tmp_path, "cmd_timeout_s=3"),
         MavClient(gcs_port) as watch,
     ):
-        watch.wait(
-            "uav1 standing by",
-            lambda m: (
-                m.get_type() == "HEARTBEAT"
-                and m.get_srcSystem() == 1
-                and m.system_status == mavlink.MAV_STATE_STANDBY
-            ),
-            120.0,
-        )
-        console = Console(
-            [
-                MAVPROXY,
-                f"--master=udpin:127.0.0.1:{api_base}",
-                "--mav20",
-                "--target-system=1",
-                f"--state-basedir={tmp_path}",
-            ],
-            tmp_path,
-        )
+        watch.wait_standby(1)
+        console = mavproxy_console(api_base, 1, tmp_path)
         try:
             console.expect("Detected vehicle 1:1")
             console.expect("parameters")  # it fetched the parameter list

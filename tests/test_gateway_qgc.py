@@ -32,18 +32,6 @@ BACKENDS = [
 ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
 
 
-def standby(c: MavClient, sysid: int) -> None:
-    c.wait(
-        f"{sysid} standing by",
-        lambda m: (
-            m.get_type() == "HEARTBEAT"
-            and m.get_srcSystem() == sysid
-            and m.system_status == mavlink.MAV_STATE_STANDBY
-        ),
-        120.0,
-    )
-
-
 def at_altitude(c: MavClient, sysid: int, metres: float) -> None:
     c.wait(
         f"{sysid} at {metres} m",
@@ -67,7 +55,7 @@ def test_qgc_flows(backend: str, tmp_path: Path) -> None:
     ):
         c.beat = True
         for sysid in (1, 2, 3):
-            standby(c, sysid)
+            c.wait_standby(sysid)
             assert c.command(sysid, mavlink.MAV_CMD_REQUEST_MESSAGE, 148) == ACCEPTED
             assert c.command(sysid, mavlink.MAV_CMD_REQUEST_MESSAGE, 300) == ACCEPTED
             assert c.command(sysid, mavlink.MAV_CMD_REQUEST_MESSAGE, 435) == (

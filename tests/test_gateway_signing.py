@@ -26,23 +26,11 @@ from tests.gateway_stack import gateway, vehicles
 from tests.mavclient import GCS_COMPID, GCS_SYSID, MavClient, mission_item, write_scenario
 from tests.mavfuzz import Fuzzer, Target
 from tests.procs import wait_until, zenoh_network
-from tests.test_gateway_mavproxy import MAVPROXY, Console
+from tests.test_gateway_mavproxy import MAVPROXY, mavproxy_console
 
 KEY = os.urandom(32)
 NAN = math.nan
 ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
-
-
-def standby(c: MavClient, sysid: int) -> None:
-    c.wait(
-        "standby",
-        lambda m: (
-            m.get_type() == "HEARTBEAT"
-            and m.get_srcSystem() == sysid
-            and m.system_status == mavlink.MAV_STATE_STANDBY
-        ),
-        120.0,
-    )
 
 
 def test_signed_gcs_link_refuses_unsigned_and_wrong_keys(tmp_path: Path) -> None:
@@ -58,7 +46,7 @@ def test_signed_gcs_link_refuses_unsigned_and_wrong_keys(tmp_path: Path) -> None
         MavClient(0, system=254, signing_key=os.urandom(32)) as forger,
         MavClient(api_base) as api_client,
     ):
-        standby(signed, 1)
+        signed.wait_standby(1)
         hb = signed.wait_type("HEARTBEAT", 1)
         assert hb.get_msgbuf()[2] & mavlink.MAVLINK_IFLAG_SIGNED  # the gateway signs too
         gateway_addr = signed.addr_of[1]
@@ -371,17 +359,8 @@ def test_mavproxy_is_ignored_until_it_has_the_passphrase(tmp_path: Path) -> None
         gateway(net, scenario, tmp_path, "cmd_timeout_s=3"),
         MavClient(gcs_port) as watch,  # listens only: no key needed to read signed telemetry
     ):
-        standby(watch, 1)
-        console = Console(
-            [
-                MAVPROXY,
-                f"--master=udpin:127.0.0.1:{api_base}",
-                "--mav20",
-                "--target-system=1",
-                f"--state-basedir={tmp_path}",
-            ],
-            tmp_path,
-        )
+        watch.wait_standby(1)
+        console = mavproxy_console(api_base, 1, tmp_path)
         try:
             console.expect("Detected vehicle 1:1")  # it reads the gateway's signed heartbeats
             console.type("arm throttle")  # unsigned: dropped by the gateway
