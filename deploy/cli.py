@@ -9,7 +9,7 @@ from typing import NoReturn
 
 import click
 
-from deploy.roles import ROLES, RoleUnavailable, role_entry
+from deploy.roles import BENCH_ROLES, ROLES, RoleUnavailable, role_entry
 from swarmbus.scenario import Scenario, ScenarioError, load_scenario, resolve_scenario_path
 from swarmbus.session import NetworkConfig
 
@@ -125,7 +125,7 @@ def scenario_check(file: Path) -> None:
 
 # ---------------------------------------------------------------------------- node
 @cli.command()
-@click.argument("role", type=click.Choice(sorted(ROLES)))
+@click.argument("role", type=click.Choice([*sorted(ROLES), *sorted(BENCH_ROLES)]))
 @SCENARIO_OPT
 @click.option("--vehicle", "vehicles", multiple=True, help="Vehicle id(s) this node serves.")
 @click.option("--name", default=None, help="Node name on the bus (default: derived from role).")
@@ -156,7 +156,7 @@ def node(
     for vid in vehicles:
         if vid not in known:
             fail(f"--vehicle {vid!r} is not in the scenario (vehicles: {', '.join(sorted(known))})")
-    if role == "autopilot" and not vehicles:
+    if role in ("autopilot", "ceiling-autopilot") and not vehicles:
         fail("role 'autopilot' needs --vehicle ID")
     opts: dict[str, str] = {}
     for item in options:
@@ -408,6 +408,11 @@ def _int_list(ctx: click.Context, param: click.Parameter, value: str) -> tuple[i
     default=None,
     help="Sensor every N control ticks (default: the scenario's).",
 )
+@click.option(
+    "--baseline",
+    is_flag=True,
+    help="Also measure each row's ceiling: the same processes doing no work but the lockstep.",
+)
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=None)
 def bench_scale(
     scenario: str | None,
@@ -417,6 +422,7 @@ def bench_scale(
     seconds: float,
     no_gateway: bool,
     sensor_period_ticks: int | None,
+    baseline: bool,
     out: Path | None,
 ) -> None:
     """Real-time factor, CPU and memory of the whole stack against the number of vehicles."""
@@ -433,6 +439,7 @@ def bench_scale(
         vehicles_per_process=vehicles_per_process,
         gateway=not no_gateway,
         sensor_period_ticks=sensor_period_ticks,
+        baseline=baseline,
     )
     try:
         rows = run_scale(opts, click.echo)

@@ -87,6 +87,9 @@ class LaunchOptions:
     node_options: dict[str, tuple[str, ...]] = field(default_factory=dict)  # role → KEY=VALUE
     node_args: tuple[str, ...] = ()  # for every node (e.g. --hosts/--host: its TLS identity)
     client_network: NetworkConfig | None = None  # the launcher's own session (e.g. with TLS)
+    # role → the ``node`` role that runs in its place, under the same process name (the bench's
+    # ceiling stand-ins, deploy.ceiling); default: each role runs itself
+    stand_ins: dict[str, str] = field(default_factory=dict)
 
 
 def router_endpoints(scenario: Scenario, opts: LaunchOptions) -> list[str]:
@@ -133,7 +136,9 @@ def plan(scenario: Scenario, opts: LaunchOptions) -> list[ProcessSpec]:
     specs: list[ProcessSpec] = []
 
     def add(role: str, name: str, extra: Sequence[str]) -> None:
-        args = [*base, "node", role, *common, *extra, *opts.node_args]
+        entry = opts.stand_ins.get(role, role)
+        named = ["--name", name] if entry != role else []
+        args = [*base, "node", entry, *common, *named, *extra, *opts.node_args]
         for item in opts.node_options.get(role, ()):
             args += ["--set", item]
         specs.append(

@@ -25,12 +25,26 @@ ROLES: dict[str, tuple[str, str]] = {
 }
 
 
+# Stand-ins that take a role's place in ``plumeswarm bench scale --baseline`` (deploy.ceiling):
+# the same processes doing no work but the lockstep handshake.
+BENCH_ROLES: dict[str, str] = {
+    "ceiling-physics": "deploy.ceiling:physics_main",
+    "ceiling-autopilot": "deploy.ceiling:autopilot_main",
+    "ceiling-plume": "deploy.ceiling:plume_main",
+    "ceiling-gateway": "deploy.ceiling:gateway_main",
+}
+
+
 class RoleUnavailable(RuntimeError):
     pass
 
 
 def role_entry(role: str) -> RoleMain:
     """The ``main`` of ``role``; :class:`RoleUnavailable` when it is not built yet or unknown."""
+    if role in BENCH_ROLES:
+        module_name, _, func_name = BENCH_ROLES[role].partition(":")
+        bench_main: RoleMain = getattr(importlib.import_module(module_name), func_name)
+        return bench_main
     if role not in ROLES:
         raise RoleUnavailable(f"unknown role {role!r}; roles: {', '.join(ROLES)}")
     target, issue = ROLES[role]

@@ -83,6 +83,16 @@ class ScaleOptions:
     gateway: bool = True
     startup_timeout_s: float = 120.0
     sensor_period_ticks: int | None = None  # None: the scenario's own sensor rate
+    baseline: bool = False  # also measure each row's ceiling (deploy.ceiling), back to back
+
+
+# The roles whose processes the ceiling replaces with stand-ins doing no work (the router stays).
+CEILING = {
+    "physics": "ceiling-physics",
+    "autopilot": "ceiling-autopilot",
+    "plume": "ceiling-plume",
+    "gateway": "ceiling-gateway",
+}
 
 
 # ---------------------------------------------------------------------------- scenario
@@ -254,9 +264,15 @@ def drive(launcher: Launcher, sc: Scenario, state: str, deadline: float) -> None
 
 
 def run_case(
-    opts: ScaleOptions, n: int, state: str, stop: threading.Event | None = None
+    opts: ScaleOptions,
+    n: int,
+    state: str,
+    stop: threading.Event | None = None,
+    ceiling: bool = False,
 ) -> dict[str, Any]:
-    run_dir = opts.out / f"{state}-{n}"
+    """One row: the stack with ``n`` vehicles in ``state``, or (``ceiling``) the same processes
+    replaced by the stand-ins of :mod:`deploy.ceiling` (nothing is driven: they do no work)."""
+    run_dir = opts.out / (f"ceiling-{n}" if ceiling else f"{state}-{n}")
     sc, path = prepare(opts.scenario, n, run_dir, opts.sensor_period_ticks)
     ids = [v.id for v in sc.vehicles]
     roles = tuple(r for r in ROLES if r != "gateway" or opts.gateway)
@@ -267,6 +283,7 @@ def run_case(
         roles=roles,
         vehicles_per_process=opts.vehicles_per_process,
         verbose=0,
+        stand_ins=CEILING if ceiling else {},
     )
     launcher = Launcher(sc, launch)
     deadline = time.monotonic() + opts.startup_timeout_s
@@ -281,8 +298,9 @@ def run_case(
         watch = Watch(launcher.session, keys)
         watch.wait(lambda w: len(w.status) >= len(ids), deadline, "every vehicle's status")
         watch.next_clock(time.monotonic(), deadline)
-        drive(launcher, sc, state, deadline)
-        if state != "grounded":
+        if not ceiling:
+            drive(launcher, sc, state, deadline)
+        if state != "grounded" and not ceiling:
             watch.wait(_airborne(ids), deadline, "every vehicle airborne")
         time.sleep(WARMUP_S)
         by_role: dict[str, list[int]] = {}
@@ -339,7 +357,7 @@ TABLE_CPU = ("physics", "autopilot", "plume", "gateway", "router")
 
 def markdown(rows: Sequence[dict[str, Any]]) -> str:
     head = (
-        "| N | state | K | RTF | ticks/s | CPU % total | "
+        "| N | state | K | RTF | ticks/s | ceiling ticks/s | fraction of ceiling | CPU % total | "
         + " | ".join(f"CPU % {r}" for r in TABLE_CPU)
         + " | CPU ms/tick total | "
         + " | ".join(f"ms/tick {r}" for r in TABLE_CPU)
@@ -358,6 +376,8 @@ def markdown(rows: Sequence[dict[str, Any]]) -> str:
             str(r["vehicles_per_process"]),
             f"{r['real_time_factor']:.2f}",
             f"{r['ticks_per_s']:.0f}",
+            f"{r['ceiling_ticks_per_s']:.0f}" if "ceiling_ticks_per_s" in r else "–",
+            f"{r['fraction_of_ceiling']:.2f}" if "fraction_of_ceiling" in r else "–",
             f"{r['cpu_percent_total']:.0f}",
             *(f"{cpu.get(k, 0.0):.0f}" for k in TABLE_CPU),
             f"{r.get('cpu_ms_per_tick_total', 0.0):.3f}",
@@ -430,14 +450,41 @@ def _one(opts: ScaleOptions, n: int, state: str, stop: threading.Event, bar: Any
         row = run_case(opts, n, state, stop)
     except (LaunchError, ScaleError, DemoError) as exc:
         row = {"vehicles": n, "state": state, "error": str(exc)}
+    if opts.baseline and "error" not in row:
+        bar.set_postfix_str(f"{n} {state} ceiling")
+        add_ceiling(row, _ceiling_ticks_per_s(opts, n, stop))
     bar.write(
         f"{n:4d} {state:<9} "
         + (
             f"RTF {row['real_time_factor']:6.2f}  {row['ticks_per_s']:6.0f} ticks/s  "
             f"CPU {row['cpu_percent_total']:5.0f} %  "
             f"{row['cpu_ms_per_tick_total']:.3f} CPU ms/tick  load1 {row['load1']:.2f}"
+            + (
+                f"  ceiling {row['ceiling_ticks_per_s']:.0f} ticks/s "
+                f"({row['fraction_of_ceiling']:.2f})"
+                if row.get("ceiling_ticks_per_s")
+                else ""
+            )
             if "error" not in row
             else f"error: {row['error']}"
         )
     )
     return row
+
+
+def _ceiling_ticks_per_s(opts: ScaleOptions, n: int, stop: threading.Event) -> float | str:
+    """The ceiling's ticks/s for ``n`` vehicles, or why it could not be measured."""
+    try:
+        return float(run_case(opts, n, "grounded", stop, ceiling=True)["ticks_per_s"])
+    except (LaunchError, ScaleError, DemoError) as exc:
+        return str(exc)
+
+
+def add_ceiling(row: dict[str, Any], ceiling: float | str) -> None:
+    """``ceiling_ticks_per_s`` and ``fraction_of_ceiling`` (the row's ticks/s over it) on
+    ``row``; ``ceiling_error`` instead when the ceiling run failed."""
+    if isinstance(ceiling, str):
+        row["ceiling_error"] = ceiling
+        return
+    row["ceiling_ticks_per_s"] = round(ceiling, 1)
+    row["fraction_of_ceiling"] = round(row["ticks_per_s"] / ceiling, 3) if ceiling > 0 else 0.0

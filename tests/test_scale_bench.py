@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 
 from deploy.launcher import LaunchOptions, plan
-from deploy.scale_bench import loop_mission, markdown
+from deploy.scale_bench import CEILING, loop_mission, markdown
 from deploy.scaling import scale_scenario
 from swarmbus.scenario import load_scenario, resolve_scenario_path
 from tests.procs import run_cli
@@ -75,3 +75,38 @@ def test_bench_scale_tiny(tmp_path: Path) -> None:
     assert "| 2 | grounded |" in table
     assert (out / "rtf.png").stat().st_size > 0
     assert (out / "cpu.png").stat().st_size > 0
+
+
+def test_the_ceiling_runs_the_same_processes_as_stand_ins(tmp_path: Path) -> None:
+    sc = scale_scenario(load_scenario(resolve_scenario_path(None)), 4)
+    real = plan(sc, LaunchOptions(scenario_path=tmp_path / "s.toml", vehicles_per_process=2))
+    ceiling = plan(
+        sc,
+        LaunchOptions(scenario_path=tmp_path / "s.toml", vehicles_per_process=2, stand_ins=CEILING),
+    )
+    assert [(s.name, s.role) for s in ceiling] == [(s.name, s.role) for s in real]
+    for spec in ceiling:
+        node_role = spec.argv[spec.argv.index("node") + 1]
+        if spec.role in CEILING:
+            assert node_role == f"ceiling-{spec.role}"
+            assert spec.argv[spec.argv.index("--name") + 1] == spec.name
+        else:
+            assert node_role == spec.role
+
+
+def test_bench_scale_baseline_tiny(tmp_path: Path) -> None:
+    out = tmp_path / "scale"
+    result = run_cli(
+        [
+            *("bench", "scale", "--vehicles", "2", "--vehicles-per-process", "2"),
+            *("--state", "hovering", "--seconds", "2", "--baseline", "--out", str(out)),
+        ],
+        timeout_s=240.0,
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
+    (row,) = json.loads((out / "scale.json").read_text())
+    assert row["ceiling_ticks_per_s"] > 0
+    assert abs(row["fraction_of_ceiling"] - row["ticks_per_s"] / row["ceiling_ticks_per_s"]) < 2e-3
+    assert "| 2 | hovering | 2 |" in (out / "scale.md").read_text()
+    # the ceiling ran in its own run directory, with the stand-ins' logs in it
+    assert (out / "ceiling-2").is_dir()

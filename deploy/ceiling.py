@@ -1,0 +1,320 @@
+"""The architecture's own ceiling: the processes of a run doing no work but the lockstep.
+
+``plumeswarm bench scale --baseline`` measures every row twice, back to back: once with the
+real roles and once with these stand-ins in the same process topology (router, one "physics",
+the same N/K "autopilot" processes with the same node names and liveliness tokens, "plume",
+"gateway"), on the same Zenoh configuration. The stand-ins exchange messages of the sizes the
+real roles exchange and nothing else:
+
+- ``ceiling-physics`` publishes one ``SimTick`` holding N vehicle states per tick (with the
+  plume values of the previous sensor tick, as the physics does), waits until every vehicle's
+  command for that tick has arrived, then publishes the next; on sensor ticks it sends the
+  shared plume query of N points (answered asynchronously, as the physics does); ``sim/clock``
+  every 0.1 s of wall time, so the bench measures both runs the same way. No pybullet.
+- ``ceiling-autopilot`` (one process per K vehicles, one Zenoh runtime thread as the
+  autopilot) answers each tick with one ``ActuatorBatch`` of K commands, puts each vehicle's
+  reading (N - 1 peers) on sensor ticks and its status twice a second. No control, no decoding
+  beyond the tick number.
+- ``ceiling-plume`` answers each plume query with N values; ``ceiling-gateway`` subscribes to
+  the ticks, statuses and readings the gateway subscribes to and drops them.
+
+Every message is encoded once at start-up except the tick number; what is left is the cost of
+the handshake itself: Python wake-ups, Zenoh's transport and routing, one put and one receive
+per process per tick.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+import os
+import threading
+import time
+
+import msgspec
+import zenoh
+
+from swarmbus.codec import MessageError, decode, encode
+from swarmbus.keys import Keys
+from swarmbus.messages import (
+    ActuatorBatch,
+    ActuatorCommand,
+    Clock,
+    ConcentrationReading,
+    FlightMode,
+    PeerReading,
+    PlumeQuery,
+    PlumeSample,
+    PlumeValues,
+    SimTick,
+    SpeedMode,
+    VehicleState,
+    VehicleStatus,
+)
+from swarmbus.node import NodeContext, NodeRuntime
+from swarmbus.session import Presence
+
+log = logging.getLogger(__name__)
+
+# The same single Zenoh runtime thread as the autopilot process (see agents.autopilot_node).
+ZENOH_RUNTIME = (
+    "(app: (worker_threads: 1), acc: (handover: app), tx: (handover: app),"
+    " rx: (handover: app), net: (handover: app))"
+)
+CLOCK_PERIOD_S = 0.1
+STATUS_PERIOD_S = 0.5
+ROTORS = 4
+
+
+class _TickNumber(
+    msgspec.Struct, frozen=True, tag_field="schema", tag=SimTick.__struct_config__.tag
+):
+    """All a stand-in reads of a tick."""
+
+    tick: int
+    states: list[msgspec.Raw]
+
+
+def _state(vid: str) -> VehicleState:
+    return VehicleState(
+        vehicle_id=vid,
+        tick=0,
+        sim_time_s=0.0,
+        position_enu_m=(0.0, 0.0, 0.0),
+        velocity_enu_m_s=(0.0, 0.0, 0.0),
+        attitude_xyzw=(0.0, 0.0, 0.0, 1.0),
+        body_rates_rad_s=(0.0, 0.0, 0.0),
+        lat_deg=0.0,
+        lon_deg=0.0,
+        alt_m=0.0,
+        on_ground=True,
+    )
+
+
+def _sensor_period(ctx: NodeContext) -> int:
+    return ctx.scenario.sensor.resolved().period_ticks
+
+
+# ---------------------------------------------------------------------------- physics
+class _Barrier:
+    """Counts the commands of the current tick (one per vehicle, in batches)."""
+
+    def __init__(self, keys: Keys, vehicles: int) -> None:
+        self.keys = keys
+        self.vehicles = vehicles
+        self.cond = threading.Condition()
+        self.tick = 0
+        self.answered = 0
+
+    def on_batch(self, sample: zenoh.Sample) -> None:
+        try:
+            view = decode(sample.payload.to_bytes(), _BatchTick)
+        except MessageError:
+            return
+        with self.cond:
+            if view.tick == self.tick:
+                self.answered += len(view.commands)
+                if self.answered >= self.vehicles:
+                    self.cond.notify()
+
+    def wait(self, stop: threading.Event) -> bool:
+        with self.cond:
+            while self.answered < self.vehicles:
+                if stop.is_set():
+                    return False
+                self.cond.wait(0.25)
+            return True
+
+    def next(self, tick: int) -> None:
+        with self.cond:
+            self.tick = tick
+            self.answered = 0
+
+
+class _BatchTick(
+    msgspec.Struct, frozen=True, tag_field="schema", tag=ActuatorBatch.__struct_config__.tag
+):
+    tick: int
+    commands: list[msgspec.Raw]
+
+
+def physics_main(ctx: NodeContext) -> int:
+    """Stand-in for the physics: the tick loop with no world behind it."""
+    sc = ctx.scenario
+    keys = Keys(sc.world.name)
+    ids = [v.id for v in sc.vehicles]
+    states = [_state(v) for v in ids]
+    dt = 1.0 / sc.time.control_hz
+    period = _sensor_period(ctx)
+    query = encode(PlumeQuery(points_enu_m=[(0.0, 0.0, 0.0)] * len(ids)))
+    with NodeRuntime(ctx, role="physics") as rt:
+        session = rt.session
+        barrier = _Barrier(keys, len(ids))
+        sub = session.declare_subscriber(keys.all_autopilot_actuators(), barrier.on_batch)
+        tick_pub = session.declare_publisher(keys.tick())
+        clock_pub = session.declare_publisher(keys.clock())
+        presence = Presence(session, keys)
+        presence.sync()
+        wanted = {f"autopilot-{v}" for v in ids}
+        if not presence.wait_for(lambda alive: wanted <= alive, sc.time.startup_timeout_s):
+            log.error("ceiling-physics: autopilot stand-ins missing: %s", wanted - presence.alive)
+            return 1
+        rt.ready()
+        answer: list[PlumeSample | None] = [None]
+
+        def on_values(reply: zenoh.Reply, tick: int) -> None:
+            if reply.ok is not None:
+                values = decode(reply.ok.payload.to_bytes(), PlumeValues).values_g_m3
+                answer[0] = PlumeSample(tick=tick, values_g_m3=values)
+
+        tick = 0
+        wall0 = clock_wall = time.monotonic()
+        while not rt.stop.is_set():
+            queried = tick % period == 0
+            sample, answer[0] = answer[0], None
+            barrier.next(tick)
+            tick_pub.put(
+                encode(
+                    SimTick(
+                        tick=tick,
+                        sim_time_s=tick * dt,
+                        control_dt_s=dt,
+                        states=states,
+                        plume_queried=queried,
+                        plume_values=sample,
+                    )
+                )
+            )
+            if queried:
+                session.get(
+                    keys.plume_concentration(),
+                    functools.partial(on_values, tick=tick),
+                    payload=query,
+                )
+            if not barrier.wait(rt.stop):
+                break
+            tick += 1
+            now = time.monotonic()
+            if now - clock_wall >= CLOCK_PERIOD_S:
+                clock_wall = now
+                clock_pub.put(
+                    encode(
+                        Clock(
+                            tick=tick,
+                            sim_time_s=tick * dt,
+                            mode=SpeedMode.LOCKSTEP,
+                            speed_factor=1.0,
+                            real_time_factor=tick * dt / max(now - wall0, 1e-9),
+                        )
+                    )
+                )
+        sub.undeclare()
+        presence.close()
+    return 0
+
+
+# ---------------------------------------------------------------------------- autopilot
+def autopilot_main(ctx: NodeContext) -> int:
+    """Stand-in for an autopilot process serving ``ctx.vehicle_ids``."""
+    os.environ.setdefault("ZENOH_RUNTIME", ZENOH_RUNTIME)
+    sc = ctx.scenario
+    keys = Keys(sc.world.name)
+    served = list(ctx.vehicle_ids)
+    others = [v.id for v in sc.vehicles]
+    period = _sensor_period(ctx)
+    readings = {
+        vid: encode(
+            ConcentrationReading(
+                vehicle_id=vid,
+                sim_time_s=0.0,
+                position_enu_m=(0.0, 0.0, 0.0),
+                available=True,
+                reported_g_m3=0.0,
+                true_g_m3=0.0,
+                peers=[
+                    PeerReading(vehicle_id=p, position_enu_m=(0.0, 0.0, 0.0), true_g_m3=0.0)
+                    for p in others
+                    if p != vid
+                ],
+            )
+        )
+        for vid in served
+    }
+    statuses = {
+        vid: encode(
+            VehicleStatus(
+                vehicle_id=vid, sim_time_s=0.0, mode=FlightMode.DISARMED, armed=False, landed=True
+            )
+        )
+        for vid in served
+    }
+    with NodeRuntime(ctx, role="autopilot") as rt:
+        session = rt.session
+        batch_key = keys.autopilot_actuators(ctx.name)
+        reading_pubs = {v: session.declare_publisher(keys.vehicle_concentration(v)) for v in served}
+        status_pubs = {v: session.declare_publisher(keys.vehicle_status(v)) for v in served}
+
+        def on_tick(sample: zenoh.Sample) -> None:
+            try:
+                tick = decode(sample.payload.to_bytes(), _TickNumber).tick
+            except MessageError:
+                return
+            commands = [
+                ActuatorCommand(vehicle_id=v, tick=tick, rotor_commands=[0.0] * ROTORS)
+                for v in served
+            ]
+            session.put(batch_key, encode(ActuatorBatch(tick=tick, commands=commands)))
+            if tick % period == 0:
+                for vid, pub in reading_pubs.items():
+                    pub.put(readings[vid])
+
+        sub = session.declare_subscriber(keys.tick(), on_tick)
+        tokens = [
+            session.liveliness().declare_token(keys.node_health(f"autopilot-{v}"))
+            for v in served
+            if f"autopilot-{v}" != ctx.name
+        ]
+        rt.ready()
+        while not rt.stop.wait(STATUS_PERIOD_S):
+            for vid, pub in status_pubs.items():
+                pub.put(statuses[vid])
+        sub.undeclare()
+        for token in tokens:
+            token.undeclare()
+    return 0
+
+
+# ---------------------------------------------------------------------------- plume, gateway
+def plume_main(ctx: NodeContext) -> int:
+    """Stand-in for the plume service: N values for every query."""
+    keys = Keys(ctx.scenario.world.name)
+    values = encode(PlumeValues(values_g_m3=[0.0] * len(ctx.scenario.vehicles)))
+    with NodeRuntime(ctx, role="plume") as rt:
+
+        def on_query(query: zenoh.Query) -> None:
+            query.reply(keys.plume_concentration(), values)
+
+        q = rt.session.declare_queryable(keys.plume_concentration(), on_query)
+        rt.ready()
+        rt.stop.wait()
+        q.undeclare()
+    return 0
+
+
+def gateway_main(ctx: NodeContext) -> int:
+    """Stand-in for the MAVLink gateway: takes what the gateway takes off the bus, drops it."""
+    keys = Keys(ctx.scenario.world.name)
+
+    def drop(sample: zenoh.Sample) -> None:
+        sample.payload.to_bytes()
+
+    with NodeRuntime(ctx, role="gateway") as rt:
+        subs = [
+            rt.session.declare_subscriber(k, drop)
+            for k in (keys.tick(), keys.all_vehicle_status(), keys.all_vehicle_concentration())
+        ]
+        rt.ready()
+        rt.stop.wait()
+        for s in subs:
+            s.undeclare()
+    return 0
