@@ -64,15 +64,10 @@ from swarmbus.messages import (
 )
 from swarmbus.node import NodeContext, NodeRuntime
 from swarmbus.scenario import Scenario
+from swarmbus.session import SINGLE_THREAD_RUNTIME
 
 log = logging.getLogger(__name__)
 
-# One Zenoh runtime thread for the whole process (receive, send, network, application): a
-# tick is received, handled and answered on one thread with no hand-over between threads.
-ZENOH_RUNTIME = (
-    "(app: (worker_threads: 1), acc: (handover: app), tx: (handover: app),"
-    " rx: (handover: app), net: (handover: app))"
-)
 IDLE_STATUS_PERIOD_S = 1.0  # wall clock: status while no ticks arrive (physics not running)
 
 
@@ -586,7 +581,7 @@ def main(ctx: NodeContext) -> int:
         return 2
     # Before the session opens (Zenoh reads it once, when its runtime starts); an operator's
     # own ZENOH_RUNTIME wins.
-    os.environ.setdefault("ZENOH_RUNTIME", ZENOH_RUNTIME)
+    os.environ.setdefault("ZENOH_RUNTIME", SINGLE_THREAD_RUNTIME)
     with NodeRuntime(ctx, role="autopilot") as rt:
         try:
             node = AutopilotNode(rt.session, ctx, options)

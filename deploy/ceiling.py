@@ -52,15 +52,10 @@ from swarmbus.messages import (
     VehicleStatus,
 )
 from swarmbus.node import NodeContext, NodeRuntime
-from swarmbus.session import Presence
+from swarmbus.session import SINGLE_THREAD_RUNTIME, Presence
 
 log = logging.getLogger(__name__)
 
-# The same single Zenoh runtime thread as the autopilot process (see agents.autopilot_node).
-ZENOH_RUNTIME = (
-    "(app: (worker_threads: 1), acc: (handover: app), tx: (handover: app),"
-    " rx: (handover: app), net: (handover: app))"
-)
 CLOCK_PERIOD_S = 0.1
 STATUS_PERIOD_S = 0.5
 ROTORS = 4
@@ -216,7 +211,7 @@ def physics_main(ctx: NodeContext) -> int:
 # ---------------------------------------------------------------------------- autopilot
 def autopilot_main(ctx: NodeContext) -> int:
     """Stand-in for an autopilot process serving ``ctx.vehicle_ids``."""
-    os.environ.setdefault("ZENOH_RUNTIME", ZENOH_RUNTIME)
+    os.environ.setdefault("ZENOH_RUNTIME", SINGLE_THREAD_RUNTIME)  # as the autopilot
     sc = ctx.scenario
     keys = Keys(sc.world.name)
     served = list(ctx.vehicle_ids)

@@ -24,6 +24,13 @@ from swarmbus.keys import Keys
 log = logging.getLogger(__name__)
 
 DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
+# ``ZENOH_RUNTIME`` for a process that should run Zenoh on ONE thread (receive, send, network,
+# application): a sample is received, handled and answered with no hand-over between threads.
+# Set it in the environment before the process opens its first session.
+SINGLE_THREAD_RUNTIME = (
+    "(app: (worker_threads: 1), acc: (handover: app), tx: (handover: app),"
+    " rx: (handover: app), net: (handover: app))"
+)
 Endpoint = Annotated[str, msgspec.Meta(pattern=r"^(tcp|udp|tls|quic|unixsock-stream)/.+$")]
 
 
