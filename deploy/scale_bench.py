@@ -472,19 +472,22 @@ def _one(opts: ScaleOptions, n: int, state: str, stop: threading.Event, bar: Any
     return row
 
 
-def _ceiling_ticks_per_s(opts: ScaleOptions, n: int, stop: threading.Event) -> float | str:
-    """The ceiling's ticks/s for ``n`` vehicles, or why it could not be measured."""
+def _ceiling_ticks_per_s(opts: ScaleOptions, n: int, stop: threading.Event) -> dict[str, Any] | str:
+    """The ceiling's row for ``n`` vehicles, or why it could not be measured."""
     try:
-        return float(run_case(opts, n, "grounded", stop, ceiling=True)["ticks_per_s"])
+        return run_case(opts, n, "grounded", stop, ceiling=True)
     except (LaunchError, ScaleError, DemoError) as exc:
         return str(exc)
 
 
-def add_ceiling(row: dict[str, Any], ceiling: float | str) -> None:
-    """``ceiling_ticks_per_s`` and ``fraction_of_ceiling`` (the row's ticks/s over it) on
-    ``row``; ``ceiling_error`` instead when the ceiling run failed."""
+def add_ceiling(row: dict[str, Any], ceiling: dict[str, Any] | str) -> None:
+    """``ceiling_ticks_per_s``, ``fraction_of_ceiling`` (the row's ticks/s over it) and the
+    ceiling's ``ceiling_cpu_ms_per_tick_by_role`` on ``row``; ``ceiling_error`` instead when the
+    ceiling run failed."""
     if isinstance(ceiling, str):
         row["ceiling_error"] = ceiling
         return
-    row["ceiling_ticks_per_s"] = round(ceiling, 1)
-    row["fraction_of_ceiling"] = round(row["ticks_per_s"] / ceiling, 3) if ceiling > 0 else 0.0
+    rate = float(ceiling["ticks_per_s"])
+    row["ceiling_ticks_per_s"] = round(rate, 1)
+    row["fraction_of_ceiling"] = round(row["ticks_per_s"] / rate, 3) if rate > 0 else 0.0
+    row["ceiling_cpu_ms_per_tick_by_role"] = ceiling["cpu_ms_per_tick_by_role"]
