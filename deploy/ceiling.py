@@ -245,7 +245,7 @@ def autopilot_main(ctx: NodeContext) -> int:
     }
     with NodeRuntime(ctx, role="autopilot") as rt:
         session = rt.session
-        batch_key = keys.autopilot_actuators(ctx.name)
+        batch_pub = session.declare_publisher(keys.autopilot_actuators(ctx.name))
         reading_pubs = {v: session.declare_publisher(keys.vehicle_concentration(v)) for v in served}
         status_pubs = {v: session.declare_publisher(keys.vehicle_status(v)) for v in served}
 
@@ -258,7 +258,7 @@ def autopilot_main(ctx: NodeContext) -> int:
                 ActuatorCommand(vehicle_id=v, tick=tick, rotor_commands=[0.0] * ROTORS)
                 for v in served
             ]
-            session.put(batch_key, encode(ActuatorBatch(tick=tick, commands=commands)))
+            batch_pub.put(encode(ActuatorBatch(tick=tick, commands=commands)))
             if tick % period == 0:
                 for vid, pub in reading_pubs.items():
                     pub.put(readings[vid])
