@@ -237,3 +237,12 @@ def test_cli_check_bad_files_one_line(tmp_path: Path, kind: str) -> None:
     assert res.returncode != 0
     assert len(res.stderr.strip().splitlines()) == 1, res.stderr
     assert "Traceback" not in res.stderr
+
+
+def test_sensor_snippets_in_the_docs_are_valid_scenarios() -> None:
+    docs = (Path(__file__).resolve().parent.parent / "docs" / "agents.md").read_text()
+    blocks = [b.split("```")[0] for b in docs.split("```toml\n")[1:]]
+    snippets = [b for b in blocks if "[sensor]" in b]
+    assert len(snippets) >= 2
+    for text in snippets:
+        parse_scenario(text + GOOD_VEHICLE, "docs/agents.md")
