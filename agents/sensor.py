@@ -9,7 +9,9 @@ Stages, in order:
    is the one sampled at the end of the interval, held; the lag is integrated analytically over
    the interval, which is exactly what integrating it every control tick with that value gives.
    With a held value the state never crosses it, so one time constant holds for the whole
-   interval.
+   interval. The sensor keeps its recent states: when sim time goes back (physics resumed
+   from a checkpoint) it resumes from the state of its last sample before that time, so the
+   replayed readings are those of a run without the restart.
 2. Noise: additive Gaussian (``noise_std_g_m3``) plus proportional (``noise_rel`` × the lagged
    value), both from a generator keyed by the scenario seed, the vehicle's index and the sample's
    sim time, so a reading's noise is the same bits whoever asks and in whatever order, and a
@@ -33,6 +35,7 @@ from __future__ import annotations
 
 import math
 import struct
+from collections import deque
 from typing import NamedTuple
 
 import numpy as np
@@ -86,6 +89,7 @@ class ConcentrationSensor:
         vehicle_index: int,
         temperature_k: float = 298.15,
         pressure_pa: float = 101_325.0,
+        history_samples: int = 1024,
     ) -> None:
         self.config = config.resolved()
         self._seed = scenario_seed
@@ -95,14 +99,24 @@ class ConcentrationSensor:
         gas = self.config.gas
         self._ppm_per_g_m3 = None if gas is None else ppm_per_g_m3(gas, temperature_k, pressure_pa)
         self._mox = None if self.config.mox is None else MoxCurve(self.config.mox)
-        self._lagged: float | None = None
-        self._last_time_s: float | None = None
+        # (sim time, lag state) of the latest samples, newest last: where to resume from when
+        # sim time goes back (physics resumed from a checkpoint)
+        self._history: deque[tuple[float, float]] = deque(maxlen=history_samples)
 
     @classmethod
     def for_vehicle(cls, scenario: Scenario, vehicle_index: int) -> ConcentrationSensor:
-        world = scenario.world
+        """The sensor of the scenario's vehicle ``vehicle_index``; it keeps its lag state for
+        two physics checkpoint periods, so a resumed physics replays the same readings."""
+        world, time = scenario.world, scenario.time
+        period_s = time.checkpoint_period_s
+        samples = math.ceil(2.0 * period_s * time.control_hz / scenario.sensor.period_ticks) + 2
         return cls(
-            scenario.sensor, world.seed, vehicle_index, world.temperature_k, world.pressure_pa
+            scenario.sensor,
+            world.seed,
+            vehicle_index,
+            world.temperature_k,
+            world.pressure_pa,
+            history_samples=samples,
         )
 
     def due(self, tick: int) -> bool:
@@ -118,17 +132,20 @@ class ConcentrationSensor:
         return value_g_m3
 
     def _lag(self, true_g_m3: float, sim_time_s: float) -> float:
-        if self._lagged is None or self._last_time_s is None:
-            state, dt = 0.0, 0.0  # switched on in clean air
+        history = self._history
+        while history and history[-1][0] >= sim_time_s:
+            history.pop()  # sim time went back: resume from the state before this sample
+        if history:
+            last_time_s, state = history[-1]
+            dt = sim_time_s - last_time_s
         else:
-            state, dt = self._lagged, max(sim_time_s - self._last_time_s, 0.0)
+            state, dt = 0.0, 0.0  # switched on in clean air
         tau = self._rise_s if true_g_m3 > state else self._decay_s
         if tau <= 0.0:
             lagged = true_g_m3
         else:
             lagged = state + (1.0 - math.exp(-dt / tau)) * (true_g_m3 - state)
-        self._lagged = lagged
-        self._last_time_s = sim_time_s
+        history.append((sim_time_s, lagged))
         return lagged
 
     def _noise(self, lagged: float, sim_time_s: float) -> float:

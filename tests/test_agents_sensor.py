@@ -208,3 +208,29 @@ def test_preset_fills_only_what_is_unset() -> None:
     cfg = Sensor(preset="mox-tgs2620", decay_time_constant_s=5.0, noise_rel=0.2).resolved()
     assert (cfg.rise_s, cfg.decay_s, cfg.noise_rel, cfg.gas) == (2.96, 5.0, 0.2, "ethanol")
     assert cfg.mox == Mox()
+
+
+def test_time_going_back_replays_the_same_readings() -> None:
+    """Physics resumed from a checkpoint: the sensor resumes from its state before that time,
+    so the readings from there on equal those of a run without the restart."""
+    cfg = Sensor(preset="mox-tgs2620", noise_rel=0.05)
+    truth = [0.0 if k < 10 or 60 < k < 80 else 0.5 for k in range(120)]
+    times = [0.1 * k for k in range(120)]
+    straight = ConcentrationSensor(cfg, 3, 0)
+    expected = [straight.sample(c, t) for c, t in zip(truth, times, strict=True)]
+    resumed = ConcentrationSensor(cfg, 3, 0)
+    for c, t in zip(truth[:90], times[:90], strict=True):  # ran ahead to 8.9 s ...
+        resumed.sample(c, t)
+    replay = [resumed.sample(c, t) for c, t in zip(truth[70:], times[70:], strict=True)]  # ... 7 s
+    assert replay == expected[70:]
+    again = ConcentrationSensor(cfg, 3, 0)
+    assert [again.sample(c, t) for c, t in zip(truth, times, strict=True)] == expected
+
+
+def test_for_vehicle_keeps_two_checkpoint_periods_of_history() -> None:
+    from swarmbus.scenario import load_scenario
+
+    sc = load_scenario()
+    s = ConcentrationSensor.for_vehicle(sc, 0)
+    period_samples = sc.time.checkpoint_period_s * sc.time.control_hz / sc.sensor.period_ticks
+    assert s._history.maxlen is not None and s._history.maxlen >= 2 * period_samples
