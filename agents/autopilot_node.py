@@ -134,7 +134,7 @@ class _Served:
         self.vehicle_id = vehicle_id
         self.autopilot = build_autopilot(scenario, vehicle_id, options)
         index = [v.id for v in scenario.vehicles].index(vehicle_id)
-        self.sensor = ConcentrationSensor(scenario.sensor, scenario.world.seed, index)
+        self.sensor = ConcentrationSensor.for_vehicle(scenario, index)
         # None: the process batches its vehicles' commands (AutopilotNode.batch_pub)
         self.actuators = (
             session.declare_publisher(keys.vehicle_actuators(vehicle_id)) if own_actuators else None

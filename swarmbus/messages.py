@@ -164,7 +164,9 @@ class ConcentrationReading(Message, frozen=True, kw_only=True, tag=_tag("concent
     """``vehicle/<id>/concentration``: the sensor's reading at the vehicle's own position.
 
     ``available`` is false when the plume service did not answer: then ``reported_g_m3`` and
-    ``true_g_m3`` are ``None``, never a silent 0.
+    ``true_g_m3`` are ``None``, never a silent 0. A sensor with a named ``gas`` also reports
+    ``reported_ppm`` (the same value in ppm of that gas); a metal-oxide sensor also reports its
+    raw ``resistance_ohm`` (``reported_g_m3`` is then the calibrated concentration).
     """
 
     vehicle_id: Name
@@ -174,6 +176,9 @@ class ConcentrationReading(Message, frozen=True, kw_only=True, tag=_tag("concent
     reported_g_m3: NonNegative | None
     true_g_m3: NonNegative | None
     peers: list[PeerReading] = []
+    gas: Name | None = None
+    reported_ppm: NonNegative | None = None
+    resistance_ohm: NonNegative | None = None
 
 
 # --------------------------------------------------------------------------- commands

@@ -6,6 +6,7 @@ A bad file gives one line naming the file, the field and what is wrong
 
 from __future__ import annotations
 
+import re
 import tomllib
 from collections.abc import Iterable
 from pathlib import Path
@@ -14,6 +15,7 @@ from typing import Annotated, Literal
 import msgspec
 
 from swarmbus.codec import split_validation_error
+from swarmbus.gases import FORMULAS
 from swarmbus.messages import MissionItem
 from swarmbus.session import NetworkConfig
 from swarmbus.vehicle_types import VehicleTypeError, load_vehicle_type
@@ -46,6 +48,9 @@ class World(_Section, frozen=True, kw_only=True):
     name: Name = "default"
     seed: Annotated[int, msgspec.Meta(ge=0, le=2**63 - 1)] = 0
     origin: Origin = Origin()
+    # the air: what a g/m³ concentration is in ppm (ideal gas)
+    temperature_k: Annotated[float, msgspec.Meta(ge=150.0, le=400.0)] = 298.15
+    pressure_pa: Annotated[float, msgspec.Meta(ge=1000.0, le=200_000.0)] = 101_325.0
 
 
 class Time(_Section, frozen=True, kw_only=True):
@@ -84,15 +89,42 @@ class Plume(_Section, frozen=True, kw_only=True):
     sources: list[Source] = msgspec.field(default_factory=lambda: [Source()])
 
 
-class Sensor(_Section, frozen=True, kw_only=True):
-    """Concentration sensor model. ``preset = "novak2018"`` is the seed's [0.01, 0.2] window."""
+class Mox(_Section, frozen=True, kw_only=True):
+    """A metal-oxide transducer: RS/R0 = coefficient · ppm^exponent, capped at the clean-air
+    ratio; defaults: GADEN's Figaro TGS2620 curve for ethanol (R0 3 kΩ, clean air 21)."""
 
-    preset: Literal["novak2018", "ideal"] | None = None
+    rs_r0_coefficient: Annotated[float, msgspec.Meta(gt=0.0, le=1e6)] = 62.32
+    rs_r0_exponent: Annotated[float, msgspec.Meta(ge=-10.0, le=-0.001)] = -0.7155
+    clean_air_rs_r0: Annotated[float, msgspec.Meta(gt=0.0, le=100.0)] = 21.0
+    r0_ohm: Annotated[float, msgspec.Meta(gt=0.0, le=1e7)] = 3000.0
+
+
+_SensorPreset = tuple[float, float, str, Mox | None]  # rise s, decay s, gas, transducer
+SENSOR_PRESETS: dict[str, _SensorPreset] = {
+    # GADEN's TGS2620 (rise 2.96 s, decay 15.71 s; its ethanol curve)
+    "mox-tgs2620": (2.96, 15.71, "ethanol", Mox()),
+    # a PID (ION Science MiniPID, T90 < 3 s → τ = 3 s / ln 10), isobutylene-calibrated, linear
+    "pid": (1.30, 1.30, "isobutylene", None),
+}
+
+
+class Sensor(_Section, frozen=True, kw_only=True):
+    """Concentration sensor model. ``preset = "novak2018"`` is the seed's [0.01, 0.2] window;
+    ``mox-tgs2620`` and ``pid`` fill the fields left unset (rise, decay, gas, mox)."""
+
+    preset: Literal["novak2018", "ideal", "mox-tgs2620", "pid"] | None = None
     detection_limit_g_m3: NonNeg = 0.0  # below → 0
     saturation_g_m3: Pos | None = None  # above → saturation
     noise_std_g_m3: NonNeg = 0.0
     time_constant_s: NonNeg = 0.0  # first-order response lag; 0: none
     period_ticks: Annotated[int, msgspec.Meta(ge=1, le=100_000)] = 1
+    # lag while the true value is above (rise) / below (decay) the state; unset: time_constant_s
+    rise_time_constant_s: NonNeg | None = None
+    decay_time_constant_s: NonNeg | None = None
+    resolution_g_m3: NonNeg = 0.0  # quantisation step of the output; 0: none
+    noise_rel: Annotated[float, msgspec.Meta(ge=0.0, le=10.0)] = 0.0  # std / lagged value
+    gas: Name | None = None  # also report ppm of this gas (swarmbus.gases)
+    mox: Mox | None = None  # a metal-oxide transducer between the lag and the output
 
     def resolved(self) -> Sensor:
         if self.preset == "novak2018":
@@ -103,7 +135,29 @@ class Sensor(_Section, frozen=True, kw_only=True):
             return msgspec.structs.replace(
                 self, preset=None, detection_limit_g_m3=0.0, saturation_g_m3=None
             )
+        if self.preset is not None:
+            rise, decay, gas, mox = SENSOR_PRESETS[self.preset]
+            return msgspec.structs.replace(
+                self,
+                preset=None,
+                rise_time_constant_s=_or(self.rise_time_constant_s, rise),
+                decay_time_constant_s=_or(self.decay_time_constant_s, decay),
+                gas=self.gas or gas,
+                mox=self.mox or mox,
+            )
         return self
+
+    @property
+    def rise_s(self) -> float:
+        return _or(self.rise_time_constant_s, self.time_constant_s)
+
+    @property
+    def decay_s(self) -> float:
+        return _or(self.decay_time_constant_s, self.time_constant_s)
+
+
+def _or(value: float | None, default: float) -> float:
+    return default if value is None else value
 
 
 class Failsafe(_Section, frozen=True, kw_only=True):
@@ -249,6 +303,20 @@ def _check(scenario: Scenario, source: str) -> None:
         )
     if not scenario.plume.sources:
         raise ScenarioError(source, "plume.sources", "at least one source is required")
+    _check_sensor(sensor, source)
+
+
+def _check_sensor(sensor: Sensor, source: str) -> None:
+    if sensor.gas is not None and sensor.gas not in FORMULAS:
+        raise ScenarioError(
+            source,
+            "sensor.gas",
+            f"unknown gas {sensor.gas!r}; known: {', '.join(sorted(FORMULAS))}",
+        )
+    if sensor.mox is not None and sensor.gas is None:
+        raise ScenarioError(
+            source, "sensor.gas", "a [sensor.mox] curve is in ppm: name the gas it is for"
+        )
 
 
 def parse_scenario(text: str, source: str = "<scenario>") -> Scenario:
@@ -277,9 +345,25 @@ def parse_scenario(text: str, source: str = "<scenario>") -> Scenario:
         scenario = msgspec.convert(raw, Scenario)
     except msgspec.ValidationError as exc:
         field, reason = split_validation_error(exc)
+        found, value = _value_at(raw, field)
+        if found and not isinstance(value, dict | list) and repr(value) not in reason:
+            reason = f"{reason}, got {value!r}"
         raise ScenarioError(source, field, reason) from None
     _check(scenario, source)
     return scenario
+
+
+def _value_at(raw: object, field: str) -> tuple[bool, object]:
+    """The raw TOML value at a msgspec error path (``a.b[0].c``): ``(found, value)``."""
+    node = raw
+    for name, index in re.findall(r"([^.\[\]]+)|\[(\d+)\]", field):
+        if name and isinstance(node, dict) and name in node:
+            node = node[name]
+        elif index and isinstance(node, list) and int(index) < len(node):
+            node = node[int(index)]
+        else:
+            return False, None
+    return bool(field), node
 
 
 def load_scenario(path: str | Path | None = None) -> Scenario:

@@ -149,7 +149,7 @@ class ToyWorld:
 
         self.field = field
         self.sensors = {
-            v.id: ConcentrationSensor(scenario.sensor, scenario.world.seed, i)
+            v.id: ConcentrationSensor.for_vehicle(scenario, i)
             for i, v in enumerate(scenario.vehicles)
         }
         self.readings: dict[str, list[ConcentrationReading]] = {v: [] for v in autopilots}

@@ -34,6 +34,9 @@ from swarmbus.node import NodeContext, NodeRuntime
 from swarmbus.scenario import DEFAULT_SCENARIO, load_scenario
 from swarmbus.session import NetworkConfig
 
+PPM_PER_G_M3 = 1525.0  # made-up scale of the first vehicle's ppm
+RESISTANCE_OHM = 12_000.0
+
 
 def field_g_m3(x: float, y: float, z: float) -> float:
     """A smooth made-up field (not the plume model): a blob around (40, 0, 10)."""
@@ -87,6 +90,10 @@ def messages(vehicle: str, index: int, step: int, args: argparse.Namespace) -> l
                 available=True,
                 reported_g_m3=reported,
                 true_g_m3=true,
+                # the first vehicle's sensor also names a gas and has a resistance (made up)
+                gas="methane" if index == 0 else None,
+                reported_ppm=reported * PPM_PER_G_M3 if index == 0 else None,
+                resistance_ohm=RESISTANCE_OHM if index == 0 else None,
             )
         )
     return out

@@ -316,3 +316,42 @@ def test_casting_behaviour_ends_closer_to_the_source(run_factory: object, tmp_pa
     before = math.dist(start.position_enu_m, source)
     after = math.dist(sw.state("moth").position_enu_m, source)  # type: ignore[union-attr]
     assert after < 0.5 * before, (before, after)
+
+
+def test_mox_sensor_readings_reach_the_swarm_client_with_ppm_and_resistance(
+    run_factory: object, tmp_path: Path
+) -> None:
+    """A TGS2620 on a vehicle climbing into the plume: the Swarm client gets the gas, the ppm,
+    the raw resistance on GADEN's curve, the rise lag on the way up and the settled value."""
+    path = tmp_path / "mox.toml"
+    path.write_text(
+        HEADER.replace('[sensor]\npreset = "novak2018"', '[sensor]\npreset = "mox-tgs2620"') + ONE
+    )
+    load_scenario(path)
+    run = run_factory(path, ["uav1"])  # type: ignore[operator]
+    sw = run.sw
+    readings: list[ConcentrationReading] = []
+    sub = sw.subscribe(on_reading=readings.append)
+    take_off(run, "uav1", 10.0)
+    t_hold = sw.state("uav1").sim_time_s  # type: ignore[union-attr]
+    sw.wait_until(
+        lambda: bool(readings) and readings[-1].sim_time_s > t_hold + 20.0, 120.0, "20 s of hover"
+    )
+    sub.close()
+    run.alive()
+    ethanol_g_mol = 2 * 12.011 + 6 * 1.008 + 15.999
+    ppm_per_g_m3 = 8.314462618 * 298.15 / 101325.0 / ethanol_g_mol * 1e6
+    for r in readings:
+        assert r.available and r.gas == "ethanol"
+        assert r.reported_g_m3 is not None and r.resistance_ohm is not None
+        assert r.reported_ppm == pytest.approx(r.reported_g_m3 * ppm_per_g_m3, rel=1e-12)
+        if r.reported_ppm > 0.0:  # RS/R0 on the published curve, read back by the calibration
+            assert r.resistance_ohm / 3000.0 == pytest.approx(
+                62.32 * r.reported_ppm**-0.7155, rel=1e-9
+            )
+        else:
+            assert r.resistance_ohm == 21.0 * 3000.0  # clean air
+    climbing = [r for r in readings if r.sim_time_s < t_hold and r.true_g_m3 > 0.01]
+    assert any(r.reported_g_m3 < 0.9 * r.true_g_m3 for r in climbing), "no rise lag seen"
+    last = readings[-1]
+    assert last.reported_g_m3 == pytest.approx(last.true_g_m3, rel=0.03)

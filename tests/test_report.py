@@ -13,6 +13,7 @@ from matplotlib.image import imread
 from deploy.recording.report import READING_COLUMNS, TRACK_COLUMNS
 from swarmbus.session import Presence
 from tests.procs import Network, NodeProcs, keys_for, run_cli
+from tests.scripted_publisher import PPM_PER_G_M3, RESISTANCE_OHM
 from tests.test_recorder import run_publisher, start_recorder
 
 PNGS = ("top_view.png", "altitude.png", "concentration.png", "reported_vs_model.png")
@@ -64,6 +65,15 @@ def test_report_draws_every_png_and_documented_csvs(short_recording: Path, tmp_p
         with open(out / f"{vid}_readings.csv") as f:
             rows = list(csv.reader(f))
         assert rows[0] == list(READING_COLUMNS) and len(rows) == 1 + 30
+        column = {name: i for i, name in enumerate(rows[0])}
+        for row in rows[1:]:
+            ppm, ohm = row[column["reported_ppm"]], row[column["resistance_ohm"]]
+            if vid == "uav1":  # the scripted publisher's first vehicle reports both
+                reported = float(row[column["reported_g_m3"]])
+                assert float(ppm) == pytest.approx(reported * PPM_PER_G_M3, rel=1e-12)
+                assert float(ohm) == RESISTANCE_OHM
+            else:
+                assert ppm == "" and ohm == ""
     md = (out / "report.md").read_text()
     for name in PNGS:
         assert f"]({name})" in md

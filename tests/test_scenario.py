@@ -70,6 +70,19 @@ BROKEN: list[tuple[str, str]] = [
         "[sensor]\ndetection_limit_g_m3 = 0.5\nsaturation_g_m3 = 0.2\n" + GOOD_VEHICLE,
         "sensor.saturation_g_m3",
     ),
+    ('[sensor]\ngas = "unobtainium"\n' + GOOD_VEHICLE, "sensor.gas"),
+    ("[sensor]\nnoise_rel = -0.1\n" + GOOD_VEHICLE, "sensor.noise_rel"),
+    ("[sensor]\nresolution_g_m3 = -0.01\n" + GOOD_VEHICLE, "sensor.resolution_g_m3"),
+    ("[sensor]\nrise_time_constant_s = -1.0\n" + GOOD_VEHICLE, "sensor.rise_time_constant_s"),
+    ("[sensor]\ndecay_time_constant_s = inf\n" + GOOD_VEHICLE, "sensor.decay_time_constant_s"),
+    ('[sensor]\npreset = "tgs2620"\n' + GOOD_VEHICLE, "sensor.preset"),
+    ("[sensor.mox]\nr0_ohm = 3000.0\n" + GOOD_VEHICLE, "sensor.gas"),  # a curve needs a gas
+    (
+        '[sensor]\ngas = "ethanol"\n[sensor.mox]\nrs_r0_exponent = 0.7\n' + GOOD_VEHICLE,
+        "sensor.mox.rs_r0_exponent",
+    ),
+    ("[world]\ntemperature_k = 0.0\n" + GOOD_VEHICLE, "world.temperature_k"),
+    ("[world]\npressure_pa = -1.0\n" + GOOD_VEHICLE, "world.pressure_pa"),
     ('[network]\nconnect = ["http://x"]\n' + GOOD_VEHICLE, "network.connect[0]"),
     ("[gateway]\ngcs_port = 70000\n" + GOOD_VEHICLE, "gateway.gcs_port"),
     (
@@ -89,6 +102,38 @@ def test_broken_scenario_names_the_field(text: str, field: str) -> None:
     line = str(err.value)
     assert "\n" not in line
     assert line.startswith("broken.toml: ")
+
+
+@pytest.mark.parametrize(
+    ("text", "value"),
+    [
+        ('[sensor]\ngas = "unobtainium"\n', "'unobtainium'"),
+        ("[sensor]\nnoise_rel = -0.1\n", "-0.1"),
+        ("[world]\ntemperature_k = 0.0\n", "0.0"),
+        ('[sensor]\npreset = "tgs2620"\n', "'tgs2620'"),
+    ],
+)
+def test_sensor_errors_name_the_bad_value(text: str, value: str) -> None:
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario(text + GOOD_VEHICLE, "broken.toml")
+    assert value in err.value.reason
+
+
+def test_sensor_v2_fields_are_accepted() -> None:
+    sc = parse_scenario(
+        '[world]\ntemperature_k = 288.15\npressure_pa = 90000.0\n[sensor]\npreset = "mox-tgs2620"\n'
+        'gas = "ethanol"\nresolution_g_m3 = 0.001\nnoise_rel = 0.05\nperiod_ticks = 6\n'
+        "[sensor.mox]\nr0_ohm = 2500.0\n" + GOOD_VEHICLE
+    )
+    cfg = sc.sensor.resolved()
+    assert (cfg.rise_s, cfg.decay_s, cfg.resolution_g_m3, cfg.noise_rel) == (
+        2.96,
+        15.71,
+        0.001,
+        0.05,
+    )
+    assert cfg.mox is not None and cfg.mox.r0_ohm == 2500.0 and cfg.mox.clean_air_rs_r0 == 21.0
+    assert (sc.world.temperature_k, sc.world.pressure_pa) == (288.15, 90000.0)
 
 
 def many(n: int, sysids: dict[int, int] | None = None) -> str:
@@ -159,6 +204,28 @@ def test_cli_check_rejects_a_broken_copy_with_one_line(tmp_path: Path) -> None:
     assert "Traceback" not in res.stderr
 
 
+def test_cli_check_accepts_sensor_v2_and_rejects_a_bad_field_with_one_line(tmp_path: Path) -> None:
+    good = tmp_path / "mox.toml"
+    good.write_text(
+        DEFAULT_SCENARIO.read_text().replace(
+            'preset = "novak2018"      # detection', 'preset = "mox-tgs2620"  # detection'
+        )
+    )
+    assert 'preset = "mox-tgs2620"' in good.read_text()
+    res = run_cli(["scenario", "check", str(good)])
+    assert res.returncode == 0, res.stderr
+    bad = tmp_path / "bad.toml"
+    bad.write_text(
+        good.read_text().replace("period_ticks = 12", "period_ticks = 12\nnoise_rel = -1.0")
+    )
+    res = run_cli(["scenario", "check", str(bad)])
+    assert res.returncode != 0
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1, res.stderr
+    assert "sensor.noise_rel" in lines[0] and "-1.0" in lines[0]
+    assert "Traceback" not in res.stderr
+
+
 @pytest.mark.parametrize("kind", ["missing", "directory", "binary"])
 def test_cli_check_bad_files_one_line(tmp_path: Path, kind: str) -> None:
     target = tmp_path / "x.toml"
@@ -170,3 +237,12 @@ def test_cli_check_bad_files_one_line(tmp_path: Path, kind: str) -> None:
     assert res.returncode != 0
     assert len(res.stderr.strip().splitlines()) == 1, res.stderr
     assert "Traceback" not in res.stderr
+
+
+def test_sensor_snippets_in_the_docs_are_valid_scenarios() -> None:
+    docs = (Path(__file__).resolve().parent.parent / "docs" / "agents.md").read_text()
+    blocks = [b.split("```")[0] for b in docs.split("```toml\n")[1:]]
+    snippets = [b for b in blocks if "[sensor]" in b]
+    assert len(snippets) >= 2
+    for text in snippets:
+        parse_scenario(text + GOOD_VEHICLE, "docs/agents.md")

@@ -101,7 +101,17 @@ TRACK_FIELDS = (
     "alt_m",
     "on_ground",
 )
-READING_FIELDS = ("sim_time_s", "x_m", "y_m", "z_m", "available", "reported_g_m3", "true_g_m3")
+READING_FIELDS = (
+    "sim_time_s",
+    "x_m",
+    "y_m",
+    "z_m",
+    "available",
+    "reported_g_m3",
+    "true_g_m3",
+    "reported_ppm",
+    "resistance_ohm",
+)
 
 
 def _state_row(s: VehicleState) -> tuple[float, ...]:
@@ -127,6 +137,8 @@ def _reading_row(r: ConcentrationReading) -> tuple[float, ...]:
         float(r.available),
         value(r.reported_g_m3),
         value(r.true_g_m3),
+        value(r.reported_ppm),
+        value(r.resistance_ohm),
     )
 
 
