@@ -97,6 +97,7 @@ CLOCK_CLIENT_PREFIX = "clock-"
 # per granted tick, generous for a large swarm on a loaded machine.
 STEP_TIMEOUT_S = 60.0
 STEP_TIMEOUT_PER_TICK_S = 0.1
+ROUTE_RETRY_S = 0.05
 
 
 class SwarmError(Exception):
@@ -376,10 +377,15 @@ class Swarm:
         self.close()
 
     def close(self) -> None:
-        for sub in self._subs:
+        """Leave the bus (and free the clock, when this client held it); idempotent."""
+        subs, self._subs = self._subs, []
+        if not subs:
+            return
+        for sub in subs:
             sub.undeclare()
         if self._clock_token is not None:
             self._clock_token.undeclare()  # frees the clock for another client
+            self._clock_token = None
         self._presence.close()
         if self._own_session:
             self.session.close()
@@ -552,7 +558,14 @@ class Swarm:
             else (STEP_TIMEOUT_S + ticks * STEP_TIMEOUT_PER_TICK_S)
         )
         request = StepRequest(client=self._clock_name, ticks=ticks)
-        ok, err = _query(self.session, self.keys.clock_step(), request, wait_s)
+        first = time.monotonic()
+        while True:  # a session just opened may not know the route to clock/step yet
+            asked = time.monotonic()
+            ok, err = _query(self.session, self.keys.clock_step(), request, wait_s)
+            waited = time.monotonic() - asked
+            if ok or err or waited >= wait_s or asked - first >= self.command_timeout_s:
+                break
+            time.sleep(ROUTE_RETRY_S)
         if ok is None and self._last_step is None and self._clock_token is not None:
             self._clock_token.undeclare()
             self._clock_token = None
@@ -560,9 +573,10 @@ class Swarm:
             e = _error_reply(err)
             raise ClockError(f"step of world {self.keys.world!r} refused ({e.field}): {e.reason}")
         if ok is None:
+            when = f"within {wait_s:g} s" if waited >= wait_s else "(nobody serves clock/step)"
             raise ClockError(
-                f"no answer to a step of {ticks} tick(s) within {wait_s:g} s "
-                f"(is the physics of world {self.keys.world!r} running?)"
+                f"no answer to a step of {ticks} tick(s) {when}: "
+                f"is the physics of world {self.keys.world!r} running?"
             )
         reply = decode(ok, StepReply)
         self._last_step = reply
