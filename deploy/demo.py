@@ -6,6 +6,11 @@ shows a live table, waits (bounded) until every vehicle finished its mission and
 prints for five moments per vehicle the reported concentration next to the plume model at exactly
 that position, and writes ``summary.json`` (with a digest of the whole vehicle-state stream, so
 two runs can be compared from outside) into the run directory.
+
+It drives the stack through an :class:`agents.Swarm` client. By default the world runs on a
+stepped clock that this client steps: the commands go out while the world is paused and land on
+the next tick, and the end is checked every ``STEP_S`` of sim time, so two runs give the same
+digest. ``clock = "lockstep"`` or ``"realtime"`` flies free-running instead.
 """
 
 from __future__ import annotations
