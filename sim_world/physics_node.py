@@ -537,7 +537,7 @@ class PhysicsNode:
         with self._cond:
             done = self.clock_gate.reached(self.tick)
         if done is not None:
-            self._publish_clock(self.world.sim_time_s, force=True)
+            self._publish_clock(self.world.sim_time_s)  # where it pauses (health: as due)
             done.reply(
                 done.key_expr, encode(StepReply(tick=self.tick, sim_time_s=self.world.sim_time_s))
             )
