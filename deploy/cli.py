@@ -404,16 +404,29 @@ def export() -> None:
 @export.command("foxglove")
 @click.argument("src", metavar="IN")
 @click.argument("dst", metavar="OUT", type=click.Path(path_type=Path))
-def export_foxglove(src: str, dst: Path) -> None:
+@click.option(
+    "--layout",
+    "layout_file",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Also write a Foxglove layout for the recording's vehicles to this file.",
+)
+def export_foxglove(src: str, dst: Path, layout_file: Path | None) -> None:
     """Write OUT: recording IN with its Foxglove channels (3D scene, map, plots) made anew."""
     from deploy.foxglove.export import ExportError
     from deploy.foxglove.export import export_foxglove as run_export
+    from deploy.foxglove.layout import layout_json
     from deploy.recording.reader import RecordingError
 
     try:
         done = run_export(src, dst, lambda n: click.echo(f"  {n} messages", err=True))
     except (RecordingError, ExportError) as exc:
         fail(str(exc))
+    if layout_file is not None:
+        try:
+            layout_file.write_text(layout_json(done.vehicle_ids))
+        except OSError as exc:
+            fail(f"cannot write the layout {layout_file}: {exc.strerror or exc}")
     cut = " (IN was cut short: read to its last complete chunk)" if done.truncated else ""
     click.echo(
         f"wrote {dst}: {done.copied} messages copied, {done.foxglove} Foxglove messages{cut}",

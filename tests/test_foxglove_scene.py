@@ -4,12 +4,15 @@ the foxglove SDK declares."""
 
 from __future__ import annotations
 
+import itertools
+import json
 import math
 from collections import Counter
 from typing import Any
 
 import numpy as np
 
+from deploy.foxglove.layout import layout_json
 from deploy.foxglove.scene import (
     PLUME_TOPIC,
     TF_TOPIC,
@@ -25,6 +28,7 @@ from deploy.foxglove.scene import (
 from swarmbus.messages import ConcentrationReading, PlumeMesh, SimTick, VehicleState
 from swarmbus.scenario import load_scenario, resolve_scenario_path
 from tests.foxglove_decode import ChannelDecoder
+from tests.procs import REPO
 
 CONTROL_HZ = 120
 WALL0_NS = 1_800_000_000_123_456_789
@@ -67,9 +71,17 @@ def decoded(o: Out) -> Any:
     return _decoder.decode(cs.name, cs.encoding, cs.data, encode(o.message))
 
 
-def fly(scene: FoxgloveScene, seconds: float, ids: list[str], sim0_s: float = 0.0) -> list[Out]:
+def fly(
+    scene: FoxgloveScene,
+    seconds: float,
+    ids: list[str],
+    sim0_s: float = 0.0,
+    reading_lag_ticks: int = 2,
+) -> list[Out]:
     """Feed ``seconds`` of ticks (all states, then each state alone, as the bus carries them)
-    and a reading per vehicle every 12 ticks (10 Hz); received at wall time = sim time."""
+    and a reading per vehicle every 12 ticks (10 Hz), ``reading_lag_ticks`` late (the plume
+    answers in wall time: seconds of sim time in a fast lockstep); received at wall time = sim
+    time."""
     out: list[Out] = []
     k0 = round(sim0_s * CONTROL_HZ)
     for k in range(k0, k0 + round(seconds * CONTROL_HZ)):
@@ -83,8 +95,9 @@ def fly(scene: FoxgloveScene, seconds: float, ids: list[str], sim0_s: float = 0.
             SimTick(tick=k, sim_time_s=t, control_dt_s=1 / CONTROL_HZ, states=states),
             *states,
         ]
-        if k % 12 == 0:
-            msgs += [reading(v, t, 0.01 * (i + 1)) for i, v in enumerate(ids)]
+        if k % 12 == 1 and k >= reading_lag_ticks:
+            t_read = (k - reading_lag_ticks) / CONTROL_HZ
+            msgs += [reading(v, t_read, 0.01 * (i + 1)) for i, v in enumerate(ids)]
         for m in msgs:
             out += scene.feed(m, wall)
     return out
@@ -94,7 +107,8 @@ def test_rates_are_counted_in_simulation_time_and_stamps_are_anchored_sim_time()
     sc = load_scenario(resolve_scenario_path(None))
     ids = [v.id for v in sc.vehicles]
     scene = FoxgloveScene(sc)
-    out = fly(scene, 4.0, ids)
+    lag = 3 * CONTROL_HZ  # readings 3 s of sim time late
+    out = fly(scene, 4.0, ids, reading_lag_ticks=lag)
     per_topic = Counter(o.topic for o in out)
     # 4 s of simulation: /tf at 20 Hz, locations at 5 Hz, series at the sensor's 10 Hz,
     # trails at 1 Hz; the bodies once.
@@ -103,7 +117,8 @@ def test_rates_are_counted_in_simulation_time_and_stamps_are_anchored_sim_time()
     assert per_topic[VEHICLES_TOPIC] == 1
     for v in ids:
         assert per_topic[location_topic(v)] == 20
-        assert per_topic[concentration_topic(v)] == 40
+        # one per reading: ticks 1, 13, … below 480 that are at least ``lag``
+        assert per_topic[concentration_topic(v)] == len(range(1, 480, 12)) - lag // 12
     anchor = WALL0_NS + 7_000  # the first message's receive time minus its sim time (0)
     for o in out:
         if o.topic == TF_TOPIC:
@@ -112,6 +127,8 @@ def test_rates_are_counted_in_simulation_time_and_stamps_are_anchored_sim_time()
             assert stamped_ns == o.log_time_ns
             sim_s = (o.log_time_ns - anchor) / 1e9
             assert abs(sim_s * 20 - round(sim_s * 20)) < 1e-6, sim_s  # on the 20 Hz grid
+    stamps = [o.log_time_ns for o in out if o.topic == TF_TOPIC]
+    assert all(b - a == 50_000_000 for a, b in itertools.pairwise(stamps))
 
 
 def test_poses_locations_and_headings_are_those_of_the_states() -> None:
@@ -137,7 +154,9 @@ def test_readings_are_coloured_by_concentration_and_series_carry_nulls() -> None
     out = scene.feed(reading("uav_low", 0.0, low), WALL0_NS)
     out += scene.feed(reading("uav_high", 0.0, high), WALL0_NS)
     out += scene.feed(reading("uav_none", 0.0, None), WALL0_NS)
-    out += scene.feed(reading("uav_low", 0.2, low), WALL0_NS + 200_000_000)
+    states = [state(v, 24, 0.0, NORTH_XYZW) for v in ("uav_low", "uav_high", "uav_none")]
+    tick = SimTick(tick=24, sim_time_s=0.2, control_dt_s=1 / CONTROL_HZ, states=states)
+    out += scene.feed(tick, WALL0_NS + 200_000_000)  # the clock: the newest readings drawn
     spheres = {
         e.id: e.spheres[0] for o in out if o.topic == "/scene/readings" for e in decoded(o).entities
     }
@@ -192,3 +211,30 @@ def test_every_message_decodes_against_the_schema_the_sdk_declares() -> None:
         "foxglove.LocationFix",
         "plumeswarm.ConcentrationSample",
     }
+
+
+def test_the_layout_in_docs_is_the_one_made_for_the_bundled_scenario() -> None:
+    sc = load_scenario(resolve_scenario_path(None))
+    ids = [v.id for v in sc.vehicles]
+    text = (REPO / "docs" / "foxglove-layout.json").read_text()
+    assert text == layout_json(ids), "regenerate docs/foxglove-layout.json (see docs/recording.md)"
+    layout = json.loads(text)
+    panels = []
+    stack = [layout["content"]]
+    while stack:
+        node = stack.pop()
+        if node["type"] == "panel":
+            panels.append(node)
+        else:
+            stack += [item["content"] for item in node["items"]]
+    kinds = Counter(p["panelType"] for p in panels)
+    assert kinds == {"ThreeDee": 1, "Map": 1, "Plot": len(ids)}
+    plotted = {
+        s["value"].split(".")[0] for p in panels if p["panelType"] == "Plot"
+        for s in p["config"]["paths"]
+    }  # fmt: skip
+    assert plotted == {concentration_topic(v) for v in ids}
+    three_d = next(p for p in panels if p["panelType"] == "ThreeDee")
+    assert set(three_d["config"]["topics"]) == {
+        VEHICLES_TOPIC, TRAILS_TOPIC, PLUME_TOPIC, "/scene/readings"
+    }  # fmt: skip

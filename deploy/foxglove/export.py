@@ -34,6 +34,7 @@ class Exported:
     copied: int  # messages of IN
     foxglove: int  # Foxglove messages written
     truncated: bool  # IN was cut short (read to its last complete chunk)
+    vehicle_ids: list[str]  # the vehicles seen, in order
 
 
 def export_foxglove(src: str | Path, dst: Path, progress: Progress | None = None) -> Exported:
@@ -71,4 +72,9 @@ def export_foxglove(src: str | Path, dst: Path, progress: Progress | None = None
         if isinstance(exc, RecordingError):
             raise
         raise ExportError(f"cannot write {dst}: {exc.strerror or exc}") from None
-    return Exported(copied=copied, foxglove=foxglove, truncated=recording.truncated)
+    return Exported(
+        copied=copied,
+        foxglove=foxglove,
+        truncated=recording.truncated,
+        vehicle_ids=scene.vehicle_ids,
+    )

@@ -51,6 +51,7 @@ TRAIL_MAX_POINTS = 600  # ... the last 10 minutes of it
 VEHICLE_SCALE = 4.0  # drawn size (as the meshcat viewer): a 0.5 m quadcopter vanishes at 60 m
 NO_READING_RGB = 0x9E9E9E
 DEFAULT_VEHICLE_TYPE = "iris"
+RESTART_S = 1.0  # sim time this far back is a new start (a replay, a restored checkpoint)
 _EPS_S = 1e-9
 
 
@@ -199,6 +200,11 @@ class FoxgloveScene:
             for v in scenario.vehicles:
                 self._vehicle(v.id, v.type)
 
+    @property
+    def vehicle_ids(self) -> list[str]:
+        """The vehicles of the scenario, then those seen on the bus, in order."""
+        return list(self._vehicles)
+
     # ------------------------------------------------------------------ input
     def feed(self, message: object, log_time_ns: int) -> list[Out]:
         """The Foxglove messages due after ``message`` (received at ``log_time_ns``)."""
@@ -220,7 +226,10 @@ class FoxgloveScene:
     def _on_reading(self, reading: ConcentrationReading, log_time_ns: int) -> list[Out]:
         v = self._vehicle(reading.vehicle_id)
         v.reading = reading
-        out = self._advance(reading.sim_time_s, log_time_ns)
+        # A reading is published once the plume answered, which in a lockstep faster than real
+        # time is many ticks later: only the world's states move the clock.
+        clock_s = reading.sim_time_s if self._anchor_ns is None else None
+        out = self._advance(clock_s, log_time_ns)
         if v.series_every.due(reading.sim_time_s):
             x, y, z = reading.position_enu_m
             sample = ConcentrationSample(
@@ -250,8 +259,12 @@ class FoxgloveScene:
         if t_s is not None:
             if self._anchor_ns is None:
                 self._anchor_ns = log_time_ns - round(t_s * 1e9)
-            elif t_s == self._now_s and not (self._vehicles_pending or self._plume_pending):
-                return []  # this instant is done (a tick's states come once more, one by one)
+            elif self._now_s - RESTART_S < t_s <= self._now_s:
+                # Not later than what is drawn: a tick's states once more, one by one.
+                if not (self._vehicles_pending or self._plume_pending):
+                    return []
+                t_s = None
+        if t_s is not None:
             self._now_s = t_s
         if self._anchor_ns is None:
             return []  # nothing to stamp with yet: kept until the first sim time
@@ -264,7 +277,7 @@ class FoxgloveScene:
         if t_s is None:
             return out
         self._sample_trails(t_s)
-        if self._tf.due(t_s):
+        if any(v.state is not None for v in self._vehicles.values()) and self._tf.due(t_s):
             out.append(Out(TF_TOPIC, self.transforms(now_ns), now_ns))
         for vid, v in self._vehicles.items():
             if v.state is not None and v.location_every.due(t_s):
