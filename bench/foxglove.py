@@ -19,7 +19,8 @@ from pathlib import Path
 from typing import Any
 
 from bench.recorder import STATE_HZ, state
-from deploy.foxglove.scene import FoxgloveScene
+from deploy.foxglove.scene import TRAIL_MAX_POINTS, TRAILS_PERIOD_S, FoxgloveScene
+from deploy.foxglove.scene import encode as encode_message
 from deploy.recording.sink import McapSink
 from swarmbus.codec import encode
 from swarmbus.keys import Keys
@@ -80,6 +81,20 @@ def write(data: list[tuple[str, bytes]], seconds: float, foxglove: bool) -> dict
     }
 
 
+def full_trails(vehicles: int, repeats: int = 5) -> dict[str, float]:
+    """The trail message once every trail is at its longest (the worst case of a long run)."""
+    scene = FoxgloveScene(None)
+    for k in range(TRAIL_MAX_POINTS + 1):
+        states = [state(v, k * STATE_HZ) for v in range(vehicles)]
+        scene.feed(SimTick(tick=k, sim_time_s=float(k), control_dt_s=1.0, states=states), 0)
+    t0 = time.perf_counter()
+    for _ in range(repeats):
+        update = scene.trails_update(0)
+        assert update is not None
+        size = len(encode_message(update))
+    return {"ms": (time.perf_counter() - t0) / repeats * 1e3, "bytes": size}
+
+
 def main() -> None:
     p = argparse.ArgumentParser()
     p.add_argument("--vehicles", type=int, default=32)
@@ -95,7 +110,14 @@ def main() -> None:
             f"{'on' if r['foxglove'] else 'off':>9} {r['sim_s_per_wall_s']:>15.2f} "
             f"{r['cpu_s_per_sim_s']:>14.3f} {r['mb_per_sim_minute']:>13.1f}"
         )
-    args.out.write_text(json.dumps({"vehicles": args.vehicles, "rows": rows}, indent=2))
+    trails = full_trails(args.vehicles)
+    print(
+        f"full trails ({args.vehicles} × {TRAIL_MAX_POINTS} points, every "
+        f"{TRAILS_PERIOD_S:g} s of sim): {trails['ms']:.0f} ms to build and encode, "
+        f"{trails['bytes'] / 1e6:.2f} MB"
+    )
+    result = {"vehicles": args.vehicles, "rows": rows, "full_trails": trails}
+    args.out.write_text(json.dumps(result, indent=2))
 
 
 if __name__ == "__main__":

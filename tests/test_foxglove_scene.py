@@ -111,9 +111,9 @@ def test_rates_are_counted_in_simulation_time_and_stamps_are_anchored_sim_time()
     out = fly(scene, 4.0, ids, reading_lag_ticks=lag)
     per_topic = Counter(o.topic for o in out)
     # 4 s of simulation: /tf at 20 Hz, locations at 5 Hz, series at the sensor's 10 Hz,
-    # trails at 1 Hz; the bodies once.
+    # trails at 0.5 Hz; the bodies once.
     assert per_topic[TF_TOPIC] == 80
-    assert per_topic[TRAILS_TOPIC] == 4
+    assert per_topic[TRAILS_TOPIC] == 1  # at 2 s (at 0 s no trail has two points yet)
     assert per_topic[VEHICLES_TOPIC] == 1
     for v in ids:
         assert per_topic[location_topic(v)] == 20

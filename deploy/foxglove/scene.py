@@ -44,9 +44,9 @@ TF_PERIOD_S = 0.05  # 20 Hz: every vehicle's pose in one FrameTransforms
 LOCATION_PERIOD_S = 0.2  # 5 Hz per vehicle
 READINGS_PERIOD_S = 0.1  # 10 Hz: the newest reading of every vehicle
 SERIES_PERIOD_S = 0.05  # up to 20 Hz per vehicle (the sensor's own rate when lower)
-TRAILS_PERIOD_S = 1.0  # 1 Hz: every trail, whole
+TRAILS_PERIOD_S = 2.0  # 0.5 Hz: every trail, whole (a seek shows the newest message only)
 TRAIL_POINT_PERIOD_S = 1.0  # a trail point per vehicle per sim second ...
-TRAIL_MAX_POINTS = 600  # ... the last 10 minutes of it
+TRAIL_MAX_POINTS = 300  # ... the last 5 minutes of it (a full 32-vehicle update: 9600 points)
 
 VEHICLE_SCALE = 4.0  # drawn size (as the meshcat viewer): a 0.5 m quadcopter vanishes at 60 m
 NO_READING_RGB = 0x9E9E9E
@@ -287,7 +287,9 @@ class FoxgloveScene:
             if update is not None:
                 out.append(Out(READINGS_TOPIC, update, now_ns))
         if self._trails.due(t_s):
-            out.append(Out(TRAILS_TOPIC, self.trails_update(now_ns), now_ns))
+            trails = self.trails_update(now_ns)
+            if trails is not None:
+                out.append(Out(TRAILS_TOPIC, trails, now_ns))
         return out
 
     def static_messages(self) -> list[Out]:
@@ -402,7 +404,7 @@ class FoxgloveScene:
             )
         return fm.SceneUpdate(entities=entities) if entities else None
 
-    def trails_update(self, now_ns: int) -> fm.SceneUpdate:
+    def trails_update(self, now_ns: int) -> fm.SceneUpdate | None:
         """Each vehicle's path, coloured by the concentration it read there (grey: none)."""
         ts = stamp(now_ns)
         entities = []
@@ -420,7 +422,7 @@ class FoxgloveScene:
             entities.append(
                 fm.SceneEntity(timestamp=ts, frame_id=WORLD_FRAME, id=f"trail/{vid}", lines=[line])
             )
-        return fm.SceneUpdate(entities=entities)
+        return fm.SceneUpdate(entities=entities) if entities else None
 
     # ------------------------------------------------------------------ plume
     def plume_update(self, now_ns: int) -> fm.SceneUpdate:
