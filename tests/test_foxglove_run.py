@@ -22,10 +22,10 @@ import pytest
 from mcap.reader import make_reader
 from websockets.sync.client import connect
 
-from deploy.demo import start_missions
+from deploy.demo import command_until_answered
 from deploy.foxglove.layout import layout_json
 from deploy.recording.reader import Recording
-from swarmbus.messages import SimTick
+from swarmbus.messages import Arm, MissionStart, MissionUpload, SimTick
 from swarmbus.scenario import load_scenario, resolve_scenario_path
 from swarmbus.session import NetworkConfig, free_tcp_port, open_session
 from tests.foxglove_decode import ChannelDecoder
@@ -124,7 +124,10 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Run]:
         with open_session(net) as session:
 
             def fly() -> None:
-                start_missions(session, keys_for(), sc, time.monotonic() + 60.0)
+                deadline = time.monotonic() + 60.0
+                for v in sc.vehicles:
+                    for cmd in (MissionUpload(items=v.mission), Arm(), MissionStart()):
+                        command_until_answered(session, keys_for(), v.id, cmd, deadline)
 
             live = watch_live(port, ids, fly)
     yield Run(live=live, recording=up.run / "recording.mcap")
