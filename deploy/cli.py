@@ -202,7 +202,7 @@ def node(
     "--foxglove-port",
     type=click.IntRange(0, 65535),
     default=None,
-    help="Port of the live Foxglove server (default 8765; 0: any free port).",
+    help="Port of the live Foxglove server (implies --foxglove; default 8765, 0: any free).",
 )
 @click.option("--out", type=click.Path(path_type=Path), default=None, help="Run directory.")
 @click.option("--connect", multiple=True, help="Router endpoint (default: the scenario's).")
@@ -261,7 +261,7 @@ def up(
         roles=tuple(r.strip() for r in roles.split(",") if r.strip()) if roles else None,
         router=not no_router,
         vehicles_per_process=vehicles_per_process,
-        foxglove=foxglove_live,
+        foxglove=foxglove_live or foxglove_port is not None,
         node_options={"foxglove": (f"port={foxglove_port}",)} if foxglove_port is not None else {},
     )
     if deployment is not None or host_name is not None:

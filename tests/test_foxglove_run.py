@@ -24,6 +24,7 @@ from websockets.sync.client import connect
 
 from deploy.demo import command_until_answered
 from deploy.foxglove.layout import layout_json
+from deploy.launcher import LaunchOptions, plan
 from deploy.recording.reader import Recording
 from swarmbus.messages import Arm, MissionStart, MissionUpload, SimTick
 from swarmbus.scenario import load_scenario, resolve_scenario_path
@@ -228,3 +229,15 @@ def test_a_bad_option_is_one_clear_error() -> None:
     res = run_cli(["node", "foxglove", "--set", "port=http"], 60.0)
     assert res.returncode == 2
     assert "option port: 'http' is not a number" in res.stderr and "Traceback" not in res.stderr
+
+
+def test_up_runs_the_foxglove_role_only_when_asked() -> None:
+    path = resolve_scenario_path(None)
+    sc = load_scenario(path)
+    off = plan(sc, LaunchOptions(scenario_path=path, headless=True))
+    assert "foxglove" not in {s.role for s in off}
+    on = plan(sc, LaunchOptions(scenario_path=path, foxglove=True, node_options={
+        "foxglove": ("port=9876",)
+    }))  # fmt: skip
+    spec = next(s for s in on if s.role == "foxglove")
+    assert spec.argv[-2:] == ("--set", "port=9876") and not spec.critical
