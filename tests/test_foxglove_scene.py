@@ -8,10 +8,14 @@ import itertools
 import json
 import math
 from collections import Counter
+from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pytest
+from mcap.reader import make_reader
 
+from deploy.foxglove.export import ExportError, export_foxglove
 from deploy.foxglove.layout import layout_json
 from deploy.foxglove.scene import (
     PLUME_TOPIC,
@@ -25,6 +29,9 @@ from deploy.foxglove.scene import (
     encode,
     location_topic,
 )
+from deploy.recording.sink import McapSink
+from swarmbus import codec
+from swarmbus.keys import Keys
 from swarmbus.messages import ConcentrationReading, PlumeMesh, SimTick, VehicleState
 from swarmbus.scenario import load_scenario, resolve_scenario_path
 from tests.foxglove_decode import ChannelDecoder
@@ -238,3 +245,41 @@ def test_the_layout_in_docs_is_the_one_made_for_the_bundled_scenario() -> None:
     assert set(three_d["config"]["topics"]) == {
         VEHICLES_TOPIC, TRAILS_TOPIC, PLUME_TOPIC, "/scene/readings"
     }  # fmt: skip
+
+
+def write_segment(path: Path, ticks: range, wall0_ns: int, summary: bool) -> None:
+    sink = McapSink(path, metadata={"world": "default"})
+    keys = Keys("default")
+    for k in ticks:
+        states = [state("uav1", k, 0.1 * k, NORTH_XYZW)]
+        tick = SimTick(
+            tick=k, sim_time_s=k / CONTROL_HZ, control_dt_s=1 / CONTROL_HZ, states=states
+        )
+        sink.write_bus(keys.tick(), codec.encode(tick), wall0_ns + k * 1_000_000)
+    sink.close({"received_total": str(len(ticks))} if summary else None)
+
+
+def test_export_makes_each_segment_its_own_scene_as_the_recorder_did(tmp_path: Path) -> None:
+    # Two segments (a recorder restarted): the second's ticks are received 5 s later.
+    write_segment(tmp_path / "rec.mcap", range(0, 120), WALL0_NS, summary=True)
+    later_ns = WALL0_NS + 5_000_000_000
+    write_segment(tmp_path / "rec.1.mcap", range(300, 420), later_ns, summary=True)
+    out = tmp_path / "out.mcap"
+    done = export_foxglove(tmp_path / "rec.mcap", out)
+    assert done.copied == 240 and done.vehicle_ids == ["uav1"] and not done.truncated
+    with open(out, "rb") as f:
+        reader = make_reader(f)
+        tf = [m.log_time for _, c, m in reader.iter_messages() if c.topic == TF_TOPIC]
+        summary = reader.get_summary()
+        assert summary is not None
+        meta = {r.name: r.metadata for r in reader.iter_metadata()}
+    # Each segment's first /tf is stamped with the receive time of its first tick (its anchor).
+    assert WALL0_NS in tf and later_ns + 300 * 1_000_000 in tf
+    assert len(tf) == 2 * 20  # 1 s of sim per segment at 20 Hz
+    assert meta["plumeswarm.summary"] == {"received_total": "120"}
+
+
+def test_export_refuses_to_overwrite_its_input(tmp_path: Path) -> None:
+    write_segment(tmp_path / "rec.mcap", range(0, 12), WALL0_NS, summary=True)
+    with pytest.raises(ExportError, match="is the recording being read"):
+        export_foxglove(tmp_path / "rec.mcap", tmp_path / "rec.mcap")

@@ -45,27 +45,38 @@ def export_foxglove(src: str | Path, dst: Path, progress: Progress | None = None
         raise ExportError(f"{dst}: is the recording being read; choose another output file")
     if dst.is_dir():
         raise ExportError(f"{dst}: is a directory")
-    scene = FoxgloveScene(scenario_of(recording))
+    scenario = scenario_of(recording)
     metadata = recording.metadata.get("plumeswarm")
     try:
         sink = McapSink(dst, metadata=metadata)
     except OSError as exc:
         raise ExportError(f"cannot write {dst}: {exc.strerror or exc}") from None
     copied = foxglove = 0
+    truncated = False
+    vehicle_ids: dict[str, None] = {}
+    summary: dict[str, str] | None = None
     try:
-        for rec in recording.messages():
-            if rec.origin == sch.FOXGLOVE_ORIGIN:
-                continue  # made again below, from the bus messages
-            message = sink.write_recorded(rec)
-            copied += 1
-            if message is not None:
-                for out in scene.feed(message, rec.log_time_ns):
-                    sink.write_foxglove(out)
-                    foxglove += 1
-            sink.maybe_close_chunk()
-            if progress is not None and copied % 10_000 == 0:
-                progress(copied)
-        sink.close(recording.metadata.get("plumeswarm.summary"))
+        # Each segment has its own scene, as the recorder that wrote it had.
+        for path in recording.segments:
+            segment = Recording(path, segments=[path])
+            scene = FoxgloveScene(scenario)
+            for rec in segment.messages():
+                if rec.origin == sch.FOXGLOVE_ORIGIN:
+                    continue  # made again below, from the bus messages
+                message = sink.write_recorded(rec)
+                copied += 1
+                if message is not None:
+                    for out in scene.feed(message, rec.log_time_ns):
+                        sink.write_foxglove(out)
+                        foxglove += 1
+                sink.maybe_close_chunk()
+                if progress is not None and copied % 10_000 == 0:
+                    progress(copied)
+            truncated |= segment.truncated
+            if path == recording.segments[0]:  # its summary was read with its last record
+                summary = segment.metadata.get("plumeswarm.summary")
+            vehicle_ids.update(dict.fromkeys(scene.vehicle_ids))
+        sink.close(summary)
     except (RecordingError, OSError) as exc:
         sink.close()
         os.unlink(dst)
@@ -75,6 +86,6 @@ def export_foxglove(src: str | Path, dst: Path, progress: Progress | None = None
     return Exported(
         copied=copied,
         foxglove=foxglove,
-        truncated=recording.truncated,
-        vehicle_ids=scene.vehicle_ids,
+        truncated=truncated,
+        vehicle_ids=list(vehicle_ids),
     )
