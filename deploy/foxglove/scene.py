@@ -169,8 +169,6 @@ class _Vehicle:
     state: VehicleState | None = None
     reading: ConcentrationReading | None = None
     trail: list[tuple[float, float, float, int]] = field(default_factory=list)  # x, y, z, rgb
-    trail_every: _Every = field(default_factory=lambda: _Every(TRAIL_POINT_PERIOD_S))
-    location_every: _Every = field(default_factory=lambda: _Every(LOCATION_PERIOD_S))
     series_every: _Every = field(default_factory=lambda: _Every(SERIES_PERIOD_S))
 
     @property
@@ -190,6 +188,9 @@ class FoxgloveScene:
         self._tf = _Every(TF_PERIOD_S)
         self._readings = _Every(READINGS_PERIOD_S)
         self._trails = _Every(TRAILS_PERIOD_S)
+        self._trail_points = _Every(TRAIL_POINT_PERIOD_S)
+        self._locations = _Every(LOCATION_PERIOD_S)
+        self._has_state = False
         self._plume_meshes: dict[float, PlumeMesh] = {}
         self._plume_pending = False
         self._vehicles_pending = False
@@ -217,10 +218,12 @@ class FoxgloveScene:
     def _on_tick(self, tick: SimTick, log_time_ns: int) -> list[Out]:
         for st in tick.states:
             self._vehicle(st.vehicle_id).state = st
+        self._has_state = self._has_state or bool(tick.states)
         return self._advance(tick.sim_time_s, log_time_ns)
 
     def _on_state(self, state: VehicleState, log_time_ns: int) -> list[Out]:
         self._vehicle(state.vehicle_id).state = state
+        self._has_state = True
         return self._advance(state.sim_time_s, log_time_ns)
 
     def _on_reading(self, reading: ConcentrationReading, log_time_ns: int) -> list[Out]:
@@ -276,12 +279,15 @@ class FoxgloveScene:
             out.append(Out(PLUME_TOPIC, self.plume_update(now_ns), now_ns))
         if t_s is None:
             return out
-        self._sample_trails(t_s)
-        if any(v.state is not None for v in self._vehicles.values()) and self._tf.due(t_s):
+        # Scene-wide periods: nothing is done per vehicle on a tick where nothing is due.
+        if self._trail_points.due(t_s):
+            self._sample_trails()
+        if self._has_state and self._tf.due(t_s):
             out.append(Out(TF_TOPIC, self.transforms(now_ns), now_ns))
-        for vid, v in self._vehicles.items():
-            if v.state is not None and v.location_every.due(t_s):
-                out.append(Out(location_topic(vid), self.location(v, v.state, now_ns), now_ns))
+        if self._locations.due(t_s):
+            for vid, v in self._vehicles.items():
+                if v.state is not None:
+                    out.append(Out(location_topic(vid), self.location(v, v.state, now_ns), now_ns))
         if self._readings.due(t_s):
             update = self.readings_update(now_ns)
             if update is not None:
@@ -310,10 +316,10 @@ class FoxgloveScene:
             self._vehicles_pending = True
         return v
 
-    def _sample_trails(self, t_s: float) -> None:
+    def _sample_trails(self) -> None:
         for v in self._vehicles.values():
             st = v.state
-            if st is None or not v.trail_every.due(t_s):
+            if st is None:
                 continue
             v.trail.append((*st.position_enu_m, self._reading_rgb(v.reading)))
             del v.trail[:-TRAIL_MAX_POINTS]
