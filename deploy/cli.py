@@ -192,6 +192,18 @@ def node(
 @SCENARIO_OPT
 @click.option("--headless", is_flag=True, help="No viewer.")
 @click.option("--record", is_flag=True, help="Also run the recorder (MCAP in the run directory).")
+@click.option(
+    "--foxglove",
+    "foxglove_live",
+    is_flag=True,
+    help="Also serve the run live to Foxglove (WebSocket on 127.0.0.1).",
+)
+@click.option(
+    "--foxglove-port",
+    type=click.IntRange(0, 65535),
+    default=None,
+    help="Port of the live Foxglove server (implies --foxglove; default 8765, 0: any free).",
+)
 @click.option("--out", type=click.Path(path_type=Path), default=None, help="Run directory.")
 @click.option("--connect", multiple=True, help="Router endpoint (default: the scenario's).")
 @click.option("--listen", multiple=True, help="Endpoint every node listens on.")
@@ -216,6 +228,8 @@ def up(
     scenario: str | None,
     headless: bool,
     record: bool,
+    foxglove_live: bool,
+    foxglove_port: int | None,
     out: Path | None,
     connect: tuple[str, ...],
     listen: tuple[str, ...],
@@ -261,6 +275,8 @@ def up(
         roles=tuple(r.strip() for r in roles.split(",") if r.strip()) if roles else None,
         router=not no_router,
         vehicles_per_process=vehicles_per_process,
+        foxglove=foxglove_live or foxglove_port is not None,
+        node_options={"foxglove": (f"port={foxglove_port}",)} if foxglove_port is not None else {},
     )
     if deployment is not None or host_name is not None:
         try:
@@ -402,6 +418,44 @@ def report(file: str, out: Path) -> None:
     from deploy.recording import commands
 
     sys.exit(commands.report(file, out))
+
+
+@cli.group()
+def export() -> None:
+    """Convert a recording for other tools."""
+
+
+@export.command("foxglove")
+@click.argument("src", metavar="IN")
+@click.argument("dst", metavar="OUT", type=click.Path(path_type=Path))
+@click.option(
+    "--layout",
+    "layout_file",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="Also write a Foxglove layout for the recording's vehicles to this file.",
+)
+def export_foxglove(src: str, dst: Path, layout_file: Path | None) -> None:
+    """Write OUT: recording IN with its Foxglove channels (3D scene, map, plots) made anew."""
+    from deploy.foxglove.export import ExportError
+    from deploy.foxglove.export import export_foxglove as run_export
+    from deploy.foxglove.layout import layout_json
+    from deploy.recording.reader import RecordingError
+
+    try:
+        done = run_export(src, dst, lambda n: click.echo(f"  {n} messages", err=True))
+    except (RecordingError, ExportError) as exc:
+        fail(str(exc))
+    if layout_file is not None:
+        try:
+            layout_file.write_text(layout_json(done.vehicle_ids))
+        except OSError as exc:
+            fail(f"cannot write the layout {layout_file}: {exc.strerror or exc}")
+    cut = " (IN was cut short: read to its last complete chunk)" if done.truncated else ""
+    click.echo(
+        f"wrote {dst}: {done.copied} messages copied, {done.foxglove} Foxglove messages{cut}",
+        err=True,
+    )
 
 
 @cli.group()

@@ -43,12 +43,22 @@ from swarmbus.session import DEFAULT_ROUTER, NetworkConfig, open_session
 
 log = logging.getLogger(__name__)
 
-ALL_ROLES = ("router", "recorder", "plume", "physics", "autopilot", "gateway", "viewer")
+ALL_ROLES = (
+    "router",
+    "recorder",
+    "plume",
+    "physics",
+    "autopilot",
+    "gateway",
+    "viewer",
+    "foxglove",
+)
 # Stop order: the world and its edges first (so no autopilot is "dropped" from a lockstep that
 # is still running), then the autopilots and the plume, then the recorder, the router last.
 STOP_STAGE = {
     "gateway": 0,
     "viewer": 0,
+    "foxglove": 0,
     "physics": 0,
     "autopilot": 1,
     "plume": 1,
@@ -63,8 +73,9 @@ RESTART = {
     "autopilot": RestartPolicy(RestartMode.ON_FAILURE, max_restarts=3),
     "gateway": RestartPolicy(RestartMode.ON_FAILURE, max_restarts=3),
     "viewer": RestartPolicy(RestartMode.ON_FAILURE, max_restarts=2),
+    "foxglove": RestartPolicy(RestartMode.ON_FAILURE, max_restarts=2),
 }
-NOT_CRITICAL = {"viewer"}
+NOT_CRITICAL = {"viewer", "foxglove"}
 
 
 class LaunchError(RuntimeError):
@@ -76,6 +87,7 @@ class LaunchOptions:
     scenario_path: Path
     headless: bool = False
     record: bool = False
+    foxglove: bool = False  # also the live Foxglove WebSocket server (role ``foxglove``)
     run_dir: Path = Path("runs")
     connect: tuple[str, ...] = ()  # the router endpoint(s); default: the scenario's
     listen: tuple[str, ...] = ()  # what each node listens on; default: loopback, any port
@@ -105,6 +117,8 @@ def selected_roles(opts: LaunchOptions) -> list[str]:
         roles.remove("viewer")
     if not opts.record and "recorder" in roles and opts.roles is None:
         roles.remove("recorder")
+    if not opts.foxglove and "foxglove" in roles and opts.roles is None:
+        roles.remove("foxglove")
     if not opts.router and "router" in roles:
         roles.remove("router")
     return [r for r in ALL_ROLES if r in roles]

@@ -22,6 +22,7 @@ ROLES: dict[str, tuple[str, str]] = {
     "gateway": ("gcs_bridge.gateway:main", "#6"),
     "viewer": ("sim_world.viewer:main", "#7"),
     "recorder": ("deploy.recorder:main", "#8"),
+    "foxglove": ("deploy.foxglove.live:main", "#18"),
 }
 
 

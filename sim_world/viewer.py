@@ -31,14 +31,22 @@ import meshcat
 import meshcat.geometry as mg
 import meshcat.transformations as mtf
 import numpy as np
-import zenoh
 from meshcat.servers.zmqserver import ZMQWebSocketBridge
 
-from swarmbus.codec import MessageError, decode, encode
-from swarmbus.keys import KeyNameError, Keys
+from sim_world.view_feed import (
+    PALETTE,
+    PLUME_COLOURS,
+    READING_BINS,
+    Feed,
+    MeshFetcher,
+    default_levels,
+    isosurface_queries,
+    reading_colour,
+    scene_bounds,
+)
+from swarmbus.codec import MessageError, decode
 from swarmbus.messages import (
     ConcentrationReading,
-    ErrorReply,
     PlumeMesh,
     PlumeMeshQuery,
     SimTick,
@@ -51,24 +59,8 @@ from swarmbus.vehicle_types import load_vehicle_type
 
 log = logging.getLogger(__name__)
 
-# Vehicle colours (Tableau 10), one per vehicle in scenario order.
-PALETTE = (
-    0x1F77B4,
-    0xFF7F0E,
-    0x2CA02C,
-    0xD62728,
-    0x9467BD,
-    0x8C564B,
-    0xE377C2,
-    0x7F7F7F,
-    0xBCBD22,
-    0x17BECF,
-)
-PLUME_COLOURS = (0x6A3D9A, 0xE31A1C, 0xFFD92F)
 TRAIL_PERIOD_S = 0.5
 TRAIL_MAX_POINTS = 2000
-MESH_RETRY_S = 2.0
-READING_BINS = 16
 WORLD_ROOT = "/world"
 HEALTH_PERIOD_S = 1.0
 
@@ -97,43 +89,12 @@ class ViewerOptions:
         )
 
 
-def default_levels(scenario: Scenario) -> tuple[float, ...]:
-    """The sensor window's edges and its middle (geometric), else a decade of levels."""
-    sensor = scenario.sensor.resolved()
-    low = sensor.detection_limit_g_m3 or 0.01
-    high = sensor.saturation_g_m3 or low * 20.0
-    return (low, math.sqrt(low * high), high)
-
-
-def scene_bounds(
-    scenario: Scenario,
-) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
-    """A box around sources, spawns and mission items (ENU m), padded."""
-    pts = [(s.x_m, s.y_m, s.release_height_m) for s in scenario.plume.sources]
-    for v in scenario.vehicles:
-        pts.append(v.spawn_enu_m)
-        pts += [(m.x, m.y, m.z) for m in v.mission if m.frame == "enu"]
-    arr = np.array(pts, dtype=float)
-    lo = arr.min(axis=0) - np.array([10.0, 15.0, 0.0])
-    hi = arr.max(axis=0) + np.array([20.0, 15.0, 15.0])
-    lo[2] = 0.0
-    return (float(lo[0]), float(lo[1]), float(lo[2])), (float(hi[0]), float(hi[1]), float(hi[2]))
-
-
 def pose_matrix(position: Sequence[float], xyzw: Sequence[float], scale: float = 1.0) -> Any:
     x, y, z, w = xyzw
     m = mtf.quaternion_matrix([w, x, y, z])
     m[:3, :3] *= scale
     m[:3, 3] = position
     return m
-
-
-def reading_colour(value: float, full_scale: float) -> int:
-    """Blue (nothing) → red (saturated), in ``READING_BINS`` steps."""
-    t = 0.0 if full_scale <= 0 else min(1.0, max(0.0, value / full_scale))
-    t = round(t * (READING_BINS - 1)) / (READING_BINS - 1)
-    r, g, b = int(255 * t), int(80 * (1 - abs(2 * t - 1))), int(255 * (1 - t))
-    return (r << 16) | (g << 8) | b
 
 
 class LoopbackBridge(ZMQWebSocketBridge):  # type: ignore[misc]
@@ -192,43 +153,6 @@ class MeshcatServer:
         if bridge is not None:
             bridge.ioloop.add_callback(bridge.ioloop.stop)
         self._thread.join(timeout=5.0)
-
-
-class Feed:
-    """Newest payloads from the bus; callbacks only store bytes."""
-
-    def __init__(self, session: zenoh.Session, keys: Keys) -> None:
-        self.keys = keys
-        self._lock = threading.Lock()
-        self._tick: bytes | None = None
-        self._readings: dict[str, bytes] = {}
-        self._subs = [
-            session.declare_subscriber(keys.tick(), self._on_tick),
-            session.declare_subscriber(keys.all_vehicle_concentration(), self._on_reading),
-        ]
-
-    def _on_tick(self, sample: zenoh.Sample) -> None:
-        with self._lock:
-            self._tick = sample.payload.to_bytes()
-
-    def _on_reading(self, sample: zenoh.Sample) -> None:
-        try:
-            vid = self.keys.vehicle_id_of(str(sample.key_expr))
-        except KeyNameError:
-            return
-        with self._lock:
-            self._readings[vid] = sample.payload.to_bytes()
-
-    def take(self) -> tuple[bytes | None, dict[str, bytes]]:
-        """The newest tick (once) and the newest readings (once each)."""
-        with self._lock:
-            tick, self._tick = self._tick, None
-            readings, self._readings = self._readings, {}
-        return tick, readings
-
-    def close(self) -> None:
-        for sub in self._subs:
-            sub.undeclare()
 
 
 @dataclass
@@ -409,80 +333,8 @@ class Scene:
         )
 
 
-def fetch_mesh(
-    session: zenoh.Session, keys: Keys, query: PlumeMeshQuery, timeout_s: float = 10.0
-) -> PlumeMesh | None:
-    """One ``plume/mesh`` query; None when nobody answered or it failed (logged)."""
-    for reply in session.get(keys.plume_mesh(), payload=encode(query), timeout=timeout_s):
-        if reply.ok is not None:
-            try:
-                return decode(reply.ok.payload.to_bytes(), PlumeMesh)
-            except MessageError as exc:
-                log.warning("bad plume mesh: %s", exc)
-                return None
-        if reply.err is None:
-            return None
-        try:
-            err = decode(reply.err.payload.to_bytes(), ErrorReply)
-            log.warning("plume mesh refused: %s: %s", err.field, err.reason)
-        except MessageError:
-            log.warning("plume mesh query failed")
-        return None
-    return None
-
-
-class MeshFetcher:
-    """Asks ``plume/mesh`` for each level on its own thread until every level is answered."""
-
-    def __init__(
-        self, session: zenoh.Session, keys: Keys, queries: Sequence[PlumeMeshQuery]
-    ) -> None:
-        self.results: dict[int, PlumeMesh] = {}
-        self.queries = list(queries)
-        self._lock = threading.Lock()
-        self._stop = threading.Event()
-        self._thread = threading.Thread(
-            target=self._run, args=(session, keys, list(queries)), name="plume-mesh", daemon=True
-        )
-        self._thread.start()
-
-    def _run(self, session: zenoh.Session, keys: Keys, queries: list[PlumeMeshQuery]) -> None:
-        pending = dict(enumerate(queries))
-        while pending and not self._stop.is_set():
-            for i, q in list(pending.items()):
-                try:
-                    mesh = fetch_mesh(session, keys, q)
-                except zenoh.ZError as exc:
-                    log.warning("plume mesh query: %s", exc)
-                    return
-                if mesh is not None:
-                    with self._lock:
-                        self.results[i] = mesh
-                    del pending[i]
-            self._stop.wait(MESH_RETRY_S)
-
-    def take(self) -> dict[int, PlumeMesh]:
-        with self._lock:
-            out, self.results = self.results, {}
-        return out
-
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join(timeout=15.0)
-
-
 def mesh_queries(scenario: Scenario, opts: ViewerOptions) -> list[PlumeMeshQuery]:
-    lo, hi = scene_bounds(scenario)
-    levels = opts.levels_g_m3 or default_levels(scenario)
-    return [
-        PlumeMeshQuery(
-            level_g_m3=level,
-            resolution_m=opts.mesh_resolution_m,
-            bounds_min_m=lo,
-            bounds_max_m=hi,
-        )
-        for level in levels
-    ]
+    return isosurface_queries(scenario, opts.levels_g_m3, opts.mesh_resolution_m)
 
 
 def render(scene: Scene, feed: Feed, meshes: MeshFetcher) -> int:

@@ -62,6 +62,7 @@ PUBLIC_COMMANDS = {
     "report",
     "bench",
     "certs",
+    "export",
 }
 
 
@@ -90,4 +91,5 @@ def test_node_roles_are_the_designed_ones() -> None:
         "gateway",
         "viewer",
         "recorder",
+        "foxglove",
     }

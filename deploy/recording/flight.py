@@ -209,7 +209,7 @@ class _Collector:
                 modes.append((msg.sim_time_s, str(msg.mode)))
 
 
-def _scenario_of(recording: Recording) -> Scenario | None:
+def scenario_of(recording: Recording) -> Scenario | None:
     text = recording.metadata.get("plumeswarm", {}).get("scenario")
     if not text:
         return None
@@ -244,7 +244,7 @@ def load_flight(recording: Recording, progress: bool | None = None) -> Flight:
     flight = Flight(
         world=world,
         plume_info=collector.plume_info,
-        scenario=_scenario_of(recording),
+        scenario=scenario_of(recording),
         events=collector.events,
         message_count=count,
         truncated=recording.truncated,

@@ -200,6 +200,8 @@ def segment_end(path: Path) -> SegmentEnd:
     tick_schema = sch.schema_name(SimTick)
     for rec in recording.messages():
         count += 1
+        if rec.origin == sch.FOXGLOVE_ORIGIN:
+            continue  # stamped in simulation time, not when received
         last_ns = rec.log_time_ns if last_ns is None else max(last_ns, rec.log_time_ns)
         if rec.schema_name == tick_schema and rec.is_bus_message:
             last_tick = rec

@@ -30,14 +30,17 @@ from pathlib import Path
 import msgspec
 import zenoh
 
+from deploy.foxglove.scene import FoxgloveScene
 from deploy.recording import schema as sch
 from deploy.recording.reader import RecordingError, SegmentEnd, segment_end
 from deploy.recording.segments import next_segment
 from deploy.recording.sink import DEFAULT_CHUNK_BYTES, DEFAULT_CHUNK_INTERVAL_S, McapSink
+from sim_world.view_feed import fetch_mesh, isosurface_queries
 from swarmbus.codec import MessageError, decode, encode
 from swarmbus.keys import Keys
 from swarmbus.messages import NodeHealth, PlumeInfo, PlumeInfoQuery, SimTick, VehicleState
 from swarmbus.node import NodeContext, NodeRuntime, package_version
+from swarmbus.scenario import Scenario
 
 log = logging.getLogger(__name__)
 
@@ -55,6 +58,7 @@ class RecorderOptions:
     health_period_s: float = 1.0
     query_plume_info: bool = True
     resume: bool = False  # ``out`` exists (a killed predecessor's): continue in its next segment
+    foxglove: bool = True  # also write the Foxglove channels (deploy.foxglove.scene)
 
     @classmethod
     def from_ctx(cls, ctx: NodeContext) -> RecorderOptions:
@@ -68,6 +72,7 @@ class RecorderOptions:
             max_backlog=int(opts.get("max_backlog", 2_000_000)),
             query_plume_info=opts.get("query_plume_info", "true").lower() != "false",
             resume=opts.get("resume", "false").lower() == "true",
+            foxglove=opts.get("foxglove", "true").lower() != "false",
         )
 
 
@@ -94,8 +99,13 @@ class Recorder:
         options: RecorderOptions,
         publish_health: HealthPublisher,
         previous_segment: Path | None = None,
+        scenario: Scenario | None = None,
     ) -> None:
         self._session = session
+        self._scenario = scenario
+        # Foxglove's channels, converted on the writer thread from the messages it decodes
+        # anyway; decimated in simulation time, so their cost does not grow with the tick rate.
+        self._foxglove = FoxgloveScene(scenario) if options.foxglove else None
         self._keys = keys
         self._name = name
         self._sink = sink
@@ -230,11 +240,14 @@ class Recorder:
     def _write(self, item: Item) -> None:
         key, payload, log_time_ns, publish_ns, is_reply = item
         if is_reply:
-            self._sink.write_reply(key, decode(payload, PlumeInfo), log_time_ns)
+            reply = sch.decode_bus(payload)
+            self._sink.write_reply(key, reply, log_time_ns)
+            self._to_foxglove(reply, log_time_ns)
             return
         with self._lock:
             self._taken_total += 1
         message = self._sink.write_bus(key, payload, log_time_ns, publish_ns)
+        self._to_foxglove(message, log_time_ns)
         if self._first_log_ns is None:
             self._first_log_ns = log_time_ns
         if isinstance(message, SimTick) and self._first_tick is None:
@@ -243,6 +256,11 @@ class Recorder:
             self._check_tick(key, message.tick)
         elif isinstance(message, NodeHealth) and message.name != self._name:
             self._publish_health(f"heard {message.name} {message.state}")
+
+    def _to_foxglove(self, message: msgspec.Struct | None, log_time_ns: int) -> None:
+        if self._foxglove is not None and message is not None:
+            for out in self._foxglove.feed(message, log_time_ns):
+                self._sink.write_foxglove(out)
 
     def _check_tick(self, key: str, tick: int) -> None:
         last = self._last_tick.get(key)
@@ -368,10 +386,29 @@ class Recorder:
                     decode(payload, PlumeInfo)
                     self._queue.put((key, payload, time.time_ns(), None, True))
                     log.info("recorded the plume's info")
+                    if self._foxglove is not None and self._scenario is not None:
+                        self._query_plume_meshes(self._scenario)
                     return
             except (zenoh.ZError, MessageError) as exc:
                 log.info("plume info not recorded yet: %s", exc)
             self._stopping.wait(2.0)
+
+    def _query_plume_meshes(self, scenario: Scenario) -> None:
+        # The isosurfaces the viewer draws (same levels and box), for the Foxglove scene; the
+        # replies are recorded too, so that ``export foxglove`` draws the same plume.
+        key = self._keys.plume_mesh()
+        pending = isosurface_queries(scenario)
+        while pending and not self._stopping.is_set():
+            for query in list(pending):
+                try:
+                    mesh = fetch_mesh(self._session, self._keys, query)
+                except zenoh.ZError as exc:
+                    log.info("plume mesh not recorded: %s", exc)
+                    return
+                if mesh is not None:
+                    self._queue.put((key, encode(mesh), time.time_ns(), None, True))
+                    pending.remove(query)
+            self._stopping.wait(2.0 if pending else 0.0)
 
 
 # Zenoh's receive thread needs the GIL for every sample while the writer thread holds it for up
@@ -418,6 +455,7 @@ def run(ctx: NodeContext) -> int:
             opts,
             lambda d: rt.publish_health(detail=d),
             previous_segment=previous,
+            scenario=ctx.scenario,
         )
         recorder.start()
         log.info("recording %s to %s", rt.keys.everything(), out)

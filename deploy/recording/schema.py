@@ -26,6 +26,7 @@ SCHEMA_PREFIX = "plumeswarm."
 EVENTS_TOPIC = "recorder/events"  # an MCAP topic, not a bus key (replay never publishes it)
 GAPS_TOPIC = "recorder/gaps"  # a restarted recorder's gap between segments (its own channel)
 PROFILE = "plumeswarm"
+FOXGLOVE_ORIGIN = "foxglove"  # channel metadata ``origin`` of the Foxglove channels
 
 # msgspec decodes a tagged union of every message in one pass (the ``schema`` field picks).
 AnyMessage: Any = Union[ALL_MESSAGES]  # noqa: UP007 - a runtime union of a tuple of types

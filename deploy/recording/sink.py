@@ -15,10 +15,15 @@ from typing import IO
 import msgspec
 from mcap.writer import CompressionType, Writer
 
+from deploy.foxglove.scene import Out, channel_schema, encode
 from deploy.recording import schema as sch
+from deploy.recording.reader import Recorded
 from swarmbus.node import package_version
 
 log = logging.getLogger(__name__)
+
+# The recorder's own channels and their message types.
+_OWN_TYPES: dict[str, type] = {sch.EVENTS_TOPIC: sch.RecorderEvent, sch.GAPS_TOPIC: sch.SegmentGap}
 
 DEFAULT_CHUNK_INTERVAL_S = 1.0
 DEFAULT_CHUNK_BYTES = 1 << 20
@@ -42,6 +47,7 @@ class McapSink:
         self._writer = Writer(self._file, chunk_size=1 << 40, compression=CompressionType.ZSTD)
         self._writer.start(profile=sch.PROFILE, library=f"plumeswarm {package_version()}")
         self._schemas: dict[type, int] = {}
+        self._foxglove_schemas: dict[str, int] = {}
         self._channels: dict[tuple[str, str], int] = {}
         self._sequence: Counter[str] = Counter()
         self.written: Counter[str] = Counter()  # per key, typed and raw
@@ -137,6 +143,39 @@ class McapSink:
         now = log_time_ns if log_time_ns is not None else time.time_ns()
         cid = self._channel_id(sch.GAPS_TOPIC, sch.MESSAGE_ENCODING, sch.SegmentGap, "recorder")
         self._add(cid, sch.GAPS_TOPIC, msgspec.json.encode(gap), now, now)
+
+    def write_recorded(self, rec: Recorded) -> msgspec.Struct | None:
+        """Copy one message of another recording (its channel, encoding, times); returns the
+        typed bus message, None for anything else."""
+        if rec.is_bus_message:
+            message = rec.message()
+            assert message is not None
+            cid = self._channel_id(rec.topic, rec.encoding, type(message), rec.origin)
+            self._add(cid, rec.topic, rec.data, rec.log_time_ns, rec.publish_time_ns)
+            return message
+        own = _OWN_TYPES.get(rec.topic) if rec.encoding == sch.MESSAGE_ENCODING else None
+        cid = self._channel_id(rec.topic, rec.encoding, own, rec.origin)
+        self._add(cid, rec.topic, rec.data, rec.log_time_ns, rec.publish_time_ns)
+        return None
+
+    def write_foxglove(self, out: Out) -> None:
+        """Store one Foxglove message (:mod:`deploy.foxglove.scene`) on its channel, with the
+        schema the foxglove SDK declares; log and publish time are its simulation time."""
+        cs = channel_schema(type(out.message))
+        cid = self._channels.get((out.topic, cs.message_encoding))
+        if cid is None:
+            sid = self._foxglove_schemas.get(cs.name)
+            if sid is None:
+                sid = self._writer.register_schema(name=cs.name, encoding=cs.encoding, data=cs.data)
+                self._foxglove_schemas[cs.name] = sid
+            cid = self._writer.register_channel(
+                topic=out.topic,
+                message_encoding=cs.message_encoding,
+                schema_id=sid,
+                metadata={"origin": sch.FOXGLOVE_ORIGIN},
+            )
+            self._channels[(out.topic, cs.message_encoding)] = cid
+        self._add(cid, out.topic, encode(out.message), out.log_time_ns, out.log_time_ns)
 
     def maybe_close_chunk(self, now_monotonic: float | None = None) -> bool:
         """Close the open chunk (and flush it to the OS) when it is old or big enough."""

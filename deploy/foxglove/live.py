@@ -1,0 +1,178 @@
+"""The ``foxglove`` role: the run's Foxglove channels, live, over the Foxglove WebSocket
+protocol (the foxglove SDK's server) on 127.0.0.1 — open ``ws://127.0.0.1:PORT`` in Foxglove.
+
+A subscriber only, like the viewer: Zenoh callbacks keep the newest tick and the newest reading
+of each vehicle; a loop converts them at most ``rate_hz`` times a second with the same
+conversion the recorder uses (:class:`~deploy.foxglove.scene.FoxgloveScene`), so a slow client
+or a slow role drops frames and never slows the lockstep. The vehicles' bodies and the plume are
+sent again every ``static_period_s`` for clients that connect later.
+
+Options (``--set KEY=VALUE``): ``port`` (8765, Foxglove's default; 0: any free port),
+``rate_hz`` (20), ``static_period_s`` (2).
+"""
+
+from __future__ import annotations
+
+import logging
+import sys
+import time
+from dataclasses import dataclass
+
+import foxglove
+
+from deploy.foxglove.scene import FoxgloveScene, Out, channel_schema, encode
+from sim_world.view_feed import Feed, MeshFetcher, isosurface_queries
+from swarmbus.codec import MessageError, decode
+from swarmbus.messages import ConcentrationReading, SimTick
+from swarmbus.node import NodeContext, NodeRuntime
+
+log = logging.getLogger(__name__)
+
+HOST = "127.0.0.1"
+DEFAULT_PORT = 8765
+HEALTH_PERIOD_S = 1.0
+
+
+@dataclass(frozen=True)
+class LiveOptions:
+    port: int = DEFAULT_PORT
+    rate_hz: float = 20.0
+    static_period_s: float = 2.0
+
+    @classmethod
+    def from_options(cls, options: dict[str, str]) -> LiveOptions:
+        known = {"port", "rate_hz", "static_period_s"}
+        unknown = set(options) - known
+        if unknown:
+            raise ValueError(
+                f"unknown foxglove option(s) {sorted(unknown)}; known: {sorted(known)}"
+            )
+        values: dict[str, float] = {}
+        for name, low, high in (
+            ("port", 0, 65535),
+            ("rate_hz", 0.1, 100.0),
+            ("static_period_s", 0.1, 3600.0),
+        ):
+            if name not in options:
+                continue
+            try:
+                values[name] = float(options[name])
+            except ValueError:
+                raise ValueError(f"option {name}: {options[name]!r} is not a number") from None
+            if not low <= values[name] <= high:
+                raise ValueError(f"option {name}: {options[name]} is not in [{low}, {high}]")
+        return cls(
+            port=int(values.get("port", DEFAULT_PORT)),
+            rate_hz=values.get("rate_hz", 20.0),
+            static_period_s=values.get("static_period_s", 2.0),
+        )
+
+
+class LiveChannels:
+    """One SDK channel per Foxglove topic, made on first use, logging to ``context``."""
+
+    def __init__(self, context: foxglove.Context) -> None:
+        self._context = context
+        self._channels: dict[str, foxglove.Channel] = {}
+        self.sent = 0
+
+    def log(self, out: Out) -> None:
+        channel = self._channels.get(out.topic)
+        if channel is None:
+            cs = channel_schema(type(out.message))
+            channel = foxglove.Channel(
+                out.topic,
+                schema=foxglove.Schema(name=cs.name, encoding=cs.encoding, data=cs.data),
+                message_encoding=cs.message_encoding,
+                context=self._context,
+            )
+            self._channels[out.topic] = channel
+        channel.log(encode(out.message), log_time=out.log_time_ns)
+        self.sent += 1
+
+
+def convert(scene: FoxgloveScene, feed: Feed, meshes: MeshFetcher, channels: LiveChannels) -> int:
+    """Feed what is new to ``scene`` and send what it makes; the newest tick, or -1."""
+    now = time.time_ns()
+    newest = -1
+    for mesh in meshes.take().values():
+        for out in scene.feed(mesh, now):
+            channels.log(out)
+    tick_raw, readings_raw = feed.take()
+    messages: list[object] = []
+    if tick_raw is not None:
+        try:
+            tick = decode(tick_raw, SimTick)
+            messages.append(tick)
+            newest = tick.tick
+        except MessageError as exc:
+            log.warning("ignoring tick: %s", exc)
+    for vid, raw in readings_raw.items():
+        try:
+            messages.append(decode(raw, ConcentrationReading))
+        except MessageError as exc:
+            log.warning("ignoring reading of %s: %s", vid, exc)
+    for message in messages:
+        for out in scene.feed(message, now):
+            channels.log(out)
+    return newest
+
+
+def main(ctx: NodeContext) -> int:
+    try:
+        opts = LiveOptions.from_options(ctx.options)
+    except ValueError as exc:
+        log.error("foxglove: %s", exc)
+        return 2
+    context = foxglove.Context()
+    try:
+        server = foxglove.start_server(
+            name=f"plumeswarm {ctx.scenario.world.name}",
+            host=HOST,
+            port=opts.port,
+            context=context,
+        )
+    except RuntimeError as exc:
+        log.error(
+            "foxglove: cannot serve on %s:%d (%s); another program uses the port? "
+            "choose another with --set port=N",
+            HOST,
+            opts.port,
+            exc,
+        )
+        return 2
+    url = f"ws://{HOST}:{server.port}"
+    try:
+        with NodeRuntime(ctx, role="foxglove") as rt:
+            scene = FoxgloveScene(ctx.scenario)
+            channels = LiveChannels(context)
+            feed = Feed(rt.session, rt.keys)
+            meshes = MeshFetcher(rt.session, rt.keys, isosurface_queries(ctx.scenario))
+            sys.stdout.write(f"foxglove: open {url} in Foxglove\n")  # this role's output
+            sys.stdout.flush()
+            rt.publish_health(detail=f"url={url} tick=-")
+            rt.ready()
+            period = 1.0 / opts.rate_hz
+            next_health = next_static = time.monotonic()
+            drawn = -1
+            try:
+                while not rt.stop.is_set():
+                    t0 = time.monotonic()
+                    drawn = max(drawn, convert(scene, feed, meshes, channels))
+                    if t0 >= next_static:
+                        next_static = t0 + opts.static_period_s
+                        for out in scene.static_messages():
+                            channels.log(out)
+                    if t0 >= next_health:
+                        next_health = t0 + HEALTH_PERIOD_S
+                        rt.publish_health(
+                            detail=f"url={url} tick={drawn if drawn >= 0 else '-'} "
+                            f"sent={channels.sent}"
+                        )
+                    rt.stop.wait(max(0.0, period - (time.monotonic() - t0)))
+            finally:
+                feed.close()
+                meshes.close()
+    finally:
+        server.stop()
+    return 0

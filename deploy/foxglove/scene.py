@@ -1,0 +1,550 @@
+"""Bus messages in, Foxglove messages out: the one conversion the recorder, ``plumeswarm export
+foxglove`` and the live ``foxglove`` role share.
+
+:class:`FoxgloveScene` is fed the typed bus messages a recording holds (in the order received,
+with their receive time) and returns what to write on the Foxglove channels. Messages are
+Foxglove's well-known schemas from the foxglove SDK (protobuf), except the concentration series,
+a JSON channel per vehicle described by the JSON Schema of :class:`ConcentrationSample`.
+
+Time: every Foxglove message is stamped with **simulation time**, anchored once to the wall clock
+(the receive time of the first message that carries a sim time, minus that sim time), so that
+Foxglove's timeline scrubs the simulation and stays next to the recording's raw channels (whose
+log time is the receive time). Rates are counted in simulation time, so a run's Foxglove
+channels are the same whether it was converted live or afterwards.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from functools import cache
+from typing import Any, NamedTuple
+
+import msgspec
+import numpy as np
+from foxglove import messages as fm
+
+from sim_world.view_feed import PALETTE, PLUME_COLOURS, default_levels, reading_colour
+from swarmbus.messages import ConcentrationReading, PlumeMesh, SimTick, VehicleState
+from swarmbus.scenario import Scenario
+from swarmbus.vehicle_types import VehicleType, VehicleTypeError, load_vehicle_type
+
+WORLD_FRAME = "world"
+TF_TOPIC = "/tf"
+VEHICLES_TOPIC = "/scene/vehicles"
+TRAILS_TOPIC = "/scene/trails"
+READINGS_TOPIC = "/scene/readings"
+PLUME_TOPIC = "/scene/plume"
+LOCATION_PREFIX = "/location/"
+CONCENTRATION_PREFIX = "/concentration/"
+
+# Rates, in simulation time (a channel gets at most one message per period).
+TF_PERIOD_S = 0.05  # 20 Hz: every vehicle's pose in one FrameTransforms
+LOCATION_PERIOD_S = 0.2  # 5 Hz per vehicle
+READINGS_PERIOD_S = 0.1  # 10 Hz: the newest reading of every vehicle
+SERIES_PERIOD_S = 0.05  # up to 20 Hz per vehicle (the sensor's own rate when lower)
+TRAILS_PERIOD_S = 2.0  # 0.5 Hz: every trail, whole (a seek shows the newest message only)
+TRAIL_POINT_PERIOD_S = 1.0  # a trail point per vehicle per sim second ...
+TRAIL_MAX_POINTS = 300  # ... the last 5 minutes of it (a full 32-vehicle update: 9600 points)
+
+VEHICLE_SCALE = 4.0  # drawn size (as the meshcat viewer): a 0.5 m quadcopter vanishes at 60 m
+NO_READING_RGB = 0x9E9E9E
+DEFAULT_VEHICLE_TYPE = "iris"
+RESTART_S = 1.0  # sim time this far back is a new start (a replay, a restored checkpoint)
+_EPS_S = 1e-9
+
+
+def location_topic(vehicle_id: str) -> str:
+    return LOCATION_PREFIX + vehicle_id
+
+
+def concentration_topic(vehicle_id: str) -> str:
+    return CONCENTRATION_PREFIX + vehicle_id
+
+
+class ConcentrationSample(msgspec.Struct, frozen=True, kw_only=True):
+    """One point of a vehicle's concentration series (``/concentration/<id>``, JSON).
+    ``reported_g_m3`` / ``true_g_m3`` are null when the plume did not answer."""
+
+    vehicle_id: str
+    sim_time_s: float
+    available: bool
+    reported_g_m3: float | None
+    true_g_m3: float | None
+    x_m: float
+    y_m: float
+    z_m: float
+
+
+FoxgloveMessage = fm.FrameTransforms | fm.SceneUpdate | fm.LocationFix | ConcentrationSample
+
+
+class Out(NamedTuple):
+    """One message for a Foxglove channel; ``log_time_ns`` is the anchored simulation time."""
+
+    topic: str
+    message: FoxgloveMessage
+    log_time_ns: int
+
+
+class ChannelSchema(NamedTuple):
+    name: str
+    encoding: str  # "protobuf" or "jsonschema"
+    data: bytes
+    message_encoding: str  # "protobuf" or "json"
+
+
+_schemas: dict[type, ChannelSchema] = {}
+
+
+def channel_schema(type_: type) -> ChannelSchema:
+    """The schema a Foxglove channel carrying ``type_`` declares (the SDK's own for its
+    well-known messages)."""
+    cs = _schemas.get(type_)
+    if cs is None:
+        if type_ is ConcentrationSample:
+            data = msgspec.json.encode(msgspec.json.schema(ConcentrationSample))
+            cs = ChannelSchema("plumeswarm.ConcentrationSample", "jsonschema", data, "json")
+        else:
+            schema = type_.get_schema()  # type: ignore[attr-defined]
+            cs = ChannelSchema(schema.name, schema.encoding, bytes(schema.data), "protobuf")
+        _schemas[type_] = cs
+    return cs
+
+
+_json = msgspec.json.Encoder()
+
+
+def encode(message: FoxgloveMessage) -> bytes:
+    """``message`` in its channel's message encoding."""
+    if isinstance(message, ConcentrationSample):
+        return _json.encode(message)
+    return bytes(message.encode())
+
+
+# --------------------------------------------------------------------------- small builders
+def stamp(ns: int) -> fm.Timestamp:
+    return fm.Timestamp(sec=ns // 1_000_000_000, nsec=ns % 1_000_000_000)
+
+
+def colour(rgb: int, alpha: float = 1.0) -> fm.Color:
+    return fm.Color(
+        r=((rgb >> 16) & 0xFF) / 255, g=((rgb >> 8) & 0xFF) / 255, b=(rgb & 0xFF) / 255, a=alpha
+    )
+
+
+def pose(x: float = 0.0, y: float = 0.0, z: float = 0.0) -> fm.Pose:
+    return fm.Pose(
+        position=fm.Vector3(x=x, y=y, z=z), orientation=fm.Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
+    )
+
+
+def heading_rad(xyzw: Sequence[float]) -> float:
+    """Heading clockwise from north of a body (FLU) whose attitude in ENU is ``xyzw``."""
+    x, y, z, w = xyzw
+    yaw_from_east = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    return (math.pi / 2.0 - yaw_from_east) % (2.0 * math.pi)
+
+
+class _Every:
+    """Due once per ``period_s`` of simulation time; time going backwards (a replay, a restart
+    from a checkpoint) starts over."""
+
+    def __init__(self, period_s: float) -> None:
+        self.period_s = period_s
+        self.last_s: float | None = None
+
+    def due(self, t_s: float) -> bool:
+        if self.last_s is not None and self.last_s <= t_s < self.last_s + self.period_s - _EPS_S:
+            return False
+        self.last_s = t_s
+        return True
+
+
+@dataclass
+class _Vehicle:
+    index: int
+    type_name: str
+    state: VehicleState | None = None
+    reading: ConcentrationReading | None = None
+    trail: list[tuple[float, float, float, int]] = field(default_factory=list)  # x, y, z, rgb
+    series_every: _Every = field(default_factory=lambda: _Every(SERIES_PERIOD_S))
+
+    @property
+    def rgb(self) -> int:
+        return PALETTE[self.index % len(PALETTE)]
+
+
+class FoxgloveScene:
+    """The conversion, with the state it needs (newest state and reading per vehicle, trails,
+    the plume). Feed it every bus message in order with :meth:`feed`."""
+
+    def __init__(self, scenario: Scenario | None) -> None:
+        self.scenario = scenario
+        self._vehicles: dict[str, _Vehicle] = {}
+        self._anchor_ns: int | None = None
+        self._now_s = 0.0
+        self._tf = _Every(TF_PERIOD_S)
+        self._readings = _Every(READINGS_PERIOD_S)
+        self._trails = _Every(TRAILS_PERIOD_S)
+        self._trail_points = _Every(TRAIL_POINT_PERIOD_S)
+        self._locations = _Every(LOCATION_PERIOD_S)
+        self._has_state = False
+        self._plume_meshes: dict[float, PlumeMesh] = {}
+        self._plume_pending = False
+        self._vehicles_pending = False
+        self.full_scale_g_m3 = 1.0
+        if scenario is not None:
+            sensor = scenario.sensor.resolved()
+            self.full_scale_g_m3 = sensor.saturation_g_m3 or max(default_levels(scenario))
+            for v in scenario.vehicles:
+                self._vehicle(v.id, v.type)
+
+    @property
+    def vehicle_ids(self) -> list[str]:
+        """The vehicles of the scenario, then those seen on the bus, in order."""
+        return list(self._vehicles)
+
+    # ------------------------------------------------------------------ input
+    def feed(self, message: object, log_time_ns: int) -> list[Out]:
+        """The Foxglove messages due after ``message`` (received at ``log_time_ns``)."""
+        handler = _HANDLERS.get(type(message))
+        if handler is None:
+            return []
+        out: list[Out] = handler(self, message, log_time_ns)
+        return out
+
+    def _on_tick(self, tick: SimTick, log_time_ns: int) -> list[Out]:
+        for st in tick.states:
+            self._vehicle(st.vehicle_id).state = st
+        self._has_state = self._has_state or bool(tick.states)
+        return self._advance(tick.sim_time_s, log_time_ns)
+
+    def _on_state(self, state: VehicleState, log_time_ns: int) -> list[Out]:
+        self._vehicle(state.vehicle_id).state = state
+        self._has_state = True
+        return self._advance(state.sim_time_s, log_time_ns)
+
+    def _on_reading(self, reading: ConcentrationReading, log_time_ns: int) -> list[Out]:
+        v = self._vehicle(reading.vehicle_id)
+        v.reading = reading
+        # A reading is published once the plume answered, which in a lockstep faster than real
+        # time is many ticks later: only the world's states move the clock.
+        clock_s = reading.sim_time_s if self._anchor_ns is None else None
+        out = self._advance(clock_s, log_time_ns)
+        if v.series_every.due(reading.sim_time_s):
+            x, y, z = reading.position_enu_m
+            sample = ConcentrationSample(
+                vehicle_id=reading.vehicle_id,
+                sim_time_s=reading.sim_time_s,
+                available=reading.available,
+                reported_g_m3=reading.reported_g_m3,
+                true_g_m3=reading.true_g_m3,
+                x_m=x,
+                y_m=y,
+                z_m=z,
+            )
+            out.append(Out(concentration_topic(reading.vehicle_id), sample, self._ns(reading)))
+        return out
+
+    def _on_mesh(self, mesh: PlumeMesh, log_time_ns: int) -> list[Out]:
+        self._plume_meshes[mesh.level_g_m3] = mesh
+        self._plume_pending = True
+        return self._advance(None, log_time_ns)
+
+    # ------------------------------------------------------------------ time
+    def _ns(self, reading: ConcentrationReading) -> int:
+        assert self._anchor_ns is not None
+        return self._anchor_ns + round(reading.sim_time_s * 1e9)
+
+    def _advance(self, t_s: float | None, log_time_ns: int) -> list[Out]:
+        if t_s is not None:
+            if self._anchor_ns is None:
+                self._anchor_ns = log_time_ns - round(t_s * 1e9)
+            elif self._now_s - RESTART_S < t_s <= self._now_s:
+                # Not later than what is drawn: a tick's states once more, one by one.
+                if not (self._vehicles_pending or self._plume_pending):
+                    return []
+                t_s = None
+        if t_s is not None:
+            self._now_s = t_s
+        if self._anchor_ns is None:
+            return []  # nothing to stamp with yet: kept until the first sim time
+        now_ns = self._anchor_ns + round(self._now_s * 1e9)
+        out: list[Out] = []
+        if self._vehicles_pending:
+            out.append(Out(VEHICLES_TOPIC, self.vehicles_update(now_ns), now_ns))
+        if self._plume_pending:
+            out.append(Out(PLUME_TOPIC, self.plume_update(now_ns), now_ns))
+        if t_s is None:
+            return out
+        # Scene-wide periods: nothing is done per vehicle on a tick where nothing is due.
+        if self._trail_points.due(t_s):
+            self._sample_trails()
+        if self._has_state and self._tf.due(t_s):
+            out.append(Out(TF_TOPIC, self.transforms(now_ns), now_ns))
+        if self._locations.due(t_s):
+            for vid, v in self._vehicles.items():
+                if v.state is not None:
+                    out.append(Out(location_topic(vid), self.location(v, v.state, now_ns), now_ns))
+        if self._readings.due(t_s):
+            update = self.readings_update(now_ns)
+            if update is not None:
+                out.append(Out(READINGS_TOPIC, update, now_ns))
+        if self._trails.due(t_s):
+            trails = self.trails_update(now_ns)
+            if trails is not None:
+                out.append(Out(TRAILS_TOPIC, trails, now_ns))
+        return out
+
+    def static_messages(self) -> list[Out]:
+        """The vehicles' bodies and the plume again (for a live client that joined late)."""
+        if self._anchor_ns is None:
+            return []
+        now_ns = self._anchor_ns + round(self._now_s * 1e9)
+        return [
+            Out(VEHICLES_TOPIC, self.vehicles_update(now_ns), now_ns),
+            Out(PLUME_TOPIC, self.plume_update(now_ns), now_ns),
+        ]
+
+    # ------------------------------------------------------------------ vehicles
+    def _vehicle(self, vid: str, type_name: str = DEFAULT_VEHICLE_TYPE) -> _Vehicle:
+        v = self._vehicles.get(vid)
+        if v is None:
+            v = self._vehicles[vid] = _Vehicle(index=len(self._vehicles), type_name=type_name)
+            self._vehicles_pending = True
+        return v
+
+    def _sample_trails(self) -> None:
+        for v in self._vehicles.values():
+            st = v.state
+            if st is None:
+                continue
+            v.trail.append((*st.position_enu_m, self._reading_rgb(v.reading)))
+            del v.trail[:-TRAIL_MAX_POINTS]
+
+    def _reading_rgb(self, reading: ConcentrationReading | None) -> int:
+        if reading is None or reading.reported_g_m3 is None:
+            return NO_READING_RGB
+        return reading_colour(reading.reported_g_m3, self.full_scale_g_m3)
+
+    def transforms(self, now_ns: int) -> fm.FrameTransforms:
+        ts = stamp(now_ns)
+        out = []
+        for vid, v in self._vehicles.items():
+            if v.state is None:
+                continue
+            (x, y, z), (qx, qy, qz, qw) = v.state.position_enu_m, v.state.attitude_xyzw
+            out.append(
+                fm.FrameTransform(
+                    timestamp=ts,
+                    parent_frame_id=WORLD_FRAME,
+                    child_frame_id=vid,
+                    translation=fm.Vector3(x=x, y=y, z=z),
+                    rotation=fm.Quaternion(x=qx, y=qy, z=qz, w=qw),
+                )
+            )
+        return fm.FrameTransforms(transforms=out)
+
+    def location(self, v: _Vehicle, st: VehicleState, now_ns: int) -> fm.LocationFix:
+        vx, vy, vz = st.velocity_enu_m_s
+        return fm.LocationFix(
+            timestamp=stamp(now_ns),
+            frame_id=st.vehicle_id,
+            latitude=st.lat_deg,
+            longitude=st.lon_deg,
+            altitude=st.alt_m,
+            heading=heading_rad(st.attitude_xyzw),
+            velocity=fm.Vector3(x=vx, y=vy, z=vz),
+            color=colour(v.rgb),
+        )
+
+    def vehicles_update(self, now_ns: int) -> fm.SceneUpdate:
+        """Each vehicle's body, rotors and name in its own frame (follows ``/tf``)."""
+        self._vehicles_pending = False
+        ts = stamp(now_ns)
+        return fm.SceneUpdate(
+            entities=[
+                _body_entity(vid, _vehicle_type(v.type_name), v.rgb, ts)
+                for vid, v in self._vehicles.items()
+            ]
+        )
+
+    def readings_update(self, now_ns: int) -> fm.SceneUpdate | None:
+        """A sphere above each vehicle at its newest reading, coloured and sized by it."""
+        ts = stamp(now_ns)
+        entities = []
+        for vid, v in self._vehicles.items():
+            r = v.reading
+            if r is None:
+                continue
+            value = r.reported_g_m3
+            t = 0.0 if value is None else min(1.0, value / self.full_scale_g_m3)
+            radius = 0.3 + 1.2 * t
+            x, y, z = v.state.position_enu_m if v.state is not None else r.position_enu_m
+            label = "no reading" if value is None else f"{value:.3g} g/m³"
+            entities.append(
+                fm.SceneEntity(
+                    timestamp=ts,
+                    frame_id=WORLD_FRAME,
+                    id=f"reading/{vid}",
+                    spheres=[
+                        fm.SpherePrimitive(
+                            pose=pose(x, y, z + 1.5 + radius),
+                            size=fm.Vector3(x=2 * radius, y=2 * radius, z=2 * radius),
+                            color=colour(self._reading_rgb(r)),
+                        )
+                    ],
+                    texts=[
+                        fm.TextPrimitive(
+                            pose=pose(x, y, z + 2.0 + 2 * radius),
+                            billboard=True,
+                            font_size=14.0,
+                            scale_invariant=True,
+                            color=colour(0xFFFFFF),
+                            text=label,
+                        )
+                    ],
+                )
+            )
+        return fm.SceneUpdate(entities=entities) if entities else None
+
+    def trails_update(self, now_ns: int) -> fm.SceneUpdate | None:
+        """Each vehicle's path, coloured by the concentration it read there (grey: none)."""
+        ts = stamp(now_ns)
+        entities = []
+        for vid, v in self._vehicles.items():
+            if len(v.trail) < 2:
+                continue
+            line = fm.LinePrimitive(
+                type=fm.LinePrimitiveLineType.LineStrip,
+                pose=pose(),
+                thickness=3.0,
+                scale_invariant=True,
+                points=[fm.Point3(x=x, y=y, z=z) for x, y, z, _ in v.trail],
+                colors=[colour(rgb) for *_, rgb in v.trail],
+            )
+            entities.append(
+                fm.SceneEntity(timestamp=ts, frame_id=WORLD_FRAME, id=f"trail/{vid}", lines=[line])
+            )
+        return fm.SceneUpdate(entities=entities) if entities else None
+
+    # ------------------------------------------------------------------ plume
+    def plume_update(self, now_ns: int) -> fm.SceneUpdate:
+        """The plume: its sources and what is known of its shape — the isosurfaces of the
+        Gaussian plume (``plume/mesh`` replies), one translucent surface per level."""
+        self._plume_pending = False
+        ts = stamp(now_ns)
+        entities = list(self._source_entities(ts))
+        for i, (level, mesh) in enumerate(sorted(self._plume_meshes.items())):
+            entity = _isosurface_entity(i, level, mesh, ts)
+            if entity is not None:
+                entities.append(entity)
+        return fm.SceneUpdate(entities=entities)
+
+    def _source_entities(self, ts: fm.Timestamp) -> Iterable[fm.SceneEntity]:
+        if self.scenario is None:
+            return
+        for i, src in enumerate(self.scenario.plume.sources):
+            h = max(src.release_height_m, 0.1)
+            yield fm.SceneEntity(
+                timestamp=ts,
+                frame_id=WORLD_FRAME,
+                id=f"source/{i}",
+                cylinders=[
+                    fm.CylinderPrimitive(
+                        pose=pose(src.x_m, src.y_m, h / 2),
+                        size=fm.Vector3(x=0.8, y=0.8, z=h),
+                        bottom_scale=1.0,
+                        top_scale=1.0,
+                        color=colour(0x444444),
+                    )
+                ],
+                spheres=[
+                    fm.SpherePrimitive(
+                        pose=pose(src.x_m, src.y_m, src.release_height_m),
+                        size=fm.Vector3(x=2.0, y=2.0, z=2.0),
+                        color=colour(0xFF0000),
+                    )
+                ],
+            )
+
+
+def _isosurface_entity(
+    index: int, level: float, mesh: PlumeMesh, ts: fm.Timestamp
+) -> fm.SceneEntity | None:
+    vertices = np.frombuffer(mesh.vertices_f32, dtype="<f4").reshape(-1, 3).astype(float)
+    faces = np.frombuffer(mesh.faces_i32, dtype="<i4")
+    if faces.size == 0:
+        return None
+    triangles = fm.TriangleListPrimitive(
+        pose=pose(),
+        points=[fm.Point3(x=x, y=y, z=z) for x, y, z in vertices.tolist()],
+        color=colour(PLUME_COLOURS[index % len(PLUME_COLOURS)], alpha=0.18 + 0.12 * index),
+        indices=faces.tolist(),
+    )
+    return fm.SceneEntity(
+        timestamp=ts,
+        frame_id=WORLD_FRAME,
+        id=f"plume/level_{index}",
+        metadata=[fm.KeyValuePair(key="level_g_m3", value=f"{level:g}")],
+        triangles=[triangles],
+    )
+
+
+@cache
+def _vehicle_type(name: str) -> VehicleType:
+    try:
+        return load_vehicle_type(name)
+    except VehicleTypeError:
+        return load_vehicle_type(DEFAULT_VEHICLE_TYPE)
+
+
+def _body_entity(vid: str, vt: VehicleType, rgb: int, ts: fm.Timestamp) -> fm.SceneEntity:
+    s = VEHICLE_SCALE
+    hx, hy, hz = vt.collision_half_extents_m
+    arm_r = max(math.hypot(r.position_m[0], r.position_m[1]) for r in vt.rotors)
+    disc_d = 2 * max(0.05, 0.45 * arm_r) * s
+    rotors = [
+        fm.CylinderPrimitive(
+            pose=pose(r.position_m[0] * s, r.position_m[1] * s, r.position_m[2] * s),
+            size=fm.Vector3(x=disc_d, y=disc_d, z=0.02 * s),
+            bottom_scale=1.0,
+            top_scale=1.0,
+            color=colour(rgb, alpha=0.6),
+        )
+        for r in vt.rotors
+    ]
+    return fm.SceneEntity(
+        timestamp=ts,
+        frame_id=vid,
+        id=f"vehicle/{vid}",
+        frame_locked=True,
+        cubes=[
+            fm.CubePrimitive(
+                pose=pose(),
+                size=fm.Vector3(x=2 * hx * s, y=2 * hy * s, z=2 * hz * s),
+                color=colour(rgb),
+            )
+        ],
+        cylinders=rotors,
+        texts=[
+            fm.TextPrimitive(
+                pose=pose(0.0, 0.0, 2.0 * s * max(hz, 0.1) + 1.0),
+                billboard=True,
+                font_size=14.0,
+                scale_invariant=True,
+                color=colour(rgb),
+                text=vid,
+            )
+        ],
+    )
+
+
+_HANDLERS: dict[type, Any] = {
+    SimTick: FoxgloveScene._on_tick,
+    VehicleState: FoxgloveScene._on_state,
+    ConcentrationReading: FoxgloveScene._on_reading,
+    PlumeMesh: FoxgloveScene._on_mesh,
+}
