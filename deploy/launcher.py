@@ -30,6 +30,7 @@ import zenoh
 from deploy.busview import BusView, status_line
 from deploy.roles import ROLES
 from deploy.supervisor import (
+    ExitEvent,
     ProcessSpec,
     ProcState,
     RestartMode,
@@ -37,7 +38,9 @@ from deploy.supervisor import (
     Supervisor,
 )
 from sim_world import checkpoint
+from swarmbus.codec import encode
 from swarmbus.keys import Keys
+from swarmbus.messages import RestartNotice
 from swarmbus.scenario import Scenario
 from swarmbus.session import DEFAULT_ROUTER, NetworkConfig, open_session
 
@@ -170,6 +173,12 @@ def plan(scenario: Scenario, opts: LaunchOptions) -> list[ProcessSpec]:
         else:
             add(role, role, net_args)
     return specs
+
+
+def served_vehicles(spec: ProcessSpec) -> list[str]:
+    """The vehicles an autopilot process serves (its ``--vehicle`` arguments)."""
+    argv = spec.argv
+    return [argv[i + 1] for i, a in enumerate(argv[:-1]) if a == "--vehicle"]
 
 
 def checkpoint_path(opts: LaunchOptions) -> Path:
@@ -328,6 +337,7 @@ class Launcher:
         """Reap and restart; raise :class:`LaunchError` when a critical process is gone."""
         before = self.supervisor.pids()
         for event in self.supervisor.poll():
+            self._announce(event)
             if event.restarting:
                 log.warning(
                     "%s exited with code %d: restarting in %.1f s",
@@ -345,6 +355,26 @@ class Launcher:
             raise LaunchError(
                 f"{sv.spec.name} exited with code {sv.returncode}: {_last_lines(sv.log_path)}"
             )
+
+    def _announce(self, event: ExitEvent) -> None:
+        """Say on the bus that a process ended and whether it is being restarted: the physics
+        holds the lockstep for the vehicles of an autopilot being restarted."""
+        if self._session is None:
+            return
+        sv = self.supervisor.procs[event.name]
+        notice = RestartNotice(
+            node=event.name,
+            role=sv.spec.role,
+            restarting=event.restarting,
+            returncode=event.returncode,
+            delay_s=event.delay_s,
+            restarts=sv.restarts,
+            vehicles=served_vehicles(sv.spec),
+        )
+        try:
+            self._session.put(self.keys.node_restart(event.name), encode(notice))
+        except zenoh.ZError as exc:
+            log.warning("could not announce the restart of %s: %s", event.name, exc)
 
     def supervise(
         self,

@@ -56,6 +56,7 @@ from swarmbus.messages import (
     PlumeQuery,
     PlumeSample,
     PlumeValues,
+    RestartNotice,
     SimTick,
     SpeedMode,
     Tick,
@@ -202,6 +203,14 @@ class PhysicsNode:
         self._plume_timeout_s = 0.4 * self.scenario.time.participant_timeout_s
         self._plume_nodes: set[str] = set()
         self._plume_pending: tuple[int, int, Any] | None = None  # tick, points, replies
+        # Restarts (lockstep): hold the tick for an autopilot the launcher is restarting.
+        self._restart_grace_s = (
+            self.scenario.time.restart_grace_s if options.mode == SpeedMode.LOCKSTEP else 0.0
+        )
+        self._held_republish = 0.0  # wall time of the last re-publication during a hold
+        self._restart_sub = session.declare_subscriber(
+            self.keys.all_node_restart(), self._on_restart_notice
+        )
         self._presence = Presence(session, self.keys, self._on_presence)
         # Clock bookkeeping (wall clock only measures; it never drives the physics).
         self._wall_start = time.monotonic()
@@ -214,6 +223,7 @@ class PhysicsNode:
 
     def close(self) -> None:
         self._presence.close()
+        self._restart_sub.undeclare()
         for sub in self._actuator_subs:
             sub.undeclare()
         for pub in self._state_pubs:
@@ -238,6 +248,8 @@ class PhysicsNode:
         with self._cond:
             if alive:
                 self.barrier.joined(vid)
+            elif self._restart_grace_s > 0.0:
+                self.barrier.held_leave(vid)  # the launcher may be restarting it
             else:
                 self.barrier.left(vid)
             self._cond.notify_all()
@@ -466,6 +478,7 @@ class PhysicsNode:
                     return None
                 remaining = barrier.remaining_s()
                 if remaining <= 0.0:
+                    held = barrier.held
                     dropped = barrier.expire()
                     self.dropped_total += len(dropped)
                     log.warning(
@@ -474,9 +487,59 @@ class PhysicsNode:
                         ", ".join(dropped),
                         barrier.timeout_s,
                     )
+                    self._report_expired_holds(held, dropped)
                     break
                 self._cond.wait(min(remaining, STOP_POLL_S))
+                if barrier.held:
+                    self._republish_held_tick()
             return barrier.commands()  # a new dict of the decoded (never mutated) lists
+
+    # ------------------------------------------------------------------ restarts
+    def _on_restart_notice(self, sample: zenoh.Sample) -> None:
+        """The launcher's word on a process that ended: hold or drop its vehicles."""
+        try:
+            notice = decode(sample.payload.to_bytes(), RestartNotice)
+        except MessageError as exc:
+            log.warning("ignoring restart notice on %s: %s", sample.key_expr, exc)
+            return
+        vids = [v for v in notice.vehicles if v in self._known]
+        if not vids or self._restart_grace_s <= 0.0:
+            return
+        with self._cond:
+            if notice.restarting:
+                grace = notice.delay_s + self._restart_grace_s
+                held = [v for v in vids if self.barrier.restarting(v, grace)]
+            else:
+                held = [v for v in vids if self.barrier.gone(v)]
+            self._cond.notify_all()
+        if held and notice.restarting:
+            log.warning(
+                "tick %d: holding the clock for %s: %s is being restarted (grace %.1f s)",
+                self.tick,
+                ", ".join(held),
+                notice.node,
+                grace,
+            )
+        elif held:
+            log.warning("%s will not be restarted: %s dropped", notice.node, ", ".join(held))
+
+    def _republish_held_tick(self) -> None:
+        """During a hold, re-send the held tick (as in the start-up handshake) so the new
+        process receives it; the others answer a repeated tick with the same command."""
+        now = time.monotonic()
+        if now - self._held_republish >= HANDSHAKE_REPUBLISH_S:
+            self._held_republish = now
+            self._tick_pub.put(self._last_tick_msg)
+
+    def _report_expired_holds(self, held: frozenset[str], dropped: list[str]) -> None:
+        expired = [v for v in dropped if v in held]
+        if expired:
+            log.warning(
+                "tick %d: restart grace of %.1f s passed: %s dropped (motors off, failsafe)",
+                self.tick,
+                self._restart_grace_s,
+                ", ".join(expired),
+            )
 
     def _apply(self, commands: Mapping[str, Sequence[float]]) -> None:
         world = self.world

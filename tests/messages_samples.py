@@ -87,4 +87,7 @@ SAMPLES: dict[type[m.Message], m.Message] = {
     m.NodeHealth: m.NodeHealth(
         name="physics", role="physics", state=m.NodeState.READY, version="0.1.0", pid=123, host="h"
     ),
+    m.RestartNotice: m.RestartNotice(
+        node="autopilot-uav1", role="autopilot", restarting=True, returncode=-9, vehicles=["uav1"]
+    ),
 }
