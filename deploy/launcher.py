@@ -20,13 +20,14 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import TracebackType
 
 import msgspec
 import zenoh
 
+from agents.resume import snapshot_paths
 from deploy.busview import BusView, status_line
 from deploy.roles import ROLES
 from deploy.supervisor import (
@@ -163,7 +164,9 @@ def plan(scenario: Scenario, opts: LaunchOptions) -> list[ProcessSpec]:
                 name = f"autopilot-{chunk[0]}" + (
                     f"-plus{len(chunk) - 1}" if len(chunk) > 1 else ""
                 )
+                state = f"checkpoint={autopilot_state_path(opts, name)}"  # agents.resume
                 add(role, name, [a for vid in chunk for a in ("--vehicle", vid)] + net_args)
+                specs[-1] = replace(specs[-1], argv=(*specs[-1].argv, "--set", state))
         elif role == "physics":
             add(role, role, [*net_args, "--set", f"checkpoint={checkpoint_path(opts)}"])
         elif role == "recorder":
@@ -183,6 +186,11 @@ def served_vehicles(spec: ProcessSpec) -> list[str]:
 
 def checkpoint_path(opts: LaunchOptions) -> Path:
     return opts.run_dir / "physics.ckpt"
+
+
+def autopilot_state_path(opts: LaunchOptions, node_name: str) -> Path:
+    """Where an autopilot process keeps its snapshots (``agents.resume``)."""
+    return opts.run_dir / f"{node_name}.state"
 
 
 def default_run_dir(root: Path = Path("runs")) -> Path:
@@ -249,6 +257,10 @@ class Launcher:
         self.run_dir.mkdir(parents=True, exist_ok=True)
         if any(s.role == "physics" for s in self.specs):
             checkpoint.remove(checkpoint_path(self.opts))  # an earlier run's: start from spawn
+        for spec in self.specs:
+            if spec.role == "autopilot":  # likewise: autopilots start fresh
+                for path in snapshot_paths(autopilot_state_path(self.opts, spec.name)):
+                    path.unlink(missing_ok=True)
         timeout = self.scenario.time.startup_timeout_s
         first = [s.name for s in self.specs if s.role == "router"]
         if first:
