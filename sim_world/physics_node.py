@@ -20,7 +20,8 @@ The answer is awaited after the tick's commands, so it overlaps the autopilots' 
 With a ``checkpoint`` path it saves the world there every ``checkpoint_period_s`` of sim time
 (:mod:`sim_world.checkpoint`) and, when that file exists at start, resumes from it instead of
 the spawn: the lockstep handshake then runs on the checkpoint's tick, and the autopilots answer
-it like any tick (sim time goes back by the replayed span).
+it like any tick (sim time goes back by the replayed span; autopilots with snapshots restore
+their state of the tick before and replay the same bits).
 
 Options (``--set KEY=VALUE``): ``max_ticks`` (stop once this tick is published and answered),
 ``mode`` (lockstep|realtime), ``speed_factor``, ``wait_for_autopilots`` (true|false: start
@@ -203,6 +204,8 @@ class PhysicsNode:
         self._plume_timeout_s = 0.4 * self.scenario.time.participant_timeout_s
         self._plume_nodes: set[str] = set()
         self._plume_pending: tuple[int, int, Any] | None = None  # tick, points, replies
+        self._plume_asked: tuple[int, bytes] | None = None  # the pending query: tick, payload
+        self._resume_query: tuple[int, bytes] | None = None  # a checkpoint's, to ask again
         # Restarts (lockstep): hold the tick for an autopilot the launcher is restarting.
         self._restart_grace_s = (
             self.scenario.time.restart_grace_s if options.mode == SpeedMode.LOCKSTEP else 0.0
@@ -333,6 +336,7 @@ class PhysicsNode:
         with self._cond:
             self.barrier.start()
             self.barrier.begin(self.tick, timeout_s=max(0.0, deadline - time.monotonic()))
+        self._ask_again()
         self._publish_tick(self.world.states(self.tick, self.world.sim_time_s))
         if not self._handshake():
             return 0 if self.rt.stop.is_set() else 1
@@ -352,6 +356,8 @@ class PhysicsNode:
             cp = checkpoint.load(path)
             self.world.restore(cp)
             self.tick = cp.tick
+            if cp.plume_query_tick is not None:
+                self._resume_query = (cp.plume_query_tick, cp.plume_query)
             self._resume_note = (
                 f"resumed from checkpoint at tick {cp.tick} (sim t={cp.sim_time_s:.3f} s)"
             )
@@ -378,7 +384,11 @@ class PhysicsNode:
         writer.wait()
         if self.tick >= self._due_checkpoint:
             t0 = time.monotonic()
-            writer.submit(self.world.checkpoint(self.tick))
+            cp = self.world.checkpoint(self.tick)
+            asked = self._plume_asked if self._plume_pending is not None else None
+            if asked is not None:  # its answer belongs to the tick being saved
+                cp = msgspec.structs.replace(cp, plume_query_tick=asked[0], plume_query=asked[1])
+            writer.submit(cp)
             self._capture_s += time.monotonic() - t0
             self._due_checkpoint = self.tick + self._checkpoint_ticks
         self._next_checkpoint = self.tick + 1 if writer.pending else self._due_checkpoint
@@ -586,10 +596,29 @@ class PhysicsNode:
         query = PlumeQuery(
             points_enu_m=[s.position_enu_m for s in states], sim_time_s=self.world.sim_time_s
         )
+        payload = encode(query)
         replies = self.rt.session.get(
-            self._plume_key, payload=encode(query), timeout=self._plume_timeout_s
+            self._plume_key, payload=payload, timeout=self._plume_timeout_s
         )
         self._plume_pending = (self.tick, len(states), replies)
+        self._plume_asked = (self.tick, payload)
+
+    def _ask_again(self) -> None:
+        """Resumed from a checkpoint: the sensor query whose answer goes into its tick, again
+        (so the replayed tick carries the same plume values as the first time)."""
+        resumed, self._resume_query = self._resume_query, None
+        if resumed is None or not self._plume_nodes:
+            return
+        tick, payload = resumed
+        try:
+            count = len(decode(payload, PlumeQuery).points_enu_m)
+        except MessageError as exc:
+            log.warning("not asking the checkpoint's plume query again: %s", exc)
+            return
+        replies = self.rt.session.get(
+            self._plume_key, payload=payload, timeout=self._plume_timeout_s
+        )
+        self._plume_pending = (tick, count, replies)
 
     def _plume_answer(self) -> PlumeSample | None:
         """The answer to the pending sensor query (waits for it up to its timeout)."""

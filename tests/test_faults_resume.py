@@ -3,7 +3,7 @@ a mission, and of the physics and that autopilot at once, under the launcher tha
 up`` runs (router, plume, physics, three autopilots). The physics holds the clock while the
 autopilot is restarted, the new autopilot restores the state of the tick before and flies on:
 every vehicle's state stream is bit-identical to a run without the kill, the killed vehicle
-finishes its mission and lands.
+finishes its mission and lands; every plume reading is the same too.
 
 The missions start on a known tick, so that two runs can be compared bit for bit: a fourth
 vehicle, parked on the ground, is a scripted lockstep participant that holds tick
@@ -30,7 +30,14 @@ import zenoh
 
 from deploy.launcher import Launcher, LaunchOptions
 from swarmbus.codec import decode, encode
-from swarmbus.messages import Arm, CommandReply, MissionStart, VehicleState, VehicleStatus
+from swarmbus.messages import (
+    Arm,
+    CommandReply,
+    ConcentrationReading,
+    MissionStart,
+    VehicleState,
+    VehicleStatus,
+)
 from swarmbus.scenario import load_scenario
 from swarmbus.session import free_tcp_port
 from tests.mavclient import write_scenario
@@ -59,6 +66,16 @@ class Flight:
     states: dict[str, dict[int, bytes]] = field(default_factory=dict)
     conflicts: list[tuple[str, int]] = field(default_factory=list)
     status: dict[str, VehicleStatus] = field(default_factory=dict)
+    # every concentration reading payload by vehicle and sim time (the first seen)
+    readings: dict[str, dict[float, bytes]] = field(default_factory=dict)
+
+    def on_reading(self, sample: zenoh.Sample) -> None:
+        payload = sample.payload.to_bytes()
+        r = decode(payload, ConcentrationReading)
+        with self.lock:
+            old = self.readings.setdefault(r.vehicle_id, {}).setdefault(r.sim_time_s, payload)
+            if old != payload:
+                self.conflicts.append((r.vehicle_id, -1))
 
     def on_state(self, sample: zenoh.Sample) -> None:
         payload = sample.payload.to_bytes()
@@ -131,6 +148,7 @@ def flight(tmp: Path) -> Iterator[Flight]:
         keys = keys_for()
         subs.append(session.declare_subscriber(keys.all_vehicle_states(), f.on_state))
         subs.append(session.declare_subscriber(keys.all_vehicle_status(), f.on_status))
+        subs.append(session.declare_subscriber(keys.all_vehicle_concentration(), f.on_reading))
 
     gate: subprocess.Popen[bytes] | None = None
     try:
@@ -221,6 +239,15 @@ def assert_nothing_lost(f: Flight, baseline: Flight, killed_at: int) -> None:
         assert not missing, (vid, missing[:5])
         differ = [t for t in range(end + 1) if got[t] != want[t]]
         assert not differ, f"{vid}: {len(differ)} ticks differ from the run without the kill"
+    # ... and so is every reading of the plume, through the kill (sensor state and queries)
+    for vid in VEHICLES:
+        got_r, want_r = f.readings[vid], baseline.readings[vid]
+        end_s = min(max(got_r), max(want_r))
+        times = sorted(t for t in set(got_r) | set(want_r) if t <= end_s)
+        assert end_s > killed_at / 120.0 + 5.0, (vid, end_s)
+        lost = [t for t in times if t not in got_r or t not in want_r]
+        assert not lost, (vid, lost[:5])
+        assert all(got_r[t] == want_r[t] for t in times), f"{vid}: readings differ"
 
 
 def test_autopilot_killed_mid_mission_the_clock_waits_and_nothing_is_lost(
