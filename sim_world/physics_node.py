@@ -71,6 +71,9 @@ log = logging.getLogger(__name__)
 HANDSHAKE_REPUBLISH_S = 0.1  # tick 0 is re-sent until every participant has answered it
 STOP_POLL_S = 0.2  # longest wait between checks of the stop signal
 HEALTH_PERIOD_S = 1.0
+# A plume query that got no reply: how long to wait for the service's token to go (it died)
+# before taking it for a slow answer from a live service.
+PLUME_DEPARTURE_S = 0.5
 
 
 class OptionError(ValueError):
@@ -211,6 +214,9 @@ class PhysicsNode:
             self.scenario.time.restart_grace_s if options.mode == SpeedMode.LOCKSTEP else 0.0
         )
         self._held_republish = 0.0  # wall time of the last re-publication during a hold
+        self._plume_restart_until = 0.0  # the plume is being restarted: wait for it until then
+        self._plume_lost = False
+        self._plume_arrivals = 0  # plume tokens that arrived (a restarted service is a new one)
         self._restart_sub = session.declare_subscriber(
             self.keys.all_node_restart(), self._on_restart_notice
         )
@@ -242,8 +248,11 @@ class PhysicsNode:
             with self._cond:
                 if alive:
                     self._plume_nodes.add(name)
+                    self._plume_arrivals += 1
                 else:
                     self._plume_nodes.discard(name)
+                self._plume_lost = not self._plume_nodes  # a plume was here and is gone
+                self._cond.notify_all()
             return
         vid = participant_of(name, self.world.vehicle_ids)
         if vid is None:
@@ -512,6 +521,13 @@ class PhysicsNode:
         except MessageError as exc:
             log.warning("ignoring restart notice on %s: %s", sample.key_expr, exc)
             return
+        if notice.role == "plume" and self._restart_grace_s > 0.0:
+            with self._cond:
+                grace = notice.delay_s + self._restart_grace_s
+                self._plume_restart_until = time.monotonic() + grace if notice.restarting else 0.0
+                self._plume_lost = self._plume_lost and notice.restarting
+                self._cond.notify_all()
+            return
         vids = [v for v in notice.vehicles if v in self._known]
         if not vids or self._restart_grace_s <= 0.0:
             return
@@ -541,6 +557,34 @@ class PhysicsNode:
             self._held_republish = now
             self._tick_pub.put(self._last_tick_msg)
 
+    def _plume_restarted(self) -> bool:
+        """No plume answer, or the plume service left (lockstep): hold the clock until a plume
+        service arrives — up to the participant timeout (time for the launcher's word), or up
+        to the grace when the launcher says it restarts it. Whether one arrived."""
+        if self._restart_grace_s <= 0.0:
+            return False
+        word = time.monotonic() + self.scenario.time.participant_timeout_s
+        with self._cond:
+            # The tick is not out yet: its participants' deadline starts when it is.
+            timeout = max(self.barrier.timeout_s, self.barrier.remaining_s())
+            seen = self._plume_arrivals
+            alive_until = time.monotonic() + PLUME_DEPARTURE_S
+            while self._plume_arrivals == seen and not self.rt.stop.is_set():
+                now = time.monotonic()
+                if self._plume_nodes and not self._plume_restart_until and now > alive_until:
+                    break  # still there: a slow answer, not a dead service
+                remaining = max(word, self._plume_restart_until) - now
+                if remaining <= 0.0:
+                    break
+                self._cond.wait(min(remaining, STOP_POLL_S / 4))
+            self._plume_restart_until = 0.0
+            self.barrier.begin(self.tick, timeout)
+            back = self._plume_arrivals != seen
+            if not back and not self._plume_nodes:
+                log.warning("tick %d: no plume service came back", self.tick)
+            self._plume_lost = False  # once per departure, not every tick
+            return back
+
     def _report_expired_holds(self, held: frozenset[str], dropped: list[str]) -> None:
         expired = [v for v in dropped if v in held]
         if expired:
@@ -567,6 +611,8 @@ class PhysicsNode:
     # ------------------------------------------------------------------ output
     def _publish_tick(self, states: list[VehicleState]) -> None:
         plume_values = self._plume_answer()
+        if self._plume_lost and self.tick % self._sensor_period == 0:
+            self._plume_restarted()  # the plume left between queries: wait for it likewise
         query = (
             self.options.shared_plume_query
             and self.tick % self._sensor_period == 0
@@ -619,6 +665,7 @@ class PhysicsNode:
             self._plume_key, payload=payload, timeout=self._plume_timeout_s
         )
         self._plume_pending = (tick, count, replies)
+        self._plume_asked = (tick, payload)
 
     def _plume_answer(self) -> PlumeSample | None:
         """The answer to the pending sensor query (waits for it up to its timeout)."""
@@ -626,9 +673,26 @@ class PhysicsNode:
         if pending is None:
             return None
         tick, count, replies = pending
+        values, replied = self._values(replies, count)
+        asked = self._plume_asked
+        silent = not replied and asked is not None and asked[0] == tick
+        if silent and self._plume_restarted():
+            assert asked is not None
+            # the plume died with this query: the clock waited for its restart; ask again
+            log.warning("tick %d: asking the restarted plume service again", self.tick)
+            again = self.rt.session.get(
+                self._plume_key, payload=asked[1], timeout=self._plume_timeout_s
+            )
+            values, _ = self._values(again, count)
+        return PlumeSample(tick=tick, values_g_m3=values)
+
+    def _values(self, replies: Any, count: int) -> tuple[list[float] | None, bool]:
+        """The values of the first reply (None if unusable) and whether there was a reply."""
         values: list[float] | None = None
+        replied = False
         try:
             for reply in replies:
+                replied = True
                 if reply.ok is None:
                     err = reply.err
                     log.warning("plume query refused: %s", err.payload.to_bytes() if err else "")
@@ -641,7 +705,7 @@ class PhysicsNode:
                 break
         except (MessageError, zenoh.ZError) as exc:
             log.warning("plume reply unusable: %s", exc)
-        return PlumeSample(tick=tick, values_g_m3=values)
+        return values, replied
 
     def _pace(self, sim_time_s: float) -> None:
         """Realtime mode: hold tick ``k`` until the wall clock reaches its sim time / factor."""
