@@ -74,6 +74,7 @@ HEALTH_PERIOD_S = 1.0
 # A plume query that got no reply: how long to wait for the service's token to go (it died)
 # before taking it for a slow answer from a live service.
 PLUME_DEPARTURE_S = 0.5
+RECORDER = "recorder"  # the recorder's node name: the clock waits for its restart too
 
 
 class OptionError(ValueError):
@@ -217,6 +218,9 @@ class PhysicsNode:
         self._plume_restart_until = 0.0  # the plume is being restarted: wait for it until then
         self._plume_lost = False
         self._plume_arrivals = 0  # plume tokens that arrived (a restarted service is a new one)
+        self._recorder_arrivals = 0
+        self._recorder_lost = False  # the recorder's token went: hold before the next tick
+        self._recorder_until = 0.0  # it is being restarted: hold until it is back, or this
         self._restart_sub = session.declare_subscriber(
             self.keys.all_node_restart(), self._on_restart_notice
         )
@@ -252,6 +256,12 @@ class PhysicsNode:
                 else:
                     self._plume_nodes.discard(name)
                 self._plume_lost = not self._plume_nodes  # a plume was here and is gone
+                self._cond.notify_all()
+            return
+        if name == RECORDER and self._restart_grace_s > 0.0:
+            with self._cond:
+                self._recorder_arrivals += alive
+                self._recorder_lost = not alive  # wait for its word before the next tick
                 self._cond.notify_all()
             return
         vid = participant_of(name, self.world.vehicle_ids)
@@ -461,6 +471,8 @@ class PhysicsNode:
             if paced:
                 self._pace(sim_time)
             states = self.world.states(self.tick, sim_time)
+            if self._recorder_lost:
+                self._wait_for_recorder()
             with self._cond:
                 self.barrier.begin(self.tick)
             self._publish_tick(states)
@@ -520,6 +532,13 @@ class PhysicsNode:
             notice = decode(sample.payload.to_bytes(), RestartNotice)
         except MessageError as exc:
             log.warning("ignoring restart notice on %s: %s", sample.key_expr, exc)
+            return
+        if notice.role == RECORDER and self._restart_grace_s > 0.0:
+            with self._cond:
+                grace = notice.delay_s + self._restart_grace_s
+                self._recorder_until = time.monotonic() + grace if notice.restarting else 0.0
+                self._recorder_lost = self._recorder_lost and notice.restarting
+                self._cond.notify_all()
             return
         if notice.role == "plume" and self._restart_grace_s > 0.0:
             with self._cond:
@@ -584,6 +603,29 @@ class PhysicsNode:
                 log.warning("tick %d: no plume service came back", self.tick)
             self._plume_lost = False  # once per departure, not every tick
             return back
+
+    def _wait_for_recorder(self) -> None:
+        """The recorder left (lockstep): hold the next tick until a recorder is back — up to
+        the participant timeout for the launcher's word, up to the grace if it restarts it —
+        so that the new recorder records every tick from the first one it missed."""
+        t0 = time.monotonic()
+        word = t0 + self.scenario.time.participant_timeout_s
+        with self._cond:
+            seen = self._recorder_arrivals
+            while self._recorder_arrivals == seen and not self.rt.stop.is_set():
+                remaining = max(word, self._recorder_until) - time.monotonic()
+                if remaining <= 0.0:
+                    break
+                self._cond.wait(min(remaining, STOP_POLL_S))
+            back = self._recorder_arrivals != seen
+            self._recorder_lost = False
+            self._recorder_until = 0.0
+        log.warning(
+            "tick %d: held the clock %.2f s for the recorder: %s",
+            self.tick,
+            time.monotonic() - t0,
+            "it is back" if back else "it did not come back",
+        )
 
     def _report_expired_holds(self, held: frozenset[str], dropped: list[str]) -> None:
         expired = [v for v in dropped if v in held]
