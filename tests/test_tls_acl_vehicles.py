@@ -5,6 +5,10 @@ then a marker on a key it may use prove it without waiting for a silence."""
 
 from __future__ import annotations
 
+import os
+import signal
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -12,9 +16,11 @@ import pytest
 from deploy.certs import common_name_of
 from deploy.hosts import Deployment, HostsError, load_deployment
 from deploy.security import secure_network
+from swarmbus.codec import decode, encode
 from swarmbus.keys import Keys
+from swarmbus.messages import CommandReply, GetParams, VehicleStatus
 from swarmbus.session import NetworkConfig, free_tcp_port, open_session
-from tests.procs import run_cli, wait_until
+from tests.procs import REPO, run_cli, wait_until
 from tests.tls_probe import forged_puts_seen
 
 KEYS = Keys("default")
@@ -131,3 +137,68 @@ def test_per_vehicle_identities_need_one_vehicle_per_process_and_the_hosts_vehic
         client(dep, "agents", "autopilot", "autopilot-uav1-plus1")
     with pytest.raises(HostsError, match=r"vehicles = \[...\]"):
         load_deployment(write_hosts(tmp_path / "h.toml", "tls/127.0.0.1:7447", vehicles=False))
+
+
+def test_a_real_autopilot_process_serves_its_vehicle_under_its_own_identity(
+    deployment: tuple[Deployment, Path], tmp_path: Path
+) -> None:
+    """``plumeswarm node autopilot --vehicle uav1 --hosts … --host agents`` runs as
+    ``autopilot-uav1.agents``: its token, its status and its answers reach an operator, so the
+    allow-list covers what an autopilot does."""
+    dep, tmp = deployment
+    router = NetworkConfig(mode="router", connect=[], listen=[dep.router])
+    cmd = [
+        sys.executable,
+        "-m",
+        "deploy",
+        "node",
+        "autopilot",
+        "--vehicle",
+        "uav1",
+        "--hosts",
+        str(tmp / "hosts.toml"),
+        "--host",
+        "agents",
+        "--listen",
+        "tls/127.0.0.1:0",
+    ]
+    statuses: list[VehicleStatus] = []
+    with (
+        open_session(secure_network(router, dep, "sim", "router", KEYS)),
+        open_session(client(dep, "gcs", "operator")) as op,
+        open(tmp_path / "autopilot.log", "wb") as log,
+    ):
+        sub = op.declare_subscriber(
+            KEYS.vehicle_status("uav1"),
+            lambda s: statuses.append(decode(s.payload.to_bytes(), VehicleStatus)),
+        )
+        proc = subprocess.Popen(
+            cmd, cwd=REPO, env=dict(os.environ, PYTHONPATH=str(REPO)), start_new_session=True,
+            stdout=log, stderr=subprocess.STDOUT,
+        )  # fmt: skip
+        try:
+            wait_until(
+                lambda: (
+                    KEYS.node_health("autopilot-uav1")
+                    in [
+                        str(r.ok.key_expr)
+                        for r in op.liveliness().get(KEYS.all_node_health(), timeout=2.0)
+                        if r.ok is not None
+                    ]
+                ),
+                90.0,
+                "the autopilot's token",
+                poll_s=0.5,
+            )
+            wait_until(lambda: statuses, 30.0, "its status")
+            replies = [
+                decode(r.ok.payload.to_bytes(), CommandReply)
+                for r in op.get(KEYS.vehicle_cmd("uav1"), payload=encode(GetParams()), timeout=10.0)
+                if r.ok is not None
+            ]
+            assert replies and replies[0].accepted and replies[0].params, replies
+        finally:
+            sub.undeclare()
+            os.killpg(proc.pid, signal.SIGTERM)
+            proc.wait(30)
+    assert statuses[0].vehicle_id == "uav1"
