@@ -301,6 +301,7 @@ class AutopilotNode:
             period = ctx.scenario.time.checkpoint_period_s * ctx.scenario.time.control_hz
             self.keeper = StateKeeper(Path(options.checkpoint), round(period))
         self._snap_pending: PendingSnapshot | None = None
+        self._snap_tick = -1  # the tick of the state under the lock (last_tick runs ahead)
         self.node_name = ctx.name
 
     # ------------------------------------------------------------------ set-up
@@ -510,6 +511,7 @@ class AutopilotNode:
                     )
             if self.batch_pub is not None and batch:
                 self.last_batch = encode(ActuatorBatch(tick=tick.tick, commands=batch))
+            self._snap_tick = tick.tick
             if self.keeper is not None:  # saved before the answer goes out (agents.resume)
                 self._snap_pending = self._pending_after(tick, sensing)
                 self._save()
@@ -553,7 +555,7 @@ class AutopilotNode:
         served = list(self.served.values())
         snap = ProcessSnapshot(
             node=self.node_name,
-            tick=self.last_tick,
+            tick=self._snap_tick,
             vehicles=[capture(s.autopilot, s.sensor, s.behavior_rng) for s in served],
             commands=[s.last_command for s in served],
             batch=self.last_batch,
@@ -609,7 +611,7 @@ class AutopilotNode:
             s.last_status_time_s = when
             s.new_readings = []
         self.last_batch = snap.batch
-        self.last_tick = snap.tick
+        self.last_tick = self._snap_tick = snap.tick
         self._snap_pending = p = snap.pending
         self.pending = None
         if p is not None:
