@@ -126,8 +126,9 @@ class Flight:
 
 
 @contextmanager
-def flight(tmp: Path) -> Iterator[Flight]:
-    """The stack flying the three missions from tick START_TICK + 1 on."""
+def flight(tmp: Path, per_process: int = 1) -> Iterator[Flight]:
+    """The stack flying the three missions from tick START_TICK + 1 on (``per_process``
+    vehicles per autopilot process)."""
     path, _, _ = write_scenario(tmp / "scenario.toml", len(VEHICLES) + 1)
     scenario = load_scenario(path)
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
@@ -138,6 +139,7 @@ def flight(tmp: Path) -> Iterator[Flight]:
         connect=(endpoint,),
         roles=("router", "plume", "physics", "autopilot"),
         vehicles=VEHICLES,
+        vehicles_per_process=per_process,
     )
     launcher = Launcher(scenario, opts)
     f = Flight(launcher)
@@ -199,10 +201,10 @@ def kill(f: Flight, *names: str) -> None:
         os.killpg(pids[name], signal.SIGKILL)
 
 
-def fly_with_kill(tmp: Path, *names: str) -> tuple[Flight, int]:
+def fly_with_kill(tmp: Path, *names: str, per_process: int = 1) -> tuple[Flight, int]:
     """Fly the missions, SIGKILL ``names`` while uav1 flies its first leg at 10 m; the flight
     and the last tick of uav1 seen before the kill."""
-    with flight(tmp) as f:
+    with flight(tmp, per_process) as f:
         f.wait(
             lambda: (s := f.status.get(KILLED)) is not None and s.mission_index >= 1,
             300.0,
@@ -269,3 +271,15 @@ def test_physics_and_autopilot_killed_at_once_nothing_is_lost(
     assert "resumed from checkpoint" in (run / "physics.log").read_text()
     for vid in VEHICLES:
         assert "restored the state of tick" in (run / f"autopilot-{vid}.log").read_text(), vid
+
+
+def test_a_process_of_two_autopilots_killed_both_vehicles_resume(
+    baseline: Flight, tmp_path: Path
+) -> None:
+    """Two vehicles in one process (one ActuatorBatch per tick): the clock holds both, the new
+    process restores both, and the streams are the bits of the run without the kill (flown one
+    vehicle per process: batching changes no bit either)."""
+    f, killed_at = fly_with_kill(tmp_path, "autopilot-uav1-plus1", per_process=2)
+    assert_nothing_lost(f, baseline, killed_at)
+    log = (f.launcher.run_dir / "physics.log").read_text()
+    assert "holding the clock for uav1, uav2: autopilot-uav1-plus1 is being restarted" in log
