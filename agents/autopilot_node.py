@@ -573,6 +573,9 @@ class AutopilotNode:
         except (SnapshotError, OSError) as exc:
             log.error("snapshots off: %s", exc)
             self.keeper = None
+        except Exception:  # a snapshot must never cost the vehicle its ticks
+            log.exception("snapshots off: a snapshot failed")
+            self.keeper = None
 
     def _resume(self, tick: _Tick) -> None:
         """Restore a snapshot when this tick calls for one (agents.resume)."""

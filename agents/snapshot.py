@@ -119,9 +119,12 @@ class MonitorSnapshot(msgspec.Struct, frozen=True, kw_only=True):
 
 
 class SensorSnapshot(msgspec.Struct, frozen=True, kw_only=True):
+    """The sensor's state, whichever of these its model keeps (the others are None)."""
+
     lagged_g_m3: float | None
     last_time_s: float | None
     rng: RngState | None  # a sensor that draws its noise from a running generator
+    history: list[tuple[float, float]] | None = None  # (sim time, lag state) of recent samples
 
 
 class BehaviorSnapshot(msgspec.Struct, frozen=True, kw_only=True):
@@ -212,12 +215,16 @@ def _estimator_rng(ap: Autopilot) -> RngState | None:
 
 
 def _sensor_snapshot(sensor: ConcentrationSensor) -> SensorSnapshot:
+    # The sensor model keeps its lag as a last value and time, or as a short history of
+    # samples; its noise from a running generator, or keyed by sample time (no state).
     rng = getattr(sensor, "_rng", None)
     noisy = getattr(sensor.config, "noise_std_g_m3", 0.0) > 0.0
+    history = getattr(sensor, "_history", None)
     return SensorSnapshot(
-        lagged_g_m3=sensor._lagged,
-        last_time_s=sensor._last_time_s,
+        lagged_g_m3=getattr(sensor, "_lagged", None),
+        last_time_s=getattr(sensor, "_last_time_s", None),
         rng=rng_state(rng) if noisy and isinstance(rng, np.random.Generator) else None,
+        history=[(t, v) for t, v in history] if history is not None else None,
     )
 
 
@@ -273,13 +280,22 @@ def restore(
     c._w_prev = snap.controller.rates_prev
     if snap.estimator_rng is not None:
         set_rng_state(ap.estimator._rng, snap.estimator_rng)
-    sensor._lagged = snap.sensor.lagged_g_m3
-    sensor._last_time_s = snap.sensor.last_time_s
-    rng = getattr(sensor, "_rng", None)
-    if snap.sensor.rng is not None and isinstance(rng, np.random.Generator):
-        set_rng_state(rng, snap.sensor.rng)
+    _restore_sensor(sensor, snap.sensor)
     if snap.behavior is not None and ap.behavior is not None:
         _restore_behavior(ap.behavior, snap.behavior, behavior_rng)
+
+
+def _restore_sensor(sensor: ConcentrationSensor, snap: SensorSnapshot) -> None:
+    for name, value in (("_lagged", snap.lagged_g_m3), ("_last_time_s", snap.last_time_s)):
+        if hasattr(sensor, name):
+            setattr(sensor, name, value)
+    history = getattr(sensor, "_history", None)
+    if history is not None and snap.history is not None:
+        history.clear()
+        history.extend(snap.history)
+    rng = getattr(sensor, "_rng", None)
+    if snap.rng is not None and isinstance(rng, np.random.Generator):
+        set_rng_state(rng, snap.rng)
 
 
 def _restore_modes(ap: Autopilot, s: ModesSnapshot) -> None:

@@ -212,7 +212,7 @@ class PhysicsNode:
         self._resume_query: tuple[int, bytes] | None = None  # a checkpoint's, to ask again
         # Restarts (lockstep): hold the tick for an autopilot the launcher is restarting.
         self._restart_grace_s = (
-            self.scenario.time.restart_grace_s if options.mode == SpeedMode.LOCKSTEP else 0.0
+            self.scenario.time.restart_grace_s if options.mode != SpeedMode.REALTIME else 0.0
         )
         self._held_republish = 0.0  # wall time of the last re-publication during a hold
         self._plume_restart_until = 0.0  # the plume is being restarted: wait for it until then
