@@ -4,6 +4,7 @@ write."""
 
 from __future__ import annotations
 
+import collections
 import copy
 import dataclasses
 import enum
@@ -43,7 +44,7 @@ def state_of(obj: Any, seen: set[int] | None = None) -> Any:
         return obj.bit_generator.state
     if isinstance(obj, (str, int, float, bool, type(None), enum.Enum, bytes)):
         return obj
-    if isinstance(obj, (list, tuple)):
+    if isinstance(obj, (list, tuple, collections.deque)):
         return [state_of(v, seen) for v in obj]
     if isinstance(obj, dict):
         return {k: state_of(v, seen) for k, v in obj.items() if not callable(v)}
@@ -54,8 +55,10 @@ def state_of(obj: Any, seen: set[int] | None = None) -> Any:
     seen.add(id(obj))
     if dataclasses.is_dataclass(obj):
         names = [f.name for f in dataclasses.fields(obj)]
-    else:
+    elif hasattr(obj, "__dict__"):
         names = list(vars(obj))
+    else:
+        names = [n for c in type(obj).__mro__ for n in getattr(c, "__slots__", ())]
     return {n: state_of(getattr(obj, n), seen) for n in names if not callable(getattr(obj, n))}
 
 
