@@ -24,8 +24,10 @@ same values at the same tick. Commands are handled on Zenoh's thread under a loc
 
 Options (``--set key=value``): ``sensor_timeout_s`` (0: 0.4 × participant timeout),
 ``status_period_s`` (0.5; a stepped world gets a status every tick), ``position_noise_m`` /
-``velocity_noise_m_s`` (0: the estimate is the physics' truth). Plume queries go out only
-while a ``plume`` node's token is alive.
+``velocity_noise_m_s`` (0: the estimate is the physics' truth), ``checkpoint`` (a file path;
+empty: none): keep snapshots of the process's state there, so a restarted process, or a physics
+resumed from its checkpoint, carries on with the same bits (:mod:`agents.resume`). Plume
+queries go out only while a ``plume`` node's token is alive.
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ import time
 from collections.abc import Callable
 from contextlib import suppress
 from dataclasses import dataclass, fields
+from pathlib import Path
 from typing import Any
 
 import msgspec
@@ -46,7 +49,9 @@ import zenoh
 from agents.autopilot import Autopilot
 from agents.behavior import BehaviorContext, BehaviorError, load_behavior
 from agents.estimator import Estimator
+from agents.resume import StateKeeper
 from agents.sensor import ConcentrationSensor
+from agents.snapshot import PendingSnapshot, ProcessSnapshot, SnapshotError, capture, restore
 from swarmbus.codec import MessageError, decode, encode
 from swarmbus.keys import Keys
 from swarmbus.messages import (
@@ -80,14 +85,18 @@ class NodeOptions:
     status_period_s: float = 0.5
     position_noise_m: float = 0.0
     velocity_noise_m_s: float = 0.0
+    checkpoint: str = ""  # snapshots of the process's state (agents.resume); empty: none
 
     @classmethod
     def parse(cls, options: dict[str, str]) -> NodeOptions:
         known = {f.name for f in fields(cls)}
-        values: dict[str, float] = {}
+        values: dict[str, Any] = {}
         for key, text in options.items():
             if key not in known:
                 raise ValueError(f"unknown option {key!r}; options: {', '.join(sorted(known))}")
+            if key == "checkpoint":
+                values[key] = text.strip()
+                continue
             try:
                 value = float(text)
             except ValueError:
@@ -98,7 +107,20 @@ class NodeOptions:
         return cls(**values)
 
 
-def build_autopilot(scenario: Scenario, vehicle_id: str, options: NodeOptions) -> Autopilot:
+def behavior_rng(scenario: Scenario, vehicle_id: str) -> np.random.Generator:
+    """The generator a vehicle's behaviour gets in its context."""
+    index = [v.id for v in scenario.vehicles].index(vehicle_id)
+    seed = scenario.world.seed
+    return np.random.Generator(np.random.PCG64(np.random.SeedSequence([seed, index, 0xBE4])))
+
+
+def build_autopilot(
+    scenario: Scenario,
+    vehicle_id: str,
+    options: NodeOptions,
+    rng: np.random.Generator | None = None,
+) -> Autopilot:
+    """``rng``: the behaviour's generator (default: :func:`behavior_rng`)."""
     index = [v.id for v in scenario.vehicles].index(vehicle_id)
     seed = scenario.world.seed
     estimator = Estimator(
@@ -114,7 +136,7 @@ def build_autopilot(scenario: Scenario, vehicle_id: str, options: NodeOptions) -
             vehicle_index=index,
             scenario=scenario,
             control_dt_s=1.0 / scenario.time.control_hz,
-            rng=np.random.Generator(np.random.PCG64(np.random.SeedSequence([seed, index, 0xBE4]))),
+            rng=rng if rng is not None else behavior_rng(scenario, vehicle_id),
         )
         behavior = load_behavior(spec, ctx)
     return Autopilot(scenario, vehicle_id, estimator=estimator, behavior=behavior)
@@ -133,7 +155,8 @@ class _Served:
         own_actuators: bool = True,
     ) -> None:
         self.vehicle_id = vehicle_id
-        self.autopilot = build_autopilot(scenario, vehicle_id, options)
+        self.behavior_rng = behavior_rng(scenario, vehicle_id)
+        self.autopilot = build_autopilot(scenario, vehicle_id, options, self.behavior_rng)
         index = [v.id for v in scenario.vehicles].index(vehicle_id)
         self.sensor = ConcentrationSensor.for_vehicle(scenario, index)
         # None: the process batches its vehicles' commands (AutopilotNode.batch_pub)
@@ -271,10 +294,20 @@ class AutopilotNode:
         self.plume_nodes: set[str] = set()
         self._declared: list[Any] = []  # subscribers and queryables, undeclared on close
         self._tokens: list[zenoh.LivelinessToken] = []
+        # Snapshots (agents.resume): the keeper, and the tick part of the latest snapshot.
+        self.keeper: StateKeeper | None = None
+        if options.checkpoint:
+            period = ctx.scenario.time.checkpoint_period_s * ctx.scenario.time.control_hz
+            self.keeper = StateKeeper(Path(options.checkpoint), round(period))
+        self._snap_pending: PendingSnapshot | None = None
+        self._snap_tick = -1  # the tick of the state under the lock (last_tick runs ahead)
+        self.node_name = ctx.name
 
     # ------------------------------------------------------------------ set-up
     def declare(self, node_name: str) -> None:
         """Subscriber and queryables first, then the participants' tokens."""
+        if self.keeper is not None:
+            self.keeper.open(self._snapshot())
         self._declared.append(
             self.session.liveliness().declare_subscriber(
                 self.keys.all_node_health(), self._on_presence, history=True
@@ -312,6 +345,8 @@ class AutopilotNode:
                 self.plume_nodes.discard(name)
 
     def close(self) -> None:
+        if self.keeper is not None:
+            self.keeper.close()
         for token in self._tokens:
             with suppress(zenoh.ZError):
                 token.undeclare()
@@ -333,6 +368,7 @@ class AutopilotNode:
                 with self.lock:
                     reply = served.autopilot.handle(command)
                     served.publish_status(force=False, period_s=self.status_period_s)
+                    self._save()
                 if not reply.accepted:
                     log.info(
                         "%s: %s refused: %s",
@@ -418,6 +454,8 @@ class AutopilotNode:
         if isinstance(tick, SimTick):
             tick = _Tick.of(tick)
         self.last_tick_wall = time.monotonic()
+        if self.keeper is not None:
+            self._resume(tick)
         if tick.tick == self.last_tick:  # the start handshake repeats a tick: same answer
             if self.batch_pub is not None and self.last_batch:
                 self.batch_pub.put(self.last_batch)
@@ -437,9 +475,12 @@ class AutopilotNode:
             )
             self.pending = None  # the sensor query of a tick that is being replayed
         self.last_tick = tick.tick
+        if self.keeper is not None:
+            self.keeper.before_tick(tick.tick)
         self._collect_readings(tick)
         index = {h.vehicle_id: k for k, h in enumerate(tick.heads)}
         batch: list[ActuatorCommand] = []
+        sensing = any(s.sensor.due(tick.tick) for s in self.served.values()) and bool(tick.heads)
         with self.lock:
             for vid, served in self.served.items():
                 own = index.get(vid)
@@ -463,21 +504,124 @@ class AutopilotNode:
                     batch.append(command)
                 else:
                     served.last_command = encode(command)
-                    served.actuators.put(served.last_command)
                 for event in served.autopilot.modes.mission.drain_events():
                     log.info(
                         "%s: mission item %d reached at %.2f s", vid, event.index, event.sim_time_s
                     )
             if self.batch_pub is not None and batch:
                 self.last_batch = encode(ActuatorBatch(tick=tick.tick, commands=batch))
+            self._snap_tick = tick.tick
+            if self.keeper is not None:  # saved before the answer goes out (agents.resume)
+                self._snap_pending = self._pending_after(tick, sensing)
+                self._save()
+            if self.batch_pub is not None and batch:
                 self.batch_pub.put(self.last_batch)
             for served in self.served.values():
+                if served.actuators is not None and served.last_command:
+                    served.actuators.put(served.last_command)
+            for served in self.served.values():
                 served.publish_status(force=False, period_s=self.status_period_s)
-        if any(s.sensor.due(tick.tick) for s in self.served.values()) and tick.heads:
+        if sensing:
             if tick.plume_queried:
                 self.pending = _PendingSensor(tick.tick, tick.sim_time_s, tick.heads, None, True)
             else:
                 self._query_plume(tick)
+
+    # ------------------------------------------------------------------ snapshots
+    def _pending_after(self, tick: _Tick, sensing: bool) -> PendingSnapshot | None:
+        """The sensor query in flight once ``tick`` is handled (see on_tick's end)."""
+        p = self.pending
+        if sensing:
+            heads, sim_time, tick_no, by_physics = (
+                tick.heads,
+                tick.sim_time_s,
+                tick.tick,
+                tick.plume_queried,
+            )
+        elif p is not None:
+            heads, sim_time, tick_no, by_physics = p.states, p.sim_time_s, p.tick, p.by_physics
+        else:
+            return None
+        return PendingSnapshot(
+            tick=tick_no,
+            sim_time_s=sim_time,
+            heads=[(h.vehicle_id, h.position_enu_m) for h in heads],
+            by_physics=by_physics,
+        )
+
+    def _snapshot(self) -> bytes:
+        """The process's state now (caller holds the lock, or no tick has run yet)."""
+        served = list(self.served.values())
+        snap = ProcessSnapshot(
+            node=self.node_name,
+            tick=self._snap_tick,
+            vehicles=[capture(s.autopilot, s.sensor, s.behavior_rng) for s in served],
+            commands=[s.last_command for s in served],
+            batch=self.last_batch,
+            status_times_s=[s.last_status_time_s for s in served],
+            pending=self._snap_pending,
+        )
+        return msgspec.msgpack.encode(snap)
+
+    def _save(self) -> None:
+        keeper = self.keeper
+        if keeper is None:
+            return
+        try:
+            keeper.save(self._snapshot())
+        except (SnapshotError, OSError) as exc:
+            log.error("snapshots off: %s", exc)
+            self.keeper = None
+        except Exception:  # a snapshot must never cost the vehicle its ticks
+            log.exception("snapshots off: a snapshot failed")
+            self.keeper = None
+
+    def _resume(self, tick: _Tick) -> None:
+        """Restore a snapshot when this tick calls for one (agents.resume)."""
+        keeper = self.keeper
+        assert keeper is not None
+        if self.last_tick < 0:
+            snap = keeper.for_restart(tick.tick)
+            how = "restarted process"
+        elif tick.tick < self.last_tick:
+            snap = keeper.for_rewind(tick.tick)
+            how = "physics resumed from its checkpoint"
+        else:
+            return
+        if snap is None:
+            return
+        with self.lock:
+            self._restore(snap)
+        log.warning(
+            "%s: restored the state of tick %d for tick %d (%s)",
+            ", ".join(self.served),
+            snap.tick,
+            tick.tick,
+            how,
+        )
+
+    def _restore(self, snap: ProcessSnapshot) -> None:
+        served = list(self.served.values())
+        if [v.vehicle_id for v in snap.vehicles] != list(self.served):
+            log.error("snapshot of %s, not of this process's vehicles: not restored", snap.node)
+            return
+        for s, v, cmd, when in zip(
+            served, snap.vehicles, snap.commands, snap.status_times_s, strict=True
+        ):
+            restore(s.autopilot, s.sensor, v, s.behavior_rng)
+            s.last_command = cmd
+            s.last_status_time_s = when
+            s.new_readings = []
+        self.last_batch = snap.batch
+        self.last_tick = self._snap_tick = snap.tick
+        self._snap_pending = p = snap.pending
+        self.pending = None
+        if p is not None:
+            heads = [_StateHead(vid, pos) for vid, pos in p.heads]
+            pending = _PendingSensor(p.tick, p.sim_time_s, heads, None, p.by_physics)
+            self.pending = pending if p.by_physics else self._ask_plume(pending)
+        if self.keeper is not None:
+            self.keeper.save(msgspec.msgpack.encode(snap))
 
     # ------------------------------------------------------------------ sensor
     def _ask_plume(self, pending: _PendingSensor) -> _PendingSensor:

@@ -71,14 +71,19 @@ HOST_OPT = click.option("--host", "host_name", default=None, help="This host's e
 
 
 def secured(
-    sc: Scenario, net: NetworkConfig, hosts_file: Path | None, host_name: str | None, role: str
+    sc: Scenario,
+    net: NetworkConfig,
+    hosts_file: Path | None,
+    host_name: str | None,
+    role: str,
+    node_name: str | None = None,
 ) -> NetworkConfig:
     """``net`` as ``role`` on ``host_name`` of the deployment (TLS identity and ACL), if any;
     its TLS files checked (one line naming a missing or unreadable one)."""
     from swarmbus.session import NetworkConfigError, check_tls_files
 
     if hosts_file is not None or host_name is not None:
-        net = _as_deployed(sc, net, hosts_file, host_name, role)
+        net = _as_deployed(sc, net, hosts_file, host_name, role, node_name)
     if net.tls is not None:  # also a scenario's own [network.tls]
         try:
             check_tls_files(net.tls)
@@ -88,7 +93,12 @@ def secured(
 
 
 def _as_deployed(
-    sc: Scenario, net: NetworkConfig, hosts_file: Path | None, host_name: str | None, role: str
+    sc: Scenario,
+    net: NetworkConfig,
+    hosts_file: Path | None,
+    host_name: str | None,
+    role: str,
+    node_name: str | None,
 ) -> NetworkConfig:
     from deploy.hosts import HostsError, load_deployment
     from deploy.security import secure_network
@@ -100,7 +110,7 @@ def _as_deployed(
         dep = load_deployment(hosts_file)
         if net.connect == sc.network.connect:  # not given: the deployment's router
             net = net.with_overrides(connect=[dep.router])
-        return secure_network(net, dep, host_name, role, Keys(sc.world.name))
+        return secure_network(net, dep, host_name, role, Keys(sc.world.name), node_name)
     except HostsError as exc:
         fail(str(exc))
 
@@ -177,7 +187,7 @@ def node(
     net = sc.network.with_overrides(
         mode=mode, connect=list(connect) or None, listen=list(listen) or None
     )
-    net = secured(sc, net, hosts_file, host_name, role)
+    net = secured(sc, net, hosts_file, host_name, role, node_name)
     try:
         entry = role_entry(role)
     except RoleUnavailable as exc:

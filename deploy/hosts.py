@@ -55,6 +55,9 @@ class AclSection(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
     enabled: bool = True
     actuators: list[RoleName] = msgspec.field(default_factory=_default_actuators)
     world: list[RoleName] = msgspec.field(default_factory=_default_world)  # ticks, states, clock
+    # One identity per autopilot process (one vehicle each), allowed to speak for its own
+    # vehicle only (deploy.security); the hosts running autopilots then list their vehicles.
+    per_vehicle: bool = False
 
 
 class Deployment(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
@@ -92,6 +95,13 @@ def load_deployment(path: Path) -> Deployment:
         dep = msgspec.structs.replace(dep, tls=msgspec.structs.replace(dep.tls, certs=str(certs)))
     elif any(e.startswith("tls/") for e in endpoints):
         raise HostsError(f"{path}: tls/ endpoints need a [tls] section (certs = DIR)")
+    if dep.acl.per_vehicle:
+        vague = [h.name for h in dep.hosts if "autopilot" in h.roles and not h.vehicles]
+        if vague:
+            raise HostsError(
+                f"{path}: [acl] per_vehicle needs the vehicles of every autopilot host "
+                f"(vehicles = [...]), missing on {', '.join(vague)}"
+            )
     return dep
 
 

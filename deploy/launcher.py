@@ -20,16 +20,18 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import TracebackType
 
 import msgspec
 import zenoh
 
+from agents.resume import snapshot_paths
 from deploy.busview import BusView, status_line
 from deploy.roles import ROLES
 from deploy.supervisor import (
+    ExitEvent,
     ProcessSpec,
     ProcState,
     RestartMode,
@@ -37,7 +39,9 @@ from deploy.supervisor import (
     Supervisor,
 )
 from sim_world import checkpoint
+from swarmbus.codec import encode
 from swarmbus.keys import Keys
+from swarmbus.messages import RestartNotice
 from swarmbus.scenario import Scenario
 from swarmbus.session import DEFAULT_ROUTER, NetworkConfig, open_session
 
@@ -179,7 +183,9 @@ def plan(scenario: Scenario, opts: LaunchOptions) -> list[ProcessSpec]:
                 name = f"autopilot-{chunk[0]}" + (
                     f"-plus{len(chunk) - 1}" if len(chunk) > 1 else ""
                 )
+                state = f"checkpoint={autopilot_state_path(opts, name)}"  # agents.resume
                 add(role, name, [a for vid in chunk for a in ("--vehicle", vid)] + net_args)
+                specs[-1] = replace(specs[-1], argv=(*specs[-1].argv, "--set", state))
         elif role == "physics":
             add(role, role, [*net_args, "--set", f"checkpoint={checkpoint_path(opts)}"])
         elif role == "recorder":
@@ -191,8 +197,19 @@ def plan(scenario: Scenario, opts: LaunchOptions) -> list[ProcessSpec]:
     return specs
 
 
+def served_vehicles(spec: ProcessSpec) -> list[str]:
+    """The vehicles an autopilot process serves (its ``--vehicle`` arguments)."""
+    argv = spec.argv
+    return [argv[i + 1] for i, a in enumerate(argv[:-1]) if a == "--vehicle"]
+
+
 def checkpoint_path(opts: LaunchOptions) -> Path:
     return opts.run_dir / "physics.ckpt"
+
+
+def autopilot_state_path(opts: LaunchOptions, node_name: str) -> Path:
+    """Where an autopilot process keeps its snapshots (``agents.resume``)."""
+    return opts.run_dir / f"{node_name}.state"
 
 
 def default_run_dir(root: Path = Path("runs")) -> Path:
@@ -259,6 +276,10 @@ class Launcher:
         self.run_dir.mkdir(parents=True, exist_ok=True)
         if any(s.role == "physics" for s in self.specs):
             checkpoint.remove(checkpoint_path(self.opts))  # an earlier run's: start from spawn
+        for spec in self.specs:
+            if spec.role == "autopilot":  # likewise: autopilots start fresh
+                for path in snapshot_paths(autopilot_state_path(self.opts, spec.name)):
+                    path.unlink(missing_ok=True)
         timeout = self.scenario.time.startup_timeout_s
         first = [s.name for s in self.specs if s.role == "router"]
         if first:
@@ -347,6 +368,7 @@ class Launcher:
         """Reap and restart; raise :class:`LaunchError` when a critical process is gone."""
         before = self.supervisor.pids()
         for event in self.supervisor.poll():
+            self._announce(event)
             if event.restarting:
                 log.warning(
                     "%s exited with code %d: restarting in %.1f s",
@@ -364,6 +386,26 @@ class Launcher:
             raise LaunchError(
                 f"{sv.spec.name} exited with code {sv.returncode}: {_last_lines(sv.log_path)}"
             )
+
+    def _announce(self, event: ExitEvent) -> None:
+        """Say on the bus that a process ended and whether it is being restarted: the physics
+        holds the lockstep for the vehicles of an autopilot being restarted."""
+        if self._session is None:
+            return
+        sv = self.supervisor.procs[event.name]
+        notice = RestartNotice(
+            node=event.name,
+            role=sv.spec.role,
+            restarting=event.restarting,
+            returncode=event.returncode,
+            delay_s=event.delay_s,
+            restarts=sv.restarts,
+            vehicles=served_vehicles(sv.spec),
+        )
+        try:
+            self._session.put(self.keys.node_restart(event.name), encode(notice))
+        except zenoh.ZError as exc:
+            log.warning("could not announce the restart of %s: %s", event.name, exc)
 
     def supervise(
         self,

@@ -14,6 +14,13 @@ link to the router:
   publishing the world (``sim/tick``, ``sim/clock``, ``vehicle/*/state``) unless it is physics
   (roles configurable in ``[acl]``).
 
+With ``[acl] per_vehicle = true`` each autopilot process (one vehicle each) runs as its own
+identity ``autopilot-<vehicle>.<host>`` (its node name and host), which is not one of the
+members above: it may publish only its own vehicle's actuators, status and concentration
+readings and its own health, declare only its own liveliness token, serve and answer only its
+own vehicle's commands, and subscribe and query anywhere. A forged sample of another vehicle
+from it is dropped at the first process it reaches (the router, or a peer on a direct link).
+
 The router's identity is not denied: it forwards what others publish, and checked them when
 they arrived.
 """
@@ -53,9 +60,43 @@ def host_identities(dep: Deployment) -> list[HostIdentities]:
         addresses += [_address_of(e) for e in h.listen]
         if "router" in h.roles:
             addresses.append(_address_of(dep.router))
-        names = [identity(r, h.name) for r in dict.fromkeys([*h.roles, OPERATOR])]
+        roles = [r for r in dict.fromkeys([*h.roles, OPERATOR])]
+        if dep.acl.per_vehicle and "autopilot" in roles:
+            roles.remove("autopilot")
+            roles += [vehicle_node(v) for v in h.vehicles or ()]
+        names = [identity(r, h.name) for r in roles]
         out.append(HostIdentities(h.name, tuple(dict.fromkeys(addresses)), tuple(names)))
     return out
+
+
+def per_vehicle_identities(dep: Deployment) -> dict[str, str]:
+    """Vehicle id → the identity of its autopilot (``[acl] per_vehicle``; else empty)."""
+    if not dep.acl.per_vehicle:
+        return {}
+    return {
+        vid: identity(vehicle_node(vid), h.name)
+        for h in dep.hosts
+        if "autopilot" in h.roles
+        for vid in h.vehicles or ()
+    }
+
+
+def vehicle_node(vehicle_id: str) -> str:
+    """The node name of the autopilot process of one vehicle (its per-vehicle identity)."""
+    return f"autopilot-{vehicle_id}"
+
+
+def node_identity(dep: Deployment, host: str, role: str, node_name: str | None) -> str:
+    """The identity a process of ``role`` (named ``node_name``) runs as on ``host``."""
+    if dep.acl.per_vehicle and role == "autopilot":
+        vehicles = dep.host(host).vehicles or []
+        if node_name not in [vehicle_node(v) for v in vehicles]:
+            raise HostsError(
+                f"[acl] per_vehicle: {node_name or 'this autopilot'} is not the autopilot of "
+                f"one vehicle of host {host} ({', '.join(vehicles)}); run one vehicle per process"
+            )
+        return identity(node_name, host)
+    return identity(role, host)
 
 
 def _address_of(endpoint: str) -> str:
@@ -69,7 +110,8 @@ def _role_of(name: str) -> str:
 
 def access_control(dep: Deployment, keys: Keys) -> dict[str, Any]:
     """Zenoh's ``access_control`` section for ``dep``."""
-    members = sorted(n for h in host_identities(dep) for n in h.identities)
+    per_vehicle = set(per_vehicle_identities(dep).values())  # each with its own rules, below
+    members = sorted(n for h in host_identities(dep) for n in h.identities if n not in per_vehicle)
     rules: list[dict[str, Any]] = [
         {
             "id": "members",
@@ -103,6 +145,19 @@ def access_control(dep: Deployment, keys: Keys) -> dict[str, Any]:
         )
         subjects.append({"id": f"not-{plane}-publishers", "cert_common_names": others})
         policies.append({"rules": [f"publish-{plane}"], "subjects": [f"not-{plane}-publishers"]})
+    if dep.acl.per_vehicle:
+        rules += _shared_vehicle_rules()
+        for vid, name in per_vehicle_identities(dep).items():
+            own = _vehicle_rules(keys, vid)
+            rules += own
+            subject = vehicle_node(vid)
+            subjects.append({"id": subject, "cert_common_names": [name]})
+            policies.append(
+                {
+                    "rules": [r["id"] for r in own] + ["read-anything", "receive-anything"],
+                    "subjects": [subject],
+                }
+            )
     return {
         "enabled": True,
         "default_permission": "deny",
@@ -110,6 +165,54 @@ def access_control(dep: Deployment, keys: Keys) -> dict[str, Any]:
         "subjects": subjects,
         "policies": policies,
     }
+
+
+def _vehicle_rules(keys: Keys, vehicle_id: str) -> list[dict[str, Any]]:
+    """What a per-vehicle identity may send (ingress): its own vehicle's data and answers."""
+    node = vehicle_node(vehicle_id)
+    own_data = [
+        keys.vehicle_actuators(vehicle_id),
+        keys.vehicle_status(vehicle_id),
+        keys.vehicle_concentration(vehicle_id),
+        keys.autopilot_actuators(node),
+        keys.node_health(node),
+    ]
+    grants = [
+        ("data", ["put", "delete"], own_data),
+        ("presence", ["liveliness_token"], [keys.node_health(node)]),
+        ("commands", ["declare_queryable", "reply"], [keys.vehicle_cmd(vehicle_id)]),
+    ]
+    return [
+        {
+            "id": f"{node}-{what}",
+            "permission": "allow",
+            "flows": ["ingress"],
+            "messages": messages,
+            "key_exprs": key_exprs,
+        }
+        for what, messages, key_exprs in grants
+    ]
+
+
+def _shared_vehicle_rules() -> list[dict[str, Any]]:
+    """Every per-vehicle identity may subscribe and query anywhere, and receive anything."""
+    return [
+        {
+            "id": "read-anything",
+            "permission": "allow",
+            "flows": ["ingress", "egress"],
+            "messages": ["declare_subscriber", "query", "liveliness_query",
+                         "declare_liveliness_subscriber"],
+            "key_exprs": ["**"],
+        },
+        {
+            "id": "receive-anything",
+            "permission": "allow",
+            "flows": ["egress"],
+            "messages": list(MESSAGES),
+            "key_exprs": ["**"],
+        },
+    ]  # fmt: skip
 
 
 def tls_for(dep: Deployment, host: str, name: str) -> TlsConfig | None:
@@ -127,12 +230,18 @@ def tls_for(dep: Deployment, host: str, name: str) -> TlsConfig | None:
 
 
 def secure_network(
-    net: NetworkConfig, dep: Deployment, host: str, role: str, keys: Keys
+    net: NetworkConfig,
+    dep: Deployment,
+    host: str,
+    role: str,
+    keys: Keys,
+    node_name: str | None = None,
 ) -> NetworkConfig:
-    """``net`` as the identity of ``role`` on ``host``: TLS and the access-control list.
+    """``net`` as the identity of ``role`` on ``host`` (of ``node_name`` with per-vehicle
+    identities): TLS and the access-control list.
 
     Raises :class:`HostsError` (one line) when a TLS file is missing or unreadable."""
-    tls = tls_for(dep, host, identity(role, host))
+    tls = tls_for(dep, host, node_identity(dep, host, role, node_name))
     if tls is None:
         return net
     try:
@@ -155,8 +264,14 @@ def secure_launch(
     launcher's own session runs as the host's operator."""
     if dep.tls is None:
         return opts
+    if dep.acl.per_vehicle and "autopilot" in dep.host(host).roles:
+        if opts.vehicles_per_process > 1:
+            raise HostsError("[acl] per_vehicle: one vehicle per autopilot process")
+        for vid in dep.host(host).vehicles or ():
+            secure_network(net, dep, host, "autopilot", keys, vehicle_node(vid))
     for role in dep.host(host).roles:
-        secure_network(net, dep, host, role, keys)  # fail before anything starts
+        if not (dep.acl.per_vehicle and role == "autopilot"):
+            secure_network(net, dep, host, role, keys)  # fail before anything starts
     return replace(
         opts,
         node_args=("--hosts", str(hosts_file.absolute()), "--host", host),

@@ -71,6 +71,10 @@ class WorldCheckpoint(msgspec.Struct, frozen=True, kw_only=True):
     sim_time_s: float
     vehicles: list[VehicleCheckpoint]
     bullet: bytes  # pybullet ``saveBullet`` of the whole world
+    # The physics process's shared sensor query in flight (its answer goes into this tick):
+    # the tick it was made for and the encoded PlumeQuery; asked again on resume.
+    plume_query_tick: int | None = None
+    plume_query: bytes = b""
 
 
 _encoder = msgspec.msgpack.Encoder()

@@ -9,6 +9,12 @@ while the barrier waits for it. :meth:`Lockstep.start` makes every present parti
 (the start-up handshake). A participant that misses the deadline of a tick is dropped (no longer
 active: its motors go to zero); a dropped or newly arrived participant becomes active again
 as soon as it answers a tick published since (it has caught up), and is waited for from then on.
+
+Restarts (lockstep mode): a participant whose token goes while the launcher may be restarting
+its process is *held* instead (:meth:`Lockstep.held_leave`): it stays active, the tick waits
+for it until its usual deadline (time for the launcher's word), and a restart notice
+(:meth:`Lockstep.restarting`) extends the wait to the grace. Its new process answers the held
+tick like any tick; after the grace it is dropped like a silent participant.
 """
 
 from __future__ import annotations
@@ -44,6 +50,9 @@ class Lockstep:
         self.tick = 0
         self._deadline = clock() + timeout_s
         self._commands: dict[str, Sequence[float]] = {}
+        # Held participants (token gone, restart possible): wall time until which the tick
+        # waits for each; None until the launcher's notice (the tick's own deadline applies).
+        self._held: dict[str, float | None] = {}
 
     # ------------------------------------------------------------------ presence
     def joined(self, vehicle_id: str) -> bool:
@@ -63,6 +72,7 @@ class Lockstep:
         self._active.discard(vehicle_id)
         self._waiting.discard(vehicle_id)
         self._commands.pop(vehicle_id, None)
+        self._held.pop(vehicle_id, None)
         return True
 
     @property
@@ -103,6 +113,8 @@ class Lockstep:
             return False
         self._commands[vehicle_id] = rotor_commands
         self._waiting.discard(vehicle_id)
+        if self._held:
+            self._held.pop(vehicle_id, None)  # its new process answered: the hold is over
         return True
 
     def complete(self) -> bool:
@@ -114,6 +126,8 @@ class Lockstep:
         return [v for v in self.vehicle_ids if v in self._waiting]
 
     def remaining_s(self) -> float:
+        if self._held:
+            return self._held_deadline() - self._clock()
         return self._deadline - self._clock()
 
     def expire(self) -> list[str]:
@@ -125,8 +139,43 @@ class Lockstep:
             self._active.discard(vid)
             self._waiting.discard(vid)
             self._rejoin_from[vid] = self.tick
+            self._held.pop(vid, None)
         return dropped
 
     def commands(self) -> dict[str, Sequence[float]]:
         """The current tick's commands of active participants (others get zero motors)."""
         return {v: c for v, c in self._commands.items() if v in self._active}
+
+    # ------------------------------------------------------------------ restarts
+    def held_leave(self, vehicle_id: str) -> bool:
+        """A participant's token disappeared and its process may be restarted: hold it (see
+        the module doc) instead of :meth:`left`; returns whether it is one of ours."""
+        if vehicle_id not in self._known:
+            return False
+        self._present.discard(vehicle_id)
+        if vehicle_id in self._active:
+            self._held.setdefault(vehicle_id, None)
+        return True
+
+    def restarting(self, vehicle_id: str, grace_s: float) -> bool:
+        """The launcher is restarting this participant's process: the tick waits for it up to
+        ``grace_s`` from now. Returns whether it is held (an active participant of ours)."""
+        if vehicle_id not in self._active:
+            return False
+        self._held[vehicle_id] = self._clock() + grace_s
+        return True
+
+    def gone(self, vehicle_id: str) -> bool:
+        """The launcher will not restart it: stop waiting for it now, like :meth:`left`."""
+        return self.left(vehicle_id) if vehicle_id not in self._present else False
+
+    @property
+    def held(self) -> frozenset[str]:
+        """Participants the current tick holds for (token gone, restart possible)."""
+        return frozenset(self._held)
+
+    def _held_deadline(self) -> float:
+        # The tick ends no earlier than its own deadline, nor before the longest hold of a
+        # participant it still waits for (the others simply wait with it).
+        holds = [u for v, u in self._held.items() if u is not None and v in self._waiting]
+        return max([self._deadline, *holds])

@@ -20,7 +20,8 @@ The answer is awaited after the tick's commands, so it overlaps the autopilots' 
 With a ``checkpoint`` path it saves the world there every ``checkpoint_period_s`` of sim time
 (:mod:`sim_world.checkpoint`) and, when that file exists at start, resumes from it instead of
 the spawn: the lockstep handshake then runs on the checkpoint's tick, and the autopilots answer
-it like any tick (sim time goes back by the replayed span).
+it like any tick (sim time goes back by the replayed span; autopilots with snapshots restore
+their state of the tick before and replay the same bits).
 
 Options (``--set KEY=VALUE``): ``max_ticks`` (stop once this tick is published and answered),
 ``mode`` (lockstep|realtime|stepped), ``speed_factor``, ``wait_for_autopilots`` (true|false: start
@@ -63,6 +64,7 @@ from swarmbus.messages import (
     PlumeQuery,
     PlumeSample,
     PlumeValues,
+    RestartNotice,
     SimTick,
     SpeedMode,
     StepReply,
@@ -78,6 +80,10 @@ log = logging.getLogger(__name__)
 HANDSHAKE_REPUBLISH_S = 0.1  # tick 0 is re-sent until every participant has answered it
 STOP_POLL_S = 0.2  # longest wait between checks of the stop signal
 HEALTH_PERIOD_S = 1.0
+# A plume query that got no reply: how long to wait for the service's token to go (it died)
+# before taking it for a slow answer from a live service.
+PLUME_DEPARTURE_S = 0.5
+RECORDER = "recorder"  # the recorder's node name: the clock waits for its restart too
 
 
 class OptionError(ValueError):
@@ -215,6 +221,22 @@ class PhysicsNode:
         self._stepped = options.mode == SpeedMode.STEPPED
         self.clock_gate: SteppedClock[zenoh.Query] = SteppedClock()
         self._step_queryable = session.declare_queryable(self.keys.clock_step(), self._on_step)
+        self._plume_asked: tuple[int, bytes] | None = None  # the pending query: tick, payload
+        self._resume_query: tuple[int, bytes] | None = None  # a checkpoint's, to ask again
+        # Restarts (lockstep): hold the tick for an autopilot the launcher is restarting.
+        self._restart_grace_s = (
+            self.scenario.time.restart_grace_s if options.mode != SpeedMode.REALTIME else 0.0
+        )
+        self._held_republish = 0.0  # wall time of the last re-publication during a hold
+        self._plume_restart_until = 0.0  # the plume is being restarted: wait for it until then
+        self._plume_lost = False
+        self._plume_arrivals = 0  # plume tokens that arrived (a restarted service is a new one)
+        self._recorder_arrivals = 0
+        self._recorder_lost = False  # the recorder's token went: hold before the next tick
+        self._recorder_until = 0.0  # it is being restarted: hold until it is back, or this
+        self._restart_sub = session.declare_subscriber(
+            self.keys.all_node_restart(), self._on_restart_notice
+        )
         self._presence = Presence(session, self.keys, self._on_presence)
         # Clock bookkeeping (wall clock only measures; it never drives the physics).
         self._wall_start = time.monotonic()
@@ -228,6 +250,7 @@ class PhysicsNode:
     def close(self) -> None:
         self._presence.close()
         self._step_queryable.undeclare()
+        self._restart_sub.undeclare()
         for sub in self._actuator_subs:
             sub.undeclare()
         for pub in self._state_pubs:
@@ -243,8 +266,17 @@ class PhysicsNode:
             with self._cond:
                 if alive:
                     self._plume_nodes.add(name)
+                    self._plume_arrivals += 1
                 else:
                     self._plume_nodes.discard(name)
+                self._plume_lost = not self._plume_nodes  # a plume was here and is gone
+                self._cond.notify_all()
+            return
+        if name == RECORDER and self._restart_grace_s > 0.0:
+            with self._cond:
+                self._recorder_arrivals += alive
+                self._recorder_lost = not alive  # wait for its word before the next tick
+                self._cond.notify_all()
             return
         vid = participant_of(name, self.world.vehicle_ids)
         if vid is None:
@@ -256,6 +288,8 @@ class PhysicsNode:
         with self._cond:
             if alive:
                 self.barrier.joined(vid)
+            elif self._restart_grace_s > 0.0:
+                self.barrier.held_leave(vid)  # the launcher may be restarting it
             else:
                 self.barrier.left(vid)
             self._cond.notify_all()
@@ -339,6 +373,7 @@ class PhysicsNode:
         with self._cond:
             self.barrier.start()
             self.barrier.begin(self.tick, timeout_s=max(0.0, deadline - time.monotonic()))
+        self._ask_again()
         self._publish_tick(self.world.states(self.tick, self.world.sim_time_s))
         if not self._handshake():
             return 0 if self.rt.stop.is_set() else 1
@@ -358,6 +393,8 @@ class PhysicsNode:
             cp = checkpoint.load(path)
             self.world.restore(cp)
             self.tick = cp.tick
+            if cp.plume_query_tick is not None:
+                self._resume_query = (cp.plume_query_tick, cp.plume_query)
             self._resume_note = (
                 f"resumed from checkpoint at tick {cp.tick} (sim t={cp.sim_time_s:.3f} s)"
             )
@@ -384,7 +421,11 @@ class PhysicsNode:
         writer.wait()
         if self.tick >= self._due_checkpoint:
             t0 = time.monotonic()
-            writer.submit(self.world.checkpoint(self.tick))
+            cp = self.world.checkpoint(self.tick)
+            asked = self._plume_asked if self._plume_pending is not None else None
+            if asked is not None:  # its answer belongs to the tick being saved
+                cp = msgspec.structs.replace(cp, plume_query_tick=asked[0], plume_query=asked[1])
+            writer.submit(cp)
             self._capture_s += time.monotonic() - t0
             self._due_checkpoint = self.tick + self._checkpoint_ticks
         self._next_checkpoint = self.tick + 1 if writer.pending else self._due_checkpoint
@@ -450,6 +491,8 @@ class PhysicsNode:
             if paced:
                 self._pace(sim_time)
             states = self.world.states(self.tick, sim_time)
+            if self._recorder_lost:
+                self._wait_for_recorder()
             with self._cond:
                 self.barrier.begin(self.tick)
             self._publish_tick(states)
@@ -490,6 +533,7 @@ class PhysicsNode:
                     return None
                 remaining = barrier.remaining_s()
                 if remaining <= 0.0:
+                    held = barrier.held
                     dropped = barrier.expire()
                     self.dropped_total += len(dropped)
                     log.warning(
@@ -498,8 +542,11 @@ class PhysicsNode:
                         ", ".join(dropped),
                         barrier.timeout_s,
                     )
+                    self._report_expired_holds(held, dropped)
                     break
                 self._cond.wait(min(remaining, STOP_POLL_S))
+                if barrier.held:
+                    self._republish_held_tick()
             return barrier.commands()  # a new dict of the decoded (never mutated) lists
 
     # ------------------------------------------------------------------ stepped clock
@@ -550,6 +597,118 @@ class PhysicsNode:
             self._maybe_publish_clock(self.world.sim_time_s)  # clock and health while paused
         return False
 
+    # ------------------------------------------------------------------ restarts
+    def _on_restart_notice(self, sample: zenoh.Sample) -> None:
+        """The launcher's word on a process that ended: hold or drop its vehicles."""
+        try:
+            notice = decode(sample.payload.to_bytes(), RestartNotice)
+        except MessageError as exc:
+            log.warning("ignoring restart notice on %s: %s", sample.key_expr, exc)
+            return
+        if notice.role == RECORDER and self._restart_grace_s > 0.0:
+            with self._cond:
+                grace = notice.delay_s + self._restart_grace_s
+                self._recorder_until = time.monotonic() + grace if notice.restarting else 0.0
+                self._recorder_lost = self._recorder_lost and notice.restarting
+                self._cond.notify_all()
+            return
+        if notice.role == "plume" and self._restart_grace_s > 0.0:
+            with self._cond:
+                grace = notice.delay_s + self._restart_grace_s
+                self._plume_restart_until = time.monotonic() + grace if notice.restarting else 0.0
+                self._plume_lost = self._plume_lost and notice.restarting
+                self._cond.notify_all()
+            return
+        vids = [v for v in notice.vehicles if v in self._known]
+        if not vids or self._restart_grace_s <= 0.0:
+            return
+        with self._cond:
+            if notice.restarting:
+                grace = notice.delay_s + self._restart_grace_s
+                held = [v for v in vids if self.barrier.restarting(v, grace)]
+            else:
+                held = [v for v in vids if self.barrier.gone(v)]
+            self._cond.notify_all()
+        if held and notice.restarting:
+            log.warning(
+                "tick %d: holding the clock for %s: %s is being restarted (grace %.1f s)",
+                self.tick,
+                ", ".join(held),
+                notice.node,
+                grace,
+            )
+        elif held:
+            log.warning("%s will not be restarted: %s dropped", notice.node, ", ".join(held))
+
+    def _republish_held_tick(self) -> None:
+        """During a hold, re-send the held tick (as in the start-up handshake) so the new
+        process receives it; the others answer a repeated tick with the same command."""
+        now = time.monotonic()
+        if now - self._held_republish >= HANDSHAKE_REPUBLISH_S:
+            self._held_republish = now
+            self._tick_pub.put(self._last_tick_msg)
+
+    def _plume_restarted(self) -> bool:
+        """No plume answer, or the plume service left (lockstep): hold the clock until a plume
+        service arrives — up to the participant timeout (time for the launcher's word), or up
+        to the grace when the launcher says it restarts it. Whether one arrived."""
+        if self._restart_grace_s <= 0.0:
+            return False
+        word = time.monotonic() + self.scenario.time.participant_timeout_s
+        with self._cond:
+            # The tick is not out yet: its participants' deadline starts when it is.
+            timeout = max(self.barrier.timeout_s, self.barrier.remaining_s())
+            seen = self._plume_arrivals
+            alive_until = time.monotonic() + PLUME_DEPARTURE_S
+            while self._plume_arrivals == seen and not self.rt.stop.is_set():
+                now = time.monotonic()
+                if self._plume_nodes and not self._plume_restart_until and now > alive_until:
+                    break  # still there: a slow answer, not a dead service
+                remaining = max(word, self._plume_restart_until) - now
+                if remaining <= 0.0:
+                    break
+                self._cond.wait(min(remaining, STOP_POLL_S / 4))
+            self._plume_restart_until = 0.0
+            self.barrier.begin(self.tick, timeout)
+            back = self._plume_arrivals != seen
+            if not back and not self._plume_nodes:
+                log.warning("tick %d: no plume service came back", self.tick)
+            self._plume_lost = False  # once per departure, not every tick
+            return back
+
+    def _wait_for_recorder(self) -> None:
+        """The recorder left (lockstep): hold the next tick until a recorder is back — up to
+        the participant timeout for the launcher's word, up to the grace if it restarts it —
+        so that the new recorder records every tick from the first one it missed."""
+        t0 = time.monotonic()
+        word = t0 + self.scenario.time.participant_timeout_s
+        with self._cond:
+            seen = self._recorder_arrivals
+            while self._recorder_arrivals == seen and not self.rt.stop.is_set():
+                remaining = max(word, self._recorder_until) - time.monotonic()
+                if remaining <= 0.0:
+                    break
+                self._cond.wait(min(remaining, STOP_POLL_S))
+            back = self._recorder_arrivals != seen
+            self._recorder_lost = False
+            self._recorder_until = 0.0
+        log.warning(
+            "tick %d: held the clock %.2f s for the recorder: %s",
+            self.tick,
+            time.monotonic() - t0,
+            "it is back" if back else "it did not come back",
+        )
+
+    def _report_expired_holds(self, held: frozenset[str], dropped: list[str]) -> None:
+        expired = [v for v in dropped if v in held]
+        if expired:
+            log.warning(
+                "tick %d: restart grace of %.1f s passed: %s dropped (motors off, failsafe)",
+                self.tick,
+                self._restart_grace_s,
+                ", ".join(expired),
+            )
+
     def _apply(self, commands: Mapping[str, Sequence[float]]) -> None:
         world = self.world
         for vid in world.vehicle_ids:
@@ -566,6 +725,8 @@ class PhysicsNode:
     # ------------------------------------------------------------------ output
     def _publish_tick(self, states: list[VehicleState]) -> None:
         plume_values = self._plume_answer()
+        if self._plume_lost and self.tick % self._sensor_period == 0:
+            self._plume_restarted()  # the plume left between queries: wait for it likewise
         query = (
             self.options.shared_plume_query
             and self.tick % self._sensor_period == 0
@@ -595,10 +756,30 @@ class PhysicsNode:
         query = PlumeQuery(
             points_enu_m=[s.position_enu_m for s in states], sim_time_s=self.world.sim_time_s
         )
+        payload = encode(query)
         replies = self.rt.session.get(
-            self._plume_key, payload=encode(query), timeout=self._plume_timeout_s
+            self._plume_key, payload=payload, timeout=self._plume_timeout_s
         )
         self._plume_pending = (self.tick, len(states), replies)
+        self._plume_asked = (self.tick, payload)
+
+    def _ask_again(self) -> None:
+        """Resumed from a checkpoint: the sensor query whose answer goes into its tick, again
+        (so the replayed tick carries the same plume values as the first time)."""
+        resumed, self._resume_query = self._resume_query, None
+        if resumed is None or not self._plume_nodes:
+            return
+        tick, payload = resumed
+        try:
+            count = len(decode(payload, PlumeQuery).points_enu_m)
+        except MessageError as exc:
+            log.warning("not asking the checkpoint's plume query again: %s", exc)
+            return
+        replies = self.rt.session.get(
+            self._plume_key, payload=payload, timeout=self._plume_timeout_s
+        )
+        self._plume_pending = (tick, count, replies)
+        self._plume_asked = (tick, payload)
 
     def _plume_answer(self) -> PlumeSample | None:
         """The answer to the pending sensor query (waits for it up to its timeout)."""
@@ -606,9 +787,26 @@ class PhysicsNode:
         if pending is None:
             return None
         tick, count, replies = pending
+        values, replied = self._values(replies, count)
+        asked = self._plume_asked
+        silent = not replied and asked is not None and asked[0] == tick
+        if silent and self._plume_restarted():
+            assert asked is not None
+            # the plume died with this query: the clock waited for its restart; ask again
+            log.warning("tick %d: asking the restarted plume service again", self.tick)
+            again = self.rt.session.get(
+                self._plume_key, payload=asked[1], timeout=self._plume_timeout_s
+            )
+            values, _ = self._values(again, count)
+        return PlumeSample(tick=tick, values_g_m3=values)
+
+    def _values(self, replies: Any, count: int) -> tuple[list[float] | None, bool]:
+        """The values of the first reply (None if unusable) and whether there was a reply."""
         values: list[float] | None = None
+        replied = False
         try:
             for reply in replies:
+                replied = True
                 if reply.ok is None:
                     err = reply.err
                     log.warning("plume query refused: %s", err.payload.to_bytes() if err else "")
@@ -621,7 +819,7 @@ class PhysicsNode:
                 break
         except (MessageError, zenoh.ZError) as exc:
             log.warning("plume reply unusable: %s", exc)
-        return PlumeSample(tick=tick, values_g_m3=values)
+        return values, replied
 
     def _pace(self, sim_time_s: float) -> None:
         """Realtime mode: hold tick ``k`` until the wall clock reaches its sim time / factor."""

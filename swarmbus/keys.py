@@ -121,6 +121,13 @@ class Keys:
     def all_node_health(self) -> str:
         return f"{self.prefix}/node/*/health"
 
+    def node_restart(self, node_name: str) -> str:
+        """The launcher's :class:`~swarmbus.messages.RestartNotice` about ``node_name``."""
+        return f"{self.prefix}/node/{check_name('node', node_name)}/restart"
+
+    def all_node_restart(self) -> str:
+        return f"{self.prefix}/node/*/restart"
+
     # -- parsing ---------------------------------------------------------------
     def vehicle_id_of(self, key: str) -> str:
         """The vehicle id in a ``vehicle/<id>/...`` key of this world."""

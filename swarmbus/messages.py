@@ -426,6 +426,24 @@ class NodeHealth(Message, frozen=True, kw_only=True, tag=_tag("node_health")):
     detail: Text = ""
 
 
+# --------------------------------------------------------------------------- restarts
+class RestartNotice(Message, frozen=True, kw_only=True, tag=_tag("restart_notice")):
+    """``node/<name>/restart``: the launcher's word on a process of its run that ended.
+
+    ``restarting`` true: it will be started again in ``delay_s`` (its backoff); false: it is
+    gone for good. ``vehicles`` are the vehicles the process served (an autopilot's), so the
+    physics can hold the lockstep for them instead of dropping them.
+    """
+
+    node: Name
+    role: Name
+    restarting: bool
+    returncode: int
+    delay_s: NonNegative = 0.0
+    restarts: Annotated[int, msgspec.Meta(ge=0)] = 0  # restarts before this one
+    vehicles: Annotated[list[Name], msgspec.Meta(max_length=MAX_BATCH_COMMANDS)] = []
+
+
 ALL_MESSAGES: tuple[type[Message], ...] = (
     Clock,
     VehicleState,
@@ -462,6 +480,7 @@ ALL_MESSAGES: tuple[type[Message], ...] = (
     NodeHealth,
     StepRequest,
     StepReply,
+    RestartNotice,
 )
 
 __all__ = [m.__name__ for m in ALL_MESSAGES] + [

@@ -62,6 +62,8 @@ class Time(_Section, frozen=True, kw_only=True):
     startup_timeout_s: Pos = 60.0
     duration_s: NonNeg = 0.0  # 0: run until stopped
     checkpoint_period_s: NonNeg = 1.0  # physics checkpoints the world every S sim s; 0: never
+    # lockstep: wall seconds the clock holds for an autopilot the launcher is restarting
+    restart_grace_s: NonNeg = 30.0
 
 
 class Wind(_Section, frozen=True, kw_only=True):

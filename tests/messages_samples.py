@@ -89,4 +89,7 @@ SAMPLES: dict[type[m.Message], m.Message] = {
     ),
     m.StepRequest: m.StepRequest(client="clock-3f2a", ticks=120),
     m.StepReply: m.StepReply(tick=240, sim_time_s=2.0),
+    m.RestartNotice: m.RestartNotice(
+        node="autopilot-uav1", role="autopilot", restarting=True, returncode=-9, vehicles=["uav1"]
+    ),
 }

@@ -93,6 +93,10 @@ class Script:
             return
         a = self.args
         with self.lock:
+            if a.follow_rewinds and msg.tick <= self.answered:
+                # the physics resumed from a checkpoint (replay) or repeats a tick it holds:
+                # answer it (again; a restarted physics may have missed the first answer)
+                self.answered = msg.tick - 1
             if msg.tick <= self.answered and msg.tick != 0:
                 return  # duplicate (tick 0 is re-sent during the handshake)
         if a.stall_at_tick is not None and msg.tick == a.stall_at_tick and not self.delayed:
@@ -210,6 +214,9 @@ def parse(argv: list[str]) -> argparse.Namespace:
     p.add_argument("--report", default=None)
     p.add_argument("--batch", action="store_true", help="one ActuatorBatch per tick")
     p.add_argument("--release-file", default=None, help="the delay ends when this file exists")
+    p.add_argument(
+        "--follow-rewinds", action="store_true", help="answer again ticks the physics went back to"
+    )
     return p.parse_args(argv)
 
 

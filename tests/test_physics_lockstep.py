@@ -128,3 +128,66 @@ def test_startup_handshake_uses_its_own_deadline() -> None:
     assert ls.expire() == []
     clock.now += 31.0
     assert ls.expire() == ["a"]
+
+
+# ---------------------------------------------------------------------------- restarts
+def test_a_held_participant_is_waited_for_until_the_deadline_without_a_notice() -> None:
+    ls, clock = barrier("a", "b")
+    ls.start()
+    ls.begin(0)
+    ls.receive("a", 0, [0.1])
+    ls.held_leave("b")  # token gone: the launcher may be restarting it
+    assert not ls.complete() and ls.missing() == ["b"] and ls.held == {"b"}
+    clock.now += 0.49
+    assert ls.expire() == []
+    clock.now += 0.02
+    assert ls.expire() == ["b"] and ls.complete() and ls.held == frozenset()
+
+
+def test_a_restart_notice_holds_the_tick_for_the_grace_and_the_new_process_answers_it() -> None:
+    ls, clock = barrier("a", "b")
+    ls.start()
+    ls.begin(7)
+    ls.receive("a", 7, [0.1])
+    ls.held_leave("b")
+    assert ls.restarting("b", grace_s=20.0)
+    clock.now += 19.9  # far past the 0.5 s participant deadline
+    assert ls.remaining_s() > 0.0 and ls.expire() == []
+    assert not ls.receive("b", 7, [0.2])  # no token yet: not a participant's answer
+    ls.joined("b")  # the new process
+    assert ls.receive("b", 7, [0.2])
+    assert ls.complete() and ls.commands() == {"a": [0.1], "b": [0.2]}
+    assert ls.held == frozenset()
+    ls.begin(8)
+    assert ls.remaining_s() == 0.5  # back to the participant deadline
+
+
+def test_a_hold_spans_ticks_when_the_dead_process_had_answered_and_expires_after_grace() -> None:
+    ls, clock = barrier("a", "b")
+    ls.start()
+    ls.begin(3)
+    ls.receive("b", 3, [0.2])
+    ls.restarting("b", grace_s=5.0)  # the notice came before the token's departure
+    ls.held_leave("b")
+    ls.receive("a", 3, [0.1])
+    assert ls.complete() and ls.commands() == {"a": [0.1], "b": [0.2]}
+    ls.begin(4)
+    ls.receive("a", 4, [0.1])
+    assert not ls.complete() and ls.missing() == ["b"]
+    clock.now += 4.9
+    assert ls.expire() == []
+    clock.now += 0.2
+    assert ls.expire() == ["b"]  # the grace passed: dropped like a silent participant
+    assert ls.commands() == {"a": [0.1]} and "b" not in ls.active
+
+
+def test_no_hold_for_a_process_that_is_not_restarted_or_a_dropped_participant() -> None:
+    ls, clock = barrier("a", "b", "c")
+    ls.start()
+    ls.begin(0)
+    ls.held_leave("b")
+    assert ls.gone("b")  # the launcher gave up on it: not waited for any more
+    assert ls.missing() == ["a", "c"] and "b" not in ls.active
+    clock.now += 1.0
+    assert ls.expire() == ["a", "c"]
+    assert not ls.restarting("c", grace_s=20.0)  # already dropped: it rejoins by answering

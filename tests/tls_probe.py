@@ -43,8 +43,12 @@ def forged_puts_seen(
     publisher: NetworkConfig,
     keys: Keys,
     timeout_s: float = 30.0,
+    forged_keys: list[str] | None = None,
+    marker_key: str = MARKER_KEY,
 ) -> dict[str, Any]:
-    """Which of :func:`forbidden_keys` the listener received from the publisher."""
+    """Which of ``forged_keys`` (default :func:`forbidden_keys`) the listener received from
+    the publisher; the marker goes on ``marker_key`` (one the publisher may put on)."""
+    forged = forged_keys if forged_keys is not None else forbidden_keys(keys)
     seen: set[str] = set()
     markers = threading.Event()
 
@@ -52,26 +56,26 @@ def forged_puts_seen(
         payload = sample.payload.to_bytes()
         if payload == FORGED:
             seen.add(str(sample.key_expr))
-        elif str(sample.key_expr) == MARKER_KEY:
+        elif str(sample.key_expr) == marker_key:
             markers.set()
 
     deadline = time.monotonic() + timeout_s
     sent = 0
     with open_session(listener) as ls:
-        subs = [ls.declare_subscriber(k, on_sample) for k in (keys.everything(), MARKER_KEY)]
+        subs = [ls.declare_subscriber(k, on_sample) for k in (keys.everything(), marker_key)]
         with open_session(publisher) as ps:
             while not markers.is_set() and time.monotonic() < deadline:
-                for key in forbidden_keys(keys):
+                for key in forged:
                     ps.put(key, FORGED)
                     sent += 1
-                ps.put(MARKER_KEY, b"marker")
+                ps.put(marker_key, b"marker")
                 markers.wait(0.2)
             # One more round after the first marker: routes are surely up for all keys now.
             markers.clear()
-            for key in forbidden_keys(keys):
+            for key in forged:
                 ps.put(key, FORGED)
                 sent += 1
-            ps.put(MARKER_KEY, b"marker")
+            ps.put(marker_key, b"marker")
             markers.wait(max(0.0, deadline - time.monotonic()))
         for s in subs:
             s.undeclare()

@@ -1,0 +1,108 @@
+"""Where an autopilot process keeps its snapshots, and which one a tick resumes from.
+
+With ``--set checkpoint=PATH`` (what ``plumeswarm up`` passes: ``<run dir>/<node>.state``) the
+process saves a :class:`~agents.snapshot.ProcessSnapshot` after every tick it answers (before
+the answer goes out) and after every command it handles, in ``PATH.0`` / ``PATH.1`` in turn;
+on the physics' checkpoint ticks (multiples of ``time.checkpoint_period_s``) it also keeps the
+snapshot of the tick before in ``PATH.ckpt.0`` / ``PATH.ckpt.1`` and in memory.
+
+Which snapshot a tick ``k`` resumes from:
+
+* a restarted process (no tick handled yet) takes a saved snapshot of tick ``k - 1`` and
+  handles ``k`` as the killed one would have; one of tick ``k`` itself (it had answered ``k``)
+  is restored and its answer sent again. The physics holds ``k`` for it (lockstep restarts);
+  after a physics restart too, ``k`` is the physics' checkpoint tick, whose ``k - 1`` snapshot
+  is in ``PATH.ckpt.*``;
+* a running process that sees the tick go back (the physics resumed from its checkpoint at
+  ``k``) restores its own snapshot of ``k - 1`` from memory and flies the replayed ticks again,
+  the same bits as the first time.
+
+Without a matching snapshot the process carries on as before (a restarted one takes an
+airborne vehicle back in HOLD; a running one flies on from where it was).
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+from agents.snapshot import ProcessSnapshot, SnapshotError, SnapshotSlots, decode_process
+
+log = logging.getLogger(__name__)
+
+
+def snapshot_paths(path: Path) -> list[Path]:
+    """Every file a keeper at ``path`` writes (the launcher removes them for a fresh run)."""
+    return [*SnapshotSlots(path).paths(), *SnapshotSlots(_ckpt(path)).paths()]
+
+
+def _ckpt(path: Path) -> Path:
+    return path.with_name(path.name + ".ckpt")
+
+
+class StateKeeper:
+    """The snapshots of one autopilot process (see the module doc)."""
+
+    def __init__(self, path: Path, period_ticks: int) -> None:
+        self.path = path
+        self.period_ticks = period_ticks
+        self._slots = SnapshotSlots(path)
+        self._ckpt = SnapshotSlots(_ckpt(path))
+        self._found: list[ProcessSnapshot] = []  # what a killed predecessor left
+        self._last = b""  # the latest snapshot (not necessarily written yet)
+        self._at_checkpoint: dict[int, bytes] = {}  # tick → snapshot, the latest two
+
+    def open(self, initial: bytes) -> None:
+        """Read what a predecessor left, then open the files; ``initial`` is the fresh
+        process's own snapshot (tick -1: the state before tick 0)."""
+        for slots in (self._slots, self._ckpt):
+            for _, payload in slots.read_all():
+                try:
+                    self._found.append(decode_process(payload))
+                except SnapshotError as exc:
+                    log.warning("ignoring %s: %s", slots.path, exc)
+            slots.open()
+        self._last = initial
+        if self._found:
+            ticks = sorted({s.tick for s in self._found})
+            log.info("snapshots of ticks %s found in %s*", ticks, self.path)
+
+    def close(self) -> None:
+        self._slots.close()
+        self._ckpt.close()
+
+    def save(self, payload: bytes) -> None:
+        """The process's state now (after a tick's answer was computed, or a command)."""
+        self._last = payload
+        self._slots.write(payload)
+
+    def before_tick(self, tick: int) -> None:
+        """Tick ``tick`` is about to be handled: on a checkpoint tick keep the state before it."""
+        if self.period_ticks and tick % self.period_ticks == 0 and self._last:
+            self._ckpt.write(self._last)
+            self._at_checkpoint[tick] = self._last
+            for old in sorted(self._at_checkpoint)[:-2]:
+                del self._at_checkpoint[old]
+
+    def for_restart(self, tick: int) -> ProcessSnapshot | None:
+        """A restarted process's first tick: the predecessor's snapshot of ``tick - 1`` (or of
+        ``tick``, already answered), or None."""
+        found = self._found
+        for want in (tick - 1, tick):
+            match = next((s for s in found if s.tick == want), None)
+            if match is not None:
+                return match
+        if found:
+            log.warning(
+                "no snapshot for tick %d (found ticks %s): not restored",
+                tick,
+                sorted({s.tick for s in found}),
+            )
+        return None
+
+    def for_rewind(self, tick: int) -> ProcessSnapshot | None:
+        """The tick went back to ``tick`` (a physics checkpoint): the state before it."""
+        payload = self._at_checkpoint.get(tick)
+        if payload is not None:
+            return decode_process(payload)
+        return next((s for s in self._found if s.tick == tick - 1), None)
