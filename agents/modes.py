@@ -118,6 +118,7 @@ class FlightModes:
         self._setpoint_time_s = -math.inf
         self._item_seen = -1
         self._land_descending = False
+        self._climb_alt_m: float | None = None  # a mission started on the ground climbs first
         self._guidance: dict[FlightMode, Callable[[Estimate, float], Target | None]] = {
             M.DISARMED: lambda est, now: None,
             M.ARMED: lambda est, now: None,
@@ -143,6 +144,8 @@ class FlightModes:
     def _set_mode(self, mode: FlightMode, est: Estimate) -> None:
         self.mode = mode
         self._touchdown_since = None
+        if mode != M.MISSION:
+            self._climb_alt_m = None
         if mode in (M.HOLD, M.TAKEOFF, M.OFFBOARD):
             self._yaw = yaw_of(est.attitude_xyzw)
 
@@ -287,12 +290,23 @@ class FlightModes:
         index = start_index if start_index is not None else max(mission.index, 0)
         if start_index is None and mission.finished:
             return denied("mission finished: start it again with a start index")
-        if self.mode == M.ARMED and mission.resolved[index].command != MissionCommand.TAKEOFF:
-            return denied(f"on the ground: mission item {index} must be a takeoff")
+        climb_alt_m = None
+        first = mission.resolved[index]
+        if self.mode == M.ARMED and first.command != MissionCommand.TAKEOFF:
+            # PX4: a mission started on the ground without a takeoff item climbs vertically to
+            # the first item's altitude, at least MIS_TAKEOFF_ALT above home, then flies it.
+            climb_alt_m = max(first.z, self.home[2] + self.failsafe.takeoff_altitude_m)
+            x, y, _ = est.position
+            fence = self.fence_violation(x, y, climb_alt_m)
+            if fence is not None:
+                return invalid(f"mission takeoff altitude: {fence}")
         if start_index is not None:
             mission.start(start_index)
         self._item_seen = -1
         self._set_mode(to, est)
+        if climb_alt_m is not None:
+            self._climb_alt_m = climb_alt_m
+            self._target = est.position
         return None
 
     def setpoint(self, setpoint: Setpoint, now: float) -> Refusal | None:
@@ -394,6 +408,11 @@ class FlightModes:
             self._hold_here(est)
             self._set_mode(M.HOLD, est)
             return self._position_target()
+        if self._climb_alt_m is not None:
+            if est.position[2] < self._climb_alt_m - TAKEOFF_DONE_M:
+                tx, ty, _ = self._target
+                return Target((tx, ty), self._climb_alt_m, self._yaw)
+            self._climb_alt_m = None
         if mission.index != self._item_seen:
             self._item_seen = mission.index
             self._target = est.position

@@ -255,7 +255,6 @@ def test_commands_are_refused_with_the_right_reason() -> None:
     ok(ap.handle(MissionUpload(items=[])))
     refused(ap, MissionStart(), "no mission uploaded")
     ok(ap.handle(MissionUpload(items=[MissionItem(x=30.0, y=0.0, z=5.0)])))
-    refused(ap, MissionStart(), "must be a takeoff")
     refused(ap, MissionStart(start_index=3), "mission has 1 item", code="invalid")
     refused(
         ap,
@@ -299,3 +298,43 @@ def test_scenario_mission_is_downloadable_before_the_first_state() -> None:
     w.run(0.1)
     assert aps["uav1"].handle(MissionDownload()).mission == list(want)
     assert aps["uav1"].status().mission_count == len(want)
+
+
+@pytest.mark.parametrize("first_alt_m", [1.0, 7.0])
+def test_mission_started_on_the_ground_without_takeoff_item_climbs_first(
+    first_alt_m: float,
+) -> None:
+    """PX4: the vehicle climbs vertically over its spawn to max(first item altitude,
+    MIS_TAKEOFF_ALT above home) before heading for the first waypoint; an RTL item brings it
+    home and it lands and disarms there."""
+    sc = scenario(takeoff_altitude_m=2.5)
+    vid = sc.vehicles[0].id
+    w, aps = world(sc, [vid])
+    ap = aps[vid]
+    x0, y0, z0 = w.vehicles[vid].p
+    items = [
+        MissionItem(x=x0 + 15.0, y=y0, z=z0 + first_alt_m),
+        MissionItem(x=x0 + 15.0, y=y0 + 10.0, z=z0 + first_alt_m),
+        MissionItem(command=MissionCommand.RTL, x=0.0, y=0.0, z=0.0),
+    ]
+    ok(ap.handle(MissionUpload(items=items)))
+    ok(ap.handle(Arm()))
+    ok(ap.handle(MissionStart()))
+    climb_m = max(first_alt_m, 2.5)
+    drift_in_climb = 0.0
+
+    def climbing() -> bool:
+        nonlocal drift_in_climb
+        p = w.vehicles[vid].p
+        drift_in_climb = max(drift_in_climb, math.hypot(p[0] - x0, p[1] - y0))
+        return p[2] - z0 > climb_m - 0.35
+
+    w.run(20.0, until=climbing)
+    assert w.vehicles[vid].p[2] - z0 > climb_m - 0.35, "never climbed"
+    assert drift_in_climb < 0.5, f"left the spawn by {drift_in_climb:.2f} m while climbing"
+    w.run(150.0, until=lambda: ap.modes.mode == FlightMode.DISARMED)
+    status = ap.status()
+    assert status.mission_finished and status.landed and not status.armed
+    assert [e.index for e in ap.modes.mission.drain_events()] == [0, 1, 2]
+    p = w.vehicles[vid].p
+    assert math.hypot(p[0] - x0, p[1] - y0) < 1.0, "RTL did not land at home"

@@ -1,0 +1,118 @@
+"""PX4 workflows a MAVSDK user brings from PX4 SITL, through MAVSDK's own plugins (4.x, its
+bundled C++ core) on the vehicle's API port, against the real stack (plume + physics +
+autopilot + gateway).
+
+One stack start covers several workflows in turn on one vehicle:
+- a mission started on the ground without a takeoff item, with MAVSDK's "return to launch
+  after mission": it takes off by itself, flies every item, returns and lands where it armed.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from gcs_bridge.frames import enu_to_geodetic
+from swarmbus.scenario import Origin
+from tests.gateway_stack import gateway, real_stack_available, vehicles
+from tests.mavclient import first, write_scenario
+from tests.procs import zenoh_network
+
+mavsdk = pytest.importorskip("mavsdk")
+
+from mavsdk.asyncio import ComponentType, Configuration, Mavsdk  # noqa: E402
+from mavsdk.asyncio.plugins.action import ActionAsync  # noqa: E402
+from mavsdk.asyncio.plugins.mission import MissionAsync, MissionItem, MissionPlan  # noqa: E402
+from mavsdk.asyncio.plugins.telemetry import TelemetryAsync  # noqa: E402
+
+pytestmark = pytest.mark.skipif(
+    not real_stack_available(), reason="autopilot / physics not on this branch"
+)
+
+ORIGIN = Origin()
+SPAWN_ENU = (20.0, 0.0)  # tests.mavclient.scenario_text, one vehicle
+MISSION_ALT_M = 6.0
+
+
+def waypoint(east_m: float, north_m: float, rel_alt_m: float) -> MissionItem:
+    lat, lon, _ = enu_to_geodetic((east_m, north_m, 0.0), ORIGIN)
+    return MissionItem(
+        latitude_deg=lat,
+        longitude_deg=lon,
+        relative_altitude_m=rel_alt_m,
+        is_fly_through=True,
+        acceptance_radius_m=1.0,
+    )
+
+
+def horizontal_m(a: Any, b: Any) -> float:
+    """Distance between two telemetry positions (small-angle, metres)."""
+    north = (a.latitude_deg - b.latitude_deg) * 111_320.0
+    east = (a.longitude_deg - b.longitude_deg) * 111_320.0 * math.cos(math.radians(a.latitude_deg))
+    return math.hypot(north, east)
+
+
+async def mission_from_the_ground_with_rtl(system: Any) -> None:
+    tel, act, mis = TelemetryAsync(system), ActionAsync(system), MissionAsync(system)
+    await first(tel.subscribe_health(), lambda h: h.is_armable, "ready to arm")
+    home = await first(tel.subscribe_position(), lambda p: True, "a position")
+    e0, n0 = SPAWN_ENU
+    plan = MissionPlan(
+        [waypoint(e0 + 15.0, n0, MISSION_ALT_M), waypoint(e0 + 15.0, n0 + 8.0, MISSION_ALT_M)]
+    )
+    await mis.set_return_to_launch_after_mission(True)
+    await mis.upload_mission(plan)
+    await act.arm()
+    await mis.start_mission()
+    await first(tel.subscribe_in_air(), bool, "in the air after starting the mission")
+    await first(
+        tel.subscribe_position(),
+        lambda p: p.relative_altitude_m > MISSION_ALT_M - 1.0,
+        f"the climb to {MISSION_ALT_M} m",
+    )
+    await first(
+        mis.subscribe_mission_progress(),
+        lambda p: p.total > 0 and p.current == p.total,
+        "mission progress to the end",
+    )
+    await first(tel.subscribe_armed(), lambda armed: not armed, "landed and disarmed", 180.0)
+    landed = await first(tel.subscribe_position(), lambda p: True, "a position after landing")
+    assert horizontal_m(landed, home) < 1.5, "return to launch did not land at home"
+
+
+async def connect(api_port: int) -> tuple[Mavsdk, Any]:
+    config = Configuration.create_with_component_type(ComponentType.GROUND_STATION)
+    sdk = Mavsdk(config)
+    await sdk.__aenter__()
+    await sdk.add_any_connection(f"udpin://127.0.0.1:{api_port}")
+
+    async def found() -> Any:
+        while True:
+            for s in await sdk.get_systems():
+                if await s.has_autopilot():
+                    return s
+            await asyncio.sleep(0.2)
+
+    return sdk, await asyncio.wait_for(found(), 120.0)
+
+
+async def workflows(api_port: int) -> None:
+    sdk, system = await connect(api_port)
+    try:
+        await mission_from_the_ground_with_rtl(system)
+    finally:
+        await sdk.__aexit__(None, None, None)
+
+
+def test_px4_workflows_through_mavsdk_plugins(tmp_path: Path) -> None:
+    scenario, _gcs, api = write_scenario(tmp_path / "scenario.toml", 1)
+    with (
+        zenoh_network() as (net, _router),
+        vehicles(net, scenario, tmp_path, ["uav1"], backend="real"),
+        gateway(net, scenario, tmp_path, "cmd_timeout_s=3"),
+    ):
+        asyncio.run(workflows(api))
