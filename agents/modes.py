@@ -155,14 +155,14 @@ class FlightModes:
         self._yaw = yaw_of(est.attitude_xyzw)
 
     def fence_violation(self, x: float, y: float, z: float) -> str | None:
+        """Which geofence limit a point breaks, named by its PX4 parameter (0 = off, as PX4)."""
         fs = self.failsafe
         hx, hy, hz = self.home
-        if z - hz > fs.geofence_max_alt_m:
-            limit = fs.geofence_max_alt_m
-            return f"altitude {z - hz:.1f} m above home exceeds the geofence ({limit} m)"
+        if fs.geofence_max_alt_m > 0.0 and z - hz > fs.geofence_max_alt_m:
+            return f"GF_MAX_VER_DIST {fs.geofence_max_alt_m:g} m: {z - hz:.1f} m above home"
         dist = math.hypot(x - hx, y - hy)
-        if dist > fs.geofence_max_distance_m:
-            return f"{dist:.1f} m from home exceeds the geofence ({fs.geofence_max_distance_m} m)"
+        if fs.geofence_max_distance_m > 0.0 and dist > fs.geofence_max_distance_m:
+            return f"GF_MAX_HOR_DIST {fs.geofence_max_distance_m:g} m: {dist:.1f} m from home"
         return None
 
     # ------------------------------------------------------------------ actions
@@ -204,7 +204,7 @@ class FlightModes:
         z = self.home[2] + altitude_m
         fence = self.fence_violation(x, y, z)
         if fence is not None:
-            return invalid(f"takeoff altitude: {fence}")
+            return invalid(f"takeoff: {fence}")
         self._target = (x, y, z)
         self._speed = 0.0
         self._set_mode(to, est)
@@ -248,7 +248,7 @@ class FlightModes:
             return to
         fence = self.fence_violation(*position)
         if fence is not None:
-            return invalid(f"goto target: {fence}")
+            return invalid(f"goto: {fence}")
         self._set_mode(to, est)
         self._target = position
         self._speed = speed_m_s
@@ -299,7 +299,7 @@ class FlightModes:
             x, y, _ = est.position
             fence = self.fence_violation(x, y, climb_alt_m)
             if fence is not None:
-                return invalid(f"mission takeoff altitude: {fence}")
+                return invalid(f"mission takeoff: {fence}")
         if start_index is not None:
             mission.start(start_index)
         self._item_seen = -1

@@ -110,6 +110,7 @@ class Gateway(CommandHandlers, ParamHandlers, MissionHandlers):
             self._streams = Streams(session, keys, set(self.vehicles))
         self._inflight: set[tuple[int, int, int, int]] = set()
         self._text_budget: dict[tuple[str | None, int], tuple[float, float]] = {}
+        self._text_id = 0
         self._param_sync: dict[str, float] = {}  # vehicle id → next attempt (wall s); -1 busy
         self._next_heartbeat_s = 0.0
         self._next_tick_s = 0.0

@@ -100,18 +100,18 @@ SPECS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "GF_MAX_VER_DIST",
         REAL32,
-        1.0,
+        0.0,
         10000.0,
         lambda f, t: f.geofence_max_alt_m,
-        "geofence: maximum altitude above home (m)",
+        "geofence: maximum altitude above home (m); 0: off",
     ),
     ParamSpec(
         "GF_MAX_HOR_DIST",
         REAL32,
-        1.0,
+        0.0,
         100000.0,
         lambda f, t: f.geofence_max_distance_m,
-        "geofence: maximum horizontal distance from home (m)",
+        "geofence: maximum horizontal distance from home (m); 0: off",
     ),
     ParamSpec(
         "MPC_XY_CRUISE",

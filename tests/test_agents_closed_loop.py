@@ -249,7 +249,7 @@ def test_commands_are_refused_with_the_right_reason() -> None:
     refused(ap, Disarm(), "already disarmed")
     ok(ap.handle(Arm()))
     refused(ap, Arm(), "already armed")
-    refused(ap, Takeoff(altitude_m=80.0), "geofence", code="invalid")
+    refused(ap, Takeoff(altitude_m=80.0), "GF_MAX_VER_DIST 50 m", code="invalid")
     refused(ap, Goto(position_enu_m=(1.0, 2.0, 3.0)), "on the ground")
     refused(ap, SetMode(mode=FlightMode.OFFBOARD), "no offboard setpoint stream")
     ok(ap.handle(MissionUpload(items=[])))
@@ -338,3 +338,19 @@ def test_mission_started_on_the_ground_without_takeoff_item_climbs_first(
     assert [e.index for e in ap.modes.mission.drain_events()] == [0, 1, 2]
     p = w.vehicles[vid].p
     assert math.hypot(p[0] - x0, p[1] - y0) < 1.0, "RTL did not land at home"
+
+
+def test_horizontal_fence_is_off_by_default_as_in_px4_and_refusals_name_the_parameter() -> None:
+    from swarmbus.scenario import Failsafe
+
+    assert Failsafe().geofence_max_distance_m == 0.0 and Failsafe().takeoff_altitude_m == 2.5
+    assert load_scenario().failsafe.geofence_max_distance_m == 500.0  # the seed keeps its own
+    far = scenario(geofence_max_distance_m=0.0)
+    w, aps = world(far, ["uav1"])
+    take_off(w, aps, 5.0)
+    x, y, z = w.vehicles["uav1"].p
+    ok(aps["uav1"].handle(Goto(position_enu_m=(x + 2000.0, y, z))))
+    w2, aps2 = world(scenario(geofence_max_distance_m=30.0), ["uav1"])
+    take_off(w2, aps2, 5.0)
+    x, y, z = w2.vehicles["uav1"].p
+    refused(aps2["uav1"], Goto(position_enu_m=(x + 60.0, y, z)), "GF_MAX_HOR_DIST 30 m", "invalid")

@@ -4,7 +4,9 @@ autopilot + gateway).
 
 One stack start covers several workflows in turn on one vehicle:
 - a mission started on the ground without a takeoff item, with MAVSDK's "return to launch
-  after mission": it takes off by itself, flies every item, returns and lands where it armed.
+  after mission": it takes off by itself, flies every item, returns and lands where it armed;
+- the horizontal fence set through the param plugin (off by default, as PX4) refuses a go-to
+  beyond it with COMMAND_DENIED and a status text naming GF_MAX_HOR_DIST and its value.
 """
 
 from __future__ import annotations
@@ -25,8 +27,9 @@ from tests.procs import zenoh_network
 mavsdk = pytest.importorskip("mavsdk")
 
 from mavsdk.asyncio import ComponentType, Configuration, Mavsdk  # noqa: E402
-from mavsdk.asyncio.plugins.action import ActionAsync  # noqa: E402
+from mavsdk.asyncio.plugins.action import ActionAsync, ActionError  # noqa: E402
 from mavsdk.asyncio.plugins.mission import MissionAsync, MissionItem, MissionPlan  # noqa: E402
+from mavsdk.asyncio.plugins.param import ParamAsync  # noqa: E402
 from mavsdk.asyncio.plugins.telemetry import TelemetryAsync  # noqa: E402
 
 pytestmark = pytest.mark.skipif(
@@ -84,6 +87,44 @@ async def mission_from_the_ground_with_rtl(system: Any) -> None:
     assert horizontal_m(landed, home) < 1.5, "return to launch did not land at home"
 
 
+async def take_off(system: Any, alt_m: float) -> None:
+    tel, act = TelemetryAsync(system), ActionAsync(system)
+    await first(tel.subscribe_health(), lambda h: h.is_armable, "ready to arm")
+    await act.set_takeoff_altitude(alt_m)
+    await act.arm()
+    await act.takeoff()
+    await first(
+        tel.subscribe_position(), lambda p: p.relative_altitude_m > alt_m - 0.5, f"at {alt_m} m"
+    )
+
+
+async def goto_refused_by_the_fence_parameter(system: Any) -> None:
+    tel, act, param = TelemetryAsync(system), ActionAsync(system), ParamAsync(system)
+    assert await param.get_param_float("GF_MAX_HOR_DIST") == 0.0, "PX4 default: no fence"
+    await param.set_param_float("GF_MAX_HOR_DIST", 30.0)
+    here = await first(tel.subscribe_position(), lambda p: True, "a position")
+    texts: list[str] = []
+
+    async def listen() -> None:
+        async for t in tel.subscribe_status_text():
+            texts.append(t.text)
+
+    listener = asyncio.create_task(listen())
+    try:
+        e0, n0 = SPAWN_ENU
+        lat, lon, _ = enu_to_geodetic((e0 + 60.0, n0, 0.0), ORIGIN)
+        with pytest.raises(ActionError) as refused:
+            await act.goto_location(lat, lon, here.absolute_altitude_m, math.nan)
+        assert refused.value.result.name == "COMMAND_DENIED", refused.value
+        deadline = asyncio.get_running_loop().time() + 10.0
+        while not any("GF_MAX_HOR_DIST 30 m" in t for t in texts):
+            assert asyncio.get_running_loop().time() < deadline, f"status texts: {texts}"
+            await asyncio.sleep(0.1)
+    finally:
+        listener.cancel()
+    await param.set_param_float("GF_MAX_HOR_DIST", 0.0)
+
+
 async def connect(api_port: int) -> tuple[Mavsdk, Any]:
     config = Configuration.create_with_component_type(ComponentType.GROUND_STATION)
     sdk = Mavsdk(config)
@@ -104,12 +145,17 @@ async def workflows(api_port: int) -> None:
     sdk, system = await connect(api_port)
     try:
         await mission_from_the_ground_with_rtl(system)
+        await take_off(system, 5.0)
+        await goto_refused_by_the_fence_parameter(system)
     finally:
         await sdk.__aexit__(None, None, None)
 
 
 def test_px4_workflows_through_mavsdk_plugins(tmp_path: Path) -> None:
     scenario, _gcs, api = write_scenario(tmp_path / "scenario.toml", 1)
+    text = scenario.read_text()  # the seed's own 500 m fence out: the default applies
+    scenario.write_text(text.replace("geofence_max_distance_m = 500.0\n", ""))
+    assert scenario.read_text() != text
     with (
         zenoh_network() as (net, _router),
         vehicles(net, scenario, tmp_path, ["uav1"], backend="real"),

@@ -341,3 +341,20 @@ def test_landed_state_for_mavsdk_in_air() -> None:
     st = status(mode=FlightMode.HOLD, armed=True, landed=False)
     assert landed_state_of(st) == mavlink.MAV_LANDED_STATE_IN_AIR
     assert landed_state_of(None) == mavlink.MAV_LANDED_STATE_UNDEFINED
+
+
+def test_a_long_statustext_travels_as_mavlink2_chunks() -> None:
+    from gcs_bridge.core import statustext_chunks
+
+    short = statustext_chunks("uav1: fits in one", 7)
+    assert len(short) == 1 and short[0].id == 0
+    text = "uav1: item 12: GF_MAX_HOR_DIST 500 m: 551.2 m from home, mission refused"
+    chunks = statustext_chunks(text, 7)
+    assert [(c.id, c.chunk_seq) for c in chunks] == [(7, 0), (7, 1)]
+    joined = b"".join(
+        c.text if isinstance(c.text, bytes) else c.text.encode() for c in chunks
+    ).rstrip(b"\0")
+    assert joined.decode() == text
+    exactly_two = statustext_chunks("x" * 100, 9)  # the receiver needs a short last chunk
+    assert [c.chunk_seq for c in exactly_two] == [0, 1, 2]
+    assert len(statustext_chunks("y" * 5000, 3)) == 4  # capped
