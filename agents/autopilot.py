@@ -27,6 +27,7 @@ from swarmbus.messages import (
     Disarm,
     FlightMode,
     GcsHeartbeat,
+    GeofenceUpload,
     GetParams,
     Goto,
     Hold,
@@ -37,6 +38,7 @@ from swarmbus.messages import (
     MissionPause,
     MissionStart,
     MissionUpload,
+    RallyUpload,
     RejectCode,
     ReturnToLaunch,
     SetMode,
@@ -116,6 +118,8 @@ class Autopilot:
             GcsHeartbeat: self._heartbeat,
             SetParam: self._set_param,
             GetParams: lambda c: self._reply(params=self.params()),
+            GeofenceUpload: lambda c: self.modes.upload_fence(self.est, list(c.zones)),
+            RallyUpload: lambda c: self.modes.upload_rally([tuple(p) for p in c.points_enu_m]),
         }
 
     def mission_items(self) -> list[MissionItem]:

@@ -16,8 +16,16 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from agents.control import Estimate, Target, yaw_of
+from agents.geofence import zone_error, zones_violation
 from agents.mission import Mission, MissionError
-from swarmbus.messages import FlightMode, MissionCommand, MissionItem, RejectCode, Setpoint
+from swarmbus.messages import (
+    FenceZone,
+    FlightMode,
+    MissionCommand,
+    MissionItem,
+    RejectCode,
+    Setpoint,
+)
 from swarmbus.scenario import Failsafe, Origin
 
 M = FlightMode
@@ -106,6 +114,9 @@ class FlightModes:
         self.mode = M.DISARMED
         self.mission = Mission()
         self.home: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        self.fence_zones: list[FenceZone] = []  # uploaded polygons and circles
+        self.rally_points: list[tuple[float, float, float]] = []
+        self._rtl_dest: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self.failsafe_reason = ""  # why the last automatic (failsafe) transition happened
         self.has_behavior = False
         self._target: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -163,6 +174,25 @@ class FlightModes:
         dist = math.hypot(x - hx, y - hy)
         if fs.geofence_max_distance_m > 0.0 and dist > fs.geofence_max_distance_m:
             return f"GF_MAX_HOR_DIST {fs.geofence_max_distance_m:g} m: {dist:.1f} m from home"
+        return zones_violation(self.fence_zones, x, y)
+
+    def upload_fence(self, est: Estimate | None, zones: list[FenceZone]) -> Refusal | None:
+        """Replace the uploaded zones. As PX4 does, a fence that leaves out home (or, before
+        arming, where the vehicle stands) is refused."""
+        for i, zone in enumerate(zones):
+            why = zone_error(zone)
+            if why is not None:
+                return invalid(f"zone {i}: {why}")
+        here = self.home if self.armed or est is None else est.position
+        if est is not None or self.armed:
+            outside = zones_violation(zones, here[0], here[1])
+            if outside is not None:
+                return invalid(f"home is not allowed by the fence ({outside})")
+        self.fence_zones = list(zones)
+        return None
+
+    def upload_rally(self, points: list[tuple[float, float, float]]) -> Refusal | None:
+        self.rally_points = list(points)
         return None
 
     # ------------------------------------------------------------------ actions
@@ -224,6 +254,11 @@ class FlightModes:
             return to
         self._rtl_phase = RtlPhase.CLIMB
         self._rtl_alt = max(est.position[2], self.home[2] + self.failsafe.rtl_altitude_m)
+        # PX4's default RTL_TYPE 0: the closest safe point, home or a rally point
+        x, y, _ = est.position
+        self._rtl_dest = min(
+            [self.home, *self.rally_points], key=lambda p: math.hypot(p[0] - x, p[1] - y)
+        )
         self._target = est.position
         self._set_mode(to, est)
         return None
@@ -389,7 +424,7 @@ class FlightModes:
         return self._descend(est, now, (self._target[0], self._target[1]))
 
     def _guide_rtl(self, est: Estimate, now: float) -> Target | None:
-        hx, hy, _ = self.home
+        hx, hy, _ = self._rtl_dest
         x, y, z = est.position
         if self._rtl_phase == RtlPhase.CLIMB:
             if z >= self._rtl_alt - TAKEOFF_DONE_M:

@@ -141,6 +141,7 @@ class Vehicle:
         self.uploader = Uploader()
         self.mission: Converted | None = None  # as MAVLink last saw it (upload or download)
         self.download: list[WireItem] = []
+        self.plans: dict[int, list[WireItem]] = {}  # fence and rally items as accepted
         self._home_geo: Vec3 | None = None
         self.intent: ArmIntent | None = None
         self.arming_since_s: float | None = None  # wall: an Arm sent, no armed status yet

@@ -283,6 +283,39 @@ class GetParams(Message, frozen=True, kw_only=True, tag=_tag("cmd.get_params")):
     pass
 
 
+# --------------------------------------------------------------------------- geofence, rally
+MAX_FENCE_VERTICES = 1000
+
+
+class FenceZone(msgspec.Struct, frozen=True, kw_only=True):
+    """A geofence zone in the world ENU frame: a polygon (``polygon_enu_m``, ≥ 3 vertices) or
+    a circle (``center_enu_m`` and ``radius_m``). Inclusion: the vehicle stays inside (inside
+    at least one, when there are several); exclusion: it stays out."""
+
+    inclusion: bool = True
+    polygon_enu_m: (
+        Annotated[
+            list[tuple[Finite, Finite]],
+            msgspec.Meta(min_length=3, max_length=MAX_FENCE_VERTICES),
+        ]
+        | None
+    ) = None
+    center_enu_m: tuple[Finite, Finite] | None = None
+    radius_m: Positive | None = None
+
+
+class GeofenceUpload(Message, frozen=True, kw_only=True, tag=_tag("cmd.geofence_upload")):
+    """Replace the uploaded geofence zones (empty: none; the GF_* limits stay)."""
+
+    zones: Annotated[list[FenceZone], msgspec.Meta(max_length=MAX_MISSION_ITEMS)]
+
+
+class RallyUpload(Message, frozen=True, kw_only=True, tag=_tag("cmd.rally_upload")):
+    """Replace the rally points (ENU m): RTL goes to the closest of home and these."""
+
+    points_enu_m: Annotated[list[Vec3], msgspec.Meta(max_length=MAX_MISSION_ITEMS)]
+
+
 Command = (
     Arm
     | Disarm
@@ -301,6 +334,8 @@ Command = (
     | GcsHeartbeat
     | SetParam
     | GetParams
+    | GeofenceUpload
+    | RallyUpload
 )
 
 
@@ -424,6 +459,8 @@ ALL_MESSAGES: tuple[type[Message], ...] = (
     GcsHeartbeat,
     SetParam,
     GetParams,
+    GeofenceUpload,
+    RallyUpload,
     CommandReply,
     PlumeQuery,
     PlumeValues,
@@ -437,6 +474,7 @@ ALL_MESSAGES: tuple[type[Message], ...] = (
 
 __all__ = [m.__name__ for m in ALL_MESSAGES] + [
     "Command",
+    "FenceZone",
     "FlightMode",
     "MissionCommand",
     "MissionFrame",

@@ -32,6 +32,7 @@ from swarmbus.messages import (
     ErrorReply,
     FlightMode,
     GcsHeartbeat,
+    GeofenceUpload,
     GetParams,
     Goto,
     Hold,
@@ -44,6 +45,7 @@ from swarmbus.messages import (
     MissionPause,
     MissionStart,
     MissionUpload,
+    RallyUpload,
     RejectCode,
     ReturnToLaunch,
     SetMode,
@@ -170,7 +172,7 @@ class World:
                 return refuse(f.vid, denied, "on the ground: first item must be a takeoff")
             f.mode, f.descending = M.MISSION, False
             return ok
-        if isinstance(cmd, Setpoint):
+        if isinstance(cmd, Setpoint | GeofenceUpload | RallyUpload):
             return ok
         if f.mode not in AIRBORNE:
             return refuse(f.vid, denied, "not flying")

@@ -21,6 +21,7 @@ from swarmbus.messages import (
     MissionItem,
     MissionStart,
     MissionUpload,
+    ReturnToLaunch,
     SetMode,
     Setpoint,
     Takeoff,
@@ -354,3 +355,40 @@ def test_horizontal_fence_is_off_by_default_as_in_px4_and_refusals_name_the_para
     take_off(w2, aps2, 5.0)
     x, y, z = w2.vehicles["uav1"].p
     refused(aps2["uav1"], Goto(position_enu_m=(x + 60.0, y, z)), "GF_MAX_HOR_DIST 30 m", "invalid")
+
+
+def test_uploaded_zones_allow_inside_one_inclusion_and_outside_every_exclusion() -> None:
+    from agents.geofence import zones_violation
+    from swarmbus.messages import FenceZone
+
+    square = FenceZone(polygon_enu_m=[(0.0, 0.0), (100.0, 0.0), (100.0, 100.0), (0.0, 100.0)])
+    far = FenceZone(center_enu_m=(500.0, 0.0), radius_m=20.0)
+    hole = FenceZone(inclusion=False, center_enu_m=(50.0, 50.0), radius_m=10.0)
+    zones = [square, far, hole]
+    assert zones_violation(zones, 10.0, 10.0) is None
+    assert zones_violation(zones, 510.0, 5.0) is None  # inside the other inclusion zone
+    assert "inclusion" in (zones_violation(zones, 150.0, 50.0) or "")
+    assert "exclusion zone 2" in (zones_violation(zones, 52.0, 48.0) or "")
+    assert zones_violation([], 1e6, 1e6) is None
+
+
+def test_uploaded_fence_refuses_goto_outside_and_one_leaving_out_home() -> None:
+    from swarmbus.messages import FenceZone, GeofenceUpload, RallyUpload
+
+    w, aps = world(scenario(), ["uav1"])
+    ap = aps["uav1"]
+    x, y, z = w.vehicles["uav1"].p
+    elsewhere = FenceZone(center_enu_m=(x + 500.0, y), radius_m=20.0)
+    refused(ap, GeofenceUpload(zones=[elsewhere]), "home is not allowed", "invalid")
+    near = FenceZone(center_enu_m=(x, y), radius_m=30.0)
+    ok(ap.handle(GeofenceUpload(zones=[near])))
+    take_off(w, aps, 5.0)
+    refused(ap, Goto(position_enu_m=(x + 40.0, y, z + 5.0)), "outside the inclusion", "invalid")
+    ok(ap.handle(Goto(position_enu_m=(x + 20.0, y, z + 5.0))))
+    # rally point closer than home: RTL lands there (PX4's RTL_TYPE 0)
+    ok(ap.handle(RallyUpload(points_enu_m=[(x + 25.0, y + 5.0, z)])))
+    w.run(15.0)
+    ok(ap.handle(ReturnToLaunch()))
+    w.run(90.0, until=lambda: ap.modes.mode == FlightMode.DISARMED)
+    p = w.vehicles["uav1"].p
+    assert math.hypot(p[0] - (x + 25.0), p[1] - (y + 5.0)) < 1.0, p

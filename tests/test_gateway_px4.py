@@ -6,7 +6,9 @@ One stack start covers several workflows in turn on one vehicle:
 - a mission started on the ground without a takeoff item, with MAVSDK's "return to launch
   after mission": it takes off by itself, flies every item, returns and lands where it armed;
 - the horizontal fence set through the param plugin (off by default, as PX4) refuses a go-to
-  beyond it with COMMAND_DENIED and a status text naming GF_MAX_HOR_DIST and its value.
+  beyond it with COMMAND_DENIED and a status text naming GF_MAX_HOR_DIST and its value;
+- an inclusion polygon uploaded with the geofence plugin stops a go-to outside it (one inside
+  flies) and downloads again; a rally point uploaded with mission_raw is where RTL lands.
 """
 
 from __future__ import annotations
@@ -28,9 +30,13 @@ mavsdk = pytest.importorskip("mavsdk")
 
 from mavsdk.asyncio import ComponentType, Configuration, Mavsdk  # noqa: E402
 from mavsdk.asyncio.plugins.action import ActionAsync, ActionError  # noqa: E402
+from mavsdk.asyncio.plugins.geofence import GeofenceAsync  # noqa: E402
 from mavsdk.asyncio.plugins.mission import MissionAsync, MissionItem, MissionPlan  # noqa: E402
+from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync  # noqa: E402
 from mavsdk.asyncio.plugins.param import ParamAsync  # noqa: E402
 from mavsdk.asyncio.plugins.telemetry import TelemetryAsync  # noqa: E402
+from mavsdk.plugins.geofence import FenceType, GeofenceData, Point, Polygon  # noqa: E402
+from mavsdk.plugins.mission_raw import MissionItem as RawItem  # noqa: E402
 
 pytestmark = pytest.mark.skipif(
     not real_stack_available(), reason="autopilot / physics not on this branch"
@@ -125,6 +131,45 @@ async def goto_refused_by_the_fence_parameter(system: Any) -> None:
     await param.set_param_float("GF_MAX_HOR_DIST", 0.0)
 
 
+def latlon(east_m: float, north_m: float) -> tuple[float, float]:
+    lat, lon, _ = enu_to_geodetic((east_m, north_m, 0.0), ORIGIN)
+    return lat, lon
+
+
+async def fence_stops_goto_and_rtl_lands_at_rally(system: Any) -> None:
+    tel, act = TelemetryAsync(system), ActionAsync(system)
+    fence, raw = GeofenceAsync(system), MissionRawAsync(system)
+    e0, n0 = SPAWN_ENU
+    corners = [(e0 - 30, n0 - 30), (e0 + 30, n0 - 30), (e0 + 30, n0 + 30), (e0 - 30, n0 + 30)]
+    square = Polygon([Point(*latlon(e, n)) for e, n in corners], FenceType.INCLUSION)
+    await fence.upload_geofence(GeofenceData(polygons=[square], circles=[]))
+    assert len(await raw.download_geofence()) == 4
+    here = await first(tel.subscribe_position(), lambda p: True, "a position")
+    with pytest.raises(ActionError) as refused:
+        await act.goto_location(*latlon(e0 + 45.0, n0), here.absolute_altitude_m, math.nan)
+    assert refused.value.result.name == "COMMAND_DENIED", refused.value
+    await act.goto_location(*latlon(e0 + 20.0, n0), here.absolute_altitude_m, math.nan)
+    lat, lon = latlon(e0 + 20.0, n0)
+    await first(
+        tel.subscribe_position(),
+        lambda p: (
+            abs(p.latitude_deg - lat) * 111_320 < 1.0 and abs(p.longitude_deg - lon) * 75_000 < 1.0
+        ),
+        "the go-to inside the fence",
+    )
+    rally_lat, rally_lon = latlon(e0 + 15.0, n0 + 10.0)
+    rally = RawItem(
+        0, 6, 5100, 0, 1, 0, 0, 0, 0, round(rally_lat * 1e7), round(rally_lon * 1e7), 0.0, 2
+    )
+    await raw.upload_rally_points([rally])
+    await act.return_to_launch()
+    await first(tel.subscribe_armed(), lambda armed: not armed, "landed and disarmed", 180.0)
+    landed = await first(tel.subscribe_position(), lambda p: True, "a position after RTL")
+    target = type("P", (), {"latitude_deg": rally_lat, "longitude_deg": rally_lon})()
+    assert horizontal_m(landed, target) < 1.5, "RTL did not land at the closer rally point"
+    await fence.clear_geofence()
+
+
 async def connect(api_port: int) -> tuple[Mavsdk, Any]:
     config = Configuration.create_with_component_type(ComponentType.GROUND_STATION)
     sdk = Mavsdk(config)
@@ -147,6 +192,7 @@ async def workflows(api_port: int) -> None:
         await mission_from_the_ground_with_rtl(system)
         await take_off(system, 5.0)
         await goto_refused_by_the_fence_parameter(system)
+        await fence_stops_goto_and_rtl_lands_at_rally(system)
     finally:
         await sdk.__aexit__(None, None, None)
 
