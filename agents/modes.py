@@ -127,6 +127,7 @@ class FlightModes:
         self._rtl_alt = 0.0
         self._setpoint: Setpoint | None = None
         self._setpoint_time_s = -math.inf
+        self._offboard_tick_s = -math.inf
         self._item_seen = -1
         self._land_descending = False
         self._climb_alt_m: float | None = None  # a mission started on the ground climbs first
@@ -345,8 +346,18 @@ class FlightModes:
         return None
 
     def setpoint(self, setpoint: Setpoint, now: float) -> Refusal | None:
-        if setpoint.position_enu_m is None and setpoint.velocity_enu_m_s is None:
-            return invalid("setpoint needs a position or a velocity")
+        sp = setpoint
+        direct = sp.attitude_xyzw is not None or sp.body_rates_rad_s is not None
+        if direct and sp.thrust is None:
+            return invalid("an attitude or body-rate setpoint needs a thrust")
+        if not direct and (
+            sp.position_enu_m is None
+            and sp.velocity_enu_m_s is None
+            and sp.acceleration_enu_m_s2 is None
+        ):
+            return invalid(
+                "setpoint needs a position, velocity, acceleration, attitude or body rates"
+            )
         if setpoint.position_enu_m is not None:
             fence = self.fence_violation(*setpoint.position_enu_m)
             if fence is not None and self.armed:
@@ -363,6 +374,7 @@ class FlightModes:
             return denied("no offboard setpoint stream: send setpoints first")
         self._hold_here(est)
         self._set_mode(to, est)
+        self._offboard_tick_s = -math.inf
         if self.has_behavior:  # the behaviour is the stream; it starts now
             self._setpoint_time_s = now
         return None
@@ -491,12 +503,27 @@ class FlightModes:
             )
             return self.guidance(est, now)
         sp = self._setpoint
+        dt = now - self._offboard_tick_s if math.isfinite(self._offboard_tick_s) else 0.0
+        self._offboard_tick_s = now
         if sp is None:
             return self._position_target()
         if sp.yaw_deg is not None:
             self._yaw = math.radians(sp.yaw_deg)
+        elif sp.yaw_rate_deg_s is not None:
+            self._yaw = (self._yaw + math.radians(sp.yaw_rate_deg_s) * dt + math.pi) % (
+                2.0 * math.pi
+            ) - math.pi
+        thrust = sp.thrust or 0.0
+        if sp.body_rates_rad_s is not None:
+            return Target(
+                None, None, self._yaw, body_rates=sp.body_rates_rad_s, thrust_fraction=thrust
+            )
+        if sp.attitude_xyzw is not None:
+            return Target(None, None, self._yaw, attitude=sp.attitude_xyzw, thrust_fraction=thrust)
         velocity = sp.velocity_enu_m_s or (0.0, 0.0, 0.0)
+        accel = sp.acceleration_enu_m_s2 or (0.0, 0.0, 0.0)
         if sp.position_enu_m is None:
-            return Target(None, None, self._yaw, velocity=velocity)
+            loop = sp.velocity_enu_m_s is not None
+            return Target(None, None, self._yaw, velocity, acceleration=accel, velocity_loop=loop)
         px, py, pz = sp.position_enu_m
-        return Target((px, py), pz, self._yaw, velocity=velocity)
+        return Target((px, py), pz, self._yaw, velocity=velocity, acceleration=accel)

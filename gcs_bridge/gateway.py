@@ -131,6 +131,8 @@ class Gateway(CommandHandlers, ParamHandlers, MissionHandlers):
             "MISSION_CLEAR_ALL": self._on_mission_clear_all,
             "MISSION_SET_CURRENT": self._on_mission_set_current,
             "SET_POSITION_TARGET_LOCAL_NED": self._on_position_target,
+            "SET_POSITION_TARGET_GLOBAL_INT": self._on_global_target,
+            "SET_ATTITUDE_TARGET": self._on_attitude_target,
         }
         self._local_commands = self._command_table()
 

@@ -16,15 +16,12 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from gcs_bridge.dialect import mavlink
+from swarmbus.messages import COM_OBL_ACT_CODES, NAV_DLL_ACT_CODES
 from swarmbus.scenario import Failsafe
 from swarmbus.vehicle_types import VehicleType
 
 REAL32 = int(mavlink.MAV_PARAM_TYPE_REAL32)
 INT32 = int(mavlink.MAV_PARAM_TYPE_INT32)
-
-# Failsafe action codes, as the autopilot's SetParam/GetParams speak them: PX4's NAV_DLL_ACT
-# codes, for COM_OBL_ACT too (PX4's own COM_OBL_ACT numbers them differently).
-ACTION_CODE = {"none": 0, "hold": 1, "rtl": 2, "land": 3}
 
 
 class ParamError(ValueError):
@@ -70,7 +67,7 @@ SPECS: tuple[ParamSpec, ...] = (
         INT32,
         0,
         3,
-        lambda f, t: ACTION_CODE[f.datalink_loss_action],
+        lambda f, t: NAV_DLL_ACT_CODES[f.datalink_loss_action],
         "data-link-loss action: 0 none, 1 hold, 2 RTL, 3 land",
     ),
     ParamSpec(
@@ -84,10 +81,10 @@ SPECS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "COM_OBL_ACT",
         INT32,
-        1,
-        3,
-        lambda f, t: ACTION_CODE[f.offboard_loss_action],
-        "offboard-loss action: 1 hold, 2 RTL, 3 land",
+        0,
+        2,
+        lambda f, t: COM_OBL_ACT_CODES[f.offboard_loss_action],
+        "offboard-loss action (PX4's codes): 0 land, 1 hold, 2 RTL",
     ),
     ParamSpec(
         "COM_OF_LOSS_T",

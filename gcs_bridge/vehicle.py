@@ -246,7 +246,15 @@ class Vehicle:
         home = self.home_enu
         if home is not None and self._home_geo is None:
             self._home_geo = enu_to_geodetic(home, self.origin)
-        return View(self.state, self.status, self.reading, self._home_geo, home, self.wind_enu)
+        return View(
+            self.state,
+            self.status,
+            self.reading,
+            self._home_geo,
+            home,
+            self.wind_enu,
+            self.spawn_enu,
+        )
 
     # -- mission bookkeeping ----------------------------------------------------
     def _mapping_valid(self) -> bool:

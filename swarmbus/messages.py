@@ -261,11 +261,22 @@ class MissionDownload(Message, frozen=True, kw_only=True, tag=_tag("cmd.mission_
 
 
 class Setpoint(Message, frozen=True, kw_only=True, tag=_tag("cmd.setpoint")):
-    """Offboard setpoint: a position, or a velocity (position ``None``), optional yaw."""
+    """Offboard setpoint (world ENU, body FLU), the kinds PX4 accepts:
+
+    - a position, a velocity or an acceleration, or a combination (with a position, velocity
+      and acceleration are feed-forward), with a yaw or a yaw rate;
+    - an attitude (``attitude_xyzw``, body → world) or body rates (``body_rates_rad_s``), each
+      with a collective ``thrust`` (fraction of the vehicle's maximum).
+    """
 
     position_enu_m: Vec3 | None = None
     velocity_enu_m_s: Vec3 | None = None
     yaw_deg: Annotated[float, msgspec.Meta(ge=-360.0, le=360.0)] | None = None
+    acceleration_enu_m_s2: Vec3 | None = None
+    yaw_rate_deg_s: Annotated[float, msgspec.Meta(ge=-3600.0, le=3600.0)] | None = None
+    attitude_xyzw: Quat | None = None
+    body_rates_rad_s: Vec3 | None = None
+    thrust: Unit | None = None
 
 
 class GcsHeartbeat(Message, frozen=True, kw_only=True, tag=_tag("cmd.gcs_heartbeat")):
@@ -281,6 +292,12 @@ class SetParam(Message, frozen=True, kw_only=True, tag=_tag("cmd.set_param")):
 
 class GetParams(Message, frozen=True, kw_only=True, tag=_tag("cmd.get_params")):
     pass
+
+
+# PX4's codes for the failsafe-action parameters that SetParam / GetParams carry as numbers
+NAV_DLL_ACT_CODES = {"none": 0, "hold": 1, "rtl": 2, "land": 3}  # PX4 NAV_DLL_ACT
+COM_OBL_ACT_CODES = {"land": 0, "hold": 1, "rtl": 2}  # PX4 COM_OBL_ACT (no terminate)
+ACTION_CODES_OF_PARAM = {"NAV_DLL_ACT": NAV_DLL_ACT_CODES, "COM_OBL_ACT": COM_OBL_ACT_CODES}
 
 
 # --------------------------------------------------------------------------- geofence, rally

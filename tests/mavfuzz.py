@@ -309,7 +309,7 @@ class Fuzzer:
         return [self._count(t, n)], [self._mission_ack(t, M.MAV_MISSION_NO_SPACE)]
 
     def mission_other_type(self, t: Target) -> Case:
-        mission_type = self.rng.choice([1, 2, 3, 7, 255])  # fence, rally, ... and nonsense
+        mission_type = self.rng.choice([3, 7, 254, 255])  # no such plan (255: only clear-all)
         msg = self.rng.choice(
             [
                 self._count(t, self.rng.randrange(1, 10), mission_type),
@@ -317,7 +317,7 @@ class Fuzzer:
                 M.MAVLink_mission_request_int_message(t.sysid, 1, 0, mission_type),
             ]
         )
-        if mission_type in (1, 2) and self.rng.random() < 0.3:  # 255 (all) clears the mission
+        if mission_type != 255 and self.rng.random() < 0.3:
             msg = M.MAVLink_mission_clear_all_message(t.sysid, 1, mission_type)
         return [msg], [self._mission_ack(t, M.MAV_MISSION_UNSUPPORTED)]
 

@@ -392,3 +392,58 @@ def test_uploaded_fence_refuses_goto_outside_and_one_leaving_out_home() -> None:
     w.run(90.0, until=lambda: ap.modes.mode == FlightMode.DISARMED)
     p = w.vehicles["uav1"].p
     assert math.hypot(p[0] - (x + 25.0), p[1] - (y + 5.0)) < 1.0, p
+
+
+def _offboard_with(w: ToyWorld, ap: Autopilot, sp: Setpoint, seconds: float) -> None:
+    ok(ap.handle(sp))
+    if ap.modes.mode != FlightMode.OFFBOARD:
+        ok(ap.handle(SetMode(mode=FlightMode.OFFBOARD)))
+
+    def stream() -> bool:
+        ok(ap.handle(sp))
+        return False
+
+    w.run(seconds, until=stream)
+    assert ap.modes.mode == FlightMode.OFFBOARD
+
+
+def test_offboard_acceleration_yaw_rate_and_body_rates_act_in_their_frames() -> None:
+    from agents.control import yaw_of
+
+    sc = scenario(geofence_max_distance_m=0.0)
+    sc = msgspec.structs.replace(sc, wind=msgspec.structs.replace(sc.wind, speed_m_s=0.0))
+    w, aps = world(sc, ["uav1"])
+    ap = aps["uav1"]
+    take_off(w, aps, 8.0)
+    # acceleration alone, 1.5 m/s² north in still air: no velocity loop, the speed keeps
+    # growing (≈ 3 m/s after 2 s, less the drag and the time to tilt)
+    _offboard_with(w, ap, Setpoint(acceleration_enu_m_s2=(0.0, 1.5, 0.0)), 2.0)
+    v = w.vehicles["uav1"].v
+    assert 2.2 < v[1] < 3.1 and abs(v[0]) < 0.2, v  # vz: whatever the take-off left
+    # velocity with a yaw rate of 30 °/s (ENU, counter-clockwise) for 2 s: yaw grows ≈ 60°
+    yaw0 = yaw_of(ap.est.attitude_xyzw)  # type: ignore[union-attr]
+    _offboard_with(w, ap, Setpoint(velocity_enu_m_s=(0.0, 0.0, 0.0), yaw_rate_deg_s=30.0), 2.0)
+    turned = math.degrees(yaw_of(ap.est.attitude_xyzw) - yaw0)  # type: ignore[union-attr]
+    assert 45.0 < (turned + 180.0) % 360.0 - 180.0 < 65.0, turned
+    # body rates: 0.5 rad/s about body z (FLU: counter-clockwise seen from above)
+    yaw1 = yaw_of(ap.est.attitude_xyzw)  # type: ignore[union-attr]
+    iris_hover = 0.0
+    for vt in (ap.controller,):
+        iris_hover = vt.mass * 9.80665 / vt.max_thrust_n
+    _offboard_with(w, ap, Setpoint(body_rates_rad_s=(0.0, 0.0, 0.5), thrust=iris_hover), 1.0)
+    spun = math.degrees(yaw_of(ap.est.attitude_xyzw) - yaw1)  # type: ignore[union-attr]
+    assert 20.0 < (spun + 180.0) % 360.0 - 180.0 < 32.0, spun
+
+
+def test_com_obl_act_speaks_px4s_codes() -> None:
+    from swarmbus.messages import GetParams, SetParam
+
+    ap = Autopilot(load_scenario(), "uav1")
+    ok(ap.handle(SetParam(name="COM_OBL_ACT", value=0.0)))  # PX4: 0 land
+    assert ap.modes.failsafe.offboard_loss_action == "land"
+    ok(ap.handle(SetParam(name="COM_OBL_ACT", value=2.0)))  # PX4: 2 return
+    assert ap.modes.failsafe.offboard_loss_action == "rtl"
+    assert (ap.handle(GetParams()).params or {})["COM_OBL_ACT"] == 2.0
+    refused(ap, SetParam(name="COM_OBL_ACT", value=3.0), "0 land, 1 hold, 2 rtl", "invalid")
+    ok(ap.handle(SetParam(name="NAV_DLL_ACT", value=3.0)))  # NAV_DLL_ACT: 3 land
+    assert ap.modes.failsafe.datalink_loss_action == "land"

@@ -8,7 +8,11 @@ One stack start covers several workflows in turn on one vehicle:
 - the horizontal fence set through the param plugin (off by default, as PX4) refuses a go-to
   beyond it with COMMAND_DENIED and a status text naming GF_MAX_HOR_DIST and its value;
 - an inclusion polygon uploaded with the geofence plugin stops a go-to outside it (one inside
-  flies) and downloads again; a rally point uploaded with mission_raw is where RTL lands.
+  flies) and downloads again; a rally point uploaded with mission_raw is where RTL lands;
+- offboard through the offboard plugin: a local NED position is measured from the vehicle's
+  own origin (its spawn, not the world origin); body-frame velocity goes where the nose
+  points; an attitude setpoint (nose down) accelerates the way the nose points; a global
+  position setpoint is reached.
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ import pytest
 
 from gcs_bridge.frames import enu_to_geodetic
 from swarmbus.scenario import Origin
+from swarmbus.vehicle_types import load_vehicle_type
 from tests.gateway_stack import gateway, real_stack_available, vehicles
 from tests.mavclient import first, write_scenario
 from tests.procs import zenoh_network
@@ -33,10 +38,17 @@ from mavsdk.asyncio.plugins.action import ActionAsync, ActionError  # noqa: E402
 from mavsdk.asyncio.plugins.geofence import GeofenceAsync  # noqa: E402
 from mavsdk.asyncio.plugins.mission import MissionAsync, MissionItem, MissionPlan  # noqa: E402
 from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync  # noqa: E402
+from mavsdk.asyncio.plugins.offboard import OffboardAsync  # noqa: E402
 from mavsdk.asyncio.plugins.param import ParamAsync  # noqa: E402
 from mavsdk.asyncio.plugins.telemetry import TelemetryAsync  # noqa: E402
 from mavsdk.plugins.geofence import FenceType, GeofenceData, Point, Polygon  # noqa: E402
 from mavsdk.plugins.mission_raw import MissionItem as RawItem  # noqa: E402
+from mavsdk.plugins.offboard import (  # noqa: E402
+    Attitude,
+    PositionGlobalYaw,
+    PositionNedYaw,
+    VelocityBodyYawspeed,
+)
 
 pytestmark = pytest.mark.skipif(
     not real_stack_available(), reason="autopilot / physics not on this branch"
@@ -170,6 +182,81 @@ async def fence_stops_goto_and_rtl_lands_at_rally(system: Any) -> None:
     await fence.clear_geofence()
 
 
+def east_north_of(p: Any) -> tuple[float, float]:
+    """ENU metres of a telemetry position (small-angle, about the origin)."""
+    o = ORIGIN
+    north = (p.latitude_deg - o.lat_deg) * 111_320.0
+    east = (p.longitude_deg - o.lon_deg) * 111_320.0 * math.cos(math.radians(o.lat_deg))
+    return east, north
+
+
+async def arrive(tel: Any, east: float, north: float, what: str, within_m: float = 1.0) -> None:
+    await first(
+        tel.subscribe_position(),
+        lambda p: math.dist(east_north_of(p), (east, north)) < within_m,
+        what,
+    )
+
+
+async def moved(tel: Any, distance_m: float, what: str) -> tuple[float, float]:
+    """The unit direction (east, north) of the next ``distance_m`` flown."""
+    start = east_north_of(await first(tel.subscribe_position(), lambda p: True, "a position"))
+    end = east_north_of(
+        await first(
+            tel.subscribe_position(),
+            lambda p: math.dist(east_north_of(p), start) > distance_m,
+            what,
+            60.0,
+        )
+    )
+    d = math.dist(end, start)
+    return (end[0] - start[0]) / d, (end[1] - start[1]) / d
+
+
+async def offboard_setpoints_as_px4(system: Any) -> None:
+    tel, act, param = TelemetryAsync(system), ActionAsync(system), ParamAsync(system)
+    off = OffboardAsync(system)
+    # the simulation runs faster than real time: MAVSDK's 20 Hz stream must not look lost
+    await param.set_param_float("COM_OF_LOSS_T", 30.0)
+    await take_off(system, 5.0)
+    e0, n0 = SPAWN_ENU
+    # local NED from the vehicle's own origin: 5 m north of its spawn, nose east (NED yaw 90)
+    await off.set_position_ned(PositionNedYaw(5.0, 0.0, -6.0, 90.0))
+    await off.start()
+    await arrive(tel, e0, n0 + 5.0, "local NED (5, 0) from the spawn")
+    await first(tel.subscribe_heading(), lambda h: abs(h.heading_deg - 90.0) < 5.0, "nose east")
+    await off.set_velocity_body(VelocityBodyYawspeed(2.0, 0.0, 0.0, 0.0))
+    east, north = await moved(tel, 5.0, "body-frame forward flight")
+    assert east > 0.95, f"body forward with the nose east flew ({east:.2f}, {north:.2f})"
+    # attitude from rest, nose north: 20 degrees nose down, thrust to hold the altitude; the
+    # tilt (g·tan 20° ≈ 3.6 m/s²) outweighs the drag of the 6 m/s west wind
+    here = east_north_of(await first(tel.subscribe_position(), lambda p: True, "a position"))
+    await off.set_position_ned(PositionNedYaw(here[1] - n0, here[0] - e0, -6.0, 0.0))
+    await first(
+        tel.subscribe_velocity_ned(),
+        lambda v: math.hypot(v.north_m_s, v.east_m_s) < 0.2,
+        "a stop before the attitude setpoint",
+    )
+    await first(
+        tel.subscribe_heading(),
+        lambda h: min(h.heading_deg % 360.0, 360.0 - h.heading_deg % 360.0) < 5.0,
+        "nose north",
+    )
+    iris = load_vehicle_type("iris")
+    hover = iris.mass_kg * 9.80665 / iris.max_total_thrust_n
+    await off.set_attitude(Attitude(0.0, -20.0, 0.0, hover / math.cos(math.radians(20.0))))
+    east, north = await moved(tel, 4.0, "the attitude setpoint's acceleration")
+    assert north > 0.8, f"nose down heading north flew ({east:.2f}, {north:.2f})"
+    lat, lon = latlon(e0 - 5.0, n0 + 10.0)
+    await off.set_position_global(
+        PositionGlobalYaw(lat, lon, 6.0, 0.0, PositionGlobalYaw.AltitudeType.REL_HOME)
+    )
+    await arrive(tel, e0 - 5.0, n0 + 10.0, "the global setpoint", within_m=1.5)
+    await off.stop()
+    await act.land()
+    await first(tel.subscribe_armed(), lambda armed: not armed, "landed and disarmed", 180.0)
+
+
 async def connect(api_port: int) -> tuple[Mavsdk, Any]:
     config = Configuration.create_with_component_type(ComponentType.GROUND_STATION)
     sdk = Mavsdk(config)
@@ -193,6 +280,7 @@ async def workflows(api_port: int) -> None:
         await take_off(system, 5.0)
         await goto_refused_by_the_fence_parameter(system)
         await fence_stops_goto_and_rtl_lands_at_rally(system)
+        await offboard_setpoints_as_px4(system)
     finally:
         await sdk.__aexit__(None, None, None)
 

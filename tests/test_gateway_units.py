@@ -358,3 +358,148 @@ def test_a_long_statustext_travels_as_mavlink2_chunks() -> None:
     exactly_two = statustext_chunks("x" * 100, 9)  # the receiver needs a short last chunk
     assert [c.chunk_seq for c in exactly_two] == [0, 1, 2]
     assert len(statustext_chunks("y" * 5000, 3)) == 4  # capped
+
+
+# ------------------------------------------------------------------ offboard setpoints
+def _here(yaw_enu_rad: float = 0.0) -> object:
+    from gcs_bridge.offboard import Here
+
+    return Here(
+        position_enu=(25.0, -1.0, 6.0),
+        yaw_enu_rad=yaw_enu_rad,
+        local_origin_enu=(20.0, -4.0, 0.0),
+        home_amsl_m=Origin().alt_m,
+        origin=Origin(),
+    )
+
+
+def _local_target(frame: int, mask: int, pos: tuple, vel: tuple = (0, 0, 0), **kw: float) -> object:
+    return mavlink.MAVLink_set_position_target_local_ned_message(
+        0, 1, 1, frame, mask, *pos, *vel, 0, 0, 0, kw.get("yaw", 0.0), kw.get("yaw_rate", 0.0)
+    )
+
+
+def test_local_ned_is_measured_from_the_vehicles_own_origin_with_velocity_feed_forward() -> None:
+    from gcs_bridge.offboard import IGNORE_ACCELERATION, IGNORE_YAW_RATE, from_local_ned
+
+    msg = _local_target(1, IGNORE_ACCELERATION | IGNORE_YAW_RATE, (1.0, 2.0, -3.0), (0.5, 0, 0))
+    sp = from_local_ned(msg, _here())
+    assert sp is not None
+    assert sp.position_enu_m == pytest.approx((22.0, -3.0, 3.0))  # spawn (20, -4, 0) + NED
+    assert sp.velocity_enu_m_s == pytest.approx((0.0, 0.5, 0.0))  # kept: feed-forward
+    assert sp.yaw_deg == pytest.approx(90.0)  # NED yaw 0 (north) is ENU 90
+
+
+@pytest.mark.parametrize(
+    ("yaw_enu_deg", "forward_right", "east_north"),
+    [
+        (90.0, (2.0, 0.0), (0.0, 2.0)),  # facing north: forward is north
+        (90.0, (0.0, 1.0), (1.0, 0.0)),  # facing north: right is east
+        (0.0, (2.0, 0.0), (2.0, 0.0)),  # facing east: forward is east
+        (0.0, (0.0, 1.0), (0.0, -1.0)),  # facing east: right is south
+    ],
+)
+def test_body_frame_velocity_turns_with_the_heading(
+    yaw_enu_deg: float, forward_right: tuple, east_north: tuple
+) -> None:
+    from gcs_bridge.offboard import (
+        FRAME_BODY_NED,
+        IGNORE_ACCELERATION,
+        IGNORE_POSITION,
+        IGNORE_YAW,
+        from_local_ned,
+    )
+
+    mask = IGNORE_POSITION | IGNORE_ACCELERATION | IGNORE_YAW
+    msg = _local_target(FRAME_BODY_NED, mask, (0, 0, 0), (*forward_right, -0.5), yaw_rate=0.2)
+    sp = from_local_ned(msg, _here(math.radians(yaw_enu_deg)))
+    assert sp is not None and sp.position_enu_m is None
+    assert sp.velocity_enu_m_s == pytest.approx((*east_north, 0.5), abs=1e-9)
+    assert sp.yaw_rate_deg_s == pytest.approx(-math.degrees(0.2))  # clockwise in NED
+
+
+def test_body_offset_position_is_relative_to_the_vehicle() -> None:
+    from gcs_bridge.offboard import FRAME_BODY_OFFSET_NED, IGNORE_ACCELERATION, from_local_ned
+
+    msg = _local_target(FRAME_BODY_OFFSET_NED, IGNORE_ACCELERATION, (3.0, 0.0, -1.0))
+    sp = from_local_ned(msg, _here(math.radians(90.0)))  # facing north, at (25, -1, 6)
+    assert sp is not None and sp.position_enu_m == pytest.approx((25.0, 2.0, 7.0))
+
+
+def test_acceleration_alone_and_global_setpoints() -> None:
+    from gcs_bridge.offboard import (
+        FRAME_GLOBAL_RELATIVE_ALT_INT,
+        IGNORE_POSITION,
+        IGNORE_VELOCITY,
+        from_global_int,
+        from_local_ned,
+    )
+
+    acc = mavlink.MAVLink_set_position_target_local_ned_message(
+        0, 1, 1, 1, IGNORE_POSITION | IGNORE_VELOCITY, 0, 0, 0, 0, 0, 0, 1.0, 0.0, 0.0, 0, 0
+    )
+    sp = from_local_ned(acc, _here())
+    assert sp is not None and sp.acceleration_enu_m_s2 == pytest.approx((0.0, 1.0, -0.0))
+    assert sp.position_enu_m is None and sp.velocity_enu_m_s is None
+    lat, lon, _ = enu_to_geodetic((30.0, 40.0, 0.0), Origin())
+    glob = mavlink.MAVLink_set_position_target_global_int_message(
+        0,
+        1,
+        1,
+        FRAME_GLOBAL_RELATIVE_ALT_INT,
+        0b111111000,
+        round(lat * 1e7),
+        round(lon * 1e7),
+        7.0,
+        0,
+        0,
+        0,
+        0,
+        0,
+        0,
+        0.0,
+        0.0,
+    )
+    sp = from_global_int(glob, _here())
+    assert sp is not None and sp.position_enu_m == pytest.approx((30.0, 40.0, 7.0), abs=0.02)
+
+
+def _quat_ned(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
+    """w, x, y, z of ZYX Euler angles (the MAVLink / PX4 convention)."""
+    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
+    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
+    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
+    return (
+        cr * cp * cy + sr * sp * sy,
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+    )
+
+
+@pytest.mark.parametrize("euler_deg", [(0, 0, 0), (0, -10, 0), (5, 0, 90), (-8, 12, -135)])
+def test_attitude_targets_become_the_same_attitude_in_enu(euler_deg: tuple) -> None:
+    from gcs_bridge.offboard import IGNORE_BODY_RATES, from_attitude_target
+
+    euler = tuple(math.radians(a) for a in euler_deg)
+    msg = mavlink.MAVLink_set_attitude_target_message(
+        0, 1, 1, IGNORE_BODY_RATES, list(_quat_ned(*euler)), 0, 0, 0, 0.6
+    )
+    sp = from_attitude_target(msg)
+    assert sp is not None and sp.thrust == pytest.approx(0.6)
+    assert sp.attitude_xyzw is not None
+    assert euler_ned_frd(sp.attitude_xyzw) == pytest.approx(euler, abs=1e-9)
+
+
+def test_rate_targets_flip_to_flu_and_a_missing_thrust_is_unusable() -> None:
+    from gcs_bridge.offboard import IGNORE_ATTITUDE, IGNORE_THRUST, from_attitude_target
+
+    msg = mavlink.MAVLink_set_attitude_target_message(
+        0, 1, 1, IGNORE_ATTITUDE, [1, 0, 0, 0], 0.1, 0.2, 0.3, 0.5
+    )
+    sp = from_attitude_target(msg)
+    assert sp is not None and sp.body_rates_rad_s == pytest.approx((0.1, -0.2, -0.3))
+    msg.type_mask = IGNORE_ATTITUDE | IGNORE_THRUST
+    assert from_attitude_target(msg) is None
+    msg.type_mask, msg.thrust = IGNORE_ATTITUDE, math.nan
+    assert from_attitude_target(msg) is None
