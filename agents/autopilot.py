@@ -39,6 +39,7 @@ from swarmbus.messages import (
     MissionPause,
     MissionStart,
     MissionUpload,
+    Orbit,
     RallyUpload,
     RejectCode,
     ReturnToLaunch,
@@ -121,6 +122,7 @@ class Autopilot:
             GetParams: lambda c: self._reply(params=self.params()),
             GeofenceUpload: lambda c: self.modes.upload_fence(self.est, list(c.zones)),
             RallyUpload: lambda c: self.modes.upload_rally([tuple(p) for p in c.points_enu_m]),
+            Orbit: lambda c: self._flying(lambda est: self.modes.orbit(est, c)),
         }
 
     def mission_items(self) -> list[MissionItem]:
@@ -261,6 +263,7 @@ class Autopilot:
             FlightMode.LAND: m.land,
             FlightMode.RTL: m.rtl,
             FlightMode.OFFBOARD: lambda est: m.offboard(est, self.now),
+            FlightMode.ORBIT: lambda est: denied("orbit needs a centre: send an Orbit command"),
         }
         if cmd.mode == m.mode:
             return None

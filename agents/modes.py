@@ -23,13 +23,15 @@ from swarmbus.messages import (
     FlightMode,
     MissionCommand,
     MissionItem,
+    Orbit,
+    OrbitYaw,
     RejectCode,
     Setpoint,
 )
 from swarmbus.scenario import Failsafe, Origin
 
 M = FlightMode
-AIRBORNE = frozenset({M.TAKEOFF, M.HOLD, M.MISSION, M.LAND, M.RTL, M.OFFBOARD})
+AIRBORNE = frozenset({M.TAKEOFF, M.HOLD, M.MISSION, M.LAND, M.RTL, M.OFFBOARD, M.ORBIT})
 
 TAKEOFF_DONE_M = 0.3  # altitude error at which take-off hands over to hold
 TOUCHDOWN_SPEED_M_S = 0.5
@@ -49,6 +51,7 @@ class Action(enum.StrEnum):
     GOTO = "goto"
     MISSION = "mission"
     OFFBOARD = "offboard"
+    ORBIT = "orbit"
 
 
 def _all_airborne(to: FlightMode) -> dict[FlightMode, FlightMode]:
@@ -65,6 +68,7 @@ TRANSITIONS: dict[Action, dict[FlightMode, FlightMode]] = {
     Action.GOTO: _all_airborne(M.HOLD),
     Action.MISSION: {M.ARMED: M.MISSION, **_all_airborne(M.MISSION)},
     Action.OFFBOARD: {M.ARMED: M.OFFBOARD, **_all_airborne(M.OFFBOARD)},
+    Action.ORBIT: _all_airborne(M.ORBIT),
 }
 
 _NOT_FLYING = "disarmed: not flying"
@@ -82,6 +86,7 @@ REFUSALS: dict[Action, dict[FlightMode, str]] = {
     Action.GOTO: {M.DISARMED: _NOT_FLYING, M.ARMED: _ON_GROUND},
     Action.MISSION: {M.DISARMED: "disarmed: arm before starting a mission"},
     Action.OFFBOARD: {M.DISARMED: "disarmed: arm before switching to offboard"},
+    Action.ORBIT: {M.DISARMED: _NOT_FLYING, M.ARMED: _ON_GROUND},
 }
 
 
@@ -140,7 +145,9 @@ class FlightModes:
             M.LAND: self._guide_land,
             M.RTL: self._guide_rtl,
             M.OFFBOARD: self._guide_offboard,
+            M.ORBIT: self._guide_orbit,
         }
+        self._orbit: Orbit | None = None
 
     # ------------------------------------------------------------------ table
     @property
@@ -290,6 +297,21 @@ class FlightModes:
         self._speed = speed_m_s
         if yaw_rad is not None:
             self._yaw = yaw_rad
+        return None
+
+    def orbit(self, est: Estimate, orbit: Orbit) -> Refusal | None:
+        to = self._allowed(Action.ORBIT)
+        if isinstance(to, Refusal):
+            return to
+        cx, cy, cz = orbit.center_enu_m
+        for k in range(8):  # the circle, sampled, must lie inside the fence
+            a = k * math.pi / 4.0
+            r = orbit.radius_m
+            fence = self.fence_violation(cx + r * math.cos(a), cy + r * math.sin(a), cz)
+            if fence is not None:
+                return invalid(f"orbit: {fence}")
+        self._set_mode(to, est)
+        self._orbit = orbit
         return None
 
     def upload_mission(self, items: list[MissionItem]) -> Refusal | None:
@@ -495,6 +517,23 @@ class FlightModes:
         if dist < item.acceptance_radius_m and mission.arrived(now):
             return self._guide_mission(est, now)
         return Target((item.x, item.y), item.z, self._yaw, max_speed_xy_m_s=item.speed_m_s)
+
+    def _guide_orbit(self, est: Estimate, now: float) -> Target | None:
+        """On the circle at the vehicle's bearing from the centre, the tangential speed as
+        feed-forward (the position loop pulls in the radial error)."""
+        o = self._orbit
+        if o is None:
+            return self._position_target()
+        cx, cy, cz = o.center_enu_m
+        theta = math.atan2(est.position[1] - cy, est.position[0] - cx)
+        omega = -o.speed_m_s / o.radius_m  # clockwise (positive speed) is negative in ENU
+        tangent = (-math.sin(theta) * omega * o.radius_m, math.cos(theta) * omega * o.radius_m)
+        if o.yaw == OrbitYaw.CENTRE:
+            self._yaw = theta + math.pi
+        elif o.yaw == OrbitYaw.TANGENT:
+            self._yaw = theta + math.copysign(math.pi / 2.0, omega)
+        on_circle = (cx + o.radius_m * math.cos(theta), cy + o.radius_m * math.sin(theta))
+        return Target(on_circle, cz, self._yaw, velocity=(*tangent, 0.0))
 
     def _guide_offboard(self, est: Estimate, now: float) -> Target | None:
         if not self._stream_alive(now):

@@ -34,6 +34,9 @@ class Px4AutoSub(enum.IntEnum):
     LAND = 6
 
 
+PX4_POSCTL_SUB_ORBIT = 1  # PX4 shows its orbit as POSCTL / ORBIT
+
+
 @dataclass(frozen=True)
 class Px4Mode:
     main: int
@@ -56,6 +59,7 @@ _PX4_OF_MODE: dict[FlightMode, Px4Mode] = {
     FlightMode.RTL: Px4Mode(Px4Main.AUTO, Px4AutoSub.RTL),
     FlightMode.LAND: Px4Mode(Px4Main.AUTO, Px4AutoSub.LAND),
     FlightMode.OFFBOARD: Px4Mode(Px4Main.OFFBOARD),
+    FlightMode.ORBIT: Px4Mode(Px4Main.POSCTL, PX4_POSCTL_SUB_ORBIT),
 }
 
 _MODE_OF_AUTO_SUB: dict[int, FlightMode] = {

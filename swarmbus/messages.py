@@ -134,6 +134,7 @@ class FlightMode(enum.StrEnum):
     LAND = "land"
     RTL = "rtl"
     OFFBOARD = "offboard"
+    ORBIT = "orbit"  # circling a point (MAVLink DO_ORBIT)
 
 
 class VehicleStatus(Message, frozen=True, kw_only=True, tag=_tag("vehicle_status")):
@@ -294,6 +295,25 @@ class GetParams(Message, frozen=True, kw_only=True, tag=_tag("cmd.get_params")):
     pass
 
 
+class OrbitYaw(enum.IntEnum):
+    """Where the nose points while orbiting (MAVLink ORBIT_YAW_BEHAVIOUR)."""
+
+    CENTRE = 0
+    HOLD_INITIAL = 1
+    UNCONTROLLED = 2
+    TANGENT = 3
+
+
+class Orbit(Message, frozen=True, kw_only=True, tag=_tag("cmd.orbit")):
+    """Circle ``center_enu_m`` (its z is the altitude) at ``radius_m``; ``speed_m_s`` > 0
+    clockwise seen from above, < 0 counter-clockwise (PX4's convention)."""
+
+    center_enu_m: Vec3
+    radius_m: Annotated[float, msgspec.Meta(gt=0.0, le=1000.0)]
+    speed_m_s: Annotated[float, msgspec.Meta(ge=-50.0, le=50.0)]
+    yaw: OrbitYaw = OrbitYaw.CENTRE
+
+
 # PX4's codes for the failsafe-action parameters that SetParam / GetParams carry as numbers
 NAV_DLL_ACT_CODES = {"none": 0, "hold": 1, "rtl": 2, "land": 3}  # PX4 NAV_DLL_ACT
 COM_OBL_ACT_CODES = {"land": 0, "hold": 1, "rtl": 2}  # PX4 COM_OBL_ACT (no terminate)
@@ -353,6 +373,7 @@ Command = (
     | GetParams
     | GeofenceUpload
     | RallyUpload
+    | Orbit
 )
 
 
@@ -478,6 +499,7 @@ ALL_MESSAGES: tuple[type[Message], ...] = (
     GetParams,
     GeofenceUpload,
     RallyUpload,
+    Orbit,
     CommandReply,
     PlumeQuery,
     PlumeValues,
@@ -493,6 +515,7 @@ __all__ = [m.__name__ for m in ALL_MESSAGES] + [
     "Command",
     "FenceZone",
     "FlightMode",
+    "OrbitYaw",
     "MissionCommand",
     "MissionFrame",
     "MissionItem",

@@ -73,6 +73,7 @@ SAMPLES: dict[type[m.Message], m.Message] = {
         ]
     ),
     m.RallyUpload: m.RallyUpload(points_enu_m=[(40.0, 5.0, 0.0)]),
+    m.Orbit: m.Orbit(center_enu_m=(30.0, 0.0, 10.0), radius_m=8.0, speed_m_s=-2.0),
     m.CommandReply: m.CommandReply(
         vehicle_id="uav1", accepted=False, code=m.RejectCode.DENIED, reason="armed in the air"
     ),

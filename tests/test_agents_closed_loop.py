@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import msgspec
@@ -447,3 +448,39 @@ def test_com_obl_act_speaks_px4s_codes() -> None:
     refused(ap, SetParam(name="COM_OBL_ACT", value=3.0), "0 land, 1 hold, 2 rtl", "invalid")
     ok(ap.handle(SetParam(name="NAV_DLL_ACT", value=3.0)))  # NAV_DLL_ACT: 3 land
     assert ap.modes.failsafe.datalink_loss_action == "land"
+
+
+def test_orbit_circles_clockwise_at_its_radius_facing_the_centre() -> None:
+    from agents.control import yaw_of
+    from swarmbus.messages import Orbit
+
+    w, aps = world(scenario(geofence_max_distance_m=0.0), ["uav1"])
+    ap = aps["uav1"]
+    refused(ap, Orbit(center_enu_m=(0.0, 0.0, 5.0), radius_m=5.0, speed_m_s=2.0), "not flying")
+    take_off(w, aps, 6.0)
+    x, y, z = w.vehicles["uav1"].p
+    cx, cy = x + 8.0, y
+    ok(ap.handle(Orbit(center_enu_m=(cx, cy, z), radius_m=8.0, speed_m_s=2.0)))
+    w.run(15.0)  # settle on the circle
+    angles = []
+    worst = 0.0
+
+    def track() -> bool:
+        p = w.vehicles["uav1"].p
+        worst_r = abs(math.hypot(p[0] - cx, p[1] - cy) - 8.0)
+        nonlocal worst
+        worst = max(worst, worst_r)
+        angles.append(math.atan2(p[1] - cy, p[0] - cx))
+        return False
+
+    w.run(10.0, until=track)
+    steps = [(b - a + math.pi) % (2 * math.pi) - math.pi for a, b in itertools.pairwise(angles)]
+    swept = float(sum(steps))
+    # 2 m/s on an 8 m circle for 10 s: −2.5 rad (clockwise is negative in ENU)
+    assert -2.8 < swept < -2.1, swept
+    assert worst < 0.8, worst
+    p = w.vehicles["uav1"].p
+    to_centre = math.atan2(cy - p[1], cx - p[0])
+    yaw = yaw_of(ap.est.attitude_xyzw)  # type: ignore[union-attr]
+    assert abs((yaw - to_centre + math.pi) % (2 * math.pi) - math.pi) < math.radians(10)
+    ok(ap.handle(Land()))

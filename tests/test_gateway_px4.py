@@ -12,12 +12,18 @@ One stack start covers several workflows in turn on one vehicle:
 - offboard through the offboard plugin: a local NED position is measured from the vehicle's
   own origin (its spawn, not the world origin); body-frame velocity goes where the nose
   points; an attitude setpoint (nose down) accelerates the way the nose points; a global
-  position setpoint is reached.
+  position setpoint is reached;
+- orbit (action plugin, DO_ORBIT): the vehicle circles the given centre clockwise at the
+  given radius, the heartbeat showing PX4's orbit mode (POSCTL / ORBIT);
+- a QGroundControl ``.plan`` (mission without a takeoff item, ending in RTL; an inclusion
+  polygon; a rally point) imported with mission_raw and uploaded: the vehicle takes off, flies
+  it and lands at the rally point.
 """
 
 from __future__ import annotations
 
 import asyncio
+import json
 import math
 from pathlib import Path
 from typing import Any
@@ -41,6 +47,7 @@ from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync  # noqa: E402
 from mavsdk.asyncio.plugins.offboard import OffboardAsync  # noqa: E402
 from mavsdk.asyncio.plugins.param import ParamAsync  # noqa: E402
 from mavsdk.asyncio.plugins.telemetry import TelemetryAsync  # noqa: E402
+from mavsdk.plugins.action import OrbitYawBehavior  # noqa: E402
 from mavsdk.plugins.geofence import FenceType, GeofenceData, Point, Polygon  # noqa: E402
 from mavsdk.plugins.mission_raw import MissionItem as RawItem  # noqa: E402
 from mavsdk.plugins.offboard import (  # noqa: E402
@@ -213,6 +220,34 @@ async def moved(tel: Any, distance_m: float, what: str) -> tuple[float, float]:
     return (end[0] - start[0]) / d, (end[1] - start[1]) / d
 
 
+async def orbit_clockwise(system: Any, east: float, north: float) -> None:
+    tel, act = TelemetryAsync(system), ActionAsync(system)
+    here = await first(tel.subscribe_position(), lambda p: True, "a position")
+    lat, lon = latlon(east, north)
+    await act.do_orbit(
+        8.0, 2.0, OrbitYawBehavior.HOLD_FRONT_TO_CIRCLE_CENTER, lat, lon, here.absolute_altitude_m
+    )
+
+    def radius(p: Any) -> float:
+        return math.dist(east_north_of(p), (east, north))
+
+    await first(tel.subscribe_position(), lambda p: abs(radius(p) - 8.0) < 0.7, "on the circle")
+    start = east_north_of(await first(tel.subscribe_position(), lambda p: True, "a position"))
+    a0 = math.atan2(start[1] - north, start[0] - east)
+
+    def swept(p: Any) -> float:
+        e, n = east_north_of(p)
+        return (math.atan2(n - north, e - east) - a0 + math.pi) % (2 * math.pi) - math.pi
+
+    # clockwise seen from above: the bearing from the centre decreases (ENU)
+    await first(
+        tel.subscribe_position(),
+        lambda p: -1.5 < swept(p) < -1.0 and abs(radius(p) - 8.0) < 1.0,
+        "a quarter turn clockwise on the circle",
+        60.0,
+    )
+
+
 async def offboard_setpoints_as_px4(system: Any) -> None:
     tel, act, param = TelemetryAsync(system), ActionAsync(system), ParamAsync(system)
     off = OffboardAsync(system)
@@ -253,8 +288,72 @@ async def offboard_setpoints_as_px4(system: Any) -> None:
     )
     await arrive(tel, e0 - 5.0, n0 + 10.0, "the global setpoint", within_m=1.5)
     await off.stop()
+    await orbit_clockwise(system, e0 + 3.0, n0 + 10.0)
     await act.land()
     await first(tel.subscribe_armed(), lambda armed: not armed, "landed and disarmed", 180.0)
+
+
+def qgc_plan(path: Path) -> Path:
+    """A QGroundControl plan file as its Plan view saves it (relative altitudes, frame 3)."""
+    e0, n0 = SPAWN_ENU
+
+    def item(seq: int, command: int, east: float, north: float, alt: float) -> dict[str, Any]:
+        lat, lon = latlon(east, north)
+        return {
+            "type": "SimpleItem",
+            "autoContinue": True,
+            "command": command,
+            "doJumpId": seq + 1,
+            "frame": 3 if command == 16 else 2,
+            "params": [0, 0, 0, None, lat, lon, alt] if command == 16 else [0] * 7,
+        }
+
+    fence = [latlon(e0 + de, n0 + dn) for de, dn in ((-50, -50), (50, -50), (50, 50), (-50, 50))]
+    plan = {
+        "fileType": "Plan",
+        "version": 1,
+        "groundStation": "QGroundControl",
+        "mission": {
+            "version": 2,
+            "firmwareType": 12,
+            "vehicleType": 2,
+            "cruiseSpeed": 5,
+            "hoverSpeed": 3,
+            "plannedHomePosition": [*latlon(e0, n0), ORIGIN.alt_m],
+            "items": [
+                item(0, 16, e0 + 10.0, n0 + 20.0, 6.0),
+                item(1, 16, e0 + 20.0, n0 + 20.0, 6.0),
+                item(2, 20, 0.0, 0.0, 0.0),
+            ],
+        },
+        "geoFence": {
+            "version": 2,
+            "circles": [],
+            "polygons": [{"inclusion": True, "polygon": [list(p) for p in fence], "version": 1}],
+        },
+        "rallyPoints": {"version": 2, "points": [[*latlon(e0 + 22.0, n0 + 22.0), 6.0]]},
+    }
+    path.write_text(json.dumps(plan))
+    return path
+
+
+async def qgc_plan_imported_and_flown(system: Any, plan: Path) -> None:
+    tel, act, raw = TelemetryAsync(system), ActionAsync(system), MissionRawAsync(system)
+    imported = await raw.import_qgroundcontrol_mission(str(plan))
+    assert len(imported.mission_items) == 3 and len(imported.rally_items) == 1
+    await raw.upload_mission(imported.mission_items)
+    await raw.upload_geofence(imported.geofence_items)
+    await raw.upload_rally_points(imported.rally_items)
+    assert len(await raw.download_geofence()) == len(imported.geofence_items) == 4
+    assert len(await raw.download_rallypoints()) == 1
+    await first(tel.subscribe_health(), lambda h: h.is_armable, "ready to arm")
+    await act.arm()
+    await raw.start_mission()
+    await first(tel.subscribe_in_air(), bool, "in the air on the imported mission")
+    await first(tel.subscribe_armed(), lambda armed: not armed, "landed and disarmed", 180.0)
+    landed = await first(tel.subscribe_position(), lambda p: True, "a position after the plan")
+    e0, n0 = SPAWN_ENU
+    assert math.dist(east_north_of(landed), (e0 + 22.0, n0 + 22.0)) < 1.5, "not at the rally point"
 
 
 async def connect(api_port: int) -> tuple[Mavsdk, Any]:
@@ -273,7 +372,7 @@ async def connect(api_port: int) -> tuple[Mavsdk, Any]:
     return sdk, await asyncio.wait_for(found(), 120.0)
 
 
-async def workflows(api_port: int) -> None:
+async def workflows(api_port: int, plan: Path) -> None:
     sdk, system = await connect(api_port)
     try:
         await mission_from_the_ground_with_rtl(system)
@@ -281,6 +380,7 @@ async def workflows(api_port: int) -> None:
         await goto_refused_by_the_fence_parameter(system)
         await fence_stops_goto_and_rtl_lands_at_rally(system)
         await offboard_setpoints_as_px4(system)
+        await qgc_plan_imported_and_flown(system, plan)
     finally:
         await sdk.__aexit__(None, None, None)
 
@@ -295,4 +395,4 @@ def test_px4_workflows_through_mavsdk_plugins(tmp_path: Path) -> None:
         vehicles(net, scenario, tmp_path, ["uav1"], backend="real"),
         gateway(net, scenario, tmp_path, "cmd_timeout_s=3"),
     ):
-        asyncio.run(workflows(api))
+        asyncio.run(workflows(api, qgc_plan(tmp_path / "survey.plan")))

@@ -503,3 +503,20 @@ def test_rate_targets_flip_to_flu_and_a_missing_thrust_is_unusable() -> None:
     assert from_attitude_target(msg) is None
     msg.type_mask, msg.thrust = IGNORE_ATTITUDE, math.nan
     assert from_attitude_target(msg) is None
+
+
+def test_orbit_command_takes_px4s_signs_and_defaults() -> None:
+    from swarmbus.messages import Orbit, OrbitYaw
+
+    f = facts(landed=False)
+    lat, lon, _ = enu_to_geodetic((30.0, 10.0, 0.0), Origin())
+    t = translate(CommandRequest(34, -8.0, 2.0, 3.0, 0.0, lat, lon, math.nan), f)
+    assert t is not None and isinstance(t.bus, Orbit)
+    assert t.bus.radius_m == 8.0 and t.bus.speed_m_s == -2.0  # negative radius: anticlockwise
+    assert t.bus.yaw == OrbitYaw.TANGENT
+    assert t.bus.center_enu_m[:2] == pytest.approx((30.0, 10.0), abs=0.05)
+    d = translate(CommandRequest(34), f)
+    assert d is not None and isinstance(d.bus, Orbit)
+    assert (d.bus.radius_m, d.bus.speed_m_s) == (10.0, 1.0)
+    bad = translate(CommandRequest(34, math.inf), f)
+    assert bad is not None and bad.bus is None and bad.result == DENIED
