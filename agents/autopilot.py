@@ -264,6 +264,7 @@ class Autopilot:
             FlightMode.RTL: m.rtl,
             FlightMode.OFFBOARD: lambda est: m.offboard(est, self.now),
             FlightMode.ORBIT: lambda est: denied("orbit needs a centre: send an Orbit command"),
+            FlightMode.POSITION: lambda est: m.position_mode(est, self.now),
         }
         if cmd.mode == m.mode:
             return None

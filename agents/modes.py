@@ -31,7 +31,7 @@ from swarmbus.messages import (
 from swarmbus.scenario import Failsafe, Origin
 
 M = FlightMode
-AIRBORNE = frozenset({M.TAKEOFF, M.HOLD, M.MISSION, M.LAND, M.RTL, M.OFFBOARD, M.ORBIT})
+AIRBORNE = frozenset({M.TAKEOFF, M.HOLD, M.MISSION, M.LAND, M.RTL, M.OFFBOARD, M.ORBIT, M.POSITION})
 
 TAKEOFF_DONE_M = 0.3  # altitude error at which take-off hands over to hold
 TOUCHDOWN_SPEED_M_S = 0.5
@@ -52,6 +52,7 @@ class Action(enum.StrEnum):
     MISSION = "mission"
     OFFBOARD = "offboard"
     ORBIT = "orbit"
+    POSITION = "position"
 
 
 def _all_airborne(to: FlightMode) -> dict[FlightMode, FlightMode]:
@@ -69,6 +70,7 @@ TRANSITIONS: dict[Action, dict[FlightMode, FlightMode]] = {
     Action.MISSION: {M.ARMED: M.MISSION, **_all_airborne(M.MISSION)},
     Action.OFFBOARD: {M.ARMED: M.OFFBOARD, **_all_airborne(M.OFFBOARD)},
     Action.ORBIT: _all_airborne(M.ORBIT),
+    Action.POSITION: _all_airborne(M.POSITION),
 }
 
 _NOT_FLYING = "disarmed: not flying"
@@ -87,6 +89,7 @@ REFUSALS: dict[Action, dict[FlightMode, str]] = {
     Action.MISSION: {M.DISARMED: "disarmed: arm before starting a mission"},
     Action.OFFBOARD: {M.DISARMED: "disarmed: arm before switching to offboard"},
     Action.ORBIT: {M.DISARMED: _NOT_FLYING, M.ARMED: _ON_GROUND},
+    Action.POSITION: {M.DISARMED: _NOT_FLYING, M.ARMED: _ON_GROUND},
 }
 
 
@@ -146,6 +149,7 @@ class FlightModes:
             M.RTL: self._guide_rtl,
             M.OFFBOARD: self._guide_offboard,
             M.ORBIT: self._guide_orbit,
+            M.POSITION: self._guide_position,
         }
         self._orbit: Orbit | None = None
 
@@ -400,6 +404,25 @@ class FlightModes:
         if self.has_behavior:  # the behaviour is the stream; it starts now
             self._setpoint_time_s = now
         return None
+
+    def position_mode(self, est: Estimate, now: float) -> Refusal | None:
+        """PX4's position mode: the ground station's sticks arrive as setpoints (velocity,
+        yaw rate); centred sticks hold. Needs the stick stream, as offboard needs its own."""
+        to = self._allowed(Action.POSITION)
+        if isinstance(to, Refusal):
+            return to
+        if not self._stream_alive(now):
+            return denied("no manual control input: send MANUAL_CONTROL first")
+        self._hold_here(est)
+        self._set_mode(to, est)
+        self._offboard_tick_s = -math.inf
+        return None
+
+    def _guide_position(self, est: Estimate, now: float) -> Target | None:
+        if not self._stream_alive(now):
+            self.failsafe_action("hold", est, "manual control input lost")
+            return self.guidance(est, now)
+        return self._guide_offboard(est, now)
 
     def _stream_alive(self, now: float) -> bool:
         return now - self._setpoint_time_s <= self.failsafe.offboard_timeout_s

@@ -133,6 +133,7 @@ class Gateway(CommandHandlers, ParamHandlers, MissionHandlers):
             "SET_POSITION_TARGET_LOCAL_NED": self._on_position_target,
             "SET_POSITION_TARGET_GLOBAL_INT": self._on_global_target,
             "SET_ATTITUDE_TARGET": self._on_attitude_target,
+            "MANUAL_CONTROL": self._on_manual_control,
         }
         self._local_commands = self._command_table()
 
@@ -414,7 +415,7 @@ class Gateway(CommandHandlers, ParamHandlers, MissionHandlers):
     def _targets(self, link: Link, msg: Msg) -> list[Vehicle]:
         """Vehicles of ``link`` a message is addressed to; others ignore it (QGC's UDP link
         writes every packet to every vehicle it heard)."""
-        system = getattr(msg, "target_system", None)
+        system = getattr(msg, "target_system", getattr(msg, "target", None))  # MANUAL_CONTROL
         component = getattr(msg, "target_component", 0)
         if system is None or component not in (0, 1):
             return []

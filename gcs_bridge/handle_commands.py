@@ -312,6 +312,12 @@ class CommandHandlers(Core):
         """SET_POSITION_TARGET_GLOBAL_INT."""
         self._offboard(v, offboard.from_global_int(msg, self._offboard_here(v)))
 
+    def _on_manual_control(
+        self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
+    ) -> None:
+        """MANUAL_CONTROL sticks: velocity and yaw-rate setpoints for position mode."""
+        self._offboard(v, offboard.from_manual_control(msg, self._offboard_here(v)))
+
     def _on_attitude_target(
         self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
     ) -> None:

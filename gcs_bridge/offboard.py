@@ -154,6 +154,35 @@ def from_global_int(msg: Any, here: Here) -> Setpoint | None:
     return _motion(msg, mask, position, ned_to_enu)
 
 
+# PX4's position-mode stick scaling (MPC_VEL_MANUAL, MPC_Z_VEL_MAX_UP / _DN, MPC_MAN_Y_MAX)
+STICK_XY_M_S = 10.0
+STICK_UP_M_S = 3.0
+STICK_DOWN_M_S = 1.5
+STICK_YAW_DEG_S = 150.0
+STICK_DEADZONE = 0.05
+
+
+def _stick(raw: int, scale: float = 1000.0) -> float:
+    v = max(-1.0, min(1.0, raw / scale))
+    return 0.0 if abs(v) < STICK_DEADZONE else v
+
+
+def from_manual_control(msg: Any, here: Here) -> Setpoint | None:
+    """MANUAL_CONTROL as PX4's position mode reads it: x forward, y right (−1000…1000) give a
+    horizontal velocity along the heading, z throttle (0…1000, 500 centred) a climb or
+    descent, r a yaw rate; centred sticks hold."""
+    forward, right = _stick(int(msg.x)), _stick(int(msg.y))
+    throttle = _stick(int(msg.z) - 500, 500.0)
+    yaw = _stick(int(msg.r))
+    up = throttle * (STICK_UP_M_S if throttle > 0 else STICK_DOWN_M_S)
+    horizontal = (forward * STICK_XY_M_S, right * STICK_XY_M_S, 0.0)
+    east, north, _ = _turned(horizontal, here.yaw_enu_rad)
+    return Setpoint(
+        velocity_enu_m_s=(east, north, up),
+        yaw_rate_deg_s=-yaw * STICK_YAW_DEG_S,  # stick right: clockwise
+    )
+
+
 def enu_flu_of_ned_frd(
     q_wxyz: tuple[float, float, float, float],
 ) -> tuple[float, float, float, float]:

@@ -135,6 +135,7 @@ class FlightMode(enum.StrEnum):
     RTL = "rtl"
     OFFBOARD = "offboard"
     ORBIT = "orbit"  # circling a point (MAVLink DO_ORBIT)
+    POSITION = "position"  # PX4's position mode, flown from a ground station's sticks
 
 
 class VehicleStatus(Message, frozen=True, kw_only=True, tag=_tag("vehicle_status")):

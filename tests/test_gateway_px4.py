@@ -15,6 +15,8 @@ One stack start covers several workflows in turn on one vehicle:
   position setpoint is reached;
 - orbit (action plugin, DO_ORBIT): the vehicle circles the given centre clockwise at the
   given radius, the heartbeat showing PX4's orbit mode (POSCTL / ORBIT);
+- position mode with MANUAL_CONTROL sticks (manual_control plugin): forward stick flies
+  along the nose, centred sticks stop; the heartbeat shows POSCTL;
 - a QGroundControl ``.plan`` (mission without a takeoff item, ending in RTL; an inclusion
   polygon; a rally point) imported with mission_raw and uploaded: the vehicle takes off, flies
   it and lands at the rally point.
@@ -42,6 +44,7 @@ mavsdk = pytest.importorskip("mavsdk")
 from mavsdk.asyncio import ComponentType, Configuration, Mavsdk  # noqa: E402
 from mavsdk.asyncio.plugins.action import ActionAsync, ActionError  # noqa: E402
 from mavsdk.asyncio.plugins.geofence import GeofenceAsync  # noqa: E402
+from mavsdk.asyncio.plugins.manual_control import ManualControlAsync  # noqa: E402
 from mavsdk.asyncio.plugins.mission import MissionAsync, MissionItem, MissionPlan  # noqa: E402
 from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync  # noqa: E402
 from mavsdk.asyncio.plugins.offboard import OffboardAsync  # noqa: E402
@@ -248,6 +251,35 @@ async def orbit_clockwise(system: Any, east: float, north: float) -> None:
     )
 
 
+async def position_mode_with_sticks(system: Any) -> None:
+    tel, manual = TelemetryAsync(system), ManualControlAsync(system)
+    sticks = [0.0, 0.0, 0.5, 0.0]  # x forward, y right, z throttle (0.5: hold), r yaw
+
+    async def joystick() -> None:  # a ground station sends its sticks continuously
+        while True:
+            await manual.set_manual_control_input(*sticks)
+            await asyncio.sleep(0.02)
+
+    stream = asyncio.create_task(joystick())
+    try:
+        await asyncio.sleep(0.2)
+        await manual.start_position_control()
+        await first(tel.subscribe_flight_mode(), lambda m: m.name == "POSCTL", "POSCTL")
+        heading = (await first(tel.subscribe_heading(), lambda h: True, "a heading")).heading_deg
+        sticks[0] = 0.4
+        east, north = await moved(tel, 5.0, "forward stick")
+        nose = (math.sin(math.radians(heading)), math.cos(math.radians(heading)))
+        assert east * nose[0] + north * nose[1] > 0.9, f"flew ({east:.2f}, {north:.2f})"
+        sticks[0] = 0.0
+        await first(
+            tel.subscribe_velocity_ned(),
+            lambda v: math.hypot(v.north_m_s, v.east_m_s) < 0.3,
+            "a stop with centred sticks",
+        )
+    finally:
+        stream.cancel()
+
+
 async def offboard_setpoints_as_px4(system: Any) -> None:
     tel, act, param = TelemetryAsync(system), ActionAsync(system), ParamAsync(system)
     off = OffboardAsync(system)
@@ -289,6 +321,7 @@ async def offboard_setpoints_as_px4(system: Any) -> None:
     await arrive(tel, e0 - 5.0, n0 + 10.0, "the global setpoint", within_m=1.5)
     await off.stop()
     await orbit_clockwise(system, e0 + 3.0, n0 + 10.0)
+    await position_mode_with_sticks(system)
     await act.land()
     await first(tel.subscribe_armed(), lambda armed: not armed, "landed and disarmed", 180.0)
 

@@ -103,7 +103,8 @@ def test_base_mode_has_custom_bit_and_armed_bit_only_when_armed() -> None:
 
 
 def test_manual_modes_have_no_autopilot_mode_and_rotor_count_picks_mav_type() -> None:
-    assert flight_mode_for(Px4Main.POSCTL, 0) is None
+    assert flight_mode_for(Px4Main.MANUAL, 0) is None  # no RC: no stick-only modes
+    assert flight_mode_for(Px4Main.ALTCTL, 0) is None
     assert flight_mode_for(Px4Main.AUTO, 0) is None
     assert mav_type_of(len(load_vehicle_type("iris").rotors)) == mavlink.MAV_TYPE_QUADROTOR
     assert mav_type_of(len(load_vehicle_type("typhoon_h480").rotors)) == mavlink.MAV_TYPE_HEXAROTOR
@@ -284,7 +285,9 @@ def test_mode_commands_map_to_bus_commands() -> None:
     t = translate_mode(custom, 4, 2, facts())
     assert isinstance(t.bus, Takeoff) and t.bus.altitude_m == 10.0
     assert translate_mode(0.0, 4, 4, facts()).result == DENIED
-    assert translate_mode(custom, 3, 0, facts()).result == DENIED  # POSCTL: no RC
+    assert translate_mode(custom, 2, 0, facts()).result == DENIED  # ALTCTL: no RC
+    position = translate_mode(custom, 3, 0, facts()).bus  # POSCTL: flown from MANUAL_CONTROL
+    assert isinstance(position, SetMode) and position.mode == FlightMode.POSITION
     assert translate_mode(custom, math.nan, 0, facts()).result == DENIED
 
 
@@ -520,3 +523,23 @@ def test_orbit_command_takes_px4s_signs_and_defaults() -> None:
     assert (d.bus.radius_m, d.bus.speed_m_s) == (10.0, 1.0)
     bad = translate(CommandRequest(34, math.inf), f)
     assert bad is not None and bad.bus is None and bad.result == DENIED
+
+
+def test_manual_control_sticks_become_px4_position_mode_velocities() -> None:
+    from gcs_bridge.modes import flight_mode_for
+    from gcs_bridge.offboard import from_manual_control
+    from swarmbus.messages import FlightMode
+
+    facing_north = _here(math.radians(90.0))
+    msg = mavlink.MAVLink_manual_control_message(1, 500, 0, 500, 0, 0)
+    sp = from_manual_control(msg, facing_north)  # half forward stick, throttle centred
+    assert sp is not None and sp.velocity_enu_m_s == pytest.approx((0.0, 5.0, 0.0), abs=1e-9)
+    msg = mavlink.MAVLink_manual_control_message(1, 0, 1000, 1000, -1000, 0)
+    sp = from_manual_control(msg, facing_north)  # full right, full throttle, yaw left
+    assert sp is not None and sp.velocity_enu_m_s == pytest.approx((10.0, 0.0, 3.0), abs=1e-9)
+    assert sp.yaw_rate_deg_s == 150.0  # yaw stick left: counter-clockwise, positive in ENU
+    centred = from_manual_control(
+        mavlink.MAVLink_manual_control_message(1, 0, 0, 500, 0, 0), facing_north
+    )
+    assert centred is not None and centred.velocity_enu_m_s == (0.0, 0.0, 0.0)
+    assert flight_mode_for(3, 0) == FlightMode.POSITION and flight_mode_for(3, 1) is None
