@@ -265,6 +265,7 @@ class Autopilot:
             FlightMode.OFFBOARD: lambda est: m.offboard(est, self.now),
             FlightMode.ORBIT: lambda est: denied("orbit needs a centre: send an Orbit command"),
             FlightMode.POSITION: lambda est: m.position_mode(est, self.now),
+            FlightMode.FOLLOW: m.follow,
         }
         if cmd.mode == m.mode:
             return None

@@ -31,7 +31,9 @@ from swarmbus.messages import (
 from swarmbus.scenario import Failsafe, Origin
 
 M = FlightMode
-AIRBORNE = frozenset({M.TAKEOFF, M.HOLD, M.MISSION, M.LAND, M.RTL, M.OFFBOARD, M.ORBIT, M.POSITION})
+AIRBORNE = frozenset(
+    {M.TAKEOFF, M.HOLD, M.MISSION, M.LAND, M.RTL, M.OFFBOARD, M.ORBIT, M.POSITION, M.FOLLOW}
+)
 
 TAKEOFF_DONE_M = 0.3  # altitude error at which take-off hands over to hold
 TOUCHDOWN_SPEED_M_S = 0.5
@@ -53,6 +55,7 @@ class Action(enum.StrEnum):
     OFFBOARD = "offboard"
     ORBIT = "orbit"
     POSITION = "position"
+    FOLLOW = "follow"
 
 
 def _all_airborne(to: FlightMode) -> dict[FlightMode, FlightMode]:
@@ -71,6 +74,7 @@ TRANSITIONS: dict[Action, dict[FlightMode, FlightMode]] = {
     Action.OFFBOARD: {M.ARMED: M.OFFBOARD, **_all_airborne(M.OFFBOARD)},
     Action.ORBIT: _all_airborne(M.ORBIT),
     Action.POSITION: _all_airborne(M.POSITION),
+    Action.FOLLOW: _all_airborne(M.FOLLOW),
 }
 
 _NOT_FLYING = "disarmed: not flying"
@@ -90,6 +94,7 @@ REFUSALS: dict[Action, dict[FlightMode, str]] = {
     Action.OFFBOARD: {M.DISARMED: "disarmed: arm before switching to offboard"},
     Action.ORBIT: {M.DISARMED: _NOT_FLYING, M.ARMED: _ON_GROUND},
     Action.POSITION: {M.DISARMED: _NOT_FLYING, M.ARMED: _ON_GROUND},
+    Action.FOLLOW: {M.DISARMED: _NOT_FLYING, M.ARMED: _ON_GROUND},
 }
 
 
@@ -150,6 +155,7 @@ class FlightModes:
             M.OFFBOARD: self._guide_offboard,
             M.ORBIT: self._guide_orbit,
             M.POSITION: self._guide_position,
+            M.FOLLOW: self._guide_follow,
         }
         self._orbit: Orbit | None = None
 
@@ -417,6 +423,26 @@ class FlightModes:
         self._set_mode(to, est)
         self._offboard_tick_s = -math.inf
         return None
+
+    def follow(self, est: Estimate) -> Refusal | None:
+        """PX4's follow-me: hold here until target setpoints arrive, fly them while they do,
+        hold where they stopped when they stop (the target is lost)."""
+        to = self._allowed(Action.FOLLOW)
+        if isinstance(to, Refusal):
+            return to
+        self._hold_here(est)
+        self._set_mode(to, est)
+        self._setpoint = None
+        self._offboard_tick_s = -math.inf
+        return None
+
+    def _guide_follow(self, est: Estimate, now: float) -> Target | None:
+        if self._setpoint is None or not self._stream_alive(now):
+            if self._setpoint is not None:
+                self._hold_here(est)
+                self._setpoint = None
+            return self._position_target()
+        return self._guide_offboard(est, now)
 
     def _guide_position(self, est: Estimate, now: float) -> Target | None:
         if not self._stream_alive(now):

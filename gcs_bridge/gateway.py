@@ -134,6 +134,7 @@ class Gateway(CommandHandlers, ParamHandlers, MissionHandlers):
             "SET_POSITION_TARGET_GLOBAL_INT": self._on_global_target,
             "SET_ATTITUDE_TARGET": self._on_attitude_target,
             "MANUAL_CONTROL": self._on_manual_control,
+            "FOLLOW_TARGET": self._on_follow_target,
         }
         self._local_commands = self._command_table()
 
@@ -415,6 +416,9 @@ class Gateway(CommandHandlers, ParamHandlers, MissionHandlers):
     def _targets(self, link: Link, msg: Msg) -> list[Vehicle]:
         """Vehicles of ``link`` a message is addressed to; others ignore it (QGC's UDP link
         writes every packet to every vehicle it heard)."""
+        if msg.get_type() == "FOLLOW_TARGET":  # addressed to nobody: whoever follows
+            following = (self.by_sysid[s] for s in link.sysids)
+            return [v for v in following if v.status is not None and v.status.mode == "follow"]
         system = getattr(msg, "target_system", getattr(msg, "target", None))  # MANUAL_CONTROL
         component = getattr(msg, "target_component", 0)
         if system is None or component not in (0, 1):

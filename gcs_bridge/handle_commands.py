@@ -318,6 +318,18 @@ class CommandHandlers(Core):
         """MANUAL_CONTROL sticks: velocity and yaw-rate setpoints for position mode."""
         self._offboard(v, offboard.from_manual_control(msg, self._offboard_here(v)))
 
+    def _on_follow_target(
+        self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
+    ) -> None:
+        """FOLLOW_TARGET (follow-me): where to be, from the target and the FLW_TGT_* params."""
+        p = v.params
+        follow = offboard.Follow(
+            height_m=p.value("FLW_TGT_HT"),
+            distance_m=p.value("FLW_TGT_DST"),
+            angle_deg=p.value("FLW_TGT_FA"),
+        )
+        self._offboard(v, offboard.from_follow_target(msg, self._offboard_here(v), follow))
+
     def _on_attitude_target(
         self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
     ) -> None:

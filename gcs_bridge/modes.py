@@ -33,6 +33,7 @@ class Px4AutoSub(enum.IntEnum):
     MISSION = 4
     RTL = 5
     LAND = 6
+    FOLLOW_TARGET = 8
 
 
 PX4_POSCTL_SUB_ORBIT = 1  # PX4 shows its orbit as POSCTL / ORBIT
@@ -62,6 +63,7 @@ _PX4_OF_MODE: dict[FlightMode, Px4Mode] = {
     FlightMode.OFFBOARD: Px4Mode(Px4Main.OFFBOARD),
     FlightMode.ORBIT: Px4Mode(Px4Main.POSCTL, PX4_POSCTL_SUB_ORBIT),
     FlightMode.POSITION: Px4Mode(Px4Main.POSCTL),
+    FlightMode.FOLLOW: Px4Mode(Px4Main.AUTO, Px4AutoSub.FOLLOW_TARGET),
 }
 
 _MODE_OF_AUTO_SUB: dict[int, FlightMode] = {
@@ -70,6 +72,7 @@ _MODE_OF_AUTO_SUB: dict[int, FlightMode] = {
     Px4AutoSub.MISSION: FlightMode.MISSION,
     Px4AutoSub.RTL: FlightMode.RTL,
     Px4AutoSub.LAND: FlightMode.LAND,
+    Px4AutoSub.FOLLOW_TARGET: FlightMode.FOLLOW,
 }
 
 _BASE_AUTO = (

@@ -183,6 +183,43 @@ def from_manual_control(msg: Any, here: Here) -> Setpoint | None:
     )
 
 
+@dataclass(frozen=True)
+class Follow:
+    """PX4's follow-me settings: height above home, distance from the target, and the angle
+    from the target's heading (0 ahead, 90 right, 180 behind; FLW_TGT_HT, _DST, _FA)."""
+
+    height_m: float
+    distance_m: float
+    angle_deg: float
+
+
+FOLLOW_MIN_SPEED_M_S = 0.5  # below, the target's course is unknown: keep the current bearing
+
+
+def from_follow_target(msg: Any, here: Here, follow: Follow) -> Setpoint | None:
+    """FOLLOW_TARGET → where the follower should be, moving with the target, facing it."""
+    lat, lon = int(msg.lat) * 1e-7, int(msg.lon) * 1e-7
+    if not (abs(lat) <= 90.0 and abs(lon) <= 180.0):
+        return None
+    tx, ty, _ = geodetic_to_enu(lat, lon, here.origin.alt_m, here.origin)
+    vn, ve = float(msg.vel[0]), float(msg.vel[1])
+    moving = math.isfinite(vn) and math.isfinite(ve) and math.hypot(vn, ve) >= FOLLOW_MIN_SPEED_M_S
+    if moving:
+        bearing = math.atan2(ve, vn) + math.radians(follow.angle_deg)  # compass, from north
+        ex, ny = math.sin(bearing), math.cos(bearing)
+    else:
+        dx, dy = here.position_enu[0] - tx, here.position_enu[1] - ty
+        norm = math.hypot(dx, dy) or 1.0
+        ex, ny = dx / norm, dy / norm
+    x, y = tx + follow.distance_m * ex, ty + follow.distance_m * ny
+    up = here.home_amsl_m - here.origin.alt_m + follow.height_m
+    yaw = math.degrees(math.atan2(ty - y, tx - x))
+    velocity = (ve, vn, 0.0) if moving else None
+    if not _within((x, y, up), MAX_SETPOINT_M, MAX_SETPOINT_UP_M):
+        return None
+    return Setpoint(position_enu_m=(x, y, up), velocity_enu_m_s=velocity, yaw_deg=yaw)
+
+
 def enu_flu_of_ned_frd(
     q_wxyz: tuple[float, float, float, float],
 ) -> tuple[float, float, float, float]:

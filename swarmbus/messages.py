@@ -136,6 +136,7 @@ class FlightMode(enum.StrEnum):
     OFFBOARD = "offboard"
     ORBIT = "orbit"  # circling a point (MAVLink DO_ORBIT)
     POSITION = "position"  # PX4's position mode, flown from a ground station's sticks
+    FOLLOW = "follow"  # PX4's follow-me: setpoints computed from a moving target
 
 
 class VehicleStatus(Message, frozen=True, kw_only=True, tag=_tag("vehicle_status")):

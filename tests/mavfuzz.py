@@ -259,10 +259,10 @@ class Fuzzer:
             self.rng.shuffle(p)
         elif kind == 1:  # no custom-mode bit
             p = [float(self.rng.randrange(0, 256, 2)), 4.0, 3.0]
-        elif kind == 2:  # manual, altitude, position: no RC here
-            p = [1.0, float(self.rng.choice([1, 2, 3, 5, 7, 8, 99])), 0.0]
+        elif kind == 2:  # manual, altitude, acro, stabilized: no RC here (position: sticks)
+            p = [1.0, float(self.rng.choice([1, 2, 5, 7, 8, 99])), 0.0]
         else:  # AUTO with an unknown sub mode
-            p = [1.0, 4.0, float(self.rng.choice([0, 1, 7, 8, 9, 200]))]
+            p = [1.0, 4.0, float(self.rng.choice([0, 1, 7, 9, 200]))]
         return [self._command(t, 176, p, self.rng.random() < 0.5)], [self._ack(t, 176, DENIED)]
 
     def bad_pause(self, t: Target) -> Case:

@@ -17,6 +17,8 @@ One stack start covers several workflows in turn on one vehicle:
   given radius, the heartbeat showing PX4's orbit mode (POSCTL / ORBIT);
 - position mode with MANUAL_CONTROL sticks (manual_control plugin): forward stick flies
   along the nose, centred sticks stop; the heartbeat shows POSCTL;
+- follow-me (follow_me plugin, FOLLOW_TARGET): the vehicle keeps FLW_TGT_DST behind a target
+  walking north, at FLW_TGT_HT (MAVSDK's minimum, as PX4's, is 8 m);
 - a QGroundControl ``.plan`` (mission without a takeoff item, ending in RTL; an inclusion
   polygon; a rally point) imported with mission_raw and uploaded: the vehicle takes off, flies
   it and lands at the rally point.
@@ -43,6 +45,7 @@ mavsdk = pytest.importorskip("mavsdk")
 
 from mavsdk.asyncio import ComponentType, Configuration, Mavsdk  # noqa: E402
 from mavsdk.asyncio.plugins.action import ActionAsync, ActionError  # noqa: E402
+from mavsdk.asyncio.plugins.follow_me import FollowMeAsync  # noqa: E402
 from mavsdk.asyncio.plugins.geofence import GeofenceAsync  # noqa: E402
 from mavsdk.asyncio.plugins.manual_control import ManualControlAsync  # noqa: E402
 from mavsdk.asyncio.plugins.mission import MissionAsync, MissionItem, MissionPlan  # noqa: E402
@@ -51,6 +54,8 @@ from mavsdk.asyncio.plugins.offboard import OffboardAsync  # noqa: E402
 from mavsdk.asyncio.plugins.param import ParamAsync  # noqa: E402
 from mavsdk.asyncio.plugins.telemetry import TelemetryAsync  # noqa: E402
 from mavsdk.plugins.action import OrbitYawBehavior  # noqa: E402
+from mavsdk.plugins.follow_me import Config as FollowConfig  # noqa: E402
+from mavsdk.plugins.follow_me import TargetLocation  # noqa: E402
 from mavsdk.plugins.geofence import FenceType, GeofenceData, Point, Polygon  # noqa: E402
 from mavsdk.plugins.mission_raw import MissionItem as RawItem  # noqa: E402
 from mavsdk.plugins.offboard import (  # noqa: E402
@@ -280,6 +285,38 @@ async def position_mode_with_sticks(system: Any) -> None:
         stream.cancel()
 
 
+async def follow_a_walking_target(system: Any) -> None:
+    tel, follow = TelemetryAsync(system), FollowMeAsync(system)
+    await follow.set_config(FollowConfig(follow_height_m=9.0, follow_distance_m=6.0))
+    here = east_north_of(await first(tel.subscribe_position(), lambda p: True, "a position"))
+    walk = {"north": here[1] + 10.0}
+
+    async def target() -> None:  # someone walking north at 1.5 m/s (wall clock), 1 Hz fixes
+        while True:
+            lat, lon = latlon(here[0], walk["north"])
+            await follow.set_target_location(TargetLocation(lat, lon, ORIGIN.alt_m, 1.5, 0.0, 0.0))
+            await asyncio.sleep(0.2)
+            walk["north"] += 0.3
+
+    walker = asyncio.create_task(target())
+    try:
+        await follow.start()
+        await first(tel.subscribe_flight_mode(), lambda m: m.name == "FOLLOW_ME", "FOLLOW_ME")
+
+        def behind(p: Any) -> bool:
+            e, n = east_north_of(p)
+            return (
+                abs(e - here[0]) < 1.5
+                and abs(n - (walk["north"] - 6.0)) < 2.5
+                and abs(p.relative_altitude_m - 9.0) < 1.0
+            )
+
+        await first(tel.subscribe_position(), behind, "6 m behind the walker at 9 m", 60.0)
+        await follow.stop()
+    finally:
+        walker.cancel()
+
+
 async def offboard_setpoints_as_px4(system: Any) -> None:
     tel, act, param = TelemetryAsync(system), ActionAsync(system), ParamAsync(system)
     off = OffboardAsync(system)
@@ -322,6 +359,7 @@ async def offboard_setpoints_as_px4(system: Any) -> None:
     await off.stop()
     await orbit_clockwise(system, e0 + 3.0, n0 + 10.0)
     await position_mode_with_sticks(system)
+    await follow_a_walking_target(system)
     await act.land()
     await first(tel.subscribe_armed(), lambda armed: not armed, "landed and disarmed", 180.0)
 

@@ -543,3 +543,20 @@ def test_manual_control_sticks_become_px4_position_mode_velocities() -> None:
     )
     assert centred is not None and centred.velocity_enu_m_s == (0.0, 0.0, 0.0)
     assert flight_mode_for(3, 0) == FlightMode.POSITION and flight_mode_for(3, 1) is None
+
+
+def test_follow_target_puts_the_follower_behind_a_moving_target_facing_it() -> None:
+    from gcs_bridge.offboard import Follow, from_follow_target
+
+    lat, lon, _ = enu_to_geodetic((40.0, 30.0, 0.0), Origin())
+    msg = mavlink.MAVLink_follow_target_message(
+        0, 0, round(lat * 1e7), round(lon * 1e7), 500.0, [2.0, 0.0, 0.0], [0.0] * 3,
+        [1.0, 0.0, 0.0, 0.0], [0.0] * 3, [0.0] * 3, 0,
+    )  # fmt: skip
+    sp = from_follow_target(msg, _here(), Follow(height_m=8.0, distance_m=8.0, angle_deg=180.0))
+    # heading north at 2 m/s: 8 m south of it, 8 m above home, moving with it, facing north
+    assert sp is not None and sp.position_enu_m == pytest.approx((40.0, 22.0, 8.0), abs=0.05)
+    assert sp.velocity_enu_m_s == pytest.approx((0.0, 2.0, 0.0))
+    assert sp.yaw_deg == pytest.approx(90.0, abs=0.1)
+    right = from_follow_target(msg, _here(), Follow(height_m=8.0, distance_m=5.0, angle_deg=90.0))
+    assert right is not None and right.position_enu_m == pytest.approx((45.0, 30.0, 8.0), abs=0.05)
