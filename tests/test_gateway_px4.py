@@ -21,7 +21,10 @@ One stack start covers several workflows in turn on one vehicle:
   walking north, at FLW_TGT_HT (MAVSDK's minimum, as PX4's, is 8 m);
 - a QGroundControl ``.plan`` (mission without a takeoff item, ending in RTL; an inclusion
   polygon; a rally point) imported with mission_raw and uploaded: the vehicle takes off, flies
-  it and lands at the rally point.
+  it and lands at the rally point;
+- then, as QGroundControl on the shared GCS port (raw MAVLink): a fence circle uploads as
+  mission type 1, and QGC's *Start Mission* (mode Mission while disarmed, then ARM) flies a
+  mission without a takeoff item to its end and its RTL.
 """
 
 from __future__ import annotations
@@ -34,11 +37,12 @@ from typing import Any
 
 import pytest
 
+from gcs_bridge.dialect import mavlink
 from gcs_bridge.frames import enu_to_geodetic
 from swarmbus.scenario import Origin
 from swarmbus.vehicle_types import load_vehicle_type
 from tests.gateway_stack import gateway, real_stack_available, vehicles
-from tests.mavclient import first, write_scenario
+from tests.mavclient import clients, first, mission_item, write_scenario
 from tests.procs import zenoh_network
 
 mavsdk = pytest.importorskip("mavsdk")
@@ -456,8 +460,35 @@ async def workflows(api_port: int, plan: Path) -> None:
         await sdk.__aexit__(None, None, None)
 
 
+def qgc_fence_and_start_mission(gcs_port: int) -> None:
+    accepted = int(mavlink.MAV_MISSION_ACCEPTED)
+    with clients(gcs_port) as (c,):
+        c.wait_standby(1)  # the client heartbeats once a second, as QGC does
+        pos = c.wait_type("GLOBAL_POSITION_INT", 1)
+        lat, lon = pos.lat * 1e-7, pos.lon * 1e-7
+        circle = mavlink.MAVLink_mission_item_int_message(
+            1, 1, 0, int(mavlink.MAV_FRAME_GLOBAL_INT), 5003, 0, 1, 200.0, 0, 0, 0,
+            pos.lat, pos.lon, 0.0, 1,
+        )  # fmt: skip
+        assert c.upload(1, [circle], mission_type=1) == accepted
+        east = lon + 10.0 / (111_320.0 * math.cos(math.radians(lat)))
+        north = lat + 5.0 / 111_320.0
+        items = [
+            mission_item(1, 0, 16, lat, east, 5.0),
+            mission_item(1, 1, 16, north, east, 5.0),
+            mission_item(1, 2, 20, 0.0, 0.0, 0.0),
+        ]
+        assert c.upload(1, items) == accepted
+        c.set_mode(1, 4, 4)  # QGC's Start Mission: the mode first, disarmed ...
+        c.wait_mode(1, 4, 4, armed=False)
+        assert c.command(1, 400, 1) == int(mavlink.MAV_RESULT_ACCEPTED)  # ... then ARM
+        reached = [c.wait_type("MISSION_ITEM_REACHED", 1, timeout_s=90.0).seq for _ in range(2)]
+        assert reached == [0, 1]
+        c.wait_disarmed(1, timeout_s=120.0)
+
+
 def test_px4_workflows_through_mavsdk_plugins(tmp_path: Path) -> None:
-    scenario, _gcs, api = write_scenario(tmp_path / "scenario.toml", 1)
+    scenario, gcs, api = write_scenario(tmp_path / "scenario.toml", 1)
     text = scenario.read_text()  # the seed's own 500 m fence out: the default applies
     scenario.write_text(text.replace("geofence_max_distance_m = 500.0\n", ""))
     assert scenario.read_text() != text
@@ -467,3 +498,4 @@ def test_px4_workflows_through_mavsdk_plugins(tmp_path: Path) -> None:
         gateway(net, scenario, tmp_path, "cmd_timeout_s=3"),
     ):
         asyncio.run(workflows(api, qgc_plan(tmp_path / "survey.plan")))
+        qgc_fence_and_start_mission(gcs)
