@@ -21,12 +21,14 @@ from agents.failsafe import FailsafeMonitor
 from agents.mixer import Mixer
 from agents.modes import FlightModes, Refusal, denied, invalid
 from swarmbus.messages import (
+    ACTION_CODES_OF_PARAM,
     Arm,
     CommandReply,
     ConcentrationReading,
     Disarm,
     FlightMode,
     GcsHeartbeat,
+    GeofenceUpload,
     GetParams,
     Goto,
     Hold,
@@ -37,6 +39,8 @@ from swarmbus.messages import (
     MissionPause,
     MissionStart,
     MissionUpload,
+    Orbit,
+    RallyUpload,
     RejectCode,
     ReturnToLaunch,
     SetMode,
@@ -53,8 +57,8 @@ log = logging.getLogger(__name__)
 
 IDLE_COMMAND = 0.15  # rotor command while armed on the ground (props spinning)
 
-# PX4-style parameter names → failsafe field, with the enum encodings PX4 uses.
-_ACTION_CODES = {"none": 0, "hold": 1, "rtl": 2, "land": 3}
+# PX4-style parameter names → failsafe field, with the enum encodings PX4 uses
+# (ACTION_CODES_OF_PARAM).
 _PARAMS: dict[str, str] = {
     "NAV_DLL_ACT": "datalink_loss_action",
     "COM_DL_LOSS_T": "datalink_timeout_s",
@@ -116,6 +120,9 @@ class Autopilot:
             GcsHeartbeat: self._heartbeat,
             SetParam: self._set_param,
             GetParams: lambda c: self._reply(params=self.params()),
+            GeofenceUpload: lambda c: self.modes.upload_fence(self.est, list(c.zones)),
+            RallyUpload: lambda c: self.modes.upload_rally([tuple(p) for p in c.points_enu_m]),
+            Orbit: lambda c: self._flying(lambda est: self.modes.orbit(est, c)),
         }
 
     def mission_items(self) -> list[MissionItem]:
@@ -256,6 +263,9 @@ class Autopilot:
             FlightMode.LAND: m.land,
             FlightMode.RTL: m.rtl,
             FlightMode.OFFBOARD: lambda est: m.offboard(est, self.now),
+            FlightMode.ORBIT: lambda est: denied("orbit needs a centre: send an Orbit command"),
+            FlightMode.POSITION: lambda est: m.position_mode(est, self.now),
+            FlightMode.FOLLOW: m.follow,
         }
         if cmd.mode == m.mode:
             return None
@@ -269,7 +279,10 @@ class Autopilot:
         out: dict[str, float] = {}
         for name, field in _PARAMS.items():
             value = getattr(fs, field)
-            out[name] = float(_ACTION_CODES[value]) if isinstance(value, str) else float(value)
+            if isinstance(value, str):
+                out[name] = float(ACTION_CODES_OF_PARAM[name][value])
+            else:
+                out[name] = float(value)
         return out
 
     def _set_param(self, cmd: SetParam) -> CommandReply | Refusal:
@@ -279,10 +292,11 @@ class Autopilot:
         fs = self.modes.failsafe
         value: Any = cmd.value
         if isinstance(getattr(fs, field), str):
-            names = {float(v): k for k, v in _ACTION_CODES.items()}
-            value = names.get(float(cmd.value))
-            if value is None or (field == "offboard_loss_action" and value == "none"):
-                return invalid(f"{cmd.name}: {cmd.value} is not an action code")
+            codes = ACTION_CODES_OF_PARAM[cmd.name]
+            value = {float(v): k for k, v in codes.items()}.get(float(cmd.value))
+            if value is None:
+                known = ", ".join(f"{v} {k}" for k, v in codes.items())
+                return invalid(f"{cmd.name}: {cmd.value:g} is not an action code ({known})")
         try:
             self.modes.failsafe = msgspec.convert(
                 {**msgspec.structs.asdict(fs), field: value}, type(fs)

@@ -60,6 +60,13 @@ class Target:
     yaw_rad: float
     velocity: Vec3 = (0.0, 0.0, 0.0)
     max_speed_xy_m_s: float = 0.0
+    # offboard extras: acceleration feed-forward (alone when ``velocity_loop`` is off), or an
+    # attitude / body rates with a collective thrust (fraction of the maximum), loops bypassed
+    acceleration: Vec3 = (0.0, 0.0, 0.0)
+    velocity_loop: bool = True
+    attitude: Quat | None = None
+    body_rates: Vec3 | None = None
+    thrust_fraction: float = 0.0
 
 
 def yaw_of(q: Quat) -> float:
@@ -160,8 +167,17 @@ class Controller:
             fx, fy = fx * limit / speed, fy * limit / speed
         return fx, fy, _clip(fz, -self.max_down, self.max_up)
 
-    def thrust_vector(self, est: Estimate, vsp: Vec3, integrate: bool) -> Vec3:
-        """World-frame thrust (N) for the velocity setpoint, tilt- and thrust-limited."""
+    def thrust_vector(
+        self,
+        est: Estimate,
+        vsp: Vec3 | None,
+        integrate: bool,
+        accel_ff: Vec3 = (0.0, 0.0, 0.0),
+    ) -> Vec3:
+        """World-frame thrust (N) for the velocity setpoint plus an acceleration feed-forward
+        (``vsp`` None: the acceleration alone), tilt- and thrust-limited."""
+        if vsp is None:
+            return self._limited_thrust(*accel_ff)
         dt = self.dt
         vx, vy, vz = est.velocity
         ex, ey, ez = vsp[0] - vx, vsp[1] - vy, vsp[2] - vz
@@ -178,6 +194,9 @@ class Controller:
         ax = p[0] * ex + i[0] * vi[0] - d[0] * (vx - prev[0]) / dt
         ay = p[1] * ey + i[1] * vi[1] - d[1] * (vy - prev[1]) / dt
         az = p[2] * ez + i[2] * vi[2] - d[2] * (vz - prev[2]) / dt
+        return self._limited_thrust(ax + accel_ff[0], ay + accel_ff[1], az + accel_ff[2])
+
+    def _limited_thrust(self, ax: float, ay: float, az: float) -> Vec3:
         m = self.mass
         weight = m * GRAVITY_M_S2
         t_max = _MAX_THRUST_FRACTION * self.max_thrust_n
@@ -234,9 +253,15 @@ class Controller:
         ``integrate`` false freezes the integrators (on the ground, where the vehicle cannot
         follow the setpoint and integrators would wind up).
         """
-        vsp = self.velocity_setpoint(est, target)
-        fx, fy, fz = self.thrust_vector(est, vsp, integrate)
         q = est.attitude_xyzw
+        direct = target.body_rates
+        if direct is None and target.attitude is not None:
+            direct = self.rate_setpoint(q, target.attitude)
+        if direct is not None:  # attitude / rate offboard: the outer loops are bypassed
+            tx, ty, tz = self.torques(est.body_rates, direct, integrate)
+            return target.thrust_fraction * self.max_thrust_n, tx, ty, tz
+        vsp = self.velocity_setpoint(est, target) if target.velocity_loop else None
+        fx, fy, fz = self.thrust_vector(est, vsp, integrate, target.acceleration)
         qd = desired_attitude(fx, fy, fz, target.yaw_rad)
         wsp = self.rate_setpoint(q, qd)
         tx, ty, tz = self.torques(est.body_rates, wsp, integrate)

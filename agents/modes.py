@@ -16,12 +16,24 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from agents.control import Estimate, Target, yaw_of
+from agents.geofence import zone_error, zones_violation
 from agents.mission import Mission, MissionError
-from swarmbus.messages import FlightMode, MissionCommand, MissionItem, RejectCode, Setpoint
+from swarmbus.messages import (
+    FenceZone,
+    FlightMode,
+    MissionCommand,
+    MissionItem,
+    Orbit,
+    OrbitYaw,
+    RejectCode,
+    Setpoint,
+)
 from swarmbus.scenario import Failsafe, Origin
 
 M = FlightMode
-AIRBORNE = frozenset({M.TAKEOFF, M.HOLD, M.MISSION, M.LAND, M.RTL, M.OFFBOARD})
+AIRBORNE = frozenset(
+    {M.TAKEOFF, M.HOLD, M.MISSION, M.LAND, M.RTL, M.OFFBOARD, M.ORBIT, M.POSITION, M.FOLLOW}
+)
 
 TAKEOFF_DONE_M = 0.3  # altitude error at which take-off hands over to hold
 TOUCHDOWN_SPEED_M_S = 0.5
@@ -41,6 +53,9 @@ class Action(enum.StrEnum):
     GOTO = "goto"
     MISSION = "mission"
     OFFBOARD = "offboard"
+    ORBIT = "orbit"
+    POSITION = "position"
+    FOLLOW = "follow"
 
 
 def _all_airborne(to: FlightMode) -> dict[FlightMode, FlightMode]:
@@ -57,6 +72,9 @@ TRANSITIONS: dict[Action, dict[FlightMode, FlightMode]] = {
     Action.GOTO: _all_airborne(M.HOLD),
     Action.MISSION: {M.ARMED: M.MISSION, **_all_airborne(M.MISSION)},
     Action.OFFBOARD: {M.ARMED: M.OFFBOARD, **_all_airborne(M.OFFBOARD)},
+    Action.ORBIT: _all_airborne(M.ORBIT),
+    Action.POSITION: _all_airborne(M.POSITION),
+    Action.FOLLOW: _all_airborne(M.FOLLOW),
 }
 
 _NOT_FLYING = "disarmed: not flying"
@@ -74,6 +92,9 @@ REFUSALS: dict[Action, dict[FlightMode, str]] = {
     Action.GOTO: {M.DISARMED: _NOT_FLYING, M.ARMED: _ON_GROUND},
     Action.MISSION: {M.DISARMED: "disarmed: arm before starting a mission"},
     Action.OFFBOARD: {M.DISARMED: "disarmed: arm before switching to offboard"},
+    Action.ORBIT: {M.DISARMED: _NOT_FLYING, M.ARMED: _ON_GROUND},
+    Action.POSITION: {M.DISARMED: _NOT_FLYING, M.ARMED: _ON_GROUND},
+    Action.FOLLOW: {M.DISARMED: _NOT_FLYING, M.ARMED: _ON_GROUND},
 }
 
 
@@ -106,6 +127,9 @@ class FlightModes:
         self.mode = M.DISARMED
         self.mission = Mission()
         self.home: tuple[float, float, float] = (0.0, 0.0, 0.0)
+        self.fence_zones: list[FenceZone] = []  # uploaded polygons and circles
+        self.rally_points: list[tuple[float, float, float]] = []
+        self._rtl_dest: tuple[float, float, float] = (0.0, 0.0, 0.0)
         self.failsafe_reason = ""  # why the last automatic (failsafe) transition happened
         self.has_behavior = False
         self._target: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -116,8 +140,10 @@ class FlightModes:
         self._rtl_alt = 0.0
         self._setpoint: Setpoint | None = None
         self._setpoint_time_s = -math.inf
+        self._offboard_tick_s = -math.inf
         self._item_seen = -1
         self._land_descending = False
+        self._climb_alt_m: float | None = None  # a mission started on the ground climbs first
         self._guidance: dict[FlightMode, Callable[[Estimate, float], Target | None]] = {
             M.DISARMED: lambda est, now: None,
             M.ARMED: lambda est, now: None,
@@ -127,7 +153,11 @@ class FlightModes:
             M.LAND: self._guide_land,
             M.RTL: self._guide_rtl,
             M.OFFBOARD: self._guide_offboard,
+            M.ORBIT: self._guide_orbit,
+            M.POSITION: self._guide_position,
+            M.FOLLOW: self._guide_follow,
         }
+        self._orbit: Orbit | None = None
 
     # ------------------------------------------------------------------ table
     @property
@@ -143,6 +173,8 @@ class FlightModes:
     def _set_mode(self, mode: FlightMode, est: Estimate) -> None:
         self.mode = mode
         self._touchdown_since = None
+        if mode != M.MISSION:
+            self._climb_alt_m = None
         if mode in (M.HOLD, M.TAKEOFF, M.OFFBOARD):
             self._yaw = yaw_of(est.attitude_xyzw)
 
@@ -152,14 +184,33 @@ class FlightModes:
         self._yaw = yaw_of(est.attitude_xyzw)
 
     def fence_violation(self, x: float, y: float, z: float) -> str | None:
+        """Which geofence limit a point breaks, named by its PX4 parameter (0 = off, as PX4)."""
         fs = self.failsafe
         hx, hy, hz = self.home
-        if z - hz > fs.geofence_max_alt_m:
-            limit = fs.geofence_max_alt_m
-            return f"altitude {z - hz:.1f} m above home exceeds the geofence ({limit} m)"
+        if fs.geofence_max_alt_m > 0.0 and z - hz > fs.geofence_max_alt_m:
+            return f"GF_MAX_VER_DIST {fs.geofence_max_alt_m:g} m: {z - hz:.1f} m above home"
         dist = math.hypot(x - hx, y - hy)
-        if dist > fs.geofence_max_distance_m:
-            return f"{dist:.1f} m from home exceeds the geofence ({fs.geofence_max_distance_m} m)"
+        if fs.geofence_max_distance_m > 0.0 and dist > fs.geofence_max_distance_m:
+            return f"GF_MAX_HOR_DIST {fs.geofence_max_distance_m:g} m: {dist:.1f} m from home"
+        return zones_violation(self.fence_zones, x, y)
+
+    def upload_fence(self, est: Estimate | None, zones: list[FenceZone]) -> Refusal | None:
+        """Replace the uploaded zones. As PX4 does, a fence that leaves out home (or, before
+        arming, where the vehicle stands) is refused."""
+        for i, zone in enumerate(zones):
+            why = zone_error(zone)
+            if why is not None:
+                return invalid(f"zone {i}: {why}")
+        here = self.home if self.armed or est is None else est.position
+        if est is not None or self.armed:
+            outside = zones_violation(zones, here[0], here[1])
+            if outside is not None:
+                return invalid(f"home is not allowed by the fence ({outside})")
+        self.fence_zones = list(zones)
+        return None
+
+    def upload_rally(self, points: list[tuple[float, float, float]]) -> Refusal | None:
+        self.rally_points = list(points)
         return None
 
     # ------------------------------------------------------------------ actions
@@ -201,7 +252,7 @@ class FlightModes:
         z = self.home[2] + altitude_m
         fence = self.fence_violation(x, y, z)
         if fence is not None:
-            return invalid(f"takeoff altitude: {fence}")
+            return invalid(f"takeoff: {fence}")
         self._target = (x, y, z)
         self._speed = 0.0
         self._set_mode(to, est)
@@ -221,6 +272,11 @@ class FlightModes:
             return to
         self._rtl_phase = RtlPhase.CLIMB
         self._rtl_alt = max(est.position[2], self.home[2] + self.failsafe.rtl_altitude_m)
+        # PX4's default RTL_TYPE 0: the closest safe point, home or a rally point
+        x, y, _ = est.position
+        self._rtl_dest = min(
+            [self.home, *self.rally_points], key=lambda p: math.hypot(p[0] - x, p[1] - y)
+        )
         self._target = est.position
         self._set_mode(to, est)
         return None
@@ -245,12 +301,27 @@ class FlightModes:
             return to
         fence = self.fence_violation(*position)
         if fence is not None:
-            return invalid(f"goto target: {fence}")
+            return invalid(f"goto: {fence}")
         self._set_mode(to, est)
         self._target = position
         self._speed = speed_m_s
         if yaw_rad is not None:
             self._yaw = yaw_rad
+        return None
+
+    def orbit(self, est: Estimate, orbit: Orbit) -> Refusal | None:
+        to = self._allowed(Action.ORBIT)
+        if isinstance(to, Refusal):
+            return to
+        cx, cy, cz = orbit.center_enu_m
+        for k in range(8):  # the circle, sampled, must lie inside the fence
+            a = k * math.pi / 4.0
+            r = orbit.radius_m
+            fence = self.fence_violation(cx + r * math.cos(a), cy + r * math.sin(a), cz)
+            if fence is not None:
+                return invalid(f"orbit: {fence}")
+        self._set_mode(to, est)
+        self._orbit = orbit
         return None
 
     def upload_mission(self, items: list[MissionItem]) -> Refusal | None:
@@ -287,17 +358,38 @@ class FlightModes:
         index = start_index if start_index is not None else max(mission.index, 0)
         if start_index is None and mission.finished:
             return denied("mission finished: start it again with a start index")
-        if self.mode == M.ARMED and mission.resolved[index].command != MissionCommand.TAKEOFF:
-            return denied(f"on the ground: mission item {index} must be a takeoff")
+        climb_alt_m = None
+        first = mission.resolved[index]
+        if self.mode == M.ARMED and first.command != MissionCommand.TAKEOFF:
+            # PX4: a mission started on the ground without a takeoff item climbs vertically to
+            # the first item's altitude, at least MIS_TAKEOFF_ALT above home, then flies it.
+            climb_alt_m = max(first.z, self.home[2] + self.failsafe.takeoff_altitude_m)
+            x, y, _ = est.position
+            fence = self.fence_violation(x, y, climb_alt_m)
+            if fence is not None:
+                return invalid(f"mission takeoff: {fence}")
         if start_index is not None:
             mission.start(start_index)
         self._item_seen = -1
         self._set_mode(to, est)
+        if climb_alt_m is not None:
+            self._climb_alt_m = climb_alt_m
+            self._target = est.position
         return None
 
     def setpoint(self, setpoint: Setpoint, now: float) -> Refusal | None:
-        if setpoint.position_enu_m is None and setpoint.velocity_enu_m_s is None:
-            return invalid("setpoint needs a position or a velocity")
+        sp = setpoint
+        direct = sp.attitude_xyzw is not None or sp.body_rates_rad_s is not None
+        if direct and sp.thrust is None:
+            return invalid("an attitude or body-rate setpoint needs a thrust")
+        if not direct and (
+            sp.position_enu_m is None
+            and sp.velocity_enu_m_s is None
+            and sp.acceleration_enu_m_s2 is None
+        ):
+            return invalid(
+                "setpoint needs a position, velocity, acceleration, attitude or body rates"
+            )
         if setpoint.position_enu_m is not None:
             fence = self.fence_violation(*setpoint.position_enu_m)
             if fence is not None and self.armed:
@@ -314,9 +406,49 @@ class FlightModes:
             return denied("no offboard setpoint stream: send setpoints first")
         self._hold_here(est)
         self._set_mode(to, est)
+        self._offboard_tick_s = -math.inf
         if self.has_behavior:  # the behaviour is the stream; it starts now
             self._setpoint_time_s = now
         return None
+
+    def position_mode(self, est: Estimate, now: float) -> Refusal | None:
+        """PX4's position mode: the ground station's sticks arrive as setpoints (velocity,
+        yaw rate); centred sticks hold. Needs the stick stream, as offboard needs its own."""
+        to = self._allowed(Action.POSITION)
+        if isinstance(to, Refusal):
+            return to
+        if not self._stream_alive(now):
+            return denied("no manual control input: send MANUAL_CONTROL first")
+        self._hold_here(est)
+        self._set_mode(to, est)
+        self._offboard_tick_s = -math.inf
+        return None
+
+    def follow(self, est: Estimate) -> Refusal | None:
+        """PX4's follow-me: hold here until target setpoints arrive, fly them while they do,
+        hold where they stopped when they stop (the target is lost)."""
+        to = self._allowed(Action.FOLLOW)
+        if isinstance(to, Refusal):
+            return to
+        self._hold_here(est)
+        self._set_mode(to, est)
+        self._setpoint = None
+        self._offboard_tick_s = -math.inf
+        return None
+
+    def _guide_follow(self, est: Estimate, now: float) -> Target | None:
+        if self._setpoint is None or not self._stream_alive(now):
+            if self._setpoint is not None:
+                self._hold_here(est)
+                self._setpoint = None
+            return self._position_target()
+        return self._guide_offboard(est, now)
+
+    def _guide_position(self, est: Estimate, now: float) -> Target | None:
+        if not self._stream_alive(now):
+            self.failsafe_action("hold", est, "manual control input lost")
+            return self.guidance(est, now)
+        return self._guide_offboard(est, now)
 
     def _stream_alive(self, now: float) -> bool:
         return now - self._setpoint_time_s <= self.failsafe.offboard_timeout_s
@@ -375,7 +507,7 @@ class FlightModes:
         return self._descend(est, now, (self._target[0], self._target[1]))
 
     def _guide_rtl(self, est: Estimate, now: float) -> Target | None:
-        hx, hy, _ = self.home
+        hx, hy, _ = self._rtl_dest
         x, y, z = est.position
         if self._rtl_phase == RtlPhase.CLIMB:
             if z >= self._rtl_alt - TAKEOFF_DONE_M:
@@ -394,6 +526,11 @@ class FlightModes:
             self._hold_here(est)
             self._set_mode(M.HOLD, est)
             return self._position_target()
+        if self._climb_alt_m is not None:
+            if est.position[2] < self._climb_alt_m - TAKEOFF_DONE_M:
+                tx, ty, _ = self._target
+                return Target((tx, ty), self._climb_alt_m, self._yaw)
+            self._climb_alt_m = None
         if mission.index != self._item_seen:
             self._item_seen = mission.index
             self._target = est.position
@@ -430,6 +567,23 @@ class FlightModes:
             return self._guide_mission(est, now)
         return Target((item.x, item.y), item.z, self._yaw, max_speed_xy_m_s=item.speed_m_s)
 
+    def _guide_orbit(self, est: Estimate, now: float) -> Target | None:
+        """On the circle at the vehicle's bearing from the centre, the tangential speed as
+        feed-forward (the position loop pulls in the radial error)."""
+        o = self._orbit
+        if o is None:
+            return self._position_target()
+        cx, cy, cz = o.center_enu_m
+        theta = math.atan2(est.position[1] - cy, est.position[0] - cx)
+        omega = -o.speed_m_s / o.radius_m  # clockwise (positive speed) is negative in ENU
+        tangent = (-math.sin(theta) * omega * o.radius_m, math.cos(theta) * omega * o.radius_m)
+        if o.yaw == OrbitYaw.CENTRE:
+            self._yaw = theta + math.pi
+        elif o.yaw == OrbitYaw.TANGENT:
+            self._yaw = theta + math.copysign(math.pi / 2.0, omega)
+        on_circle = (cx + o.radius_m * math.cos(theta), cy + o.radius_m * math.sin(theta))
+        return Target(on_circle, cz, self._yaw, velocity=(*tangent, 0.0))
+
     def _guide_offboard(self, est: Estimate, now: float) -> Target | None:
         if not self._stream_alive(now):
             self.failsafe_action(
@@ -437,12 +591,27 @@ class FlightModes:
             )
             return self.guidance(est, now)
         sp = self._setpoint
+        dt = now - self._offboard_tick_s if math.isfinite(self._offboard_tick_s) else 0.0
+        self._offboard_tick_s = now
         if sp is None:
             return self._position_target()
         if sp.yaw_deg is not None:
             self._yaw = math.radians(sp.yaw_deg)
+        elif sp.yaw_rate_deg_s is not None:
+            self._yaw = (self._yaw + math.radians(sp.yaw_rate_deg_s) * dt + math.pi) % (
+                2.0 * math.pi
+            ) - math.pi
+        thrust = sp.thrust or 0.0
+        if sp.body_rates_rad_s is not None:
+            return Target(
+                None, None, self._yaw, body_rates=sp.body_rates_rad_s, thrust_fraction=thrust
+            )
+        if sp.attitude_xyzw is not None:
+            return Target(None, None, self._yaw, attitude=sp.attitude_xyzw, thrust_fraction=thrust)
         velocity = sp.velocity_enu_m_s or (0.0, 0.0, 0.0)
+        accel = sp.acceleration_enu_m_s2 or (0.0, 0.0, 0.0)
         if sp.position_enu_m is None:
-            return Target(None, None, self._yaw, velocity=velocity)
+            loop = sp.velocity_enu_m_s is not None
+            return Target(None, None, self._yaw, velocity, acceleration=accel, velocity_loop=loop)
         px, py, pz = sp.position_enu_m
-        return Target((px, py), pz, self._yaw, velocity=velocity)
+        return Target((px, py), pz, self._yaw, velocity=velocity, acceleration=accel)

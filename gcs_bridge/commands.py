@@ -8,6 +8,7 @@ lat/lon 0. COMMAND_INT carries its frame, which settles it.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -27,6 +28,8 @@ from swarmbus.messages import (
     Hold,
     Land,
     MissionStart,
+    Orbit,
+    OrbitYaw,
     RejectCode,
     ReturnToLaunch,
     SetMode,
@@ -161,13 +164,8 @@ def _takeoff(req: CommandRequest, facts: Facts) -> Translation:
     return Translation(Takeoff(altitude_m=altitude))
 
 
-def _reposition(req: CommandRequest, facts: Facts) -> Translation:
-    """DO_REPOSITION: go to lat/lon/alt; absent (NaN) values keep the current ones; none →
-    hold. An infinite value is garbage, never "absent"."""
-    if any(math.isinf(v) for v in (req.x, req.y, req.z)):
-        return refuse(DENIED, "reposition target is not finite")
-    if not (_finite(req.x) or _finite(req.y) or _finite(req.z)):
-        return Translation(Hold())
+def _place(req: CommandRequest, facts: Facts) -> Vec3 | Translation:
+    """ENU of a command's lat/lon/alt; an absent (NaN) value keeps the vehicle's own."""
     if facts.position_enu is None or facts.home_amsl_m is None:
         return refuse(TEMPORARILY_REJECTED, "no position yet")
     here = facts.position_enu
@@ -184,6 +182,47 @@ def _reposition(req: CommandRequest, facts: Facts) -> Translation:
         up = here[2]
     if abs(e) > 1e7 or abs(n) > 1e7 or abs(up) > 1e5:
         return refuse(DENIED, "target out of range")
+    return (e, n, up)
+
+
+ORBIT_DEFAULT_RADIUS_M = 10.0
+ORBIT_DEFAULT_SPEED_M_S = 1.0
+
+
+def _orbit(req: CommandRequest, facts: Facts) -> Translation:
+    """DO_ORBIT (multicopters, as PX4): param1 radius (< 0: counter-clockwise), param2
+    tangential speed (its sign also turns the direction), param3 yaw behaviour, x/y/z the
+    centre (NaN: here; the altitude AMSL). Orbits go on until another mode is chosen (param4,
+    the number of turns, is not counted)."""
+    if any(math.isinf(v) for v in (req.param1, req.param2, req.x, req.y, req.z)):
+        return refuse(DENIED, "orbit parameters are not finite")
+    radius = req.param1 if _finite(req.param1) and req.param1 != 0.0 else ORBIT_DEFAULT_RADIUS_M
+    speed = req.param2 if _finite(req.param2) and req.param2 != 0.0 else ORBIT_DEFAULT_SPEED_M_S
+    if not 0.0 < abs(radius) <= 1000.0 or abs(speed) > 50.0:
+        return refuse(DENIED, f"orbit radius {radius} m / speed {speed} m/s out of range")
+    if radius < 0.0:
+        speed = -speed
+    behaviour = int(req.param3) if _finite(req.param3) else int(OrbitYaw.CENTRE)
+    yaw = OrbitYaw(behaviour) if behaviour in OrbitYaw.__members__.values() else OrbitYaw.CENTRE
+    # PX4 reads the centre's altitude as AMSL whatever the frame (MAVSDK sends AMSL in a
+    # COMMAND_INT whose frame says relative)
+    place = _place(dataclasses.replace(req, frame=None), facts)
+    if isinstance(place, Translation):
+        return place
+    return Translation(Orbit(center_enu_m=place, radius_m=abs(radius), speed_m_s=speed, yaw=yaw))
+
+
+def _reposition(req: CommandRequest, facts: Facts) -> Translation:
+    """DO_REPOSITION: go to lat/lon/alt; absent (NaN) values keep the current ones; none →
+    hold. An infinite value is garbage, never "absent"."""
+    if any(math.isinf(v) for v in (req.x, req.y, req.z)):
+        return refuse(DENIED, "reposition target is not finite")
+    if not (_finite(req.x) or _finite(req.y) or _finite(req.z)):
+        return Translation(Hold())
+    place = _place(req, facts)
+    if isinstance(place, Translation):
+        return place
+    e, n, up = place
     yaw = enu_yaw_deg_of_heading(req.param4) if _finite(req.param4) else None
     speed = req.param1 if _finite(req.param1) and 0.0 < req.param1 <= 100.0 else facts.cruise_m_s
     return Translation(Goto(position_enu_m=(e, n, up), yaw_deg=yaw, speed_m_s=speed))
@@ -241,6 +280,7 @@ FLIGHT_COMMANDS: dict[int, Callable[[CommandRequest, Facts], Translation]] = {
     int(mavlink.MAV_CMD_DO_REPOSITION): _reposition,
     int(mavlink.MAV_CMD_DO_SET_MODE): _set_mode,
     int(mavlink.MAV_CMD_DO_PAUSE_CONTINUE): _pause_continue,
+    int(mavlink.MAV_CMD_DO_ORBIT): _orbit,
 }
 
 

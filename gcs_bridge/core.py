@@ -27,6 +27,7 @@ log = logging.getLogger(__name__)
 
 ALIVE_WITHOUT_TOKEN_S = 3.0
 STATUSTEXT_MAX = 50
+STATUSTEXT_CHUNKS_MAX = 4  # a longer text is cut after 4 MAVLink 2 chunks (200 characters)
 STATUSTEXT_BURST = 10  # refusal texts per vehicle and link, then STATUSTEXT_RATE_HZ
 STATUSTEXT_RATE_HZ = 5.0
 
@@ -39,6 +40,22 @@ def text_of(value: Any) -> str:
     if isinstance(value, bytes | bytearray):
         return bytes(value).split(b"\0", 1)[0].decode("ascii", "replace")
     return str(value).split("\0", 1)[0]
+
+
+def statustext_chunks(text: str, text_id: int) -> list[Msg]:
+    """STATUSTEXT messages for ``text``: one when it fits, else MAVLink 2 chunks sharing
+    ``text_id`` (QGroundControl and MAVSDK join them; the last chunk is shorter than 50
+    characters, so a text of a multiple of 50 ends with an empty chunk)."""
+    raw = text.encode("ascii", "replace")[: STATUSTEXT_MAX * STATUSTEXT_CHUNKS_MAX - 1]
+    if len(raw) <= STATUSTEXT_MAX:
+        return [mavlink.MAVLink_statustext_message(mavlink.MAV_SEVERITY_WARNING, raw)]
+    pieces = [raw[i : i + STATUSTEXT_MAX] for i in range(0, len(raw), STATUSTEXT_MAX)]
+    if len(pieces[-1]) == STATUSTEXT_MAX:
+        pieces.append(b"")
+    return [
+        mavlink.MAVLink_statustext_message(mavlink.MAV_SEVERITY_WARNING, piece, text_id, seq)
+        for seq, piece in enumerate(pieces)
+    ]
 
 
 class Core:
@@ -56,6 +73,7 @@ class Core:
     _inflight: set[tuple[int, int, int, int]]
     _param_sync: dict[str, float]
     _text_budget: dict[tuple[str | None, int], tuple[float, float]]  # → (tokens, last wall s)
+    _text_id: int  # the last STATUSTEXT.id given to a chunked text
 
     # ------------------------------------------------------------------ presence
     def alive(self, v: Vehicle, now: float) -> bool:
@@ -90,13 +108,15 @@ class Core:
         if not self._text_allowed(link, v, now):
             log.debug("%s: STATUSTEXT dropped (rate): %s", v.id, text)
             return
-        msg = mavlink.MAVLink_statustext_message(
-            mavlink.MAV_SEVERITY_WARNING, text[:STATUSTEXT_MAX].encode("ascii", "replace")
-        )
-        if link is None:
-            self._send_all(v, msg, now)
-        else:
-            self._send(link, v, msg, now)
+        text_id = 0
+        if len(text) > STATUSTEXT_MAX:
+            self._text_id = self._text_id % 65535 + 1
+            text_id = self._text_id
+        for msg in statustext_chunks(text, text_id):
+            if link is None:
+                self._send_all(v, msg, now)
+            else:
+                self._send(link, v, msg, now)
 
     def _ack(
         self,

@@ -110,6 +110,7 @@ class Gateway(CommandHandlers, ParamHandlers, MissionHandlers):
             self._streams = Streams(session, keys, set(self.vehicles))
         self._inflight: set[tuple[int, int, int, int]] = set()
         self._text_budget: dict[tuple[str | None, int], tuple[float, float]] = {}
+        self._text_id = 0
         self._param_sync: dict[str, float] = {}  # vehicle id → next attempt (wall s); -1 busy
         self._next_heartbeat_s = 0.0
         self._next_tick_s = 0.0
@@ -130,6 +131,10 @@ class Gateway(CommandHandlers, ParamHandlers, MissionHandlers):
             "MISSION_CLEAR_ALL": self._on_mission_clear_all,
             "MISSION_SET_CURRENT": self._on_mission_set_current,
             "SET_POSITION_TARGET_LOCAL_NED": self._on_position_target,
+            "SET_POSITION_TARGET_GLOBAL_INT": self._on_global_target,
+            "SET_ATTITUDE_TARGET": self._on_attitude_target,
+            "MANUAL_CONTROL": self._on_manual_control,
+            "FOLLOW_TARGET": self._on_follow_target,
         }
         self._local_commands = self._command_table()
 
@@ -411,7 +416,10 @@ class Gateway(CommandHandlers, ParamHandlers, MissionHandlers):
     def _targets(self, link: Link, msg: Msg) -> list[Vehicle]:
         """Vehicles of ``link`` a message is addressed to; others ignore it (QGC's UDP link
         writes every packet to every vehicle it heard)."""
-        system = getattr(msg, "target_system", None)
+        if msg.get_type() == "FOLLOW_TARGET":  # addressed to nobody: whoever follows
+            following = (self.by_sysid[s] for s in link.sysids)
+            return [v for v in following if v.status is not None and v.status.mode == "follow"]
+        system = getattr(msg, "target_system", getattr(msg, "target", None))  # MANUAL_CONTROL
         component = getattr(msg, "target_component", 0)
         if system is None or component not in (0, 1):
             return []

@@ -8,6 +8,7 @@ import time
 from collections.abc import Callable
 
 from gcs_bridge import mission as ms
+from gcs_bridge import offboard
 from gcs_bridge.commands import (
     ACCEPTED,
     DENIED,
@@ -29,7 +30,7 @@ from gcs_bridge.dialect import (
     mavlink,
     protocol_version_message,
 )
-from gcs_bridge.frames import ned_to_enu
+from gcs_bridge.frames import euler_ned_frd
 from gcs_bridge.links import Link
 from gcs_bridge.modes import decode_custom_mode
 from gcs_bridge.telemetry import BUILDERS, ID_MISSION_CURRENT
@@ -51,9 +52,6 @@ log = logging.getLogger(__name__)
 
 GCS_HEARTBEAT_FORWARD_S = 0.5
 MAX_MESSAGE_ID = 65535  # MESSAGE_INTERVAL.message_id is a uint16
-MAX_SETPOINT_M = 1e7  # |east|, |north| of an offboard position (the bus carries ≤ 1e9)
-MAX_SETPOINT_UP_M = 1e5
-MAX_SETPOINT_M_S = 1e3
 GCS_LINK_TIMEOUT_S = 3.0  # wall: a GCS silent this long is gone (QGC's own is ~3.5 s)
 
 
@@ -285,40 +283,55 @@ class CommandHandlers(Core):
 
         self._submit(v, t.bus, done)
 
-    def _on_position_target(
-        self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
-    ) -> None:
-        """Offboard setpoints (local NED, world origin) → ``Setpoint``; no ACK in MAVLink."""
-        if int(msg.coordinate_frame) != mavlink.MAV_FRAME_LOCAL_NED:
-            return
-        mask = int(msg.type_mask)
-        pos = (float(msg.x), float(msg.y), float(msg.z))
-        vel = (float(msg.vx), float(msg.vy), float(msg.vz))
-        use_pos = not mask & 0b111 and _within(pos, MAX_SETPOINT_M, MAX_SETPOINT_UP_M)
-        use_vel = not mask & 0b111000 and _within(vel, MAX_SETPOINT_M_S, MAX_SETPOINT_M_S)
-        yaw = float(msg.yaw)
-        yaw_deg = None
-        if not mask & 1024 and math.isfinite(yaw):
-            yaw_deg = (90.0 - math.degrees(yaw) + 180.0) % 360.0 - 180.0
-        if not (use_pos or use_vel):
-            return
-        try:
-            setpoint = Setpoint(
-                position_enu_m=ned_to_enu(pos) if use_pos else None,
-                velocity_enu_m_s=ned_to_enu(vel) if use_vel and not use_pos else None,
-                yaw_deg=yaw_deg,
-            )
-        except (TypeError, ValueError) as exc:
-            log.debug("%s: unusable setpoint: %s", v.id, exc)
+    def _offboard_here(self, v: Vehicle) -> offboard.Here:
+        st = v.state
+        return offboard.Here(
+            position_enu=st.position_enu_m if st is not None else v.spawn_enu,
+            yaw_enu_rad=math.pi / 2 - euler_ned_frd(st.attitude_xyzw)[2] if st is not None else 0.0,
+            local_origin_enu=v.spawn_enu,
+            home_amsl_m=v.home_place().alt_amsl_m,
+            origin=v.origin,
+        )
+
+    def _offboard(self, v: Vehicle, setpoint: Setpoint | None) -> None:
+        """Offboard setpoints have no ACK in MAVLink: unusable ones are dropped."""
+        if setpoint is None:
+            log.debug("%s: unusable offboard setpoint dropped", v.id)
             return
         self._submit(v, setpoint, lambda reply: None)
 
+    def _on_position_target(
+        self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
+    ) -> None:
+        """SET_POSITION_TARGET_LOCAL_NED (from the vehicle's local origin, as PX4)."""
+        self._offboard(v, offboard.from_local_ned(msg, self._offboard_here(v)))
 
-def _within(v: tuple[float, float, float], horizontal: float, vertical: float) -> bool:
-    """Finite, and within the bounds (NED: x, y horizontal, z vertical)."""
-    return (
-        all(map(math.isfinite, v))
-        and abs(v[0]) <= horizontal
-        and abs(v[1]) <= horizontal
-        and abs(v[2]) <= vertical
-    )
+    def _on_global_target(
+        self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
+    ) -> None:
+        """SET_POSITION_TARGET_GLOBAL_INT."""
+        self._offboard(v, offboard.from_global_int(msg, self._offboard_here(v)))
+
+    def _on_manual_control(
+        self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
+    ) -> None:
+        """MANUAL_CONTROL sticks: velocity and yaw-rate setpoints for position mode."""
+        self._offboard(v, offboard.from_manual_control(msg, self._offboard_here(v)))
+
+    def _on_follow_target(
+        self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
+    ) -> None:
+        """FOLLOW_TARGET (follow-me): where to be, from the target and the FLW_TGT_* params."""
+        p = v.params
+        follow = offboard.Follow(
+            height_m=p.value("FLW_TGT_HT"),
+            distance_m=p.value("FLW_TGT_DST"),
+            angle_deg=p.value("FLW_TGT_FA"),
+        )
+        self._offboard(v, offboard.from_follow_target(msg, self._offboard_here(v), follow))
+
+    def _on_attitude_target(
+        self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
+    ) -> None:
+        """SET_ATTITUDE_TARGET: attitude or body rates with a thrust."""
+        self._offboard(v, offboard.from_attitude_target(msg))

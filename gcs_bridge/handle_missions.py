@@ -8,16 +8,20 @@ import time
 from collections.abc import Callable
 
 from gcs_bridge import mission as ms
+from gcs_bridge import plans
 from gcs_bridge.core import Core
 from gcs_bridge.dialect import Msg, mavlink
 from gcs_bridge.links import Link
 from gcs_bridge.vehicle import Vehicle
 from swarmbus.messages import (
+    Command,
     CommandReply,
+    GeofenceUpload,
     MissionClear,
     MissionDownload,
     MissionStart,
     MissionUpload,
+    RallyUpload,
     RejectCode,
 )
 
@@ -68,6 +72,9 @@ class MissionHandlers(Core):
 
             return done
 
+        if c.mission_type != ms.MISSION_TYPE_MISSION:
+            self._complete_plan_upload(v, c, now)
+            return
         if not c.items:
             self._submit(v, MissionClear(), finish(ms.Converted([], [], [])))
             return
@@ -80,6 +87,32 @@ class MissionHandlers(Core):
             self._mission_ack(v, c.peer, exc.result, c.mission_type, now)
             return
         self._submit(v, command, finish(converted))
+
+    def _complete_plan_upload(self, v: Vehicle, c: ms.Complete, now: float) -> None:
+        """A geofence or rally upload: to the autopilot, then ACK; kept for download."""
+        link = self.links[c.peer.link]
+        try:
+            command: Command
+            if c.mission_type == ms.MISSION_TYPE_FENCE:
+                command = GeofenceUpload(zones=plans.convert_fence(c.items, v.home_place()))
+            else:
+                command = RallyUpload(points_enu_m=plans.convert_rally(c.items, v.home_place()))
+        except ms.MissionError as exc:
+            self._statustext(link, v, f"{v.id}: {exc}", now)
+            self._mission_ack(v, c.peer, exc.result, c.mission_type, now)
+            return
+
+        def done(reply: CommandReply) -> None:
+            done_now = time.monotonic()
+            if reply.accepted:
+                v.plans[c.mission_type] = list(c.items)
+                result = ms.Result.ACCEPTED
+            else:
+                result = _MISSION_RESULT_OF_CODE.get(reply.code, ms.Result.ERROR)
+                self._statustext(link, v, f"{v.id}: refused: {reply.reason}", done_now)
+            self._mission_ack(v, c.peer, result, c.mission_type, done_now)
+
+        self._submit(v, command, done)
 
     def _on_mission_count(
         self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
@@ -124,9 +157,9 @@ class MissionHandlers(Core):
         )
 
     def _plan_type(self, v: Vehicle, msg: Msg, peer: ms.Peer, now: float) -> int | None:
-        """The message's mission type if it is the mission plan; fence and rally: UNSUPPORTED."""
+        """The message's mission type if it is mission, fence or rally; else UNSUPPORTED."""
         mission_type = int(msg.mission_type)
-        if mission_type != ms.MISSION_TYPE_MISSION:
+        if mission_type not in ms.PLAN_TYPES:
             self._mission_ack(v, peer, ms.Result.UNSUPPORTED, mission_type, now)
             return None
         return mission_type
@@ -140,6 +173,13 @@ class MissionHandlers(Core):
     ) -> None:
         mission_type = self._plan_type(v, msg, peer, now)
         if mission_type is None:
+            return
+        if mission_type != ms.MISSION_TYPE_MISSION:
+            count = len(v.plans.get(mission_type, []))
+            msg_count = mavlink.MAVLink_mission_count_message(
+                peer.system, peer.component, count, mission_type
+            )
+            self._send(link, v, msg_count, now)
             return
 
         def done(reply: CommandReply) -> None:
@@ -166,11 +206,15 @@ class MissionHandlers(Core):
         if mission_type is None:
             return
         seq = int(msg.seq)
-        if not 0 <= seq < len(v.download):
+        served = (
+            v.download if mission_type == ms.MISSION_TYPE_MISSION else v.plans.get(mission_type, [])
+        )
+        if not 0 <= seq < len(served):
             self._mission_ack(v, peer, ms.Result.INVALID_SEQUENCE, mission_type, now)
             return
-        w = v.download[seq]
-        current = 1 if seq == v.mission_current().seq else 0
+        w = served[seq]
+        is_mission = mission_type == ms.MISSION_TYPE_MISSION
+        current = 1 if is_mission and seq == v.mission_current().seq else 0
         args = (
             w.seq,
             w.frame,
@@ -196,19 +240,40 @@ class MissionHandlers(Core):
         self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
     ) -> None:
         mission_type = int(msg.mission_type)
-        if mission_type not in (ms.MISSION_TYPE_MISSION, ms.MISSION_TYPE_ALL):
+        if mission_type not in (*ms.PLAN_TYPES, ms.MISSION_TYPE_ALL):
             self._mission_ack(v, peer, ms.Result.UNSUPPORTED, mission_type, now)
             return
+        everything = mission_type == ms.MISSION_TYPE_ALL
+        clears: list[tuple[int, Command]] = [
+            (t, c)
+            for t, c in (
+                (ms.MISSION_TYPE_MISSION, MissionClear()),
+                (ms.MISSION_TYPE_FENCE, GeofenceUpload(zones=[])),
+                (ms.MISSION_TYPE_RALLY, RallyUpload(points_enu_m=[])),
+            )
+            if everything or t == mission_type
+        ]
+        refusals: list[CommandReply] = []
 
-        def done(reply: CommandReply) -> None:
-            if reply.accepted:
-                v.remember_upload(ms.Converted([], [], []))
+        def cleared(kind: int) -> Callable[[CommandReply], None]:
+            def done(reply: CommandReply) -> None:
+                if not reply.accepted:
+                    refusals.append(reply)
+                elif kind == ms.MISSION_TYPE_MISSION:
+                    v.remember_upload(ms.Converted([], [], []))
+                else:
+                    v.plans.pop(kind, None)
+                if kind != clears[-1][0]:
+                    return
                 result = ms.Result.ACCEPTED
-            else:
-                result = _MISSION_RESULT_OF_CODE.get(reply.code, ms.Result.ERROR)
-            self._mission_ack(v, peer, result, mission_type, time.monotonic())
+                if refusals:
+                    result = _MISSION_RESULT_OF_CODE.get(refusals[0].code, ms.Result.ERROR)
+                self._mission_ack(v, peer, result, mission_type, time.monotonic())
 
-        self._submit(v, MissionClear(), done)
+            return done
+
+        for kind, command in clears:
+            self._submit(v, command, cleared(kind))
 
     def _on_mission_set_current(
         self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float

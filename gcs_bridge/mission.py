@@ -43,6 +43,9 @@ class Result(enum.IntEnum):
 
 MISSION_TYPE_MISSION = int(mavlink.MAV_MISSION_TYPE_MISSION)
 MISSION_TYPE_ALL = int(mavlink.MAV_MISSION_TYPE_ALL)
+MISSION_TYPE_FENCE = int(mavlink.MAV_MISSION_TYPE_FENCE)
+MISSION_TYPE_RALLY = int(mavlink.MAV_MISSION_TYPE_RALLY)
+PLAN_TYPES = (MISSION_TYPE_MISSION, MISSION_TYPE_FENCE, MISSION_TYPE_RALLY)
 
 CMD_WAYPOINT = int(mavlink.MAV_CMD_NAV_WAYPOINT)
 CMD_LOITER_TIME = int(mavlink.MAV_CMD_NAV_LOITER_TIME)
@@ -128,6 +131,11 @@ def _position(w: WireItem, here: Place, needs_position: bool) -> tuple[float, fl
     if not _finite(alt) or abs(alt) > 1e5:
         raise MissionError(Result.INVALID_PARAM7, w.seq, f"altitude {w.z} not usable")
     return geodetic_to_enu(lat, lon, alt, here.origin)
+
+
+def item_position_enu(w: WireItem, here: Place) -> tuple[float, float, float]:
+    """ENU position of an item that must give one (rally points)."""
+    return _position(w, here, needs_position=True)
 
 
 def _yaw(param4: float) -> float | None:
@@ -291,7 +299,7 @@ class Uploader:
         return self._transfer is not None
 
     def on_count(self, peer: Peer, count: int, mission_type: int, now_s: float) -> list[Action]:
-        if mission_type != MISSION_TYPE_MISSION:
+        if mission_type not in PLAN_TYPES:
             return [Ack(peer, Result.UNSUPPORTED, mission_type)]
         t = self._transfer
         if t is not None and t.peer != peer:

@@ -1,8 +1,9 @@
 """PX4 flight-mode encoding of the autopilot's real :class:`FlightMode`, and back.
 
 PX4 puts its mode in HEARTBEAT ``custom_mode`` as ``main_mode << 16 | sub_mode << 24``; QGC and
-MAVSDK decode it that way when ``autopilot = MAV_AUTOPILOT_PX4``. Our autopilot has no manual
-modes (there is no RC in the simulation), so MANUAL/ALTCTL/POSCTL requests are refused.
+MAVSDK decode it that way when ``autopilot = MAV_AUTOPILOT_PX4``. There is no RC in the
+simulation: MANUAL/ALTCTL/ACRO/STABILIZED requests are refused; POSCTL is flown from the
+ground station's MANUAL_CONTROL sticks (PX4's joystick path).
 """
 
 from __future__ import annotations
@@ -32,6 +33,10 @@ class Px4AutoSub(enum.IntEnum):
     MISSION = 4
     RTL = 5
     LAND = 6
+    FOLLOW_TARGET = 8
+
+
+PX4_POSCTL_SUB_ORBIT = 1  # PX4 shows its orbit as POSCTL / ORBIT
 
 
 @dataclass(frozen=True)
@@ -56,6 +61,9 @@ _PX4_OF_MODE: dict[FlightMode, Px4Mode] = {
     FlightMode.RTL: Px4Mode(Px4Main.AUTO, Px4AutoSub.RTL),
     FlightMode.LAND: Px4Mode(Px4Main.AUTO, Px4AutoSub.LAND),
     FlightMode.OFFBOARD: Px4Mode(Px4Main.OFFBOARD),
+    FlightMode.ORBIT: Px4Mode(Px4Main.POSCTL, PX4_POSCTL_SUB_ORBIT),
+    FlightMode.POSITION: Px4Mode(Px4Main.POSCTL),
+    FlightMode.FOLLOW: Px4Mode(Px4Main.AUTO, Px4AutoSub.FOLLOW_TARGET),
 }
 
 _MODE_OF_AUTO_SUB: dict[int, FlightMode] = {
@@ -64,6 +72,7 @@ _MODE_OF_AUTO_SUB: dict[int, FlightMode] = {
     Px4AutoSub.MISSION: FlightMode.MISSION,
     Px4AutoSub.RTL: FlightMode.RTL,
     Px4AutoSub.LAND: FlightMode.LAND,
+    Px4AutoSub.FOLLOW_TARGET: FlightMode.FOLLOW,
 }
 
 _BASE_AUTO = (
@@ -98,6 +107,8 @@ def flight_mode_for(main: int, sub: int) -> FlightMode | None:
         return _MODE_OF_AUTO_SUB.get(sub)
     if main == Px4Main.OFFBOARD:
         return FlightMode.OFFBOARD
+    if main == Px4Main.POSCTL and sub == 0:
+        return FlightMode.POSITION
     return None
 
 

@@ -16,15 +16,12 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from gcs_bridge.dialect import mavlink
+from swarmbus.messages import COM_OBL_ACT_CODES, NAV_DLL_ACT_CODES
 from swarmbus.scenario import Failsafe
 from swarmbus.vehicle_types import VehicleType
 
 REAL32 = int(mavlink.MAV_PARAM_TYPE_REAL32)
 INT32 = int(mavlink.MAV_PARAM_TYPE_INT32)
-
-# Failsafe action codes, as the autopilot's SetParam/GetParams speak them: PX4's NAV_DLL_ACT
-# codes, for COM_OBL_ACT too (PX4's own COM_OBL_ACT numbers them differently).
-ACTION_CODE = {"none": 0, "hold": 1, "rtl": 2, "land": 3}
 
 
 class ParamError(ValueError):
@@ -70,7 +67,7 @@ SPECS: tuple[ParamSpec, ...] = (
         INT32,
         0,
         3,
-        lambda f, t: ACTION_CODE[f.datalink_loss_action],
+        lambda f, t: NAV_DLL_ACT_CODES[f.datalink_loss_action],
         "data-link-loss action: 0 none, 1 hold, 2 RTL, 3 land",
     ),
     ParamSpec(
@@ -84,10 +81,10 @@ SPECS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "COM_OBL_ACT",
         INT32,
-        1,
-        3,
-        lambda f, t: ACTION_CODE[f.offboard_loss_action],
-        "offboard-loss action: 1 hold, 2 RTL, 3 land",
+        0,
+        2,
+        lambda f, t: COM_OBL_ACT_CODES[f.offboard_loss_action],
+        "offboard-loss action (PX4's codes): 0 land, 1 hold, 2 RTL",
     ),
     ParamSpec(
         "COM_OF_LOSS_T",
@@ -100,18 +97,73 @@ SPECS: tuple[ParamSpec, ...] = (
     ParamSpec(
         "GF_MAX_VER_DIST",
         REAL32,
-        1.0,
+        0.0,
         10000.0,
         lambda f, t: f.geofence_max_alt_m,
-        "geofence: maximum altitude above home (m)",
+        "geofence: maximum altitude above home (m); 0: off",
     ),
     ParamSpec(
         "GF_MAX_HOR_DIST",
         REAL32,
-        1.0,
+        0.0,
         100000.0,
         lambda f, t: f.geofence_max_distance_m,
-        "geofence: maximum horizontal distance from home (m)",
+        "geofence: maximum horizontal distance from home (m); 0: off",
+    ),
+    # follow-me (PX4's names and defaults), used by the gateway for FOLLOW_TARGET
+    ParamSpec(
+        "FLW_TGT_HT",
+        REAL32,
+        8.0,
+        100.0,
+        lambda f, t: 8.0,
+        "follow-me height above home (m)",
+        gateway_side=True,
+    ),
+    ParamSpec(
+        "FLW_TGT_DST",
+        REAL32,
+        1.0,
+        100.0,
+        lambda f, t: 8.0,
+        "follow-me distance from the target (m)",
+        gateway_side=True,
+    ),
+    ParamSpec(
+        "FLW_TGT_FA",
+        REAL32,
+        -180.0,
+        180.0,
+        lambda f, t: 180.0,
+        "follow-me angle from the target's heading (deg; 180 behind)",
+        gateway_side=True,
+    ),
+    ParamSpec(
+        "FLW_TGT_RS",
+        REAL32,
+        0.0,
+        1.0,
+        lambda f, t: 0.1,
+        "follow-me responsiveness (kept, not used)",
+        gateway_side=True,
+    ),
+    ParamSpec(
+        "FLW_TGT_ALT_M",
+        INT32,
+        0,
+        2,
+        lambda f, t: 0,
+        "follow-me altitude mode (0: above home; kept)",
+        gateway_side=True,
+    ),
+    ParamSpec(
+        "FLW_TGT_MAX_VEL",
+        REAL32,
+        0.0,
+        20.0,
+        lambda f, t: 5.0,
+        "follow-me orbit speed (m/s; kept, not used)",
+        gateway_side=True,
     ),
     ParamSpec(
         "MPC_XY_CRUISE",

@@ -170,6 +170,12 @@ class View:
     home_geodetic: Vec3 | None  # lat, lon, alt AMSL
     home_enu: Vec3 | None
     wind_enu: Vec3
+    local_origin_enu: Vec3 = (0.0, 0.0, 0.0)  # where local NED starts: the spawn, as PX4
+
+
+def _local(view: View, enu: Vec3) -> Vec3:
+    o = view.local_origin_enu
+    return enu_to_ned((enu[0] - o[0], enu[1] - o[1], enu[2] - o[2]))
 
 
 def boot_ms(sim_time_s: float) -> int:
@@ -247,7 +253,7 @@ def local_position_ned(view: View) -> Msg | None:
     st = view.state
     if st is None:
         return None
-    x, y, z = enu_to_ned(st.position_enu_m)
+    x, y, z = _local(view, st.position_enu_m)
     vx, vy, vz = enu_to_ned(st.velocity_enu_m_s)
     return mavlink.MAVLink_local_position_ned_message(boot_ms(st.sim_time_s), x, y, z, vx, vy, vz)
 
@@ -299,7 +305,7 @@ def home_position(view: View) -> Msg | None:
     if view.home_geodetic is None or view.home_enu is None:
         return None
     lat, lon, alt = view.home_geodetic
-    x, y, z = enu_to_ned(view.home_enu)
+    x, y, z = _local(view, view.home_enu)
     t_us = int(view.state.sim_time_s * 1e6) if view.state is not None else 0
     return mavlink.MAVLink_home_position_message(
         _e7(lat), _e7(lon), round(alt * 1000.0), x, y, z, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, t_us

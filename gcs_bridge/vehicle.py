@@ -141,6 +141,7 @@ class Vehicle:
         self.uploader = Uploader()
         self.mission: Converted | None = None  # as MAVLink last saw it (upload or download)
         self.download: list[WireItem] = []
+        self.plans: dict[int, list[WireItem]] = {}  # fence and rally items as accepted
         self._home_geo: Vec3 | None = None
         self.intent: ArmIntent | None = None
         self.arming_since_s: float | None = None  # wall: an Arm sent, no armed status yet
@@ -245,7 +246,15 @@ class Vehicle:
         home = self.home_enu
         if home is not None and self._home_geo is None:
             self._home_geo = enu_to_geodetic(home, self.origin)
-        return View(self.state, self.status, self.reading, self._home_geo, home, self.wind_enu)
+        return View(
+            self.state,
+            self.status,
+            self.reading,
+            self._home_geo,
+            home,
+            self.wind_enu,
+            self.spawn_enu,
+        )
 
     # -- mission bookkeeping ----------------------------------------------------
     def _mapping_valid(self) -> bool:

@@ -135,6 +135,9 @@ class FlightMode(enum.StrEnum):
     LAND = "land"
     RTL = "rtl"
     OFFBOARD = "offboard"
+    ORBIT = "orbit"  # circling a point (MAVLink DO_ORBIT)
+    POSITION = "position"  # PX4's position mode, flown from a ground station's sticks
+    FOLLOW = "follow"  # PX4's follow-me: setpoints computed from a moving target
 
 
 class VehicleStatus(Message, frozen=True, kw_only=True, tag=_tag("vehicle_status")):
@@ -267,11 +270,22 @@ class MissionDownload(Message, frozen=True, kw_only=True, tag=_tag("cmd.mission_
 
 
 class Setpoint(Message, frozen=True, kw_only=True, tag=_tag("cmd.setpoint")):
-    """Offboard setpoint: a position, or a velocity (position ``None``), optional yaw."""
+    """Offboard setpoint (world ENU, body FLU), the kinds PX4 accepts:
+
+    - a position, a velocity or an acceleration, or a combination (with a position, velocity
+      and acceleration are feed-forward), with a yaw or a yaw rate;
+    - an attitude (``attitude_xyzw``, body → world) or body rates (``body_rates_rad_s``), each
+      with a collective ``thrust`` (fraction of the vehicle's maximum).
+    """
 
     position_enu_m: Vec3 | None = None
     velocity_enu_m_s: Vec3 | None = None
     yaw_deg: Annotated[float, msgspec.Meta(ge=-360.0, le=360.0)] | None = None
+    acceleration_enu_m_s2: Vec3 | None = None
+    yaw_rate_deg_s: Annotated[float, msgspec.Meta(ge=-3600.0, le=3600.0)] | None = None
+    attitude_xyzw: Quat | None = None
+    body_rates_rad_s: Vec3 | None = None
+    thrust: Unit | None = None
 
 
 class GcsHeartbeat(Message, frozen=True, kw_only=True, tag=_tag("cmd.gcs_heartbeat")):
@@ -287,6 +301,64 @@ class SetParam(Message, frozen=True, kw_only=True, tag=_tag("cmd.set_param")):
 
 class GetParams(Message, frozen=True, kw_only=True, tag=_tag("cmd.get_params")):
     pass
+
+
+class OrbitYaw(enum.IntEnum):
+    """Where the nose points while orbiting (MAVLink ORBIT_YAW_BEHAVIOUR)."""
+
+    CENTRE = 0
+    HOLD_INITIAL = 1
+    UNCONTROLLED = 2
+    TANGENT = 3
+
+
+class Orbit(Message, frozen=True, kw_only=True, tag=_tag("cmd.orbit")):
+    """Circle ``center_enu_m`` (its z is the altitude) at ``radius_m``; ``speed_m_s`` > 0
+    clockwise seen from above, < 0 counter-clockwise (PX4's convention)."""
+
+    center_enu_m: Vec3
+    radius_m: Annotated[float, msgspec.Meta(gt=0.0, le=1000.0)]
+    speed_m_s: Annotated[float, msgspec.Meta(ge=-50.0, le=50.0)]
+    yaw: OrbitYaw = OrbitYaw.CENTRE
+
+
+# PX4's codes for the failsafe-action parameters that SetParam / GetParams carry as numbers
+NAV_DLL_ACT_CODES = {"none": 0, "hold": 1, "rtl": 2, "land": 3}  # PX4 NAV_DLL_ACT
+COM_OBL_ACT_CODES = {"land": 0, "hold": 1, "rtl": 2}  # PX4 COM_OBL_ACT (no terminate)
+ACTION_CODES_OF_PARAM = {"NAV_DLL_ACT": NAV_DLL_ACT_CODES, "COM_OBL_ACT": COM_OBL_ACT_CODES}
+
+
+# --------------------------------------------------------------------------- geofence, rally
+MAX_FENCE_VERTICES = 1000
+
+
+class FenceZone(msgspec.Struct, frozen=True, kw_only=True):
+    """A geofence zone in the world ENU frame: a polygon (``polygon_enu_m``, ≥ 3 vertices) or
+    a circle (``center_enu_m`` and ``radius_m``). Inclusion: the vehicle stays inside (inside
+    at least one, when there are several); exclusion: it stays out."""
+
+    inclusion: bool = True
+    polygon_enu_m: (
+        Annotated[
+            list[tuple[Finite, Finite]],
+            msgspec.Meta(min_length=3, max_length=MAX_FENCE_VERTICES),
+        ]
+        | None
+    ) = None
+    center_enu_m: tuple[Finite, Finite] | None = None
+    radius_m: Positive | None = None
+
+
+class GeofenceUpload(Message, frozen=True, kw_only=True, tag=_tag("cmd.geofence_upload")):
+    """Replace the uploaded geofence zones (empty: none; the GF_* limits stay)."""
+
+    zones: Annotated[list[FenceZone], msgspec.Meta(max_length=MAX_MISSION_ITEMS)]
+
+
+class RallyUpload(Message, frozen=True, kw_only=True, tag=_tag("cmd.rally_upload")):
+    """Replace the rally points (ENU m): RTL goes to the closest of home and these."""
+
+    points_enu_m: Annotated[list[Vec3], msgspec.Meta(max_length=MAX_MISSION_ITEMS)]
 
 
 Command = (
@@ -307,6 +379,9 @@ Command = (
     | GcsHeartbeat
     | SetParam
     | GetParams
+    | GeofenceUpload
+    | RallyUpload
+    | Orbit
 )
 
 
@@ -469,6 +544,9 @@ ALL_MESSAGES: tuple[type[Message], ...] = (
     GcsHeartbeat,
     SetParam,
     GetParams,
+    GeofenceUpload,
+    RallyUpload,
+    Orbit,
     CommandReply,
     PlumeQuery,
     PlumeValues,
@@ -485,7 +563,9 @@ ALL_MESSAGES: tuple[type[Message], ...] = (
 
 __all__ = [m.__name__ for m in ALL_MESSAGES] + [
     "Command",
+    "FenceZone",
     "FlightMode",
+    "OrbitYaw",
     "MissionCommand",
     "MissionFrame",
     "MissionItem",

@@ -168,8 +168,8 @@ class Failsafe(_Section, frozen=True, kw_only=True):
     datalink_required: bool = False  # only armed once a GCS heartbeat was seen
     offboard_loss_action: Literal["hold", "land", "rtl"] = "hold"
     offboard_timeout_s: Pos = 0.5
-    geofence_max_alt_m: Pos = 120.0
-    geofence_max_distance_m: Pos = 1000.0
+    geofence_max_alt_m: NonNeg = 120.0  # above home; 0: off (PX4's GF_MAX_VER_DIST)
+    geofence_max_distance_m: NonNeg = 0.0  # from home; 0: off, PX4's GF_MAX_HOR_DIST default
     rtl_altitude_m: Pos = 15.0
     takeoff_altitude_m: Pos = 2.5
     crash_speed_m_s: Pos = 3.0

@@ -32,6 +32,7 @@ from swarmbus.messages import (
     ErrorReply,
     FlightMode,
     GcsHeartbeat,
+    GeofenceUpload,
     GetParams,
     Goto,
     Hold,
@@ -44,6 +45,7 @@ from swarmbus.messages import (
     MissionPause,
     MissionStart,
     MissionUpload,
+    RallyUpload,
     RejectCode,
     ReturnToLaunch,
     SetMode,
@@ -87,6 +89,7 @@ class Fake:
     gcs_heartbeats: int = 0
     vel: tuple[float, float, float] = (0.0, 0.0, 0.0)
     descending: bool = False
+    climb_to: float | None = None  # a mission started on the ground climbs first (PX4)
 
     @property
     def on_ground(self) -> bool:
@@ -166,11 +169,12 @@ class World:
                 return refuse(f.vid, denied, "no mission uploaded")
             if isinstance(cmd, MissionStart):
                 f.index, f.reached, f.finished = cmd.start_index, 0, False
-            if f.mode == M.ARMED and f.items[f.index].command != MissionCommand.TAKEOFF:
-                return refuse(f.vid, denied, "on the ground: first item must be a takeoff")
+            first = f.items[f.index]
+            if f.mode == M.ARMED and first.command != MissionCommand.TAKEOFF:
+                f.climb_to = max(first.z, f.home[2] + f.params["MIS_TAKEOFF_ALT"])
             f.mode, f.descending = M.MISSION, False
             return ok
-        if isinstance(cmd, Setpoint):
+        if isinstance(cmd, Setpoint | GeofenceUpload | RallyUpload):
             return ok
         if f.mode not in AIRBORNE:
             return refuse(f.vid, denied, "not flying")
@@ -243,6 +247,10 @@ class World:
             self._fly_mission(f)
 
     def _fly_mission(self, f: Fake) -> None:
+        if f.climb_to is not None:
+            if self._move(f, (f.pos[0], f.pos[1], f.climb_to)) < 0.3:
+                f.climb_to = None
+            return
         item = f.items[f.index]
         if item.command == MissionCommand.LAND:
             if self._descend(f, item.x, item.y):

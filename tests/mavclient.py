@@ -7,6 +7,7 @@ answers to whatever address the gateway's packets came from, per vehicle sysid.
 
 from __future__ import annotations
 
+import asyncio
 import collections
 import math
 import random
@@ -86,6 +87,21 @@ def scenario_text(
             "]",
         ]
     return "\n".join(lines) + "\n"
+
+
+async def first(gen: Any, pred: Any, what: str, timeout_s: float = 120.0) -> Any:
+    """The first value of an async stream (a MAVSDK subscription) that satisfies ``pred``."""
+
+    async def scan() -> Any:
+        async for value in gen:
+            if pred(value):
+                return value
+        raise AssertionError(f"stream ended before {what}")
+
+    try:
+        return await asyncio.wait_for(scan(), timeout_s)
+    except TimeoutError:
+        raise AssertionError(f"timed out after {timeout_s:.0f} s waiting for {what}") from None
 
 
 def write_scenario(path: Path, vehicles: int, **kw: Any) -> tuple[Path, int, int]:

@@ -50,7 +50,7 @@ ACCEPTED = int(M.MAV_RESULT_ACCEPTED)
 REL_INT = int(M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
 GET_INTERVAL = int(M.MAV_CMD_GET_MESSAGE_INTERVAL)
 # every command the gateway knows (anything else must be UNSUPPORTED)
-KNOWN_COMMANDS = {16, 17, 20, 21, 22, 176, 192, 193, 300, 400, 510, 511, 512, 519, 520}
+KNOWN_COMMANDS = {16, 17, 20, 21, 22, 34, 176, 192, 193, 300, 400, 510, 511, 512, 519, 520}
 BAD_FLOATS = (NAN, INF, -INF)
 INT32_MAX = 2**31 - 1
 SENTINEL_BASE = 40000  # GET_MESSAGE_INTERVAL of these ids closes a batch (not streams)
@@ -259,10 +259,10 @@ class Fuzzer:
             self.rng.shuffle(p)
         elif kind == 1:  # no custom-mode bit
             p = [float(self.rng.randrange(0, 256, 2)), 4.0, 3.0]
-        elif kind == 2:  # manual, altitude, position: no RC here
-            p = [1.0, float(self.rng.choice([1, 2, 3, 5, 7, 8, 99])), 0.0]
+        elif kind == 2:  # manual, altitude, acro, stabilized: no RC here (position: sticks)
+            p = [1.0, float(self.rng.choice([1, 2, 5, 7, 8, 99])), 0.0]
         else:  # AUTO with an unknown sub mode
-            p = [1.0, 4.0, float(self.rng.choice([0, 1, 7, 8, 9, 200]))]
+            p = [1.0, 4.0, float(self.rng.choice([0, 1, 7, 9, 200]))]
         return [self._command(t, 176, p, self.rng.random() < 0.5)], [self._ack(t, 176, DENIED)]
 
     def bad_pause(self, t: Target) -> Case:
@@ -309,7 +309,7 @@ class Fuzzer:
         return [self._count(t, n)], [self._mission_ack(t, M.MAV_MISSION_NO_SPACE)]
 
     def mission_other_type(self, t: Target) -> Case:
-        mission_type = self.rng.choice([1, 2, 3, 7, 255])  # fence, rally, ... and nonsense
+        mission_type = self.rng.choice([3, 7, 254, 255])  # no such plan (255: only clear-all)
         msg = self.rng.choice(
             [
                 self._count(t, self.rng.randrange(1, 10), mission_type),
@@ -317,7 +317,7 @@ class Fuzzer:
                 M.MAVLink_mission_request_int_message(t.sysid, 1, 0, mission_type),
             ]
         )
-        if mission_type in (1, 2) and self.rng.random() < 0.3:  # 255 (all) clears the mission
+        if mission_type != 255 and self.rng.random() < 0.3:
             msg = M.MAVLink_mission_clear_all_message(t.sysid, 1, mission_type)
         return [msg], [self._mission_ack(t, M.MAV_MISSION_UNSUPPORTED)]
 

@@ -66,6 +66,14 @@ SAMPLES: dict[type[m.Message], m.Message] = {
     m.GcsHeartbeat: m.GcsHeartbeat(),
     m.SetParam: m.SetParam(name="MIS_TAKEOFF_ALT", value=10.0),
     m.GetParams: m.GetParams(),
+    m.GeofenceUpload: m.GeofenceUpload(
+        zones=[
+            m.FenceZone(polygon_enu_m=[(0.0, 0.0), (50.0, 0.0), (50.0, 50.0)]),
+            m.FenceZone(inclusion=False, center_enu_m=(10.0, 10.0), radius_m=5.0),
+        ]
+    ),
+    m.RallyUpload: m.RallyUpload(points_enu_m=[(40.0, 5.0, 0.0)]),
+    m.Orbit: m.Orbit(center_enu_m=(30.0, 0.0, 10.0), radius_m=8.0, speed_m_s=-2.0),
     m.CommandReply: m.CommandReply(
         vehicle_id="uav1", accepted=False, code=m.RejectCode.DENIED, reason="armed in the air"
     ),

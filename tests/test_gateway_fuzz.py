@@ -59,7 +59,7 @@ def replies_until(
     while True:
         while client.inbox:
             m = client.inbox.popleft()
-            if m.get_type() == "STATUSTEXT":
+            if m.get_type() == "STATUSTEXT" and not m.chunk_seq:  # a long text's chunks: one
                 texts[m.get_type()] += 1
             r = reply_of(m)
             if r is None:

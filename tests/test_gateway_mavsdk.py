@@ -20,7 +20,7 @@ import pytest
 from gcs_bridge.frames import enu_to_geodetic
 from swarmbus.scenario import Origin
 from tests.gateway_stack import gateway, real_stack_available, vehicles
-from tests.mavclient import write_scenario
+from tests.mavclient import first, write_scenario
 from tests.procs import zenoh_network
 
 mavsdk = pytest.importorskip("mavsdk")
@@ -73,19 +73,6 @@ def mission(i: int) -> list[Any]:
             )
         )
     return items
-
-
-async def first(gen: Any, pred: Any, what: str, timeout_s: float = 120.0) -> Any:
-    async def scan() -> Any:
-        async for value in gen:
-            if pred(value):
-                return value
-        raise AssertionError(f"stream ended before {what}")
-
-    try:
-        return await asyncio.wait_for(scan(), timeout_s)
-    except TimeoutError:
-        raise AssertionError(f"timed out after {timeout_s:.0f} s waiting for {what}") from None
 
 
 async def fly(system: Any, sysid: int) -> dict[str, Any]:

@@ -47,7 +47,10 @@ def test_absurd_counts_and_other_mission_types_are_refused() -> None:
     assert up.on_count(QGC, 65535, ms.MISSION_TYPE_MISSION, 0.0) == [
         ms.Ack(QGC, ms.Result.NO_SPACE, ms.MISSION_TYPE_MISSION)
     ]
-    assert up.on_count(QGC, 3, FENCE, 0.0) == [ms.Ack(QGC, ms.Result.UNSUPPORTED, FENCE)]
+    assert up.on_count(QGC, 3, 7, 0.0) == [ms.Ack(QGC, ms.Result.UNSUPPORTED, 7)]
+    assert up.on_count(QGC, 3, ms.MISSION_TYPE_ALL, 0.0) == [
+        ms.Ack(QGC, ms.Result.UNSUPPORTED, ms.MISSION_TYPE_ALL)
+    ]
     assert not up.active
     (clear,) = up.on_count(QGC, 0, ms.MISSION_TYPE_MISSION, 0.0)
     assert isinstance(clear, ms.Complete) and clear.items == []
@@ -170,3 +173,33 @@ def test_autopilot_missions_download_as_relative_altitude_items() -> None:
     for a, b in zip(items, back, strict=True):
         assert (b.x, b.y, b.z) == pytest.approx((a.x, a.y, a.z), abs=0.02)
     assert back[1].hold_s == 2.0
+
+
+def fence_item(seq: int, e: float, n: float, command: int, param1: float) -> ms.WireItem:
+    w = wp(seq, e, n, 0.0, command)
+    return ms.WireItem(**{**w.__dict__, "frame": ms.FRAME_GLOBAL_INT, "param1": param1})
+
+
+def test_fence_polygons_and_circles_become_enu_zones() -> None:
+    from gcs_bridge import plans
+
+    inc, exc = plans.CMD_POLYGON_INCLUSION, plans.CMD_CIRCLE_EXCLUSION
+    square = [(0.0, 0.0), (100.0, 0.0), (100.0, 100.0), (0.0, 100.0)]
+    wire = [fence_item(i, e, n, inc, 4) for i, (e, n) in enumerate(square)]
+    wire.append(fence_item(4, 50.0, 50.0, exc, 10.0))
+    zones = plans.convert_fence(wire, HOME)
+    assert len(zones) == 2 and zones[0].inclusion and not zones[1].inclusion
+    got = [c for vertex in zones[0].polygon_enu_m or [] for c in vertex]
+    assert got == pytest.approx([c for vertex in square for c in vertex], abs=0.05)
+    assert zones[1].center_enu_m == pytest.approx((50.0, 50.0), abs=0.05)
+    assert zones[1].radius_m == 10.0
+    with pytest.raises(ms.MissionError) as short:
+        plans.convert_fence(wire[:3], HOME)  # a polygon announced with 4 vertices, 3 sent
+    assert short.value.result == ms.Result.INVALID_PARAM1
+    with pytest.raises(ms.MissionError) as bad_radius:
+        plans.convert_fence([fence_item(0, 0.0, 0.0, exc, -1.0)], HOME)
+    assert bad_radius.value.result == ms.Result.INVALID_PARAM1
+    (rally,) = plans.convert_rally([wp(0, 30.0, -20.0, 5.0, plans.CMD_RALLY_POINT)], HOME)
+    assert rally == pytest.approx((30.0, -20.0, 5.0), abs=0.05)
+    up = ms.Uploader()
+    assert up.on_count(QGC, 5, FENCE, 0.0) == [ms.Request(QGC, 0, FENCE)]

@@ -103,7 +103,8 @@ def test_base_mode_has_custom_bit_and_armed_bit_only_when_armed() -> None:
 
 
 def test_manual_modes_have_no_autopilot_mode_and_rotor_count_picks_mav_type() -> None:
-    assert flight_mode_for(Px4Main.POSCTL, 0) is None
+    assert flight_mode_for(Px4Main.MANUAL, 0) is None  # no RC: no stick-only modes
+    assert flight_mode_for(Px4Main.ALTCTL, 0) is None
     assert flight_mode_for(Px4Main.AUTO, 0) is None
     assert mav_type_of(len(load_vehicle_type("iris").rotors)) == mavlink.MAV_TYPE_QUADROTOR
     assert mav_type_of(len(load_vehicle_type("typhoon_h480").rotors)) == mavlink.MAV_TYPE_HEXAROTOR
@@ -284,7 +285,9 @@ def test_mode_commands_map_to_bus_commands() -> None:
     t = translate_mode(custom, 4, 2, facts())
     assert isinstance(t.bus, Takeoff) and t.bus.altitude_m == 10.0
     assert translate_mode(0.0, 4, 4, facts()).result == DENIED
-    assert translate_mode(custom, 3, 0, facts()).result == DENIED  # POSCTL: no RC
+    assert translate_mode(custom, 2, 0, facts()).result == DENIED  # ALTCTL: no RC
+    position = translate_mode(custom, 3, 0, facts()).bus  # POSCTL: flown from MANUAL_CONTROL
+    assert isinstance(position, SetMode) and position.mode == FlightMode.POSITION
     assert translate_mode(custom, math.nan, 0, facts()).result == DENIED
 
 
@@ -341,3 +344,219 @@ def test_landed_state_for_mavsdk_in_air() -> None:
     st = status(mode=FlightMode.HOLD, armed=True, landed=False)
     assert landed_state_of(st) == mavlink.MAV_LANDED_STATE_IN_AIR
     assert landed_state_of(None) == mavlink.MAV_LANDED_STATE_UNDEFINED
+
+
+def test_a_long_statustext_travels_as_mavlink2_chunks() -> None:
+    from gcs_bridge.core import statustext_chunks
+
+    short = statustext_chunks("uav1: fits in one", 7)
+    assert len(short) == 1 and short[0].id == 0
+    text = "uav1: item 12: GF_MAX_HOR_DIST 500 m: 551.2 m from home, mission refused"
+    chunks = statustext_chunks(text, 7)
+    assert [(c.id, c.chunk_seq) for c in chunks] == [(7, 0), (7, 1)]
+    joined = b"".join(
+        c.text if isinstance(c.text, bytes) else c.text.encode() for c in chunks
+    ).rstrip(b"\0")
+    assert joined.decode() == text
+    exactly_two = statustext_chunks("x" * 100, 9)  # the receiver needs a short last chunk
+    assert [c.chunk_seq for c in exactly_two] == [0, 1, 2]
+    assert len(statustext_chunks("y" * 5000, 3)) == 4  # capped
+
+
+# ------------------------------------------------------------------ offboard setpoints
+def _here(yaw_enu_rad: float = 0.0) -> object:
+    from gcs_bridge.offboard import Here
+
+    return Here(
+        position_enu=(25.0, -1.0, 6.0),
+        yaw_enu_rad=yaw_enu_rad,
+        local_origin_enu=(20.0, -4.0, 0.0),
+        home_amsl_m=Origin().alt_m,
+        origin=Origin(),
+    )
+
+
+def _local_target(frame: int, mask: int, pos: tuple, vel: tuple = (0, 0, 0), **kw: float) -> object:
+    return mavlink.MAVLink_set_position_target_local_ned_message(
+        0, 1, 1, frame, mask, *pos, *vel, 0, 0, 0, kw.get("yaw", 0.0), kw.get("yaw_rate", 0.0)
+    )
+
+
+def test_local_ned_is_measured_from_the_vehicles_own_origin_with_velocity_feed_forward() -> None:
+    from gcs_bridge.offboard import IGNORE_ACCELERATION, IGNORE_YAW_RATE, from_local_ned
+
+    msg = _local_target(1, IGNORE_ACCELERATION | IGNORE_YAW_RATE, (1.0, 2.0, -3.0), (0.5, 0, 0))
+    sp = from_local_ned(msg, _here())
+    assert sp is not None
+    assert sp.position_enu_m == pytest.approx((22.0, -3.0, 3.0))  # spawn (20, -4, 0) + NED
+    assert sp.velocity_enu_m_s == pytest.approx((0.0, 0.5, 0.0))  # kept: feed-forward
+    assert sp.yaw_deg == pytest.approx(90.0)  # NED yaw 0 (north) is ENU 90
+
+
+@pytest.mark.parametrize(
+    ("yaw_enu_deg", "forward_right", "east_north"),
+    [
+        (90.0, (2.0, 0.0), (0.0, 2.0)),  # facing north: forward is north
+        (90.0, (0.0, 1.0), (1.0, 0.0)),  # facing north: right is east
+        (0.0, (2.0, 0.0), (2.0, 0.0)),  # facing east: forward is east
+        (0.0, (0.0, 1.0), (0.0, -1.0)),  # facing east: right is south
+    ],
+)
+def test_body_frame_velocity_turns_with_the_heading(
+    yaw_enu_deg: float, forward_right: tuple, east_north: tuple
+) -> None:
+    from gcs_bridge.offboard import (
+        FRAME_BODY_NED,
+        IGNORE_ACCELERATION,
+        IGNORE_POSITION,
+        IGNORE_YAW,
+        from_local_ned,
+    )
+
+    mask = IGNORE_POSITION | IGNORE_ACCELERATION | IGNORE_YAW
+    msg = _local_target(FRAME_BODY_NED, mask, (0, 0, 0), (*forward_right, -0.5), yaw_rate=0.2)
+    sp = from_local_ned(msg, _here(math.radians(yaw_enu_deg)))
+    assert sp is not None and sp.position_enu_m is None
+    assert sp.velocity_enu_m_s == pytest.approx((*east_north, 0.5), abs=1e-9)
+    assert sp.yaw_rate_deg_s == pytest.approx(-math.degrees(0.2))  # clockwise in NED
+
+
+def test_body_offset_position_is_relative_to_the_vehicle() -> None:
+    from gcs_bridge.offboard import FRAME_BODY_OFFSET_NED, IGNORE_ACCELERATION, from_local_ned
+
+    msg = _local_target(FRAME_BODY_OFFSET_NED, IGNORE_ACCELERATION, (3.0, 0.0, -1.0))
+    sp = from_local_ned(msg, _here(math.radians(90.0)))  # facing north, at (25, -1, 6)
+    assert sp is not None and sp.position_enu_m == pytest.approx((25.0, 2.0, 7.0))
+
+
+def test_acceleration_alone_and_global_setpoints() -> None:
+    from gcs_bridge.offboard import (
+        FRAME_GLOBAL_RELATIVE_ALT_INT,
+        IGNORE_POSITION,
+        IGNORE_VELOCITY,
+        from_global_int,
+        from_local_ned,
+    )
+
+    acc = mavlink.MAVLink_set_position_target_local_ned_message(
+        0, 1, 1, 1, IGNORE_POSITION | IGNORE_VELOCITY, 0, 0, 0, 0, 0, 0, 1.0, 0.0, 0.0, 0, 0
+    )
+    sp = from_local_ned(acc, _here())
+    assert sp is not None and sp.acceleration_enu_m_s2 == pytest.approx((0.0, 1.0, -0.0))
+    assert sp.position_enu_m is None and sp.velocity_enu_m_s is None
+    lat, lon, _ = enu_to_geodetic((30.0, 40.0, 0.0), Origin())
+    glob = mavlink.MAVLink_set_position_target_global_int_message(
+        0,
+        1,
+        1,
+        FRAME_GLOBAL_RELATIVE_ALT_INT,
+        0b111111000,
+        round(lat * 1e7),
+        round(lon * 1e7),
+        7.0,
+        0,
+        0,
+        0,
+        0,
+        0,
+        0,
+        0.0,
+        0.0,
+    )
+    sp = from_global_int(glob, _here())
+    assert sp is not None and sp.position_enu_m == pytest.approx((30.0, 40.0, 7.0), abs=0.02)
+
+
+def _quat_ned(roll: float, pitch: float, yaw: float) -> tuple[float, float, float, float]:
+    """w, x, y, z of ZYX Euler angles (the MAVLink / PX4 convention)."""
+    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
+    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
+    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
+    return (
+        cr * cp * cy + sr * sp * sy,
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+    )
+
+
+@pytest.mark.parametrize("euler_deg", [(0, 0, 0), (0, -10, 0), (5, 0, 90), (-8, 12, -135)])
+def test_attitude_targets_become_the_same_attitude_in_enu(euler_deg: tuple) -> None:
+    from gcs_bridge.offboard import IGNORE_BODY_RATES, from_attitude_target
+
+    euler = tuple(math.radians(a) for a in euler_deg)
+    msg = mavlink.MAVLink_set_attitude_target_message(
+        0, 1, 1, IGNORE_BODY_RATES, list(_quat_ned(*euler)), 0, 0, 0, 0.6
+    )
+    sp = from_attitude_target(msg)
+    assert sp is not None and sp.thrust == pytest.approx(0.6)
+    assert sp.attitude_xyzw is not None
+    assert euler_ned_frd(sp.attitude_xyzw) == pytest.approx(euler, abs=1e-9)
+
+
+def test_rate_targets_flip_to_flu_and_a_missing_thrust_is_unusable() -> None:
+    from gcs_bridge.offboard import IGNORE_ATTITUDE, IGNORE_THRUST, from_attitude_target
+
+    msg = mavlink.MAVLink_set_attitude_target_message(
+        0, 1, 1, IGNORE_ATTITUDE, [1, 0, 0, 0], 0.1, 0.2, 0.3, 0.5
+    )
+    sp = from_attitude_target(msg)
+    assert sp is not None and sp.body_rates_rad_s == pytest.approx((0.1, -0.2, -0.3))
+    msg.type_mask = IGNORE_ATTITUDE | IGNORE_THRUST
+    assert from_attitude_target(msg) is None
+    msg.type_mask, msg.thrust = IGNORE_ATTITUDE, math.nan
+    assert from_attitude_target(msg) is None
+
+
+def test_orbit_command_takes_px4s_signs_and_defaults() -> None:
+    from swarmbus.messages import Orbit, OrbitYaw
+
+    f = facts(landed=False)
+    lat, lon, _ = enu_to_geodetic((30.0, 10.0, 0.0), Origin())
+    t = translate(CommandRequest(34, -8.0, 2.0, 3.0, 0.0, lat, lon, math.nan), f)
+    assert t is not None and isinstance(t.bus, Orbit)
+    assert t.bus.radius_m == 8.0 and t.bus.speed_m_s == -2.0  # negative radius: anticlockwise
+    assert t.bus.yaw == OrbitYaw.TANGENT
+    assert t.bus.center_enu_m[:2] == pytest.approx((30.0, 10.0), abs=0.05)
+    d = translate(CommandRequest(34), f)
+    assert d is not None and isinstance(d.bus, Orbit)
+    assert (d.bus.radius_m, d.bus.speed_m_s) == (10.0, 1.0)
+    bad = translate(CommandRequest(34, math.inf), f)
+    assert bad is not None and bad.bus is None and bad.result == DENIED
+
+
+def test_manual_control_sticks_become_px4_position_mode_velocities() -> None:
+    from gcs_bridge.modes import flight_mode_for
+    from gcs_bridge.offboard import from_manual_control
+    from swarmbus.messages import FlightMode
+
+    facing_north = _here(math.radians(90.0))
+    msg = mavlink.MAVLink_manual_control_message(1, 500, 0, 500, 0, 0)
+    sp = from_manual_control(msg, facing_north)  # half forward stick, throttle centred
+    assert sp is not None and sp.velocity_enu_m_s == pytest.approx((0.0, 5.0, 0.0), abs=1e-9)
+    msg = mavlink.MAVLink_manual_control_message(1, 0, 1000, 1000, -1000, 0)
+    sp = from_manual_control(msg, facing_north)  # full right, full throttle, yaw left
+    assert sp is not None and sp.velocity_enu_m_s == pytest.approx((10.0, 0.0, 3.0), abs=1e-9)
+    assert sp.yaw_rate_deg_s == 150.0  # yaw stick left: counter-clockwise, positive in ENU
+    centred = from_manual_control(
+        mavlink.MAVLink_manual_control_message(1, 0, 0, 500, 0, 0), facing_north
+    )
+    assert centred is not None and centred.velocity_enu_m_s == (0.0, 0.0, 0.0)
+    assert flight_mode_for(3, 0) == FlightMode.POSITION and flight_mode_for(3, 1) is None
+
+
+def test_follow_target_puts_the_follower_behind_a_moving_target_facing_it() -> None:
+    from gcs_bridge.offboard import Follow, from_follow_target
+
+    lat, lon, _ = enu_to_geodetic((40.0, 30.0, 0.0), Origin())
+    msg = mavlink.MAVLink_follow_target_message(
+        0, 0, round(lat * 1e7), round(lon * 1e7), 500.0, [2.0, 0.0, 0.0], [0.0] * 3,
+        [1.0, 0.0, 0.0, 0.0], [0.0] * 3, [0.0] * 3, 0,
+    )  # fmt: skip
+    sp = from_follow_target(msg, _here(), Follow(height_m=8.0, distance_m=8.0, angle_deg=180.0))
+    # heading north at 2 m/s: 8 m south of it, 8 m above home, moving with it, facing north
+    assert sp is not None and sp.position_enu_m == pytest.approx((40.0, 22.0, 8.0), abs=0.05)
+    assert sp.velocity_enu_m_s == pytest.approx((0.0, 2.0, 0.0))
+    assert sp.yaw_deg == pytest.approx(90.0, abs=0.1)
+    right = from_follow_target(msg, _here(), Follow(height_m=8.0, distance_m=5.0, angle_deg=90.0))
+    assert right is not None and right.position_enu_m == pytest.approx((45.0, 30.0, 8.0), abs=0.05)
