@@ -45,6 +45,7 @@ import zenoh
 from agents.autopilot import Autopilot
 from agents.behavior import BehaviorContext, BehaviorError, load_behavior
 from agents.estimator import Estimator
+from agents.flight import Flight, take_readings
 from agents.sensor import ConcentrationSensor
 from swarmbus.codec import MessageError, decode, encode
 from swarmbus.keys import Keys
@@ -52,9 +53,7 @@ from swarmbus.messages import (
     ActuatorBatch,
     ActuatorCommand,
     Command,
-    ConcentrationReading,
     ErrorReply,
-    PeerReading,
     PlumeQuery,
     PlumeSample,
     PlumeValues,
@@ -124,6 +123,13 @@ def build_autopilot(scenario: Scenario, vehicle_id: str, options: NodeOptions) -
     return Autopilot(scenario, vehicle_id, estimator=estimator, behavior=behavior)
 
 
+def build_flight(scenario: Scenario, vehicle_id: str, options: NodeOptions) -> Flight:
+    """A vehicle's autopilot and sensor, seeded from the scenario and the vehicle's index."""
+    index = [v.id for v in scenario.vehicles].index(vehicle_id)
+    sensor = ConcentrationSensor(scenario.sensor, scenario.world.seed, index)
+    return Flight(build_autopilot(scenario, vehicle_id, options), sensor)
+
+
 class _Served:
     """One served vehicle: its autopilot, sensor and publishers."""
 
@@ -137,9 +143,9 @@ class _Served:
         own_actuators: bool = True,
     ) -> None:
         self.vehicle_id = vehicle_id
-        self.autopilot = build_autopilot(scenario, vehicle_id, options)
-        index = [v.id for v in scenario.vehicles].index(vehicle_id)
-        self.sensor = ConcentrationSensor(scenario.sensor, scenario.world.seed, index)
+        self.flight = build_flight(scenario, vehicle_id, options)
+        self.autopilot = self.flight.autopilot
+        self.sensor = self.flight.sensor
         # None: the process batches its vehicles' commands (AutopilotNode.batch_pub)
         self.actuators = (
             session.declare_publisher(keys.vehicle_actuators(vehicle_id)) if own_actuators else None
@@ -149,7 +155,6 @@ class _Served:
         self.last_command = b""
         self.last_status: VehicleStatus | None = None
         self.last_status_time_s = -1e9
-        self.new_readings: list[ConcentrationReading] = []
 
     def publish_status(self, force: bool, period_s: float) -> None:
         status = self.autopilot.status()
@@ -456,8 +461,7 @@ class AutopilotNode:
                 except MessageError as exc:
                     log.warning("%s: ignoring bad state in tick %d: %s", vid, tick.tick, exc)
                     continue
-                rotor = served.autopilot.step(state, peers, served.new_readings)
-                served.new_readings = []
+                rotor = served.flight.step(state, peers)
                 command = ActuatorCommand(vehicle_id=vid, tick=tick.tick, rotor_commands=rotor)
                 if served.actuators is None:
                     batch.append(command)
@@ -505,38 +509,10 @@ class AutopilotNode:
             return  # not the tick with the physics' answer (e.g. garbage on sim/tick): wait
         self.pending = None
         values = self._values(pending, tick.plume_values)
-        index: dict[str, int] = {}
-        for k, s in enumerate(pending.states):
-            index.setdefault(s.vehicle_id, k)
-        # Every vehicle's PeerReading, built once per tick and shared by the served vehicles'
-        # readings (frozen): K x N constructions per tick would be N.
-        everyone: list[PeerReading] | None = None
-        for vid, served in self.served.items():
-            if not served.sensor.due(pending.tick):
-                continue
-            own = index.get(vid)
-            if own is None:
-                continue
-            position = pending.states[own].position_enu_m
-            true = values[own] if values is not None else None
-            peers: list[PeerReading] = []
-            if values is not None:
-                if everyone is None:
-                    everyone = [
-                        PeerReading(
-                            vehicle_id=s.vehicle_id,
-                            position_enu_m=s.position_enu_m,
-                            true_g_m3=values[k],
-                        )
-                        for k, s in enumerate(pending.states)
-                    ]
-                peers = everyone[:own] + everyone[own + 1 :]
-            reading = served.sensor.reading(vid, pending.sim_time_s, position, true, peers)
-            served.autopilot.sensor_health = (
-                "" if reading.available else "sensor: the plume service did not answer"
-            )
-            served.readings_pub.put(encode(reading))
-            served.new_readings.append(reading)
+        flights = [served.flight for served in self.served.values()]
+        taken = take_readings(flights, pending.tick, pending.sim_time_s, pending.states, values)
+        for flight, reading in taken:
+            self.served[flight.vehicle_id].readings_pub.put(encode(reading))
 
     def _values(
         self, pending: _PendingSensor, from_physics: PlumeSample | None
