@@ -12,11 +12,13 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from deploy.demo import StateDigest
+from deploy.envs.clock import ClockHolder
 from deploy.fused import FusedRunner
 from swarmbus.codec import encode
 from swarmbus.keys import Keys
 from swarmbus.messages import (
     Arm,
+    Command,
     FlightMode,
     MissionStart,
     PlumeQuery,
@@ -25,7 +27,6 @@ from swarmbus.messages import (
     VehicleState,
 )
 from swarmbus.scenario import DEFAULT_SCENARIO, Scenario, load_scenario
-from tests.clock_holder import ClockHolder
 from tests.procs import NodeProcs, wait_for_queryable, zenoh_network
 
 CLOCK = "clock"
@@ -37,7 +38,7 @@ spawn_enu_m = [-300.0, 0.0, 0.0]
 """
 BEHAVIOUR = 'behavior = "agents.behaviors.casting:Casting"\n'
 
-Boundary = dict[int, list[tuple[str, object]]]
+Boundary = dict[int, list[tuple[str, Command]]]
 
 
 def default_with_clock(tmp_path: Path, noisy_casting: bool = False) -> Path:

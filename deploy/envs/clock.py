@@ -1,10 +1,11 @@
-"""A lockstep participant in the test process that holds the clock between ticks.
+"""A lockstep participant that holds the clock between ticks, from a client process.
 
-It is the autopilot of one parked scenario vehicle (its liveliness token ``autopilot-<id>``),
-so the physics waits for it every tick. It answers tick ``k`` (motors off) only once every other
-vehicle's autopilot has answered ``k`` and the test's commands for that moment have been
-answered: a command given at the boundary of tick ``k`` takes effect at tick ``k + 1`` in the
-distributed stack, exactly where :meth:`deploy.fused.FusedRunner.command` puts it.
+It is the autopilot of one parked scenario vehicle (its liveliness token ``autopilot-<id>``,
+motors always off), so the physics waits for it every tick. It answers tick ``k`` only when
+told, and only once every other vehicle's autopilot has answered ``k``: a command given while it
+holds tick ``k`` takes effect at tick ``k + 1``, exactly where
+:meth:`deploy.fused.FusedRunner.command` puts it. The bus backend of the environments steps the
+distributed stack with it.
 """
 
 from __future__ import annotations
@@ -18,7 +19,11 @@ import zenoh
 from deploy.demo import StateDigest, send_command
 from swarmbus.codec import MessageError, decode, encode
 from swarmbus.keys import Keys
-from swarmbus.messages import ActuatorBatch, ActuatorCommand, SimTick, VehicleState
+from swarmbus.messages import ActuatorBatch, ActuatorCommand, Command, SimTick, VehicleState
+
+
+class ClockError(RuntimeError):
+    pass
 
 
 class ClockHolder:
@@ -36,7 +41,7 @@ class ClockHolder:
         self.others = frozenset(others)
         self.rotor_count = rotor_count
         self.digest = StateDigest()
-        self.states: dict[int, list[VehicleState]] = {}
+        self._states: dict[int, list[VehicleState]] = {}
         self._cond = threading.Condition()
         self._answered: dict[int, set[str]] = {}
         self._released = -1
@@ -56,6 +61,7 @@ class ClockHolder:
             sub.undeclare()
         self._pub.undeclare()
 
+    # ------------------------------------------------------------------ bus callbacks
     def _on_tick(self, sample: zenoh.Sample) -> None:
         try:
             tick = decode(sample.payload.to_bytes(), SimTick)
@@ -64,7 +70,7 @@ class ClockHolder:
         for state in tick.states:
             self.digest.add(encode(state))
         with self._cond:
-            self.states.setdefault(tick.tick, tick.states)
+            self._states.setdefault(tick.tick, tick.states)
             self._cond.notify_all()
         if tick.tick <= self._released:  # the start handshake repeats tick 0: answer again
             self.release(tick.tick)
@@ -72,7 +78,8 @@ class ClockHolder:
     def _answer(self, commands: Sequence[ActuatorCommand]) -> None:
         with self._cond:
             for cmd in commands:
-                self._answered.setdefault(cmd.tick, set()).add(cmd.vehicle_id)
+                if cmd.tick > self._released:
+                    self._answered.setdefault(cmd.tick, set()).add(cmd.vehicle_id)
             self._cond.notify_all()
 
     def _on_command(self, sample: zenoh.Sample) -> None:
@@ -87,35 +94,46 @@ class ClockHolder:
         except MessageError:
             return
 
-    def wait_answered(self, tick: int, timeout_s: float = 30.0) -> None:
-        """Until tick ``tick`` is published and every other autopilot answered it."""
+    # ------------------------------------------------------------------ the clock
+    def wait_answered(self, tick: int, timeout_s: float = 30.0) -> list[VehicleState]:
+        """Until ``tick`` is published and every other autopilot answered it; its states."""
         deadline = time.monotonic() + timeout_s
         with self._cond:
-            while not (tick in self.states and self.others <= self._answered.get(tick, set())):
+            while not (tick in self._states and self.others <= self._answered.get(tick, set())):
                 remaining = deadline - time.monotonic()
                 if remaining <= 0.0:
                     missing = sorted(self.others - self._answered.get(tick, set()))
-                    raise AssertionError(
-                        f"tick {tick}: published {tick in self.states}, no answer from {missing}"
+                    raise ClockError(
+                        f"tick {tick} after {timeout_s:.0f} s: "
+                        + ("no answer from " + ", ".join(missing) if missing else "not published")
                     )
                 self._cond.wait(remaining)
+            return self._states[tick]
 
     def release(self, tick: int) -> None:
         """Answer ``tick``: the physics steps on to ``tick + 1``."""
         cmd = ActuatorCommand(
             vehicle_id=self.vehicle_id, tick=tick, rotor_commands=[0.0] * self.rotor_count
         )
-        self._released = max(self._released, tick)
+        with self._cond:
+            if tick > self._released:
+                self._released = tick
+                for old in [k for k in self._states if k < tick]:
+                    del self._states[old]
+                for old in [k for k in self._answered if k <= tick]:
+                    del self._answered[old]
         self._pub.put(encode(cmd))
 
     def run(
-        self, last_tick: int, at_boundary: Callable[[int], Sequence[tuple[str, object]]]
+        self, last_tick: int, at_boundary: Callable[[int], Sequence[tuple[str, Command]]]
     ) -> None:
-        """Ticks 0..``last_tick``; ``at_boundary(k)`` names the commands given after tick k."""
+        """Ticks 0..``last_tick``; ``at_boundary(k)`` names the commands given after tick k
+        (each must be accepted)."""
         for k in range(last_tick + 1):
             self.wait_answered(k)
             for vid, command in at_boundary(k):
-                reply = send_command(self.session, self.keys, vid, command)  # type: ignore[arg-type]
-                assert reply is not None and reply.accepted, (vid, command, reply)
+                reply = send_command(self.session, self.keys, vid, command)
+                if reply is None or not reply.accepted:
+                    raise ClockError(f"tick {k}: {vid} did not accept {command}: {reply}")
             if k < last_tick:
                 self.release(k)

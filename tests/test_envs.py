@@ -1,0 +1,164 @@
+"""The Gymnasium and PettingZoo environments: the standard conformance checks, repeatability,
+the default reward against the geometry, and the bus backend against the fused one."""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+from pettingzoo.test import parallel_api_test
+
+from deploy.envs import ENV_ID, AgentStep, PlumeSourceEnv, PlumeSwarmEnv
+
+
+def scripted_actions(seed: int, agents: list[str], steps: int) -> list[dict[str, np.ndarray]]:
+    rng = np.random.default_rng(seed)
+    return [{a: rng.uniform(-1.0, 1.0, 4).astype(np.float32) for a in agents} for _ in range(steps)]
+
+
+def trajectory(env: PlumeSwarmEnv, seed: int, steps: int) -> list[dict[str, np.ndarray]]:
+    obs, _ = env.reset(seed=seed)
+    out = [obs]
+    for actions in scripted_actions(seed, env.possible_agents, steps):
+        obs, *_ = env.step(actions)
+        out.append(obs)
+    return out
+
+
+def assert_same(a: list[dict[str, np.ndarray]], b: list[dict[str, np.ndarray]]) -> None:
+    assert len(a) == len(b)
+    for step, (x, y) in enumerate(zip(a, b, strict=True)):
+        assert x.keys() == y.keys(), step
+        for agent in x:
+            assert np.array_equal(x[agent], y[agent]), (step, agent, x[agent], y[agent])
+
+
+def test_source_env_is_registered_and_passes_check_env() -> None:
+    env = gymnasium.make(ENV_ID)
+    try:
+        check_env(env.unwrapped)
+    finally:
+        env.close()
+
+
+def test_swarm_env_passes_the_parallel_api_test() -> None:
+    env = PlumeSwarmEnv()
+    try:
+        parallel_api_test(env, num_cycles=30)
+    finally:
+        env.close()
+
+
+def test_reset_with_a_seed_repeats_the_trajectory_and_another_seed_does_not() -> None:
+    env = PlumeSwarmEnv(vehicles=4)
+    try:
+        first = trajectory(env, 11, 15)
+        second = trajectory(env, 11, 15)
+        other = trajectory(env, 12, 15)
+    finally:
+        env.close()
+    assert_same(first, second)
+    assert not np.array_equal(first[0]["uav1"], other[0]["uav1"])
+
+
+def test_start_lies_in_the_box_in_offboard_at_the_drawn_altitude() -> None:
+    env = PlumeSwarmEnv()
+    try:
+        obs, _ = env.reset(seed=5)
+        box = env.scenario.env
+        for agent, o in obs.items():
+            x, y, z = o[:3]
+            assert box.start_min_enu_m[0] <= x <= box.start_max_enu_m[0], agent
+            assert box.start_min_enu_m[1] <= y <= box.start_max_enu_m[1], agent
+            # the take-off altitude above the ground (the body's centre sits ~6 cm up)
+            assert box.start_min_enu_m[2] - 0.5 <= z <= box.start_max_enu_m[2] + 0.6, agent
+        runner = env.backend.runner  # type: ignore[attr-defined]
+        modes = {f.autopilot.modes.mode for f in runner.flights.values()}
+        assert modes == {"offboard"}
+    finally:
+        env.close()
+
+
+def test_flying_at_the_source_earns_the_distance_closed() -> None:
+    """The default reward is metres of progress: flying straight at the source for T seconds
+    closes at most v·T metres and, with the autopilot tracking the setpoint, most of that."""
+    env = PlumeSourceEnv()
+    try:
+        obs, info = env.reset(seed=2)
+        source = np.array([0.0, 0.0, 10.0])  # the default scenario's release point
+        start = info["distance_m"]
+        assert start == pytest.approx(float(np.linalg.norm(obs[:3] - source)), rel=1e-5)
+        total = 0.0
+        steps = 30  # 3 s at 10 steps/s
+        for _ in range(steps):
+            direction = (source - obs[:3]) / np.linalg.norm(source - obs[:3])
+            action = np.append(direction, 0.0).astype(np.float32)
+            obs, reward, terminated, truncated, info = env.step(action)
+            total += reward
+            assert not (terminated or truncated)
+        assert total == pytest.approx(start - info["distance_m"], abs=1e-9)
+        assert 0.5 * 5.0 * 3.0 < total <= math.hypot(5.0, 2.0) * 3.0
+    finally:
+        env.close()
+
+
+def test_termination_and_reward_are_pluggable() -> None:
+    seen: list[AgentStep] = []
+
+    def reward(step: AgentStep) -> float:
+        seen.append(step)
+        return -1.0
+
+    env = PlumeSwarmEnv(reward_fn=reward, termination_fn=lambda s: (s.elapsed_s >= 0.25, False))
+    try:
+        env.reset(seed=1)
+        zero = {a: np.zeros(4, dtype=np.float32) for a in env.agents}
+        _, rewards, terminated, _, _ = env.step(zero)
+        assert set(rewards.values()) == {-1.0} and not any(terminated.values())
+        _, _, terminated, _, _ = env.step(zero)  # 2 × 0.1 s
+        _, _, terminated, _, _ = env.step(zero)
+        assert all(terminated.values()) and env.agents == []
+        assert len(seen) == 9 and {s.vehicle_id for s in seen} == set(env.possible_agents)
+    finally:
+        env.close()
+
+
+def test_rgb_array_is_a_top_down_frame_with_the_vehicles() -> None:
+    env = PlumeSwarmEnv(render_mode="rgb_array")
+    try:
+        env.reset(seed=3)
+        frame = env.render()
+    finally:
+        env.close()
+    assert isinstance(frame, np.ndarray) and frame.dtype == np.uint8 and frame.shape[2] == 3
+    assert len(np.unique(frame.reshape(-1, 3), axis=0)) > 50  # a plume, axes, vehicles
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "field"),
+    [
+        ({"backend": "carrier-pigeon"}, "backend"),
+        ({"ticks_per_step": 120}, "ticks_per_step"),
+        ({"ticks_per_step": 0}, "ticks_per_step"),
+        ({"k_peers": -1}, "k_peers"),
+        ({"render_mode": "ansi"}, "render_mode"),
+    ],
+)
+def test_bad_arguments_name_the_field(kwargs: dict[str, object], field: str) -> None:
+    with pytest.raises(ValueError, match=field):
+        PlumeSwarmEnv(**kwargs)  # type: ignore[arg-type]
+
+
+def test_bus_backend_gives_the_fused_backends_observations() -> None:
+    fused = PlumeSwarmEnv()
+    bus = PlumeSwarmEnv(backend="bus")
+    try:
+        expected = trajectory(fused, 21, 10)
+        got = trajectory(bus, 21, 10)
+    finally:
+        fused.close()
+        bus.close()
+    assert_same(expected, got)
