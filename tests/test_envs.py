@@ -11,12 +11,17 @@ import sys
 from pathlib import Path
 
 import gymnasium
+import msgspec
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 from pettingzoo.test import parallel_api_test
 
 from deploy.envs import ENV_ID, AgentStep, PlumeSourceEnv, PlumeSwarmEnv
+from deploy.launcher import Launcher, LaunchOptions
+from deploy.scaling import write_scenario
+from swarmbus.scenario import load_scenario
+from swarmbus.session import free_tcp_port
 from tests.procs import REPO, run_cli
 
 
@@ -204,3 +209,35 @@ def test_bench_envs_names_an_unknown_backend(tmp_path: Path) -> None:
     assert res.returncode != 0
     assert "--backends" in res.stderr and "warp" in res.stderr
     assert "Traceback" not in res.stderr
+
+
+def test_bus_backend_attaches_to_a_running_stack_and_flies_it(tmp_path: Path) -> None:
+    scenario = load_scenario()
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    scenario = msgspec.structs.replace(
+        scenario, network=msgspec.structs.replace(scenario.network, connect=[endpoint])
+    )
+    path = write_scenario(scenario, tmp_path / "scenario.toml")
+    opts = LaunchOptions(
+        scenario_path=path,
+        headless=True,
+        run_dir=tmp_path,
+        roles=("router", "plume", "physics", "autopilot"),
+        verbose=0,
+    )
+    with Launcher(scenario, opts):
+        env = PlumeSwarmEnv(scenario, backend="bus", attach=endpoint)
+        try:
+            start, first = env.reset(seed=1)
+            upwind = {a: np.array([-1.0, 0.0, 0.0, 0.0], dtype=np.float32) for a in env.agents}
+            for _ in range(10):  # >= 1 s (the world runs at its own pace) toward -x
+                obs, _, _, _, infos = env.step(upwind)
+        finally:
+            env.close()
+    for agent in env.possible_agents:
+        assert start[agent][2] > 7.0, "taken off to the [env] box's altitude"
+        elapsed = infos[agent]["sim_time_s"] - first[agent]["sim_time_s"]
+        assert elapsed >= 1.0
+        moved = start[agent][0] - obs[agent][0]
+        # from hover, at most 5 m/s (and a little overshoot)
+        assert 1.0 < moved <= 5.0 * elapsed + 0.5, (agent, moved, elapsed)
