@@ -1,6 +1,7 @@
 """agents — one autopilot process per vehicle, and the ``Swarm`` client for swarm algorithms."""
 
 from agents.swarm import (
+    ClockError,
     CommandRejected,
     CommandTimeout,
     PlumeError,
@@ -11,6 +12,7 @@ from agents.swarm import (
 )
 
 __all__ = [
+    "ClockError",
     "CommandRejected",
     "CommandTimeout",
     "PlumeError",

@@ -23,8 +23,9 @@ the autopilot sends none and takes the answer from tick k+1 (``SimTick.plume_val
 same values at the same tick. Commands are handled on Zenoh's thread under a lock.
 
 Options (``--set key=value``): ``sensor_timeout_s`` (0: 0.4 × participant timeout),
-``status_period_s`` (0.5), ``position_noise_m`` / ``velocity_noise_m_s`` (0: the estimate is
-the physics' truth). Plume queries go out only while a ``plume`` node's token is alive.
+``status_period_s`` (0.5; a stepped world gets a status every tick), ``position_noise_m`` /
+``velocity_noise_m_s`` (0: the estimate is the physics' truth). Plume queries go out only
+while a ``plume`` node's token is alive.
 """
 
 from __future__ import annotations
@@ -261,6 +262,10 @@ class AutopilotNode:
         self.last_tick = -1
         self.last_tick_wall = 0.0
         self.control_dt_s = 1.0 / ctx.scenario.time.control_hz
+        # A stepped world's client decides between steps on what it has seen: a status every
+        # tick lets it know it has seen the tick it paused at (agents.Swarm waits for that).
+        stepped = ctx.scenario.time.mode == "stepped"
+        self.status_period_s = 0.0 if stepped else options.status_period_s
         self._slot_lock = threading.Lock()  # guards _latest and _draining
         self._latest: zenoh.Sample | None = None  # the newest tick not handled yet
         self._draining = False  # a thread is handling ticks
@@ -303,7 +308,7 @@ class AutopilotNode:
                     self.session.liveliness().declare_token(self.keys.node_health(name))
                 )
         for served in self.served.values():
-            served.publish_status(force=True, period_s=self.options.status_period_s)
+            served.publish_status(force=True, period_s=self.status_period_s)
 
     def _on_presence(self, sample: zenoh.Sample) -> None:
         try:
@@ -337,7 +342,7 @@ class AutopilotNode:
             try:
                 with self.lock:
                     reply = served.autopilot.handle(command)
-                    served.publish_status(force=False, period_s=self.options.status_period_s)
+                    served.publish_status(force=False, period_s=self.status_period_s)
                 if not reply.accepted:
                     log.info(
                         "%s: %s refused: %s",
@@ -476,7 +481,7 @@ class AutopilotNode:
                 self.last_batch = encode(ActuatorBatch(tick=tick.tick, commands=batch))
                 self.batch_pub.put(self.last_batch)
             for served in self.served.values():
-                served.publish_status(force=False, period_s=self.options.status_period_s)
+                served.publish_status(force=False, period_s=self.status_period_s)
         if any(s.sensor.due(tick.tick) for s in self.served.values()) and tick.heads:
             if tick.plume_queried:
                 self.pending = _PendingSensor(tick.tick, tick.sim_time_s, tick.heads, None, True)

@@ -17,13 +17,27 @@ answer (:class:`CommandTimeout`); every wait has a deadline (:class:`WaitTimeout
 
 Offboard setpoints are timed in simulated time (``failsafe.offboard_timeout_s``): in lockstep
 mode faster than real time, stream them fast enough, or use a behaviour plug-in instead.
+
+A world started with ``time.mode = "stepped"`` (``plumeswarm up --stepped``) moves only when a
+client steps it; the first client to call :meth:`Swarm.step` holds its clock until it closes::
+
+    with Swarm.connect() as sw:
+        sw.step(1)                      # the world is paused at tick 1
+        sw.command("uav1").arm()        # takes effect in the autopilot's step of tick 2
+        sw.command("uav1").takeoff(10.0)
+        sw.step_until(lambda: sw.status("uav1").mode == "hold", 30.0, "uav1 hovering")
+
+A command answered between two steps always takes effect on the next tick (docs/deploy.md,
+"Clock modes"), so the same script gives the same state stream, run after run.
 """
 
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
+import uuid
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import Any, TypeVar
 
@@ -36,6 +50,7 @@ from swarmbus.codec import MessageError, decode, encode
 from swarmbus.keys import Keys
 from swarmbus.messages import (
     Arm,
+    Clock,
     CommandReply,
     ConcentrationReading,
     Disarm,
@@ -62,6 +77,8 @@ from swarmbus.messages import (
     SetMode,
     SetParam,
     Setpoint,
+    StepReply,
+    StepRequest,
     Takeoff,
     VehicleState,
     VehicleStatus,
@@ -75,6 +92,12 @@ T = TypeVar("T")
 M = TypeVar("M", bound=Message)
 Vec3 = tuple[float, float, float]
 AUTOPILOT_PREFIX = "autopilot-"
+CLOCK_CLIENT_PREFIX = "clock-"
+# A step's wall-clock deadline (only a dead or stuck physics reaches it): a base and a share
+# per granted tick, generous for a large swarm on a loaded machine.
+STEP_TIMEOUT_S = 60.0
+STEP_TIMEOUT_PER_TICK_S = 0.1
+ROUTE_RETRY_S = 0.05
 
 
 class SwarmError(Exception):
@@ -109,6 +132,11 @@ class PlumeError(SwarmError):
     """The plume service refused a query or did not answer."""
 
 
+class ClockError(SwarmError):
+    """A step was refused (the world is not stepped, another client holds its clock, the world
+    stopped) or the physics did not answer."""
+
+
 def _query(
     session: zenoh.Session, key: str, request: Message, timeout_s: float
 ) -> tuple[bytes | None, bytes | None]:
@@ -119,6 +147,14 @@ def _query(
         if reply.err is not None:
             return None, reply.err.payload.to_bytes()
     return None, None
+
+
+def _check(predicate: Callable[[], T]) -> T | None:
+    """``predicate()``, or None when it trips over data not there yet (``None.attr``, a key)."""
+    try:
+        return predicate()
+    except (AttributeError, KeyError, TypeError):
+        return None
 
 
 def _error_reply(data: bytes) -> ErrorReply:
@@ -289,6 +325,14 @@ class Swarm:
         self._status: dict[str, VehicleStatus] = {}
         self._readings: dict[str, ConcentrationReading] = {}
         self._callbacks: list[tuple[Callable[..., None] | None, ...]] = []
+        # What every callback has been given (a stepped client waits for this, see step)
+        self._handled_tick: dict[str, int] = {}
+        self._handled_status_s: dict[str, float] = {}
+        self._clock: Clock | None = None
+        self._changed = threading.Condition(self._lock)  # a handled message or a clock
+        self._clock_name = f"{CLOCK_CLIENT_PREFIX}{uuid.uuid4().hex[:12]}"
+        self._clock_token: zenoh.LivelinessToken | None = None
+        self._last_step: StepReply | None = None
         self.plume = PlumeClient(session, keys, command_timeout_s)
         self._subs = [
             session.declare_subscriber(
@@ -301,6 +345,7 @@ class Swarm:
                 keys.all_vehicle_concentration(),
                 self._on(ConcentrationReading, self._readings, 2),
             ),
+            session.declare_subscriber(keys.clock(), self._on_clock),
         ]
         self._presence = Presence(session, keys)
 
@@ -332,8 +377,15 @@ class Swarm:
         self.close()
 
     def close(self) -> None:
-        for sub in self._subs:
+        """Leave the bus (and free the clock, when this client held it); idempotent."""
+        subs, self._subs = self._subs, []
+        if not subs:
+            return
+        for sub in subs:
             sub.undeclare()
+        if self._clock_token is not None:
+            self._clock_token.undeclare()  # frees the clock for another client
+            self._clock_token = None
         self._presence.close()
         if self._own_session:
             self.session.close()
@@ -355,8 +407,26 @@ class Swarm:
                     cb(msg)  # type: ignore[misc]
                 except Exception:
                     log.exception("swarm subscriber callback failed")
+            with self._lock:
+                if isinstance(msg, VehicleState):
+                    self._handled_tick[vid] = max(msg.tick, self._handled_tick.get(vid, -1))
+                elif isinstance(msg, VehicleStatus):
+                    old = self._handled_status_s.get(vid, -1.0)
+                    self._handled_status_s[vid] = max(msg.sim_time_s, old)
+                self._changed.notify_all()
 
         return handle
+
+    def _on_clock(self, sample: zenoh.Sample) -> None:
+        try:
+            clock = decode(sample.payload.to_bytes(), Clock)
+        except MessageError as exc:
+            log.warning("ignoring %s: %s", sample.key_expr, exc)
+            return
+        with self._lock:
+            if self._clock is None or clock.tick >= self._clock.tick:
+                self._clock = clock
+            self._changed.notify_all()
 
     @property
     def vehicles(self) -> list[str]:
@@ -404,21 +474,153 @@ class Swarm:
         return VehicleCommander(self.session, self.keys, vehicle_id, self.command_timeout_s)
 
     def wait_until(
-        self, predicate: Callable[[], T], timeout_s: float, what: str = "", poll_s: float = 0.02
+        self,
+        predicate: Callable[[], T],
+        timeout_s: float | None = None,
+        what: str = "",
+        poll_s: float = 0.02,
+        *,
+        sim_timeout_s: float | None = None,
     ) -> T:
-        """Poll ``predicate`` until it returns something truthy (returned) or time runs out.
+        """Poll ``predicate`` until it returns something truthy (returned) or time runs out:
+        ``timeout_s`` of wall clock, ``sim_timeout_s`` of simulated time (either or both).
 
         A predicate that trips over data not there yet (``None.attr``, a missing key) counts
-        as "not yet"."""
-        deadline = time.monotonic() + timeout_s
+        as "not yet". When this client holds a stepped world's clock, a sim-time wait steps
+        the world (:meth:`step_until`, one tick at a time; ``timeout_s`` does not apply)."""
+        if timeout_s is None and sim_timeout_s is None:
+            raise ValueError("wait_until needs timeout_s (wall clock) or sim_timeout_s (sim time)")
+        name = what or getattr(predicate, "__name__", repr(predicate))
+        if sim_timeout_s is not None and self.holds_clock:
+            return self.step_until(predicate, sim_timeout_s, name)
+        deadline = time.monotonic() + timeout_s if timeout_s is not None else math.inf
+        sim_deadline = self.sim_time + sim_timeout_s if sim_timeout_s is not None else math.inf
         while True:
-            try:
-                value: T | None = predicate()
-            except (AttributeError, KeyError, TypeError):  # e.g. no status yet: not yet
-                value = None
+            value = _check(predicate)
             if value:
                 return value
             if time.monotonic() >= deadline:
-                name = what or getattr(predicate, "__name__", repr(predicate))
                 raise WaitTimeout(f"timed out after {timeout_s:g} s waiting for {name}")
+            if self._known_sim_time() >= sim_deadline:
+                raise WaitTimeout(
+                    f"timed out after {sim_timeout_s:g} s of sim time waiting for {name}"
+                )
             time.sleep(poll_s)
+
+    # ------------------------------------------------------------------ simulated time
+    @property
+    def sim_time(self) -> float:
+        """The world's simulated time in s: where a stepped world is paused, or the latest
+        ``sim/clock`` (waits up to ``command_timeout_s`` for the first one)."""
+        with self._lock:
+            if self._clock is None and self._last_step is None:
+                self._changed.wait_for(lambda: self._clock is not None, self.command_timeout_s)
+        known = self._known_sim_time()
+        if known < 0.0:
+            raise ClockError(
+                f"no sim/clock of world {self.keys.world!r} within {self.command_timeout_s:g} s "
+                "(is its physics running?)"
+            )
+        return known
+
+    def _known_sim_time(self) -> float:
+        with self._lock:
+            times = [-1.0]
+            if self._clock is not None:
+                times.append(self._clock.sim_time_s)
+            if self._last_step is not None:
+                times.append(self._last_step.sim_time_s)
+        return max(times)
+
+    @property
+    def holds_clock(self) -> bool:
+        """Whether this client steps the world's clock (since its first accepted step)."""
+        return self._last_step is not None
+
+    def step(self, ticks: int = 1, timeout_s: float | None = None) -> StepReply:
+        """Advance a stepped world by ``ticks`` control ticks; returns where it paused (tick,
+        sim time). On return every state, status and reading of that tick has reached this
+        client's caches and callbacks; a command sent now takes effect on the next tick.
+
+        The first call takes the world's clock (until :meth:`close`). Raises
+        :class:`ClockError` when the world is not in stepped mode, another client holds its
+        clock, the world stopped, or the physics does not answer within ``timeout_s`` (default:
+        60 s + 0.1 s per tick)."""
+        if isinstance(ticks, bool) or not isinstance(ticks, int) or ticks < 1:
+            raise ValueError(f"step: ticks must be an integer >= 1, got {ticks!r}")
+        if self._clock_token is None:
+            # Our token tells the physics when we are gone (the clock is free again).
+            key = self.keys.node_health(self._clock_name)
+            self._clock_token = self.session.liveliness().declare_token(key)
+        wait_s = (
+            timeout_s
+            if timeout_s is not None
+            else (STEP_TIMEOUT_S + ticks * STEP_TIMEOUT_PER_TICK_S)
+        )
+        request = StepRequest(client=self._clock_name, ticks=ticks)
+        first = time.monotonic()
+        while True:  # a session just opened may not know the route to clock/step yet
+            asked = time.monotonic()
+            ok, err = _query(self.session, self.keys.clock_step(), request, wait_s)
+            waited = time.monotonic() - asked
+            if ok or err or waited >= wait_s or asked - first >= self.command_timeout_s:
+                break
+            time.sleep(ROUTE_RETRY_S)
+        if ok is None and self._last_step is None and self._clock_token is not None:
+            self._clock_token.undeclare()
+            self._clock_token = None
+        if err is not None:
+            e = _error_reply(err)
+            raise ClockError(f"step of world {self.keys.world!r} refused ({e.field}): {e.reason}")
+        if ok is None:
+            when = f"within {wait_s:g} s" if waited >= wait_s else "(nobody serves clock/step)"
+            raise ClockError(
+                f"no answer to a step of {ticks} tick(s) {when}: "
+                f"is the physics of world {self.keys.world!r} running?"
+            )
+        reply = decode(ok, StepReply)
+        self._last_step = reply
+        self._await_handled(reply)
+        return reply
+
+    def _await_handled(self, reply: StepReply) -> None:
+        """Until this tick's states and (live autopilots') statuses went through the caches and
+        callbacks: they travel from other processes than the step's reply, so they may come
+        after it. Readings are published before their status, so they are in too."""
+        alive = set(self.autopilots_alive())
+
+        def stale() -> list[str]:
+            late = {v for v, t in self._handled_tick.items() if t < reply.tick}
+            late |= {v for v in alive if self._handled_status_s.get(v, -1.0) < reply.sim_time_s}
+            return sorted(late)
+
+        with self._lock:
+            if not self._changed.wait_for(lambda: not stale(), self.command_timeout_s):
+                log.warning(
+                    "tick %d: no state or status of that tick from %s within %g s",
+                    reply.tick,
+                    ", ".join(stale()),
+                    self.command_timeout_s,
+                )
+
+    def step_until(
+        self, predicate: Callable[[], T], timeout_sim_s: float, what: str = "", ticks: int = 1
+    ) -> T:
+        """Step ``ticks`` at a time until ``predicate`` returns something truthy (returned);
+        :class:`WaitTimeout` after ``timeout_sim_s`` of simulated time. The predicate is
+        checked before the first step and after every step, on that tick's data."""
+        name = what or getattr(predicate, "__name__", repr(predicate))
+        start_s = self._last_step.sim_time_s if self._last_step is not None else self.sim_time
+        while True:
+            value = _check(predicate)
+            if value:
+                return value
+            reply = self.step(ticks)
+            if reply.sim_time_s - start_s >= timeout_sim_s - 1e-9:
+                value = _check(predicate)
+                if value:
+                    return value
+                raise WaitTimeout(
+                    f"timed out after {timeout_sim_s:g} s of sim time waiting for {name} "
+                    f"(tick {reply.tick}, t={reply.sim_time_s:.3f} s)"
+                )

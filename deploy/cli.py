@@ -206,6 +206,11 @@ def node(
     show_default=True,
     help="Vehicles each autopilot process serves.",
 )
+@click.option(
+    "--stepped",
+    is_flag=True,
+    help="Stepped clock: the world advances only when one client steps it (Swarm.step).",
+)
 def up(
     scenario_arg: str | None,
     scenario: str | None,
@@ -219,6 +224,7 @@ def up(
     hosts_file: Path | None,
     host_name: str | None,
     vehicles_per_process: int,
+    stepped: bool,
 ) -> None:
     """Start the whole swarm (plume, physics, autopilots, gateway, viewer) and supervise it."""
     from deploy.console import Console
@@ -237,11 +243,19 @@ def up(
     )
     sc = scenario_from(str(path))
     secured(sc, sc.network, None, None, "operator")  # its TLS files, if any, are readable
+    run_dir = out or default_run_dir()
+    if stepped:  # every process reads the mode from the scenario: fly a stepped copy of it
+        import msgspec
+
+        from deploy.scaling import write_scenario
+
+        sc = msgspec.structs.replace(sc, time=msgspec.structs.replace(sc.time, mode="stepped"))
+        path = write_scenario(sc, run_dir / "scenario-stepped.toml")
     opts = LaunchOptions(
         scenario_path=path,
         headless=headless,
         record=record,
-        run_dir=out or default_run_dir(),
+        run_dir=run_dir,
         connect=connect,
         listen=listen,
         roles=tuple(r.strip() for r in roles.split(",") if r.strip()) if roles else None,
@@ -271,6 +285,14 @@ def up(
 @click.option(
     "--record/--no-record", default=True, help="Record the run (when the recorder exists)."
 )
+@click.option(
+    "--clock",
+    type=click.Choice(["stepped", "lockstep", "realtime"]),
+    default=None,
+    help="stepped (default): the demo steps the clock, two runs give the same state digest; "
+    "lockstep: free-running, as fast as the slowest process; realtime: paced to the wall "
+    "clock. With --attach the default is however the attached world runs.",
+)
 @HOSTS_FILE_OPT
 @HOST_OPT
 def demo(
@@ -280,6 +302,7 @@ def demo(
     timeout_s: float,
     attach: tuple[str, ...],
     record: bool,
+    clock: str | None,
     hosts_file: Path | None,
     host_name: str | None,
 ) -> None:
@@ -302,6 +325,7 @@ def demo(
         attach=attach,
         record=record,
         network=net,
+        clock=clock,
     )
     sys.exit(run_demo(opts, Console()))
 

@@ -6,10 +6,16 @@ shows a live table, waits (bounded) until every vehicle finished its mission and
 prints for five moments per vehicle the reported concentration next to the plume model at exactly
 that position, and writes ``summary.json`` (with a digest of the whole vehicle-state stream, so
 two runs can be compared from outside) into the run directory.
+
+It drives the stack through an :class:`agents.Swarm` client. By default the world runs on a
+stepped clock that this client steps: the commands go out while the world is paused and land on
+the next tick, and the end is checked every ``STEP_S`` of sim time, so two runs give the same
+digest. ``clock = "lockstep"`` or ``"realtime"`` flies free-running instead.
 """
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import logging
@@ -25,20 +31,19 @@ import numpy as np
 import numpy.typing as npt
 import zenoh
 
+from agents import CommandRejected, CommandTimeout, Swarm, SwarmError
+from agents.swarm import Subscription
 from deploy.busview import BusView, Snapshot, status_line
 from deploy.console import Console
 from deploy.launcher import Launcher, LaunchError, LaunchOptions, missing_roles
 from deploy.scaling import scale_scenario, write_scenario
 from swarmbus.codec import MessageError, decode, encode
-from swarmbus.keys import KeyNameError, Keys
+from swarmbus.keys import Keys
 from swarmbus.messages import (
-    Arm,
     Command,
     CommandReply,
     ConcentrationReading,
     ErrorReply,
-    MissionStart,
-    MissionUpload,
     VehicleStatus,
 )
 from swarmbus.scenario import Scenario
@@ -47,6 +52,8 @@ from swarmbus.session import NetworkConfig, free_tcp_port, open_session
 log = logging.getLogger(__name__)
 
 SAMPLES_PER_VEHICLE = 5
+STEP_S = 0.1  # a stepped demo checks whether every vehicle is done this often (sim time)
+COMMAND_TIMEOUT_S = 5.0
 DEMO_ROLES = ("router", "plume", "physics", "autopilot")
 AIRBORNE_M = 1.0
 ModelFn = Callable[[npt.NDArray[np.float64]], npt.NDArray[np.float64]]
@@ -132,50 +139,36 @@ class VehicleRecord:
 
 
 class Collector:
-    """Subscribes before the world starts: every state payload, status and reading."""
+    """Every state payload (subscribed before the world starts), and every status and reading
+    as the demo's :class:`~agents.Swarm` client hands them over (see :meth:`attach`)."""
 
     def __init__(self, session: zenoh.Session, keys: Keys, vehicle_ids: Sequence[str]) -> None:
         self.keys = keys
         self.digest = StateDigest()
         self._lock = threading.Lock()
         self.vehicles = {vid: VehicleRecord() for vid in vehicle_ids}
-        self._subs = [
+        self._subs: list[Subscription | zenoh.Subscriber[None]] = [
             session.declare_subscriber(
                 keys.all_vehicle_states(), lambda s: self.digest.add(s.payload.to_bytes())
             ),
-            session.declare_subscriber(keys.all_vehicle_status(), self._on_status),
-            session.declare_subscriber(keys.all_vehicle_concentration(), self._on_reading),
         ]
 
-    def _record(self, sample: zenoh.Sample) -> VehicleRecord | None:
-        try:
-            return self.vehicles.get(self.keys.vehicle_id_of(str(sample.key_expr)))
-        except KeyNameError:
-            return None
+    def attach(self, swarm: Swarm) -> None:
+        """Statuses and readings through ``swarm``'s callbacks: a stepped ``swarm.step`` returns
+        once they are handled, so what the demo decides on is the tick it paused at."""
+        self._subs.append(swarm.subscribe(on_status=self.on_status, on_reading=self.on_reading))
 
-    def _on_status(self, sample: zenoh.Sample) -> None:
-        rec = self._record(sample)
-        if rec is None:
-            return
-        try:
-            st = decode(sample.payload.to_bytes(), VehicleStatus)
-        except MessageError as exc:
-            log.warning("ignoring status: %s", exc)
-            return
-        with self._lock:
-            rec.on_status(st)
+    def on_status(self, st: VehicleStatus) -> None:
+        rec = self.vehicles.get(st.vehicle_id)
+        if rec is not None:
+            with self._lock:
+                rec.on_status(st)
 
-    def _on_reading(self, sample: zenoh.Sample) -> None:
-        rec = self._record(sample)
-        if rec is None:
-            return
-        try:
-            r = decode(sample.payload.to_bytes(), ConcentrationReading)
-        except MessageError as exc:
-            log.warning("ignoring reading: %s", exc)
-            return
-        with self._lock:
-            rec.readings.append(r)
+    def on_reading(self, r: ConcentrationReading) -> None:
+        rec = self.vehicles.get(r.vehicle_id)
+        if rec is not None:
+            with self._lock:
+                rec.readings.append(r)
 
     def all_done(self) -> bool:
         with self._lock:
@@ -183,7 +176,10 @@ class Collector:
 
     def close(self) -> None:
         for sub in self._subs:
-            sub.undeclare()
+            if isinstance(sub, Subscription):
+                sub.close()
+            else:
+                sub.undeclare()
 
 
 # ---------------------------------------------------------------------------- commands
@@ -248,12 +244,24 @@ def wait_for_world(view: BusView, vehicle_ids: Sequence[str], deadline: float) -
         view.wait_changed(0.2)
 
 
-def start_missions(session: zenoh.Session, keys: Keys, scenario: Scenario, deadline: float) -> None:
+def start_missions(sw: Swarm, scenario: Scenario, deadline: float) -> None:
+    """Upload each vehicle's scenario mission, arm it and start it (an autopilot that does not
+    answer yet is asked again until ``deadline``)."""
     for v in scenario.vehicles:
+        uav = sw.command(v.id)
+        steps: list[Callable[[], None]] = [uav.arm, uav.start_mission]
         if v.mission:
-            command_until_answered(session, keys, v.id, MissionUpload(items=v.mission), deadline)
-        command_until_answered(session, keys, v.id, Arm(), deadline)
-        command_until_answered(session, keys, v.id, MissionStart(), deadline)
+            steps.insert(0, functools.partial(uav.upload_mission, v.mission))
+        for step in steps:
+            while True:
+                try:
+                    step()
+                    break
+                except CommandRejected as exc:
+                    raise DemoError(str(exc)) from None
+                except CommandTimeout as exc:
+                    if time.monotonic() > deadline:
+                        raise DemoError(str(exc)) from None
 
 
 # ---------------------------------------------------------------------------- results
@@ -386,6 +394,9 @@ class DemoOptions:
     attach: tuple[str, ...] = ()  # fly a stack already running behind this router endpoint
     network: NetworkConfig | None = None  # how to join it (default: the scenario's, e.g. TLS)
     record: bool = True  # run the recorder too, when it is installed
+    # "stepped" (default for its own stack: reproducible), "lockstep" or "realtime";
+    # None with ``attach``: however the attached world runs
+    clock: str | None = None
 
 
 class AttachedStack:
@@ -441,9 +452,44 @@ def prepare(opts: DemoOptions) -> tuple[Scenario, Path]:
     sc = msgspec.structs.replace(
         sc,
         network=msgspec.structs.replace(sc.network, connect=[endpoint]),
-        time=msgspec.structs.replace(sc.time, mode="lockstep", duration_s=0.0),
+        time=msgspec.structs.replace(sc.time, mode=opts.clock or "stepped", duration_s=0.0),
     )
     return sc, write_scenario(sc, opts.out / "scenario.toml")
+
+
+def clock_mode(view: BusView, deadline: float) -> str:
+    """How the (attached) world's clock runs, from its ``sim/clock``."""
+    while (snap := view.snapshot()).clock is None:
+        if time.monotonic() > deadline:
+            raise DemoError("no sim/clock from the physics in time")
+        view.wait_changed(0.2)
+    return str(snap.clock.mode)
+
+
+def start_stepped(sw: Swarm, sc: Scenario, deadline: float) -> Callable[[], None]:
+    """Start the missions on a stepped clock; returns how to advance the world: every command
+    lands on a known tick, and the run ends on the first check (every ``STEP_S`` of sim time)
+    that finds every vehicle done, so two runs give the same state stream."""
+    sw.step(1)  # past the start handshake: every autopilot has its first state
+    start_missions(sw, sc, deadline)  # paused at tick 1: they take effect in tick 2
+    ticks = max(1, round(STEP_S * sc.time.control_hz))
+
+    def advance() -> None:
+        sw.step(ticks)
+
+    return advance
+
+
+def start_free(view: BusView, sw: Swarm, sc: Scenario, deadline: float) -> Callable[[], None]:
+    """Start the missions on a free-running clock (lockstep or realtime): commands land on
+    whichever tick is current when they arrive; returns how to wait for news."""
+    wait_for_world(view, [v.id for v in sc.vehicles], deadline)
+    start_missions(sw, sc, deadline)
+
+    def advance() -> None:
+        view.wait_changed(0.2)
+
+    return advance
 
 
 def run_demo(opts: DemoOptions, console: Console) -> int:
@@ -460,42 +506,58 @@ def run_demo(opts: DemoOptions, console: Console) -> int:
         AttachedStack(sc, opts.attach, opts.network) if opts.attach else Launcher(sc, launch)
     )
     collector: Collector | None = None
+    sw: Swarm | None = None
     deadline = time.monotonic() + opts.timeout_s
     console.line(f"plumeswarm demo: {len(ids)} vehicle(s), run directory {opts.out}")
 
     def subscribe(session: zenoh.Session) -> None:
-        nonlocal collector
+        nonlocal collector, sw
         collector = Collector(session, keys, ids)
+        sw = Swarm(session, keys, command_timeout_s=COMMAND_TIMEOUT_S, own_session=False)
+        collector.attach(sw)
 
     wall0 = time.monotonic()
     sim0: float | None = None
     snap: Snapshot | None = None
+    mode: str = sc.time.mode
     try:
         launcher.start(on_bus=subscribe)
-        assert collector is not None and launcher.view is not None
+        assert collector is not None and sw is not None and launcher.view is not None
+        view = launcher.view
         console.line(f"plumeswarm demo: {len(launcher.specs)} processes ready")
-        wait_for_world(launcher.view, ids, deadline)
-        console.line("plumeswarm demo: the world is ticking; starting missions")
-        start_missions(launcher.session, keys, sc, deadline)
-        wall0 = time.monotonic()
-        snap = launcher.view.snapshot()
-        sim0 = snap.clock.sim_time_s if snap.clock else None
+        if opts.attach:
+            mode = opts.clock or clock_mode(view, deadline)
         next_table = 0.0
+
+        def show() -> None:
+            nonlocal next_table
+            now = time.monotonic()
+            if now >= next_table:
+                assert collector is not None
+                console.block(live_table(view.snapshot(), collector.vehicles, len(ids)))
+                next_table = now + (opts.table_period_s if console.tty else 10.0)
+
+        console.line(f"plumeswarm demo: {mode} clock; starting missions")
+        if mode == "stepped":
+            advance = start_stepped(sw, sc, deadline)
+        else:
+            advance = start_free(view, sw, sc, deadline)
+        wall0 = time.monotonic()
+        snap = view.snapshot()
+        sim0 = snap.clock.sim_time_s if snap.clock else None
         while not collector.all_done():
             launcher.supervise_once()
-            now = time.monotonic()
-            if now > deadline:
+            if time.monotonic() > deadline:
                 break
-            if now >= next_table:
-                snap = launcher.view.snapshot()
-                console.block(live_table(snap, collector.vehicles, len(ids)))
-                next_table = now + (opts.table_period_s if console.tty else 10.0)
-            launcher.view.wait_changed(0.2)
-        snap = launcher.view.snapshot()
-    except (LaunchError, DemoError) as exc:
+            show()
+            advance()
+        snap = view.snapshot()
+    except (LaunchError, DemoError, SwarmError) as exc:
         console.line(f"plumeswarm demo: {exc}")
     finally:
         wall = time.monotonic() - wall0
+        if sw is not None:
+            sw.close()
         launcher.stop()
         if collector is not None:
             collector.close()
@@ -504,6 +566,8 @@ def run_demo(opts: DemoOptions, console: Console) -> int:
     if snap is not None:
         console.block(live_table(snap, collector.vehicles, len(ids)))
     summary = build_summary(sc, path, collector, snap, wall, sim0, record, opts.out)
+    summary["clock"] = mode
+    summary["deterministic"] = mode == "stepped"
     (opts.out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     console.line("")
     console.line(accuracy_table(summary["vehicles"]))
@@ -514,6 +578,12 @@ def run_demo(opts: DemoOptions, console: Console) -> int:
         f"({summary['state_digest']['messages']} states); summary {opts.out / 'summary.json'}"
         if rtf is not None
         else f"summary {opts.out / 'summary.json'}"
+    )
+    console.line(
+        "plumeswarm demo: deterministic: stepped clock (the same run gives the same state digest)"
+        if mode == "stepped"
+        else f"plumeswarm demo: not deterministic: {mode} clock (commands land on whichever "
+        "tick is current)"
     )
     failed = [
         vid

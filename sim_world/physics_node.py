@@ -23,10 +23,15 @@ the spawn: the lockstep handshake then runs on the checkpoint's tick, and the au
 it like any tick (sim time goes back by the replayed span).
 
 Options (``--set KEY=VALUE``): ``max_ticks`` (stop once this tick is published and answered),
-``mode`` (lockstep|realtime), ``speed_factor``, ``wait_for_autopilots`` (true|false: start
+``mode`` (lockstep|realtime|stepped), ``speed_factor``, ``wait_for_autopilots`` (true|false: start
 without waiting for the configured autopilots), ``clock_period_s``, ``checkpoint`` (a file
 path; empty: none), ``checkpoint_period_s`` (default ``time.checkpoint_period_s``; 0: never),
 ``shared_plume_query`` (true|false: false leaves the sensor query to every autopilot).
+
+Stepped mode (``mode = stepped``): after each tick is published and answered the physics waits
+for the clock holder's grant (``clock/step``, :mod:`sim_world.stepping`) before it applies the
+tick's commands; it answers the grant once the granted tick is published and answered. In the
+other modes ``clock/step`` answers with an error naming the mode.
 """
 
 from __future__ import annotations
@@ -46,6 +51,7 @@ import zenoh
 from sim_world import checkpoint
 from sim_world.checkpoint import CheckpointError, CheckpointWriter, ProgressMarker
 from sim_world.lockstep import Lockstep, participant_of
+from sim_world.stepping import SteppedClock, StepRefused
 from sim_world.world import World
 from swarmbus.codec import MessageError, decode, encode
 from swarmbus.messages import (
@@ -53,11 +59,14 @@ from swarmbus.messages import (
     ActuatorBatch,
     ActuatorCommand,
     Clock,
+    ErrorReply,
     PlumeQuery,
     PlumeSample,
     PlumeValues,
     SimTick,
     SpeedMode,
+    StepReply,
+    StepRequest,
     Tick,
     VehicleState,
 )
@@ -202,6 +211,10 @@ class PhysicsNode:
         self._plume_timeout_s = 0.4 * self.scenario.time.participant_timeout_s
         self._plume_nodes: set[str] = set()
         self._plume_pending: tuple[int, int, Any] | None = None  # tick, points, replies
+        # The stepped clock (served in every mode: the others answer with an error).
+        self._stepped = options.mode == SpeedMode.STEPPED
+        self.clock_gate: SteppedClock[zenoh.Query] = SteppedClock()
+        self._step_queryable = session.declare_queryable(self.keys.clock_step(), self._on_step)
         self._presence = Presence(session, self.keys, self._on_presence)
         # Clock bookkeeping (wall clock only measures; it never drives the physics).
         self._wall_start = time.monotonic()
@@ -214,6 +227,7 @@ class PhysicsNode:
 
     def close(self) -> None:
         self._presence.close()
+        self._step_queryable.undeclare()
         for sub in self._actuator_subs:
             sub.undeclare()
         for pub in self._state_pubs:
@@ -234,6 +248,10 @@ class PhysicsNode:
             return
         vid = participant_of(name, self.world.vehicle_ids)
         if vid is None:
+            if not alive:
+                with self._cond:
+                    if self.clock_gate.released(name):
+                        log.info("the stepped clock's holder %s left: the clock is free", name)
             return
         with self._cond:
             if alive:
@@ -417,6 +435,8 @@ class PhysicsNode:
             commands = self._await_commands()
             if commands is None:
                 break
+            if self._stepped and not self._await_grant():
+                break
             if opts.max_ticks is not None and self.tick >= opts.max_ticks:
                 break
             if duration_s > 0.0 and self.world.sim_time_s >= duration_s:
@@ -435,6 +455,10 @@ class PhysicsNode:
             self._publish_tick(states)
             self._maybe_publish_clock(sim_time)
         self._publish_clock(self.world.sim_time_s, force=True)
+        with self._cond:
+            abandoned = self.clock_gate.abandon()
+        if abandoned is not None:
+            _refuse(abandoned, "ticks", f"the world stopped at tick {self.tick}")
         wall = time.monotonic() - self._wall_start
         log.info(
             "physics stopped at tick %d, sim %.3f s after %.3f s wall (%.0f ticks/s)",
@@ -477,6 +501,54 @@ class PhysicsNode:
                     break
                 self._cond.wait(min(remaining, STOP_POLL_S))
             return barrier.commands()  # a new dict of the decoded (never mutated) lists
+
+    # ------------------------------------------------------------------ stepped clock
+    def _on_step(self, query: zenoh.Query) -> None:
+        payload = query.payload
+        try:
+            request = decode(payload.to_bytes() if payload is not None else b"", StepRequest)
+        except MessageError as exc:
+            _refuse(query, exc.field, exc.reason)
+            return
+        if not self._stepped:
+            _refuse(
+                query,
+                "mode",
+                f"world {self.keys.world!r} runs in {self.options.mode} mode, not stepped "
+                '(time.mode = "stepped" in the scenario, or plumeswarm up --stepped)',
+            )
+            return
+        with self._cond:
+            try:
+                target = self.clock_gate.request(request.client, request.ticks, self.tick, query)
+            except StepRefused as exc:
+                refusal: StepRefused | None = exc
+            else:
+                refusal = None
+                self._cond.notify_all()
+        if refusal is not None:
+            _refuse(query, refusal.field, refusal.reason)
+        else:
+            log.debug("%s: step to tick %d", request.client, target)
+
+    def _await_grant(self) -> bool:
+        """Stepped mode, the current tick published and answered: answer the grant that ends
+        here, then wait for the next one. False when stopped."""
+        with self._cond:
+            done = self.clock_gate.reached(self.tick)
+        if done is not None:
+            self._publish_clock(self.world.sim_time_s)  # where it pauses (health: as due)
+            done.reply(
+                done.key_expr, encode(StepReply(tick=self.tick, sim_time_s=self.world.sim_time_s))
+            )
+            done.drop()
+        while not self.rt.stop.is_set():
+            with self._cond:
+                if self.clock_gate.may_advance(self.tick):
+                    return True
+                self._cond.wait(STOP_POLL_S)
+            self._maybe_publish_clock(self.world.sim_time_s)  # clock and health while paused
+        return False
 
     def _apply(self, commands: Mapping[str, Sequence[float]]) -> None:
         for bad in self.world.apply_tick(commands):
@@ -588,6 +660,11 @@ class PhysicsNode:
             if self._resume_note:
                 detail += f"; {self._resume_note}"
             self.rt.publish_health(sim_time_s=sim_time_s, detail=detail)
+
+
+def _refuse(query: zenoh.Query, field: str, reason: str) -> None:
+    query.reply_err(encode(ErrorReply(field=field, reason=reason[:1000])))
+    query.drop()
 
 
 class _StatePublisher:

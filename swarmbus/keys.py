@@ -2,8 +2,8 @@
 
 All keys live under ``plumeswarm/<world>/``. Three planes are kept apart so that a
 wildcard never crosses them: ``sim/`` and ``vehicle/*/{state,actuators,status,concentration}``
-carry data, ``vehicle/*/cmd`` and ``plume/*`` are queryables (control), ``node/*`` is presence.
-No other module formats a key expression.
+carry data, ``vehicle/*/cmd``, ``plume/*`` and ``clock/step`` are queryables (control),
+``node/*`` is presence. No other module formats a key expression.
 
 One departure from DESIGN.md's key table: ``autopilot/<node>/actuators`` carries an
 ``ActuatorBatch`` (the commands of every vehicle an autopilot process serves, one put per process
@@ -59,6 +59,11 @@ class Keys:
 
     def tick(self) -> str:
         return f"{self.prefix}/sim/tick"
+
+    # -- stepped clock (control plane: a queryable of the physics) -------------
+    def clock_step(self) -> str:
+        """``StepRequest`` → ``StepReply``: the stepped clock's grants."""
+        return f"{self.prefix}/clock/step"
 
     # -- vehicle data plane ----------------------------------------------------
     def _vehicle(self, vehicle_id: str, leaf: str) -> str:

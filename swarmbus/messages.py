@@ -47,6 +47,7 @@ class Message(msgspec.Struct, frozen=True, kw_only=True, tag_field="schema"):
 class SpeedMode(enum.StrEnum):
     LOCKSTEP = "lockstep"
     REALTIME = "realtime"
+    STEPPED = "stepped"  # one client grants ticks (StepRequest on clock/step)
 
 
 class Clock(Message, frozen=True, kw_only=True, tag=_tag("clock")):
@@ -379,6 +380,27 @@ class ErrorReply(Message, frozen=True, kw_only=True, tag=_tag("error")):
     reason: Text
 
 
+# --------------------------------------------------------------------------- stepped clock
+MAX_STEP_TICKS = 2**31
+
+
+class StepRequest(Message, frozen=True, kw_only=True, tag=_tag("step_request")):
+    """``clock/step`` query: advance a stepped world by ``ticks`` ticks. ``client`` names the
+    clock holder (its liveliness token ``node/<client>/health``); a world is stepped by one
+    client at a time."""
+
+    client: Name
+    ticks: Annotated[int, msgspec.Meta(ge=1, le=MAX_STEP_TICKS)]
+
+
+class StepReply(Message, frozen=True, kw_only=True, tag=_tag("step_reply")):
+    """Answer to a ``StepRequest`` once tick ``tick`` is published and every participant
+    answered it: the world is paused there until the next request."""
+
+    tick: Tick
+    sim_time_s: SimTime
+
+
 # --------------------------------------------------------------------------- presence
 class NodeState(enum.StrEnum):
     UP = "up"
@@ -433,6 +455,8 @@ ALL_MESSAGES: tuple[type[Message], ...] = (
     PlumeMesh,
     ErrorReply,
     NodeHealth,
+    StepRequest,
+    StepReply,
 )
 
 __all__ = [m.__name__ for m in ALL_MESSAGES] + [

@@ -51,7 +51,7 @@ class World(_Section, frozen=True, kw_only=True):
 class Time(_Section, frozen=True, kw_only=True):
     physics_hz: Annotated[int, msgspec.Meta(ge=1, le=10_000)] = 240
     control_hz: Annotated[int, msgspec.Meta(ge=1, le=10_000)] = 120
-    mode: Literal["lockstep", "realtime"] = "lockstep"
+    mode: Literal["lockstep", "realtime", "stepped"] = "lockstep"
     speed_factor: Annotated[float, msgspec.Meta(gt=0.0, le=1000.0)] = 1.0
     participant_timeout_s: Pos = 2.0
     startup_timeout_s: Pos = 60.0

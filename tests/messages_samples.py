@@ -87,4 +87,6 @@ SAMPLES: dict[type[m.Message], m.Message] = {
     m.NodeHealth: m.NodeHealth(
         name="physics", role="physics", state=m.NodeState.READY, version="0.1.0", pid=123, host="h"
     ),
+    m.StepRequest: m.StepRequest(client="clock-3f2a", ticks=120),
+    m.StepReply: m.StepReply(tick=240, sim_time_s=2.0),
 }

@@ -10,6 +10,7 @@ from agents import Swarm, VehicleCommander
 
 def test_exports() -> None:
     assert set(agents.__all__) == {
+        "ClockError",
         "CommandRejected",
         "CommandTimeout",
         "PlumeError",
@@ -26,6 +27,14 @@ def test_swarm_surface() -> None:
     assert params["world"].default == "default" and params["connect"].default is None
     for name in ("vehicles", "state", "status", "reading", "subscribe", "command", "wait_until"):
         assert hasattr(Swarm, name), name
+    for name in ("step", "step_until", "sim_time", "holds_clock"):
+        assert hasattr(Swarm, name), name
+    assert list(inspect.signature(Swarm.step).parameters)[1:2] == ["ticks"]
+    assert list(inspect.signature(Swarm.step_until).parameters)[1:3] == [
+        "predicate",
+        "timeout_sim_s",
+    ]
+    assert "sim_timeout_s" in inspect.signature(Swarm.wait_until).parameters
     assert hasattr(Swarm, "__enter__") and hasattr(Swarm, "__exit__")
 
 

@@ -22,13 +22,23 @@ pytestmark = pytest.mark.skipif(
 )
 
 
-def test_demo_flies_the_seed_scenario_and_writes_the_summary(tmp_path: Path) -> None:
-    result = run_cli(["demo", "--out", str(tmp_path), "--timeout", "600"], timeout_s=900)
+@pytest.fixture(scope="module")
+def seed_demo(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
+    """One ``plumeswarm demo`` of the seed scenario: its run directory and its output."""
+    out = tmp_path_factory.mktemp("demo")
+    result = run_cli(["demo", "--out", str(out), "--timeout", "600"], timeout_s=900)
     assert result.returncode == 0, result.stdout[-4000:] + result.stderr[-2000:]
-    assert "every vehicle completed its mission and landed" in result.stdout
-    assert "reported" in result.stdout and "model" in result.stdout
+    return out, result.stdout
+
+
+def test_demo_flies_the_seed_scenario_and_writes_the_summary(seed_demo: tuple[Path, str]) -> None:
+    tmp_path, stdout = seed_demo
+    assert "every vehicle completed its mission and landed" in stdout
+    assert "reported" in stdout and "model" in stdout
+    assert "deterministic: stepped clock" in stdout
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["ok"] and summary["scenario"]["vehicles"] == 3
+    assert summary["clock"] == "stepped" and summary["deterministic"] is True
     assert summary["real_time_factor"] > 0
     digest = summary["state_digest"]
     assert len(digest["sha256"]) == 64 and digest["messages"] > 0
@@ -73,3 +83,32 @@ def test_demo_scales_to_more_vehicles(tmp_path: Path) -> None:
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert sorted(summary["vehicles"]) == [f"uav{k}" for k in range(1, 6)]
     assert all(v["mission_completed"] and v["landed"] for v in summary["vehicles"].values())
+
+
+def test_two_demo_runs_give_the_same_state_digest(
+    seed_demo: tuple[Path, str], tmp_path: Path
+) -> None:
+    """The stepped clock: every command lands on a known tick and the run ends on a known tick,
+    so a second run (without the recorder, which only listens) streams the same states from
+    tick 0 to the last, bit for bit."""
+    first = json.loads((seed_demo[0] / "summary.json").read_text())["state_digest"]
+    result = run_cli(
+        ["demo", "--out", str(tmp_path), "--timeout", "600", "--no-record"], timeout_s=900
+    )
+    assert result.returncode == 0, result.stdout[-4000:] + result.stderr[-2000:]
+    second = json.loads((tmp_path / "summary.json").read_text())["state_digest"]
+    assert second["first_tick"] == 0 and second["missing"] == 0 and second["conflicts"] == 0
+    assert second == first
+
+
+def test_free_running_demo_stays_available_and_says_it_is_not_reproducible(
+    tmp_path: Path,
+) -> None:
+    result = run_cli(
+        ["demo", "--vehicles", "1", "--clock", "lockstep", "--no-record", "--out", str(tmp_path)],
+        timeout_s=900,
+    )
+    assert result.returncode == 0, result.stdout[-4000:] + result.stderr[-2000:]
+    assert "not deterministic: lockstep clock" in result.stdout
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["ok"] and summary["clock"] == "lockstep" and summary["deterministic"] is False

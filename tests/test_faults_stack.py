@@ -35,6 +35,7 @@ from swarmbus.messages import (
     PlumeMeshQuery,
     PlumeQuery,
     SimTick,
+    StepRequest,
     Takeoff,
     VehicleState,
     VehicleStatus,
@@ -222,6 +223,7 @@ def test_fuzz_every_bus_key_while_flying(stack: Stack) -> None:
         (keys.plume_concentration(), PlumeQuery),
         (keys.plume_info(), PlumeInfoQuery),
         (keys.plume_mesh(), PlumeMeshQuery),
+        (keys.clock_step(), StepRequest),  # a lockstep world: refused, says why
         *[(keys.vehicle_cmd(v), Command) for v in VEHICLES],  # type: ignore[misc]
     ]
 
