@@ -7,9 +7,9 @@ and the physics do their full work). Per row: steps per second and the real-time
 time advanced over wall time) of those steps, the reset's wall time, and for the fused backend
 the real-time factor per CPU second of this process (what one idle core would give: on a
 shared machine the wall-clock numbers mostly measure the others' load, printed beside them).
-The bus backend starts a stack per reset and holds its clock (one round trip through this
-process per tick), so its rows show what that costs over the fused backend's. Rows go to
-``DIR/envs.json``.
+The bus backend starts a stack per reset on the stepped clock and grants each step's ticks in
+one request (after one command query per agent), so its rows show what the bus costs over the
+fused backend's. Rows go to ``DIR/envs.json``.
 """
 
 from __future__ import annotations

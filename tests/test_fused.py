@@ -1,9 +1,11 @@
 """The fused runner against the distributed stack: the same state stream, bit for bit.
 
-Both sides get the same scenario and the same commands at the same tick boundaries; on the
-distributed side a clock holder in the test process (a parked scenario vehicle's participant,
-:mod:`tests.clock_holder`) keeps the lockstep from moving on until the commands are answered.
-Each side's digest covers every vehicle's state of every tick from 0.
+Both sides get the same scenario and the same commands at the same tick boundaries. The
+distributed side is held between ticks either by the stepped clock (``time.mode = "stepped"``,
+stepped by a ``Swarm`` client: the scenario itself, unchanged) or by a clock holder in the test
+process (a parked extra vehicle's lockstep participant, tests/clock_holder.py: the plain
+lockstep, without the stepped clock's code). Each side's digest covers every vehicle's state of
+every tick from 0.
 """
 
 from __future__ import annotations
@@ -16,7 +18,6 @@ import zenoh
 
 from agents import Swarm
 from deploy.demo import StateDigest, send_command
-from deploy.envs.clock import ClockHolder
 from deploy.fused import FusedRunner
 from swarmbus.codec import decode, encode
 from swarmbus.keys import Keys
@@ -32,6 +33,7 @@ from swarmbus.messages import (
     VehicleState,
 )
 from swarmbus.scenario import DEFAULT_SCENARIO, Scenario, load_scenario
+from tests.clock_holder import ClockHolder
 from tests.procs import NodeProcs, wait_for_queryable, wait_until, zenoh_network
 
 CLOCK = "clock"

@@ -7,11 +7,12 @@ latest states and readings.
 - :class:`FusedBackend`: a :class:`~deploy.fused.FusedRunner` (no bus, no processes).
 - :class:`BusBackend`: the distributed stack. Started by the backend (router, plume, physics and
   one autopilot process per ``vehicles_per_process`` vehicles, on a free loopback port; a new
-  stack per episode, since the spawns change), it holds the lockstep's clock with a
-  :class:`~deploy.envs.clock.ClockHolder` (a parked extra vehicle far from the others), so the
-  stack gives the same states as the fused backend. Attached to a running stack
-  (``attach=ENDPOINT``), it neither respawns nor holds the clock: the world runs at its own
-  pace, a step waits until k more ticks were published, and runs do not repeat.
+  stack per episode, since the spawns change) on the stepped clock (``time.mode = "stepped"``),
+  which an :class:`agents.Swarm` client steps k ticks at a time: commands land on known ticks
+  and the stack gives the same states as the fused backend. Attached to a running stack
+  (``attach=ENDPOINT``) it never respawns; it steps a stepped world's clock if it can have it,
+  and otherwise lets the world run at its own pace (a step waits until k more ticks were
+  published; such runs do not repeat).
 """
 
 from __future__ import annotations
@@ -27,13 +28,13 @@ from typing import Any, Protocol
 import msgspec
 import zenoh
 
+from agents import ClockError, Swarm
 from deploy.demo import command_reply
-from deploy.envs.clock import ClockError, ClockHolder
 from deploy.fused import FusedRunner
 from deploy.launcher import Launcher, LaunchOptions
 from deploy.scaling import write_scenario
 from swarmbus.codec import MessageError, decode, encode
-from swarmbus.keys import KeyNameError, Keys
+from swarmbus.keys import Keys
 from swarmbus.messages import (
     Command,
     CommandReply,
@@ -41,15 +42,13 @@ from swarmbus.messages import (
     SimTick,
     VehicleState,
 )
-from swarmbus.scenario import Scenario, Vehicle
-from swarmbus.session import NetworkConfig, free_tcp_port, open_session
-from swarmbus.vehicle_types import load_vehicle_type
+from swarmbus.scenario import Scenario
+from swarmbus.session import free_tcp_port
 
 log = logging.getLogger(__name__)
 
-CLOCK_VEHICLE = "env-clock"
-CLOCK_OFFSET_M = 400.0  # the clock's parked vehicle: this far upwind of the vehicles' box
 COMMAND_TIMEOUT_S = 5.0
+CLOCK_POLL_S = 0.02
 BUS_ROLES = ("router", "plume", "physics", "autopilot")
 
 
@@ -116,32 +115,6 @@ class FusedBackend:
             self._runner = None
 
 
-class _Readings:
-    """The newest reading of every vehicle, from ``vehicle/*/concentration``."""
-
-    def __init__(self, session: zenoh.Session, keys: Keys) -> None:
-        self.keys = keys
-        self.latest: dict[str, ConcentrationReading] = {}
-        self._lock = threading.Lock()
-        self._sub = session.declare_subscriber(keys.all_vehicle_concentration(), self._on)
-
-    def _on(self, sample: zenoh.Sample) -> None:
-        try:
-            vid = self.keys.vehicle_id_of(str(sample.key_expr))
-            reading = decode(sample.payload.to_bytes(), ConcentrationReading)
-        except (KeyNameError, MessageError):
-            return
-        with self._lock:
-            self.latest[vid] = reading
-
-    def snapshot(self) -> dict[str, ConcentrationReading]:
-        with self._lock:
-            return dict(self.latest)
-
-    def close(self) -> None:
-        self._sub.undeclare()
-
-
 class _Ticks:
     """The newest ``sim/tick`` (attached mode: the world runs on its own)."""
 
@@ -174,17 +147,6 @@ class _Ticks:
         self._sub.undeclare()
 
 
-def with_clock_vehicle(scenario: Scenario) -> Scenario:
-    """``scenario`` plus the clock holder's parked vehicle, upwind of every other vehicle."""
-    xs = [v.spawn_enu_m[0] for v in scenario.vehicles]
-    ys = [v.spawn_enu_m[1] for v in scenario.vehicles]
-    parked = Vehicle(
-        id=CLOCK_VEHICLE,
-        spawn_enu_m=(min(xs) - CLOCK_OFFSET_M, sum(ys) / len(ys), 0.0),
-    )
-    return msgspec.structs.replace(scenario, vehicles=[*scenario.vehicles, parked])
-
-
 class BusBackend:
     """The distributed stack (see the module doc); ``attach``: a running stack's router."""
 
@@ -197,16 +159,15 @@ class BusBackend:
     ) -> None:
         self.attach = attach
         self.vehicles_per_process = vehicles_per_process
-        self._tmp: tempfile.TemporaryDirectory[str] | None = None
         self.run_dir = run_dir
         self.startup_timeout_s = startup_timeout_s
+        self._tmp: tempfile.TemporaryDirectory[str] | None = None
         self._launcher: Launcher | None = None
-        self._session: zenoh.Session | None = None
-        self._holder: ClockHolder | None = None
+        self._swarm: Swarm | None = None
         self._ticks: _Ticks | None = None
-        self._readings: _Readings | None = None
         self._keys = Keys()
         self._agents: tuple[str, ...] = ()
+        self._stepped = False  # this backend holds a stepped world's clock
         self._tick = 0
         self._states: dict[str, VehicleState] = {}
 
@@ -219,13 +180,17 @@ class BusBackend:
         else:
             self._launch(scenario)
 
+    def _join(self, world: str, endpoint: str) -> None:
+        """Our client and tick subscriber, before the world publishes its first tick."""
+        sw = self._swarm = Swarm.connect(world, [endpoint], command_timeout_s=COMMAND_TIMEOUT_S)
+        self._ticks = _Ticks(sw.session, self._keys)
+
     def _attach(self, scenario: Scenario) -> None:
-        if self._session is None:
-            net = NetworkConfig(connect=[self.attach or ""], listen=[])
-            self._session = open_session(net)
-            self._ticks = _Ticks(self._session, self._keys)
-            self._readings = _Readings(self._session, self._keys)
+        if self._swarm is None:
+            self._join(scenario.world.name, self.attach or "")
+            self._stepped = True  # until the world says otherwise (first step)
         assert self._ticks is not None
+        self._wait_handshake()
         latest = self._ticks.wait_past(0, self.startup_timeout_s)
         self._take(latest.tick, latest.states)
 
@@ -235,50 +200,55 @@ class BusBackend:
             self._tmp = tempfile.TemporaryDirectory(prefix="plumeswarm-env-")
         run_dir = self.run_dir or Path(self._tmp.name if self._tmp else ".")
         endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
-        sc = with_clock_vehicle(scenario)
         sc = msgspec.structs.replace(
-            sc,
-            network=msgspec.structs.replace(sc.network, connect=[endpoint]),
+            scenario,
+            network=msgspec.structs.replace(scenario.network, connect=[endpoint]),
             time=msgspec.structs.replace(
-                sc.time,
-                mode="lockstep",
+                scenario.time,
+                mode="stepped",
                 duration_s=0.0,
-                startup_timeout_s=max(sc.time.startup_timeout_s, self.startup_timeout_s),
+                startup_timeout_s=max(scenario.time.startup_timeout_s, self.startup_timeout_s),
             ),
         )
-        path = write_scenario(sc, run_dir / "scenario.toml")
         opts = LaunchOptions(
-            scenario_path=path,
+            scenario_path=write_scenario(sc, run_dir / "scenario.toml"),
             headless=True,
             run_dir=run_dir,
             roles=BUS_ROLES,
-            vehicles=self._agents,
             vehicles_per_process=self.vehicles_per_process,
             verbose=0,
         )
-        rotors = len(load_vehicle_type(sc.vehicle(CLOCK_VEHICLE).type).rotors)
         launcher = self._launcher = Launcher(sc, opts)
+        # The client joins once the router is up and before the physics starts: it sees tick 0.
+        launcher.start(lambda _session: self._join(sc.world.name, endpoint))
+        self._stepped = True
+        assert self._ticks is not None and self._swarm is not None
+        tick0 = self._ticks.wait_past(0, self.startup_timeout_s)
+        self._wait_handshake()  # from then on the world is paused at tick 0
+        self._take(0, tick0.states)
 
-        def on_bus(session: zenoh.Session) -> None:
-            self._holder = ClockHolder(session, self._keys, CLOCK_VEHICLE, self._agents, rotors)
-            self._readings = _Readings(session, self._keys)
-
-        launcher.start(on_bus)
-        self._session = launcher.session
-        self._tick = 0
-        self._hold(0)
+    def _wait_handshake(self) -> None:
+        """The physics publishes its clock once every autopilot answered the first tick (the
+        start handshake): from then on the autopilots have a state and take commands."""
+        assert self._swarm is not None
+        deadline = time.monotonic() + self.startup_timeout_s
+        while not _has_clock(self._swarm):
+            if time.monotonic() > deadline:
+                raise BackendError(
+                    f"the world's start handshake did not finish in {self.startup_timeout_s} s"
+                )
+            time.sleep(CLOCK_POLL_S)
 
     def close(self) -> None:
-        for part in (self._holder, self._readings, self._ticks):
-            if part is not None:
-                part.close()
-        self._holder = self._readings = self._ticks = None
+        if self._ticks is not None:
+            self._ticks.close()
+            self._ticks = None
+        if self._swarm is not None:
+            self._swarm.close()  # before the router goes
+            self._swarm = None
         if self._launcher is not None:
             self._launcher.stop()
             self._launcher = None
-        elif self._session is not None:
-            self._session.close()
-        self._session = None
         if self._tmp is not None:
             self._tmp.cleanup()
             self._tmp = None
@@ -289,23 +259,22 @@ class BusBackend:
         agents = set(self._agents)
         self._states = {s.vehicle_id: s for s in states if s.vehicle_id in agents}
 
-    def _hold(self, tick: int) -> None:
-        assert self._holder is not None
-        try:
-            states = self._holder.wait_answered(tick, self.startup_timeout_s)
-        except ClockError as exc:
-            raise BackendError(str(exc)) from None
-        self._take(tick, states)
-
     def step(self, ticks: int) -> None:
-        if self._holder is not None:
-            for _ in range(ticks):
-                self._holder.release(self._tick)
-                self._hold(self._tick + 1)
-            return
-        if self._ticks is None:
+        sw, seen = self._swarm, self._ticks
+        if sw is None or seen is None:
             raise BackendError("the environment has no world before reset()")
-        latest = self._ticks.wait_past(self._tick + ticks, self.startup_timeout_s)
+        if self._stepped:
+            try:
+                reply = sw.step(ticks)
+            except ClockError as exc:
+                if self._launcher is not None or "stepped" not in str(exc):
+                    raise BackendError(str(exc)) from None
+                self._stepped = False  # an attached world that runs on its own
+            else:
+                tick = seen.wait_past(reply.tick, self.startup_timeout_s)
+                self._take(tick.tick, tick.states)
+                return
+        latest = seen.wait_past(self._tick + ticks, self.startup_timeout_s)
         self._take(latest.tick, latest.states)
 
     @property
@@ -316,13 +285,17 @@ class BusBackend:
         return self._states
 
     def readings(self) -> dict[str, ConcentrationReading]:
-        return self._readings.snapshot() if self._readings is not None else {}
+        sw = self._swarm
+        if sw is None:
+            return {}
+        latest = {vid: sw.reading(vid) for vid in self._agents}
+        return {vid: r for vid, r in latest.items() if r is not None}
 
     def command(self, commands: Sequence[tuple[str, Command]]) -> list[CommandReply]:
         """All queries first, then all replies: one round trip for the lot, not one each."""
-        session = self._session
-        if session is None:
+        if self._swarm is None:
             raise BackendError("the environment has no world before reset()")
+        session = self._swarm.session
         pending: list[tuple[str, Any]] = [
             (
                 vid,
@@ -333,6 +306,14 @@ class BusBackend:
             for vid, cmd in commands
         ]
         return [_reply_of(vid, replies) for vid, replies in pending]
+
+
+def _has_clock(sw: Swarm) -> bool:
+    try:
+        sw.sim_time  # noqa: B018 - raises until the physics published its clock
+    except ClockError:
+        return False
+    return True
 
 
 def _reply_of(vehicle_id: str, replies: Any) -> CommandReply:

@@ -1,11 +1,11 @@
-"""A lockstep participant that holds the clock between ticks, from a client process.
+"""A lockstep participant in the test process that holds the clock between ticks.
 
 It is the autopilot of one parked scenario vehicle (its liveliness token ``autopilot-<id>``,
 motors always off), so the physics waits for it every tick. It answers tick ``k`` only when
 told, and only once every other vehicle's autopilot has answered ``k``: a command given while it
 holds tick ``k`` takes effect at tick ``k + 1``, exactly where
-:meth:`deploy.fused.FusedRunner.command` puts it. The bus backend of the environments steps the
-distributed stack with it.
+:meth:`deploy.fused.FusedRunner.command` puts it — in the plain lockstep mode, without the
+stepped clock's code.
 """
 
 from __future__ import annotations
