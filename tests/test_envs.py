@@ -20,7 +20,7 @@ from pettingzoo.test import parallel_api_test
 from deploy.envs import ENV_ID, AgentStep, PlumeSourceEnv, PlumeSwarmEnv
 from deploy.launcher import Launcher, LaunchOptions
 from deploy.scaling import write_scenario
-from swarmbus.scenario import load_scenario
+from swarmbus.scenario import ScenarioError, load_scenario, parse_scenario
 from swarmbus.session import free_tcp_port
 from tests.procs import REPO, run_cli
 
@@ -241,3 +241,22 @@ def test_bus_backend_attaches_to_a_running_stack_and_flies_it(tmp_path: Path) ->
         moved = start[agent][0] - obs[agent][0]
         # from hover, at most 5 m/s (and a little overshoot)
         assert 1.0 < moved <= 5.0 * elapsed + 0.5, (agent, moved, elapsed)
+
+
+@pytest.mark.parametrize(
+    ("env_section", "field", "words"),
+    [
+        ("start_min_enu_m = [50.0, 0.0, 8.0]\nstart_max_enu_m = [40.0, 5.0, 9.0]",
+         "env.start_max_enu_m", "x 40.0 is below"),
+        ("start_min_enu_m = [30.0, 0.0, 0.0]\nstart_max_enu_m = [40.0, 5.0, 9.0]",
+         "env.start_min_enu_m", "must be > 0"),
+        ("success_radius_m = 0.0", "env.success_radius_m", ""),
+        ("start_box = 3", "env", "unknown field `start_box`"),
+    ],
+)  # fmt: skip
+def test_a_bad_env_section_names_its_field(env_section: str, field: str, words: str) -> None:
+    text = f'[env]\n{env_section}\n[[vehicles]]\nid = "a"\n'
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario(text, "sc.toml")
+    assert err.value.field == field
+    assert words in err.value.reason
