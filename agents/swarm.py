@@ -552,6 +552,9 @@ class Swarm:
             # Our token tells the physics when we are gone (the clock is free again).
             key = self.keys.node_health(self._clock_name)
             self._clock_token = self.session.liveliness().declare_token(key)
+            # Whose statuses to wait for after each step: the autopilots alive now, not only
+            # those whose tokens a just-opened session has heard of.
+            self._presence.sync(timeout_s=self.command_timeout_s)
         wait_s = (
             timeout_s
             if timeout_s is not None
