@@ -214,8 +214,12 @@ def test_bench_envs_names_an_unknown_backend(tmp_path: Path) -> None:
 def test_bus_backend_attaches_to_a_running_stack_and_flies_it(tmp_path: Path) -> None:
     scenario = load_scenario()
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    # Real time: a world that runs on its own must not outrun the environment by more than the
+    # offboard timeout between two steps (docs/envs.md), whatever the machine's load.
     scenario = msgspec.structs.replace(
-        scenario, network=msgspec.structs.replace(scenario.network, connect=[endpoint])
+        scenario,
+        network=msgspec.structs.replace(scenario.network, connect=[endpoint]),
+        time=msgspec.structs.replace(scenario.time, mode="realtime"),
     )
     path = write_scenario(scenario, tmp_path / "scenario.toml")
     opts = LaunchOptions(
