@@ -177,7 +177,8 @@ def test_bus_backend_gives_the_fused_backends_observations() -> None:
 
 def test_the_scripted_policy_of_the_docs_runs_and_finds_the_source() -> None:
     text = (REPO / "docs" / "envs.md").read_text()
-    code = text.split("```python\n", 1)[1].split("```", 1)[0]
+    section = text.split("## A scripted policy", 1)[1]
+    code = section.split("```python\n", 1)[1].split("```", 1)[0]
     env = dict(os.environ, PYTHONPATH=str(REPO))
     res = subprocess.run(
         [sys.executable, "-c", code], cwd=REPO, env=env, capture_output=True, text=True, timeout=240

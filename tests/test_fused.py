@@ -212,3 +212,15 @@ def test_casting_in_offboard_with_a_noisy_sensor_gives_the_same_states(
         assert runner.flights[vid].autopilot.modes.mode == FlightMode.OFFBOARD, vid
     readings = [r for r in runner.latest_readings.values() if r.true_g_m3 is not None]
     assert readings and any(r.reported_g_m3 != r.true_g_m3 for r in readings)
+
+
+def test_the_docs_example_of_the_runner_flies_the_missions() -> None:
+    text = (Path(__file__).resolve().parent.parent / "docs" / "envs.md").read_text()
+    section = text.split("## The fused runner without an environment", 1)[1]
+    code = section.split("```python\n", 1)[1].split("```", 1)[0]
+    scope: dict[str, object] = {}
+    exec(code, scope)
+    states = scope["states"]
+    assert isinstance(states, list) and len(states) == 3
+    # 10 s after the start the missions' take-off to 10 m is done and the legs are being flown
+    assert all(abs(s.position_enu_m[2] - 10.0) < 1.0 for s in states)
