@@ -467,7 +467,13 @@ def bench_scale(
 
 @bench.command("envs")
 @SCENARIO_OPT
-@click.option("--vehicles", default="1,3,16,64", callback=_int_list, show_default=True)
+@click.option(
+    "--vehicles",
+    default="1,3,16,64",
+    callback=_int_list,
+    show_default=True,
+    help="Comma-separated vehicle counts (the scenario scaled to each).",
+)
 @click.option(
     "--backends",
     default="fused,bus",
@@ -488,7 +494,12 @@ def bench_scale(
     show_default=True,
     help="Bus backend: autopilot processes serve this many vehicles each.",
 )
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=None)
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Directory for envs.json (default: runs/bench-envs-<time>/).",
+)
 def bench_envs(
     scenario: str | None,
     vehicles: tuple[int, ...],
@@ -501,10 +512,11 @@ def bench_envs(
     """Steps per second and real-time factor of the environments, fused and bus side by side."""
     import time
 
+    sc = scenario_from(scenario)
     from deploy.env_bench import EnvBenchOptions, run_env_bench
 
     opts = EnvBenchOptions(
-        scenario=scenario_from(scenario),
+        scenario=sc,
         out=out or Path("runs") / time.strftime("bench-envs-%Y%m%d-%H%M%S"),
         vehicles=vehicles,
         backends=tuple(b.strip() for b in backends.split(",") if b.strip()),
