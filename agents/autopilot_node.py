@@ -49,6 +49,7 @@ import zenoh
 from agents.autopilot import Autopilot
 from agents.behavior import BehaviorContext, BehaviorError, load_behavior
 from agents.estimator import Estimator
+from agents.flight import Flight, take_readings
 from agents.resume import StateKeeper
 from agents.sensor import ConcentrationSensor
 from agents.snapshot import PendingSnapshot, ProcessSnapshot, SnapshotError, capture, restore
@@ -58,9 +59,7 @@ from swarmbus.messages import (
     ActuatorBatch,
     ActuatorCommand,
     Command,
-    ConcentrationReading,
     ErrorReply,
-    PeerReading,
     PlumeQuery,
     PlumeSample,
     PlumeValues,
@@ -142,6 +141,19 @@ def build_autopilot(
     return Autopilot(scenario, vehicle_id, estimator=estimator, behavior=behavior)
 
 
+def build_flight(
+    scenario: Scenario,
+    vehicle_id: str,
+    options: NodeOptions,
+    rng: np.random.Generator | None = None,
+) -> Flight:
+    """A vehicle's autopilot and sensor, seeded from the scenario and the vehicle's index
+    (``rng``: the behaviour's generator, default :func:`behavior_rng`)."""
+    index = [v.id for v in scenario.vehicles].index(vehicle_id)
+    sensor = ConcentrationSensor.for_vehicle(scenario, index)
+    return Flight(build_autopilot(scenario, vehicle_id, options, rng), sensor)
+
+
 class _Served:
     """One served vehicle: its autopilot, sensor and publishers."""
 
@@ -156,9 +168,9 @@ class _Served:
     ) -> None:
         self.vehicle_id = vehicle_id
         self.behavior_rng = behavior_rng(scenario, vehicle_id)
-        self.autopilot = build_autopilot(scenario, vehicle_id, options, self.behavior_rng)
-        index = [v.id for v in scenario.vehicles].index(vehicle_id)
-        self.sensor = ConcentrationSensor.for_vehicle(scenario, index)
+        self.flight = build_flight(scenario, vehicle_id, options, self.behavior_rng)
+        self.autopilot = self.flight.autopilot
+        self.sensor = self.flight.sensor
         # None: the process batches its vehicles' commands (AutopilotNode.batch_pub)
         self.actuators = (
             session.declare_publisher(keys.vehicle_actuators(vehicle_id)) if own_actuators else None
@@ -168,7 +180,6 @@ class _Served:
         self.last_command = b""
         self.last_status: VehicleStatus | None = None
         self.last_status_time_s = -1e9
-        self.new_readings: list[ConcentrationReading] = []
 
     def publish_status(self, force: bool, period_s: float) -> None:
         status = self.autopilot.status()
@@ -497,8 +508,7 @@ class AutopilotNode:
                 except MessageError as exc:
                     log.warning("%s: ignoring bad state in tick %d: %s", vid, tick.tick, exc)
                     continue
-                rotor = served.autopilot.step(state, peers, served.new_readings)
-                served.new_readings = []
+                rotor = served.flight.step(state, peers)
                 command = ActuatorCommand(vehicle_id=vid, tick=tick.tick, rotor_commands=rotor)
                 if served.actuators is None:
                     batch.append(command)
@@ -611,7 +621,7 @@ class AutopilotNode:
             restore(s.autopilot, s.sensor, v, s.behavior_rng)
             s.last_command = cmd
             s.last_status_time_s = when
-            s.new_readings = []
+            s.flight.new_readings = []
         self.last_batch = snap.batch
         self.last_tick = self._snap_tick = snap.tick
         self._snap_pending = p = snap.pending
@@ -649,38 +659,10 @@ class AutopilotNode:
             return  # not the tick with the physics' answer (e.g. garbage on sim/tick): wait
         self.pending = None
         values = self._values(pending, tick.plume_values)
-        index: dict[str, int] = {}
-        for k, s in enumerate(pending.states):
-            index.setdefault(s.vehicle_id, k)
-        # Every vehicle's PeerReading, built once per tick and shared by the served vehicles'
-        # readings (frozen): K x N constructions per tick would be N.
-        everyone: list[PeerReading] | None = None
-        for vid, served in self.served.items():
-            if not served.sensor.due(pending.tick):
-                continue
-            own = index.get(vid)
-            if own is None:
-                continue
-            position = pending.states[own].position_enu_m
-            true = values[own] if values is not None else None
-            peers: list[PeerReading] = []
-            if values is not None:
-                if everyone is None:
-                    everyone = [
-                        PeerReading(
-                            vehicle_id=s.vehicle_id,
-                            position_enu_m=s.position_enu_m,
-                            true_g_m3=values[k],
-                        )
-                        for k, s in enumerate(pending.states)
-                    ]
-                peers = everyone[:own] + everyone[own + 1 :]
-            reading = served.sensor.reading(vid, pending.sim_time_s, position, true, peers)
-            served.autopilot.sensor_health = (
-                "" if reading.available else "sensor: the plume service did not answer"
-            )
-            served.readings_pub.put(encode(reading))
-            served.new_readings.append(reading)
+        flights = [served.flight for served in self.served.values()]
+        taken = take_readings(flights, pending.tick, pending.sim_time_s, pending.states, values)
+        for flight, reading in taken:
+            self.served[flight.vehicle_id].readings_pub.put(encode(reading))
 
     def _values(
         self, pending: _PendingSensor, from_physics: PlumeSample | None

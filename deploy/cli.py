@@ -536,6 +536,72 @@ def bench_scale(
     sys.exit(1 if any("error" in r for r in rows) else 0)
 
 
+@bench.command("envs")
+@SCENARIO_OPT
+@click.option(
+    "--vehicles",
+    default="1,3,16,64",
+    callback=_int_list,
+    show_default=True,
+    help="Comma-separated vehicle counts (the scenario scaled to each).",
+)
+@click.option(
+    "--backends",
+    default="fused,bus",
+    show_default=True,
+    help="Comma-separated: fused (one process, no bus), bus (the distributed stack).",
+)
+@click.option(
+    "--steps", type=click.IntRange(min=1), default=30, show_default=True, help="Timed steps."
+)
+@click.option(
+    "--ticks-per-step", type=click.IntRange(min=1), default=12, show_default=True,
+    help="Control ticks per environment step.",
+)  # fmt: skip
+@click.option(
+    "--vehicles-per-process",
+    type=click.IntRange(min=1),
+    default=1,
+    show_default=True,
+    help="Bus backend: autopilot processes serve this many vehicles each.",
+)
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Directory for envs.json (default: runs/bench-envs-<time>/).",
+)
+def bench_envs(
+    scenario: str | None,
+    vehicles: tuple[int, ...],
+    backends: str,
+    steps: int,
+    ticks_per_step: int,
+    vehicles_per_process: int,
+    out: Path | None,
+) -> None:
+    """Steps per second and real-time factor of the environments, fused and bus side by side."""
+    import time
+
+    sc = scenario_from(scenario)
+    from deploy.env_bench import EnvBenchOptions, run_env_bench
+
+    opts = EnvBenchOptions(
+        scenario=sc,
+        out=out or Path("runs") / time.strftime("bench-envs-%Y%m%d-%H%M%S"),
+        vehicles=vehicles,
+        backends=tuple(b.strip() for b in backends.split(",") if b.strip()),
+        steps=steps,
+        ticks_per_step=ticks_per_step,
+        vehicles_per_process=vehicles_per_process,
+    )
+    try:
+        rows = run_env_bench(opts, click.echo)
+    except ValueError as exc:
+        fail(str(exc))
+    sys.exit(1 if any("error" in r for r in rows) else 0)
+
+
 def _register_groups() -> None:
     from deploy.certs_cli import certs
     from deploy.plume_cli import plume

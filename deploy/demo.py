@@ -21,7 +21,7 @@ import json
 import logging
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -187,7 +187,13 @@ def send_command(
     session: zenoh.Session, keys: Keys, vehicle_id: str, cmd: Command, timeout_s: float = 5.0
 ) -> CommandReply | None:
     """One command; the reply, or None when no autopilot answered (not there yet)."""
-    for reply in session.get(keys.vehicle_cmd(vehicle_id), payload=encode(cmd), timeout=timeout_s):
+    replies = session.get(keys.vehicle_cmd(vehicle_id), payload=encode(cmd), timeout=timeout_s)
+    return command_reply(vehicle_id, replies)
+
+
+def command_reply(vehicle_id: str, replies: Iterable[zenoh.Reply]) -> CommandReply | None:
+    """The reply among a command query's ``replies``, or None when no autopilot answered."""
+    for reply in replies:
         if reply.ok is not None:
             return decode(reply.ok.payload.to_bytes(), CommandReply)
         if reply.err is not None:

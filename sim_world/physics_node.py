@@ -710,17 +710,8 @@ class PhysicsNode:
             )
 
     def _apply(self, commands: Mapping[str, Sequence[float]]) -> None:
-        world = self.world
-        for vid in world.vehicle_ids:
-            cmd = commands.get(vid)
-            world.set_motors_enabled(vid, cmd is not None)
-            if cmd is None:
-                continue
-            try:
-                world.apply(vid, cmd)
-            except ValueError as exc:
-                log.warning("tick %d: %s; motors off", self.tick, exc)
-                world.set_motors_enabled(vid, False)
+        for bad in self.world.apply_tick(commands):
+            log.warning("tick %d: %s; motors off", self.tick, bad)
 
     # ------------------------------------------------------------------ output
     def _publish_tick(self, states: list[VehicleState]) -> None:

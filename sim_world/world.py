@@ -275,6 +275,22 @@ class World:
                 target[i] = w
                 v.settled = False
 
+    def apply_tick(self, commands: Mapping[str, Sequence[float]]) -> list[str]:
+        """A tick's commands of every vehicle: a vehicle without one (no answer, a dropped
+        participant) or with a bad one gets its motors off. Returns one line per bad command."""
+        bad = []
+        for vid in self.vehicle_ids:
+            cmd = commands.get(vid)
+            self.set_motors_enabled(vid, cmd is not None)
+            if cmd is None:
+                continue
+            try:
+                self.apply(vid, cmd)
+            except ValueError as exc:
+                bad.append(str(exc))
+                self.set_motors_enabled(vid, False)
+        return bad
+
     def set_motors_enabled(self, vehicle_id: str, enabled: bool) -> None:
         """Disabled motors get zero targets until enabled again (a dropped participant)."""
         v = self._by_id[vehicle_id]

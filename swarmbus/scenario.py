@@ -196,6 +196,18 @@ class Gateway(_Section, frozen=True, kw_only=True):
     telemetry_hz: Annotated[float, msgspec.Meta(gt=0.0, le=100.0)] = 4.0
 
 
+class Env(_Section, frozen=True, kw_only=True):
+    """The Gymnasium / PettingZoo environments: where an episode starts and when it ends.
+
+    ``reset(seed=…)`` draws each vehicle's ground position (x, y) and take-off altitude z
+    uniformly from the box ``start_min_enu_m``..``start_max_enu_m``."""
+
+    start_min_enu_m: tuple[Fin, Fin, Fin] = (30.0, -15.0, 8.0)
+    start_max_enu_m: tuple[Fin, Fin, Fin] = (60.0, 15.0, 12.0)
+    success_radius_m: Pos = 3.0
+    time_limit_s: Pos = 60.0
+
+
 class Scenario(_Section, frozen=True, kw_only=True):
     world: World = World()
     time: Time = Time()
@@ -205,6 +217,7 @@ class Scenario(_Section, frozen=True, kw_only=True):
     sensor: Sensor = Sensor()
     failsafe: Failsafe = Failsafe()
     gateway: Gateway = Gateway()
+    env: Env = Env()
     vehicles: Annotated[list[Vehicle], msgspec.Meta(min_length=1, max_length=MAX_VEHICLES)]
 
     def vehicle(self, vehicle_id: str) -> Vehicle:
@@ -305,7 +318,21 @@ def _check(scenario: Scenario, source: str) -> None:
         )
     if not scenario.plume.sources:
         raise ScenarioError(source, "plume.sources", "at least one source is required")
+    _check_env(scenario, source)
     _check_sensor(sensor, source)
+
+
+def _check_env(scenario: Scenario, source: str) -> None:
+    lo, hi = scenario.env.start_min_enu_m, scenario.env.start_max_enu_m
+    for axis, a, b in zip("xyz", lo, hi, strict=True):
+        if a > b:
+            raise ScenarioError(
+                source, "env.start_max_enu_m", f"{axis} {b} is below env.start_min_enu_m's {a}"
+            )
+    if lo[2] <= 0.0:
+        raise ScenarioError(
+            source, "env.start_min_enu_m", f"the take-off altitude z must be > 0, got {lo[2]}"
+        )
 
 
 def _check_sensor(sensor: Sensor, source: str) -> None:

@@ -1,0 +1,324 @@
+"""Where an environment's world runs: in this process (fused) or on the bus.
+
+Both backends offer the same small surface: start a world for a scenario, hand commands to
+autopilots (they take effect on the next tick), advance k control ticks, and read the agents'
+latest states and readings.
+
+- :class:`FusedBackend`: a :class:`~deploy.fused.FusedRunner` (no bus, no processes).
+- :class:`BusBackend`: the distributed stack. Started by the backend (router, plume, physics and
+  one autopilot process per ``vehicles_per_process`` vehicles, on a free loopback port; a new
+  stack per episode, since the spawns change) on the stepped clock (``time.mode = "stepped"``),
+  which an :class:`agents.Swarm` client steps k ticks at a time: commands land on known ticks
+  and the stack gives the same states as the fused backend. Attached to a running stack
+  (``attach=ENDPOINT``) it never respawns; it steps a stepped world's clock if it can have it,
+  and otherwise lets the world run at its own pace (a step waits until k more ticks were
+  published; such runs do not repeat).
+"""
+
+from __future__ import annotations
+
+import logging
+import tempfile
+import threading
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, Protocol
+
+import msgspec
+import zenoh
+
+from agents import ClockError, Swarm
+from deploy.demo import command_reply
+from deploy.fused import FusedRunner
+from deploy.launcher import Launcher, LaunchOptions
+from deploy.scaling import write_scenario
+from swarmbus.codec import MessageError, decode, encode
+from swarmbus.keys import Keys
+from swarmbus.messages import (
+    Command,
+    CommandReply,
+    ConcentrationReading,
+    SimTick,
+    VehicleState,
+)
+from swarmbus.scenario import Scenario
+from swarmbus.session import free_tcp_port
+
+log = logging.getLogger(__name__)
+
+COMMAND_TIMEOUT_S = 5.0
+CLOCK_POLL_S = 0.02
+BUS_ROLES = ("router", "plume", "physics", "autopilot")
+
+
+class BackendError(RuntimeError):
+    pass
+
+
+class Backend(Protocol):
+    def start(self, scenario: Scenario) -> None:
+        """A world at tick 0 for ``scenario`` (the previous one, if any, is gone)."""
+
+    def command(self, commands: Sequence[tuple[str, Command]]) -> list[CommandReply]:
+        """Hand each command to its vehicle's autopilot; the replies in the same order."""
+
+    def step(self, ticks: int) -> None:
+        """Advance ``ticks`` control ticks."""
+
+    @property
+    def tick(self) -> int: ...
+
+    def states(self) -> dict[str, VehicleState]:
+        """The agents' states of the current tick."""
+
+    def readings(self) -> dict[str, ConcentrationReading]:
+        """Each agent's latest reading (none before its first)."""
+
+    def close(self) -> None: ...
+
+
+class FusedBackend:
+    def __init__(self) -> None:
+        self._runner: FusedRunner | None = None
+
+    @property
+    def runner(self) -> FusedRunner:
+        if self._runner is None:
+            raise BackendError("the environment has no world before reset()")
+        return self._runner
+
+    def start(self, scenario: Scenario) -> None:
+        self.close()
+        self._runner = FusedRunner(scenario)
+
+    def command(self, commands: Sequence[tuple[str, Command]]) -> list[CommandReply]:
+        runner = self.runner
+        return [runner.command(vid, cmd) for vid, cmd in commands]
+
+    def step(self, ticks: int) -> None:
+        self.runner.step(ticks)
+
+    @property
+    def tick(self) -> int:
+        return self.runner.tick
+
+    def states(self) -> dict[str, VehicleState]:
+        return {s.vehicle_id: s for s in self.runner.states}
+
+    def readings(self) -> dict[str, ConcentrationReading]:
+        return self.runner.latest_readings
+
+    def close(self) -> None:
+        if self._runner is not None:
+            self._runner.close()
+            self._runner = None
+
+
+class _Ticks:
+    """The newest ``sim/tick`` (attached mode: the world runs on its own)."""
+
+    def __init__(self, session: zenoh.Session, keys: Keys) -> None:
+        self.latest: SimTick | None = None
+        self._cond = threading.Condition()
+        self._sub = session.declare_subscriber(keys.tick(), self._on)
+
+    def _on(self, sample: zenoh.Sample) -> None:
+        try:
+            tick = decode(sample.payload.to_bytes(), SimTick)
+        except MessageError:
+            return
+        with self._cond:
+            if self.latest is None or tick.tick > self.latest.tick:
+                self.latest = tick
+                self._cond.notify_all()
+
+    def wait_past(self, tick: int, timeout_s: float) -> SimTick:
+        deadline = time.monotonic() + timeout_s
+        with self._cond:
+            while self.latest is None or self.latest.tick < tick:
+                remaining = deadline - time.monotonic()
+                if remaining <= 0.0:
+                    raise BackendError(f"no tick {tick} on the bus within {timeout_s:.0f} s")
+                self._cond.wait(remaining)
+            return self.latest
+
+    def close(self) -> None:
+        self._sub.undeclare()
+
+
+class BusBackend:
+    """The distributed stack (see the module doc); ``attach``: a running stack's router."""
+
+    def __init__(
+        self,
+        attach: str | None = None,
+        vehicles_per_process: int = 1,
+        run_dir: Path | None = None,
+        startup_timeout_s: float = 120.0,
+    ) -> None:
+        self.attach = attach
+        self.vehicles_per_process = vehicles_per_process
+        self.run_dir = run_dir
+        self.startup_timeout_s = startup_timeout_s
+        self._tmp: tempfile.TemporaryDirectory[str] | None = None
+        self._launcher: Launcher | None = None
+        self._swarm: Swarm | None = None
+        self._ticks: _Ticks | None = None
+        self._keys = Keys()
+        self._agents: tuple[str, ...] = ()
+        self._stepped = False  # this backend holds a stepped world's clock
+        self._tick = 0
+        self._states: dict[str, VehicleState] = {}
+
+    # ------------------------------------------------------------------ lifecycle
+    def start(self, scenario: Scenario) -> None:
+        self._agents = tuple(v.id for v in scenario.vehicles)
+        self._keys = Keys(scenario.world.name)
+        if self.attach is not None:
+            self._attach(scenario)
+        else:
+            self._launch(scenario)
+
+    def _join(self, world: str, endpoint: str) -> None:
+        """Our client and tick subscriber, before the world publishes its first tick."""
+        sw = self._swarm = Swarm.connect(world, [endpoint], command_timeout_s=COMMAND_TIMEOUT_S)
+        self._ticks = _Ticks(sw.session, self._keys)
+
+    def _attach(self, scenario: Scenario) -> None:
+        if self._swarm is None:
+            self._join(scenario.world.name, self.attach or "")
+            self._stepped = True  # until the world says otherwise (first step)
+        assert self._ticks is not None
+        self._wait_handshake()
+        latest = self._ticks.wait_past(0, self.startup_timeout_s)
+        self._take(latest.tick, latest.states)
+
+    def _launch(self, scenario: Scenario) -> None:
+        self.close()
+        if self.run_dir is None:
+            self._tmp = tempfile.TemporaryDirectory(prefix="plumeswarm-env-")
+        run_dir = self.run_dir or Path(self._tmp.name if self._tmp else ".")
+        endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+        sc = msgspec.structs.replace(
+            scenario,
+            network=msgspec.structs.replace(scenario.network, connect=[endpoint]),
+            time=msgspec.structs.replace(
+                scenario.time,
+                mode="stepped",
+                duration_s=0.0,
+                startup_timeout_s=max(scenario.time.startup_timeout_s, self.startup_timeout_s),
+            ),
+        )
+        opts = LaunchOptions(
+            scenario_path=write_scenario(sc, run_dir / "scenario.toml"),
+            headless=True,
+            run_dir=run_dir,
+            roles=BUS_ROLES,
+            vehicles_per_process=self.vehicles_per_process,
+            verbose=0,
+        )
+        launcher = self._launcher = Launcher(sc, opts)
+        # The client joins once the router is up and before the physics starts: it sees tick 0.
+        launcher.start(lambda _session: self._join(sc.world.name, endpoint))
+        self._stepped = True
+        assert self._ticks is not None and self._swarm is not None
+        tick0 = self._ticks.wait_past(0, self.startup_timeout_s)
+        self._wait_handshake()  # from then on the world is paused at tick 0
+        self._take(0, tick0.states)
+
+    def _wait_handshake(self) -> None:
+        """The physics publishes its clock once every autopilot answered the first tick (the
+        start handshake): from then on the autopilots have a state and take commands."""
+        assert self._swarm is not None
+        deadline = time.monotonic() + self.startup_timeout_s
+        while not _has_clock(self._swarm):
+            if time.monotonic() > deadline:
+                raise BackendError(
+                    f"the world's start handshake did not finish in {self.startup_timeout_s} s"
+                )
+            time.sleep(CLOCK_POLL_S)
+
+    def close(self) -> None:
+        if self._ticks is not None:
+            self._ticks.close()
+            self._ticks = None
+        if self._swarm is not None:
+            self._swarm.close()  # before the router goes
+            self._swarm = None
+        if self._launcher is not None:
+            self._launcher.stop()
+            self._launcher = None
+        if self._tmp is not None:
+            self._tmp.cleanup()
+            self._tmp = None
+
+    # ------------------------------------------------------------------ stepping
+    def _take(self, tick: int, states: Sequence[VehicleState]) -> None:
+        self._tick = tick
+        agents = set(self._agents)
+        self._states = {s.vehicle_id: s for s in states if s.vehicle_id in agents}
+
+    def step(self, ticks: int) -> None:
+        sw, seen = self._swarm, self._ticks
+        if sw is None or seen is None:
+            raise BackendError("the environment has no world before reset()")
+        if self._stepped:
+            try:
+                reply = sw.step(ticks)
+            except ClockError as exc:
+                if self._launcher is not None or "stepped" not in str(exc):
+                    raise BackendError(str(exc)) from None
+                self._stepped = False  # an attached world that runs on its own
+            else:
+                tick = seen.wait_past(reply.tick, self.startup_timeout_s)
+                self._take(tick.tick, tick.states)
+                return
+        latest = seen.wait_past(self._tick + ticks, self.startup_timeout_s)
+        self._take(latest.tick, latest.states)
+
+    @property
+    def tick(self) -> int:
+        return self._tick
+
+    def states(self) -> dict[str, VehicleState]:
+        return self._states
+
+    def readings(self) -> dict[str, ConcentrationReading]:
+        sw = self._swarm
+        if sw is None:
+            return {}
+        latest = {vid: sw.reading(vid) for vid in self._agents}
+        return {vid: r for vid, r in latest.items() if r is not None}
+
+    def command(self, commands: Sequence[tuple[str, Command]]) -> list[CommandReply]:
+        """All queries first, then all replies: one round trip for the lot, not one each."""
+        if self._swarm is None:
+            raise BackendError("the environment has no world before reset()")
+        session = self._swarm.session
+        pending: list[tuple[str, Any]] = [
+            (
+                vid,
+                session.get(
+                    self._keys.vehicle_cmd(vid), payload=encode(cmd), timeout=COMMAND_TIMEOUT_S
+                ),
+            )
+            for vid, cmd in commands
+        ]
+        return [_reply_of(vid, replies) for vid, replies in pending]
+
+
+def _has_clock(sw: Swarm) -> bool:
+    try:
+        sw.sim_time  # noqa: B018 - raises until the physics published its clock
+    except ClockError:
+        return False
+    return True
+
+
+def _reply_of(vehicle_id: str, replies: Any) -> CommandReply:
+    reply = command_reply(vehicle_id, replies)
+    if reply is None:
+        reason = f"no autopilot answered within {COMMAND_TIMEOUT_S:.0f} s"
+        return CommandReply(vehicle_id=vehicle_id, accepted=False, reason=reason)
+    return reply

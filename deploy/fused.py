@@ -1,0 +1,150 @@
+"""The fused runner: the whole lockstep in one process, no bus.
+
+The same :class:`~sim_world.world.World`, the same autopilots and sensors
+(:class:`agents.flight.Flight`, built as the autopilot process builds them) and the same plume
+service object answer the same questions in the same order as the distributed stack, so for
+the same scenario, seed and commands the state stream is the same, bit for bit. One tick ``k``:
+
+1. the physics has the states of tick ``k`` (the physics process publishes them in ``sim/tick``);
+   on a sensor tick it asks the plume for every vehicle's position at ``k``;
+2. each autopilot first takes the readings of the last sensor tick before ``k`` (the plume's
+   answer arrives with tick ``k`` in the distributed stack), then steps on tick ``k``'s state;
+3. the physics applies the rotor commands of tick ``k``, steps ``substeps`` physics steps and
+   has tick ``k + 1``.
+
+:meth:`FusedRunner.step` stops between 2 and 3, where the distributed stack stands when the
+client that drives the clock holds it: a command given then (:meth:`FusedRunner.command`)
+takes effect on the next tick, always.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Sequence
+from types import TracebackType
+
+from agents.autopilot_node import NodeOptions, build_flight
+from agents.flight import Flight, take_readings
+from plume_service.from_scenario import field_from_scenario
+from plume_service.service import PlumeService
+from sim_world.world import World
+from swarmbus.messages import CommandReply, ConcentrationReading, PlumeQuery, VehicleState
+from swarmbus.scenario import Scenario
+
+log = logging.getLogger(__name__)
+
+StatesObserver = Callable[[Sequence[VehicleState]], None]
+
+
+class FusedRunner:
+    """A scenario's world, autopilots, sensors and plume in one process; a context manager.
+
+    ``on_states`` sees every tick's states (tick 0 at construction). ``plume=False`` runs
+    as a stack without a plume node does: every reading unavailable.
+    """
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        options: NodeOptions | None = None,
+        *,
+        plume: bool = True,
+        on_states: StatesObserver | None = None,
+    ) -> None:
+        self.scenario = scenario
+        self.world = World(scenario)
+        try:
+            opts = options or NodeOptions()
+            self.flights: dict[str, Flight] = {
+                vid: build_flight(scenario, vid, opts) for vid in self.world.vehicle_ids
+            }
+        except BaseException:
+            self.world.close()
+            raise
+        self._flights = list(self.flights.values())
+        self.plume = PlumeService(field_from_scenario(scenario)) if plume else None
+        self.substeps = scenario.substeps
+        self.control_dt_s = 1.0 / scenario.time.control_hz
+        self._sensor_period = scenario.sensor.resolved().period_ticks
+        self._on_states = on_states
+        self.tick = 0
+        self.states: list[VehicleState] = []
+        # The last sensor tick's question and answer: (tick, time, states, values or None).
+        self._pending: tuple[int, float, list[VehicleState], list[float] | None] | None = None
+        self._commands: dict[str, Sequence[float]] = {}
+        self.latest_readings: dict[str, ConcentrationReading] = {}
+        self._publish()
+        self._control()
+
+    # ------------------------------------------------------------------ lifecycle
+    def close(self) -> None:
+        self.world.close()
+
+    def __enter__(self) -> FusedRunner:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ the client's side
+    @property
+    def sim_time_s(self) -> float:
+        return self.world.sim_time_s
+
+    def command(self, vehicle_id: str, command: object) -> CommandReply:
+        """Hand one command to a vehicle's autopilot (as ``vehicle/<id>/cmd`` does); it
+        takes effect on the next tick. ``KeyError`` for an unknown vehicle."""
+        return self.flights[vehicle_id].autopilot.handle(command)
+
+    def step(self, ticks: int = 1) -> list[VehicleState]:
+        """Advance ``ticks`` control ticks; the states of the last one."""
+        for _ in range(ticks):
+            for bad in self.world.apply_tick(self._commands):
+                log.warning("tick %d: %s; motors off", self.tick, bad)
+            self.world.step(self.substeps)
+            self.tick += 1
+            self._publish()
+            self._control()
+        return self.states
+
+    # ------------------------------------------------------------------ one tick
+    def _publish(self) -> None:
+        """The physics' half of a tick: the states, and the sensor tick's plume question."""
+        world = self.world
+        sim_time_s = world.sim_time_s
+        states = self.states = world.states(self.tick, sim_time_s)
+        if self._on_states is not None:
+            self._on_states(states)
+
+    def _control(self) -> None:
+        """The autopilots' half: last sensor tick's readings, then every vehicle's step."""
+        states = self.states
+        pending, self._pending = self._pending, None
+        if pending is not None:
+            sensor_tick, sensor_time_s, located, values = pending
+            for flight, reading in take_readings(
+                self._flights, sensor_tick, sensor_time_s, located, values
+            ):
+                self.latest_readings[flight.vehicle_id] = reading
+        commands: dict[str, Sequence[float]] = {}
+        for own, (flight, state) in enumerate(zip(self._flights, states, strict=True)):
+            peers = (
+                states[:own] + states[own + 1 :] if flight.autopilot.behavior is not None else []
+            )
+            commands[flight.vehicle_id] = flight.step(state, peers)
+        self._commands = commands
+        if self.tick % self._sensor_period == 0 and states:
+            self._pending = (self.tick, self.world.sim_time_s, states, self._ask_plume(states))
+
+    def _ask_plume(self, states: list[VehicleState]) -> list[float] | None:
+        if self.plume is None:
+            return None
+        query = PlumeQuery(
+            points_enu_m=[s.position_enu_m for s in states], sim_time_s=self.world.sim_time_s
+        )
+        return self.plume.concentration(query).values_g_m3
