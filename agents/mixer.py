@@ -4,7 +4,7 @@ The allocation matrix comes from the vehicle type's rotor layout, so every multi
 hexa, …) shares one code path: row 0 is the collective thrust, rows 1-3 the body torques (FLU)
 produced by one newton of thrust on each rotor. A rotor at (x, y) pushing along body +z makes
 the torque r × F = (y·T, −x·T, 0); its reaction torque about z is −spin·(k_m/k_f)·T
-(docs: PREAMBLE "Rotor command"). The pseudo-inverse (exact for a quad) is computed once; the
+(docs/physics.md, the rotor command). The pseudo-inverse (exact for a quad) is computed once; the
 per-tick work is a handful of scalar multiply-adds.
 
 When the request does not fit the rotors' range, yaw gives way first, then roll/pitch are

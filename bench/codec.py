@@ -1,4 +1,4 @@
-"""Encode/decode cost of bus messages (the per-vehicle-state figure of issue #2).
+"""Encode/decode cost of bus messages (the per-vehicle-state figure).
 
 Run: ``python -m bench.codec``. Prints a table; no assertions.
 """

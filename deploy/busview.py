@@ -59,7 +59,7 @@ class Snapshot:
         return sum(1 for v in self.vehicles.values() if v.flying)
 
     def to_json(self) -> dict[str, Any]:
-        """The shape of ``plumeswarm status --json`` (DESIGN.md "Public surfaces")."""
+        """The shape of ``plumeswarm status --json`` (a public surface, locked by a test)."""
         nodes = []
         for name in sorted(self.alive | set(self.health)):
             h = self.health.get(name)

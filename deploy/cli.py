@@ -22,10 +22,6 @@ def fail(message: str, code: int = 2) -> NoReturn:
     sys.exit(code)
 
 
-def not_yet(what: str, issue: str) -> NoReturn:
-    fail(f"'{what}' is not implemented yet (issue {issue})")
-
-
 def scenario_from(name_or_path: str | None) -> Scenario:
     try:
         return load_scenario(resolve_scenario_path(name_or_path))

@@ -129,10 +129,10 @@ def selected_roles(opts: LaunchOptions) -> list[str]:
 
 
 def missing_roles(roles: Sequence[str]) -> list[str]:
-    """Roles whose entry module is not installed (not built yet)."""
+    """Roles whose entry module is not installed (a broken or partial installation)."""
     missing = []
     for role in roles:
-        module = ROLES[role][0].partition(":")[0]
+        module = ROLES[role].partition(":")[0]
         try:
             found = importlib.util.find_spec(module) is not None
         except ModuleNotFoundError:
@@ -268,10 +268,8 @@ class Launcher:
         missing = missing_roles(roles)
         if missing:
             raise LaunchError(
-                "cannot start: role(s) not available yet: "
-                + ", ".join(
-                    f"{r} ({ROLES[r][0].partition(':')[0]}, issue {ROLES[r][1]})" for r in missing
-                )
+                "cannot start: role(s) not installed: "
+                + ", ".join(f"{r} ({ROLES[r].partition(':')[0]})" for r in missing)
             )
         self.run_dir.mkdir(parents=True, exist_ok=True)
         if any(s.role == "physics" for s in self.specs):

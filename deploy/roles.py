@@ -13,16 +13,15 @@ from swarmbus.node import NodeContext
 
 RoleMain = Callable[[NodeContext], int]
 
-ROLES: dict[str, tuple[str, str]] = {
-    # role: (entry point, the issue that builds it)
-    "router": ("deploy.router:main", "#7"),
-    "plume": ("plume_service.service:main", "#3"),
-    "physics": ("sim_world.physics_node:main", "#4"),
-    "autopilot": ("agents.autopilot_node:main", "#5"),
-    "gateway": ("gcs_bridge.gateway:main", "#6"),
-    "viewer": ("sim_world.viewer:main", "#7"),
-    "recorder": ("deploy.recorder:main", "#8"),
-    "foxglove": ("deploy.foxglove.live:main", "#18"),
+ROLES: dict[str, str] = {
+    "router": "deploy.router:main",
+    "plume": "plume_service.service:main",
+    "physics": "sim_world.physics_node:main",
+    "autopilot": "agents.autopilot_node:main",
+    "gateway": "gcs_bridge.gateway:main",
+    "viewer": "sim_world.viewer:main",
+    "recorder": "deploy.recorder:main",
+    "foxglove": "deploy.foxglove.live:main",
 }
 
 
@@ -41,20 +40,19 @@ class RoleUnavailable(RuntimeError):
 
 
 def role_entry(role: str) -> RoleMain:
-    """The ``main`` of ``role``; :class:`RoleUnavailable` when it is not built yet or unknown."""
-    if role in BENCH_ROLES:
-        module_name, _, func_name = BENCH_ROLES[role].partition(":")
-        bench_main: RoleMain = getattr(importlib.import_module(module_name), func_name)
-        return bench_main
-    if role not in ROLES:
+    """The ``main`` of ``role`` (or of a bench stand-in); :class:`RoleUnavailable` when the role
+    is unknown or its package is not installed."""
+    target = BENCH_ROLES.get(role) or ROLES.get(role)
+    if target is None:
         raise RoleUnavailable(f"unknown role {role!r}; roles: {', '.join(ROLES)}")
-    target, issue = ROLES[role]
     module_name, _, func_name = target.partition(":")
     try:
         module = importlib.import_module(module_name)
     except ModuleNotFoundError as exc:
         if exc.name is not None and module_name.startswith(exc.name):
-            raise RoleUnavailable(f"role {role!r} is not implemented yet (issue {issue})") from None
+            raise RoleUnavailable(
+                f"role {role!r}: its package {module_name} is not installed"
+            ) from None
         raise
     func: RoleMain = getattr(module, func_name)
     return func

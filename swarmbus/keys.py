@@ -5,7 +5,7 @@ wildcard never crosses them: ``sim/`` and ``vehicle/*/{state,actuators,status,co
 carry data, ``vehicle/*/cmd``, ``plume/*`` and ``clock/step`` are queryables (control),
 ``node/*`` is presence. No other module formats a key expression.
 
-One departure from DESIGN.md's key table: ``autopilot/<node>/actuators`` carries an
+The one key that is not per vehicle or per service: ``autopilot/<node>/actuators`` carries an
 ``ActuatorBatch`` (the commands of every vehicle an autopilot process serves, one put per process
 per tick). A process serving K vehicles would otherwise put K ``vehicle/<id>/actuators`` per
 tick and the physics would wake K times; it is not per vehicle, so it cannot live under

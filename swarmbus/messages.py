@@ -1,4 +1,4 @@
-"""Typed, versioned messages for every payload of the key space (DESIGN.md "Key space").
+"""Typed, versioned messages for every payload of the key space (docs/bus.md).
 
 Every message is a ``msgspec.Struct`` tagged with ``schema = "<name>/v<version>"``; decoding a
 payload with another version fails with a typed error. Floats are bounded (which also rejects

@@ -1,6 +1,6 @@
 """A small rigid-body multirotor written for the agents' tests, independent of sim_world.
 
-It follows the agreed actuator convention (PREAMBLE "Rotor command"): u → target ω = u·ω_max,
+It follows the agreed actuator convention (docs/physics.md): u → target ω = u·ω_max,
 first-order motor lag, thrust k_f·ω² along body +z at the rotor, reaction torque −spin·k_m·ω²
 about body z; linear body-axis drag against the air velocity; flat ground at z = 0. It lets the
 pure autopilot logic be flown closed-loop without the physics process.

@@ -3,7 +3,6 @@ fake autopilot (tests/fake_autopilot.py) or the real stack (plume + physics + au
 
 from __future__ import annotations
 
-import importlib.util
 import os
 import signal
 import subprocess
@@ -13,14 +12,6 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from tests.procs import REPO, Network
-
-
-def real_stack_available() -> bool:
-    """Are the autopilot and the physics on this branch (both land on main separately)?"""
-    return all(
-        importlib.util.find_spec(m) is not None
-        for m in ("agents.autopilot_node", "sim_world.physics_node", "plume_service.service")
-    )
 
 
 def spawn(args: list[str], log: Path) -> subprocess.Popen[bytes]:

@@ -1,5 +1,5 @@
 """Acceptance of the autopilots with real processes: plume service + physics + autopilots,
-lockstep, on loopback (issue 5)."""
+lockstep, on loopback."""
 
 from __future__ import annotations
 
@@ -12,25 +12,11 @@ import pytest
 import zenoh
 
 from agents import CommandRejected, Swarm
-from deploy.roles import RoleUnavailable, role_entry
 from plume_service import GaussianPlume
 from swarmbus.messages import ConcentrationReading, FlightMode, VehicleState
 from swarmbus.scenario import DEFAULT_SCENARIO, load_scenario
 from swarmbus.session import Presence
 from tests.procs import Network, NodeProcs, keys_for
-
-
-def _physics_available() -> bool:
-    try:
-        role_entry("physics")
-    except RoleUnavailable:
-        return False
-    return True
-
-
-pytestmark = pytest.mark.skipif(
-    not _physics_available(), reason="the physics role (issue 4) is not on this branch yet"
-)
 
 HEADER = """
 [world]

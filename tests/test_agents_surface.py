@@ -1,4 +1,4 @@
-"""The Swarm client's public surface changes only on purpose (DESIGN.md "Public surfaces")."""
+"""The Swarm client's public surface changes only on purpose."""
 
 from __future__ import annotations
 

@@ -11,15 +11,9 @@ import numpy as np
 import pytest
 from matplotlib.image import imread
 
-from deploy.launcher import missing_roles
 from deploy.recording.report import READING_COLUMNS, TRACK_COLUMNS
 from tests.procs import run_cli
 from tests.test_report import PNGS
-
-pytestmark = pytest.mark.skipif(
-    bool(missing_roles(["plume", "physics", "autopilot"])),
-    reason="roles not built yet: " + ", ".join(missing_roles(["plume", "physics", "autopilot"])),
-)
 
 
 @pytest.fixture(scope="module")

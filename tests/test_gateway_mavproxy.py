@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.gateway_stack import gateway, real_stack_available, vehicles
+from tests.gateway_stack import gateway, vehicles
 from tests.mavclient import MavClient, write_scenario
 from tests.procs import zenoh_network
 
@@ -25,12 +25,7 @@ MAVPROXY = shutil.which("mavproxy.py") or str(Path(sys.executable).parent / "mav
 pytestmark = pytest.mark.skipif(not Path(MAVPROXY).exists(), reason="mavproxy not installed")
 BACKENDS = [
     "fake",
-    pytest.param(
-        "real",
-        marks=pytest.mark.skipif(
-            not real_stack_available(), reason="autopilot / physics not on this branch yet"
-        ),
-    ),
+    "real",
 ]
 
 

@@ -19,7 +19,7 @@ import pytest
 
 from gcs_bridge.frames import enu_to_geodetic
 from swarmbus.scenario import Origin
-from tests.gateway_stack import gateway, real_stack_available, vehicles
+from tests.gateway_stack import gateway, vehicles
 from tests.mavclient import first, write_scenario
 from tests.procs import zenoh_network
 
@@ -36,12 +36,7 @@ N = 3
 ALT_M = 8.0
 BACKENDS = [
     "fake",
-    pytest.param(
-        "real",
-        marks=pytest.mark.skipif(
-            not real_stack_available(), reason="autopilot / physics not on this branch yet"
-        ),
-    ),
+    "real",
 ]
 
 

@@ -41,7 +41,7 @@ from gcs_bridge.dialect import mavlink
 from gcs_bridge.frames import enu_to_geodetic
 from swarmbus.scenario import Origin
 from swarmbus.vehicle_types import load_vehicle_type
-from tests.gateway_stack import gateway, real_stack_available, vehicles
+from tests.gateway_stack import gateway, vehicles
 from tests.mavclient import clients, first, mission_item, write_scenario
 from tests.procs import zenoh_network
 
@@ -67,10 +67,6 @@ from mavsdk.plugins.offboard import (  # noqa: E402
     PositionGlobalYaw,
     PositionNedYaw,
     VelocityBodyYawspeed,
-)
-
-pytestmark = pytest.mark.skipif(
-    not real_stack_available(), reason="autopilot / physics not on this branch"
 )
 
 ORIGIN = Origin()

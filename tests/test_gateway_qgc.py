@@ -14,7 +14,7 @@ import pytest
 from gcs_bridge.dialect import mavlink
 from gcs_bridge.params import float_bits_of_int
 from swarmbus.scenario import Origin
-from tests.gateway_stack import gateway, real_stack_available, vehicles
+from tests.gateway_stack import gateway, vehicles
 from tests.mavclient import MavClient, write_scenario
 from tests.procs import zenoh_network
 
@@ -22,12 +22,7 @@ NAN = float("nan")
 ORIGIN = Origin()
 BACKENDS = [
     "fake",
-    pytest.param(
-        "real",
-        marks=pytest.mark.skipif(
-            not real_stack_available(), reason="autopilot / physics not on this branch yet"
-        ),
-    ),
+    "real",
 ]
 ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
 

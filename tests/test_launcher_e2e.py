@@ -13,17 +13,10 @@ from pathlib import Path
 
 import numpy as np
 import psutil
-import pytest
 
 from deploy.busview import BusView
-from deploy.launcher import missing_roles
 from swarmbus.session import NetworkConfig, free_tcp_port, open_session
 from tests.procs import REPO, keys_for, run_cli, wait_until
-
-NEEDED = ["plume", "physics", "autopilot", "viewer"]
-pytestmark = pytest.mark.skipif(
-    bool(missing_roles(NEEDED)), reason="roles not built yet: " + ", ".join(missing_roles(NEEDED))
-)
 
 
 def _env() -> dict[str, str]:
@@ -32,11 +25,7 @@ def _env() -> dict[str, str]:
 
 def test_up_status_viewer_and_clean_stop(tmp_path: Path) -> None:
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
-    roles = [
-        r
-        for r in ("router", "plume", "physics", "autopilot", "gateway", "viewer")
-        if not missing_roles([r])
-    ]
+    roles = ["router", "plume", "physics", "autopilot", "gateway", "viewer"]
     run = tmp_path / "run"
     with open(tmp_path / "console.txt", "wb") as console:
         up = subprocess.Popen(
