@@ -59,11 +59,43 @@ class Time(_Section, frozen=True, kw_only=True):
     checkpoint_period_s: NonNeg = 1.0  # physics checkpoints the world every S sim s; 0: never
 
 
+class WindMeander(_Section, frozen=True, kw_only=True):
+    """Farrell et al. (2002) coloured noise on the wind; ``preset`` fills the three numbers."""
+
+    preset: Literal["small", "large"] | None = None
+    gain: NonNeg = 3.0  # Farrell's G (see docs/plume.md for its SDE form)
+    damping: Pos = 0.071  # ζ
+    bandwidth_rad_s: Pos = 0.71  # ω
+    step_s: Annotated[float, msgspec.Meta(ge=1e-3, le=10.0)] = 0.05  # internal step, sim s
+
+    def resolved(self) -> WindMeander:
+        presets = {"small": (3.0, 0.071, 0.71), "large": (20.0, 0.1, 0.2)}
+        if self.preset is None:
+            return self
+        gain, damping, bandwidth = presets[self.preset]
+        return msgspec.structs.replace(
+            self, preset=None, gain=gain, damping=damping, bandwidth_rad_s=bandwidth
+        )
+
+
+class WindField(_Section, frozen=True, kw_only=True):
+    """A 2-D grid wind: the meander noise at the grid's corners, carried inwards by the mean
+    wind and diffused (Farrell et al. 2002)."""
+
+    spacing_m: Annotated[float, msgspec.Meta(ge=0.1, le=1e4)] = 10.0
+    extent_m: Annotated[float, msgspec.Meta(ge=1.0, le=1e5)] = 200.0  # half-width, around 0
+    diffusivity_m2_s: NonNeg = 2.0
+
+
 class Wind(_Section, frozen=True, kw_only=True):
-    """One wind, two consumers: the plume's advection and the vehicles' air velocity."""
+    """One wind, three consumers: the plume's advection, the vehicles' air velocity (drag) and
+    their anemometers (``swarmbus.wind``). ``speed_m_s``/``from_deg`` give the mean wind."""
 
     speed_m_s: Pos = 6.0
     from_deg: Degrees = 270.0  # meteorological: the direction it blows FROM; 270 → toward +x
+    model: Literal["steady", "meander", "field"] = "steady"
+    meander: WindMeander = WindMeander()
+    field: WindField = WindField()
 
 
 class Source(_Section, frozen=True, kw_only=True):
