@@ -98,18 +98,44 @@ class Wind(_Section, frozen=True, kw_only=True):
     field: WindField = WindField()
 
 
+PlumeModel = Literal["gaussian", "filament", "puff"]
+
+
 class Source(_Section, frozen=True, kw_only=True):
     x_m: Fin = 0.0
     y_m: Fin = 0.0
     release_rate_g_s: Pos = 10.0
     release_height_m: NonNeg = 10.0
+    model: PlumeModel | None = None  # this source's model; default: [plume] model
+
+
+class PlumeFilament(_Section, frozen=True, kw_only=True):
+    """Farrell et al. (2002) filaments; defaults are theirs (docs/plume.md)."""
+
+    release_rate_hz: Annotated[float, msgspec.Meta(gt=0.0, le=1e5)] = 10.0
+    initial_radius_m: Pos = 0.001**0.5
+    growth_m2_s: NonNeg = 0.001
+    centerline_diffusivity_m2_s: NonNeg = 0.02
+    step_s: Annotated[float, msgspec.Meta(ge=1e-3, le=10.0)] = 0.05
+    max_age_s: Pos = 120.0  # filaments older than this are dropped
+
+
+class PlumePuff(_Section, frozen=True, kw_only=True):
+    """CALPUFF-style puffs; σ from the plume's dispersion curves at each puff's travel."""
+
+    release_period_s: Annotated[float, msgspec.Meta(ge=1e-3, le=600.0)] = 0.5
+    step_s: Annotated[float, msgspec.Meta(ge=1e-3, le=10.0)] = 0.1  # advection step
+    max_age_s: Pos = 600.0
 
 
 class Plume(_Section, frozen=True, kw_only=True):
     """``preset`` fills model, stability, coefficients and sources; explicit fields override."""
 
     preset: Literal["novak2018"] | None = None
-    model: Literal["gaussian"] = "gaussian"
+    model: PlumeModel = "gaussian"
+    filament: PlumeFilament = PlumeFilament()
+    puff: PlumePuff = PlumePuff()
+    state_period_s: Annotated[float, msgspec.Meta(ge=0.0, le=3600.0)] = 0.5  # plume/state; 0 off
     stability: Literal["A", "B", "C", "D", "E", "F"] = "D"
     coefficients: Literal["mcmullen", "briggs-rural", "briggs-urban", "novak2018"] = "mcmullen"
     mixing_height_m: Pos | None = None
