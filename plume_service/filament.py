@@ -111,15 +111,12 @@ class FilamentPlume(TimeSteppedField[Filaments]):
         seed: int,
         stream: int = 0,
     ) -> None:
-        self.source_m = source_m
-        self.release_rate_g_s = release_rate_g_s
         self.params = params
-        self.wind = wind
         self.mass_g = release_rate_g_s / params.release_rate_hz
         self._noise = math.sqrt(2.0 * params.centerline_diffusivity_m2_s * params.step_s)
         self._max_age_steps = math.floor(params.max_age_s / params.step_s + 1e-9)
         self._tree: tuple[Filaments, cKDTree, FloatArray] | None = None
-        super().__init__(params.step_s, seed, stream)
+        super().__init__(source_m, release_rate_g_s, wind, params.step_s, seed, stream)
 
     def initial_state(self) -> Filaments:
         return Filaments(np.empty((0, 3)), np.empty(0, dtype=np.int64))

@@ -5,6 +5,7 @@ from __future__ import annotations
 from plume_service.field import ConcentrationField, PlumeField
 from plume_service.filament import FilamentPlume
 from plume_service.gaussian import GaussianPlume
+from plume_service.puff import PuffPlume
 from swarmbus.scenario import Scenario, Source
 from swarmbus.wind import WindModel, wind_from_scenario
 
@@ -27,14 +28,14 @@ def _source_field(
 ) -> ConcentrationField:
     plume = scenario.plume
     model = src.model or plume.model
+    source = (src.x_m, src.y_m, src.release_height_m)
+    rate, seed = src.release_rate_g_s, scenario.world.seed
     if model == "filament":
-        return FilamentPlume(
-            (src.x_m, src.y_m, src.release_height_m),
-            src.release_rate_g_s,
-            plume.filament,
-            wind,
-            seed=scenario.world.seed,
-            stream=index,
+        return FilamentPlume(source, rate, plume.filament, wind, seed, stream=index)
+    if model == "puff":
+        lid = plume.mixing_height_m
+        return PuffPlume(
+            source, rate, plume.puff, wind, plume.stability, plume.coefficients, lid, seed, index
         )
     return GaussianPlume(
         release_rate=src.release_rate_g_s,

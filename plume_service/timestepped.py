@@ -17,7 +17,7 @@ from typing import Any, Generic, TypeVar
 import numpy as np
 
 from plume_service.field import ConcentrationField
-from swarmbus.wind import step_index
+from swarmbus.wind import WindModel, step_index
 
 State = TypeVar("State")
 
@@ -30,9 +30,22 @@ THIN_EVERY = 16
 
 
 class TimeSteppedField(ConcentrationField, Generic[State]):
-    """Base of the filament and puff fields; subclasses say how one step changes the state."""
+    """Base of the filament and puff fields of one source (at ``source_m``, x, y and release
+    height, releasing ``release_rate_g_s``) in ``wind``; subclasses say how one step changes
+    the state."""
 
-    def __init__(self, step_s: float, seed: int, stream: int) -> None:
+    def __init__(
+        self,
+        source_m: tuple[float, float, float],
+        release_rate_g_s: float,
+        wind: WindModel,
+        step_s: float,
+        seed: int,
+        stream: int,
+    ) -> None:
+        self.source_m = source_m
+        self.release_rate_g_s = release_rate_g_s
+        self.wind = wind
         if not step_s > 0.0:
             raise ValueError(f"step_s must be > 0, got {step_s!r}")
         self.step_s = float(step_s)
