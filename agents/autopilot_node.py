@@ -42,6 +42,7 @@ import msgspec
 import numpy as np
 import zenoh
 
+from agents.anemometer import Anemometer
 from agents.autopilot import Autopilot
 from agents.behavior import BehaviorContext, BehaviorError, load_behavior
 from agents.estimator import Estimator
@@ -64,6 +65,7 @@ from swarmbus.messages import (
 )
 from swarmbus.node import NodeContext, NodeRuntime
 from swarmbus.scenario import Scenario
+from swarmbus.wind import WindModel, wind_from_scenario
 
 log = logging.getLogger(__name__)
 
@@ -134,12 +136,19 @@ class _Served:
         scenario: Scenario,
         vehicle_id: str,
         options: NodeOptions,
+        wind: WindModel,
         own_actuators: bool = True,
     ) -> None:
         self.vehicle_id = vehicle_id
         self.autopilot = build_autopilot(scenario, vehicle_id, options)
         index = [v.id for v in scenario.vehicles].index(vehicle_id)
         self.sensor = ConcentrationSensor(scenario.sensor, scenario.world.seed, index)
+        self.anemometer = Anemometer(scenario.anemometer, wind, scenario.world.seed, index)
+        self.wind_pub = (
+            session.declare_publisher(keys.vehicle_wind(vehicle_id))
+            if scenario.anemometer.period_ticks > 0
+            else None
+        )
         # None: the process batches its vehicles' commands (AutopilotNode.batch_pub)
         self.actuators = (
             session.declare_publisher(keys.vehicle_actuators(vehicle_id)) if own_actuators else None
@@ -245,8 +254,9 @@ class AutopilotNode:
         self.options = options
         self.lock = threading.Lock()
         batched = len(ctx.vehicle_ids) > 1
+        wind = wind_from_scenario(ctx.scenario)  # one wind for every vehicle served here
         self.served = {
-            vid: _Served(session, self.keys, ctx.scenario, vid, options, not batched)
+            vid: _Served(session, self.keys, ctx.scenario, vid, options, wind, not batched)
             for vid in ctx.vehicle_ids
         }
         self.batch_pub = (
@@ -456,6 +466,11 @@ class AutopilotNode:
                 except MessageError as exc:
                     log.warning("%s: ignoring bad state in tick %d: %s", vid, tick.tick, exc)
                     continue
+                if served.wind_pub is not None and served.anemometer.due(tick.tick):
+                    wind = served.anemometer.read(
+                        vid, tick.tick, tick.sim_time_s, state.position_enu_m
+                    )
+                    served.wind_pub.put(encode(wind))
                 rotor = served.autopilot.step(state, peers, served.new_readings)
                 served.new_readings = []
                 command = ActuatorCommand(vehicle_id=vid, tick=tick.tick, rotor_commands=rotor)

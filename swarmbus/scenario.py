@@ -164,6 +164,13 @@ class Sensor(_Section, frozen=True, kw_only=True):
         return self
 
 
+class Anemometer(_Section, frozen=True, kw_only=True):
+    """Every vehicle's anemometer (agents.anemometer): the scenario's wind plus noise."""
+
+    period_ticks: Annotated[int, msgspec.Meta(ge=0, le=100_000)] = 0  # 0: no anemometer
+    noise_std_m_s: NonNeg = 0.1  # per axis (GADEN's anemometer noise)
+
+
 class Failsafe(_Section, frozen=True, kw_only=True):
     datalink_loss_action: Literal["none", "hold", "land", "rtl"] = "rtl"
     datalink_timeout_s: Pos = 10.0
@@ -205,6 +212,7 @@ class Scenario(_Section, frozen=True, kw_only=True):
     wind: Wind = Wind()
     plume: Plume = Plume()
     sensor: Sensor = Sensor()
+    anemometer: Anemometer = Anemometer()
     failsafe: Failsafe = Failsafe()
     gateway: Gateway = Gateway()
     vehicles: Annotated[list[Vehicle], msgspec.Meta(min_length=1, max_length=MAX_VEHICLES)]
