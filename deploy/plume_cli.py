@@ -1,12 +1,14 @@
-"""``plumeswarm plume sample|mesh|plot``: look at a scenario's or a preset's plume field."""
+"""``plumeswarm plume sample|mesh|plot|series``: look at a scenario's or a preset's plume field."""
 
 from __future__ import annotations
 
 import json
 import math
+import sys
 from pathlib import Path
 
 import click
+from tqdm import tqdm
 
 from plume_service import GaussianPlume
 from plume_service.field import ConcentrationField
@@ -124,3 +126,60 @@ def plot(scenario: str | None, preset: str | None, out: Path, height: float | No
         fail(str(exc))
     for p in paths:
         click.echo(f"wrote {p}")
+
+
+#: Most time samples ``plume series`` computes in one call.
+MAX_SERIES_SAMPLES = 1_000_000
+
+
+@plume.command(context_settings={"ignore_unknown_options": True})
+@click.argument("scenario_name", metavar="SCENARIO")
+@click.option(
+    "--point",
+    "points",
+    type=float,
+    nargs=3,
+    multiple=True,
+    required=True,
+    metavar="X Y Z",
+    help="A point, world ENU metres (repeat for more).",
+)
+@click.option("--seconds", type=float, required=True, help="Sim seconds to cover, from t = 0.")
+@click.option("--every", type=float, required=True, help="Sim seconds between samples.")
+@click.option("--format", "fmt", type=click.Choice(["table", "json"]), default="table")
+def series(
+    scenario_name: str,
+    points: tuple[tuple[float, float, float], ...],
+    seconds: float,
+    every: float,
+    fmt: str,
+) -> None:
+    """The field at --point(s) every --every sim seconds over --seconds, without starting any
+    process: the same values the plume service would give at those sim times (filaments and
+    puffs are time-dependent; a Gaussian plume repeats one value)."""
+    from deploy.cli import fail, scenario_from
+
+    if not all(math.isfinite(c) for p in points for c in p):
+        fail("--point coordinates must be finite numbers")
+    if not (math.isfinite(seconds) and seconds >= 0.0):
+        fail(f"--seconds must be a number >= 0, got {seconds}")
+    if not (math.isfinite(every) and every > 0.0):
+        fail(f"--every must be a positive number, got {every}")
+    count = math.floor(seconds / every + 1e-9) + 1
+    if count > MAX_SERIES_SAMPLES:
+        fail(
+            f"{count} samples (--seconds / --every) exceed {MAX_SERIES_SAMPLES}; sample less often"
+        )
+    field = field_from_scenario(scenario_from(scenario_name))
+    times = [k * every for k in range(count)]
+    rows = []
+    for t in tqdm(times, desc="plume series", unit="sample", disable=count < 2000, file=sys.stderr):
+        rows.append(field.concentration(list(points), t).tolist())
+    if fmt == "json":
+        out = {"t": times, "points": [list(p) for p in points], "values_g_m3": rows}
+        click.echo(json.dumps(out))
+        return
+    header = "".join(f"{f'({p[0]:g}, {p[1]:g}, {p[2]:g})':>22}" for p in points)
+    click.echo(f"{'t (s)':>10}{header}")
+    for t, values in zip(times, rows, strict=True):
+        click.echo(f"{t:10.3f}" + "".join(f"{v:22.6g}" for v in values))
