@@ -1,7 +1,9 @@
 """The viewer role: a meshcat scene of the world, fed from the bus.
 
 Ground grid, each vehicle as a body with rotor discs in its own colour, its trail, the plume
-isosurfaces from ``plume/mesh`` as translucent surfaces, each vehicle's latest reading as a
+isosurfaces from ``plume/mesh`` as translucent surfaces (Gaussian plumes) or the filaments or
+puffs of a time-dependent plume from ``field/state`` as a point cloud (each point a centre,
+redrawn as states arrive), each vehicle's latest reading as a
 coloured, sized marker above it, and the source marked. The meshcat server (its web files ship in
 the package, nothing is fetched) runs on a thread of this process, on 127.0.0.1; the URL is
 printed at start and published in this node's health ``detail``.
@@ -41,6 +43,7 @@ from swarmbus.messages import (
     ErrorReply,
     PlumeMesh,
     PlumeMeshQuery,
+    PlumeState,
     SimTick,
     VehicleState,
 )
@@ -202,10 +205,22 @@ class Feed:
         self._lock = threading.Lock()
         self._tick: bytes | None = None
         self._readings: dict[str, bytes] = {}
+        self._plume_state: bytes | None = None
         self._subs = [
             session.declare_subscriber(keys.tick(), self._on_tick),
             session.declare_subscriber(keys.all_vehicle_concentration(), self._on_reading),
+            session.declare_subscriber(keys.plume_state(), self._on_plume_state),
         ]
+
+    def _on_plume_state(self, sample: zenoh.Sample) -> None:
+        with self._lock:
+            self._plume_state = sample.payload.to_bytes()
+
+    def take_plume_state(self) -> bytes | None:
+        """The newest ``field/state`` payload (once)."""
+        with self._lock:
+            state, self._plume_state = self._plume_state, None
+        return state
 
     def _on_tick(self, sample: zenoh.Sample) -> None:
         with self._lock:
@@ -253,6 +268,7 @@ class Scene:
         self.drawn_tick: int | None = None  # the newest tick drawn
         sensor = scenario.sensor.resolved()
         self.full_scale = sensor.saturation_g_m3 or max(default_levels(scenario))
+        self.plume_state_time_s: float | None = None  # sim time of the drawn field/state
 
     def node(self, path: str) -> Any:
         """The scene node at ``path`` under the world root (which is shifted so that the
@@ -408,6 +424,18 @@ class Scene:
             ),
         )
 
+    def set_plume_state(self, state: PlumeState) -> None:
+        """Filament or puff centres as one point cloud, points sized by the mean radius."""
+        centres = np.frombuffer(state.centres_f32, dtype="<f4").reshape(-1, 3)
+        radii = np.frombuffer(state.radii_f32, dtype="<f4")
+        size = float(np.clip(2.0 * radii.mean(), 0.05, 5.0)) if radii.size else 0.1
+        self._set(
+            "/plume/state",
+            mg.PointsGeometry(centres.T.astype(np.float32)),
+            mg.PointsMaterial(size=size, color=0x8C33BF),
+        )
+        self.plume_state_time_s = state.sim_time_s
+
 
 def fetch_mesh(
     session: zenoh.Session, keys: Keys, query: PlumeMeshQuery, timeout_s: float = 10.0
@@ -472,6 +500,10 @@ class MeshFetcher:
 
 
 def mesh_queries(scenario: Scenario, opts: ViewerOptions) -> list[PlumeMeshQuery]:
+    """Isosurfaces for Gaussian plumes; a time-dependent plume is drawn from its state."""
+    models = {src.model or scenario.plume.model for src in scenario.plume.sources}
+    if models != {"gaussian"}:
+        return []
     lo, hi = scene_bounds(scenario)
     levels = opts.levels_g_m3 or default_levels(scenario)
     return [
@@ -500,6 +532,12 @@ def render(scene: Scene, feed: Feed, meshes: MeshFetcher) -> int:
             scene.update_reading(decode(raw, ConcentrationReading))
         except MessageError as exc:
             log.warning("ignoring reading of %s: %s", vid, exc)
+    state_raw = feed.take_plume_state()
+    if state_raw is not None:
+        try:
+            scene.set_plume_state(decode(state_raw, PlumeState))
+        except MessageError as exc:
+            log.warning("ignoring plume state: %s", exc)
     new_meshes = meshes.take()
     for index, mesh in new_meshes.items():
         scene.set_plume(index, mesh)
