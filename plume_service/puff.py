@@ -130,10 +130,15 @@ class PuffPlume(TimeSteppedField[Puffs]):
             r2 = (p[:, None, 0] - centres[None, :, 0]) ** 2 + (
                 p[:, None, 1] - centres[None, :, 1]
             ) ** 2
-            vertical = np.zeros_like(r2)
+            # only the (point, puff) pairs within _IMAGE_SIGMAS σy of each other contribute
+            arg = r2 * inv_y
+            pt, puff = np.nonzero(arg < 0.5 * _IMAGE_SIGMAS**2)
+            z = p[pt, 2]
+            vertical = np.zeros(pt.shape[0])
             for image in heights:
-                vertical += np.exp(-((p[:, None, 2] - image) ** 2) * inv_z)
-            out[start : start + block] = np.sum(amplitude * np.exp(-r2 * inv_y) * vertical, axis=1)
+                vertical += np.exp(-((z - image) ** 2) * inv_z[puff])
+            terms = amplitude[puff] * np.exp(-arg[pt, puff]) * vertical
+            out[start : start + block] = np.bincount(pt, weights=terms, minlength=p.shape[0])
         out[~inside] = 0.0
 
     def _image_heights(self, sigma_z_max: float) -> list[float]:

@@ -301,6 +301,9 @@ class World:
         """Each vehicle's air velocity for this step call (the wind at the call's sim time)."""
         if self.wind.steady:
             return [self.wind_enu_m_s] * len(self._vehicles)
+        uniform = self.wind.uniform_at(self.step_count * self.dt_s)
+        if uniform is not None:
+            return [uniform] * len(self._vehicles)
         c = self._client
         points = [get_pose(v.body, physicsClientId=c)[0] for v in self._vehicles]
         values = self.wind.velocity(points, self.step_count * self.dt_s)

@@ -76,6 +76,11 @@ class WindModel(ABC):
     def steady(self) -> bool:
         return False
 
+    def uniform_at(self, t: float) -> tuple[float, float, float] | None:
+        """The wind at time t if it is the same everywhere (steady, meander), else None: lets
+        a consumer skip looking up positions."""
+        return None
+
     def info(self) -> dict[str, Any]:
         return {"model": type(self).__name__, "mean_enu_m_s": list(self.mean_enu_m_s)}
 
@@ -94,6 +99,9 @@ class SteadyWind(WindModel):
     @property
     def steady(self) -> bool:
         return True
+
+    def uniform_at(self, t: float) -> tuple[float, float, float]:
+        return self.mean_enu_m_s
 
     def velocity(self, points: npt.ArrayLike, t: float) -> FloatArray:
         n = _points(points).shape[0]
@@ -179,12 +187,24 @@ class MeanderWind(WindModel):
         self.config = wind.meander.resolved()
         self.noise = ColouredNoise(self.config, copies=2, seed=seed, stream=0)
         self._lock = threading.Lock()
+        self._last: tuple[float, tuple[float, float, float]] | None = None
 
     def at(self, t: float) -> tuple[float, float, float]:
+        """The wind (everywhere) at sim time t; the last answer is kept (one call per tick)."""
+        last = self._last
+        if last is not None and last[0] == t:
+            return last[1]
+        k, frac = step_index(t, self.noise.step_s)
         with self._lock:
-            du, dv = self.noise.at(t)
+            r0 = self.noise.values(k).tolist()
+            r1 = self.noise.values(k + 1).tolist() if frac else r0
         mx, my, mz = self.mean_enu_m_s
-        return (mx + float(du), my + float(dv), mz)
+        value = (mx + r0[0] + frac * (r1[0] - r0[0]), my + r0[1] + frac * (r1[1] - r0[1]), mz)
+        self._last = (t, value)
+        return value
+
+    def uniform_at(self, t: float) -> tuple[float, float, float]:
+        return self.at(t)
 
     def velocity(self, points: npt.ArrayLike, t: float) -> FloatArray:
         n = _points(points).shape[0]
