@@ -47,17 +47,29 @@ def plume() -> None:
 @preset_option
 @click.argument("coords", nargs=-1, type=float, required=True)
 @click.option("--format", "fmt", type=click.Choice(["table", "json"]), default="table")
-def sample(scenario: str | None, preset: str | None, coords: tuple[float, ...], fmt: str) -> None:
+@click.option(
+    "--time",
+    "time_s",
+    type=float,
+    default=0.0,
+    show_default=True,
+    help="Sim time (s) for filament and puff plumes.",
+)
+def sample(
+    scenario: str | None, preset: str | None, coords: tuple[float, ...], fmt: str, time_s: float
+) -> None:
     """Concentration at points X Y Z [X Y Z ...] (world ENU metres)."""
     from deploy.cli import fail
 
+    if not (math.isfinite(time_s) and time_s >= 0.0):
+        fail(f"--time must be a number >= 0, got {time_s}")
     if len(coords) % 3 != 0:
         fail(f"expected X Y Z triples, got {len(coords)} numbers")
     if not all(math.isfinite(c) for c in coords):
         fail("coordinates must be finite numbers")
     field = _field(scenario, preset)
     points = [coords[i : i + 3] for i in range(0, len(coords), 3)]
-    values = field.concentration(points)
+    values = field.concentration(points, time_s)
     if fmt == "json":
         rows = [
             {"x": p[0], "y": p[1], "z": p[2], "concentration_g_m3": float(v)}

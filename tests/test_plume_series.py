@@ -55,3 +55,14 @@ def test_filament_scenario_samples_at_20_hz_or_more() -> None:
     assert scenario.time.control_hz / scenario.sensor.period_ticks >= 20.0
     assert len(scenario.vehicles) == 3
     assert math.isclose(scenario.plume.filament.initial_radius_m**2, 0.001, rel_tol=1e-3)
+
+
+def test_plume_sample_at_a_time_is_the_series_value_then() -> None:
+    out = _series("filament", "--point", "20", "0", "5", "--seconds", "40", "--every", "0.05")
+    values = [row[0] for row in out["values_g_m3"]]
+    k = max(range(len(values)), key=values.__getitem__)  # the strongest burst
+    t = out["t"][k]
+    args = ["plume", "sample", "--scenario", "filament", "--time", repr(t), "--format", "json"]
+    res = run_cli([*args, "20", "0", "5"])
+    assert res.returncode == 0, res.stderr
+    assert json.loads(res.stdout)[0]["concentration_g_m3"] == values[k] > 0.0
