@@ -17,16 +17,13 @@ from typing import Any, Generic, TypeVar
 import numpy as np
 
 from plume_service.field import ConcentrationField
-from swarmbus.wind import WindModel, step_index
+from swarmbus.wind import WindModel, step_index, thin_snapshots
 
 State = TypeVar("State")
 
-#: Internal steps that share one seeded generator, and the spacing of kept snapshots.
+#: Internal steps that share one seeded generator, and the spacing of kept snapshots (thinned
+#: by :func:`swarmbus.wind.thin_snapshots`).
 BLOCK_STEPS = 64
-#: The newest snapshots kept at every block; older ones only every THIN_EVERY-th block, so
-#: memory grows slowly over long runs while a restart a few seconds back stays cheap.
-RECENT_SNAPSHOTS = 32
-THIN_EVERY = 16
 
 
 class TimeSteppedField(ConcentrationField, Generic[State]):
@@ -89,14 +86,8 @@ class TimeSteppedField(ConcentrationField, Generic[State]):
                     self._rng = self._block_rng(self._k // BLOCK_STEPS)
                     if self._k not in self._snapshots:
                         self._snapshots[self._k] = self.copy_state(self._state)
-                        self._thin()
+                        thin_snapshots(self._snapshots, self._k, BLOCK_STEPS)
             return self._k, self._state
-
-    def _thin(self) -> None:
-        recent = self._k - RECENT_SNAPSHOTS * BLOCK_STEPS
-        for k in [k for k in self._snapshots if k < recent]:
-            if (k // BLOCK_STEPS) % THIN_EVERY:
-                del self._snapshots[k]
 
     def time_info(self) -> dict[str, Any]:
         return {"step_s": self.step_s, "time_dependent": True}

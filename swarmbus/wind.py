@@ -63,6 +63,22 @@ def step_index(t: float, step_s: float) -> tuple[int, float]:
     return k, max(scaled - k, 0.0)
 
 
+#: Snapshots of stepped state kept at every block for the newest RECENT_SNAPSHOTS blocks, older
+#: ones only every THIN_EVERY-th block: memory grows slowly over long runs while going back a
+#: few seconds (a physics restart) stays cheap.
+RECENT_SNAPSHOTS = 32
+THIN_EVERY = 16
+
+
+def thin_snapshots(snapshots: dict[int, Any], newest: int, block_steps: int) -> None:
+    """Drop the snapshots (keyed by step) that :data:`RECENT_SNAPSHOTS` and
+    :data:`THIN_EVERY` do not keep; ``newest`` is the newest snapshot's step."""
+    recent = newest - RECENT_SNAPSHOTS * block_steps
+    for k in [k for k in snapshots if k < recent]:
+        if (k // block_steps) % THIN_EVERY:
+            del snapshots[k]
+
+
 class WindModel(ABC):
     """The wind, a vectorised callable of world ENU points (metres) and sim time (s)."""
 
@@ -297,11 +313,12 @@ class GridWind(WindModel):
         self._boundary_frame(self._k, g)
         if self._k % FIELD_SNAPSHOT_STEPS == 0:
             self._snapshots[self._k] = g.copy()
+            thin_snapshots(self._snapshots, self._k, FIELD_SNAPSHOT_STEPS)
 
     def grid_at_step(self, k: int) -> FloatArray:
         """The perturbation grid (2, nx, ny) at internal step k (a view; do not modify)."""
         if k < self._k:
-            base = (k // FIELD_SNAPSHOT_STEPS) * FIELD_SNAPSHOT_STEPS
+            base = max(s for s in self._snapshots if s <= k)
             self._grid = self._snapshots[base].copy()
             self._k = base
         while self._k < k:
