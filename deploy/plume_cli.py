@@ -8,12 +8,16 @@ import sys
 from pathlib import Path
 
 import click
+import numpy as np
 from tqdm import tqdm
 
 from plume_service import GaussianPlume
 from plume_service.field import ConcentrationField
+from plume_service.filament import FilamentPlume
 from plume_service.from_scenario import field_from_scenario
-from plume_service.mesh import default_bounds, isosurface, write_mesh
+from plume_service.mesh import Bounds, default_bounds, isosurface, write_mesh
+from plume_service.puff import PuffPlume
+from plume_service.service import source_fields
 
 
 def _field(scenario: str | None, preset: str | None) -> ConcentrationField:
@@ -27,6 +31,29 @@ def _field(scenario: str | None, preset: str | None) -> ConcentrationField:
         except ValueError as exc:
             fail(str(exc))
     return field_from_scenario(scenario_from(scenario))
+
+
+def state_bounds(field: ConcentrationField, t: float) -> Bounds | None:
+    """None for a field without filaments or puffs; else the box (m) around its live filaments
+    (±4R) and puffs (±3σ) at sim time t, from the ground up. ValueError when there are none."""
+    dynamic = [f for f in source_fields(field) if isinstance(f, FilamentPlume | PuffPlume)]
+    if not dynamic:
+        return None
+    low, high = [], []
+    for source in dynamic:
+        if isinstance(source, FilamentPlume):
+            centres, radii = source.filaments(t)
+            pad = np.repeat(4.0 * radii[:, None], 3, axis=1)
+        else:
+            centres, sigma_y, sigma_z = source.puffs(t)
+            pad = 3.0 * np.column_stack([sigma_y, sigma_y, sigma_z])
+        low.append(centres - pad)
+        high.append(centres + pad)
+    lo, hi = np.concatenate(low), np.concatenate(high)
+    if lo.shape[0] == 0:
+        raise ValueError(f"no filaments or puffs yet at t = {t:g} s: pick a later --time")
+    (x0, y0, _), (x1, y1, z1) = lo.min(axis=0), hi.max(axis=0)
+    return ((float(x0), float(x1)), (float(y0), float(y1)), (0.0, max(float(z1), 1.0)))
 
 
 scenario_option = click.option(
@@ -126,14 +153,36 @@ def mesh(
 @preset_option
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), required=True)
 @click.option("--height", type=float, default=None, help="Height of plan view/profiles (m).")
-def plot(scenario: str | None, preset: str | None, out: Path, height: float | None) -> None:
+@click.option(
+    "--time",
+    "time_s",
+    type=float,
+    default=None,
+    help="Sim time (s) of a filament or puff plume (default 60); its box is where they are.",
+)
+def plot(
+    scenario: str | None,
+    preset: str | None,
+    out: Path,
+    height: float | None,
+    time_s: float | None,
+) -> None:
     """PNGs: plan view, along-wind section, crosswind profiles."""
     from deploy.cli import fail
     from plume_service.plots import plot_all  # matplotlib: imported only when plotting
 
+    if time_s is not None and not (math.isfinite(time_s) and time_s >= 0.0):
+        fail(f"--time must be a number >= 0, got {time_s}")
     field = _field(scenario, preset)
     try:
-        paths = plot_all(field, out, height_m=height)
+        t = 60.0 if time_s is None else time_s
+        bounds = state_bounds(field, t)
+        dynamic = [f for f in source_fields(field) if isinstance(f, FilamentPlume | PuffPlume)]
+        if height is None and dynamic:
+            height = dynamic[0].source_m[2]  # the release height, as for a Gaussian plume
+        paths = plot_all(
+            field, out, height_m=height, bounds=bounds, t=t if bounds is not None else None
+        )
     except (OSError, ValueError) as exc:
         fail(str(exc))
     for p in paths:

@@ -4,6 +4,10 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
+
+import numpy as np
+from matplotlib.image import imread
 
 from swarmbus.scenario import load_scenario, resolve_scenario_path
 from tests.procs import run_cli
@@ -66,3 +70,17 @@ def test_plume_sample_at_a_time_is_the_series_value_then() -> None:
     res = run_cli([*args, "20", "0", "5"])
     assert res.returncode == 0, res.stderr
     assert json.loads(res.stdout)[0]["concentration_g_m3"] == values[k] > 0.0
+
+
+def test_plume_plot_of_a_filament_scenario_at_a_time(tmp_path: Path) -> None:
+    res = run_cli(
+        ["plume", "plot", "--scenario", "filament", "--time", "40", "--out", str(tmp_path)]
+    )
+    assert res.returncode == 0, res.stderr
+    pixels = imread(tmp_path / "concentration_plan.png")
+    assert np.var(pixels[..., :3]) > 1e-3, "the plan view is blank"
+    res = run_cli(
+        ["plume", "plot", "--scenario", "filament", "--time", "0", "--out", str(tmp_path)]
+    )
+    assert res.returncode != 0 and "pick a later --time" in res.stderr
+    assert "Traceback" not in res.stderr
