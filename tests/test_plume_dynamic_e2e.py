@@ -12,8 +12,9 @@ from deploy.launcher import missing_roles
 from deploy.recording.reader import Recording
 from plume_service.from_scenario import field_from_scenario
 from plume_service.service import StatePublisher
-from swarmbus.messages import ConcentrationReading, PlumeState
+from swarmbus.messages import AnemometerReading, ConcentrationReading, PlumeState
 from swarmbus.scenario import SCENARIOS_DIR, load_scenario
+from swarmbus.wind import wind_from_scenario
 from tests.procs import run_cli
 
 pytestmark = pytest.mark.skipif(
@@ -73,6 +74,15 @@ def test_a_filament_flight_reads_the_field_offline_evaluation_gives_bit_for_bit(
         assert r.reported_g_m3 == r.true_g_m3  # ideal sensor
     assert max(r.true_g_m3 or 0.0 for r in live) > 0.0, "the vehicles never met a filament"
     assert len(states) > 5
+    # the anemometers read the scenario's wind, as this process computes it, bit for bit
+    winds = [m.message() for m in recording.messages() if m.topic.endswith("/wind")]
+    assert len(winds) > 20
+    wind = wind_from_scenario(scenario)
+    for w in reversed(winds):
+        assert isinstance(w, AnemometerReading)
+        expected = wind.velocity([w.position_enu_m], w.sim_time_s)[0]
+        assert w.true_wind_enu_m_s == tuple(float(v) for v in expected)
+        assert w.wind_enu_m_s != w.true_wind_enu_m_s  # with its own noise
     publisher = StatePublisher(field_from_scenario(scenario), scenario.plume.state_period_s)
     for state in reversed(states):
         assert isinstance(state, PlumeState)
