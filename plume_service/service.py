@@ -80,9 +80,11 @@ class PlumeService:
         if self.scenario is not None:
             speed, from_deg = self.scenario.wind.speed_m_s, self.scenario.wind.from_deg
             wind_model = self.scenario.wind.model
-        else:
+        elif gaussians:
             speed, from_deg = gaussians[0].wind_speed_m_s, gaussians[0].wind_from_deg
             wind_model = "steady"
+        else:
+            raise ValueError("plume/info of a filament or puff field needs its scenario")
         lid = plume.mixing_height_m if plume is not None else gaussians[0].mixing_height_m
         return PlumeInfo(
             model="+".join(models),
