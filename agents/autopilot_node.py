@@ -46,6 +46,7 @@ import msgspec
 import numpy as np
 import zenoh
 
+from agents.anemometer import Anemometer
 from agents.autopilot import Autopilot
 from agents.behavior import BehaviorContext, BehaviorError, load_behavior
 from agents.estimator import Estimator
@@ -70,6 +71,7 @@ from swarmbus.messages import (
 from swarmbus.node import NodeContext, NodeRuntime
 from swarmbus.scenario import Scenario
 from swarmbus.session import SINGLE_THREAD_RUNTIME
+from swarmbus.wind import WindModel, wind_from_scenario
 
 log = logging.getLogger(__name__)
 
@@ -164,6 +166,7 @@ class _Served:
         scenario: Scenario,
         vehicle_id: str,
         options: NodeOptions,
+        wind: WindModel,
         own_actuators: bool = True,
     ) -> None:
         self.vehicle_id = vehicle_id
@@ -171,6 +174,13 @@ class _Served:
         self.flight = build_flight(scenario, vehicle_id, options, self.behavior_rng)
         self.autopilot = self.flight.autopilot
         self.sensor = self.flight.sensor
+        index = [v.id for v in scenario.vehicles].index(vehicle_id)
+        self.anemometer = Anemometer(scenario.anemometer, wind, scenario.world.seed, index)
+        self.wind_pub = (
+            session.declare_publisher(keys.vehicle_wind(vehicle_id))
+            if scenario.anemometer.period_ticks > 0
+            else None
+        )
         # None: the process batches its vehicles' commands (AutopilotNode.batch_pub)
         self.actuators = (
             session.declare_publisher(keys.vehicle_actuators(vehicle_id)) if own_actuators else None
@@ -275,8 +285,9 @@ class AutopilotNode:
         self.options = options
         self.lock = threading.Lock()
         batched = len(ctx.vehicle_ids) > 1
+        wind = wind_from_scenario(ctx.scenario)  # one wind for every vehicle served here
         self.served = {
-            vid: _Served(session, self.keys, ctx.scenario, vid, options, not batched)
+            vid: _Served(session, self.keys, ctx.scenario, vid, options, wind, not batched)
             for vid in ctx.vehicle_ids
         }
         self.batch_pub = (
@@ -508,6 +519,11 @@ class AutopilotNode:
                 except MessageError as exc:
                     log.warning("%s: ignoring bad state in tick %d: %s", vid, tick.tick, exc)
                     continue
+                if served.wind_pub is not None and served.anemometer.due(tick.tick):
+                    wind = served.anemometer.read(
+                        vid, tick.tick, tick.sim_time_s, state.position_enu_m
+                    )
+                    served.wind_pub.put(encode(wind))
                 rotor = served.flight.step(state, peers)
                 command = ActuatorCommand(vehicle_id=vid, tick=tick.tick, rotor_commands=rotor)
                 if served.actuators is None:

@@ -56,7 +56,8 @@ STEP_S = 0.1  # a stepped demo checks whether every vehicle is done this often (
 COMMAND_TIMEOUT_S = 5.0
 DEMO_ROLES = ("router", "plume", "physics", "autopilot")
 AIRBORNE_M = 1.0
-ModelFn = Callable[[npt.NDArray[np.float64]], npt.NDArray[np.float64]]
+# The field at (N, 3) points, each at its own sim time (time-dependent plumes need it).
+ModelFn = Callable[[npt.NDArray[np.float64], Sequence[float]], npt.NDArray[np.float64]]
 
 
 class DemoError(RuntimeError):
@@ -271,8 +272,10 @@ def model_for(scenario: Scenario) -> ModelFn:
 
     field_ = field_from_scenario(scenario)
 
-    def model(points: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-        return np.asarray(field_.concentration(points), dtype=np.float64)
+    def model(points: npt.NDArray[np.float64], times: Sequence[float]) -> npt.NDArray[np.float64]:
+        return np.array(
+            [field_.concentration(p[None, :], t)[0] for p, t in zip(points, times, strict=True)]
+        )
 
     return model
 
@@ -312,7 +315,7 @@ def vehicle_summary(
     modelled: list[float | None] = [None] * len(samples)
     if model is not None and samples:
         pts = np.array([s.position_enu_m for s in samples], dtype=np.float64)
-        modelled = [float(v) for v in model(pts)]
+        modelled = [float(v) for v in model(pts, [s.sim_time_s for s in samples])]
     rows = [
         {
             "sim_time_s": s.sim_time_s,

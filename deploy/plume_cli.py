@@ -1,17 +1,23 @@
-"""``plumeswarm plume sample|mesh|plot``: look at a scenario's or a preset's plume field."""
+"""``plumeswarm plume sample|mesh|plot|series``: look at a scenario's or a preset's plume field."""
 
 from __future__ import annotations
 
 import json
 import math
+import sys
 from pathlib import Path
 
 import click
+import numpy as np
+from tqdm import tqdm
 
 from plume_service import GaussianPlume
 from plume_service.field import ConcentrationField
+from plume_service.filament import FilamentPlume
 from plume_service.from_scenario import field_from_scenario
-from plume_service.mesh import default_bounds, isosurface, write_mesh
+from plume_service.mesh import Bounds, default_bounds, isosurface, write_mesh
+from plume_service.puff import PuffPlume
+from plume_service.service import source_fields
 
 
 def _field(scenario: str | None, preset: str | None) -> ConcentrationField:
@@ -25,6 +31,29 @@ def _field(scenario: str | None, preset: str | None) -> ConcentrationField:
         except ValueError as exc:
             fail(str(exc))
     return field_from_scenario(scenario_from(scenario))
+
+
+def state_bounds(field: ConcentrationField, t: float) -> Bounds | None:
+    """None for a field without filaments or puffs; else the box (m) around its live filaments
+    (±4R) and puffs (±3σ) at sim time t, from the ground up. ValueError when there are none."""
+    dynamic = [f for f in source_fields(field) if isinstance(f, FilamentPlume | PuffPlume)]
+    if not dynamic:
+        return None
+    low, high = [], []
+    for source in dynamic:
+        if isinstance(source, FilamentPlume):
+            centres, radii = source.filaments(t)
+            pad = np.repeat(4.0 * radii[:, None], 3, axis=1)
+        else:
+            centres, sigma_y, sigma_z = source.puffs(t)
+            pad = 3.0 * np.column_stack([sigma_y, sigma_y, sigma_z])
+        low.append(centres - pad)
+        high.append(centres + pad)
+    lo, hi = np.concatenate(low), np.concatenate(high)
+    if lo.shape[0] == 0:
+        raise ValueError(f"no filaments or puffs yet at t = {t:g} s: pick a later --time")
+    (x0, y0, _), (x1, y1, z1) = lo.min(axis=0), hi.max(axis=0)
+    return ((float(x0), float(x1)), (float(y0), float(y1)), (0.0, max(float(z1), 1.0)))
 
 
 scenario_option = click.option(
@@ -45,17 +74,29 @@ def plume() -> None:
 @preset_option
 @click.argument("coords", nargs=-1, type=float, required=True)
 @click.option("--format", "fmt", type=click.Choice(["table", "json"]), default="table")
-def sample(scenario: str | None, preset: str | None, coords: tuple[float, ...], fmt: str) -> None:
+@click.option(
+    "--time",
+    "time_s",
+    type=float,
+    default=0.0,
+    show_default=True,
+    help="Sim time (s) for filament and puff plumes.",
+)
+def sample(
+    scenario: str | None, preset: str | None, coords: tuple[float, ...], fmt: str, time_s: float
+) -> None:
     """Concentration at points X Y Z [X Y Z ...] (world ENU metres)."""
     from deploy.cli import fail
 
+    if not (math.isfinite(time_s) and time_s >= 0.0):
+        fail(f"--time must be a number >= 0, got {time_s}")
     if len(coords) % 3 != 0:
         fail(f"expected X Y Z triples, got {len(coords)} numbers")
     if not all(math.isfinite(c) for c in coords):
         fail("coordinates must be finite numbers")
     field = _field(scenario, preset)
     points = [coords[i : i + 3] for i in range(0, len(coords), 3)]
-    values = field.concentration(points)
+    values = field.concentration(points, time_s)
     if fmt == "json":
         rows = [
             {"x": p[0], "y": p[1], "z": p[2], "concentration_g_m3": float(v)}
@@ -112,15 +153,94 @@ def mesh(
 @preset_option
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), required=True)
 @click.option("--height", type=float, default=None, help="Height of plan view/profiles (m).")
-def plot(scenario: str | None, preset: str | None, out: Path, height: float | None) -> None:
+@click.option(
+    "--time",
+    "time_s",
+    type=float,
+    default=None,
+    help="Sim time (s) of a filament or puff plume (default 60); its box is where they are.",
+)
+def plot(
+    scenario: str | None,
+    preset: str | None,
+    out: Path,
+    height: float | None,
+    time_s: float | None,
+) -> None:
     """PNGs: plan view, along-wind section, crosswind profiles."""
     from deploy.cli import fail
     from plume_service.plots import plot_all  # matplotlib: imported only when plotting
 
+    if time_s is not None and not (math.isfinite(time_s) and time_s >= 0.0):
+        fail(f"--time must be a number >= 0, got {time_s}")
     field = _field(scenario, preset)
     try:
-        paths = plot_all(field, out, height_m=height)
+        t = 60.0 if time_s is None else time_s
+        bounds = state_bounds(field, t)
+        dynamic = [f for f in source_fields(field) if isinstance(f, FilamentPlume | PuffPlume)]
+        if height is None and dynamic:
+            height = dynamic[0].source_m[2]  # the release height, as for a Gaussian plume
+        paths = plot_all(
+            field, out, height_m=height, bounds=bounds, t=t if bounds is not None else None
+        )
     except (OSError, ValueError) as exc:
         fail(str(exc))
     for p in paths:
         click.echo(f"wrote {p}")
+
+
+#: Most time samples ``plume series`` computes in one call.
+MAX_SERIES_SAMPLES = 1_000_000
+
+
+@plume.command(context_settings={"ignore_unknown_options": True})
+@click.argument("scenario_name", metavar="SCENARIO")
+@click.option(
+    "--point",
+    "points",
+    type=float,
+    nargs=3,
+    multiple=True,
+    required=True,
+    metavar="X Y Z",
+    help="A point, world ENU metres (repeat for more).",
+)
+@click.option("--seconds", type=float, required=True, help="Sim seconds to cover, from t = 0.")
+@click.option("--every", type=float, required=True, help="Sim seconds between samples.")
+@click.option("--format", "fmt", type=click.Choice(["table", "json"]), default="table")
+def series(
+    scenario_name: str,
+    points: tuple[tuple[float, float, float], ...],
+    seconds: float,
+    every: float,
+    fmt: str,
+) -> None:
+    """The field at --point(s) every --every sim seconds over --seconds, without starting any
+    process: the same values the plume service would give at those sim times (filaments and
+    puffs are time-dependent; a Gaussian plume repeats one value)."""
+    from deploy.cli import fail, scenario_from
+
+    if not all(math.isfinite(c) for p in points for c in p):
+        fail("--point coordinates must be finite numbers")
+    if not (math.isfinite(seconds) and seconds >= 0.0):
+        fail(f"--seconds must be a number >= 0, got {seconds}")
+    if not (math.isfinite(every) and every > 0.0):
+        fail(f"--every must be a positive number, got {every}")
+    count = math.floor(seconds / every + 1e-9) + 1
+    if count > MAX_SERIES_SAMPLES:
+        fail(
+            f"{count} samples (--seconds / --every) exceed {MAX_SERIES_SAMPLES}; sample less often"
+        )
+    field = field_from_scenario(scenario_from(scenario_name))
+    times = [k * every for k in range(count)]
+    rows = []
+    for t in tqdm(times, desc="plume series", unit="sample", disable=count < 2000, file=sys.stderr):
+        rows.append(field.concentration(list(points), t).tolist())
+    if fmt == "json":
+        out = {"t": times, "points": [list(p) for p in points], "values_g_m3": rows}
+        click.echo(json.dumps(out))
+        return
+    header = "".join(f"{f'({p[0]:g}, {p[1]:g}, {p[2]:g})':>22}" for p in points)
+    click.echo(f"{'t (s)':>10}{header}")
+    for t, values in zip(times, rows, strict=True):
+        click.echo(f"{t:10.3f}" + "".join(f"{v:22.6g}" for v in values))

@@ -181,10 +181,17 @@ class DispersionCurves:
             ln_x = None
         return self.sigma_y(x_m, ln_x, out_y), self.sigma_z(x_m, ln_x, out_z)
 
+    @property
+    def valid_range_m(self) -> tuple[float, float]:
+        """The downwind distances (m) the family's σ is published for."""
+        return VALID_RANGE_M[self.family]
+
     def describe(self) -> dict[str, object]:
         return {
             "family": self.family,
             "stability": self.stability,
+            "valid_from_m": self.valid_range_m[0],
+            "valid_to_m": self.valid_range_m[1],
             "sigma_y": self.sigma_y.describe(),
             "sigma_z": self.sigma_z.describe(),
         }
@@ -237,6 +244,15 @@ _BRIGGS_URBAN: dict[str, tuple[BriggsFormula, BriggsFormula]] = {
     "D": (BriggsFormula(0.16, 0.0004, -0.5), BriggsFormula(0.14, 0.0003, -0.5)),
     "E": (BriggsFormula(0.11, 0.0004, -0.5), BriggsFormula(0.08, 0.0015, -0.5)),
     "F": (BriggsFormula(0.11, 0.0004, -0.5), BriggsFormula(0.08, 0.0015, -0.5)),
+}
+
+#: Downwind distances (m) each family's σ is published for: Turner's (1970) Pasquill–Gifford
+#: curves, which McMullen fitted, span 100 m – 100 km; Briggs (1973) gives 100 m – 10 km.
+VALID_RANGE_M: dict[str, tuple[float, float]] = {
+    "mcmullen": (100.0, 100_000.0),
+    "novak2018": (100.0, 100_000.0),
+    "briggs-rural": (100.0, 10_000.0),
+    "briggs-urban": (100.0, 10_000.0),
 }
 
 _FAMILIES: dict[str, Mapping[str, tuple[SigmaFunction, SigmaFunction]]] = {

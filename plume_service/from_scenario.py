@@ -3,27 +3,47 @@
 from __future__ import annotations
 
 from plume_service.field import ConcentrationField, PlumeField
+from plume_service.filament import FilamentPlume
 from plume_service.gaussian import GaussianPlume
-from swarmbus.scenario import Scenario
+from plume_service.puff import PuffPlume
+from swarmbus.scenario import Scenario, Source
+from swarmbus.wind import WindModel, wind_from_scenario
 
 
-def field_from_scenario(scenario: Scenario) -> ConcentrationField:
-    """One Gaussian plume per source, superposed; all share the scenario's wind."""
+def field_from_scenario(scenario: Scenario, wind: WindModel | None = None) -> ConcentrationField:
+    """One field per source (its own model, default the plume's), superposed; all share the
+    scenario's wind (``wind``: an already built one, else :func:`wind_from_scenario`)."""
     plume = scenario.plume
-    plumes = [
-        GaussianPlume(
-            release_rate=src.release_rate_g_s,
-            wind_speed=scenario.wind.speed_m_s,
-            release_height=src.release_height_m,
-            stability=plume.stability,
-            coefficients=plume.coefficients,
-            source=(src.x_m, src.y_m),
-            wind_from_deg=scenario.wind.from_deg,
-            mixing_height=plume.mixing_height_m,
+    wind = wind if wind is not None else wind_from_scenario(scenario)
+    fields = [_source_field(scenario, index, src, wind) for index, src in enumerate(plume.sources)]
+    if len(fields) == 1:
+        if isinstance(fields[0], GaussianPlume):
+            fields[0].preset_name = plume.preset
+        return fields[0]
+    return PlumeField(fields)
+
+
+def _source_field(
+    scenario: Scenario, index: int, src: Source, wind: WindModel
+) -> ConcentrationField:
+    plume = scenario.plume
+    model = src.model or plume.model
+    source = (src.x_m, src.y_m, src.release_height_m)
+    rate, seed = src.release_rate_g_s, scenario.world.seed
+    if model == "filament":
+        return FilamentPlume(source, rate, plume.filament, wind, seed, stream=index)
+    if model == "puff":
+        lid = plume.mixing_height_m
+        return PuffPlume(
+            source, rate, plume.puff, wind, plume.stability, plume.coefficients, lid, seed, index
         )
-        for src in plume.sources
-    ]
-    if len(plumes) == 1:
-        plumes[0].preset_name = plume.preset
-        return plumes[0]
-    return PlumeField(plumes)
+    return GaussianPlume(
+        release_rate=src.release_rate_g_s,
+        wind_speed=scenario.wind.speed_m_s,
+        release_height=src.release_height_m,
+        stability=plume.stability,
+        coefficients=plume.coefficients,
+        source=(src.x_m, src.y_m),
+        wind_from_deg=scenario.wind.from_deg,
+        mixing_height=plume.mixing_height_m,
+    )

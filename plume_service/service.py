@@ -1,14 +1,20 @@
 """``plumeswarm node plume``: the concentration field served on the bus.
 
-Three queryables: ``plume/concentration`` (a batch of points → values in one reply),
-``plume/info`` (model, parameters, sources, wind) and ``plume/mesh`` (isosurface at a level).
+Three queryables: ``plume/concentration`` (a batch of points → values in one reply, at the
+query's ``sim_time_s`` for the time-dependent filament and puff models),
+``plume/info`` (model, parameters, sources, wind, σ fits used outside their published range)
+and ``plume/mesh`` (isosurface at a level). For filaments and puffs it also follows the
+physics' ``sim/clock`` and publishes their state on ``field/state`` every
+``plume.state_period_s`` of sim time.
 A malformed query gets an :class:`~swarmbus.messages.ErrorReply` naming the bad field, and the
 service keeps serving.
 """
 
 from __future__ import annotations
 
+import contextlib
 import logging
+import math
 import queue
 import threading
 from collections.abc import Callable
@@ -17,11 +23,16 @@ from typing import TypeVar
 import numpy as np
 import zenoh
 
-from plume_service.field import ConcentrationField
+from plume_service.field import ConcentrationField, FloatArray, PlumeField
+from plume_service.filament import FilamentPlume
 from plume_service.from_scenario import field_from_scenario
-from plume_service.mesh import gaussian_sources, isosurface
+from plume_service.gaussian import GaussianPlume
+from plume_service.mesh import isosurface
+from plume_service.puff import PuffPlume
+from plume_service.timestepped import TimeSteppedField
 from swarmbus.codec import MessageError, decode, encode
 from swarmbus.messages import (
+    Clock,
     ErrorReply,
     PlumeInfo,
     PlumeInfoQuery,
@@ -29,9 +40,11 @@ from swarmbus.messages import (
     PlumeMeshQuery,
     PlumeQuery,
     PlumeSource,
+    PlumeState,
     PlumeValues,
 )
 from swarmbus.node import NodeContext, NodeRuntime
+from swarmbus.scenario import Scenario
 
 log = logging.getLogger(__name__)
 
@@ -40,37 +53,50 @@ MAX_MESH_GRID_POINTS = 20_000_000
 
 
 class PlumeService:
-    """Answers plume queries for one field; pure request → reply functions, bus-agnostic."""
+    """Answers plume queries for one field; pure request → reply functions, bus-agnostic.
 
-    def __init__(self, field: ConcentrationField) -> None:
+    ``scenario`` (optional) names the wind model and the plume section in ``plume/info``.
+    """
+
+    def __init__(self, field: ConcentrationField, scenario: Scenario | None = None) -> None:
         self.field = field
+        self.scenario = scenario
+        self.sigma_use = SigmaUse(field)
 
     def concentration(self, query: PlumeQuery) -> PlumeValues:
         if not query.points_enu_m:
             return PlumeValues(values_g_m3=[], sim_time_s=query.sim_time_s)
         points = np.asarray(query.points_enu_m, dtype=np.float64)
         values = self.field.concentration(points, query.sim_time_s)
+        self.sigma_use.note(points, values)
         return PlumeValues(values_g_m3=values.tolist(), sim_time_s=query.sim_time_s)
 
     def info(self, _query: PlumeInfoQuery) -> PlumeInfo:
-        plumes = gaussian_sources(self.field)
-        first = plumes[0]
+        sources = source_fields(self.field)
+        models = sorted({_model_name(f) for f in sources})
+        curves = [f.dispersion for f in sources if isinstance(f, GaussianPlume | PuffPlume)]
+        gaussians = [f for f in sources if isinstance(f, GaussianPlume)]
+        plume = self.scenario.plume if self.scenario is not None else None
+        if self.scenario is not None:
+            speed, from_deg = self.scenario.wind.speed_m_s, self.scenario.wind.from_deg
+            wind_model = self.scenario.wind.model
+        elif gaussians:
+            speed, from_deg = gaussians[0].wind_speed_m_s, gaussians[0].wind_from_deg
+            wind_model = "steady"
+        else:
+            raise ValueError("plume/info of a filament or puff field needs its scenario")
+        lid = plume.mixing_height_m if plume is not None else gaussians[0].mixing_height_m
         return PlumeInfo(
-            model="gaussian",
-            stability=first.stability,
-            coefficients=first.coefficients,
-            wind_speed_m_s=first.wind_speed_m_s,
-            wind_from_deg=first.wind_from_deg,
-            mixing_height_m=first.mixing_height_m,
-            sources=[
-                PlumeSource(
-                    x_m=p.source_m[0],
-                    y_m=p.source_m[1],
-                    release_rate_g_s=p.release_rate_g_s,
-                    release_height_m=p.release_height_m,
-                )
-                for p in plumes
-            ],
+            model="+".join(models),
+            stability=curves[0].stability if curves else "",
+            coefficients=curves[0].family if curves else "",
+            wind_speed_m_s=speed,
+            wind_from_deg=from_deg,
+            mixing_height_m=lid,
+            sources=[_plume_source(f) for f in sources],
+            wind_model=wind_model,
+            time_dependent=any(isinstance(f, TimeSteppedField) for f in sources),
+            sigma_validity=self.sigma_use.notes(),
         )
 
     def mesh(self, query: PlumeMeshQuery) -> PlumeMesh:
@@ -92,6 +118,132 @@ class PlumeService:
             level_g_m3=query.level_g_m3,
             vertices_f32=np.asarray(vertices, dtype="<f4").tobytes(),
             faces_i32=np.asarray(faces, dtype="<i4").tobytes(),
+        )
+
+
+def source_fields(field: ConcentrationField) -> list[ConcentrationField]:
+    """The one-source fields a field is made of (itself, or the members of a PlumeField)."""
+    if isinstance(field, PlumeField):
+        return [member for source in field.sources for member in source_fields(source)]
+    return [field]
+
+
+def _model_name(field: ConcentrationField) -> str:
+    if isinstance(field, FilamentPlume):
+        return "filament"
+    if isinstance(field, PuffPlume):
+        return "puff"
+    return "gaussian"
+
+
+def _plume_source(field: ConcentrationField) -> PlumeSource:
+    if isinstance(field, GaussianPlume):
+        (x, y), height = field.source_m, field.release_height_m
+    elif isinstance(field, TimeSteppedField):
+        x, y, height = field.source_m
+    else:
+        raise ValueError(f"a field of type {type(field).__name__} has no source")
+    return PlumeSource(
+        x_m=x, y_m=y, release_rate_g_s=field.release_rate_g_s, release_height_m=height
+    )
+
+
+class SigmaUse:
+    """Where the σ fits of a field's Gaussian and puff sources were used: the range of
+    downwind distances (horizontal distance from the source for puffs) of the points that had
+    a value, per source, for ``plume/info``'s ``sigma_validity``."""
+
+    def __init__(self, field: ConcentrationField) -> None:
+        self.sources = [f for f in source_fields(field) if isinstance(f, GaussianPlume | PuffPlume)]
+        self._range: dict[int, tuple[float, float]] = {}
+        self._lock = threading.Lock()
+
+    def note(self, points: FloatArray, values: FloatArray) -> None:
+        if not self.sources:
+            return
+        seen = points[values > 0.0]
+        if seen.shape[0] == 0:
+            return
+        for index, source in enumerate(self.sources):
+            if isinstance(source, GaussianPlume):
+                distance = source.to_plume_frame(seen)[0]
+            else:
+                distance = np.hypot(
+                    seen[:, 0] - source.source_m[0], seen[:, 1] - source.source_m[1]
+                )
+            distance = distance[distance > 0.0]
+            if distance.size == 0:
+                continue
+            lo, hi = float(distance.min()), float(distance.max())
+            with self._lock:
+                old = self._range.get(index)
+                self._range[index] = (lo, hi) if old is None else (min(old[0], lo), max(old[1], hi))
+
+    def notes(self) -> list[str]:
+        out = []
+        with self._lock:
+            ranges = dict(self._range)
+        for index, (lo, hi) in sorted(ranges.items()):
+            curves = self.sources[index].dispersion
+            valid_lo, valid_hi = curves.valid_range_m
+            if lo < valid_lo or hi > valid_hi:
+                out.append(
+                    f"source {index}: {curves.family} class {curves.stability} σ used at "
+                    f"{lo:.3g}–{hi:.3g} m downwind, outside the {valid_lo:g}–{valid_hi:g} m "
+                    "the fit was published for (values there are extrapolated)"
+                )
+        return out
+
+
+class StatePublisher:
+    """Publishes the filaments or puffs of a time-dependent field every ``period_s`` of sim
+    time, following the physics' clock; the state published for sim time t is the field's
+    state at t, whoever asks and whenever."""
+
+    def __init__(self, field: ConcentrationField, period_s: float) -> None:
+        self.sources = [f for f in source_fields(field) if isinstance(f, TimeSteppedField)]
+        self.period_s = period_s
+        self._next = 0.0
+        self._times: queue.Queue[float] = queue.Queue(maxsize=4)
+
+    @property
+    def active(self) -> bool:
+        return bool(self.sources) and self.period_s > 0.0
+
+    def on_clock(self, sim_time_s: float) -> None:
+        """Called with each clock; queues the latest due publication time."""
+        if sim_time_s + 1e-9 < self._next and sim_time_s + self.period_s > self._next:
+            return
+        due = math.floor(sim_time_s / self.period_s + 1e-9) * self.period_s
+        self._next = due + self.period_s
+        with contextlib.suppress(queue.Full):
+            self._times.put_nowait(due)
+
+    def next_time(self, timeout_s: float) -> float | None:
+        try:
+            return self._times.get(timeout=timeout_s)
+        except queue.Empty:
+            return None
+
+    def state(self, sim_time_s: float) -> PlumeState:
+        centres, radii = [], []
+        for source in self.sources:
+            if isinstance(source, FilamentPlume):
+                c, r = source.filaments(sim_time_s)
+            elif isinstance(source, PuffPlume):
+                c, r, _ = source.puffs(sim_time_s)
+            else:
+                continue
+            centres.append(c)
+            radii.append(r)
+        c_all = np.concatenate(centres) if centres else np.empty((0, 3))
+        r_all = np.concatenate(radii) if radii else np.empty(0)
+        return PlumeState(
+            sim_time_s=sim_time_s,
+            model="+".join(sorted({_model_name(f) for f in self.sources})),
+            count=int(r_all.shape[0]),
+            centres_f32=np.asarray(c_all, dtype="<f4").tobytes(),
+            radii_f32=np.asarray(r_all, dtype="<f4").tobytes(),
         )
 
 
@@ -134,7 +286,8 @@ def _handler(
 
 def main(ctx: NodeContext) -> int:
     """Serve the scenario's plume until stopped."""
-    service = PlumeService(field_from_scenario(ctx.scenario))
+    service = PlumeService(field_from_scenario(ctx.scenario), ctx.scenario)
+    states = StatePublisher(service.field, ctx.scenario.plume.state_period_s)
     with NodeRuntime(ctx, role="plume") as rt:
         keys = rt.keys
         queryables = [
@@ -170,9 +323,35 @@ def main(ctx: NodeContext) -> int:
         queryables.append(rt.session.declare_queryable(keys.plume_mesh(), enqueue_mesh))
         worker = threading.Thread(target=mesh_worker, name="plume-mesh", daemon=True)
         worker.start()
+        state_thread = None
+        subscriber = None
+        if states.active:
+            publisher = rt.session.declare_publisher(keys.plume_state())
+
+            def on_clock(sample: zenoh.Sample) -> None:
+                try:
+                    clock = decode(sample.payload.to_bytes(), Clock)
+                except MessageError as exc:
+                    log.warning("plume: bad clock message: %s", exc)
+                    return
+                states.on_clock(clock.sim_time_s)
+
+            def state_worker() -> None:
+                while not rt.stop.is_set():
+                    t = states.next_time(0.2)
+                    if t is not None:
+                        publisher.put(encode(states.state(t)))
+
+            subscriber = rt.session.declare_subscriber(keys.clock(), on_clock)
+            state_thread = threading.Thread(target=state_worker, name="plume-state", daemon=True)
+            state_thread.start()
         rt.ready()
         rt.stop.wait()
         worker.join(timeout=30.0)
+        if state_thread is not None:
+            state_thread.join(timeout=30.0)
+        if subscriber is not None:
+            subscriber.undeclare()
         for q in queryables:
             q.undeclare()
     return 0

@@ -78,10 +78,22 @@ class Feed:
         self._lock = threading.Lock()
         self._tick: bytes | None = None
         self._readings: dict[str, bytes] = {}
+        self._plume_state: bytes | None = None
         self._subs = [
             session.declare_subscriber(keys.tick(), self._on_tick),
             session.declare_subscriber(keys.all_vehicle_concentration(), self._on_reading),
+            session.declare_subscriber(keys.plume_state(), self._on_plume_state),
         ]
+
+    def _on_plume_state(self, sample: zenoh.Sample) -> None:
+        with self._lock:
+            self._plume_state = sample.payload.to_bytes()
+
+    def take_plume_state(self) -> bytes | None:
+        """The newest ``field/state`` payload (once)."""
+        with self._lock:
+            state, self._plume_state = self._plume_state, None
+        return state
 
     def _on_tick(self, sample: zenoh.Sample) -> None:
         with self._lock:
@@ -173,7 +185,11 @@ def isosurface_queries(
     scenario: Scenario, levels_g_m3: Sequence[float] = (), resolution_m: float = 1.0
 ) -> list[PlumeMeshQuery]:
     """The ``plume/mesh`` queries of a view: ``levels_g_m3`` (default: :func:`default_levels`)
-    over the box around the scenario (:func:`scene_bounds`)."""
+    over the box around the scenario (:func:`scene_bounds`). None for a time-dependent plume
+    (filaments, puffs): it is drawn from its state (``field/state``) instead."""
+    models = {src.model or scenario.plume.model for src in scenario.plume.sources}
+    if models != {"gaussian"}:
+        return []
     lo, hi = scene_bounds(scenario)
     levels = levels_g_m3 or default_levels(scenario)
     return [

@@ -1,7 +1,9 @@
 """The viewer role: a meshcat scene of the world, fed from the bus.
 
 Ground grid, each vehicle as a body with rotor discs in its own colour, its trail, the plume
-isosurfaces from ``plume/mesh`` as translucent surfaces, each vehicle's latest reading as a
+isosurfaces from ``plume/mesh`` as translucent surfaces (Gaussian plumes) or the filaments or
+puffs of a time-dependent plume from ``field/state`` as a point cloud (each point a centre,
+redrawn as states arrive), each vehicle's latest reading as a
 coloured, sized marker above it, and the source marked. The meshcat server (its web files ship in
 the package, nothing is fetched) runs on a thread of this process, on 127.0.0.1; the URL is
 printed at start and published in this node's health ``detail``.
@@ -49,6 +51,7 @@ from swarmbus.messages import (
     ConcentrationReading,
     PlumeMesh,
     PlumeMeshQuery,
+    PlumeState,
     SimTick,
     VehicleState,
 )
@@ -177,6 +180,7 @@ class Scene:
         self.drawn_tick: int | None = None  # the newest tick drawn
         sensor = scenario.sensor.resolved()
         self.full_scale = sensor.saturation_g_m3 or max(default_levels(scenario))
+        self.plume_state_time_s: float | None = None  # sim time of the drawn field/state
 
     def node(self, path: str) -> Any:
         """The scene node at ``path`` under the world root (which is shifted so that the
@@ -332,6 +336,18 @@ class Scene:
             ),
         )
 
+    def set_plume_state(self, state: PlumeState) -> None:
+        """Filament or puff centres as one point cloud, points sized by the mean radius."""
+        centres = np.frombuffer(state.centres_f32, dtype="<f4").reshape(-1, 3)
+        radii = np.frombuffer(state.radii_f32, dtype="<f4")
+        size = float(np.clip(2.0 * radii.mean(), 0.05, 5.0)) if radii.size else 0.1
+        self._set(
+            "/plume/state",
+            mg.PointsGeometry(centres.T.astype(np.float32)),
+            mg.PointsMaterial(size=size, color=0x8C33BF),
+        )
+        self.plume_state_time_s = state.sim_time_s
+
 
 def mesh_queries(scenario: Scenario, opts: ViewerOptions) -> list[PlumeMeshQuery]:
     return isosurface_queries(scenario, opts.levels_g_m3, opts.mesh_resolution_m)
@@ -352,6 +368,12 @@ def render(scene: Scene, feed: Feed, meshes: MeshFetcher) -> int:
             scene.update_reading(decode(raw, ConcentrationReading))
         except MessageError as exc:
             log.warning("ignoring reading of %s: %s", vid, exc)
+    state_raw = feed.take_plume_state()
+    if state_raw is not None:
+        try:
+            scene.set_plume_state(decode(state_raw, PlumeState))
+        except MessageError as exc:
+            log.warning("ignoring plume state: %s", exc)
     new_meshes = meshes.take()
     for index, mesh in new_meshes.items():
         scene.set_plume(index, mesh)

@@ -9,7 +9,9 @@ Forces per vehicle and substep (conventions in the team notes and ``docs/physics
   first-order lag (exact discretisation, so a zero time constant means instant response);
 - thrust ``k_f * omega_i**2`` along body +z at the rotor's position, i.e. a body force plus the
   torque ``r_i x f_i``; reaction torque ``-spin_i * k_m * omega_i**2`` about body z;
-- linear drag ``-D * v_air`` in body axes, ``v_air = R^T (v - wind)`` with the scenario's wind;
+- linear drag ``-D * v_air`` in body axes, ``v_air = R^T (v - wind)`` with the scenario's wind
+  (``swarmbus.wind``; a time-varying wind is evaluated at each vehicle's position at the start
+  of every :meth:`World.step` call, i.e. once per control tick, and held over its substeps);
 - gravity from pybullet; pybullet's own velocity damping is switched off.
 
 The per-substep loop is plain scalar Python (numpy on 3-vectors costs more than it saves), with
@@ -21,6 +23,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from types import TracebackType
+from typing import Any
 
 import pybullet as pb
 
@@ -30,6 +33,9 @@ from swarmbus.messages import VehicleState
 from swarmbus.scenario import Scenario
 from swarmbus.scenario import Vehicle as VehicleSpec
 from swarmbus.vehicle_types import VehicleType, load_vehicle_type
+from swarmbus.wind import wind_from_scenario, wind_vector_enu
+
+__all__ = ["GRAVITY_M_S2", "World", "rotate_to_body", "wind_vector_enu"]
 
 GRAVITY_M_S2 = 9.81
 # pybullet reports contact points within its collision margin; closer than this is touching.
@@ -41,12 +47,6 @@ MOTOR_SNAP_RAD_S = 1e-6
 # the ground the contact solver is most of the step's cost (128 grounded: ~2x faster at 10).
 SOLVER_ITERATIONS = 10
 _ORIGIN = (0.0, 0.0, 0.0)
-
-
-def wind_vector_enu(speed_m_s: float, from_deg: float) -> tuple[float, float, float]:
-    """The air's velocity in ENU for a meteorological wind (``from_deg`` 270 → toward +x)."""
-    rad = math.radians(from_deg)
-    return (-speed_m_s * math.sin(rad), -speed_m_s * math.cos(rad), 0.0)
 
 
 def rotate_to_body(
@@ -167,6 +167,7 @@ class World:
         self.physics_hz = scenario.time.physics_hz
         self.dt_s = 1.0 / self.physics_hz
         self.wind_enu_m_s = wind_vector_enu(scenario.wind.speed_m_s, scenario.wind.from_deg)
+        self.wind = wind_from_scenario(scenario)
         origin = scenario.world.origin
         self._geodetic = EnuToGeodetic(origin.lat_deg, origin.lon_deg, origin.alt_m)
         self.step_count = 0
@@ -312,6 +313,18 @@ class World:
         return tuple(self._by_id[vehicle_id].omega)
 
     # ------------------------------------------------------------------ stepping
+    def _winds(self, get_pose: Any) -> list[tuple[float, float, float]]:
+        """Each vehicle's air velocity for this step call (the wind at the call's sim time)."""
+        if self.wind.steady:
+            return [self.wind_enu_m_s] * len(self._vehicles)
+        uniform = self.wind.uniform_at(self.step_count * self.dt_s)
+        if uniform is not None:
+            return [uniform] * len(self._vehicles)
+        c = self._client
+        points = [get_pose(v.body, physicsClientId=c)[0] for v in self._vehicles]
+        values = self.wind.velocity(points, self.step_count * self.dt_s)
+        return [(float(w[0]), float(w[1]), float(w[2])) for w in values]
+
     def step(self, n: int = 1) -> None:
         """Advance ``n`` physics steps, then update contacts, landed and crashed flags."""
         c = self._client
@@ -321,8 +334,8 @@ class World:
         torque = pb.applyExternalTorque
         link_frame = pb.LINK_FRAME
         step_sim = pb.stepSimulation
-        wx, wy, wz = self.wind_enu_m_s
         vehicles = self._vehicles
+        winds = self._winds(get_pose)
         # What states() read since the last step is what the first substep would read again.
         fresh = self._fresh if self._fresh_step == self.step_count else None
         for _ in range(n):
@@ -341,6 +354,7 @@ class World:
                 else:
                     thrust, tx, ty, tz = _spin_motors(v)
                 # Drag against the air, in body axes.
+                wx, wy, wz = winds[i]
                 bx, by, bz = rotate_to_body(q, vx - wx, vy - wy, vz - wz)
                 dx, dy, dz = v.drag
                 force(

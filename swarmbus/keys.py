@@ -114,6 +114,17 @@ class Keys:
     def plume_mesh(self) -> str:
         return f"{self.prefix}/plume/mesh"
 
+    # -- dynamic plume and anemometer data --------------------------------------
+    def plume_state(self) -> str:
+        """Filaments or puffs of a time-dependent plume (data, not a queryable: not plume/)."""
+        return f"{self.prefix}/field/state"
+
+    def vehicle_wind(self, vehicle_id: str) -> str:
+        return self._vehicle(vehicle_id, "wind")
+
+    def all_vehicle_wind(self) -> str:
+        return f"{self.prefix}/vehicle/*/wind"
+
     # -- presence plane --------------------------------------------------------
     def node_health(self, node_name: str) -> str:
         return f"{self.prefix}/node/{check_name('node', node_name)}/health"

@@ -432,6 +432,10 @@ class PlumeInfo(Message, frozen=True, kw_only=True, tag=_tag("plume_info")):
     wind_from_deg: Annotated[float, msgspec.Meta(ge=-360.0, le=360.0)]
     mixing_height_m: Positive | None
     sources: list[PlumeSource]
+    wind_model: Text = "steady"
+    time_dependent: bool = False  # filament, puff: the value depends on sim_time_s
+    # One line per σ fit used outside its published range (the fits hold from about 100 m).
+    sigma_validity: list[Text] = []
 
 
 class PlumeInfoQuery(Message, frozen=True, kw_only=True, tag=_tag("plume_info_query")):
@@ -479,6 +483,32 @@ class StepReply(Message, frozen=True, kw_only=True, tag=_tag("step_reply")):
 
     tick: Tick
     sim_time_s: SimTime
+
+
+# --------------------------------------------------------------------------- dynamic plume
+class PlumeState(Message, frozen=True, kw_only=True, tag=_tag("plume_state")):
+    """``field/state``: the filaments or puffs of a time-dependent plume at ``sim_time_s``.
+
+    ``centres_f32``: little-endian float32 (P, 3) ENU m; ``radii_f32``: float32 (P,) m (a
+    filament's R, a puff's σy). Published a few times per sim second for viewers and recorders.
+    """
+
+    sim_time_s: SimTime
+    model: Text
+    count: Annotated[int, msgspec.Meta(ge=0, le=2**31)]
+    centres_f32: bytes
+    radii_f32: bytes
+
+
+class AnemometerReading(Message, frozen=True, kw_only=True, tag=_tag("anemometer")):
+    """``vehicle/<id>/wind``: the vehicle's anemometer, the scenario's wind at its position
+    with the instrument's own seeded noise (ENU m/s), and the true value."""
+
+    vehicle_id: Name
+    sim_time_s: SimTime
+    position_enu_m: Vec3
+    wind_enu_m_s: Vec3
+    true_wind_enu_m_s: Vec3
 
 
 # --------------------------------------------------------------------------- presence
@@ -559,6 +589,8 @@ ALL_MESSAGES: tuple[type[Message], ...] = (
     StepRequest,
     StepReply,
     RestartNotice,
+    PlumeState,
+    AnemometerReading,
 )
 
 __all__ = [m.__name__ for m in ALL_MESSAGES] + [

@@ -66,11 +66,46 @@ class Time(_Section, frozen=True, kw_only=True):
     restart_grace_s: NonNeg = 30.0
 
 
+class WindMeander(_Section, frozen=True, kw_only=True):
+    """Farrell et al. (2002) coloured noise on the wind; ``preset`` fills the three numbers."""
+
+    preset: Literal["small", "large"] | None = None
+    gain: NonNeg = 3.0  # Farrell's G (see docs/plume.md for its SDE form)
+    damping: Pos = 0.071  # ζ
+    bandwidth_rad_s: Pos = 0.71  # ω
+    step_s: Annotated[float, msgspec.Meta(ge=1e-3, le=10.0)] = 0.05  # internal step, sim s
+
+    def resolved(self) -> WindMeander:
+        presets = {"small": (3.0, 0.071, 0.71), "large": (20.0, 0.1, 0.2)}
+        if self.preset is None:
+            return self
+        gain, damping, bandwidth = presets[self.preset]
+        return msgspec.structs.replace(
+            self, preset=None, gain=gain, damping=damping, bandwidth_rad_s=bandwidth
+        )
+
+
+class WindField(_Section, frozen=True, kw_only=True):
+    """A 2-D grid wind: the meander noise at the grid's corners, carried inwards by the mean
+    wind and diffused (Farrell et al. 2002)."""
+
+    spacing_m: Annotated[float, msgspec.Meta(ge=0.1, le=1e4)] = 10.0
+    extent_m: Annotated[float, msgspec.Meta(ge=1.0, le=1e5)] = 200.0  # half-width, around 0
+    diffusivity_m2_s: NonNeg = 2.0
+
+
 class Wind(_Section, frozen=True, kw_only=True):
-    """One wind, two consumers: the plume's advection and the vehicles' air velocity."""
+    """One wind, three consumers: the plume's advection, the vehicles' air velocity (drag) and
+    their anemometers (``swarmbus.wind``). ``speed_m_s``/``from_deg`` give the mean wind."""
 
     speed_m_s: Pos = 6.0
     from_deg: Degrees = 270.0  # meteorological: the direction it blows FROM; 270 → toward +x
+    model: Literal["steady", "meander", "field"] = "steady"
+    meander: WindMeander = WindMeander()
+    field: WindField = WindField()
+
+
+PlumeModel = Literal["gaussian", "filament", "puff"]
 
 
 class Source(_Section, frozen=True, kw_only=True):
@@ -78,13 +113,36 @@ class Source(_Section, frozen=True, kw_only=True):
     y_m: Fin = 0.0
     release_rate_g_s: Pos = 10.0
     release_height_m: NonNeg = 10.0
+    model: PlumeModel | None = None  # this source's model; default: [plume] model
+
+
+class PlumeFilament(_Section, frozen=True, kw_only=True):
+    """Farrell et al. (2002) filaments; defaults are theirs (docs/plume.md)."""
+
+    release_rate_hz: Annotated[float, msgspec.Meta(gt=0.0, le=1e5)] = 10.0
+    initial_radius_m: Pos = 0.001**0.5
+    growth_m2_s: NonNeg = 0.001
+    centerline_diffusivity_m2_s: NonNeg = 0.02
+    step_s: Annotated[float, msgspec.Meta(ge=1e-3, le=10.0)] = 0.05
+    max_age_s: Pos = 120.0  # filaments older than this are dropped
+
+
+class PlumePuff(_Section, frozen=True, kw_only=True):
+    """CALPUFF-style puffs; σ from the plume's dispersion curves at each puff's travel."""
+
+    release_period_s: Annotated[float, msgspec.Meta(ge=1e-3, le=600.0)] = 0.5
+    step_s: Annotated[float, msgspec.Meta(ge=1e-3, le=10.0)] = 0.1  # advection step
+    max_age_s: Pos = 600.0
 
 
 class Plume(_Section, frozen=True, kw_only=True):
     """``preset`` fills model, stability, coefficients and sources; explicit fields override."""
 
     preset: Literal["novak2018"] | None = None
-    model: Literal["gaussian"] = "gaussian"
+    model: PlumeModel = "gaussian"
+    filament: PlumeFilament = PlumeFilament()
+    puff: PlumePuff = PlumePuff()
+    state_period_s: Annotated[float, msgspec.Meta(ge=0.0, le=3600.0)] = 0.5  # plume/state; 0 off
     stability: Literal["A", "B", "C", "D", "E", "F"] = "D"
     coefficients: Literal["mcmullen", "briggs-rural", "briggs-urban", "novak2018"] = "mcmullen"
     mixing_height_m: Pos | None = None
@@ -162,6 +220,13 @@ def _or(value: float | None, default: float) -> float:
     return default if value is None else value
 
 
+class Anemometer(_Section, frozen=True, kw_only=True):
+    """Every vehicle's anemometer (agents.anemometer): the scenario's wind plus noise."""
+
+    period_ticks: Annotated[int, msgspec.Meta(ge=0, le=100_000)] = 0  # 0: no anemometer
+    noise_std_m_s: NonNeg = 0.1  # per axis (GADEN's anemometer noise)
+
+
 class Failsafe(_Section, frozen=True, kw_only=True):
     datalink_loss_action: Literal["none", "hold", "land", "rtl"] = "rtl"
     datalink_timeout_s: Pos = 10.0
@@ -215,6 +280,7 @@ class Scenario(_Section, frozen=True, kw_only=True):
     wind: Wind = Wind()
     plume: Plume = Plume()
     sensor: Sensor = Sensor()
+    anemometer: Anemometer = Anemometer()
     failsafe: Failsafe = Failsafe()
     gateway: Gateway = Gateway()
     env: Env = Env()

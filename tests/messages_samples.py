@@ -89,6 +89,16 @@ SAMPLES: dict[type[m.Message], m.Message] = {
         sources=[m.PlumeSource(x_m=0, y_m=0, release_rate_g_s=10.0, release_height_m=10.0)],
     ),
     m.PlumeInfoQuery: m.PlumeInfoQuery(),
+    m.PlumeState: m.PlumeState(
+        sim_time_s=1.5, model="filament", count=1, centres_f32=b"\x00" * 12, radii_f32=b"\x00" * 4
+    ),
+    m.AnemometerReading: m.AnemometerReading(
+        vehicle_id="uav1",
+        sim_time_s=1.5,
+        position_enu_m=(1.0, 2.0, 10.0),
+        wind_enu_m_s=(6.1, -0.2, 0.05),
+        true_wind_enu_m_s=(6.0, 0.0, 0.0),
+    ),
     m.PlumeMeshQuery: m.PlumeMeshQuery(level_g_m3=0.05, resolution_m=0.5),
     m.PlumeMesh: m.PlumeMesh(level_g_m3=0.05, vertices_f32=b"\x00" * 36, faces_i32=b"\x00" * 12),
     m.ErrorReply: m.ErrorReply(field="points_enu_m[0][2]", reason="Expected `float` <= 1e9"),

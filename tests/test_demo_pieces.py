@@ -165,7 +165,7 @@ def test_vehicle_summary_and_accuracy_table_use_the_model_at_the_reported_positi
     rec.on_status(status(mode=FlightMode.MISSION, armed=True, landed=False))
     rec.on_status(status(armed=False, landed=True, mission_finished=True))
 
-    def model(points: np.ndarray) -> np.ndarray:
+    def model(points: np.ndarray, times: object) -> np.ndarray:
         return points[:, 0] * 0.01 + 0.015  # a stand-in field, linear in x
 
     summary = vehicle_summary(rec, (9.0, 1.0, 0.0), model, (0.01, 0.2))

@@ -14,17 +14,19 @@ with warnings.catch_warnings():
     # meshcat 0.3.2 imports pyzmq's deprecated zmq.eventloop.ioloop; not ours to fix.
     warnings.simplefilter("ignore", DeprecationWarning)
     from sim_world.viewer import (
+        WORLD_ROOT,
         Feed,
         Scene,
         ViewerOptions,
         default_levels,
+        mesh_queries,
         pose_matrix,
         reading_colour,
         scene_bounds,
     )
 from swarmbus.codec import encode
-from swarmbus.messages import ConcentrationReading, PlumeMesh, SimTick, VehicleState
-from swarmbus.scenario import load_scenario
+from swarmbus.messages import ConcentrationReading, PlumeMesh, PlumeState, SimTick, VehicleState
+from swarmbus.scenario import load_scenario, resolve_scenario_path
 from swarmbus.vehicle_types import load_vehicle_type
 from tests.procs import Network, keys_for, wait_until
 
@@ -187,3 +189,26 @@ def test_feed_keeps_only_the_newest_tick(network: tuple[Network, zenoh.Session])
         wait_until(newest, 20.0, "tick 50 as the newest frame")
         assert feed.take()[0] is None, "a frame is handed out once; stale ones are dropped"
         feed.close()
+
+
+def test_plume_state_becomes_a_point_cloud_and_filaments_ask_no_meshes(
+    scene: tuple[Scene, FakeVis],
+) -> None:
+    sc, vis = scene
+    centres = np.array([[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]], dtype="<f4")
+    radii = np.array([0.1, 0.3], dtype="<f4")
+    sc.set_plume_state(
+        PlumeState(
+            sim_time_s=2.5,
+            model="filament",
+            count=2,
+            centres_f32=centres.tobytes(),
+            radii_f32=radii.tobytes(),
+        )
+    )
+    geometry, _ = vis.objects[WORLD_ROOT + "/plume/state"]
+    assert np.asarray(geometry.position).T.tolist() == centres.tolist()
+    assert sc.plume_state_time_s == 2.5
+    filament = load_scenario(resolve_scenario_path("filament"))
+    assert mesh_queries(filament, ViewerOptions()) == []
+    assert mesh_queries(load_scenario(), ViewerOptions())  # the Gaussian keeps its isosurfaces

@@ -47,7 +47,7 @@ def plume_field(flight: Flight) -> ConcentrationField | None:
         return None
     try:
         info = flight.plume_info
-        if info is not None:
+        if info is not None and info.model == "gaussian":
             plumes = [
                 GaussianPlume(
                     release_rate=s.release_rate_g_s,
