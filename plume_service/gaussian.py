@@ -27,8 +27,8 @@ from typing import Any
 
 import numpy as np
 
-from plume_service.dispersion import DispersionCurves, dispersion_curves
 from plume_service.field import CHUNK_POINTS, ConcentrationField, FloatArray
+from swarmbus.dispersion import DispersionCurves, dispersion_curves
 
 _SQRT_2PI = math.sqrt(2.0 * math.pi)
 _SQRT_HALF = math.sqrt(0.5)
