@@ -90,12 +90,12 @@ class Infotaxis:
     prior_half_width_m = 40.0
     diffusivity_m2_s = 1.0
     lifetime_s = 50.0
-    emission_rate_hz = 15.0
+    emission_rate_hz = 100.0
     searcher_size_m = 0.1
     background_rate_hz = 0.02
     threshold_g_m3 = PLUME_THRESHOLD_G_M3
     declare_radius_m = 1.5
-    declare_mass = 0.7
+    declare_mass = 0.9
 
     def __init__(self, ctx: BehaviorContext) -> None:
         self.read_wind: WindReader = scenario_wind(ctx)  # the anemometer input

@@ -18,12 +18,17 @@ a source of hazardous substance dispersion using binary measurements", Atmos. En
   the tails where the sensor reads ~0.
 * Resampling: systematic, when the effective sample size drops below half, followed by a
   regularisation jitter (Gaussian, ``jitter`` × the particles' spread, with a floor) so the
-  cloud does not collapse onto a few values.
-* Motion: before any reading reaches :data:`~agents.behaviors.search.PLUME_THRESHOLD_G_M3`,
-  crosswind sweeps of growing width drifting upwind; after, straight toward the current mean
-  estimate (readings close to the source are the most informative).
+  cloud does not collapse onto a few values. When no particle explains a reading within 3σ,
+  a fifth of the particles is redrawn from the prior (the cloud had settled on a wrong source).
+* Motion: until a reading has reached :data:`~agents.behaviors.search.PLUME_THRESHOLD_G_M3`
+  and the estimate's spread is below ``approach_spread_m``, crosswind sweeps of growing width
+  drifting upwind (crossing the plume); then toward points ``probe_downwind_m``
+  downwind of the current mean estimate, ``probe_across_m`` to alternate sides — across the
+  plume close to the source, where readings are the most informative.
 * Stopping rule: when the particles' horizontal spread (√(σx² + σy²)) is below
-  ``declare_spread_m``, it declares the weighted mean (x₀, y₀, Q) with that spread and holds.
+  ``declare_spread_m`` while the vehicle is probing next to the estimate (so the estimate has
+  met the readings taken close to it), it declares the weighted mean (x₀, y₀, Q) with that
+  spread and holds.
 
 Use ``behavior = "agents.behaviors.particle_filter:ParticleFilter"``.
 """
@@ -31,7 +36,7 @@ Use ``behavior = "agents.behaviors.particle_filter:ParticleFilter"``.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -64,9 +69,10 @@ class SourceTermFilter:
         curves: DispersionCurves,
         release_height_m: float,
         rng: np.random.Generator,
-        log_sigma: float = 0.3,
+        log_sigma: float = 0.6,
         floor_g_m3: float = 1e-4,
         jitter: float = 0.1,
+        prior: Callable[[int], FloatArray] | None = None,
     ) -> None:
         self.particles = np.array(particles, dtype=np.float64)  # (n, 3): x0, y0, Q
         self.weights = np.full(len(self.particles), 1.0 / len(self.particles))
@@ -76,6 +82,7 @@ class SourceTermFilter:
         self.log_sigma = log_sigma
         self.floor_g_m3 = floor_g_m3
         self.jitter = jitter
+        self.prior = prior
 
     def predict(self, x_m: float, y_m: float, z_m: float, wind: tuple[float, float]) -> FloatArray:
         """Each particle's predicted concentration at (x, y, z) in the wind (east, north)."""
@@ -100,6 +107,13 @@ class SourceTermFilter:
         predicted = self.predict(x_m, y_m, z_m, wind)
         eps = self.floor_g_m3
         residual = np.log(value_g_m3 + eps) - np.log(predicted + eps)
+        if self.prior is not None and np.abs(residual).min() > 3.0 * self.log_sigma:
+            # No particle explains this reading: the cloud has collapsed on a wrong source.
+            # Redraw a fifth of it from the prior so the filter can recover.
+            fresh = self.rng.random(len(self.particles)) < 0.2
+            self.particles[fresh] = self.prior(int(fresh.sum()))
+            predicted[fresh] = self.predict(x_m, y_m, z_m, wind)[fresh]
+            residual = np.log(value_g_m3 + eps) - np.log(predicted + eps)
         log_w = np.log(self.weights + 1e-300) - 0.5 * (residual / self.log_sigma) ** 2
         log_w -= log_w.max()
         w = np.exp(log_w)
@@ -140,6 +154,9 @@ class ParticleFilter:
     first_sweep_half_width_m = 5.0
     sweep_growth = 1.6
     declare_spread_m = 0.5
+    probe_downwind_m = 4.0
+    approach_spread_m = 5.0
+    probe_across_m = 2.0
     threshold_g_m3 = PLUME_THRESHOLD_G_M3
 
     def __init__(self, ctx: BehaviorContext) -> None:
@@ -152,6 +169,7 @@ class ParticleFilter:
         self.altitude_m: float | None = None
         self.declaration: SourceEstimate | None = None
         self.detected = False
+        self.probe_side = 1.0
         self.sweep = CrosswindSweep(
             self.sweep_speed_m_s,
             -self.sweep_drift_m_s,
@@ -160,17 +178,37 @@ class ParticleFilter:
             side=1.0 if ctx.vehicle_index % 2 == 0 else -1.0,
         )
 
+    def _probe_velocity(
+        self, own: VehicleState, frame: WindFrame, mx: float, my: float
+    ) -> tuple[float, float]:
+        """Toward a point ``probe_downwind_m`` downwind of the estimate and
+        ``probe_across_m`` to one side, switching sides at each arrival: readings across the
+        plume just downwind of the source separate (x₀, y₀, Q) best; at the estimate itself
+        the plume reads 0 whichever nearby source is true."""
+        tx, ty = frame.velocity(self.probe_downwind_m, self.probe_across_m * self.probe_side)
+        tx, ty = mx + tx, my + ty
+        if math.hypot(tx - own.position_enu_m[0], ty - own.position_enu_m[1]) < 0.5:
+            self.probe_side = -self.probe_side
+        return toward(own, tx, ty, self.speed_m_s)
+
     def _prior(self, frame: WindFrame, x: float, y: float) -> SourceTermFilter:
         along0, across0 = frame.coordinates(x, y)
-        n = self.particles
-        along = self.rng.uniform(along0 - self.prior_upwind_m, along0 + self.prior_downwind_m, n)
-        across = self.rng.uniform(
-            across0 - self.prior_half_width_m, across0 + self.prior_half_width_m, n
-        )
-        q = np.exp(self.rng.uniform(math.log(self.q_min_g_s), math.log(self.q_max_g_s), n))
         dw, cw = frame.downwind, frame.crosswind
-        parts = np.column_stack([along * dw[0] + across * cw[0], along * dw[1] + across * cw[1], q])
-        return SourceTermFilter(parts, self.curves, self.release_height_m, self.rng)
+        rng = self.rng
+
+        def draw(n: int) -> FloatArray:
+            along = rng.uniform(along0 - self.prior_upwind_m, along0 + self.prior_downwind_m, n)
+            across = rng.uniform(
+                across0 - self.prior_half_width_m, across0 + self.prior_half_width_m, n
+            )
+            q = np.exp(rng.uniform(math.log(self.q_min_g_s), math.log(self.q_max_g_s), n))
+            return np.column_stack(
+                [along * dw[0] + across * cw[0], along * dw[1] + across * cw[1], q]
+            )
+
+        return SourceTermFilter(
+            draw(self.particles), self.curves, self.release_height_m, rng, prior=draw
+        )
 
     def step(
         self,
@@ -194,11 +232,12 @@ class ParticleFilter:
             self.filter.update(px, py, pz, r.reported_g_m3, wind)
             self.detected = self.detected or r.reported_g_m3 >= self.threshold_g_m3
         mx, my, q, spread = self.filter.estimate()
-        if self.detected and spread < self.declare_spread_m:
+        near = math.hypot(mx - x, my - y) <= self.probe_downwind_m + self.probe_across_m + 1.0
+        if self.detected and near and spread < self.declare_spread_m:
             self.declaration = SourceEstimate(
                 x_m=mx, y_m=my, sim_time_s=own.sim_time_s, release_rate_g_s=q, spread_m=spread
             )
             return hold_at(mx, my, self.altitude_m)
-        if self.detected:
-            return fly(own, toward(own, mx, my, self.speed_m_s), self.altitude_m)
+        if self.detected and spread < self.approach_spread_m:
+            return fly(own, self._probe_velocity(own, frame, mx, my), self.altitude_m)
         return fly(own, self.sweep.velocity(frame, x, y), self.altitude_m)
