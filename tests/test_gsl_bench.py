@@ -8,7 +8,14 @@ from pathlib import Path
 import pytest
 
 from deploy.gsl_bench import make_options, rows_of, run_all, wilson_interval, write_outputs
-from deploy.gsl_episode import START_ACROSS_M, START_ALONG_M, start_point
+from deploy.gsl_episode import (
+    ALGORITHMS,
+    START_ACROSS_M,
+    START_ALONG_M,
+    EpisodeSpec,
+    run_episode,
+    start_point,
+)
 from swarmbus.scenario import load_scenario
 from tests.procs import run_cli
 
@@ -75,3 +82,10 @@ def test_full_dynamics_and_missing_environments_are_refused_clearly() -> None:
     assert "filament plume model" in res.stderr and "Traceback" not in res.stderr
     res = run_cli(["bench", "gsl", "--algorithms", "moth", "--runs", "1"])
     assert res.returncode == 2 and "'moth'" in res.stderr and "casting" in res.stderr
+
+
+@pytest.mark.parametrize("algorithm", sorted(ALGORITHMS))
+def test_every_registered_algorithm_flies_an_episode(algorithm: str) -> None:
+    outcome = run_episode(EpisodeSpec(algorithm, "steady_gaussian", "ideal", 0, 0, 5.0))
+    assert outcome.path_length_m > 1.0  # it moved
+    assert outcome.initial_distance_m > 25.0
