@@ -32,11 +32,6 @@ from deploy.gsl_episode import (
 from swarmbus.scenario import Scenario, load_scenario
 
 DYNAMICS = ("kinematic", "full")
-FULL_DYNAMICS_MISSING = (
-    "--dynamics full needs the fused in-process runner (World, Autopilot, sensor and plume "
-    "composed in one process, with seeded resets), which this build does not include; "
-    "use --dynamics kinematic"
-)
 Z_95 = 1.959963984540054
 
 
@@ -80,8 +75,10 @@ def make_options(
     dynamics = kwargs.get("dynamics", "kinematic")
     if dynamics not in DYNAMICS:
         raise GslError(f"--dynamics {dynamics!r}: valid: {', '.join(DYNAMICS)}")
-    if dynamics == "full":
-        raise GslError(FULL_DYNAMICS_MISSING)
+    if dynamics == "full":  # the real controller runs at the scenario's rates
+        base = _base_scenario()
+        kwargs["control_hz"] = base.time.control_hz
+        kwargs["sensor_period_ticks"] = base.sensor.period_ticks
     return GslOptions(
         algorithms=_pick("algorithms", algorithms, ALGORITHMS),
         environments=_pick("environments", environments, ENVIRONMENTS),
@@ -189,6 +186,7 @@ def _specs(opts: GslOptions) -> list[EpisodeSpec]:
             control_hz=opts.control_hz,
             sensor_period_ticks=opts.sensor_period_ticks,
             keep_trajectory=run == 0,
+            dynamics=opts.dynamics,
         )
         for e in opts.environments
         for s in opts.sensors

@@ -29,7 +29,7 @@ from agents.behavior import Behavior, BehaviorContext, load_behavior
 from agents.behaviors.search import PLUME_THRESHOLD_G_M3, SourceEstimate
 from agents.sensor import ConcentrationSensor
 from plume_service.from_scenario import field_from_scenario
-from swarmbus.messages import PeerReading, Setpoint, VehicleState
+from swarmbus.messages import ConcentrationReading, PeerReading, Setpoint, VehicleState
 from swarmbus.plume_formula import downwind_unit
 from swarmbus.scenario import Scenario, Sensor, Vehicle, load_scenario
 
@@ -120,6 +120,7 @@ class EpisodeSpec:
     control_hz: int = 20
     sensor_period_ticks: int = 2
     keep_trajectory: bool = False
+    dynamics: str = "kinematic"  # or "full"
 
 
 @dataclass
@@ -157,7 +158,8 @@ def episode_scenario(base: Scenario, spec: EpisodeSpec) -> Scenario:
         Vehicle(id=f"uav{i + 1}", behavior=algo.behavior, mission=[]) for i in range(algo.vehicles)
     ]
     world = msgspec.structs.replace(base.world, seed=spec.seed)
-    return msgspec.structs.replace(base, world=world, sensor=sensor, vehicles=vehicles)
+    time = msgspec.structs.replace(base.time, control_hz=spec.control_hz)
+    return msgspec.structs.replace(base, world=world, time=time, sensor=sensor, vehicles=vehicles)
 
 
 def _follow(setpoint: Setpoint | None, p: list[float]) -> tuple[float, float, float]:
@@ -176,6 +178,122 @@ def _follow(setpoint: Setpoint | None, p: list[float]) -> tuple[float, float, fl
         k = MAX_SPEED_M_S / speed
         return v[0] * k, v[1] * k, v[2] * k
     return v[0], v[1], v[2]
+
+
+class KinematicFlight:
+    """Point masses that fly their behaviour's setpoint."""
+
+    def __init__(
+        self, scenario: Scenario, behaviors: list[Behavior], starts: list[list[float]], dt: float
+    ) -> None:
+        self.ids = [v.id for v in scenario.vehicles]
+        self.behaviors = behaviors
+        self.positions = [list(p) for p in starts]
+        self.velocities = [(0.0, 0.0, 0.0)] * len(starts)
+        self.dt = dt
+        self.start_tick = 0
+
+    def states(self, tick: int, t: float) -> list[VehicleState]:
+        return [
+            _state(self.ids[i], tick, t, p, self.velocities[i])
+            for i, p in enumerate(self.positions)
+        ]
+
+    def act(
+        self,
+        i: int,
+        own: VehicleState,
+        peers: list[VehicleState],
+        readings: list[ConcentrationReading],
+    ) -> None:
+        self.velocities[i] = _follow(
+            self.behaviors[i].step(own, peers, readings), self.positions[i]
+        )
+
+    def advance(self) -> None:
+        for p, v in zip(self.positions, self.velocities, strict=True):
+            p[0] += v[0] * self.dt
+            p[1] += v[1] * self.dt
+            p[2] += v[2] * self.dt
+
+    def close(self) -> None:
+        pass
+
+
+class FullFlight:
+    """The real vehicles: pybullet physics (:class:`sim_world.world.World`) and one
+    :class:`agents.autopilot.Autopilot` per vehicle running its behaviour in offboard mode,
+    stepped in lockstep in this process. Each vehicle is armed on the ground at its start,
+    takes off to the start altitude, and is switched to offboard once all hover; the episode
+    starts then."""
+
+    takeoff_timeout_s = 60.0
+
+    def __init__(self, scenario: Scenario, behaviors: list[Behavior], starts: list[list[float]]):
+        from agents.autopilot import Autopilot
+        from sim_world.world import World
+
+        vehicles = [
+            msgspec.structs.replace(v, spawn_enu_m=(p[0], p[1], 0.0))
+            for v, p in zip(scenario.vehicles, starts, strict=True)
+        ]
+        self.scenario = msgspec.structs.replace(scenario, vehicles=vehicles)
+        self.ids = [v.id for v in vehicles]
+        self.world = World(self.scenario)
+        self.autopilots = [
+            Autopilot(self.scenario, vid, behavior=b)
+            for vid, b in zip(self.ids, behaviors, strict=True)
+        ]
+        self.substeps = self.scenario.substeps
+        self.dt = 1.0 / self.scenario.time.control_hz
+        self.tick = 0
+        self._take_off(starts[0][2])
+        self.start_tick = self.tick
+
+    def _run_ticks(self, count: int) -> None:
+        for _ in range(count):
+            states = self.states(self.tick, self.tick * self.dt)
+            for i, state in enumerate(states):
+                self.act(i, state, states[:i] + states[i + 1 :], [])
+            self.advance()
+
+    def _take_off(self, altitude_m: float) -> None:
+        from swarmbus.messages import Arm, FlightMode, SetMode, Takeoff
+
+        self._run_ticks(2)
+        for ap in self.autopilots:
+            for cmd in (Arm(), Takeoff(altitude_m=altitude_m)):
+                reply = ap.handle(cmd)
+                if not reply.accepted:
+                    raise RuntimeError(f"{ap.vehicle_id}: {type(cmd).__name__}: {reply.reason}")
+        deadline = self.tick + round(self.takeoff_timeout_s / self.dt)
+        while any(ap.modes.mode != FlightMode.HOLD for ap in self.autopilots):
+            if self.tick > deadline:
+                raise RuntimeError(f"vehicles not hovering after {self.takeoff_timeout_s} s")
+            self._run_ticks(1)
+        for ap in self.autopilots:
+            reply = ap.handle(SetMode(mode=FlightMode.OFFBOARD))
+            if not reply.accepted:
+                raise RuntimeError(f"{ap.vehicle_id}: offboard: {reply.reason}")
+
+    def states(self, tick: int, t: float) -> list[VehicleState]:
+        return self.world.states(tick, t)
+
+    def act(
+        self,
+        i: int,
+        own: VehicleState,
+        peers: list[VehicleState],
+        readings: list[ConcentrationReading],
+    ) -> None:
+        self.world.apply(self.ids[i], self.autopilots[i].step(own, peers, readings))
+
+    def advance(self) -> None:
+        self.world.step(self.substeps)
+        self.tick += 1
+
+    def close(self) -> None:
+        self.world.close()
 
 
 def _state(
@@ -209,93 +327,119 @@ def run_episode(spec: EpisodeSpec, base: Scenario | None = None) -> Outcome:
     assert env.build is not None
     scenario = episode_scenario(base, spec)
     concentration = env.build(scenario)
-    dt = 1.0 / spec.control_hz
     src = scenario.plume.sources[0]
     sx, sy = start_point(scenario, spec.seed, spec.run)
     n = len(scenario.vehicles)
-    positions = [[sx, sy, START_ALTITUDE_M] for _ in range(n)]
+    starts = [[sx, sy, START_ALTITUDE_M] for _ in range(n)]
     if n > 1:  # a swarm starts on a circle of 2 m around the start point
-        for i, p in enumerate(positions):
+        for i, p in enumerate(starts):
             angle = 2.0 * math.pi * i / n
             p[0] += 2.0 * math.cos(angle)
             p[1] += 2.0 * math.sin(angle)
-    velocities = [(0.0, 0.0, 0.0)] * n
+    dt = 1.0 / spec.control_hz
     behaviors: list[Behavior] = []
     sensors = []
     for i, v in enumerate(scenario.vehicles):
         ctx = BehaviorContext(v.id, i, scenario, dt, behavior_rng(spec, i))
         behaviors.append(load_behavior(v.behavior or "", ctx))
         sensors.append(ConcentrationSensor(scenario.sensor, spec.seed * 100_003 + spec.run, i))
-    ids = [v.id for v in scenario.vehicles]
+    flight: KinematicFlight | FullFlight
+    if spec.dynamics == "full":
+        flight = FullFlight(scenario, behaviors, starts)
+    else:
+        flight = KinematicFlight(scenario, behaviors, starts, dt)
+    try:
+        return _fly(spec, flight, behaviors, sensors, concentration, (sx, sy), (src.x_m, src.y_m))
+    finally:
+        flight.close()
+
+
+def _fly(
+    spec: EpisodeSpec,
+    flight: KinematicFlight | FullFlight,
+    behaviors: list[Behavior],
+    sensors: list[ConcentrationSensor],
+    concentration: Field,
+    start: tuple[float, float],
+    source: tuple[float, float],
+) -> Outcome:
+    ids = flight.ids
+    dt = flight.dt
+    n = len(ids)
+    period = sensors[0].config.period_ticks
+    t0 = flight.start_tick * dt
     path = [0.0] * n
     detections = 0
     first_inside_s: float | None = None
     declared: SourceEstimate | None = None
     keep_every = max(1, round(TRAJECTORY_EVERY_S / dt))
-    tracks: list[list[tuple[float, float]]] = [[(p[0], p[1])] for p in positions]
-    ticks = round(spec.time_limit_s * spec.control_hz)
-    tick = 0
-    for tick in range(ticks):
+    tracks: list[list[tuple[float, float]]] = [[] for _ in range(n)]
+    previous: list[tuple[float, float, float]] | None = None
+    ticks = round(spec.time_limit_s / dt)
+    k = 0
+    for k in range(ticks):
+        tick = flight.start_tick + k
         t = tick * dt
-        states = [_state(ids[i], tick, t, positions[i], velocities[i]) for i in range(n)]
-        readings: list[list] = [[] for _ in range(n)]  # type: ignore[type-arg]
-        if tick % spec.sensor_period_ticks == 0:
+        states = flight.states(tick, t)
+        positions = [s.position_enu_m for s in states]
+        if previous is not None:
+            for i, (p, q) in enumerate(zip(positions, previous, strict=True)):
+                path[i] += math.hypot(p[0] - q[0], p[1] - q[1])
+        previous = positions
+        if spec.keep_trajectory and k % keep_every == 0:
+            for i, p in enumerate(positions):
+                tracks[i].append((p[0], p[1]))
+        cx = sum(p[0] for p in positions) / n
+        cy = sum(p[1] for p in positions) / n
+        if first_inside_s is None and math.dist((cx, cy), source) <= SUCCESS_RADIUS_M:
+            first_inside_s = t - t0
+        readings: list[list[ConcentrationReading]] = [[] for _ in range(n)]
+        if tick % period == 0:
             values = concentration(np.array(positions, dtype=np.float64), t)
             for i in range(n):
                 peers = [
                     PeerReading(
-                        vehicle_id=ids[j],
-                        position_enu_m=(positions[j][0], positions[j][1], positions[j][2]),
-                        true_g_m3=float(values[j]),
+                        vehicle_id=ids[j], position_enu_m=positions[j], true_g_m3=float(values[j])
                     )
                     for j in range(n)
                     if j != i
                 ]
-                r = sensors[i].reading(ids[i], t, states[i].position_enu_m, float(values[i]), peers)
+                r = sensors[i].reading(ids[i], t, positions[i], float(values[i]), peers)
                 if r.reported_g_m3 is not None and r.reported_g_m3 >= PLUME_THRESHOLD_G_M3:
                     detections += 1
                 readings[i].append(r)
-        for i, b in enumerate(behaviors):
-            others = states[:i] + states[i + 1 :]
-            velocities[i] = _follow(b.step(states[i], others, readings[i]), positions[i])
-        for i, p in enumerate(positions):
-            vel = velocities[i]
-            p[0] += vel[0] * dt
-            p[1] += vel[1] * dt
-            p[2] += vel[2] * dt
-            path[i] += math.hypot(vel[0], vel[1]) * dt
-            if spec.keep_trajectory and tick % keep_every == 0:
-                tracks[i].append((p[0], p[1]))
-        cx = sum(p[0] for p in positions) / n
-        cy = sum(p[1] for p in positions) / n
-        if first_inside_s is None and math.hypot(cx - src.x_m, cy - src.y_m) <= SUCCESS_RADIUS_M:
-            first_inside_s = t + dt
+        for i in range(n):
+            flight.act(i, states[i], states[:i] + states[i + 1 :], readings[i])
+        flight.advance()
         declared = next(
             (d for b in behaviors if (d := getattr(b, "declaration", None)) is not None), None
         )
         if declared is not None:
             break
-    elapsed_s = (tick + 1) * dt
+    elapsed_s = (k + 1) * dt
+    final = flight.states(flight.start_tick + k + 1, t0 + elapsed_s)
+    if previous is not None:
+        for i, (s, q) in enumerate(zip(final, previous, strict=True)):
+            path[i] += math.hypot(s.position_enu_m[0] - q[0], s.position_enu_m[1] - q[1])
     if declared is not None:
         estimate = (declared.x_m, declared.y_m)
     else:
         estimate = (
-            sum(p[0] for p in positions) / n,
-            sum(p[1] for p in positions) / n,
+            sum(s.position_enu_m[0] for s in final) / n,
+            sum(s.position_enu_m[1] for s in final) / n,
         )
-    error = math.hypot(estimate[0] - src.x_m, estimate[1] - src.y_m)
+    error = math.dist(estimate, source)
     success = error <= SUCCESS_RADIUS_M
     if declared is not None:
-        time_s: float | None = declared.sim_time_s if success else None
+        time_s: float | None = declared.sim_time_s - t0 if success else None
     else:
         time_s = first_inside_s if success else None
-    initial = math.hypot(sx - src.x_m, sy - src.y_m)
-    mean_path = sum(path) / n
+    initial = math.dist(start, source)
     return Outcome(
         spec=spec,
         success=success,
         time_to_success_s=time_s,
-        path_length_m=mean_path,
+        path_length_m=sum(path) / n,
         initial_distance_m=initial,
         final_error_m=error,
         detections_per_min=detections / n / (elapsed_s / 60.0),

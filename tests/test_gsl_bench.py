@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import pytest
@@ -73,15 +74,24 @@ def test_same_seed_same_table_byte_for_byte(tmp_path: Path) -> None:
     assert (tmp_path / "a" / "trajectories_steady_gaussian.png").stat().st_size > 10_000
 
 
-def test_full_dynamics_and_missing_environments_are_refused_clearly() -> None:
-    res = run_cli(["bench", "gsl", "--dynamics", "full", "--runs", "1"])
-    assert res.returncode == 2
-    assert "fused in-process runner" in res.stderr and "Traceback" not in res.stderr
+def test_missing_environments_and_unknown_algorithms_are_refused_clearly() -> None:
     res = run_cli(["bench", "gsl", "--environments", "filaments", "--runs", "1"])
     assert res.returncode == 2
     assert "filament plume model" in res.stderr and "Traceback" not in res.stderr
     res = run_cli(["bench", "gsl", "--algorithms", "moth", "--runs", "1"])
     assert res.returncode == 2 and "'moth'" in res.stderr and "casting" in res.stderr
+
+
+def test_full_dynamics_takes_off_and_casting_climbs_the_plume() -> None:
+    opts = make_options(["casting"], [], [], runs=1, time_limit_s=20.0, dynamics="full")
+    assert (opts.control_hz, opts.sensor_period_ticks) == (120, 12)  # the scenario's rates
+    spec = EpisodeSpec("casting", "steady_gaussian", "ideal", 1, 0, 20.0, 120, 12, True, "full")
+    outcome = run_episode(spec)
+    track = outcome.trajectories[0]
+    # It starts hovering over its start point (taken off there) and surges upwind (−x).
+    assert math.dist(track[0], start_point(load_scenario(), 0, 1)) < 1.0
+    assert track[-1][0] < track[0][0] - 20.0
+    assert outcome.final_error_m < outcome.initial_distance_m - 20.0
 
 
 @pytest.mark.parametrize("algorithm", sorted(ALGORITHMS))
