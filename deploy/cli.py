@@ -471,15 +471,21 @@ def _names(value: str) -> tuple[str, ...]:
     type=click.Choice(["kinematic", "full"]),
     default="kinematic",
     show_default=True,
-    help="kinematic: point masses following the setpoint.",
+    help="kinematic: point masses following the setpoint; full: pybullet vehicles and autopilots.",
 )
-@click.option("--control-hz", type=click.IntRange(min=1, max=1000), default=20, show_default=True)
+@click.option(
+    "--control-hz",
+    type=click.IntRange(min=1, max=1000),
+    default=20,
+    show_default=True,
+    help="Behaviour rate with kinematic dynamics (full uses the scenario's).",
+)
 @click.option(
     "--sensor-period-ticks",
     type=click.IntRange(min=1),
     default=2,
     show_default=True,
-    help="A reading every N control ticks.",
+    help="A reading every N control ticks (kinematic; full uses the scenario's).",
 )
 @click.option(
     "--jobs", type=click.IntRange(min=1), default=2, show_default=True, help="Worker processes."

@@ -130,6 +130,7 @@ def summarise(outcomes: Sequence[Outcome]) -> dict[str, Any]:
         "algorithm": spec.algorithm,
         "environment": spec.environment,
         "sensor": spec.sensor,
+        "dynamics": spec.dynamics,
         "vehicles": ALGORITHMS[spec.algorithm].vehicles,
         "runs": n,
         "success_rate": _r(len(wins) / n),
