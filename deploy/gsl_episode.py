@@ -224,10 +224,11 @@ class FullFlight:
     """The real vehicles: pybullet physics (:class:`sim_world.world.World`) and one
     :class:`agents.autopilot.Autopilot` per vehicle running its behaviour in offboard mode,
     stepped in lockstep in this process. Each vehicle is armed on the ground at its start,
-    takes off to the start altitude, and is switched to offboard once all hover; the episode
-    starts then."""
+    takes off to the start altitude, and is switched to offboard once all hover within
+    ``altitude_tolerance_m`` of it; the episode starts then."""
 
     takeoff_timeout_s = 60.0
+    altitude_tolerance_m = 0.03
 
     def __init__(self, scenario: Scenario, behaviors: list[Behavior], starts: list[list[float]]):
         from agents.autopilot import Autopilot
@@ -267,9 +268,16 @@ class FullFlight:
                 if not reply.accepted:
                     raise RuntimeError(f"{ap.vehicle_id}: {type(cmd).__name__}: {reply.reason}")
         deadline = self.tick + round(self.takeoff_timeout_s / self.dt)
-        while any(ap.modes.mode != FlightMode.HOLD for ap in self.autopilots):
+        # Hovering, and at the start altitude: the take-off hands over to hold within 0.3 m of
+        # it, and the behaviours keep the altitude they begin at.
+        while any(ap.modes.mode != FlightMode.HOLD for ap in self.autopilots) or any(
+            abs(s.position_enu_m[2] - altitude_m) > self.altitude_tolerance_m
+            for s in self.states(self.tick, self.tick * self.dt)
+        ):
             if self.tick > deadline:
-                raise RuntimeError(f"vehicles not hovering after {self.takeoff_timeout_s} s")
+                raise RuntimeError(
+                    f"vehicles not hovering at {altitude_m} m after {self.takeoff_timeout_s} s"
+                )
             self._run_ticks(1)
         for ap in self.autopilots:
             reply = ap.handle(SetMode(mode=FlightMode.OFFBOARD))
