@@ -598,6 +598,124 @@ def bench_envs(
     sys.exit(1 if any("error" in r for r in rows) else 0)
 
 
+def _names(value: str) -> tuple[str, ...]:
+    return tuple(v.strip() for v in value.split(",") if v.strip())
+
+
+@bench.command("gsl")
+@click.option("--algorithms", default="all", show_default=True, help="Comma-separated, or 'all'.")
+@click.option(
+    "--environments",
+    default="all",
+    show_default=True,
+    help="Comma-separated, or 'all' (every environment this build can simulate).",
+)
+@click.option(
+    "--sensors", default="all", show_default=True, help="Comma-separated, or 'all' available."
+)
+@click.option("--runs", type=click.IntRange(min=1), default=30, show_default=True)
+@click.option("--seed", type=click.IntRange(min=0, max=2**31 - 1), default=0, show_default=True)
+@click.option(
+    "--time-limit",
+    "time_limit_s",
+    type=click.FloatRange(min=1.0),
+    default=300.0,
+    show_default=True,
+    help="Seconds of simulated time per run.",
+)
+@click.option(
+    "--dynamics",
+    type=click.Choice(["kinematic", "full"]),
+    default="kinematic",
+    show_default=True,
+    help="kinematic: point masses following the setpoint; full: pybullet vehicles and autopilots.",
+)
+@click.option(
+    "--control-hz",
+    type=click.IntRange(min=1, max=1000),
+    default=20,
+    show_default=True,
+    help="Behaviour rate with kinematic dynamics (full uses the scenario's).",
+)
+@click.option(
+    "--sensor-period-ticks",
+    type=click.IntRange(min=1),
+    default=2,
+    show_default=True,
+    help="A reading every N control ticks (kinematic; full uses the scenario's).",
+)
+@click.option(
+    "--jobs", type=click.IntRange(min=1), default=2, show_default=True, help="Worker processes."
+)
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Directory for gsl.md, gsl.json and the figures (default runs/bench-gsl-…).",
+)
+def bench_gsl(
+    algorithms: str,
+    environments: str,
+    sensors: str,
+    runs: int,
+    seed: int,
+    time_limit_s: float,
+    dynamics: str,
+    control_hz: int,
+    sensor_period_ticks: int,
+    jobs: int,
+    out: Path | None,
+) -> None:
+    """Source seeking: algorithms × environments × sensors, N seeded runs per cell."""
+    import time
+
+    from tqdm import tqdm
+
+    from deploy.gsl_bench import (
+        GslError,
+        availability_lines,
+        make_options,
+        report_text,
+        rows_of,
+        run_all,
+        write_outputs,
+    )
+
+    try:
+        opts = make_options(
+            _names(algorithms),
+            _names(environments),
+            _names(sensors),
+            runs=runs,
+            seed=seed,
+            time_limit_s=time_limit_s,
+            dynamics=dynamics,
+            control_hz=control_hz,
+            sensor_period_ticks=sensor_period_ticks,
+            jobs=jobs,
+        )
+    except GslError as exc:
+        fail(str(exc))
+    for line in availability_lines():
+        click.echo(line)
+    started = time.monotonic()
+    with tqdm(total=1, desc="episodes", unit="run", file=sys.stderr) as bar:
+
+        def progress(done: int, total: int) -> None:
+            bar.total = total
+            bar.update(done - bar.n)
+
+        outcomes = run_all(opts, progress)
+    rows = rows_of(opts, outcomes)
+    wall_s = time.monotonic() - started
+    directory = out or Path("runs") / time.strftime("bench-gsl-%Y%m%d-%H%M%S")
+    written = write_outputs(directory, opts, rows, outcomes)
+    click.echo(report_text(opts, rows))
+    click.echo(f"wall time {wall_s:.0f} s on {jobs} worker process(es)")
+    for path in written:
+        click.echo(f"wrote {path}")
+
+
 def _register_groups() -> None:
     from deploy.certs_cli import certs
     from deploy.plume_cli import plume

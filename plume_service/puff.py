@@ -24,9 +24,9 @@ from typing import Any
 
 import numpy as np
 
-from plume_service.dispersion import DispersionCurves, dispersion_curves
 from plume_service.field import FloatArray
 from plume_service.timestepped import TimeSteppedField
+from swarmbus.dispersion import DispersionCurves, dispersion_curves
 from swarmbus.scenario import PlumePuff
 from swarmbus.wind import WindModel
 

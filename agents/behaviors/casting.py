@@ -1,10 +1,16 @@
 """Cross-wind casting: find the plume, climb its concentration gradient toward the source.
 
-The moth strategy. The wind is known (the scenario's ``[wind]``): while the sensor reads gas
+The moth strategy (Kennedy & Marsh 1974, Science 184:999; as a robot algorithm, e.g. Ishida et
+al. 1994 and Lochmatter & Martinoli 2008). The wind comes from the wind input
+(:mod:`agents.behaviors.search`): while the sensor reads gas
 the vehicle *surges* upwind, weaving cross-wind and turning back whenever the reading drops
 (climbing the cross-wind gradient, which keeps it on the plume's axis). When the gas is lost
 for ``lost_s`` it *casts*: cross-wind legs of growing width centred on where it last smelled
 gas, drifting slowly downwind so a vehicle that overshot the source finds the plume again.
+
+Stopping rule (:class:`~agents.behaviors.search.BestReadingDeclarer`): when it has lost the
+plume twice in a row without finding a stronger reading elsewhere (within 1 m), it declares the
+source at its strongest reading (``self.declaration``) and holds over that point.
 
 Use it with ``behavior = "agents.behaviors.casting:Casting"`` on a vehicle and switch that
 vehicle to offboard mode once it flies (the behaviour holds the altitude it starts at).
@@ -16,6 +22,14 @@ import math
 from collections.abc import Sequence
 
 from agents.behavior import BehaviorContext
+from agents.behaviors.search import (
+    BestReadingDeclarer,
+    SourceEstimate,
+    WindFrame,
+    WindReader,
+    hold_at,
+    scenario_wind,
+)
 from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
 
 
@@ -32,9 +46,13 @@ class Casting:
     altitude_gain = 1.0
 
     def __init__(self, ctx: BehaviorContext) -> None:
+        self.read_wind: WindReader = scenario_wind(ctx)  # the anemometer input
         toward = math.radians(270.0 - ctx.scenario.wind.from_deg)  # ENU angle the air moves to
         self.downwind = (math.cos(toward), math.sin(toward))
         self.crosswind = (-self.downwind[1], self.downwind[0])
+        self.declarer = BestReadingDeclarer()
+        self.declaration: SourceEstimate | None = None
+        self.was_surging = False
         self.altitude_m: float | None = None
         self.side = 1.0 if ctx.vehicle_index % 2 == 0 else -1.0
         self.leg_best = 0.0  # best reading since the last turn
@@ -50,6 +68,7 @@ class Casting:
             if not r.available or r.reported_g_m3 is None:
                 continue
             value = r.reported_g_m3
+            self.declarer.observe(r.position_enu_m[0], r.position_enu_m[1], value)
             if value > 0.0:
                 if value < self.turn_fraction * self.leg_best:  # going down the gradient: turn
                     self.side = -self.side
@@ -70,9 +89,18 @@ class Casting:
         x, y, z = own.position_enu_m
         if self.altitude_m is None:
             self.altitude_m = z
+        if self.declaration is not None:
+            return hold_at(self.declaration.x_m, self.declaration.y_m, self.altitude_m)
+        frame = WindFrame.of(self.read_wind(own))
+        self.downwind, self.crosswind = frame.downwind, frame.crosswind
         self._update(readings)
         now = own.sim_time_s
         surging = self.last_hit_s is not None and now - self.last_hit_s <= self.lost_s
+        if self.was_surging and not surging:
+            self.declaration = self.declarer.lost(now)
+            if self.declaration is not None:
+                return hold_at(self.declaration.x_m, self.declaration.y_m, self.altitude_m)
+        self.was_surging = surging
         dw, cw = self.downwind, self.crosswind
         if surging:
             along, across = -self.surge_speed_m_s, self.weave_speed_m_s * self.side

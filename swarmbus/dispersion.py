@@ -1,5 +1,7 @@
 """Dispersion coefficients σy(x), σz(x) for the Gaussian plume, by family and stability class.
 
+Shared (in swarmbus) by the plume service and by behaviours that carry a plume forward model.
+
 Three families, selected by name through :func:`dispersion_curves`:
 
 ``"mcmullen"``
@@ -204,7 +206,7 @@ def _fit(i: float, j: float, k: float) -> LogQuadraticFit:
 # McMullen, R. W. (1975) "The change of concentration standard deviations with distance",
 # J. Air Pollution Control Association 25(10):1057–1058, doi:10.1080/00022470.1975.10470179 —
 # fits of Turner (1970) "Workbook of Atmospheric Dispersion Estimates" Pasquill–Gifford curves.
-# Table as in /work/shared/FACTS.md (class D K_z = −0.0316).
+# Class D uses K_z = −0.0316 (the published sign; see the novak2018 family below).
 _MCMULLEN: dict[str, tuple[LogQuadraticFit, LogQuadraticFit]] = {
     #      σy: I,      J,      K          σz: I,      J,       K
     "A": (_fit(-1.104, 0.9878, -0.0076), _fit(4.679, -1.7172, 0.2770)),

@@ -1,0 +1,156 @@
+"""Cooperative gradient swarm: ≥ 3 vehicles estimate the concentration gradient together from
+their own and their peers' readings and climb it in formation.
+
+The scheme of Ögren, Fiorelli & Leonard (2004), "Cooperative control of mobile sensor
+networks: adaptive gradient climbing in a distributed environment", IEEE TAC 49(8):1292, in its
+simplest form: every member fits a plane to ln(c + ε) over the swarm's simultaneous readings
+(least squares, :func:`log_gradient`), and the whole formation moves along the fitted gradient
+at ``climb_speed_m_s``. ln c turns the Gaussian plume's crosswind profile into a parabola, so
+the fitted direction points toward the plume's axis and up it to the source at any distance.
+
+The readings: a vehicle's own reading carries its peers' values of the same sensor tick
+(``ConcentrationReading.peers``, the field's values at the peers' positions), so every member
+fits the same points and computes the same motion — no extra messages. Formation: the members
+(sorted by vehicle id) sit on a regular polygon of radius ``formation_radius_m`` around the
+swarm's centroid, the first vertex upwind; each flies the common climb velocity plus a
+proportional pull to its vertex.
+
+When no member reads gas the swarm casts crosswind in formation (legs of growing width,
+drifting downwind). Stopping rule: once it has found gas and its centroid has moved less than
+``stall_m`` over the last ``stall_s`` (climbing has stopped: at the source the fitted
+gradient flips back and forth), every member declares the source at the strongest reading
+the swarm took. Wind: the wind input (:mod:`agents.behaviors.search`).
+
+Use ``behavior = "agents.behaviors.gradient_swarm:GradientSwarm"`` on every member.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Sequence
+
+import numpy as np
+import numpy.typing as npt
+
+from agents.behavior import BehaviorContext
+from agents.behaviors.search import (
+    CrosswindSweep,
+    SourceEstimate,
+    WindFrame,
+    WindReader,
+    fly,
+    hold_at,
+    scenario_wind,
+)
+from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
+
+#: Added to every reading before the logarithm (g/m³), so that a zero reading is finite.
+LOG_FLOOR_G_M3 = 1e-12
+
+
+def log_gradient(
+    points_xy: npt.ArrayLike, values_g_m3: npt.ArrayLike, floor_g_m3: float = LOG_FLOOR_G_M3
+) -> tuple[float, float]:
+    """Least-squares gradient (per metre) of ln(c + floor) from ≥ 3 non-collinear readings."""
+    pts = np.asarray(points_xy, dtype=np.float64)
+    logs = np.log(np.asarray(values_g_m3, dtype=np.float64) + floor_g_m3)
+    if pts.shape[0] < 3:
+        raise ValueError(f"need at least 3 readings for a gradient, got {pts.shape[0]}")
+    design = np.column_stack([np.ones(len(pts)), pts - pts.mean(axis=0)])
+    coef, *_ = np.linalg.lstsq(design, logs, rcond=None)
+    return float(coef[1]), float(coef[2])
+
+
+class GradientSwarm:
+    climb_speed_m_s = 2.0
+    formation_radius_m = 2.0
+    formation_gain = 1.0
+    cast_speed_m_s = 2.0
+    cast_drift_m_s = 0.5
+    first_cast_half_width_m = 5.0
+    cast_growth = 1.6
+    stall_s = 10.0
+    stall_m = 1.5
+
+    def __init__(self, ctx: BehaviorContext) -> None:
+        self.vehicle_id = ctx.vehicle_id
+        self.read_wind: WindReader = scenario_wind(ctx)  # the anemometer input
+        self.altitude_m: float | None = None
+        self.declaration: SourceEstimate | None = None
+        self.gradient: tuple[float, float] | None = None
+        self.best_g_m3 = 0.0
+        self.best_xy: tuple[float, float] | None = None
+        self.centroids: deque[tuple[float, float, float]] = deque()
+        self.sweep = CrosswindSweep(
+            self.cast_speed_m_s, self.cast_drift_m_s, self.first_cast_half_width_m, self.cast_growth
+        )
+
+    def _observe(self, readings: Sequence[ConcentrationReading]) -> None:
+        for r in readings:
+            if not r.available or r.reported_g_m3 is None:
+                continue
+            pts = [(r.position_enu_m[0], r.position_enu_m[1])]
+            vals = [r.reported_g_m3]
+            for p in r.peers:
+                pts.append((p.position_enu_m[0], p.position_enu_m[1]))
+                vals.append(p.true_g_m3)
+            for (x, y), v in zip(pts, vals, strict=True):
+                if v > self.best_g_m3:
+                    self.best_g_m3, self.best_xy = v, (x, y)
+            if len(pts) >= 3 and max(vals) > 0.0:
+                self.gradient = log_gradient(pts, vals)
+            elif max(vals) <= 0.0:
+                self.gradient = None
+
+    def _stalled(self, now: float, cx: float, cy: float) -> bool:
+        self.centroids.append((now, cx, cy))
+        while self.centroids and now - self.centroids[0][0] > self.stall_s:
+            self.centroids.popleft()
+        t0, x0, y0 = self.centroids[0]
+        return now - t0 >= 0.95 * self.stall_s and math.hypot(cx - x0, cy - y0) < self.stall_m
+
+    def _slot(self, own: VehicleState, peers: Sequence[VehicleState]) -> int:
+        ids = sorted([own.vehicle_id, *(p.vehicle_id for p in peers)])
+        return ids.index(own.vehicle_id)
+
+    def step(
+        self,
+        own: VehicleState,
+        peers: Sequence[VehicleState],
+        readings: Sequence[ConcentrationReading],
+    ) -> Setpoint | None:
+        x, y, z = own.position_enu_m
+        if self.altitude_m is None:
+            self.altitude_m = z
+        if self.declaration is not None:
+            return hold_at(self.declaration.x_m, self.declaration.y_m, self.altitude_m)
+        frame = WindFrame.of(self.read_wind(own))
+        self._observe(readings)
+        members = [own, *peers]
+        cx = sum(m.position_enu_m[0] for m in members) / len(members)
+        cy = sum(m.position_enu_m[1] for m in members) / len(members)
+        if self.best_xy is not None and self._stalled(own.sim_time_s, cx, cy):
+            bx, by = self.best_xy
+            self.declaration = SourceEstimate(x_m=bx, y_m=by, sim_time_s=own.sim_time_s)
+            return hold_at(bx, by, self.altitude_m)
+        climb = self._climb_velocity(frame, cx, cy)
+        n = len(members)
+        angle = 2.0 * math.pi * self._slot(own, peers) / n
+        # First vertex upwind; the others around the polygon.
+        off_along = -self.formation_radius_m * math.cos(angle)
+        off_across = self.formation_radius_m * math.sin(angle)
+        ox, oy = frame.velocity(off_along, off_across)  # a displacement, in the same frame
+        k = self.formation_gain
+        vx = climb[0] + k * (cx + ox - x)
+        vy = climb[1] + k * (cy + oy - y)
+        return fly(own, (vx, vy), self.altitude_m)
+
+    def _climb_velocity(self, frame: WindFrame, cx: float, cy: float) -> tuple[float, float]:
+        if self.gradient is not None:
+            gx, gy = self.gradient
+            norm = math.hypot(gx, gy)
+            if norm > 0.0:
+                self.sweep.restart()
+                return self.climb_speed_m_s * gx / norm, self.climb_speed_m_s * gy / norm
+        return self.sweep.velocity(frame, cx, cy)

@@ -1,0 +1,208 @@
+"""What the source-seeking behaviours share: the wind input, the declared estimate, the frame.
+
+**The wind input.** A behaviour reads the wind through ``self.read_wind(own)``, a
+:data:`WindReader` returning the air velocity (east, north) in m/s at the vehicle — what an
+anemometer on the vehicle measures. Built with :func:`scenario_wind` it returns the scenario's
+``[wind]``, which is exact for a steady plume; a runner whose vehicles carry an anemometer
+replaces it (``behavior.read_wind = reader``) and nothing else in the behaviour changes.
+
+**The declaration.** A behaviour that decides where the source is sets ``self.declaration``
+to a :class:`SourceEstimate` (once; it then holds position). Runners read it; the bench
+``plumeswarm bench gsl`` scores the declared position instead of where the vehicle ends.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+from agents.behavior import BehaviorContext
+from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
+from swarmbus.plume_formula import downwind_unit
+
+#: (east, north) air velocity in m/s at the vehicle, as an anemometer would measure it.
+WindReader = Callable[[VehicleState], tuple[float, float]]
+
+#: A reading at or above this (g/m³) counts as "in the plume" (a detection) for the strategies
+#: that need a binary signal. 0.001 g/m³ makes the steady novak2018 plume ≈ ±8 m wide at 50 m
+#: downwind and reach beyond 100 m on its axis.
+PLUME_THRESHOLD_G_M3 = 0.001
+
+
+def scenario_wind(ctx: BehaviorContext) -> WindReader:
+    """The scenario's ``[wind]`` as a :data:`WindReader` (the stand-in for an anemometer)."""
+    ux, uy = downwind_unit(ctx.scenario.wind.from_deg)
+    speed = ctx.scenario.wind.speed_m_s
+    wind = (speed * ux, speed * uy)
+    return lambda own: wind
+
+
+@dataclass(frozen=True)
+class WindFrame:
+    """Unit vectors downwind and crosswind (to the left of the wind) from a wind vector."""
+
+    downwind: tuple[float, float]
+    crosswind: tuple[float, float]
+    speed_m_s: float
+
+    @classmethod
+    def of(cls, wind_east_north_m_s: tuple[float, float]) -> WindFrame:
+        east, north = wind_east_north_m_s
+        speed = math.hypot(east, north)
+        if speed <= 1e-9:  # calm: any frame serves; keep the last convention (toward +x)
+            return cls((1.0, 0.0), (0.0, 1.0), 0.0)
+        dw = (east / speed, north / speed)
+        return cls(dw, (-dw[1], dw[0]), speed)
+
+    def velocity(self, along_m_s: float, across_m_s: float) -> tuple[float, float]:
+        """ENU (east, north) velocity of ``along`` downwind plus ``across`` crosswind."""
+        dw, cw = self.downwind, self.crosswind
+        return along_m_s * dw[0] + across_m_s * cw[0], along_m_s * dw[1] + across_m_s * cw[1]
+
+    def coordinates(self, east_m: float, north_m: float) -> tuple[float, float]:
+        """(along, across) coordinates of an ENU point in this frame (origin at the ENU origin)."""
+        dw, cw = self.downwind, self.crosswind
+        return east_m * dw[0] + north_m * dw[1], east_m * cw[0] + north_m * cw[1]
+
+
+@dataclass(frozen=True)
+class SourceEstimate:
+    """Where a behaviour believes the source is: ENU metres, the release rate if it estimates
+    one, the 1-σ horizontal spread of its belief if it has one, and when it decided."""
+
+    x_m: float
+    y_m: float
+    sim_time_s: float
+    release_rate_g_s: float | None = None
+    spread_m: float | None = None
+
+
+def valid_values(readings: Sequence[ConcentrationReading]) -> list[tuple[float, float, float]]:
+    """(x, y, reported g/m³) of the readings that are available."""
+    return [
+        (r.position_enu_m[0], r.position_enu_m[1], r.reported_g_m3)
+        for r in readings
+        if r.available and r.reported_g_m3 is not None
+    ]
+
+
+def fly(
+    own: VehicleState, velocity_en_m_s: tuple[float, float], altitude_m: float, gain: float = 1.0
+) -> Setpoint:
+    """A velocity setpoint: horizontal as given, vertical holding ``altitude_m``."""
+    vz = gain * (altitude_m - own.position_enu_m[2])
+    return Setpoint(velocity_enu_m_s=(velocity_en_m_s[0], velocity_en_m_s[1], vz))
+
+
+def hold_at(x_m: float, y_m: float, altitude_m: float) -> Setpoint:
+    """A position setpoint over a point at ``altitude_m`` (after a declaration)."""
+    return Setpoint(position_enu_m=(x_m, y_m, altitude_m))
+
+
+def toward(own: VehicleState, x_m: float, y_m: float, speed_m_s: float) -> tuple[float, float]:
+    """Horizontal velocity toward (x, y) at ``speed_m_s``, slowing inside the last metre."""
+    dx, dy = x_m - own.position_enu_m[0], y_m - own.position_enu_m[1]
+    dist = math.hypot(dx, dy)
+    if dist < 1e-9:
+        return 0.0, 0.0
+    speed = min(speed_m_s, dist)
+    return speed * dx / dist, speed * dy / dist
+
+
+class BestReadingDeclarer:
+    """The stopping rule of casting and surge-cast: the source is where the strongest reading
+    was taken, once the plume has been lost ``losses_to_declare`` times in a row without that
+    place moving more than ``settle_m`` — the searcher keeps overshooting the same spot — and
+    the strongest reading is at least ``growth_to_declare`` times the first detection.
+
+    In a plume from a point source the mean concentration is largest next to the source, and
+    a searcher that surges past the source loses the plume there (upwind of a source there is
+    no gas), so repeated losses with no better reading mean it has arrived. The growth
+    condition tells that apart from losing the plume's edge far downwind, where the readings
+    stay close to the first one. Detections are readings above 0 and at least
+    ``detection_g_m3``.
+    """
+
+    def __init__(
+        self,
+        detection_g_m3: float = 0.0,
+        losses_to_declare: int = 2,
+        settle_m: float = 1.0,
+        growth_to_declare: float = 5.0,
+    ) -> None:
+        self.detection_g_m3 = detection_g_m3
+        self.losses_to_declare = losses_to_declare
+        self.settle_m = settle_m
+        self.growth_to_declare = growth_to_declare
+        self.first_g_m3: float | None = None
+        self.best_g_m3 = 0.0
+        self.best_xy: tuple[float, float] | None = None
+        self._at_last_loss: tuple[float, float] | None = None
+        self.settled_losses = 0
+
+    def observe(self, x_m: float, y_m: float, value_g_m3: float) -> None:
+        if value_g_m3 <= 0.0 or value_g_m3 < self.detection_g_m3:
+            return
+        if self.first_g_m3 is None:
+            self.first_g_m3 = value_g_m3
+        if value_g_m3 > self.best_g_m3:
+            self.best_g_m3 = value_g_m3
+            self.best_xy = (x_m, y_m)
+
+    def lost(self, sim_time_s: float) -> SourceEstimate | None:
+        """Call once per loss of the plume; the estimate when the rule fires, else None."""
+        best, last = self.best_xy, self._at_last_loss
+        if best is None or self.first_g_m3 is None:
+            return None
+        if last is not None and math.dist(best, last) <= self.settle_m:
+            self.settled_losses += 1
+        else:
+            self.settled_losses = 0
+        self._at_last_loss = best
+        grown = self.best_g_m3 >= self.growth_to_declare * self.first_g_m3
+        if grown and self.settled_losses + 1 >= self.losses_to_declare:
+            return SourceEstimate(x_m=best[0], y_m=best[1], sim_time_s=sim_time_s)
+        return None
+
+
+class CrosswindSweep:
+    """Crosswind legs of growing width around an anchor line, drifting along the wind: the
+    search pattern of casting, surge-cast and the plume-less phases of the other strategies.
+
+    Each leg ends ``half_width_m`` from the anchor (the crosswind coordinate where the sweep
+    began); at its end the vehicle turns and the half-width grows by ``growth`` up to
+    ``max_half_width_m``. ``drift_m_s`` > 0 drifts downwind, < 0 upwind.
+    """
+
+    def __init__(
+        self,
+        speed_m_s: float,
+        drift_m_s: float,
+        first_half_width_m: float,
+        growth: float,
+        max_half_width_m: float = 40.0,
+        side: float = 1.0,
+    ) -> None:
+        self.speed_m_s = speed_m_s
+        self.drift_m_s = drift_m_s
+        self.first_half_width_m = first_half_width_m
+        self.growth = growth
+        self.max_half_width_m = max_half_width_m
+        self.side = side
+        self.anchor_across_m: float | None = None
+        self.half_width_m = first_half_width_m
+
+    def restart(self) -> None:
+        """The next call starts a new sweep around where the vehicle is then."""
+        self.anchor_across_m = None
+
+    def velocity(self, frame: WindFrame, x_m: float, y_m: float) -> tuple[float, float]:
+        _, across = frame.coordinates(x_m, y_m)
+        if self.anchor_across_m is None:
+            self.anchor_across_m = across
+            self.half_width_m = self.first_half_width_m
+        if (across - self.anchor_across_m) * self.side > self.half_width_m:
+            self.side = -self.side
+            self.half_width_m = min(self.half_width_m * self.growth, self.max_half_width_m)
+        return frame.velocity(self.drift_m_s, self.speed_m_s * self.side)
