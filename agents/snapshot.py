@@ -2,7 +2,9 @@
 
 A :class:`VehicleSnapshot` holds everything of one vehicle's :class:`~agents.autopilot.Autopilot`
 that influences its future: mode, arming, home, targets, the mission and its current item (and
-the hold timer of that item), the offboard setpoint and its time, the RTL phase, the failsafe
+the hold timer of that item, and the climb of a mission started on the ground), the offboard
+setpoint, its time and the last offboard tick (yaw-rate setpoints integrate over it), the RTL
+phase and destination, the uploaded geofence zones and rally points, the orbit, the failsafe
 configuration (parameters may have been set) and its timers, the controller's integrators and
 derivative memory, the last state and estimate, the estimator's and the sensor's random
 generators, the sensor's lag, and the behaviour plug-in's state with its generator. Restoring
@@ -35,14 +37,14 @@ import numpy as np
 
 from agents.control import Estimate
 from agents.modes import RtlPhase
-from swarmbus.messages import FlightMode, MissionItem, Setpoint, VehicleState
+from swarmbus.messages import FenceZone, FlightMode, MissionItem, Orbit, Setpoint, VehicleState
 from swarmbus.scenario import Failsafe
 
 if TYPE_CHECKING:
     from agents.autopilot import Autopilot
     from agents.sensor import ConcentrationSensor
 
-FORMAT = "autopilot_snapshot/v1"
+FORMAT = "autopilot_snapshot/v2"
 Vec3 = tuple[float, float, float]
 
 
@@ -108,6 +110,12 @@ class ModesSnapshot(msgspec.Struct, frozen=True, kw_only=True):
     item_seen: int
     land_descending: bool
     mission: MissionSnapshot
+    fence_zones: list[FenceZone]
+    rally_points: list[Vec3]
+    rtl_dest: Vec3
+    offboard_tick_s: float
+    climb_alt_m: float | None
+    orbit: Orbit | None
 
 
 class MonitorSnapshot(msgspec.Struct, frozen=True, kw_only=True):
@@ -187,6 +195,12 @@ def capture(
                 finished=mission.finished,
                 hold_started_s=mission._hold_started_s,
             ),
+            fence_zones=list(m.fence_zones),
+            rally_points=list(m.rally_points),
+            rtl_dest=m._rtl_dest,
+            offboard_tick_s=m._offboard_tick_s,
+            climb_alt_m=m._climb_alt_m,
+            orbit=m._orbit,
         ),
         monitor=MonitorSnapshot(
             gcs_seen=mon.gcs_seen,
@@ -319,6 +333,12 @@ def _restore_modes(ap: Autopilot, s: ModesSnapshot) -> None:
     m._setpoint_time_s = s.setpoint_time_s
     m._item_seen = s.item_seen
     m._land_descending = s.land_descending
+    m.fence_zones = list(s.fence_zones)
+    m.rally_points = list(s.rally_points)
+    m._rtl_dest = s.rtl_dest
+    m._offboard_tick_s = s.offboard_tick_s
+    m._climb_alt_m = s.climb_alt_m
+    m._orbit = s.orbit
 
 
 def _restore_behavior(

@@ -23,9 +23,17 @@ from agents.snapshot import SnapshotError, SnapshotSlots, VehicleSnapshot, captu
 from plume_service import GaussianPlume
 from swarmbus.messages import (
     Arm,
+    FenceZone,
     FlightMode,
     GcsHeartbeat,
+    GeofenceUpload,
+    MissionCommand,
+    MissionItem,
     MissionStart,
+    MissionUpload,
+    Orbit,
+    RallyUpload,
+    ReturnToLaunch,
     SetMode,
     SetParam,
     Takeoff,
@@ -62,14 +70,16 @@ def state_of(obj: Any, seen: set[int] | None = None) -> Any:
     return {n: state_of(getattr(obj, n), seen) for n in names if not callable(getattr(obj, n))}
 
 
-def fly(sc: Scenario, options: NodeOptions, casting: bool) -> tuple[ToyWorld, Autopilot]:
+def fly(sc: Scenario, options: NodeOptions, flight: str) -> tuple[ToyWorld, Autopilot]:
     ap = build_autopilot(sc, "uav1", options, behavior_rng(sc, "uav1"))
     field = GaussianPlume.preset("novak2018").concentration
     w = ToyWorld(sc, {"uav1": ap}, field=field)
     w.run(0.05)
     assert ap.handle(GcsHeartbeat()).accepted
     assert ap.handle(SetParam(name="COM_DL_LOSS_T", value=600.0)).accepted
-    if casting:
+    if flight == "px4":
+        fly_px4(w, ap)
+    elif flight == "casting":
         for cmd in (Arm(), Takeoff(altitude_m=10.0)):
             assert ap.handle(cmd).accepted
         w.run(20.0, until=lambda: ap.modes.mode == FlightMode.HOLD)
@@ -85,6 +95,37 @@ def fly(sc: Scenario, options: NodeOptions, casting: bool) -> tuple[ToyWorld, Au
     return w, ap
 
 
+def fly_px4(w: ToyWorld, ap: Autopilot) -> None:
+    """Fence zones and a rally point uploaded, an orbit, RTL to the rally point (closer than
+    home), then a mission without a take-off item started on the ground: caught while it
+    climbs, with every piece of that state different from a fresh autopilot's."""
+    zones = [
+        FenceZone(center_enu_m=(20.0, -4.0), radius_m=60.0),
+        FenceZone(inclusion=False, center_enu_m=(-30.0, -4.0), radius_m=5.0),
+    ]
+    rally = (30.0, 2.0, 0.0)
+    assert ap.handle(GeofenceUpload(zones=zones)).accepted
+    assert ap.handle(RallyUpload(points_enu_m=[rally])).accepted
+    for cmd in (Arm(), Takeoff(altitude_m=10.0)):
+        assert ap.handle(cmd).accepted
+    w.run(20.0, until=lambda: ap.modes.mode == FlightMode.HOLD)
+    assert ap.handle(Orbit(center_enu_m=(25.0, -4.0, 10.0), radius_m=5.0, speed_m_s=2.0)).accepted
+    w.run(5.0)
+    assert ap.modes.mode == FlightMode.ORBIT
+    assert ap.handle(ReturnToLaunch()).accepted
+    w.run(60.0, until=lambda: ap.modes.mode == FlightMode.DISARMED)
+    assert math.dist(w.vehicles["uav1"].p[:2], rally[:2]) < 1.5  # landed at the rally point
+    items = [
+        MissionItem(x=35.0, y=10.0, z=8.0),
+        MissionItem(command=MissionCommand.LAND, x=35.0, y=10.0, z=0.0),
+    ]
+    assert ap.handle(MissionUpload(items=items)).accepted
+    for cmd in (Arm(), MissionStart(start_index=0)):
+        assert ap.handle(cmd).accepted
+    w.run(10.0, until=lambda: w.vehicles["uav1"].p[2] > 3.0)
+    assert ap.modes.mode == FlightMode.MISSION and ap.modes._climb_alt_m is not None
+
+
 def casting_scenario() -> Scenario:
     sc = load_scenario()
     v = msgspec.structs.replace(
@@ -93,10 +134,12 @@ def casting_scenario() -> Scenario:
     return msgspec.structs.replace(sc, vehicles=[v])
 
 
-@pytest.mark.parametrize("casting", [False, True], ids=["mission", "offboard-casting"])
-def test_a_restored_autopilot_is_the_same_and_flies_the_same_bits(casting: bool) -> None:
-    sc = casting_scenario() if casting else load_scenario()
-    w, ap = fly(sc, NOISY, casting)
+@pytest.mark.parametrize(
+    "flight", ["mission", "casting", "px4"], ids=["mission", "offboard-casting", "px4"]
+)
+def test_a_restored_autopilot_is_the_same_and_flies_the_same_bits(flight: str) -> None:
+    sc = casting_scenario() if flight == "casting" else load_scenario()
+    w, ap = fly(sc, NOISY, flight)
     sensor = w.sensors["uav1"]
     ap.modes.mission.drain_events()  # as the node does after every step (they are log lines)
     rng = ap.behavior.__dict__.get("rng") if ap.behavior else None  # Casting keeps none

@@ -201,9 +201,13 @@ def test_default_scenario_missions_give_the_same_states_fused_and_distributed(
 def test_casting_in_offboard_with_a_noisy_sensor_gives_the_same_states(
     tmp_path: Path, clock: str
 ) -> None:
+    # Casting has no collision avoidance and every flyer homes in on the same plume axis: each
+    # holds its own altitude, 2 m apart (the offboard switch waits for the highest take-off),
+    # so that whichever the noise, the behaviours fly on instead of into each other.
+    altitude_m = {"uav1": 8.0, "uav2": 10.0, "uav3": 12.0}
     boundary: Boundary = {
-        0: [(v, c) for v in FLYERS for c in (Arm(), Takeoff(altitude_m=10.0))],
-        480: [(v, SetMode(mode=FlightMode.OFFBOARD)) for v in FLYERS],
+        0: [(v, c) for v in FLYERS for c in (Arm(), Takeoff(altitude_m=altitude_m[v]))],
+        600: [(v, SetMode(mode=FlightMode.OFFBOARD)) for v in FLYERS],
     }
     path = scenario_for(tmp_path, clock, noisy_casting=True)
     runner = assert_same_stream(tmp_path, path, 1440, boundary, stepped=clock == "stepped")
