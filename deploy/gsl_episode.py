@@ -25,6 +25,7 @@ import msgspec
 import numpy as np
 import numpy.typing as npt
 
+from agents.anemometer import Anemometer
 from agents.behavior import Behavior, BehaviorContext, load_behavior
 from agents.behaviors.search import PLUME_THRESHOLD_G_M3, SourceEstimate
 from agents.sensor import ConcentrationSensor
@@ -32,6 +33,7 @@ from plume_service.from_scenario import field_from_scenario
 from swarmbus.messages import ConcentrationReading, PeerReading, Setpoint, VehicleState
 from swarmbus.plume_formula import downwind_unit
 from swarmbus.scenario import Scenario, Sensor, Vehicle, load_scenario
+from swarmbus.wind import WindModel, wind_from_scenario
 
 FloatArray = npt.NDArray[np.float64]
 Field = Callable[[FloatArray, float], FloatArray]
@@ -74,26 +76,57 @@ ALGORITHMS: dict[str, Algorithm] = {
 
 @dataclass(frozen=True)
 class Environment:
-    """A plume condition: ``build(scenario)`` gives its field, or ``missing`` says what this
-    build lacks to simulate it."""
+    """A plume condition: the scenario's plume model and wind model for the episode.
+
+    ``plume = "gaussian"`` is the scenario's steady plume, its behaviours read the scenario's
+    wind. Any other model is time-dependent: its field and wind are deterministic functions of
+    (scenario, seed, t), every episode starts ``FIELD_WARMUP_S`` of sim time after the release
+    began, and the behaviours read the wind from their anemometer
+    (:class:`agents.anemometer.Anemometer`, the same wind, the scenario's noise)."""
 
     description: str
-    build: Callable[[Scenario], Field] | None = None
+    plume: str = "gaussian"  # [plume] model
+    meander: str | None = None  # [wind.meander] preset; None: the scenario's steady wind
     missing: str | None = None
 
+    @property
+    def time_dependent(self) -> bool:
+        return self.plume != "gaussian"
 
-def _steady_gaussian(scenario: Scenario) -> Field:
-    plume = field_from_scenario(scenario)
-    return lambda points, t: plume.concentration(points, t)
 
+#: Sim time the release runs before an episode starts in a time-dependent environment: the
+#: filaments reach beyond the farthest start (80 m at the novak2018 wind of 6 m/s in 14 s).
+FIELD_WARMUP_S = 60.0
 
-_FILAMENTS = "the filament plume model and the vehicle anemometer"
 ENVIRONMENTS: dict[str, Environment] = {
-    "steady_gaussian": Environment("steady Gaussian plume (the scenario's)", _steady_gaussian),
-    "filaments": Environment("filament plume without meander", missing=_FILAMENTS),
-    "meander_small": Environment("filament plume, small wind meander", missing=_FILAMENTS),
-    "meander_large": Environment("filament plume, large wind meander", missing=_FILAMENTS),
+    "steady_gaussian": Environment("steady Gaussian plume (the scenario's)"),
+    "filaments": Environment("filament plume in a steady wind", "filament"),
+    "meander_small": Environment("filament plume, small wind meander", "filament", "small"),
+    "meander_large": Environment("filament plume, large wind meander", "filament", "large"),
 }
+
+
+def environment_scenario(scenario: Scenario, environment: str) -> Scenario:
+    """``scenario`` with the environment's plume and wind models."""
+    env = ENVIRONMENTS[environment]
+    if not env.time_dependent:
+        return scenario
+    wind = scenario.wind
+    if env.meander is not None:
+        meander = msgspec.structs.replace(wind.meander, preset=env.meander).resolved()
+        wind = msgspec.structs.replace(wind, model="meander", meander=meander)
+    else:
+        wind = msgspec.structs.replace(wind, model="steady")
+    sources = [msgspec.structs.replace(s, model=None) for s in scenario.plume.sources]
+    plume = msgspec.structs.replace(scenario.plume, model=env.plume, sources=sources)
+    return msgspec.structs.replace(scenario, wind=wind, plume=plume)
+
+
+def environment_field(scenario: Scenario) -> tuple[Field, WindModel]:
+    """The episode scenario's field (g/m³ at points, sim time t) and the one wind it uses."""
+    wind = wind_from_scenario(scenario)
+    plume = field_from_scenario(scenario, wind)
+    return (lambda points, t: plume.concentration(points, t)), wind
 
 
 @dataclass(frozen=True)
@@ -105,7 +138,10 @@ class SensorModel:
 
 SENSORS: dict[str, SensorModel] = {
     "ideal": SensorModel("the field's value, no lag, noise or limits", Sensor(preset="ideal")),
-    "mox": SensorModel("metal-oxide sensor (TGS2620-like)", missing="the MOX sensor model"),
+    "mox": SensorModel(
+        "metal-oxide sensor, Figaro TGS2620 (rise 2.96 s, decay 15.71 s)",
+        Sensor(preset="mox-tgs2620"),
+    ),
 }
 
 
@@ -157,9 +193,16 @@ def episode_scenario(base: Scenario, spec: EpisodeSpec) -> Scenario:
     vehicles = [
         Vehicle(id=f"uav{i + 1}", behavior=algo.behavior, mission=[]) for i in range(algo.vehicles)
     ]
-    world = msgspec.structs.replace(base.world, seed=spec.seed)
+    # A time-dependent field draws its own realisation for each run.
+    seed = spec.seed
+    if ENVIRONMENTS[spec.environment].time_dependent:
+        seed = spec.seed * 100_003 + spec.run
+    world = msgspec.structs.replace(base.world, seed=seed)
     time = msgspec.structs.replace(base.time, control_hz=spec.control_hz)
-    return msgspec.structs.replace(base, world=world, time=time, sensor=sensor, vehicles=vehicles)
+    scenario = msgspec.structs.replace(
+        base, world=world, time=time, sensor=sensor, vehicles=vehicles
+    )
+    return environment_scenario(scenario, spec.environment)
 
 
 def _follow(setpoint: Setpoint | None, p: list[float]) -> tuple[float, float, float]:
@@ -184,14 +227,19 @@ class KinematicFlight:
     """Point masses that fly their behaviour's setpoint."""
 
     def __init__(
-        self, scenario: Scenario, behaviors: list[Behavior], starts: list[list[float]], dt: float
+        self,
+        scenario: Scenario,
+        behaviors: list[Behavior],
+        starts: list[list[float]],
+        dt: float,
+        start_tick: int = 0,
     ) -> None:
         self.ids = [v.id for v in scenario.vehicles]
         self.behaviors = behaviors
         self.positions = [list(p) for p in starts]
         self.velocities = [(0.0, 0.0, 0.0)] * len(starts)
         self.dt = dt
-        self.start_tick = 0
+        self.start_tick = start_tick
 
     def states(self, tick: int, t: float) -> list[VehicleState]:
         return [
@@ -225,12 +273,19 @@ class FullFlight:
     :class:`agents.autopilot.Autopilot` per vehicle running its behaviour in offboard mode,
     stepped in lockstep in this process. Each vehicle is armed on the ground at its start,
     takes off to the start altitude, and is switched to offboard once all hover within
-    ``altitude_tolerance_m`` of it; the episode starts then."""
+    ``altitude_tolerance_m`` of it; the episode starts then, or at sim time ``start_s`` if
+    that is later (the vehicles hover till then)."""
 
     takeoff_timeout_s = 60.0
     altitude_tolerance_m = 0.03
 
-    def __init__(self, scenario: Scenario, behaviors: list[Behavior], starts: list[list[float]]):
+    def __init__(
+        self,
+        scenario: Scenario,
+        behaviors: list[Behavior],
+        starts: list[list[float]],
+        start_s: float = 0.0,
+    ):
         from agents.autopilot import Autopilot
         from sim_world.world import World
 
@@ -249,6 +304,7 @@ class FullFlight:
         self.dt = 1.0 / self.scenario.time.control_hz
         self.tick = 0
         self._take_off(starts[0][2])
+        self._run_ticks(max(0, round(start_s / self.dt) - self.tick))  # hover until start_s
         self.start_tick = self.tick
 
     def _run_ticks(self, count: int) -> None:
@@ -332,9 +388,10 @@ def run_episode(spec: EpisodeSpec, base: Scenario | None = None) -> Outcome:
     """Fly one episode to its declaration or its time limit; deterministic in ``spec``."""
     base = base if base is not None else load_scenario()
     env = ENVIRONMENTS[spec.environment]
-    assert env.build is not None
+    assert env.missing is None
     scenario = episode_scenario(base, spec)
-    concentration = env.build(scenario)
+    concentration, wind = environment_field(scenario)
+    start_s = FIELD_WARMUP_S if env.time_dependent else 0.0
     src = scenario.plume.sources[0]
     sx, sy = start_point(scenario, spec.seed, spec.run)
     n = len(scenario.vehicles)
@@ -345,21 +402,46 @@ def run_episode(spec: EpisodeSpec, base: Scenario | None = None) -> Outcome:
             p[0] += 2.0 * math.cos(angle)
             p[1] += 2.0 * math.sin(angle)
     dt = 1.0 / spec.control_hz
-    behaviors: list[Behavior] = []
-    sensors = []
-    for i, v in enumerate(scenario.vehicles):
-        ctx = BehaviorContext(v.id, i, scenario, dt, behavior_rng(spec, i))
-        behaviors.append(load_behavior(v.behavior or "", ctx))
-        sensors.append(ConcentrationSensor(scenario.sensor, spec.seed * 100_003 + spec.run, i))
+    behaviors = episode_behaviors(spec, scenario, wind)
+    sensors = [
+        ConcentrationSensor(scenario.sensor, spec.seed * 100_003 + spec.run, i) for i in range(n)
+    ]
     flight: KinematicFlight | FullFlight
     if spec.dynamics == "full":
-        flight = FullFlight(scenario, behaviors, starts)
+        flight = FullFlight(scenario, behaviors, starts, start_s)
     else:
-        flight = KinematicFlight(scenario, behaviors, starts, dt)
+        flight = KinematicFlight(scenario, behaviors, starts, dt, round(start_s / dt))
     try:
         return _fly(spec, flight, behaviors, sensors, concentration, (sx, sy), (src.x_m, src.y_m))
     finally:
         flight.close()
+
+
+def episode_behaviors(spec: EpisodeSpec, scenario: Scenario, wind: WindModel) -> list[Behavior]:
+    """The episode's behaviours; in a time-dependent environment each reads ``wind`` through
+    its vehicle's anemometer instead of the scenario's mean wind."""
+    dt = 1.0 / spec.control_hz
+    behaviors = []
+    for i, v in enumerate(scenario.vehicles):
+        ctx = BehaviorContext(v.id, i, scenario, dt, behavior_rng(spec, i))
+        behavior = load_behavior(v.behavior or "", ctx)
+        if ENVIRONMENTS[spec.environment].time_dependent and hasattr(behavior, "read_wind"):
+            behavior.read_wind = _anemometer_reader(scenario, wind, i, v.id)
+        behaviors.append(behavior)
+    return behaviors
+
+
+def _anemometer_reader(
+    scenario: Scenario, wind: WindModel, index: int, vehicle_id: str
+) -> Callable[[VehicleState], tuple[float, float]]:
+    """A behaviour's ``read_wind``: the vehicle's anemometer at its state's tick and position."""
+    anemometer = Anemometer(scenario.anemometer, wind, scenario.world.seed, index)
+
+    def read(own: VehicleState) -> tuple[float, float]:
+        r = anemometer.read(vehicle_id, own.tick, own.sim_time_s, own.position_enu_m)
+        return r.wind_enu_m_s[0], r.wind_enu_m_s[1]
+
+    return read
 
 
 def _fly(

@@ -10,23 +10,31 @@ from matplotlib import colormaps
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from deploy.gsl_episode import ENVIRONMENTS, START_ALTITUDE_M, Outcome, episode_scenario
+from deploy.gsl_episode import (
+    ENVIRONMENTS,
+    FIELD_WARMUP_S,
+    START_ALTITUDE_M,
+    Outcome,
+    environment_field,
+    episode_scenario,
+)
 from swarmbus.scenario import load_scenario
 
 
 def plot_trajectories(path: Path, environment: str, samples: Sequence[Outcome]) -> Path:
-    """Run 0 of every algorithm over log10 of the field at the flight altitude (t = 0)."""
+    """Run 0 of every algorithm over log10 of the field at the flight altitude when run 0
+    starts (a time-dependent field: its snapshot then)."""
     fig = Figure(figsize=(9, 6))
     FigureCanvasAgg(fig)
     ax = fig.add_subplot()
     if samples:
         scenario = episode_scenario(load_scenario(), samples[0].spec)
-        build = ENVIRONMENTS[environment].build
-        assert build is not None
+        field, _ = environment_field(scenario)
+        t = FIELD_WARMUP_S if ENVIRONMENTS[environment].time_dependent else 0.0
         xs, ys = np.linspace(-20.0, 100.0, 241), np.linspace(-45.0, 45.0, 181)
         gx, gy = np.meshgrid(xs, ys)
         pts = np.column_stack([gx.ravel(), gy.ravel(), np.full(gx.size, START_ALTITUDE_M)])
-        values = build(scenario)(pts, 0.0).reshape(gx.shape)
+        values = field(pts, t).reshape(gx.shape)
         with np.errstate(divide="ignore"):
             logc = np.log10(values)
         mesh = ax.pcolormesh(xs, ys, np.clip(logc, -5, 1), cmap="Greys", shading="auto")

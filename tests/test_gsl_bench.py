@@ -47,7 +47,13 @@ def test_starts_are_inside_the_protocol_box() -> None:
 def test_same_seed_same_table_byte_for_byte(tmp_path: Path) -> None:
     def once(jobs: int, out: Path) -> tuple[bytes, bytes]:
         opts = make_options(
-            ["random_walk", "casting"], [], [], runs=2, seed=4, time_limit_s=20.0, jobs=jobs
+            ["random_walk", "casting"],
+            ["steady_gaussian"],
+            ["ideal"],
+            runs=2,
+            seed=4,
+            time_limit_s=20.0,
+            jobs=jobs,
         )
         outcomes = run_all(opts)
         write_outputs(out, opts, rows_of(opts, outcomes), outcomes)
@@ -74,10 +80,28 @@ def test_same_seed_same_table_byte_for_byte(tmp_path: Path) -> None:
     assert (tmp_path / "a" / "trajectories_steady_gaussian.png").stat().st_size > 10_000
 
 
+def test_same_seed_same_filament_cell_byte_for_byte(tmp_path: Path) -> None:
+    """A time-dependent field, its anemometer and the MOX sensor repeat their bits too."""
+
+    def once(jobs: int, out: Path) -> tuple[bytes, bytes]:
+        opts = make_options(
+            ["casting"], ["meander_small"], ["mox"], runs=2, seed=4, time_limit_s=20.0, jobs=jobs
+        )
+        outcomes = run_all(opts)
+        write_outputs(out, opts, rows_of(opts, outcomes), outcomes)
+        return (out / "gsl.md").read_bytes(), (out / "gsl.json").read_bytes()
+
+    first = once(1, tmp_path / "a")
+    assert first == once(2, tmp_path / "b")
+    (row,) = json.loads(first[1])
+    assert (row["environment"], row["sensor"], row["runs"]) == ("meander_small", "mox", 2)
+
+
 def test_missing_environments_and_unknown_algorithms_are_refused_clearly() -> None:
-    res = run_cli(["bench", "gsl", "--environments", "filaments", "--runs", "1"])
+    res = run_cli(["bench", "gsl", "--environments", "filament", "--runs", "1"])
     assert res.returncode == 2
-    assert "filament plume model" in res.stderr and "Traceback" not in res.stderr
+    assert "'filament'" in res.stderr and "meander_large" in res.stderr
+    assert "Traceback" not in res.stderr
     res = run_cli(["bench", "gsl", "--algorithms", "moth", "--runs", "1"])
     assert res.returncode == 2 and "'moth'" in res.stderr and "casting" in res.stderr
 

@@ -1,0 +1,81 @@
+"""The time-dependent environments of ``plumeswarm bench gsl`` as the bench sees them."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from agents.behaviors.search import PLUME_THRESHOLD_G_M3
+from deploy.gsl_episode import (
+    FIELD_WARMUP_S,
+    START_ALONG_M,
+    START_ALTITUDE_M,
+    EpisodeSpec,
+    _state,
+    environment_field,
+    episode_behaviors,
+    episode_scenario,
+)
+from swarmbus.scenario import load_scenario
+
+
+@pytest.mark.parametrize("along_m", [START_ALONG_M[0], 55.0, START_ALONG_M[1]])
+def test_a_vehicle_hovering_on_the_centreline_sees_bursts_and_silences(along_m: float) -> None:
+    """No meander: filaments (R ≈ 0.1 m at 50 m, 0.6 m apart at 6 m/s and 10 Hz) wander about
+    the axis with std √(2K·age) ≈ 0.6 m (K = 0.02 m²/s, age ≈ 8 s). A filament's 1 mg/m³
+    shell is ≈ 0.45 m (from M/((2π)^1.5 R³)·e^(−r²/2R²), M = 1 g), so one passes close enough
+    with probability ≤ erf(0.45/(0.6·√2))² ≈ 0.3; with about 1.5 filaments within reach along
+    the wind at any moment, a sensor hovering on the axis is in the plume well under 60 % of
+    the time (a steady plume: 100 %), and in more than 5 % of its samples."""
+    spec = EpisodeSpec("casting", "filaments", "ideal", 0, 0)
+    scenario = episode_scenario(load_scenario(), spec)
+    field, _ = environment_field(scenario)
+    src = scenario.plume.sources[0]
+    assert src.release_height_m == START_ALTITUDE_M  # the axis is at the flight altitude
+    point = np.array([[src.x_m + along_m, src.y_m, START_ALTITUDE_M]])  # wind toward +x
+    times = FIELD_WARMUP_S + np.arange(0.0, 60.0, 0.1)  # the episode's first minute, 10 Hz
+    values = np.array([field(point, float(t))[0] for t in times])
+    inside = values >= PLUME_THRESHOLD_G_M3
+    assert 0.05 < inside.mean() < 0.6, inside.mean()
+    # Bursts, not one long dwell: the signal switches on and off many times.
+    assert np.count_nonzero(np.diff(inside.astype(int)) == 1) >= 20
+
+
+def test_the_filament_field_is_the_same_whoever_asks_and_differs_between_runs() -> None:
+    base = load_scenario()
+    point = np.array([[50.0, 0.0, START_ALTITUDE_M]])
+    times = FIELD_WARMUP_S + np.arange(0.0, 10.0, 0.1)
+
+    def series(run: int, order: slice) -> dict[float, float]:
+        field, _ = environment_field(
+            episode_scenario(base, EpisodeSpec("casting", "meander_small", "ideal", run, 3))
+        )
+        return {float(t): float(field(point, float(t))[0]) for t in times[order]}
+
+    forward = series(1, slice(None))
+    assert forward == series(1, slice(None, None, -1))  # asked backwards: the same values
+    assert forward != series(2, slice(None))  # another run, another realisation
+
+
+def test_behaviours_read_their_anemometer_in_a_meandering_wind() -> None:
+    """Meander "large" has a stationary std of 1.41 m/s on each horizontal component
+    (Farrell et al. 2002's G 20, ζ 0.1, ω 0.2): the wind a behaviour reads follows the
+    meander (the true wind at its position and time, plus 0.1 m/s anemometer noise), not the
+    scenario's mean wind of 6 m/s toward +x."""
+    spec = EpisodeSpec("casting", "meander_large", "ideal", 0, 0)
+    scenario = episode_scenario(load_scenario(), spec)
+    _, wind = environment_field(scenario)
+    behavior = episode_behaviors(spec, scenario, wind)[0]
+    read, true = [], []
+    for k in range(300):
+        t = FIELD_WARMUP_S + k
+        p = (50.0, 3.0, START_ALTITUDE_M)
+        read.append(behavior.read_wind(_state("uav1", k * 20, t, list(p), (0.0, 0.0, 0.0))))  # type: ignore[attr-defined]
+        true.append(wind.velocity([p], t)[0][:2])
+    error = np.asarray(read) - np.asarray(true)
+    assert np.abs(error).max() < 5 * 0.1  # the anemometer's noise only
+    assert 0.05 < np.std(error) < 0.15
+    assert np.std(np.asarray(read)[:, 1]) > 0.5  # the crosswind meander, read
+    assert math.isclose(scenario.wind.meander.gain, 20.0)
