@@ -13,9 +13,10 @@ bits as the killed process would have sent (``tests/test_agents_snapshot.py`` ch
 attribute and the commands).
 
 A behaviour is saved with its ``snapshot()`` / ``restore(data)`` methods when it has them
-(``snapshot`` returns msgpack-encodable data), otherwise as its attributes (numbers, strings,
-tuples, lists, dicts, ``None``), which covers plain-data behaviours such as
-:class:`agents.behaviors.casting.Casting`; its context's generator is saved separately. A
+(``snapshot`` returns msgpack-encodable data; the behaviours in :mod:`agents.behaviors` get
+them from :class:`agents.behaviors.search.SavesState`), otherwise as its attributes (numbers,
+strings, tuples, lists, dicts, ``None``), which covers plain-data behaviours; its context's
+generator is saved separately. A
 behaviour whose state cannot be saved makes :func:`capture` raise :class:`SnapshotError`.
 
 :class:`SnapshotSlots` keeps the latest two records of a process in two files written in turn
@@ -250,11 +251,11 @@ def _behavior_snapshot(ap: Autopilot, rng: np.random.Generator | None) -> Behavi
     if behavior is None:
         return None
     own = getattr(behavior, "snapshot", None)
-    if callable(own):
-        data = own()
-    else:
-        data = {k: v for k, v in vars(behavior).items() if not isinstance(v, _SKIP)}
     try:
+        if callable(own):
+            data = own()
+        else:
+            data = {k: v for k, v in vars(behavior).items() if not isinstance(v, _SKIP)}
         raw = msgspec.msgpack.encode(data)
     except (TypeError, OverflowError) as exc:
         raise SnapshotError(

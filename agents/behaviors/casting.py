@@ -24,6 +24,7 @@ from collections.abc import Sequence
 from agents.behavior import BehaviorContext
 from agents.behaviors.search import (
     BestReadingDeclarer,
+    SavesState,
     SourceEstimate,
     WindFrame,
     WindReader,
@@ -33,7 +34,20 @@ from agents.behaviors.search import (
 from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
 
 
-class Casting:
+class Casting(SavesState):
+    state_attributes = (
+        "downwind",
+        "crosswind",
+        "declarer",
+        "declaration",
+        "was_surging",
+        "altitude_m",
+        "side",
+        "leg_best",
+        "last_hit_s",
+        "anchor_cross_m",
+        "half_width_m",
+    )
     surge_speed_m_s = 2.0
     weave_speed_m_s = 1.0
     cast_speed_m_s = 2.5

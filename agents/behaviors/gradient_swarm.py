@@ -36,6 +36,7 @@ import numpy.typing as npt
 from agents.behavior import BehaviorContext
 from agents.behaviors.search import (
     CrosswindSweep,
+    SavesState,
     SourceEstimate,
     WindFrame,
     WindReader,
@@ -62,7 +63,16 @@ def log_gradient(
     return float(coef[1]), float(coef[2])
 
 
-class GradientSwarm:
+class GradientSwarm(SavesState):
+    state_attributes = (
+        "altitude_m",
+        "declaration",
+        "gradient",
+        "best_g_m3",
+        "best_xy",
+        "centroids",
+        "sweep",
+    )
     climb_speed_m_s = 2.0
     formation_radius_m = 2.0
     formation_gain = 1.0

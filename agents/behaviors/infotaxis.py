@@ -35,6 +35,7 @@ from scipy.special import k0e
 from agents.behavior import BehaviorContext
 from agents.behaviors.search import (
     PLUME_THRESHOLD_G_M3,
+    SavesState,
     SourceEstimate,
     WindFrame,
     WindReader,
@@ -81,7 +82,16 @@ def entropy(belief: FloatArray) -> float:
     return float(-(p * np.log(p)).sum())
 
 
-class Infotaxis:
+class Infotaxis(SavesState):
+    state_attributes = (
+        "altitude_m",
+        "declaration",
+        "cells_xy",
+        "belief",
+        "target_xy",
+        "step_started_s",
+        "hit",
+    )
     cell_m = 1.0
     step_m = 2.0
     speed_m_s = 2.0

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -45,6 +46,7 @@ from agents.behavior import BehaviorContext
 from agents.behaviors.search import (
     PLUME_THRESHOLD_G_M3,
     CrosswindSweep,
+    SavesState,
     SourceEstimate,
     WindFrame,
     WindReader,
@@ -60,8 +62,13 @@ from swarmbus.plume_formula import gaussian_plume_g_m3
 FloatArray = npt.NDArray[np.float64]
 
 
-class SourceTermFilter:
-    """The estimator alone: particles (x₀, y₀, Q) and their weights, updated reading by reading."""
+class SourceTermFilter(SavesState):
+    """The estimator alone: particles (x₀, y₀, Q) and their weights, updated reading by reading.
+
+    Its state is the particles and weights (``rng`` is the behaviour's generator, saved with it).
+    """
+
+    state_attributes = ("particles", "weights")
 
     def __init__(
         self,
@@ -141,7 +148,17 @@ class SourceTermFilter:
         return float(mean[0]), float(mean[1]), float(mean[2]), float(math.sqrt(var.sum()))
 
 
-class ParticleFilter:
+class ParticleFilter(SavesState):
+    # ``filter`` is rebuilt from ``prior_origin`` (where its prior was drawn) on restore;
+    # ``rng`` is the context's generator, which the autopilot saves on its own.
+    state_attributes = (
+        "prior_origin",
+        "altitude_m",
+        "declaration",
+        "detected",
+        "probe_side",
+        "sweep",
+    )
     particles = 2000
     prior_upwind_m = 100.0
     prior_downwind_m = 20.0
@@ -166,6 +183,7 @@ class ParticleFilter:
         self.curves = dispersion_curves(plume.coefficients, plume.stability)
         self.release_height_m = plume.sources[0].release_height_m
         self.filter: SourceTermFilter | None = None
+        self.prior_origin: tuple[tuple[float, float], float, float] | None = None  # wind, x, y
         self.altitude_m: float | None = None
         self.declaration: SourceEstimate | None = None
         self.detected = False
@@ -191,7 +209,20 @@ class ParticleFilter:
             self.probe_side = -self.probe_side
         return toward(own, tx, ty, self.speed_m_s)
 
-    def _prior(self, frame: WindFrame, x: float, y: float) -> SourceTermFilter:
+    def snapshot(self) -> dict[str, Any]:
+        data = super().snapshot()
+        data["filter"] = None if self.filter is None else self.filter.snapshot()
+        return data
+
+    def restore(self, data: dict[str, Any]) -> None:
+        super().restore(data)
+        self.filter = None
+        if self.prior_origin is not None:
+            wind, x, y = self.prior_origin
+            self.filter = self._new_filter(WindFrame.of(wind), x, y, np.empty((1, 3)))
+            self.filter.restore(data["filter"])
+
+    def _prior(self, frame: WindFrame, x: float, y: float) -> Callable[[int], FloatArray]:
         along0, across0 = frame.coordinates(x, y)
         dw, cw = frame.downwind, frame.crosswind
         rng = self.rng
@@ -206,9 +237,15 @@ class ParticleFilter:
                 [along * dw[0] + across * cw[0], along * dw[1] + across * cw[1], q]
             )
 
-        return SourceTermFilter(
-            draw(self.particles), self.curves, self.release_height_m, rng, prior=draw
-        )
+        return draw
+
+    def _new_filter(
+        self, frame: WindFrame, x: float, y: float, particles: FloatArray | None = None
+    ) -> SourceTermFilter:
+        """The filter whose prior is the box around (x, y); ``particles``: drawn from it."""
+        draw = self._prior(frame, x, y)
+        start = draw(self.particles) if particles is None else particles
+        return SourceTermFilter(start, self.curves, self.release_height_m, self.rng, prior=draw)
 
     def step(
         self,
@@ -224,7 +261,8 @@ class ParticleFilter:
         wind = self.read_wind(own)
         frame = WindFrame.of(wind)
         if self.filter is None:
-            self.filter = self._prior(frame, x, y)
+            self.prior_origin = (wind, x, y)
+            self.filter = self._new_filter(frame, x, y)
         for r in readings:
             if not r.available or r.reported_g_m3 is None:
                 continue

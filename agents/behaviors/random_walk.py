@@ -18,11 +18,13 @@ import math
 from collections.abc import Sequence
 
 from agents.behavior import BehaviorContext
-from agents.behaviors.search import SourceEstimate, fly
+from agents.behaviors.search import SavesState, SourceEstimate, fly
 from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
 
 
-class RandomWalk:
+class RandomWalk(SavesState):
+    # ``rng`` is the context's generator, which the autopilot saves on its own
+    state_attributes = ("heading_rad", "altitude_m", "declaration")
     speed_m_s = 2.0
     mean_run_s = 5.0
 

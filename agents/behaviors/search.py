@@ -9,13 +9,24 @@ replaces it (``behavior.read_wind = reader``) and nothing else in the behaviour 
 **The declaration.** A behaviour that decides where the source is sets ``self.declaration``
 to a :class:`SourceEstimate` (once; it then holds position). Runners read it; the bench
 ``plumeswarm bench gsl`` scores the declared position instead of where the vehicle ends.
+
+**Snapshots.** A behaviour (and each helper it keeps, such as :class:`CrosswindSweep`) derives
+from :class:`SavesState` and lists its state attributes in ``state_attributes``; its
+``snapshot()`` / ``restore(data)`` save and put back exactly those (numpy arrays and generators
+bit for bit), never its configuration or the callables it was built with (``read_wind``), so a
+restarted autopilot's behaviour flies on with the same bits.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
 
 from agents.behavior import BehaviorContext
 from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
@@ -78,6 +89,84 @@ class SourceEstimate:
     spread_m: float | None = None
 
 
+class SavesState:
+    """``snapshot()`` / ``restore(data)`` over the attributes named in ``state_attributes``.
+
+    The data is plain msgpack-encodable values; tuples, deques, numpy arrays (dtype, shape
+    and bytes), generators (their ``bit_generator.state``), :class:`SourceEstimate` and
+    nested :class:`SavesState` objects are tagged so that restoring gives back the same types
+    and bits. A nested object or generator is restored into the one the fresh behaviour built
+    (which keeps its configuration).
+    """
+
+    state_attributes: ClassVar[tuple[str, ...]] = ()
+
+    def snapshot(self) -> dict[str, Any]:
+        return {name: encode_state(getattr(self, name)) for name in self.state_attributes}
+
+    def restore(self, data: dict[str, Any]) -> None:
+        for name in self.state_attributes:
+            if name not in data:
+                raise ValueError(f"{type(self).__name__} snapshot: no {name!r} in it")
+            setattr(self, name, decode_state(data[name], getattr(self, name)))
+
+
+def encode_state(value: Any) -> Any:
+    """``value`` as msgpack-encodable data that :func:`decode_state` turns back exactly."""
+    if value is None or isinstance(value, (bool, str, float)):
+        return value
+    if isinstance(value, int):
+        # msgpack holds 64 bits; a generator's 128-bit words go as decimal text
+        return value if -(2**63) <= value < 2**64 else {"$": "int", "v": str(value)}
+    if isinstance(value, SavesState):
+        return {"$": "state", "v": value.snapshot()}
+    if isinstance(value, np.ndarray):
+        return {"$": "ndarray", "v": [value.dtype.str, list(value.shape), value.tobytes()]}
+    if isinstance(value, np.random.Generator):
+        return {"$": "generator", "v": encode_state(value.bit_generator.state)}
+    if isinstance(value, SourceEstimate):
+        return {"$": "estimate", "v": encode_state(dataclasses.asdict(value))}
+    if isinstance(value, tuple):
+        return {"$": "tuple", "v": [encode_state(v) for v in value]}
+    if isinstance(value, deque):
+        return {"$": "deque", "v": [encode_state(v) for v in value]}
+    if isinstance(value, list):
+        return [encode_state(v) for v in value]
+    if isinstance(value, dict) and all(isinstance(k, str) for k in value):
+        return {"$": "dict", "v": {k: encode_state(v) for k, v in value.items()}}
+    raise TypeError(f"cannot save a {type(value).__name__} as behaviour state")
+
+
+def decode_state(data: Any, current: Any = None) -> Any:
+    """The value :func:`encode_state` saved; ``current`` (the fresh attribute) receives a
+    nested state or a generator's state in place."""
+    if isinstance(data, list):
+        return [decode_state(v) for v in data]
+    if not isinstance(data, dict):
+        return data
+    tag, v = data["$"], data["v"]
+    if tag == "int":
+        return int(v)
+    if tag == "state":
+        current.restore(v)
+        return current
+    if tag == "ndarray":
+        dtype, shape, raw = v
+        return np.frombuffer(raw, dtype=np.dtype(dtype)).reshape(shape).copy()
+    if tag == "generator":
+        current.bit_generator.state = decode_state(v)
+        return current
+    if tag == "estimate":
+        return SourceEstimate(**decode_state(v))
+    if tag == "tuple":
+        return tuple(decode_state(x) for x in v)
+    if tag == "deque":
+        return deque(decode_state(x) for x in v)
+    if tag == "dict":
+        return {k: decode_state(x) for k, x in v.items()}
+    raise ValueError(f"behaviour snapshot: unknown value kind {tag!r}")
+
+
 def valid_values(readings: Sequence[ConcentrationReading]) -> list[tuple[float, float, float]]:
     """(x, y, reported g/m³) of the readings that are available."""
     return [
@@ -110,7 +199,7 @@ def toward(own: VehicleState, x_m: float, y_m: float, speed_m_s: float) -> tuple
     return speed * dx / dist, speed * dy / dist
 
 
-class BestReadingDeclarer:
+class BestReadingDeclarer(SavesState):
     """The stopping rule of casting and surge-cast: the source is where the strongest reading
     was taken, once the plume has been lost ``losses_to_declare`` times in a row without that
     place moving more than ``settle_m`` — the searcher keeps overshooting the same spot — and
@@ -123,6 +212,8 @@ class BestReadingDeclarer:
     stay close to the first one. Detections are readings above 0 and at least
     ``detection_g_m3``.
     """
+
+    state_attributes = ("first_g_m3", "best_g_m3", "best_xy", "_at_last_loss", "settled_losses")
 
     def __init__(
         self,
@@ -166,7 +257,7 @@ class BestReadingDeclarer:
         return None
 
 
-class CrosswindSweep:
+class CrosswindSweep(SavesState):
     """Crosswind legs of growing width around an anchor line, drifting along the wind: the
     search pattern of casting, surge-cast and the plume-less phases of the other strategies.
 
@@ -174,6 +265,8 @@ class CrosswindSweep:
     began); at its end the vehicle turns and the half-width grows by ``growth`` up to
     ``max_half_width_m``. ``drift_m_s`` > 0 drifts downwind, < 0 upwind.
     """
+
+    state_attributes = ("side", "anchor_across_m", "half_width_m")
 
     def __init__(
         self,

@@ -28,6 +28,7 @@ from agents.behaviors.search import (
     PLUME_THRESHOLD_G_M3,
     BestReadingDeclarer,
     CrosswindSweep,
+    SavesState,
     SourceEstimate,
     WindFrame,
     WindReader,
@@ -38,7 +39,16 @@ from agents.behaviors.search import (
 from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
 
 
-class SurgeCast:
+class SurgeCast(SavesState):
+    state_attributes = (
+        "state",
+        "declarer",
+        "declaration",
+        "altitude_m",
+        "last_hit_s",
+        "search",
+        "cast",
+    )
     surge_speed_m_s = 2.0
     cast_speed_m_s = 2.5
     cast_drift_m_s = 0.5
