@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -83,10 +84,11 @@ def entropy(belief: FloatArray) -> float:
 
 
 class Infotaxis(SavesState):
+    # ``cells_xy`` is rebuilt from ``grid_origin`` (where the grid was laid) on restore
     state_attributes = (
+        "grid_origin",
         "altitude_m",
         "declaration",
-        "cells_xy",
         "belief",
         "target_xy",
         "step_started_s",
@@ -112,10 +114,20 @@ class Infotaxis(SavesState):
         self.altitude_m: float | None = None
         self.declaration: SourceEstimate | None = None
         self.cells_xy: FloatArray | None = None  # (n, 2) ENU centres
+        self.grid_origin: tuple[tuple[float, float], float, float] | None = None  # wind, x, y
         self.belief: FloatArray | None = None
         self.target_xy: tuple[float, float] | None = None
         self.step_started_s = 0.0
         self.hit = False
+
+    def restore(self, data: dict[str, Any]) -> None:
+        super().restore(data)
+        self.cells_xy = None
+        if self.grid_origin is not None:
+            belief = self.belief
+            wind, x, y = self.grid_origin
+            self._build_grid(WindFrame.of(wind), x, y)
+            self.belief = belief
 
     def _build_grid(self, frame: WindFrame, x: float, y: float) -> None:
         along0, across0 = frame.coordinates(x, y)
@@ -210,8 +222,10 @@ class Infotaxis(SavesState):
             self.altitude_m = z
         if self.declaration is not None:
             return hold_at(self.declaration.x_m, self.declaration.y_m, self.altitude_m)
-        frame = WindFrame.of(self.read_wind(own))
+        wind = self.read_wind(own)
+        frame = WindFrame.of(wind)
         if self.belief is None:
+            self.grid_origin = (wind, x, y)
             self._build_grid(frame, x, y)
             self.step_started_s = now
         self._observe(readings)
