@@ -88,7 +88,7 @@ class ControllerSnapshot(msgspec.Struct, frozen=True, kw_only=True):
 
 
 class MissionSnapshot(msgspec.Struct, frozen=True, kw_only=True):
-    items: list[MissionItem]
+    items: msgspec.Raw  # list[MissionItem], encoded once per uploaded list (_items_raw)
     index: int
     items_reached: int
     finished: bool
@@ -146,7 +146,7 @@ class VehicleSnapshot(msgspec.Struct, frozen=True, kw_only=True):
     now_s: float
     state: VehicleState | None
     estimate: Estimate | None
-    scenario_mission: list[MissionItem]
+    scenario_mission: msgspec.Raw  # list[MissionItem] (_items_raw)
     behavior_error: str
     sensor_health: str
     modes: ModesSnapshot
@@ -158,6 +158,32 @@ class VehicleSnapshot(msgspec.Struct, frozen=True, kw_only=True):
 
 
 # ---------------------------------------------------------------------------- capture
+# A mission (up to 1000 items) is saved with every tick's snapshot but changes only when one is
+# uploaded, which replaces the list (the lists are never changed in place): each list is encoded
+# once. Holding the list keeps its id from being reused while it is cached.
+_ITEMS_CACHE: dict[int, tuple[list[MissionItem], msgspec.Raw]] = {}
+_ITEMS_CACHE_SIZE = 64
+_items_decoder = msgspec.msgpack.Decoder(list[MissionItem])
+
+
+def _items_raw(items: list[MissionItem]) -> msgspec.Raw:
+    hit = _ITEMS_CACHE.get(id(items))
+    if hit is not None and hit[0] is items:
+        return hit[1]
+    raw = msgspec.Raw(msgspec.msgpack.encode(items))
+    if len(_ITEMS_CACHE) >= _ITEMS_CACHE_SIZE:
+        _ITEMS_CACHE.pop(next(iter(_ITEMS_CACHE)))
+    _ITEMS_CACHE[id(items)] = (items, raw)
+    return raw
+
+
+def _items_of(raw: msgspec.Raw) -> list[MissionItem]:
+    try:
+        return _items_decoder.decode(raw)
+    except (msgspec.ValidationError, msgspec.DecodeError) as exc:
+        raise SnapshotError(f"mission items: {exc}") from None
+
+
 def capture(
     ap: Autopilot,
     sensor: ConcentrationSensor,
@@ -171,7 +197,7 @@ def capture(
         now_s=ap.now,
         state=ap.state,
         estimate=ap.est,
-        scenario_mission=list(ap._scenario_mission),
+        scenario_mission=_items_raw(ap._scenario_mission),
         behavior_error=ap.behavior_error,
         sensor_health=ap.sensor_health,
         modes=ModesSnapshot(
@@ -190,7 +216,7 @@ def capture(
             item_seen=m._item_seen,
             land_descending=m._land_descending,
             mission=MissionSnapshot(
-                items=list(mission.items),
+                items=_items_raw(mission.items),
                 index=mission.index,
                 items_reached=mission.items_reached,
                 finished=mission.finished,
@@ -278,7 +304,7 @@ def restore(
     ap.now = snap.now_s
     ap.state = snap.state
     ap.est = snap.estimate
-    ap._scenario_mission = list(snap.scenario_mission)
+    ap._scenario_mission = _items_of(snap.scenario_mission)
     ap.behavior_error = snap.behavior_error
     ap.sensor_health = snap.sensor_health
     _restore_modes(ap, snap.modes)
@@ -316,7 +342,7 @@ def _restore_sensor(sensor: ConcentrationSensor, snap: SensorSnapshot) -> None:
 def _restore_modes(ap: Autopilot, s: ModesSnapshot) -> None:
     m = ap.modes
     m.failsafe = s.failsafe
-    m.mission.upload(list(s.mission.items), m.origin)  # resolves the items again
+    m.mission.upload(_items_of(s.mission.items), m.origin)  # resolves the items again
     m.mission.index = s.mission.index
     m.mission.items_reached = s.mission.items_reached
     m.mission.finished = s.mission.finished
