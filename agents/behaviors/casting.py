@@ -30,6 +30,7 @@ from agents.behaviors.search import (
     WindReader,
     hold_at,
     scenario_wind,
+    start_or_hold,
 )
 from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
 
@@ -101,10 +102,9 @@ class Casting(SavesState):
         readings: Sequence[ConcentrationReading],
     ) -> Setpoint | None:
         x, y, z = own.position_enu_m
-        if self.altitude_m is None:
-            self.altitude_m = z
-        if self.declaration is not None:
-            return hold_at(self.declaration.x_m, self.declaration.y_m, self.altitude_m)
+        self.altitude_m, held = start_or_hold(own, self.altitude_m, self.declaration)
+        if held is not None:
+            return held
         frame = WindFrame.of(self.read_wind(own))
         self.downwind, self.crosswind = frame.downwind, frame.crosswind
         self._update(readings)

@@ -43,6 +43,7 @@ from agents.behaviors.search import (
     fly,
     hold_at,
     scenario_wind,
+    start_or_hold,
     toward,
 )
 from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
@@ -216,12 +217,11 @@ class Infotaxis(SavesState):
         peers: Sequence[VehicleState],
         readings: Sequence[ConcentrationReading],
     ) -> Setpoint | None:
-        x, y, z = own.position_enu_m
+        x, y, _ = own.position_enu_m
         now = own.sim_time_s
-        if self.altitude_m is None:
-            self.altitude_m = z
-        if self.declaration is not None:
-            return hold_at(self.declaration.x_m, self.declaration.y_m, self.altitude_m)
+        self.altitude_m, held = start_or_hold(own, self.altitude_m, self.declaration)
+        if held is not None:
+            return held
         wind = self.read_wind(own)
         frame = WindFrame.of(wind)
         if self.belief is None:

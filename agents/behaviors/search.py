@@ -189,6 +189,17 @@ def hold_at(x_m: float, y_m: float, altitude_m: float) -> Setpoint:
     return Setpoint(position_enu_m=(x_m, y_m, altitude_m))
 
 
+def start_or_hold(
+    own: VehicleState, altitude_m: float | None, declaration: SourceEstimate | None
+) -> tuple[float, Setpoint | None]:
+    """The altitude a search flies at (the vehicle's own at its first step) and, once the
+    source is declared, the setpoint that holds over the declaration."""
+    altitude = own.position_enu_m[2] if altitude_m is None else altitude_m
+    if declaration is None:
+        return altitude, None
+    return altitude, hold_at(declaration.x_m, declaration.y_m, altitude)
+
+
 def toward(own: VehicleState, x_m: float, y_m: float, speed_m_s: float) -> tuple[float, float]:
     """Horizontal velocity toward (x, y) at ``speed_m_s``, slowing inside the last metre."""
     dx, dy = x_m - own.position_enu_m[0], y_m - own.position_enu_m[1]

@@ -35,6 +35,7 @@ from agents.behaviors.search import (
     fly,
     hold_at,
     scenario_wind,
+    start_or_hold,
 )
 from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
 
@@ -104,11 +105,10 @@ class SurgeCast(SavesState):
         peers: Sequence[VehicleState],
         readings: Sequence[ConcentrationReading],
     ) -> Setpoint | None:
-        x, y, z = own.position_enu_m
-        if self.altitude_m is None:
-            self.altitude_m = z
-        if self.declaration is not None:
-            return hold_at(self.declaration.x_m, self.declaration.y_m, self.altitude_m)
+        x, y, _ = own.position_enu_m
+        self.altitude_m, held = start_or_hold(own, self.altitude_m, self.declaration)
+        if held is not None:
+            return held
         frame = WindFrame.of(self.read_wind(own))
         self._observe(readings)
         self._transition(own.sim_time_s)
