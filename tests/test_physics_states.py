@@ -102,7 +102,10 @@ def test_no_state_puts_without_a_subscriber_and_a_late_subscriber_gets_every_sta
             first = ticks[0]
             assert first >= joined_at, vid
             assert ticks == list(range(first, first + len(ticks))), f"{vid}: a gap or a repeat"
-        sending = wait_until(lambda: health.after(watch.last_tick), 30.0, "a report while heard")
+        # The target tick is fixed before waiting: a report's tick is always behind the ticks
+        # arriving meanwhile, so a moving target would be met only by a lucky poll.
+        heard_at = watch.last_tick
+        sending = wait_until(lambda: health.after(heard_at), 30.0, "a report while heard")
         assert sending is not None and sending[1] > 0
     finally:
         states.close()
