@@ -126,19 +126,22 @@ class _StateId(
     vehicle_id: str
 
 
+Readings = zenoh.Subscriber[zenoh.handlers.Handler[zenoh.Sample]]
+
+
 class Streams:
     """Ticks (every vehicle's state in one ``sim/tick`` message) and every vehicle's readings
     in ring buffers; the loop takes all ticks (a telemetry stream may be due at any of them)
-    and the newest reading of each vehicle."""
+    and the newest reading of each vehicle. Readings can be paused (nobody listens for
+    them): Zenoh then stops sending them here at all."""
 
     def __init__(self, session: zenoh.Session, keys: Keys, vehicle_ids: set[str]) -> None:
+        self._session = session
         self._keys = keys
         self._ids = vehicle_ids
         n = max(1, len(vehicle_ids))
-        self._readings = session.declare_subscriber(
-            keys.all_vehicle_concentration(),
-            zenoh.handlers.RingChannel(max(1024, 16 * n)),  # the newest of each vehicle stays
-        )
+        self._readings_ring = max(1024, 16 * n)  # the newest of each vehicle stays
+        self._readings: Readings | None = self._subscribe_readings()
         # as many ticks as the per-vehicle state rings held states (>= 16 ticks)
         self._ticks = session.declare_subscriber(
             keys.tick(), zenoh.handlers.RingChannel(max(16, 1024 // n))
@@ -146,12 +149,28 @@ class Streams:
         self._index: dict[str, int] = {}  # vehicle id → position of its state in a tick
         self._index_len = -1  # the number of states the index was learnt from
 
+    def _subscribe_readings(self) -> Readings:
+        return self._session.declare_subscriber(
+            self._keys.all_vehicle_concentration(),
+            zenoh.handlers.RingChannel(self._readings_ring),
+        )
+
+    def pause_readings(self) -> None:
+        """Stop receiving readings until :meth:`resume_readings`."""
+        if self._readings is not None:
+            self._readings.undeclare()
+            self._readings = None
+
+    def resume_readings(self) -> None:
+        if self._readings is None:
+            self._readings = self._subscribe_readings()
+
     def drain(self, latest: dict[tuple[str, str], bytes], ticks: list[TickView]) -> int:
         """The newest reading per vehicle into ``latest``, every tick (in order) into
         ``ticks``; how many samples came."""
         count = 0
         vehicle_id_of = self._keys.vehicle_id_of
-        while (sample := self._readings.try_recv()) is not None:
+        while self._readings is not None and (sample := self._readings.try_recv()) is not None:
             count += 1
             try:
                 vid = vehicle_id_of(str(sample.key_expr))
@@ -170,6 +189,20 @@ class Streams:
                 ticks.append(view)
         return count
 
+    def newest_tick(self) -> TickView | None:
+        """Only the newest tick (older ones are dropped undecoded); readings are left."""
+        newest = None
+        while (sample := self._ticks.try_recv()) is not None:
+            newest = sample
+        if newest is None:
+            return None
+        try:
+            view = decode(newest.payload.to_bytes(), TickView)
+        except MessageError as exc:
+            log.warning("%s: %s", self._keys.tick(), exc)
+            return None
+        return view if len(view.states) == self._index_len or self.learn(view) else None
+
     def learn(self, view: TickView) -> bool:
         """Where each served vehicle's state is in ``view`` (the physics keeps the order, so
         this runs once, and again only when a tick's layout changes)."""
@@ -187,7 +220,7 @@ class Streams:
         return view.states[i] if i is not None and i < len(view.states) else None
 
     def undeclare(self) -> None:
-        self._readings.undeclare()
+        self.pause_readings()
         self._ticks.undeclare()
 
 

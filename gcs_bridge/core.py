@@ -1,23 +1,27 @@
-"""What every part of the gateway shares: its state, and how to send and to command.
+"""The pieces every part of the gateway is handed: the way out to ground stations
+(:class:`Outbox`: telemetry, acknowledgements, rate-limited STATUSTEXTs) and the way to the
+autopilots (:class:`Autopilots`: one command queue per vehicle, and who is alive).
 
-The gateway (:mod:`gcs_bridge.gateway`) is one class assembled from this core and the handlers
-of each MAVLink microservice (:mod:`gcs_bridge.handle_commands`, :mod:`gcs_bridge.handle_params`,
-:mod:`gcs_bridge.handle_missions`); they all run on the gateway's one loop thread.
+The gateway (:mod:`gcs_bridge.gateway`) builds one of each and hands them to the handlers of
+each MAVLink microservice (:mod:`gcs_bridge.handle_commands`, :mod:`gcs_bridge.handle_offboard`,
+:mod:`gcs_bridge.handle_params`, :mod:`gcs_bridge.handle_missions`) and to the telemetry feed
+(:mod:`gcs_bridge.feed`); they all run on the gateway's one loop thread.
 """
 
 from __future__ import annotations
 
+import contextlib
 import logging
 from collections.abc import Callable
 from typing import Any
 
+import zenoh
+
 from gcs_bridge import mission as ms
-from gcs_bridge.bus import Commander
+from gcs_bridge.bus import Commander, Inbox
 from gcs_bridge.commands import ACCEPTED, Facts
 from gcs_bridge.dialect import Msg, mavlink
-from gcs_bridge.links import Link
-from gcs_bridge.options import GatewayOptions
-from gcs_bridge.telemetry import StreamSchedule
+from gcs_bridge.links import Link, LinkSet
 from gcs_bridge.vehicle import Vehicle
 from swarmbus.keys import Keys
 from swarmbus.messages import Command, CommandReply, RejectCode
@@ -58,41 +62,42 @@ def statustext_chunks(text: str, text_id: int) -> list[Msg]:
     ]
 
 
-class Core:
-    """State shared by the handlers; :class:`gcs_bridge.gateway.Gateway` fills it in."""
+def facts_of(v: Vehicle) -> Facts:
+    """What command translation needs to know of a vehicle."""
+    return Facts(
+        origin=v.origin,
+        home_amsl_m=v.home_amsl_m,
+        home_enu=v.home_enu,
+        position_enu=v.state.position_enu_m if v.state is not None else None,
+        landed=v.status.landed if v.status is not None else True,
+        takeoff_alt_m=v.params.value("MIS_TAKEOFF_ALT"),
+        mission_seqs=v.seqs(),
+        cruise_m_s=v.params.value("MPC_XY_CRUISE"),
+    )
 
-    options: GatewayOptions
-    keys: Keys
-    vehicles: dict[str, Vehicle]
-    by_sysid: dict[int, Vehicle]
-    links: dict[str, Link]
-    links_of: dict[int, list[Link]]
-    schedules: dict[tuple[str, int], StreamSchedule]
-    _commanders: dict[str, Commander]
-    _presence: Presence | None
-    _inflight: set[tuple[int, int, int, int]]
-    _param_sync: dict[str, float]
-    _text_budget: dict[tuple[str | None, int], tuple[float, float]]  # → (tokens, last wall s)
-    _text_id: int  # the last STATUSTEXT.id given to a chunked text
 
-    # ------------------------------------------------------------------ presence
-    def alive(self, v: Vehicle, now: float) -> bool:
-        """Is the vehicle's autopilot there (token, or a status lately)? Only then does it exist."""
-        if now - v.last_status_wall_s < ALIVE_WITHOUT_TOKEN_S:
-            return True
-        return self._presence is not None and f"autopilot-{v.id}" in self._presence.alive
+class Outbox:
+    """Messages to ground stations, as one vehicle: on one link or on all of its links."""
 
-    def alive_in(self, v: Vehicle, now: float, names: frozenset[str]) -> bool:
-        """:meth:`alive` against ``names``, one copy of the alive names for many vehicles."""
-        return now - v.last_status_wall_s < ALIVE_WITHOUT_TOKEN_S or f"autopilot-{v.id}" in names
+    def __init__(self, links: LinkSet) -> None:
+        self._links = links
+        self._text_budget: dict[tuple[str | None, int], tuple[float, float]] = {}
+        self._text_id = 0  # the last STATUSTEXT.id given to a chunked text
 
-    # ------------------------------------------------------------------ sending
-    def _send_all(self, v: Vehicle, msg: Msg, now: float) -> None:
-        for link in self.links_of[v.sysid]:
+    def send_all(self, v: Vehicle, msg: Msg, now: float) -> None:
+        for link in self._links.of(v.sysid):
             link.send(v.sysid, msg, now)
 
-    def _send(self, link: Link, v: Vehicle, msg: Msg, now: float) -> None:
+    def send(self, link: Link, v: Vehicle, msg: Msg, now: float) -> None:
         link.send(v.sysid, msg, now)
+
+    def link_of(self, peer: ms.Peer) -> Link:
+        """The link ``peer`` spoke on."""
+        return self._links.named(peer.link)
+
+    def to_peer(self, peer: ms.Peer, v: Vehicle, msg: Msg, now: float) -> None:
+        """On the link a transfer's peer spoke on."""
+        self.link_of(peer).send(v.sysid, msg, now)
 
     def _text_allowed(self, link: Link | None, v: Vehicle, now: float) -> bool:
         """A token bucket per vehicle and link: a flood of refused frames must not become a
@@ -104,7 +109,8 @@ class Core:
         self._text_budget[key] = (tokens - 1.0 if allowed else tokens, now)
         return allowed
 
-    def _statustext(self, link: Link | None, v: Vehicle, text: str, now: float) -> None:
+    def statustext(self, link: Link | None, v: Vehicle, text: str, now: float) -> None:
+        """A warning on ``link`` (None: on every link of the vehicle), rate-limited."""
         if not self._text_allowed(link, v, now):
             log.debug("%s: STATUSTEXT dropped (rate): %s", v.id, text)
             return
@@ -114,11 +120,11 @@ class Core:
             text_id = self._text_id
         for msg in statustext_chunks(text, text_id):
             if link is None:
-                self._send_all(v, msg, now)
+                self.send_all(v, msg, now)
             else:
-                self._send(link, v, msg, now)
+                self.send(link, v, msg, now)
 
-    def _ack(
+    def ack(
         self,
         link: Link,
         v: Vehicle,
@@ -128,14 +134,59 @@ class Core:
         now: float,
         reason: str = "",
     ) -> None:
+        """COMMAND_ACK to ``peer``; a refusal with a reason also says it in a STATUSTEXT."""
         ack = mavlink.MAVLink_command_ack_message(
             command, result, 0, 0, peer.system, peer.component
         )
-        self._send(link, v, ack, now)
+        self.send(link, v, ack, now)
         if result != ACCEPTED and reason:
-            self._statustext(link, v, f"{v.id}: {reason}", now)
+            self.statustext(link, v, f"{v.id}: {reason}", now)
 
-    def _submit(self, v: Vehicle, command: Command, done: Callable[[CommandReply], None]) -> None:
+
+class Autopilots:
+    """The autopilots behind the vehicles: who is alive, and each one's command queue.
+
+    Without a bus session (unit tests) nobody is alive by token and every command fails."""
+
+    def __init__(
+        self,
+        session: zenoh.Session | None,
+        keys: Keys,
+        vehicles: list[Vehicle],
+        cmd_timeout_s: float,
+        inbox: Inbox,
+    ) -> None:
+        self._commanders: dict[str, Commander] = {}
+        self.presence: Presence | None = None
+        if session is not None:
+            for v in vehicles:
+                self._commanders[v.id] = Commander(
+                    session, keys.vehicle_cmd(v.id), v.id, cmd_timeout_s, inbox
+                )
+            self.presence = Presence(session, keys)
+
+    def close(self) -> None:
+        if self.presence is not None:
+            with contextlib.suppress(zenoh.ZError):
+                self.presence.close()
+
+    def names(self) -> frozenset[str]:
+        """The live node names now (one copy, for :meth:`alive_in` over many vehicles)."""
+        return self.presence.alive if self.presence is not None else frozenset()
+
+    def alive(self, v: Vehicle, now: float) -> bool:
+        """Is the vehicle's autopilot there (token, or a status lately)? Only then does it exist."""
+        if now - v.last_status_wall_s < ALIVE_WITHOUT_TOKEN_S:
+            return True
+        return self.presence is not None and f"autopilot-{v.id}" in self.presence.alive
+
+    @staticmethod
+    def alive_in(v: Vehicle, now: float, names: frozenset[str]) -> bool:
+        """:meth:`alive` against ``names`` (from :meth:`names`)."""
+        return now - v.last_status_wall_s < ALIVE_WITHOUT_TOKEN_S or f"autopilot-{v.id}" in names
+
+    def submit(self, v: Vehicle, command: Command, done: Done) -> None:
+        """Queue ``command`` for the vehicle's autopilot; ``done`` runs on the loop."""
         commander = self._commanders.get(v.id)
         if commander is None:
             done(
@@ -146,15 +197,6 @@ class Core:
             return
         commander.submit(command, done)
 
-    # ------------------------------------------------------------------ commands
-    def _facts(self, v: Vehicle) -> Facts:
-        return Facts(
-            origin=v.origin,
-            home_amsl_m=v.home_amsl_m,
-            home_enu=v.home_enu,
-            position_enu=v.state.position_enu_m if v.state is not None else None,
-            landed=v.status.landed if v.status is not None else True,
-            takeoff_alt_m=v.params.value("MIS_TAKEOFF_ALT"),
-            mission_seqs=v.seqs(),
-            cruise_m_s=v.params.value("MPC_XY_CRUISE"),
-        )
+    def tell(self, v: Vehicle, command: Command) -> None:
+        """A command whose reply nobody waits for (heartbeats, setpoints)."""
+        self.submit(v, command, lambda reply: None)

@@ -1,4 +1,5 @@
-"""COMMAND_LONG / COMMAND_INT, SET_MODE, offboard setpoints and ground-station heartbeats."""
+"""COMMAND_LONG / COMMAND_INT and SET_MODE (:class:`CommandHandlers`), and ground-station
+heartbeats (:class:`GcsHeartbeats`: the autopilots' data-link-loss failsafe)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,6 @@ import time
 from collections.abc import Callable
 
 from gcs_bridge import mission as ms
-from gcs_bridge import offboard
 from gcs_bridge.commands import (
     ACCEPTED,
     DENIED,
@@ -21,7 +21,7 @@ from gcs_bridge.commands import (
     translate,
     translate_mode,
 )
-from gcs_bridge.core import Core, Done
+from gcs_bridge.core import Autopilots, Done, Handler, Outbox, facts_of
 from gcs_bridge.dialect import (
     MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES,
     MAV_CMD_REQUEST_PROTOCOL_VERSION,
@@ -30,8 +30,7 @@ from gcs_bridge.dialect import (
     mavlink,
     protocol_version_message,
 )
-from gcs_bridge.frames import euler_ned_frd
-from gcs_bridge.links import Link
+from gcs_bridge.links import Link, LinkSet
 from gcs_bridge.modes import decode_custom_mode
 from gcs_bridge.telemetry import BUILDERS, ID_MISSION_CURRENT
 from gcs_bridge.vehicle import ArmIntent, Vehicle
@@ -44,7 +43,6 @@ from swarmbus.messages import (
     GcsHeartbeat,
     Hold,
     SetMode,
-    Setpoint,
     Takeoff,
 )
 
@@ -58,12 +56,57 @@ GCS_LINK_TIMEOUT_S = 3.0  # wall: a GCS silent this long is gone (QGC's own is ~
 LocalCommand = Callable[[Link, Vehicle, CommandRequest, ms.Peer, float], None]
 
 
-class CommandHandlers(Core):
-    _local_commands: dict[int, LocalCommand]
+class GcsHeartbeats:
+    """A ground station is there: each vehicle of its link is told (``GcsHeartbeat``), and
+    while it is, the telling repeats once per sim second (:meth:`keep_alive`)."""
 
-    def _command_table(self) -> dict[int, LocalCommand]:
-        """Commands the gateway answers itself (message streams and identity)."""
-        return {
+    def __init__(
+        self, links: LinkSet, by_sysid: dict[int, Vehicle], autopilots: Autopilots
+    ) -> None:
+        self._links = links
+        self._by_sysid = by_sysid
+        self._autopilots = autopilots
+
+    def on_heartbeat(self, link: Link, now: float) -> None:
+        link.gcs_heard_s = now
+        for sysid in link.sysids:
+            v = self._by_sysid[sysid]
+            if now - v.last_gcs_heartbeat_s >= GCS_HEARTBEAT_FORWARD_S:
+                self._forward(v, now)
+
+    def heard(self, link: Link, now: float) -> bool:
+        """Was a ground station heard on ``link`` lately (wall)?"""
+        return now - link.gcs_heard_s <= GCS_LINK_TIMEOUT_S
+
+    def _forward(self, v: Vehicle, now: float) -> None:
+        if not self._autopilots.alive(v, now):
+            return
+        v.last_gcs_heartbeat_s = now
+        if v.state is not None:
+            v.last_gcs_heartbeat_sim_s = v.state.sim_time_s
+        self._autopilots.tell(v, GcsHeartbeat(source="mavlink"))
+
+    def keep_alive(self, v: Vehicle, now: float) -> None:
+        """The GCS beats once per wall second, the autopilot's link timeout is in sim seconds,
+        and the simulation may run many times faster than real time. So while a GCS was heard
+        within GCS_LINK_TIMEOUT_S (wall), its heartbeat is repeated once per sim second; when it
+        falls silent the repeats stop and the autopilot's own timeout runs in sim time."""
+        if v.state is None or v.state.sim_time_s - v.last_gcs_heartbeat_sim_s < 1.0:
+            return
+        if any(self.heard(link, now) for link in self._links.of(v.sysid)):
+            self._forward(v, now)
+
+
+class CommandHandlers:
+    """COMMAND_LONG / COMMAND_INT and SET_MODE: answered here (message streams, identity) or
+    translated and sent to the autopilot, whose reply becomes the COMMAND_ACK."""
+
+    def __init__(self, links: LinkSet, out: Outbox, autopilots: Autopilots) -> None:
+        self._links = links
+        self._out = out
+        self._autopilots = autopilots
+        self._inflight: set[tuple[int, int, int, int]] = set()
+        self._local: dict[int, LocalCommand] = {
             int(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL): self._cmd_set_message_interval,
             int(mavlink.MAV_CMD_GET_MESSAGE_INTERVAL): self._cmd_get_message_interval,
             int(mavlink.MAV_CMD_REQUEST_MESSAGE): self._cmd_request_message,
@@ -71,31 +114,12 @@ class CommandHandlers(Core):
             MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: self._cmd_request_autopilot_version,
         }
 
-    def _on_gcs_heartbeat(self, link: Link, now: float) -> None:
-        """A ground station is there: tell each vehicle (its data-link-loss failsafe)."""
-        link.gcs_heard_s = now
-        for sysid in link.sysids:
-            v = self.by_sysid[sysid]
-            if now - v.last_gcs_heartbeat_s >= GCS_HEARTBEAT_FORWARD_S:
-                self._forward_gcs_heartbeat(v, now)
-
-    def _forward_gcs_heartbeat(self, v: Vehicle, now: float) -> None:
-        if not self.alive(v, now):
-            return
-        v.last_gcs_heartbeat_s = now
-        if v.state is not None:
-            v.last_gcs_heartbeat_sim_s = v.state.sim_time_s
-        self._submit(v, GcsHeartbeat(source="mavlink"), lambda reply: None)
-
-    def _keep_gcs_link_alive(self, v: Vehicle, now: float) -> None:
-        """The GCS beats once per wall second, the autopilot's link timeout is in sim seconds,
-        and the simulation may run many times faster than real time. So while a GCS was heard
-        within GCS_LINK_TIMEOUT_S (wall), its heartbeat is repeated once per sim second; when it
-        falls silent the repeats stop and the autopilot's own timeout runs in sim time."""
-        if v.state is None or v.state.sim_time_s - v.last_gcs_heartbeat_sim_s < 1.0:
-            return
-        if any(now - link.gcs_heard_s <= GCS_LINK_TIMEOUT_S for link in self.links_of[v.sysid]):
-            self._forward_gcs_heartbeat(v, now)
+    def handlers(self) -> dict[str, Handler]:
+        return {
+            "COMMAND_LONG": self.on_command,
+            "COMMAND_INT": self.on_command,
+            "SET_MODE": self.on_set_mode,
+        }
 
     def _select_while_disarmed(
         self, v: Vehicle, command: Command, now: float
@@ -109,20 +133,24 @@ class CommandHandlers(Core):
         if isinstance(command, Takeoff) or (
             isinstance(command, SetMode) and command.mode == FlightMode.MISSION
         ):
-            why = v.armable()
-            if why is not None:
-                return refuse(TEMPORARILY_REJECTED, f"cannot select a mode to arm in: {why}")
-            if isinstance(command, Takeoff):
-                v.intent = ArmIntent(FlightMode.TAKEOFF, command.altitude_m)
-            elif v.status.mission_count == 0:
-                return refuse(TEMPORARILY_REJECTED, "no mission uploaded")
-            else:
-                v.intent = ArmIntent(FlightMode.MISSION)
-            return Translation()
+            return self._select_to_arm_in(v, command)
         if isinstance(command, Hold):
             v.intent = None
             return Translation()
         return None
+
+    @staticmethod
+    def _select_to_arm_in(v: Vehicle, command: Command) -> Translation:
+        why = v.armable()
+        if why is not None:
+            return refuse(TEMPORARILY_REJECTED, f"cannot select a mode to arm in: {why}")
+        if isinstance(command, Takeoff):
+            v.intent = ArmIntent(FlightMode.TAKEOFF, command.altitude_m)
+        elif v.status is not None and v.status.mission_count == 0:
+            return refuse(TEMPORARILY_REJECTED, "no mission uploaded")
+        else:
+            v.intent = ArmIntent(FlightMode.MISSION)
+        return Translation()
 
     def _arm_then_intent(self, v: Vehicle, intent: ArmIntent, done: Done) -> Done:
         """Completion of an Arm that carries a selected mode: on success, fly the mode."""
@@ -139,16 +167,16 @@ class CommandHandlers(Core):
 
             def flown(r: CommandReply) -> None:
                 if not r.accepted:
-                    self._statustext(
+                    self._out.statustext(
                         None, v, f"{v.id}: {intent.mode} refused: {r.reason}", time.monotonic()
                     )
-                    self._send_all(v, v.heartbeat(), time.monotonic())
+                    self._out.send_all(v, v.heartbeat(), time.monotonic())
 
-            self._submit(v, follow, flown)
+            self._autopilots.submit(v, follow, flown)
 
         return armed
 
-    def _on_command(self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float) -> None:
+    def on_command(self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float) -> None:
         if msg.get_type() == "COMMAND_LONG":
             req = CommandRequest.from_long(msg)
         else:
@@ -156,38 +184,59 @@ class CommandHandlers(Core):
         key = (v.sysid, peer.system, peer.component, req.command)
         if key in self._inflight:
             return  # a client's retry of a command still waiting for the autopilot
-        local = self._local_commands.get(req.command)
+        local = self._local.get(req.command)
         if local is not None:
             local(link, v, req, peer, now)
             return
-        t = translate(req, self._facts(v))
+        t = self._translate(v, req, now)
         if t is None:
-            self._ack(link, v, req.command, UNSUPPORTED, peer, now)
-            return
-        if t.bus is not None:
-            t = self._select_while_disarmed(v, t.bus, now) or t
-            if t.bus is None and t.result == ACCEPTED:
-                self._send_all(v, v.heartbeat(), now)
-        if t.bus is None:
-            self._ack(link, v, req.command, t.result, peer, now, t.reason)
-            return
+            self._out.ack(link, v, req.command, UNSUPPORTED, peer, now)
+        elif t.bus is None:
+            self._out.ack(link, v, req.command, t.result, peer, now, t.reason)
+        else:
+            self._to_autopilot(link, v, req, t.bus, peer, key, now)
+
+    def _translate(self, v: Vehicle, req: CommandRequest, now: float) -> Translation | None:
+        """The command for the bus, or the gateway's own answer (a selection kept for arming
+        counts as done, and the heartbeat shows it at once); None: not supported."""
+        t = translate(req, facts_of(v))
+        if t is None or t.bus is None:
+            return t
+        t = self._select_while_disarmed(v, t.bus, now) or t
+        if t.bus is None and t.result == ACCEPTED:
+            self._out.send_all(v, v.heartbeat(), now)
+        return t
+
+    def _to_autopilot(
+        self,
+        link: Link,
+        v: Vehicle,
+        req: CommandRequest,
+        command: Command,
+        peer: ms.Peer,
+        key: tuple[int, int, int, int],
+        now: float,
+    ) -> None:
+        """Send ``command``; the autopilot's reply becomes the ACK (retries wait for it)."""
         self._inflight.add(key)
 
         def done(reply: CommandReply) -> None:
             self._inflight.discard(key)
             done_now = time.monotonic()
-            self._ack(link, v, req.command, result_of_reply(reply), peer, done_now, reply.reason)
+            self._out.ack(
+                link, v, req.command, result_of_reply(reply), peer, done_now, reply.reason
+            )
 
         completion: Done = done
-        if isinstance(t.bus, Disarm):
+        if isinstance(command, Disarm):
             v.intent = None
             v.arming_since_s = None
-        elif isinstance(t.bus, Arm):
+        elif isinstance(command, Arm):
             completion = self._arming(v, now, done)
             if v.intent is not None:
                 intent, v.intent = v.intent, None
                 completion = self._arm_then_intent(v, intent, completion)
-        self._submit(v, t.bus, completion)
+        self._autopilots.submit(v, command, completion)
 
     def _arming(self, v: Vehicle, now: float, done: Done) -> Done:
         """Completion of an Arm: until a status says armed, the vehicle counts as arming."""
@@ -203,20 +252,20 @@ class CommandHandlers(Core):
     def _cmd_set_message_interval(
         self, link: Link, v: Vehicle, req: CommandRequest, peer: ms.Peer, now: float
     ) -> None:
-        schedule = self.schedules[(link.name, v.sysid)]
+        schedule = self._links.schedule(link, v.sysid)
         ok = math.isfinite(req.param1) and schedule.set_interval_us(int(req.param1), req.param2)
-        self._ack(link, v, req.command, ACCEPTED if ok else DENIED, peer, now)
+        self._out.ack(link, v, req.command, ACCEPTED if ok else DENIED, peer, now)
 
     def _cmd_get_message_interval(
         self, link: Link, v: Vehicle, req: CommandRequest, peer: ms.Peer, now: float
     ) -> None:
         if not (math.isfinite(req.param1) and 0 <= req.param1 <= MAX_MESSAGE_ID):
-            self._ack(link, v, req.command, DENIED, peer, now)  # MESSAGE_INTERVAL has a uint16
+            self._out.ack(link, v, req.command, DENIED, peer, now)  # MESSAGE_INTERVAL has a uint16
             return
         msg_id = int(req.param1)
-        interval = self.schedules[(link.name, v.sysid)].interval_us(msg_id)
-        self._ack(link, v, req.command, ACCEPTED, peer, now)
-        self._send(link, v, mavlink.MAVLink_message_interval_message(msg_id, interval), now)
+        interval = self._links.schedule(link, v.sysid).interval_us(msg_id)
+        self._out.ack(link, v, req.command, ACCEPTED, peer, now)
+        self._out.send(link, v, mavlink.MAVLink_message_interval_message(msg_id, interval), now)
 
     def _requested_message(self, v: Vehicle, msg_id: int) -> Msg | None:
         if msg_id == mavlink.MAVLINK_MSG_ID_AUTOPILOT_VERSION:
@@ -241,97 +290,46 @@ class CommandHandlers(Core):
             ID_MISSION_CURRENT,
         )
         if not known:  # AVAILABLE_MODES, COMPONENT_METADATA/INFORMATION, ...
-            self._ack(link, v, req.command, UNSUPPORTED, peer, now)
+            self._out.ack(link, v, req.command, UNSUPPORTED, peer, now)
             return
         msg = self._requested_message(v, msg_id)
         if msg is None:  # e.g. HOME_POSITION before the autopilot reported one
-            self._ack(link, v, req.command, TEMPORARILY_REJECTED, peer, now)
+            self._out.ack(link, v, req.command, TEMPORARILY_REJECTED, peer, now)
             return
-        self._ack(link, v, req.command, ACCEPTED, peer, now)
-        self._send(link, v, msg, now)
+        self._out.ack(link, v, req.command, ACCEPTED, peer, now)
+        self._out.send(link, v, msg, now)
 
     def _cmd_request_protocol_version(
         self, link: Link, v: Vehicle, req: CommandRequest, peer: ms.Peer, now: float
     ) -> None:
-        self._ack(link, v, req.command, ACCEPTED, peer, now)
-        self._send(link, v, protocol_version_message(), now)
+        self._out.ack(link, v, req.command, ACCEPTED, peer, now)
+        self._out.send(link, v, protocol_version_message(), now)
 
     def _cmd_request_autopilot_version(
         self, link: Link, v: Vehicle, req: CommandRequest, peer: ms.Peer, now: float
     ) -> None:
-        self._ack(link, v, req.command, ACCEPTED, peer, now)
-        self._send(link, v, v.autopilot_version(), now)
+        self._out.ack(link, v, req.command, ACCEPTED, peer, now)
+        self._out.send(link, v, v.autopilot_version(), now)
 
-    def _on_set_mode(self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float) -> None:
+    def on_set_mode(self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float) -> None:
         """SET_MODE has no ACK: the client watches the heartbeat's custom_mode change."""
         mode = decode_custom_mode(int(msg.custom_mode))
-        t = translate_mode(float(msg.base_mode), mode.main, mode.sub, self._facts(v))
+        t = translate_mode(float(msg.base_mode), mode.main, mode.sub, facts_of(v))
         if t.bus is not None:
             t = self._select_while_disarmed(v, t.bus, now) or t
         if t.bus is None:
             if t.result == ACCEPTED:
-                self._send_all(v, v.heartbeat(), now)
+                self._out.send_all(v, v.heartbeat(), now)
             else:
-                self._statustext(link, v, f"{v.id}: {t.reason}", now)
+                self._out.statustext(link, v, f"{v.id}: {t.reason}", now)
             return
 
         def done(reply: CommandReply) -> None:
             done_now = time.monotonic()
             if not reply.accepted:
-                self._statustext(link, v, f"{v.id}: mode change refused: {reply.reason}", done_now)
-            self._send_all(v, v.heartbeat(), done_now)
+                self._out.statustext(
+                    link, v, f"{v.id}: mode change refused: {reply.reason}", done_now
+                )
+            self._out.send_all(v, v.heartbeat(), done_now)
 
-        self._submit(v, t.bus, done)
-
-    def _offboard_here(self, v: Vehicle) -> offboard.Here:
-        st = v.state
-        return offboard.Here(
-            position_enu=st.position_enu_m if st is not None else v.spawn_enu,
-            yaw_enu_rad=math.pi / 2 - euler_ned_frd(st.attitude_xyzw)[2] if st is not None else 0.0,
-            local_origin_enu=v.spawn_enu,
-            home_amsl_m=v.home_place().alt_amsl_m,
-            origin=v.origin,
-        )
-
-    def _offboard(self, v: Vehicle, setpoint: Setpoint | None) -> None:
-        """Offboard setpoints have no ACK in MAVLink: unusable ones are dropped."""
-        if setpoint is None:
-            log.debug("%s: unusable offboard setpoint dropped", v.id)
-            return
-        self._submit(v, setpoint, lambda reply: None)
-
-    def _on_position_target(
-        self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
-    ) -> None:
-        """SET_POSITION_TARGET_LOCAL_NED (from the vehicle's local origin, as PX4)."""
-        self._offboard(v, offboard.from_local_ned(msg, self._offboard_here(v)))
-
-    def _on_global_target(
-        self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
-    ) -> None:
-        """SET_POSITION_TARGET_GLOBAL_INT."""
-        self._offboard(v, offboard.from_global_int(msg, self._offboard_here(v)))
-
-    def _on_manual_control(
-        self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
-    ) -> None:
-        """MANUAL_CONTROL sticks: velocity and yaw-rate setpoints for position mode."""
-        self._offboard(v, offboard.from_manual_control(msg, self._offboard_here(v)))
-
-    def _on_follow_target(
-        self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
-    ) -> None:
-        """FOLLOW_TARGET (follow-me): where to be, from the target and the FLW_TGT_* params."""
-        p = v.params
-        follow = offboard.Follow(
-            height_m=p.value("FLW_TGT_HT"),
-            distance_m=p.value("FLW_TGT_DST"),
-            angle_deg=p.value("FLW_TGT_FA"),
-        )
-        self._offboard(v, offboard.from_follow_target(msg, self._offboard_here(v), follow))
-
-    def _on_attitude_target(
-        self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
-    ) -> None:
-        """SET_ATTITUDE_TARGET: attitude or body rates with a thrust."""
-        self._offboard(v, offboard.from_attitude_target(msg))
+        self._autopilots.submit(v, t.bus, done)

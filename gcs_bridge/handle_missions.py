@@ -9,7 +9,7 @@ from collections.abc import Callable
 
 from gcs_bridge import mission as ms
 from gcs_bridge import plans
-from gcs_bridge.core import Core
+from gcs_bridge.core import Autopilots, Handler, Outbox
 from gcs_bridge.dialect import Msg, mavlink
 from gcs_bridge.links import Link
 from gcs_bridge.vehicle import Vehicle
@@ -34,30 +34,54 @@ _MISSION_RESULT_OF_CODE = {
 }
 
 
-class MissionHandlers(Core):
-    # ------------------------------------------------------------------ missions
+class MissionHandlers:
+    """Each vehicle's mission, geofence and rally transfers: its
+    :class:`~gcs_bridge.mission.Uploader` drives uploads; downloads answer from what the
+    autopilot or the last upload says."""
+
+    def __init__(self, out: Outbox, autopilots: Autopilots) -> None:
+        self._out = out
+        self._autopilots = autopilots
+
+    def handlers(self) -> dict[str, Handler]:
+        return {
+            "MISSION_COUNT": self.on_count,
+            "MISSION_ITEM_INT": self.on_item,
+            "MISSION_ITEM": self.on_item,
+            "MISSION_ACK": self.on_ack,
+            "MISSION_REQUEST_LIST": self.on_request_list,
+            "MISSION_REQUEST_INT": self.on_request,
+            "MISSION_REQUEST": self.on_request,
+            "MISSION_CLEAR_ALL": self.on_clear_all,
+            "MISSION_SET_CURRENT": self.on_set_current,
+        }
+
+    def on_timer(self, v: Vehicle, now: float) -> None:
+        """An upload's item re-requests and its end when the ground station went quiet."""
+        if v.uploader.active:
+            self._run_actions(v, v.uploader.on_timer(now), now)
+
     def _mission_ack(
         self, v: Vehicle, peer: ms.Peer, result: int, mission_type: int, now: float
     ) -> None:
-        link = self.links[peer.link]
         ack = mavlink.MAVLink_mission_ack_message(peer.system, peer.component, result, mission_type)
-        self._send(link, v, ack, now)
+        self._out.to_peer(peer, v, ack, now)
 
-    def _run_mission_actions(self, v: Vehicle, actions: list[ms.Action], now: float) -> None:
+    def _run_actions(self, v: Vehicle, actions: list[ms.Action], now: float) -> None:
         for action in actions:
             peer = action.peer
             if isinstance(action, ms.Request):
                 req = mavlink.MAVLink_mission_request_int_message(
                     peer.system, peer.component, action.seq, action.mission_type
                 )
-                self._send(self.links[peer.link], v, req, now)
+                self._out.to_peer(peer, v, req, now)
             elif isinstance(action, ms.Ack):
                 self._mission_ack(v, peer, action.result, action.mission_type, now)
             else:
                 self._complete_upload(v, action, now)
 
     def _complete_upload(self, v: Vehicle, c: ms.Complete, now: float) -> None:
-        link = self.links[c.peer.link]
+        link = self._out.link_of(c.peer)
 
         def finish(converted: ms.Converted) -> Callable[[CommandReply], None]:
             def done(reply: CommandReply) -> None:
@@ -67,7 +91,9 @@ class MissionHandlers(Core):
                     result = ms.Result.ACCEPTED
                 else:
                     result = _MISSION_RESULT_OF_CODE.get(reply.code, ms.Result.ERROR)
-                    self._statustext(link, v, f"{v.id}: mission refused: {reply.reason}", done_now)
+                    self._out.statustext(
+                        link, v, f"{v.id}: mission refused: {reply.reason}", done_now
+                    )
                 self._mission_ack(v, c.peer, result, c.mission_type, done_now)
 
             return done
@@ -76,21 +102,21 @@ class MissionHandlers(Core):
             self._complete_plan_upload(v, c, now)
             return
         if not c.items:
-            self._submit(v, MissionClear(), finish(ms.Converted([], [], [])))
+            self._autopilots.submit(v, MissionClear(), finish(ms.Converted([], [], [])))
             return
         try:
             cruise = v.params.value("MPC_XY_CRUISE")
             converted = ms.convert_upload(c.items, v.home_place(), cruise)
             command = MissionUpload(items=converted.items)
         except ms.MissionError as exc:
-            self._statustext(link, v, f"{v.id}: {exc}", now)
+            self._out.statustext(link, v, f"{v.id}: {exc}", now)
             self._mission_ack(v, c.peer, exc.result, c.mission_type, now)
             return
-        self._submit(v, command, finish(converted))
+        self._autopilots.submit(v, command, finish(converted))
 
     def _complete_plan_upload(self, v: Vehicle, c: ms.Complete, now: float) -> None:
         """A geofence or rally upload: to the autopilot, then ACK; kept for download."""
-        link = self.links[c.peer.link]
+        link = self._out.link_of(c.peer)
         try:
             command: Command
             if c.mission_type == ms.MISSION_TYPE_FENCE:
@@ -98,7 +124,7 @@ class MissionHandlers(Core):
             else:
                 command = RallyUpload(points_enu_m=plans.convert_rally(c.items, v.home_place()))
         except ms.MissionError as exc:
-            self._statustext(link, v, f"{v.id}: {exc}", now)
+            self._out.statustext(link, v, f"{v.id}: {exc}", now)
             self._mission_ack(v, c.peer, exc.result, c.mission_type, now)
             return
 
@@ -109,21 +135,19 @@ class MissionHandlers(Core):
                 result = ms.Result.ACCEPTED
             else:
                 result = _MISSION_RESULT_OF_CODE.get(reply.code, ms.Result.ERROR)
-                self._statustext(link, v, f"{v.id}: refused: {reply.reason}", done_now)
+                self._out.statustext(link, v, f"{v.id}: refused: {reply.reason}", done_now)
             self._mission_ack(v, c.peer, result, c.mission_type, done_now)
 
-        self._submit(v, command, done)
+        self._autopilots.submit(v, command, done)
 
-    def _on_mission_count(
-        self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
-    ) -> None:
+    def on_count(self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float) -> None:
         actions = v.uploader.on_count(peer, int(msg.count), int(msg.mission_type), now)
-        self._run_mission_actions(v, actions, now)
+        self._run_actions(v, actions, now)
 
-    def _on_mission_item(self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float) -> None:
+    def on_item(self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float) -> None:
         item = self._wire_item(v, msg, peer, now)
         if item is not None:
-            self._run_mission_actions(v, v.uploader.on_item(peer, item, now), now)
+            self._run_actions(v, v.uploader.on_item(peer, item, now), now)
 
     def _wire_item(self, v: Vehicle, msg: Msg, peer: ms.Peer, now: float) -> ms.WireItem | None:
         if msg.get_type() == "MISSION_ITEM_INT":
@@ -164,13 +188,11 @@ class MissionHandlers(Core):
             return None
         return mission_type
 
-    def _on_mission_ack(self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float) -> None:
+    def on_ack(self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float) -> None:
         if int(msg.type) != ms.Result.ACCEPTED:
             v.uploader.on_cancel(peer)  # the GCS gave up on its upload
 
-    def _on_mission_request_list(
-        self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
-    ) -> None:
+    def on_request_list(self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float) -> None:
         mission_type = self._plan_type(v, msg, peer, now)
         if mission_type is None:
             return
@@ -179,7 +201,7 @@ class MissionHandlers(Core):
             msg_count = mavlink.MAVLink_mission_count_message(
                 peer.system, peer.component, count, mission_type
             )
-            self._send(link, v, msg_count, now)
+            self._out.send(link, v, msg_count, now)
             return
 
         def done(reply: CommandReply) -> None:
@@ -195,13 +217,11 @@ class MissionHandlers(Core):
             count = mavlink.MAVLink_mission_count_message(
                 peer.system, peer.component, len(v.download), mission_type
             )
-            self._send(link, v, count, time.monotonic())
+            self._out.send(link, v, count, time.monotonic())
 
-        self._submit(v, MissionDownload(), done)
+        self._autopilots.submit(v, MissionDownload(), done)
 
-    def _on_mission_request(
-        self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
-    ) -> None:
+    def on_request(self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float) -> None:
         mission_type = self._plan_type(v, msg, peer, now)
         if mission_type is None:
             return
@@ -234,11 +254,9 @@ class MissionHandlers(Core):
             item = mavlink.MAVLink_mission_item_message(
                 peer.system, peer.component, *args, w.x * 1e-7, w.y * 1e-7, w.z, mission_type
             )
-        self._send(link, v, item, now)
+        self._out.send(link, v, item, now)
 
-    def _on_mission_clear_all(
-        self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
-    ) -> None:
+    def on_clear_all(self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float) -> None:
         mission_type = int(msg.mission_type)
         if mission_type not in (*ms.PLAN_TYPES, ms.MISSION_TYPE_ALL):
             self._mission_ack(v, peer, ms.Result.UNSUPPORTED, mission_type, now)
@@ -273,24 +291,22 @@ class MissionHandlers(Core):
             return done
 
         for kind, command in clears:
-            self._submit(v, command, cleared(kind))
+            self._autopilots.submit(v, command, cleared(kind))
 
-    def _on_mission_set_current(
-        self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
-    ) -> None:
+    def on_set_current(self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float) -> None:
         """Jump to an item: restarts the mission there (our autopilot has no idle "current").
         An item that does not exist is refused here (STATUSTEXT, MISSION_CURRENT unchanged)."""
         seq = int(msg.seq)
         if seq >= v.mission_total():
-            self._statustext(link, v, f"{v.id}: mission item {seq} does not exist", now)
-            self._send_all(v, v.mission_current_msg(), now)
+            self._out.statustext(link, v, f"{v.id}: mission item {seq} does not exist", now)
+            self._out.send_all(v, v.mission_current_msg(), now)
             return
         index = ms.bus_index_of_seq(v.seqs(), seq)
 
         def done(reply: CommandReply) -> None:
             done_now = time.monotonic()
             if not reply.accepted:
-                self._statustext(link, v, f"{v.id}: {reply.reason}", done_now)
-            self._send_all(v, v.mission_current_msg(), done_now)
+                self._out.statustext(link, v, f"{v.id}: {reply.reason}", done_now)
+            self._out.send_all(v, v.mission_current_msg(), done_now)
 
-        self._submit(v, MissionStart(start_index=index), done)
+        self._autopilots.submit(v, MissionStart(start_index=index), done)

@@ -6,7 +6,7 @@ import logging
 import time
 
 from gcs_bridge import mission as ms
-from gcs_bridge.core import Core, text_of
+from gcs_bridge.core import Autopilots, Handler, Outbox, text_of
 from gcs_bridge.dialect import Msg, mavlink
 from gcs_bridge.links import Link
 from gcs_bridge.params import ParamError
@@ -18,8 +18,22 @@ log = logging.getLogger(__name__)
 PARAM_SYNC_RETRY_S = 5.0
 
 
-class ParamHandlers(Core):
-    # ------------------------------------------------------------------ parameters
+class ParamHandlers:
+    """PARAM_* against each vehicle's :class:`~gcs_bridge.params.ParamTable`, and the one
+    ``GetParams`` that fills the table from the autopilot once it is there."""
+
+    def __init__(self, out: Outbox, autopilots: Autopilots) -> None:
+        self._out = out
+        self._autopilots = autopilots
+        self._sync: dict[str, float] = {}  # vehicle id → next attempt (wall s); -1 busy
+
+    def handlers(self) -> dict[str, Handler]:
+        return {
+            "PARAM_REQUEST_LIST": self.on_request_list,
+            "PARAM_REQUEST_READ": self.on_request_read,
+            "PARAM_SET": self.on_set,
+        }
+
     def _param_value(self, link: Link, v: Vehicle, name: str, now: float) -> None:
         index = v.params.index_of(name)
         spec = v.params.spec(name)
@@ -28,17 +42,13 @@ class ParamHandlers(Core):
         msg = mavlink.MAVLink_param_value_message(
             name.encode("ascii"), v.params.wire_value(name), spec.param_type, v.params.count, index
         )
-        self._send(link, v, msg, now)
+        self._out.send(link, v, msg, now)
 
-    def _on_param_request_list(
-        self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
-    ) -> None:
+    def on_request_list(self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float) -> None:
         for spec in v.params.specs:
             self._param_value(link, v, spec.name, now)
 
-    def _on_param_request_read(
-        self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float
-    ) -> None:
+    def on_request_read(self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float) -> None:
         index = int(msg.param_index)
         if index >= 0:
             if index < v.params.count:
@@ -46,7 +56,7 @@ class ParamHandlers(Core):
             return
         self._param_value(link, v, text_of(msg.param_id), now)
 
-    def _on_param_set(self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float) -> None:
+    def on_set(self, link: Link, v: Vehicle, msg: Msg, peer: ms.Peer, now: float) -> None:
         name = text_of(msg.param_id)
         spec = v.params.spec(name)
         if spec is None:
@@ -55,7 +65,7 @@ class ParamHandlers(Core):
         try:
             value = v.params.decode_set(name, float(msg.param_value))
         except ParamError as exc:
-            self._statustext(link, v, f"{v.id}: {exc}", now)
+            self._out.statustext(link, v, f"{v.id}: {exc}", now)
             self._param_value(link, v, name, now)  # the unchanged value says "refused"
             return
 
@@ -67,19 +77,19 @@ class ParamHandlers(Core):
             elif reply.code == RejectCode.UNSUPPORTED and spec.gateway_side:
                 v.params.set(name, value, backed=False)
             else:
-                self._statustext(link, v, f"{v.id}: {name} refused: {reply.reason}", done_now)
+                self._out.statustext(link, v, f"{v.id}: {name} refused: {reply.reason}", done_now)
             self._param_value(link, v, name, done_now)
 
-        self._submit(v, SetParam(name=name, value=value), done)
+        self._autopilots.submit(v, SetParam(name=name, value=value), done)
 
-    def _maybe_sync_params(self, v: Vehicle, now: float) -> None:
+    def sync(self, v: Vehicle, now: float) -> None:
         """Once the autopilot is there, take its parameter values (GetParams)."""
         if v.params_synced or v.status is None:
             return
-        next_try = self._param_sync.get(v.id, 0.0)
+        next_try = self._sync.get(v.id, 0.0)
         if next_try < 0 or now < next_try:
             return
-        self._param_sync[v.id] = -1.0
+        self._sync[v.id] = -1.0
 
         def done(reply: CommandReply) -> None:
             if reply.accepted and reply.params is not None:
@@ -89,6 +99,6 @@ class ParamHandlers(Core):
                 log.info("%s: autopilot has no parameters; the gateway keeps its own", v.id)
                 v.params_synced = True
             else:
-                self._param_sync[v.id] = time.monotonic() + PARAM_SYNC_RETRY_S
+                self._sync[v.id] = time.monotonic() + PARAM_SYNC_RETRY_S
 
-        self._submit(v, GetParams(), done)
+        self._autopilots.submit(v, GetParams(), done)

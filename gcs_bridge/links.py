@@ -6,18 +6,28 @@ socket it sends from. Each datagram is parsed on its own (UDP keeps frames whole
 one datagram never corrupts the next. With signing on, incoming frames must carry a valid
 signature: checked here before the timestamp is recorded (pymavlink records it first, which
 lets a forged frame push a stream's timestamp forward).
+
+Who listens: on Linux a link asks for the ICMP errors of what it sends (``IP_RECVERR``); a
+destination that answered "port unreachable" within the last ``REFUSED_HOLD_S`` counts as
+absent until a heartbeat (1 Hz, always sent) stops being refused or it speaks itself, so
+telemetry is not built for a port where nobody listens. Where no ICMP comes back (another
+host's firewall), every destination counts as listening, as before.
 """
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import logging
+import math
 import socket
 import struct
+import sys
 import time
 from dataclasses import dataclass, field
 
 from gcs_bridge.dialect import Msg, new_mav, pack
+from gcs_bridge.telemetry import StreamSchedule
 
 log = logging.getLogger(__name__)
 
@@ -28,11 +38,25 @@ _NEW_STREAM_WINDOW = 60 * 100_000  # one minute, in 10 µs units
 PEER_EXPIRY_S = 15.0
 MAX_PEERS = 16  # per link: one datagram must not buy a stranger our telemetry stream forever
 MAX_DATAGRAMS_PER_POLL = 256
+REFUSED_HOLD_S = 2.5  # > the heartbeat period: heartbeats keep an absent listener's mark fresh
+IP_RECVERR = getattr(socket, "IP_RECVERR", 11)  # Linux's value; Python does not export it
+_NOBODY_THERE = {errno.ECONNREFUSED, errno.EHOSTUNREACH, errno.ENETUNREACH}
 
 
 def signing_timestamp_now() -> int:
     """MAVLink signing time: 10 µs units since 2015-01-01."""
     return int(max(time.time() - _EPOCH_2015, 0.0) * 100_000)
+
+
+def _nobody_there(level: int, kind: int, data: bytes) -> bool:
+    """Does an error-queue entry (``struct sock_extended_err``: errno first) say that nobody
+    listens at the destination?"""
+    return (
+        level == socket.IPPROTO_IP
+        and kind == IP_RECVERR
+        and len(data) >= 4
+        and struct.unpack_from("=I", data)[0] in _NOBODY_THERE
+    )
 
 
 @dataclass
@@ -91,7 +115,11 @@ class Link:
         self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         self.sock.setblocking(False)
         self.sock.bind(bind)
+        self._errors_queued = sys.platform == "linux"
+        if self._errors_queued:
+            self.sock.setsockopt(socket.IPPROTO_IP, IP_RECVERR, 1)
         self._peers: dict[Addr, float] = {}
+        self._refused: dict[Addr, float] = {}  # destination → wall time of its last refusal
         self.gcs_heard_s = -1e9  # wall time of the last ground-station HEARTBEAT on this link
         self.signing = Signing(signing_key, link_id) if signing_key is not None else None
         self._encoders = {sysid: self._encoder(sysid, link_id) for sysid in self.sysids}
@@ -119,6 +147,7 @@ class Link:
     # -- receiving -------------------------------------------------------------
     def receive(self, now_s: float) -> list[tuple[Msg, Addr]]:
         """Every valid message waiting on the socket (bounded per call), with its sender."""
+        self._take_refusals(now_s)
         out: list[tuple[Msg, Addr]] = []
         for _ in range(MAX_DATAGRAMS_PER_POLL):
             try:
@@ -135,8 +164,35 @@ class Link:
                 if peer not in self._peers and len(self._peers) >= MAX_PEERS:
                     del self._peers[min(self._peers, key=self._peers.__getitem__)]
                 self._peers[peer] = now_s
+                self._refused.pop(peer, None)
                 out.extend((m, peer) for m in accepted)
         return out
+
+    def _take_refusals(self, now_s: float) -> None:
+        """Destinations the kernel reported unreachable (ICMP, queued by ``IP_RECVERR``)."""
+        if not self._errors_queued:
+            return
+        for _ in range(MAX_DATAGRAMS_PER_POLL):
+            try:
+                _, ancillary, _, addr = self.sock.recvmsg(1, 512, socket.MSG_ERRQUEUE)
+            except (BlockingIOError, InterruptedError):
+                return
+            except OSError as exc:
+                log.debug("%s: error queue: %s", self.name, exc)
+                return
+            if any(_nobody_there(level, kind, data) for level, kind, data in ancillary):
+                self._refused[(str(addr[0]), int(addr[1]))] = now_s
+
+    def listened(self, now_s: float) -> bool:
+        """Is anyone there to receive what this link sends (see the module's docstring)?"""
+        if not self._refused:
+            return True
+        hold = now_s - REFUSED_HOLD_S
+        for addr, heard in self._peers.items():
+            if now_s - heard <= PEER_EXPIRY_S and self._refused.get(addr, -math.inf) < hold:
+                return True
+        peer = self.default_peer
+        return peer is not None and self._refused.get(peer, -math.inf) < hold
 
     def _parse(self, data: bytes, peer: Addr) -> list[Msg]:
         parser = new_mav(0, 0)
@@ -187,8 +243,62 @@ class Link:
         buf = pack(mav, msg)
         for addr in [to] if to is not None else self.destinations(now_s):
             try:
-                self.sock.sendto(buf, addr)
+                self._sendto(buf, addr)
                 self.stats.sent += 1
             except OSError as exc:
                 self.stats.send_errors += 1
                 log.debug("%s: send to %s failed: %s", self.name, addr, exc)
+
+    def _sendto(self, buf: bytes, addr: Addr) -> None:
+        try:
+            self.sock.sendto(buf, addr)
+        except ConnectionRefusedError:
+            # an earlier datagram's ICMP error, reported on this call (IP_RECVERR): this one
+            # was not sent, and the error is now taken
+            self.sock.sendto(buf, addr)
+
+
+class LinkSet:
+    """Every link of the gateway: by name, and the links each vehicle (sysid) is on, with the
+    telemetry schedule of each (vehicle, link) pair."""
+
+    def __init__(self, rates_hz: dict[int, float], sysids: list[int]) -> None:
+        self._rates_hz = rates_hz
+        self._by_name: dict[str, Link] = {}
+        self._of: dict[int, list[Link]] = {sysid: [] for sysid in sysids}
+        self._schedules: dict[tuple[str, int], StreamSchedule] = {}
+
+    def add(self, link: Link) -> None:
+        self._by_name[link.name] = link
+        for sysid in link.sysids:
+            self._of[sysid].append(link)
+            self._schedules[(link.name, sysid)] = StreamSchedule(self._rates_hz)
+        log.info(
+            "link %s: %s:%d → %s (sysids %s, signing %s)",
+            link.name,
+            *link.address,
+            link.default_peer,
+            link.sysids,
+            "on" if link.signing else "off",
+        )
+
+    def all(self) -> list[Link]:
+        return list(self._by_name.values())
+
+    def named(self, name: str) -> Link:
+        return self._by_name[name]
+
+    def of(self, sysid: int) -> list[Link]:
+        """The links vehicle ``sysid`` is on."""
+        return self._of[sysid]
+
+    def schedule(self, link: Link, sysid: int) -> StreamSchedule:
+        return self._schedules[(link.name, sysid)]
+
+    def listened(self, now_s: float) -> bool:
+        """Does any link have someone to send telemetry to?"""
+        return any(link.listened(now_s) for link in self._by_name.values())
+
+    def close(self) -> None:
+        for link in self._by_name.values():
+            link.close()

@@ -156,50 +156,68 @@ def convert_upload(wire: list[WireItem], here: Place, cruise_m_s: float = 0.0) -
     speed = cruise_m_s
     for w in wire:
         if w.command == CMD_CHANGE_SPEED:
-            if _finite(w.param2) and w.param2 > 0:
-                speed = min(float(w.param2), 100.0)
-            elif not _finite(w.param2):
-                raise MissionError(Result.INVALID_PARAM2, w.seq, "speed is not finite")
+            speed = _changed_speed(w, speed)
             continue
         if w.command == CMD_RTL:
-            home = geodetic_to_enu(here.lat_deg, here.lon_deg, here.alt_amsl_m, here.origin)
-            items.append(MissionItem(command=MissionCommand.RTL, x=home[0], y=home[1], z=home[2]))
-            seqs.append(w.seq)
-            continue
-        if w.command not in (CMD_WAYPOINT, CMD_LOITER_TIME, CMD_TAKEOFF, CMD_LAND):
+            items.append(_rtl_item(here))
+        elif w.command in (CMD_WAYPOINT, CMD_LOITER_TIME, CMD_TAKEOFF, CMD_LAND):
+            items.append(_navigation_item(w, here, speed))
+        else:
             raise MissionError(Result.UNSUPPORTED, w.seq, f"command {w.command} not supported")
-        x, y, z = _position(w, here, needs_position=w.command in (CMD_WAYPOINT, CMD_LOITER_TIME))
-        hold = 0.0
-        radius = DEFAULT_ACCEPTANCE_M
-        if w.command in (CMD_WAYPOINT, CMD_LOITER_TIME):
-            if not _finite(w.param1) or not 0.0 <= w.param1 <= 3600.0:
-                raise MissionError(Result.INVALID_PARAM1, w.seq, f"hold time {w.param1}")
-            hold = float(w.param1)
-        if w.command == CMD_WAYPOINT and math.isinf(w.param2):
-            raise MissionError(Result.INVALID_PARAM2, w.seq, f"acceptance {w.param2}")
-        if w.command == CMD_WAYPOINT and _finite(w.param2) and w.param2 > 0:
-            if w.param2 > 1000.0:
-                raise MissionError(Result.INVALID_PARAM2, w.seq, f"acceptance {w.param2}")
-            radius = float(w.param2)
-        command = {
-            CMD_TAKEOFF: MissionCommand.TAKEOFF,
-            CMD_LAND: MissionCommand.LAND,
-        }.get(w.command, MissionCommand.WAYPOINT)
-        items.append(
-            MissionItem(
-                command=command,
-                x=x,
-                y=y,
-                z=z,
-                frame=MissionFrame.ENU,
-                acceptance_radius_m=radius,
-                hold_s=hold,
-                speed_m_s=speed,
-                yaw_deg=_yaw(w.param4),
-            )
-        )
         seqs.append(w.seq)
     return Converted(items=items, seqs=seqs, wire=list(wire))
+
+
+def _changed_speed(w: WireItem, speed: float) -> float:
+    """The speed after a DO_CHANGE_SPEED (0 or less keeps ``speed``)."""
+    if _finite(w.param2) and w.param2 > 0:
+        return min(float(w.param2), 100.0)
+    if not _finite(w.param2):
+        raise MissionError(Result.INVALID_PARAM2, w.seq, "speed is not finite")
+    return speed
+
+
+def _rtl_item(here: Place) -> MissionItem:
+    home = geodetic_to_enu(here.lat_deg, here.lon_deg, here.alt_amsl_m, here.origin)
+    return MissionItem(command=MissionCommand.RTL, x=home[0], y=home[1], z=home[2])
+
+
+def _hold_and_radius(w: WireItem) -> tuple[float, float]:
+    """A waypoint's or loiter's hold time (param1) and a waypoint's acceptance radius (param2)."""
+    hold = 0.0
+    radius = DEFAULT_ACCEPTANCE_M
+    if w.command in (CMD_WAYPOINT, CMD_LOITER_TIME):
+        if not _finite(w.param1) or not 0.0 <= w.param1 <= 3600.0:
+            raise MissionError(Result.INVALID_PARAM1, w.seq, f"hold time {w.param1}")
+        hold = float(w.param1)
+    if w.command == CMD_WAYPOINT and math.isinf(w.param2):
+        raise MissionError(Result.INVALID_PARAM2, w.seq, f"acceptance {w.param2}")
+    if w.command == CMD_WAYPOINT and _finite(w.param2) and w.param2 > 0:
+        if w.param2 > 1000.0:
+            raise MissionError(Result.INVALID_PARAM2, w.seq, f"acceptance {w.param2}")
+        radius = float(w.param2)
+    return hold, radius
+
+
+def _navigation_item(w: WireItem, here: Place, speed: float) -> MissionItem:
+    """A waypoint, loiter, takeoff or land item."""
+    x, y, z = _position(w, here, needs_position=w.command in (CMD_WAYPOINT, CMD_LOITER_TIME))
+    hold, radius = _hold_and_radius(w)
+    command = {
+        CMD_TAKEOFF: MissionCommand.TAKEOFF,
+        CMD_LAND: MissionCommand.LAND,
+    }.get(w.command, MissionCommand.WAYPOINT)
+    return MissionItem(
+        command=command,
+        x=x,
+        y=y,
+        z=z,
+        frame=MissionFrame.ENU,
+        acceptance_radius_m=radius,
+        hold_s=hold,
+        speed_m_s=speed,
+        yaw_deg=_yaw(w.param4),
+    )
 
 
 def wire_of_items(items: list[MissionItem], here: Place) -> list[WireItem]:

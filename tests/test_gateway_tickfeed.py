@@ -6,10 +6,13 @@ goes out at the next tick, a restarted simulation restarts the streams."""
 from __future__ import annotations
 
 import random
+import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import msgspec
+import pytest
 import zenoh
 
 from gcs_bridge.dialect import mavlink
@@ -18,7 +21,7 @@ from gcs_bridge.options import parse_options
 from gcs_bridge.telemetry import StreamSchedule
 from swarmbus.codec import encode
 from swarmbus.keys import Keys
-from swarmbus.messages import SimTick, VehicleState
+from swarmbus.messages import ConcentrationReading, SimTick, VehicleState
 from swarmbus.scenario import load_scenario
 from swarmbus.session import open_session
 from tests.mavclient import MavClient, write_scenario
@@ -64,6 +67,17 @@ def state(vid: str, k: int, lat: float = 47.4) -> VehicleState:
     )
 
 
+def wait_matched(pub: zenoh.Publisher, timeout_s: float) -> None:
+    """Until a subscriber matches ``pub`` (then a put reaches it), at most ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        status: Any = pub.matching_status  # a MatchingStatus (the stub says bool)
+        if status.matching:
+            return
+        assert time.monotonic() < deadline, "no subscriber matched the tick publisher"
+        time.sleep(0.01)
+
+
 def test_states_come_from_ticks_only(
     network: tuple[Network, zenoh.Session], tmp_path: Path
 ) -> None:
@@ -81,7 +95,7 @@ def test_states_come_from_ticks_only(
     ):
         assert gw._presence is not None
         assert gw._presence.wait_for(lambda a: {f"autopilot-{v}" for v in IDS} <= a, 30.0)
-        time.sleep(0.5)  # the gateway's tick subscription reaches the router
+        wait_matched(pub, 30.0)  # the gateway's tick subscription reached the publisher
 
         def run(ticks: range, broken: int) -> None:
             for k in ticks:
@@ -127,5 +141,90 @@ def test_states_come_from_ticks_only(
         run(range(0, 30), broken=-1)  # a new simulation: the streams start again
         again = [m.time_boot_ms for m in client.logged("GLOBAL_POSITION_INT", 1)]
         assert again[:3] == [0, 100, 200], again
+    for t in tokens:
+        t.undeclare()
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="refusals are read with Linux's IP_RECVERR")
+def test_a_ground_station_that_comes_late_gets_the_newest_telemetry(
+    network: tuple[Network, zenoh.Session], tmp_path: Path
+) -> None:
+    """Nobody listens on the GCS port at first (the kernel refuses what the gateway sends), so
+    the gateway builds no telemetry and takes no readings; a ground station that starts
+    listening mid-run gets the newest state, and readings again."""
+    net, session = network
+    path, gcs_port, _ = write_scenario(tmp_path / "sc.toml", len(IDS), telemetry_hz=10.0)
+    scenario = load_scenario(path)
+    keys = Keys(scenario.world.name)
+    options = parse_options(scenario.gateway, {"api_links": "off"})
+    tokens = [session.liveliness().declare_token(keys.node_health(f"autopilot-{v}")) for v in IDS]
+    pub = session.declare_publisher(keys.tick())
+    reading_pub = session.declare_publisher(keys.vehicle_concentration("uav1"))
+    k = 0
+    with (
+        open_session(net.client) as gw_session,
+        Gateway(scenario, options, IDS, gw_session, keys) as gw,
+    ):
+        assert gw._presence is not None
+        assert gw._presence.wait_for(lambda a: {f"autopilot-{v}" for v in IDS} <= a, 30.0)
+        wait_matched(pub, 30.0)
+        wait_matched(reading_pub, 30.0)
+
+        def step() -> None:
+            nonlocal k
+            k += 1
+            states = [state(v, k) for v in IDS]
+            pub.put(encode(SimTick(tick=k, sim_time_s=k * DT, control_dt_s=DT, states=states)))
+            gw.poll(0.005)
+
+        def matched() -> bool:
+            status: Any = reading_pub.matching_status
+            return bool(status.matching)
+
+        deadline = time.monotonic() + 30.0
+        while gw.links.listened(time.monotonic()) or matched():
+            assert time.monotonic() < deadline, (
+                f"still listened: {gw.links.listened(time.monotonic())}, "
+                f"readings still wanted: {matched()}"
+            )
+            step()
+        for _ in range(60):
+            step()
+        bound_at = k
+        with MavClient(gcs_port) as client:
+
+            def got(kind: str, sysid: int) -> list[Any]:
+                client.pump(0.0)
+                return client.logged(kind, sysid)
+
+            deadline = time.monotonic() + 30.0
+            while not (got("GLOBAL_POSITION_INT", 1) and got("GLOBAL_POSITION_INT", 2)):
+                assert time.monotonic() < deadline, "no telemetry for the late ground station"
+                step()
+            for sysid in (1, 2):
+                pos = got("GLOBAL_POSITION_INT", sysid)[0]
+                sent_at = round(pos.time_boot_ms / (1000.0 * DT))
+                assert bound_at < sent_at <= k, (bound_at, pos.time_boot_ms, k)
+                assert pos.time_boot_ms == int(sent_at * DT * 1000.0)
+                assert pos.vx == 0 and pos.vy == 120  # 1.2 m/s east = NED y, cm/s
+                assert pos.lat == 474_000_000 and pos.lon == 85_000_000
+
+            wait_matched(reading_pub, 30.0)  # the gateway takes readings again
+            reading = ConcentrationReading(
+                vehicle_id="uav1",
+                sim_time_s=k * DT,
+                position_enu_m=(0.0, 0.0, 1.0),
+                available=True,
+                reported_g_m3=0.125,
+                true_g_m3=0.125,
+            )
+            reading_pub.put(encode(reading))
+            deadline = time.monotonic() + 30.0
+            while not got("NAMED_VALUE_FLOAT", 1):
+                assert time.monotonic() < deadline, "no reading for the late ground station"
+                step()
+            value = got("NAMED_VALUE_FLOAT", 1)[0]
+            assert value.time_boot_ms == int(reading.sim_time_s * 1000.0)
+            assert abs(value.value - 0.125) < 1e-6
     for t in tokens:
         t.undeclare()
