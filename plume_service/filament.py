@@ -24,15 +24,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from plume_service.field import FloatArray
 from plume_service.timestepped import TimeSteppedField
 from swarmbus.scenario import PlumeFilament
 from swarmbus.wind import WindModel
+
+if TYPE_CHECKING:
+    from scipy.spatial import cKDTree
 
 #: Filaments are cut off at this many radii.
 TRUNCATE_RADII = 4.0
@@ -83,6 +85,8 @@ def filament_concentration(
                     out[j] += float(np.dot(amplitude[hit], np.exp(-d2[hit] * inv_two_r2[hit])))
         out[~above] = 0.0
         return out
+    from scipy.spatial import cKDTree  # ≈ 30 MB: loaded by the filament model only
+
     if tree is None:
         tree = cKDTree(centres)
     for flip in (1.0, -1.0):
@@ -155,6 +159,8 @@ class FilamentPlume(TimeSteppedField[Filaments]):
             radii = self.radii(state, k)
             out[:] = filament_concentration(points, state.positions, radii, masses)
             return
+        from scipy.spatial import cKDTree  # ≈ 30 MB: loaded by the filament model only
+
         with self._lock:
             if self._tree is None or self._tree[0] is not state:
                 # one k-d tree per state, shared by every query of the same step

@@ -21,7 +21,6 @@ import struct
 from collections.abc import Iterator
 from pathlib import Path
 
-import mcubes
 import numpy as np
 import numpy.typing as npt
 from tqdm import tqdm
@@ -66,6 +65,8 @@ def isosurface(
         bounds = default_bounds(field, level)
     axes = _grid_axes(bounds, resolution)
     padded = _evaluate_grid(field, axes, progress, t)
+    import mcubes  # pulls in scipy.ndimage (≈ 0.7 s): loaded when a mesh is made
+
     vertices, faces = mcubes.marching_cubes(padded, level)
     origin = np.array([axis[0] for axis in axes]) - resolution
     vertices = np.asarray(vertices, dtype=np.float64) * resolution + origin

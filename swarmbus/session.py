@@ -57,6 +57,10 @@ class NetworkConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
     listen: list[Endpoint] = msgspec.field(default_factory=lambda: ["tcp/127.0.0.1:0"])
     multicast_scouting: bool = False
     low_latency: bool = False
+    # Zenoh's shared-memory transport between processes on one host (messages of 3 KB and
+    # more). Off, each process maps no other process's pool: far less resident memory with
+    # many processes on one host (docs/performance.md, "Wave 2, session 2").
+    shared_memory: bool = True
     tls: TlsConfig | None = None
     access_control: dict[str, Any] | None = None  # zenoh's access_control section, as is
 
@@ -85,6 +89,7 @@ def zenoh_config(net: NetworkConfig) -> zenoh.Config:
     # Every sample carries its publisher's (HLC) time: recordings keep when a message was
     # published, not only when the recorder got it, and replay reproduces that timing.
     conf.insert_json5("timestamping/enabled", "true")
+    conf.insert_json5("transport/shared_memory/enabled", json.dumps(net.shared_memory))
     if net.low_latency:
         conf.insert_json5("transport/unicast/lowlatency", "true")
         conf.insert_json5("transport/unicast/qos/enabled", "false")

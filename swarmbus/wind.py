@@ -37,7 +37,6 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from scipy.linalg import expm
 
 from swarmbus.scenario import Scenario, Wind, WindField, WindMeander
 
@@ -146,6 +145,9 @@ class ColouredNoise:
         van_loan[:2, :2] = -a
         van_loan[:2, 2:] = bbt
         van_loan[2:, 2:] = a.T
+        # scipy.linalg costs ≈ 25 MB and ≈ 0.2 s per process: load it only where a meander is set.
+        from scipy.linalg import expm
+
         c = expm(van_loan * self.step_s)
         self._f = c[2:, 2:].T
         q = self._f @ c[:2, 2:]
