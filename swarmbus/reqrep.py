@@ -37,7 +37,7 @@ from typing import Any, Generic, TypeVar
 import zenoh
 
 from swarmbus.codec import MessageError, decode, encode
-from swarmbus.messages import ErrorReply
+from swarmbus.messages import CommandReply, ErrorReply, RejectCode
 
 log = logging.getLogger(__name__)
 
@@ -92,7 +92,11 @@ class BadReply(RequestError):
 # ------------------------------------------------------------------------------ clients
 class Pending(Generic[R]):
     """A request in flight (from :func:`ask`). Its outcome is the first reply, decoded, or a
-    :class:`RequestError`; it is settled once, when that reply or the timeout comes."""
+    :class:`RequestError`; it is settled once, when that reply or the timeout comes.
+
+    With an ``on_done`` callback Zenoh delivers the reply to it on a thread of its own; without
+    one the reply waits in Zenoh's channel until :meth:`outcome` or :meth:`done` reads it (no
+    hand-over between threads: a blocking round trip costs what a plain ``session.get`` does)."""
 
     def __init__(
         self,
@@ -108,13 +112,28 @@ class Pending(Generic[R]):
         self._lock = threading.Lock()
         self._settled = threading.Event()
         self._outcome: R | RequestError | None = None
+        self.answered = False  # a reply came (Zenoh's own error replies count), not only the end
+        self.replies: zenoh.Handler[zenoh.Reply] | None = None  # without on_done: read here
 
     def done(self) -> bool:
         """Whether the outcome is known (never blocks)."""
+        if self.replies is not None and not self._settled.is_set():
+            try:
+                reply = self.replies.try_recv()
+            except zenoh.ZError:  # the query ended without a reply
+                self.on_finish()
+            else:
+                if reply is not None:
+                    self.on_reply(reply)
         return self._settled.is_set()
 
     def outcome(self) -> R | RequestError:
         """The reply or the error, waiting for it (at most the request's timeout, and a margin)."""
+        if self.replies is not None and not self._settled.is_set():
+            for reply in self.replies:  # the first reply, or the end of the query
+                self.on_reply(reply)
+                break
+            self.on_finish()
         if not self._settled.wait(self.timeout_s + FINALISE_MARGIN_S):
             self._settle(NoReply(self.key, self.timeout_s, "the query never ended"))
         assert self._outcome is not None
@@ -131,6 +150,7 @@ class Pending(Generic[R]):
     # Zenoh's callbacks (its thread)
     def on_reply(self, reply: zenoh.Reply) -> None:
         if not self._settled.is_set():
+            self.answered = True
             self._settle(self._read(reply))
 
     def on_finish(self) -> None:
@@ -175,16 +195,15 @@ def ask(
     on_done: Callable[[R | RequestError], None] | None = None,
 ) -> Pending[R]:
     """Send ``message`` (a message struct, or its encoding) to the queryable on ``key`` without
-    waiting. ``on_done`` (optional) gets the outcome once, on Zenoh's thread: keep it short."""
+    waiting. ``on_done`` (optional) gets the outcome once, on a Zenoh thread: keep it short."""
     pending = Pending(key, reply_type, timeout_s, on_done)
     payload = message if isinstance(message, bytes) else encode(message)
     try:
-        session.get(
-            key,
-            zenoh.handlers.Callback(pending.on_reply, pending.on_finish),
-            payload=payload,
-            timeout=timeout_s,
-        )
+        if on_done is None:
+            pending.replies = session.get(key, payload=payload, timeout=timeout_s)
+        else:
+            handler = zenoh.handlers.Callback(pending.on_reply, pending.on_finish)
+            session.get(key, handler, payload=payload, timeout=timeout_s)
     except zenoh.ZError as exc:
         pending.on_failure(str(exc))
     return pending
@@ -327,3 +346,23 @@ def serve_later(
             on_request(incoming)
 
     return session.declare_queryable(key, on_query)
+
+
+# ------------------------------------------------------------------------------ commands
+def command_reply(vehicle_id: str, outcome: CommandReply | RequestError) -> CommandReply:
+    """A command's outcome as a ``CommandReply``, for clients that report a result code rather
+    than raise (the gateway's MAVLink results, the environments): a refusal is
+    ``RejectCode.INVALID`` with the field and the reason, no reply or a bad reply
+    ``RejectCode.FAILED``."""
+    if isinstance(outcome, CommandReply):
+        return outcome
+    if isinstance(outcome, Refused):
+        code, reason = RejectCode.INVALID, f"{outcome.field}: {outcome.reason}"
+    elif isinstance(outcome, NoReply):
+        detail = f" ({outcome.detail})" if outcome.detail else ""
+        code, reason = RejectCode.FAILED, f"no reply from the autopilot{detail}"
+    else:
+        code, reason = RejectCode.FAILED, str(outcome)
+    return CommandReply(
+        vehicle_id=vehicle_id, accepted=False, code=code, reason=reason[:MAX_REASON_CHARS]
+    )

@@ -11,9 +11,20 @@ import msgspec
 import pytest
 import zenoh
 
+from agents import CommandRejected, Swarm, VehicleCommander
+from deploy.demo import DemoError, start_missions
 from swarmbus.codec import encode
 from swarmbus.keys import Keys
-from swarmbus.messages import PlumeInfoQuery, PlumeQuery, PlumeValues
+from swarmbus.messages import (
+    Command,
+    CommandReply,
+    Goto,
+    Hold,
+    PlumeInfoQuery,
+    PlumeQuery,
+    PlumeValues,
+    RejectCode,
+)
 from swarmbus.reqrep import (
     BadReply,
     Incoming,
@@ -21,10 +32,12 @@ from swarmbus.reqrep import (
     Refused,
     RequestError,
     ask,
+    command_reply,
     request,
     serve,
     serve_later,
 )
+from swarmbus.scenario import load_scenario
 from swarmbus.session import open_session
 from tests.procs import Network
 
@@ -39,6 +52,16 @@ def sums(query: PlumeQuery) -> PlumeValues:
         bad = next(i for i, p in enumerate(query.points_enu_m) if p[2] < 0.0)
         raise Refused(f"points_enu_m[{bad}]", "below ground")
     return PlumeValues(values_g_m3=[x + y + z for x, y, z in query.points_enu_m])
+
+
+def counting(calls: list[PlumeQuery]) -> Callable[[PlumeQuery], PlumeValues]:
+    """:func:`sums` that notes each request it sees in ``calls``."""
+
+    def handler(query: PlumeQuery) -> PlumeValues:
+        calls.append(query)
+        return sums(query)
+
+    return handler
 
 
 @pytest.fixture
@@ -68,6 +91,12 @@ def test_a_request_gets_the_typed_reply(pair: tuple[zenoh.Session, zenoh.Session
     first = first_answer(client, query, PlumeValues)
     again = request(client, KEY, query, PlumeValues, 5.0)
     assert first == again == PlumeValues(values_g_m3=[6.0, 6.5])
+    pending = ask(client, KEY, query, PlumeValues, 5.0)  # polled, never blocking
+    deadline = time.monotonic() + 10.0
+    while not pending.done():
+        assert time.monotonic() < deadline, "no answer to a polled request"
+        time.sleep(0.01)
+    assert pending.result() == first and pending.answered
     q.undeclare()
 
 
@@ -104,12 +133,7 @@ def test_a_malformed_request_is_refused_naming_the_field(
 ) -> None:
     server, client = pair
     calls: list[PlumeQuery] = []
-
-    def counting(query: PlumeQuery) -> PlumeValues:
-        calls.append(query)
-        return sums(query)
-
-    q = serve(server, KEY, PlumeQuery, counting)
+    q = serve(server, KEY, PlumeQuery, counting(calls))
     first_answer(client, PlumeQuery(points_enu_m=[]), PlumeValues)
     calls.clear()
     # A NaN coordinate (the struct's bounds reject it), written without the struct's checks.
@@ -193,12 +217,7 @@ def test_memo_answers_a_repeated_request_without_the_handler(
 ) -> None:
     server, client = pair
     calls: list[PlumeQuery] = []
-
-    def counting(query: PlumeQuery) -> PlumeValues:
-        calls.append(query)
-        return sums(query)
-
-    q = serve(server, KEY, PlumeQuery, counting, memo=True)
+    q = serve(server, KEY, PlumeQuery, counting(calls), memo=True)
     same = PlumeQuery(points_enu_m=[(1.0, 2.0, 3.0)])
     first_answer(client, same, PlumeValues)
     n = len(calls)
@@ -271,3 +290,45 @@ def test_a_closed_session_is_no_reply_not_a_crash(network: tuple[Network, zenoh.
     calls: list[object] = []
     pending = ask(session, KEY, encode(PlumeQuery(points_enu_m=[])), PlumeValues, 1.0, calls.append)
     assert isinstance(pending.outcome(), NoReply) and len(calls) == 1
+
+
+def test_a_refused_command_reads_the_same_in_every_client(
+    pair: tuple[zenoh.Session, zenoh.Session],
+) -> None:
+    """A command with a NaN coordinate, refused by a ``serve``d command queryable: the Swarm
+    client, the gateway's and environments' mapping and the demo all name the field."""
+    server, client = pair
+    keys = Keys("default")
+    taken: list[object] = []
+
+    def accept_all(command: object) -> CommandReply:
+        taken.append(command)
+        return CommandReply(vehicle_id="uav1", accepted=True)
+
+    q = serve(server, keys.vehicle_cmd("uav1"), Command, accept_all)  # type: ignore[arg-type]
+    uav = VehicleCommander(client, keys, "uav1", 5.0)
+    uav.send(Hold(), retry_until=time.monotonic() + ROUTE_DEADLINE_S)  # routed, and accepted
+    nan = float("nan")
+    with pytest.raises(CommandRejected) as rejected:
+        uav.goto(1.0, 2.0, nan)
+    assert rejected.value.code == RejectCode.INVALID
+    assert rejected.value.field == "position_enu_m[2]" and rejected.value.reason
+
+    goto = Goto(position_enu_m=(1.0, 2.0, nan))
+    outcome = ask(client, keys.vehicle_cmd("uav1"), goto, CommandReply, 5.0).outcome()
+    reply = command_reply("uav1", outcome)
+    assert not reply.accepted and reply.code == RejectCode.INVALID
+    assert reply.reason.startswith("position_enu_m[2]: ")
+
+    sc = load_scenario()
+    bad = msgspec.structs.replace(sc.vehicles[0].mission[0], z=nan)
+    first = msgspec.structs.replace(sc.vehicles[0], mission=[bad])
+    sc = msgspec.structs.replace(sc, vehicles=[first])
+    sw = Swarm(client, keys, 5.0, own_session=False)
+    with pytest.raises(
+        DemoError, match=r"uav1: MissionUpload rejected \[invalid\] \(items\[0\]\.z\)"
+    ):
+        start_missions(sw, sc, time.monotonic() + 10.0)
+    sw.close()
+    assert [type(c) for c in taken] == [Hold], "the server took a command it should refuse"
+    q.undeclare()
