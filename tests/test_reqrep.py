@@ -227,6 +227,9 @@ def test_memo_answers_a_repeated_request_without_the_handler(
     other = PlumeQuery(points_enu_m=[(1.0, 2.0, 4.0)])
     assert request(client, KEY, other, PlumeValues, 5.0).values_g_m3 == [7.0]
     assert len(calls) == n + 1
+    # only the previous request is remembered: the first one is computed again
+    assert request(client, KEY, same, PlumeValues, 5.0).values_g_m3 == [6.0]
+    assert len(calls) == n + 2
     q.undeclare()
 
 
