@@ -130,9 +130,12 @@ class Pending(Generic[R]):
     def outcome(self) -> R | RequestError:
         """The reply or the error, waiting for it (at most the request's timeout, and a margin)."""
         if self.replies is not None and not self._settled.is_set():
-            for reply in self.replies:  # the first reply, or the end of the query
-                self.on_reply(reply)
-                break
+            try:
+                for reply in self.replies:  # the first reply, or the end of the query
+                    self.on_reply(reply)
+                    break
+            except zenoh.ZError as exc:  # the session closed under the query
+                self.on_failure(str(exc))
             self.on_finish()
         if not self._settled.wait(self.timeout_s + FINALISE_MARGIN_S):
             self._settle(NoReply(self.key, self.timeout_s, "the query never ended"))
@@ -147,7 +150,7 @@ class Pending(Generic[R]):
             raise outcome
         return outcome
 
-    # Zenoh's callbacks (its thread)
+    # Where the reply and the end of the query arrive (a Zenoh thread, or the channel's reader)
     def on_reply(self, reply: zenoh.Reply) -> None:
         if not self._settled.is_set():
             self.answered = True
