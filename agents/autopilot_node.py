@@ -60,7 +60,7 @@ from swarmbus.messages import (
     ActuatorBatch,
     ActuatorCommand,
     Command,
-    ErrorReply,
+    CommandReply,
     PlumeQuery,
     PlumeSample,
     PlumeValues,
@@ -69,6 +69,7 @@ from swarmbus.messages import (
     VehicleStatus,
 )
 from swarmbus.node import NodeContext, NodeRuntime
+from swarmbus.reqrep import Pending, RequestError, ask, serve
 from swarmbus.scenario import Scenario
 from swarmbus.session import SINGLE_THREAD_RUNTIME
 from swarmbus.wind import WindModel, wind_from_scenario
@@ -272,7 +273,7 @@ class _PendingSensor:
     tick: int
     sim_time_s: float
     states: list[_StateHead]
-    replies: zenoh.handlers.Handler[zenoh.Reply] | None  # None: no plume node was alive
+    replies: Pending[PlumeValues] | None  # None: no plume node was alive
     by_physics: bool = False  # the physics queried: the answer comes with the next tick
 
 
@@ -341,11 +342,9 @@ class AutopilotNode:
             self.session.declare_subscriber(self.keys.tick(), self._on_tick_sample)
         )
         for vid, served in self.served.items():
-            self._declared.append(
-                self.session.declare_queryable(
-                    self.keys.vehicle_cmd(vid), self._command_handler(served)
-                )
-            )
+            key, handler = self.keys.vehicle_cmd(vid), self._command_handler(served)
+            commands = serve(self.session, key, Command, handler)  # type: ignore[arg-type]
+            self._declared.append(commands)
         for vid in self.served:
             name = f"autopilot-{vid}"
             if name != node_name:
@@ -376,31 +375,17 @@ class AutopilotNode:
             with suppress(zenoh.ZError):
                 entity.undeclare()
 
-    def _command_handler(self, served: _Served) -> Callable[[zenoh.Query], None]:
-        def handle(query: zenoh.Query) -> None:
-            try:
-                payload = query.payload
-                data = payload.to_bytes() if payload is not None else b""
-                command: object = decode(data, Command)  # type: ignore[arg-type]
-            except MessageError as exc:
-                log.warning("%s: bad command: %s", served.vehicle_id, exc)
-                query.reply_err(encode(ErrorReply(field=exc.field, reason=exc.reason[:1000])))
-                return
-            try:
-                with self.lock:
-                    reply = served.autopilot.handle(command)
-                    served.publish_status(force=False, period_s=self.status_period_s)
-                    self._save()
-                if not reply.accepted:
-                    log.info(
-                        "%s: %s refused: %s",
-                        served.vehicle_id,
-                        type(command).__name__,
-                        reply.reason,
-                    )
-                query.reply(query.key_expr, encode(reply))
-            except Exception:  # the process must outlive any one command
-                log.exception("%s: command handling failed", served.vehicle_id)
+    def _command_handler(self, served: _Served) -> Callable[[Command], CommandReply]:
+        def handle(command: Command) -> CommandReply:
+            with self.lock:
+                reply = served.autopilot.handle(command)
+                served.publish_status(force=False, period_s=self.status_period_s)
+                self._save()
+            if not reply.accepted:
+                log.info(
+                    "%s: %s refused: %s", served.vehicle_id, type(command).__name__, reply.reason
+                )
+            return reply
 
         return handle
 
@@ -658,9 +643,7 @@ class AutopilotNode:
             points_enu_m=[s.position_enu_m for s in pending.states],
             sim_time_s=pending.sim_time_s,
         )
-        replies = self.session.get(
-            self.plume_key, payload=encode(query), timeout=self.sensor_timeout_s
-        )
+        replies = ask(self.session, self.plume_key, query, PlumeValues, self.sensor_timeout_s)
         return _PendingSensor(pending.tick, pending.sim_time_s, pending.states, replies)
 
     def _query_plume(self, tick: _Tick) -> None:
@@ -696,22 +679,16 @@ class AutopilotNode:
             return values
         if pending.replies is None:
             return None
-        try:
-            for reply in pending.replies:
-                if reply.ok is None:
-                    err = reply.err
-                    log.warning("plume query refused: %s", err.payload.to_bytes() if err else "")
-                    return None
-                values = decode(reply.ok.payload.to_bytes(), PlumeValues).values_g_m3
-                if len(values) != len(pending.states):
-                    log.warning(
-                        "plume answered %d values for %d points", len(values), len(pending.states)
-                    )
-                    return None
-                return values
-        except (MessageError, zenoh.ZError) as exc:
-            log.warning("plume reply unusable: %s", exc)
-        return None
+        outcome = pending.replies.outcome()
+        if isinstance(outcome, RequestError):
+            if pending.replies.answered:  # (no answer at all: no plume service any more)
+                log.warning("plume query: %s", outcome)
+            return None
+        values = outcome.values_g_m3
+        if len(values) != len(pending.states):
+            log.warning("plume answered %d values for %d points", len(values), len(pending.states))
+            return None
+        return values
 
 
 def main(ctx: NodeContext) -> int:

@@ -46,7 +46,7 @@ import numpy as np
 import numpy.typing as npt
 import zenoh
 
-from swarmbus.codec import MessageError, decode, encode
+from swarmbus.codec import MessageError, decode
 from swarmbus.keys import Keys
 from swarmbus.messages import (
     Arm,
@@ -54,7 +54,6 @@ from swarmbus.messages import (
     CommandReply,
     ConcentrationReading,
     Disarm,
-    ErrorReply,
     FlightMode,
     GcsHeartbeat,
     GetParams,
@@ -83,6 +82,7 @@ from swarmbus.messages import (
     VehicleState,
     VehicleStatus,
 )
+from swarmbus.reqrep import BadReply, NoReply, Refused, ask, request
 from swarmbus.scenario import load_scenario
 from swarmbus.session import NetworkConfig, Presence, open_session
 
@@ -137,31 +137,12 @@ class ClockError(SwarmError):
     stopped) or the physics did not answer."""
 
 
-def _query(
-    session: zenoh.Session, key: str, request: Message, timeout_s: float
-) -> tuple[bytes | None, bytes | None]:
-    """One query → (ok payload, error payload); (None, None) when nobody answered in time."""
-    for reply in session.get(key, payload=encode(request), timeout=timeout_s):
-        if reply.ok is not None:
-            return reply.ok.payload.to_bytes(), None
-        if reply.err is not None:
-            return None, reply.err.payload.to_bytes()
-    return None, None
-
-
 def _check(predicate: Callable[[], T]) -> T | None:
     """``predicate()``, or None when it trips over data not there yet (``None.attr``, a key)."""
     try:
         return predicate()
     except (AttributeError, KeyError, TypeError):
         return None
-
-
-def _error_reply(data: bytes) -> ErrorReply:
-    try:
-        return decode(data, ErrorReply)
-    except MessageError:
-        return ErrorReply(field="", reason=data[:200].decode("utf-8", "replace"))
 
 
 class VehicleCommander:
@@ -173,20 +154,29 @@ class VehicleCommander:
         self._key = keys.vehicle_cmd(vehicle_id)
         self.timeout_s = timeout_s
 
-    def send(self, command: Message) -> CommandReply:
-        """Send any ``Command`` message; the accepted reply, or a typed error."""
+    def send(self, command: Message, retry_until: float | None = None) -> CommandReply:
+        """Send any ``Command`` message; the accepted reply, or a typed error.
+
+        ``retry_until`` (a ``time.monotonic()`` deadline): while no autopilot answers (it is
+        still starting), ask again until then instead of raising :class:`CommandTimeout`."""
         name = type(command).__name__
-        ok, err = _query(self._session, self._key, command, self.timeout_s)
-        if ok is None and err is None:
-            raise CommandTimeout(
-                f"{self.vehicle_id}: no reply to {name} within {self.timeout_s} s "
-                f"(is {AUTOPILOT_PREFIX}{self.vehicle_id} running?)"
-            )
-        if err is not None:
-            e = _error_reply(err)
-            raise CommandRejected(self.vehicle_id, name, RejectCode.INVALID, e.reason, e.field)
-        assert ok is not None
-        reply = decode(ok, CommandReply)
+        while True:
+            try:
+                reply = request(self._session, self._key, command, CommandReply, self.timeout_s)
+                break
+            except NoReply as exc:
+                if retry_until is None or time.monotonic() > retry_until:
+                    raise CommandTimeout(
+                        f"{self.vehicle_id}: no reply to {name} within {self.timeout_s} s "
+                        f"(is {AUTOPILOT_PREFIX}{self.vehicle_id} running?)"
+                    ) from exc
+                time.sleep(ROUTE_RETRY_S)
+            except Refused as exc:  # the payload itself was invalid
+                raise CommandRejected(
+                    self.vehicle_id, name, RejectCode.INVALID, exc.reason, exc.field
+                ) from None
+            except BadReply as exc:
+                raise SwarmError(f"{self.vehicle_id}: {name}: {exc}") from None
         if not reply.accepted:
             raise CommandRejected(self.vehicle_id, name, reply.code, reply.reason)
         return reply
@@ -287,14 +277,19 @@ class PlumeClient:
     def info(self) -> PlumeInfo:
         return self._ask(self._keys.plume_info(), PlumeInfoQuery(), PlumeInfo)
 
-    def _ask(self, key: str, request: Message, reply_type: type[M]) -> M:
-        ok, err = _query(self._session, key, request, self.timeout_s)
-        if err is not None:
-            e = _error_reply(err)
-            raise PlumeError(f"plume refused the query: {e.field or '<payload>'}: {e.reason}")
-        if ok is None:
-            raise PlumeError(f"the plume service did not answer within {self.timeout_s} s")
-        return decode(ok, reply_type)
+    def _ask(self, key: str, query: Message, reply_type: type[M]) -> M:
+        try:
+            return request(self._session, key, query, reply_type, self.timeout_s)
+        except Refused as exc:
+            raise PlumeError(
+                f"plume refused the query: {exc.field or '<payload>'}: {exc.reason}"
+            ) from None
+        except NoReply:
+            raise PlumeError(
+                f"the plume service did not answer within {self.timeout_s} s"
+            ) from None
+        except BadReply as exc:
+            raise PlumeError(str(exc)) from None
 
 
 class Subscription:
@@ -560,31 +555,39 @@ class Swarm:
             if timeout_s is not None
             else (STEP_TIMEOUT_S + ticks * STEP_TIMEOUT_PER_TICK_S)
         )
-        request = StepRequest(client=self._clock_name, ticks=ticks)
-        first = time.monotonic()
-        while True:  # a session just opened may not know the route to clock/step yet
-            asked = time.monotonic()
-            ok, err = _query(self.session, self.keys.clock_step(), request, wait_s)
-            waited = time.monotonic() - asked
-            if ok or err or waited >= wait_s or asked - first >= self.command_timeout_s:
-                break
-            time.sleep(ROUTE_RETRY_S)
-        if ok is None and self._last_step is None and self._clock_token is not None:
-            self._clock_token.undeclare()
-            self._clock_token = None
-        if err is not None:
-            e = _error_reply(err)
-            raise ClockError(f"step of world {self.keys.world!r} refused ({e.field}): {e.reason}")
-        if ok is None:
-            when = f"within {wait_s:g} s" if waited >= wait_s else "(nobody serves clock/step)"
-            raise ClockError(
-                f"no answer to a step of {ticks} tick(s) {when}: "
-                f"is the physics of world {self.keys.world!r} running?"
-            )
-        reply = decode(ok, StepReply)
+        reply = self._request_step(StepRequest(client=self._clock_name, ticks=ticks), wait_s)
         self._last_step = reply
         self._await_handled(reply)
         return reply
+
+    def _request_step(self, step: StepRequest, wait_s: float) -> StepReply:
+        """The physics' answer to ``step`` (asked again while nothing serves ``clock/step``: a
+        session just opened may not know the route yet); raises :class:`ClockError`."""
+        first = time.monotonic()
+        while True:
+            asked = time.monotonic()
+            outcome = ask(self.session, self.keys.clock_step(), step, StepReply, wait_s).outcome()
+            waited = time.monotonic() - asked
+            if not isinstance(outcome, NoReply):
+                break
+            if waited >= wait_s or asked - first >= self.command_timeout_s:
+                break
+            time.sleep(ROUTE_RETRY_S)
+        if isinstance(outcome, StepReply):
+            return outcome
+        if self._last_step is None and self._clock_token is not None:
+            self._clock_token.undeclare()
+            self._clock_token = None
+        world = self.keys.world
+        if isinstance(outcome, Refused):
+            raise ClockError(f"step of world {world!r} refused ({outcome.field}): {outcome.reason}")
+        if isinstance(outcome, BadReply):
+            raise ClockError(f"step of world {world!r}: {outcome}")
+        when = f"within {wait_s:g} s" if waited >= wait_s else "(nobody serves clock/step)"
+        raise ClockError(
+            f"no answer to a step of {step.ticks} tick(s) {when}: "
+            f"is the physics of world {world!r} running?"
+        )
 
     def _await_handled(self, reply: StepReply) -> None:
         """Until this tick's states and (live autopilots') statuses went through the caches and

@@ -63,9 +63,10 @@ def best_seconds(run: Callable[[], object], repeats: int) -> float:
 
 def bus_round_trips(counts: tuple[int, ...], queries: int) -> dict[int, tuple[float, float]]:
     """p50/p99 seconds of `plume/concentration` round trips to a real plume node over Zenoh."""
-    from swarmbus.codec import decode, encode
+    from swarmbus.codec import encode
     from swarmbus.keys import Keys
-    from swarmbus.messages import PlumeInfoQuery, PlumeQuery, PlumeValues
+    from swarmbus.messages import PlumeInfo, PlumeInfoQuery, PlumeQuery, PlumeValues
+    from swarmbus.reqrep import NoReply, ask, request
     from swarmbus.session import NetworkConfig, Presence, free_tcp_port, open_session
 
     port = free_tcp_port()
@@ -89,7 +90,10 @@ def bus_round_trips(counts: tuple[int, ...], queries: int) -> dict[int, tuple[fl
             if not presence.wait_for(lambda alive: "plume" in alive, 60.0):
                 raise SystemExit("plume node did not come up within 60 s")
             deadline = time.monotonic() + 30.0
-            while not list(session.get(keys.plume_info(), payload=encode(PlumeInfoQuery()))):
+            info = keys.plume_info()
+            while isinstance(
+                ask(session, info, PlumeInfoQuery(), PlumeInfo, 10.0).outcome(), NoReply
+            ):
                 if time.monotonic() > deadline:
                     raise SystemExit("plume/info never answered")
             for count in counts:
@@ -98,8 +102,7 @@ def bus_round_trips(counts: tuple[int, ...], queries: int) -> dict[int, tuple[fl
                 times = []
                 for _ in range(queries):
                     t0 = time.perf_counter()
-                    (reply,) = list(session.get(keys.plume_concentration(), payload=payload))
-                    decode(reply.ok.payload.to_bytes(), PlumeValues)
+                    request(session, keys.plume_concentration(), payload, PlumeValues, 10.0)
                     times.append(time.perf_counter() - t0)
                 out[count] = (float(np.percentile(times, 50)), float(np.percentile(times, 99)))
             presence.close()

@@ -25,7 +25,6 @@ per process per tick.
 
 from __future__ import annotations
 
-import functools
 import logging
 import os
 import threading
@@ -52,6 +51,7 @@ from swarmbus.messages import (
     VehicleStatus,
 )
 from swarmbus.node import NodeContext, NodeRuntime
+from swarmbus.reqrep import Pending, RequestError, ask, serve
 from swarmbus.session import SINGLE_THREAD_RUNTIME, Presence
 
 log = logging.getLogger(__name__)
@@ -59,6 +59,7 @@ log = logging.getLogger(__name__)
 CLOCK_PERIOD_S = 0.1
 STATUS_PERIOD_S = 0.5
 ROTORS = 4
+PLUME_TIMEOUT_S = 10.0  # a stand-in plume answers at once; this only bounds a lost query
 
 
 class _TickNumber(
@@ -133,6 +134,16 @@ class _BatchTick(
     commands: list[msgspec.Raw]
 
 
+def _answer(asked: tuple[int, Pending[PlumeValues]] | None) -> PlumeSample | None:
+    """The plume's answer to the last query, if it is in (never waits)."""
+    if asked is None or not asked[1].done():
+        return None
+    outcome = asked[1].outcome()
+    if isinstance(outcome, RequestError):
+        return None
+    return PlumeSample(tick=asked[0], values_g_m3=outcome.values_g_m3)
+
+
 def physics_main(ctx: NodeContext) -> int:
     """Stand-in for the physics: the tick loop with no world behind it."""
     sc = ctx.scenario
@@ -155,18 +166,15 @@ def physics_main(ctx: NodeContext) -> int:
             log.error("ceiling-physics: autopilot stand-ins missing: %s", wanted - presence.alive)
             return 1
         rt.ready()
-        answer: list[PlumeSample | None] = [None]
-
-        def on_values(reply: zenoh.Reply, tick: int) -> None:
-            if reply.ok is not None:
-                values = decode(reply.ok.payload.to_bytes(), PlumeValues).values_g_m3
-                answer[0] = PlumeSample(tick=tick, values_g_m3=values)
+        asked: tuple[int, Pending[PlumeValues]] | None = None  # tick, query
 
         tick = 0
         wall0 = clock_wall = time.monotonic()
         while not rt.stop.is_set():
             queried = tick % period == 0
-            sample, answer[0] = answer[0], None
+            sample = _answer(asked)
+            if sample is not None:
+                asked = None
             barrier.next(tick)
             tick_pub.put(
                 encode(
@@ -181,11 +189,8 @@ def physics_main(ctx: NodeContext) -> int:
                 )
             )
             if queried:
-                session.get(
-                    keys.plume_concentration(),
-                    functools.partial(on_values, tick=tick),
-                    payload=query,
-                )
+                key = keys.plume_concentration()
+                asked = (tick, ask(session, key, query, PlumeValues, PLUME_TIMEOUT_S))
             if not barrier.wait(rt.stop):
                 break
             tick += 1
@@ -283,13 +288,10 @@ def autopilot_main(ctx: NodeContext) -> int:
 def plume_main(ctx: NodeContext) -> int:
     """Stand-in for the plume service: N values for every query."""
     keys = Keys(ctx.scenario.world.name)
-    values = encode(PlumeValues(values_g_m3=[0.0] * len(ctx.scenario.vehicles)))
+    values = PlumeValues(values_g_m3=[0.0] * len(ctx.scenario.vehicles))
     with NodeRuntime(ctx, role="plume") as rt:
-
-        def on_query(query: zenoh.Query) -> None:
-            query.reply(keys.plume_concentration(), values)
-
-        q = rt.session.declare_queryable(keys.plume_concentration(), on_query)
+        key = keys.plume_concentration()
+        q = serve(rt.session, key, PlumeQuery, lambda _: values, memo=True)
         rt.ready()
         rt.stop.wait()
         q.undeclare()

@@ -15,13 +15,12 @@ digest. ``clock = "lockstep"`` or ``"realtime"`` flies free-running instead.
 
 from __future__ import annotations
 
-import functools
 import hashlib
 import json
 import logging
 import threading
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -31,19 +30,21 @@ import numpy as np
 import numpy.typing as npt
 import zenoh
 
-from agents import CommandRejected, CommandTimeout, Swarm, SwarmError
+from agents import Swarm, SwarmError
 from agents.swarm import Subscription
 from deploy.busview import BusView, Snapshot, status_line
 from deploy.console import Console
 from deploy.launcher import Launcher, LaunchError, LaunchOptions, missing_roles
 from deploy.scaling import scale_scenario, write_scenario
-from swarmbus.codec import MessageError, decode, encode
+from swarmbus.codec import encode
 from swarmbus.keys import Keys
 from swarmbus.messages import (
+    Arm,
     Command,
-    CommandReply,
     ConcentrationReading,
-    ErrorReply,
+    MissionStart,
+    MissionUpload,
+    VehicleState,
     VehicleStatus,
 )
 from swarmbus.scenario import Scenario
@@ -140,24 +141,27 @@ class VehicleRecord:
 
 
 class Collector:
-    """Every state payload (subscribed before the world starts), and every status and reading
-    as the demo's :class:`~agents.Swarm` client hands them over (see :meth:`attach`)."""
+    """What the demo's :class:`~agents.Swarm` client hands over (see :meth:`attach`): every
+    vehicle state into the digest, every status and reading into the vehicles' records."""
 
-    def __init__(self, session: zenoh.Session, keys: Keys, vehicle_ids: Sequence[str]) -> None:
-        self.keys = keys
+    def __init__(self, vehicle_ids: Sequence[str]) -> None:
         self.digest = StateDigest()
         self._lock = threading.Lock()
         self.vehicles = {vid: VehicleRecord() for vid in vehicle_ids}
-        self._subs: list[Subscription | zenoh.Subscriber[None]] = [
-            session.declare_subscriber(
-                keys.all_vehicle_states(), lambda s: self.digest.add(s.payload.to_bytes())
-            ),
-        ]
+        self._subs: list[Subscription] = []
 
     def attach(self, swarm: Swarm) -> None:
-        """Statuses and readings through ``swarm``'s callbacks: a stepped ``swarm.step`` returns
-        once they are handled, so what the demo decides on is the tick it paused at."""
-        self._subs.append(swarm.subscribe(on_status=self.on_status, on_reading=self.on_reading))
+        """Attached before the world starts, so the digest has every state from tick 0; a
+        stepped ``swarm.step`` returns once the tick's states, statuses and readings went
+        through, so what the demo decides on is the tick it paused at."""
+        self._subs.append(
+            swarm.subscribe(
+                on_state=self.on_state, on_status=self.on_status, on_reading=self.on_reading
+            )
+        )
+
+    def on_state(self, state: VehicleState) -> None:
+        self.digest.add(encode(state))  # the bytes the physics put: one encoding, one struct
 
     def on_status(self, st: VehicleStatus) -> None:
         rec = self.vehicles.get(st.vehicle_id)
@@ -177,51 +181,10 @@ class Collector:
 
     def close(self) -> None:
         for sub in self._subs:
-            if isinstance(sub, Subscription):
-                sub.close()
-            else:
-                sub.undeclare()
+            sub.close()
 
 
 # ---------------------------------------------------------------------------- commands
-def send_command(
-    session: zenoh.Session, keys: Keys, vehicle_id: str, cmd: Command, timeout_s: float = 5.0
-) -> CommandReply | None:
-    """One command; the reply, or None when no autopilot answered (not there yet)."""
-    replies = session.get(keys.vehicle_cmd(vehicle_id), payload=encode(cmd), timeout=timeout_s)
-    return command_reply(vehicle_id, replies)
-
-
-def command_reply(vehicle_id: str, replies: Iterable[zenoh.Reply]) -> CommandReply | None:
-    """The reply among a command query's ``replies``, or None when no autopilot answered."""
-    for reply in replies:
-        if reply.ok is not None:
-            return decode(reply.ok.payload.to_bytes(), CommandReply)
-        if reply.err is not None:
-            try:
-                err = decode(reply.err.payload.to_bytes(), ErrorReply)
-                reason = f"{err.field}: {err.reason}"
-            except MessageError:
-                reason = "error reply"
-            return CommandReply(vehicle_id=vehicle_id, accepted=False, reason=reason)
-    return None
-
-
-def command_until_answered(
-    session: zenoh.Session, keys: Keys, vehicle_id: str, cmd: Command, deadline: float
-) -> None:
-    name = type(cmd).__name__
-    while True:
-        reply = send_command(session, keys, vehicle_id, cmd)
-        if reply is not None:
-            if not reply.accepted:
-                raise DemoError(f"{vehicle_id} refused {name}: {reply.code} {reply.reason}")
-            return
-        if time.monotonic() > deadline:
-            raise DemoError(f"{vehicle_id} did not answer {name} in time")
-        time.sleep(0.2)
-
-
 def wait_for_world(view: BusView, vehicle_ids: Sequence[str], deadline: float) -> None:
     """Until the lockstep runs: a state past the start handshake and a status of every vehicle.
 
@@ -250,19 +213,12 @@ def start_missions(sw: Swarm, scenario: Scenario, deadline: float) -> None:
     answer yet is asked again until ``deadline``)."""
     for v in scenario.vehicles:
         uav = sw.command(v.id)
-        steps: list[Callable[[], None]] = [uav.arm, uav.start_mission]
-        if v.mission:
-            steps.insert(0, functools.partial(uav.upload_mission, v.mission))
-        for step in steps:
-            while True:
-                try:
-                    step()
-                    break
-                except CommandRejected as exc:
-                    raise DemoError(str(exc)) from None
-                except CommandTimeout as exc:
-                    if time.monotonic() > deadline:
-                        raise DemoError(str(exc)) from None
+        upload: list[Command] = [MissionUpload(items=v.mission)] if v.mission else []
+        for command in [*upload, Arm(), MissionStart()]:
+            try:
+                uav.send(command, retry_until=deadline)
+            except SwarmError as exc:
+                raise DemoError(str(exc)) from None
 
 
 # ---------------------------------------------------------------------------- results
@@ -495,82 +451,132 @@ def start_free(view: BusView, sw: Swarm, sc: Scenario, deadline: float) -> Calla
     return advance
 
 
+@dataclass
+class Flight:
+    """What a run saw: the collector's records, the clock's mode, the last snapshot of the bus,
+    and the wall time (from the missions' start) and sim time it took."""
+
+    collector: Collector
+    mode: str
+    snap: Snapshot | None = None
+    wall0: float = field(default_factory=time.monotonic)
+    wall_s: float = 0.0
+    sim0: float | None = None
+
+
 def run_demo(opts: DemoOptions, console: Console) -> int:
     sc, path = prepare(opts)
-    keys = Keys(sc.world.name)
-    ids = [v.id for v in sc.vehicles]
     record = opts.record and not opts.attach and not missing_roles(["recorder"])
-    # What flying needs (no gateway: nobody speaks MAVLink here; the recorder when it exists).
+    console.line(f"plumeswarm demo: {len(sc.vehicles)} vehicle(s), run directory {opts.out}")
+    flight = fly(opts, sc, stack_for(opts, sc, path, record), console)
+    if flight is None:
+        return 1
+    return finish(opts, sc, path, flight, record, console)
+
+
+def stack_for(
+    opts: DemoOptions, sc: Scenario, path: Path, record: bool
+) -> Launcher | AttachedStack:
+    """The stack to fly: our own (what flying needs; no gateway: nobody speaks MAVLink here;
+    the recorder when it is installed), or the attached one."""
+    if opts.attach:
+        return AttachedStack(sc, opts.attach, opts.network)
     roles = DEMO_ROLES + (("recorder",) if record else ())
     launch = LaunchOptions(
         scenario_path=path, headless=True, record=record, run_dir=opts.out, roles=roles
     )
-    launcher: Launcher | AttachedStack = (
-        AttachedStack(sc, opts.attach, opts.network) if opts.attach else Launcher(sc, launch)
-    )
-    collector: Collector | None = None
-    sw: Swarm | None = None
+    return Launcher(sc, launch)
+
+
+def fly(
+    opts: DemoOptions, sc: Scenario, launcher: Launcher | AttachedStack, console: Console
+) -> Flight | None:
+    """Start the stack, fly every mission to its end (or the deadline) through one
+    :class:`~agents.Swarm` client, stop the stack; None when it never reached the bus."""
+    flight = Flight(Collector([v.id for v in sc.vehicles]), mode=sc.time.mode)
+    swarms: list[Swarm] = []
+
+    def on_bus(session: zenoh.Session) -> None:  # before the world starts: states from tick 0
+        sw = Swarm(session, Keys(sc.world.name), COMMAND_TIMEOUT_S, own_session=False)
+        flight.collector.attach(sw)
+        swarms.append(sw)
+
     deadline = time.monotonic() + opts.timeout_s
-    console.line(f"plumeswarm demo: {len(ids)} vehicle(s), run directory {opts.out}")
-
-    def subscribe(session: zenoh.Session) -> None:
-        nonlocal collector, sw
-        collector = Collector(session, keys, ids)
-        sw = Swarm(session, keys, command_timeout_s=COMMAND_TIMEOUT_S, own_session=False)
-        collector.attach(sw)
-
-    wall0 = time.monotonic()
-    sim0: float | None = None
-    snap: Snapshot | None = None
-    mode: str = sc.time.mode
     try:
-        launcher.start(on_bus=subscribe)
-        assert collector is not None and sw is not None and launcher.view is not None
-        view = launcher.view
-        console.line(f"plumeswarm demo: {len(launcher.specs)} processes ready")
-        if opts.attach:
-            mode = opts.clock or clock_mode(view, deadline)
-        next_table = 0.0
-
-        def show() -> None:
-            nonlocal next_table
-            now = time.monotonic()
-            if now >= next_table:
-                assert collector is not None
-                console.block(live_table(view.snapshot(), collector.vehicles, len(ids)))
-                next_table = now + (opts.table_period_s if console.tty else 10.0)
-
-        console.line(f"plumeswarm demo: {mode} clock; starting missions")
-        if mode == "stepped":
-            advance = start_stepped(sw, sc, deadline)
-        else:
-            advance = start_free(view, sw, sc, deadline)
-        wall0 = time.monotonic()
-        snap = view.snapshot()
-        sim0 = snap.clock.sim_time_s if snap.clock else None
-        while not collector.all_done():
-            launcher.supervise_once()
-            if time.monotonic() > deadline:
-                break
-            show()
-            advance()
-        snap = view.snapshot()
+        launcher.start(on_bus=on_bus)
+        fly_missions(opts, sc, launcher, swarms[0], flight, console, deadline)
     except (LaunchError, DemoError, SwarmError) as exc:
         console.line(f"plumeswarm demo: {exc}")
     finally:
-        wall = time.monotonic() - wall0
-        if sw is not None:
+        flight.wall_s = time.monotonic() - flight.wall0
+        for sw in swarms:
             sw.close()
         launcher.stop()
-        if collector is not None:
-            collector.close()
-    if collector is None:
-        return 1
-    if snap is not None:
-        console.block(live_table(snap, collector.vehicles, len(ids)))
-    summary = build_summary(sc, path, collector, snap, wall, sim0, record, opts.out)
-    summary["clock"] = mode
-    summary["deterministic"] = mode == "stepped"
+        flight.collector.close()
+    return flight if swarms else None
+
+
+def fly_missions(
+    opts: DemoOptions,
+    sc: Scenario,
+    launcher: Launcher | AttachedStack,
+    sw: Swarm,
+    flight: Flight,
+    console: Console,
+    deadline: float,
+) -> None:
+    """Start the missions on the world's clock and advance it until every vehicle is done."""
+    view = launcher.view
+    assert view is not None
+    console.line(f"plumeswarm demo: {len(launcher.specs)} processes ready")
+    if opts.attach:
+        flight.mode = opts.clock or clock_mode(view, deadline)
+    console.line(f"plumeswarm demo: {flight.mode} clock; starting missions")
+    if flight.mode == "stepped":
+        advance = start_stepped(sw, sc, deadline)
+    else:
+        advance = start_free(view, sw, sc, deadline)
+    flight.wall0 = time.monotonic()
+    flight.snap = view.snapshot()
+    flight.sim0 = flight.snap.clock.sim_time_s if flight.snap.clock else None
+    show = table_shower(opts, console, view, flight.collector)
+    while not flight.collector.all_done():
+        launcher.supervise_once()
+        if time.monotonic() > deadline:
+            break
+        show()
+        advance()
+    flight.snap = view.snapshot()
+
+
+def table_shower(
+    opts: DemoOptions, console: Console, view: BusView, collector: Collector
+) -> Callable[[], None]:
+    """Shows the live table every ``table_period_s`` (every 10 s when not on a terminal)."""
+    period_s = opts.table_period_s if console.tty else 10.0
+    next_at = [0.0]
+
+    def show() -> None:
+        now = time.monotonic()
+        if now >= next_at[0]:
+            console.block(live_table(view.snapshot(), collector.vehicles, len(collector.vehicles)))
+            next_at[0] = now + period_s
+
+    return show
+
+
+def finish(
+    opts: DemoOptions, sc: Scenario, path: Path, flight: Flight, record: bool, console: Console
+) -> int:
+    """Write ``summary.json``, print the accuracy table and the verdict; the exit code."""
+    collector = flight.collector
+    if flight.snap is not None:
+        console.block(live_table(flight.snap, collector.vehicles, len(sc.vehicles)))
+    summary = build_summary(
+        sc, path, collector, flight.snap, flight.wall_s, flight.sim0, record, opts.out
+    )
+    summary["clock"] = flight.mode
+    summary["deterministic"] = flight.mode == "stepped"
     (opts.out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     console.line("")
     console.line(accuracy_table(summary["vehicles"]))
@@ -584,8 +590,8 @@ def run_demo(opts: DemoOptions, console: Console) -> int:
     )
     console.line(
         "plumeswarm demo: deterministic: stepped clock (the same run gives the same state digest)"
-        if mode == "stepped"
-        else f"plumeswarm demo: not deterministic: {mode} clock (commands land on whichever "
+        if flight.mode == "stepped"
+        else f"plumeswarm demo: not deterministic: {flight.mode} clock (commands land on whichever "
         "tick is current)"
     )
     failed = [

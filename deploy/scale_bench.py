@@ -36,7 +36,7 @@ import msgspec
 import psutil
 import zenoh
 
-from deploy.demo import DemoError, command_until_answered
+from agents import SwarmError, VehicleCommander
 from deploy.launcher import Launcher, LaunchError, LaunchOptions
 from deploy.scaling import scale_scenario, write_scenario
 from deploy.up import stop_on_signals
@@ -45,6 +45,7 @@ from swarmbus.keys import KeyNameError, Keys
 from swarmbus.messages import (
     Arm,
     Clock,
+    Command,
     MissionCommand,
     MissionItem,
     MissionStart,
@@ -66,6 +67,7 @@ LAPS = 200
 SAMPLE_PERIOD_S = 0.5
 WARMUP_S = 1.0  # wall time between reaching the state and the window (start-up transients)
 AIRBORNE_M = 1.0
+COMMAND_TIMEOUT_S = 5.0  # one command's answer
 
 
 class ScaleError(RuntimeError):
@@ -248,19 +250,15 @@ class RoleUsage:
 # ---------------------------------------------------------------------------- one case
 def drive(launcher: Launcher, sc: Scenario, state: str, deadline: float) -> None:
     keys = Keys(sc.world.name)
-    session = launcher.session
     for k, v in enumerate(sc.vehicles):
+        uav = VehicleCommander(launcher.session, keys, v.id, COMMAND_TIMEOUT_S)
+        commands: list[Command] = []
         if state == "hovering":
-            command_until_answered(session, keys, v.id, Arm(), deadline)
-            command_until_answered(
-                session, keys, v.id, Takeoff(altitude_m=flight_altitude(sc, k)), deadline
-            )
+            commands = [Arm(), Takeoff(altitude_m=flight_altitude(sc, k))]
         elif state == "flying":
-            command_until_answered(
-                session, keys, v.id, MissionUpload(items=loop_mission(sc, k)), deadline
-            )
-            command_until_answered(session, keys, v.id, Arm(), deadline)
-            command_until_answered(session, keys, v.id, MissionStart(), deadline)
+            commands = [MissionUpload(items=loop_mission(sc, k)), Arm(), MissionStart()]
+        for command in commands:
+            uav.send(command, retry_until=deadline)
 
 
 def run_case(
@@ -448,7 +446,7 @@ def _one(opts: ScaleOptions, n: int, state: str, stop: threading.Event, bar: Any
     bar.set_postfix_str(f"{n} {state}")
     try:
         row = run_case(opts, n, state, stop)
-    except (LaunchError, ScaleError, DemoError) as exc:
+    except (LaunchError, ScaleError, SwarmError) as exc:
         row = {"vehicles": n, "state": state, "error": str(exc)}
     if opts.baseline and "error" not in row:
         bar.set_postfix_str(f"{n} {state} ceiling")
@@ -476,7 +474,7 @@ def _ceiling_ticks_per_s(opts: ScaleOptions, n: int, stop: threading.Event) -> d
     """The ceiling's row for ``n`` vehicles, or why it could not be measured."""
     try:
         return run_case(opts, n, "grounded", stop, ceiling=True)
-    except (LaunchError, ScaleError, DemoError) as exc:
+    except (LaunchError, ScaleError, SwarmError) as exc:
         return str(exc)
 
 

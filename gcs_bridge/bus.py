@@ -26,12 +26,11 @@ from collections.abc import Callable
 import msgspec
 import zenoh
 
-from swarmbus.codec import MessageError, decode, encode
+from swarmbus.codec import MessageError, decode
 from swarmbus.keys import KeyNameError, Keys
 from swarmbus.messages import (
     Command,
     CommandReply,
-    ErrorReply,
     GcsHeartbeat,
     RejectCode,
     Setpoint,
@@ -40,6 +39,7 @@ from swarmbus.messages import (
     Tick,
     VehicleState,
 )
+from swarmbus.reqrep import BadReply, RequestError, ask, command_reply
 
 log = logging.getLogger(__name__)
 
@@ -301,43 +301,13 @@ class Commander:
                 self._busy = False
                 return
             command, done = self._queue.popleft()
-        replies: list[CommandReply] = []
+        name = type(command).__name__
 
-        def on_reply(reply: zenoh.Reply) -> None:
-            if replies:
-                return
-            try:
-                if reply.ok is not None:
-                    replies.append(decode(reply.ok.payload.to_bytes(), CommandReply))
-                elif reply.err is not None:
-                    data = reply.err.payload.to_bytes()
-                    try:
-                        err = decode(data, ErrorReply)
-                    except MessageError:  # Zenoh's own errors, e.g. "Timeout"
-                        text = data[:200].decode("utf-8", "replace")
-                        replies.append(self._failed(f"no reply from the autopilot ({text})"))
-                        return
-                    replies.append(
-                        self._failed(f"{err.field}: {err.reason}", code=RejectCode.INVALID)
-                    )
-            except MessageError as exc:
-                log.warning("%s: bad reply to %s: %s", self._key, type(command).__name__, exc)
-                replies.append(self._failed(f"bad reply: {exc}"))
-
-        def on_done() -> None:
-            result = replies[0] if replies else self._failed("no reply from the autopilot")
+        def on_done(outcome: CommandReply | RequestError) -> None:
+            if isinstance(outcome, BadReply):
+                log.warning("%s: bad reply to %s: %s", self._key, name, outcome)
+            result = command_reply(self._vehicle_id, outcome)
             self._inbox.post(lambda: done(result))
             self._start_next()
 
-        try:
-            self._session.get(
-                self._key,
-                zenoh.handlers.Callback(on_reply, on_done),
-                payload=encode(command),
-                timeout=self._timeout_s,
-            )
-        except zenoh.ZError as exc:
-            log.warning("%s: query failed: %s", self._key, exc)
-            reply = self._failed(f"query failed: {exc}")
-            self._inbox.post(lambda: done(reply))
-            self._start_next()
+        ask(self._session, self._key, command, CommandReply, self._timeout_s, on_done)

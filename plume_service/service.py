@@ -17,8 +17,6 @@ import logging
 import math
 import queue
 import threading
-from collections.abc import Callable
-from typing import TypeVar
 
 import numpy as np
 import zenoh
@@ -31,9 +29,9 @@ from plume_service.mesh import isosurface
 from plume_service.puff import PuffPlume
 from plume_service.timestepped import TimeSteppedField
 from swarmbus.codec import MessageError, decode, encode
+from swarmbus.keys import Keys
 from swarmbus.messages import (
     Clock,
-    ErrorReply,
     PlumeInfo,
     PlumeInfoQuery,
     PlumeMesh,
@@ -44,6 +42,7 @@ from swarmbus.messages import (
     PlumeValues,
 )
 from swarmbus.node import NodeContext, NodeRuntime
+from swarmbus.reqrep import Incoming, serve, serve_later
 from swarmbus.scenario import Scenario
 
 log = logging.getLogger(__name__)
@@ -247,41 +246,39 @@ class StatePublisher:
         )
 
 
-Q = TypeVar("Q")
-R = TypeVar("R")
+def serve_queries(
+    session: zenoh.Session, keys: Keys, service: PlumeService, stop: threading.Event
+) -> tuple[list[zenoh.Queryable[None]], threading.Thread]:
+    """The three queryables, and the thread that computes meshes until ``stop``.
 
+    Meshes take seconds: they queue to their own thread so point queries never wait. (A
+    blocking recv() on a zenoh channel can't be interrupted by undeclare; a Python queue with a
+    timeout can.) Point queries are memoised: in lockstep every autopilot asks for the same
+    tick's positions, and one computation serves them all."""
+    mesh_queue: queue.Queue[Incoming[PlumeMeshQuery]] = queue.Queue(maxsize=8)
 
-def _handler(
-    query_type: type[Q], serve: Callable[[Q], R], what: str, memo: bool = False
-) -> Callable[[zenoh.Query], None]:
-    """``memo``: answer a payload equal to the previous one with the previous reply (in lockstep
-    every autopilot asks for the same tick's positions: one computation serves them all)."""
-    last: list[tuple[bytes, bytes]] = []  # at most one (payload, reply); replaced atomically
-
-    def handle(query: zenoh.Query) -> None:
-        payload = query.payload
-        data = payload.to_bytes() if payload is not None else b""
-        if memo and last and last[0][0] == data:
-            query.reply(query.key_expr, last[0][1])
-            return
+    def enqueue_mesh(incoming: Incoming[PlumeMeshQuery]) -> None:
         try:
-            request = decode(data, query_type)
-        except MessageError as exc:
-            log.warning("plume %s: rejected query: %s", what, exc)
-            query.reply_err(encode(ErrorReply(field=exc.field, reason=exc.reason[:1000])))
-            return
-        try:
-            reply = serve(request)
-        except ValueError as exc:
-            log.warning("plume %s: cannot serve: %s", what, exc)
-            query.reply_err(encode(ErrorReply(field="", reason=str(exc)[:1000])))
-            return
-        out = encode(reply)
-        if memo:
-            last[:] = [(data, out)]
-        query.reply(query.key_expr, out)
+            mesh_queue.put_nowait(incoming)
+        except queue.Full:
+            incoming.refuse("", "mesh queue full, retry later")
 
-    return handle
+    def mesh_worker() -> None:
+        while not stop.is_set():
+            try:
+                incoming = mesh_queue.get(timeout=0.2)
+            except queue.Empty:
+                continue
+            incoming.answer(service.mesh)
+
+    queryables = [
+        serve(session, keys.plume_concentration(), PlumeQuery, service.concentration, memo=True),
+        serve(session, keys.plume_info(), PlumeInfoQuery, service.info),
+        serve_later(session, keys.plume_mesh(), PlumeMeshQuery, enqueue_mesh),
+    ]
+    worker = threading.Thread(target=mesh_worker, name="plume-mesh", daemon=True)
+    worker.start()
+    return queryables, worker
 
 
 def main(ctx: NodeContext) -> int:
@@ -290,39 +287,7 @@ def main(ctx: NodeContext) -> int:
     states = StatePublisher(service.field, ctx.scenario.plume.state_period_s)
     with NodeRuntime(ctx, role="plume") as rt:
         keys = rt.keys
-        queryables = [
-            rt.session.declare_queryable(
-                keys.plume_concentration(),
-                _handler(PlumeQuery, service.concentration, "concentration", memo=True),
-            ),
-            rt.session.declare_queryable(
-                keys.plume_info(), _handler(PlumeInfoQuery, service.info, "info")
-            ),
-        ]
-        # Meshes take seconds: queue them to their own thread so point queries never wait.
-        # (A blocking recv() on a zenoh channel can't be interrupted by undeclare; a Python
-        # queue with a timeout can.)
-        mesh_queue: queue.Queue[zenoh.Query] = queue.Queue(maxsize=8)
-        handle_mesh = _handler(PlumeMeshQuery, service.mesh, "mesh")
-
-        def enqueue_mesh(query: zenoh.Query) -> None:
-            try:
-                mesh_queue.put_nowait(query)
-            except queue.Full:
-                query.reply_err(encode(ErrorReply(field="", reason="mesh queue full, retry later")))
-
-        def mesh_worker() -> None:
-            while not rt.stop.is_set():
-                try:
-                    query = mesh_queue.get(timeout=0.2)
-                except queue.Empty:
-                    continue
-                handle_mesh(query)
-                del query  # dropping the query finalises the reply
-
-        queryables.append(rt.session.declare_queryable(keys.plume_mesh(), enqueue_mesh))
-        worker = threading.Thread(target=mesh_worker, name="plume-mesh", daemon=True)
-        worker.start()
+        queryables, worker = serve_queries(rt.session, keys, service, rt.stop)
         state_thread = None
         subscriber = None
         if states.active:

@@ -60,7 +60,6 @@ from swarmbus.messages import (
     ActuatorBatch,
     ActuatorCommand,
     Clock,
-    ErrorReply,
     PlumeQuery,
     PlumeSample,
     PlumeValues,
@@ -73,6 +72,7 @@ from swarmbus.messages import (
     VehicleState,
 )
 from swarmbus.node import NodeContext, NodeRuntime
+from swarmbus.reqrep import Incoming, Pending, RequestError, ask, serve_later
 from swarmbus.session import Presence
 
 log = logging.getLogger(__name__)
@@ -216,11 +216,13 @@ class PhysicsNode:
         self._sensor_period = self.scenario.sensor.resolved().period_ticks
         self._plume_timeout_s = 0.4 * self.scenario.time.participant_timeout_s
         self._plume_nodes: set[str] = set()
-        self._plume_pending: tuple[int, int, Any] | None = None  # tick, points, replies
+        self._plume_pending: tuple[int, int, Pending[PlumeValues]] | None = None  # tick, points
         # The stepped clock (served in every mode: the others answer with an error).
         self._stepped = options.mode == SpeedMode.STEPPED
-        self.clock_gate: SteppedClock[zenoh.Query] = SteppedClock()
-        self._step_queryable = session.declare_queryable(self.keys.clock_step(), self._on_step)
+        self.clock_gate: SteppedClock[Incoming[StepRequest]] = SteppedClock()
+        self._step_queryable = serve_later(
+            session, self.keys.clock_step(), StepRequest, self._on_step
+        )
         self._plume_asked: tuple[int, bytes] | None = None  # the pending query: tick, payload
         self._resume_query: tuple[int, bytes] | None = None  # a checkpoint's, to ask again
         # Restarts (lockstep): hold the tick for an autopilot the launcher is restarting.
@@ -501,7 +503,7 @@ class PhysicsNode:
         with self._cond:
             abandoned = self.clock_gate.abandon()
         if abandoned is not None:
-            _refuse(abandoned, "ticks", f"the world stopped at tick {self.tick}")
+            abandoned.refuse("ticks", f"the world stopped at tick {self.tick}")
         wall = time.monotonic() - self._wall_start
         log.info(
             "physics stopped at tick %d, sim %.3f s after %.3f s wall (%.0f ticks/s)",
@@ -550,16 +552,10 @@ class PhysicsNode:
             return barrier.commands()  # a new dict of the decoded (never mutated) lists
 
     # ------------------------------------------------------------------ stepped clock
-    def _on_step(self, query: zenoh.Query) -> None:
-        payload = query.payload
-        try:
-            request = decode(payload.to_bytes() if payload is not None else b"", StepRequest)
-        except MessageError as exc:
-            _refuse(query, exc.field, exc.reason)
-            return
+    def _on_step(self, incoming: Incoming[StepRequest]) -> None:
+        request = incoming.request
         if not self._stepped:
-            _refuse(
-                query,
+            incoming.refuse(
                 "mode",
                 f"world {self.keys.world!r} runs in {self.options.mode} mode, not stepped "
                 '(time.mode = "stepped" in the scenario, or plumeswarm up --stepped)',
@@ -567,14 +563,14 @@ class PhysicsNode:
             return
         with self._cond:
             try:
-                target = self.clock_gate.request(request.client, request.ticks, self.tick, query)
+                target = self.clock_gate.request(request.client, request.ticks, self.tick, incoming)
             except StepRefused as exc:
                 refusal: StepRefused | None = exc
             else:
                 refusal = None
                 self._cond.notify_all()
         if refusal is not None:
-            _refuse(query, refusal.field, refusal.reason)
+            incoming.refuse(refusal.field, refusal.reason)
         else:
             log.debug("%s: step to tick %d", request.client, target)
 
@@ -585,10 +581,7 @@ class PhysicsNode:
             done = self.clock_gate.reached(self.tick)
         if done is not None:
             self._publish_clock(self.world.sim_time_s)  # where it pauses (health: as due)
-            done.reply(
-                done.key_expr, encode(StepReply(tick=self.tick, sim_time_s=self.world.sim_time_s))
-            )
-            done.drop()
+            done.reply(StepReply(tick=self.tick, sim_time_s=self.world.sim_time_s))
         while not self.rt.stop.is_set():
             with self._cond:
                 if self.clock_gate.may_advance(self.tick):
@@ -748,10 +741,8 @@ class PhysicsNode:
             points_enu_m=[s.position_enu_m for s in states], sim_time_s=self.world.sim_time_s
         )
         payload = encode(query)
-        replies = self.rt.session.get(
-            self._plume_key, payload=payload, timeout=self._plume_timeout_s
-        )
-        self._plume_pending = (self.tick, len(states), replies)
+        pending = ask(self.rt.session, self._plume_key, payload, PlumeValues, self._plume_timeout_s)
+        self._plume_pending = (self.tick, len(states), pending)
         self._plume_asked = (self.tick, payload)
 
     def _ask_again(self) -> None:
@@ -766,10 +757,8 @@ class PhysicsNode:
         except MessageError as exc:
             log.warning("not asking the checkpoint's plume query again: %s", exc)
             return
-        replies = self.rt.session.get(
-            self._plume_key, payload=payload, timeout=self._plume_timeout_s
-        )
-        self._plume_pending = (tick, count, replies)
+        pending = ask(self.rt.session, self._plume_key, payload, PlumeValues, self._plume_timeout_s)
+        self._plume_pending = (tick, count, pending)
         self._plume_asked = (tick, payload)
 
     def _plume_answer(self) -> PlumeSample | None:
@@ -777,40 +766,31 @@ class PhysicsNode:
         pending, self._plume_pending = self._plume_pending, None
         if pending is None:
             return None
-        tick, count, replies = pending
-        values, replied = self._values(replies, count)
+        tick, count, asking = pending
+        values, replied = self._values(asking, count)
         asked = self._plume_asked
         silent = not replied and asked is not None and asked[0] == tick
         if silent and self._plume_restarted():
             assert asked is not None
             # the plume died with this query: the clock waited for its restart; ask again
             log.warning("tick %d: asking the restarted plume service again", self.tick)
-            again = self.rt.session.get(
-                self._plume_key, payload=asked[1], timeout=self._plume_timeout_s
+            again = ask(
+                self.rt.session, self._plume_key, asked[1], PlumeValues, self._plume_timeout_s
             )
             values, _ = self._values(again, count)
         return PlumeSample(tick=tick, values_g_m3=values)
 
-    def _values(self, replies: Any, count: int) -> tuple[list[float] | None, bool]:
-        """The values of the first reply (None if unusable) and whether there was a reply."""
-        values: list[float] | None = None
-        replied = False
-        try:
-            for reply in replies:
-                replied = True
-                if reply.ok is None:
-                    err = reply.err
-                    log.warning("plume query refused: %s", err.payload.to_bytes() if err else "")
-                    break
-                got = decode(reply.ok.payload.to_bytes(), PlumeValues).values_g_m3
-                if len(got) == count:
-                    values = got
-                else:
-                    log.warning("plume answered %d values for %d points", len(got), count)
-                break
-        except (MessageError, zenoh.ZError) as exc:
-            log.warning("plume reply unusable: %s", exc)
-        return values, replied
+    def _values(self, pending: Pending[PlumeValues], count: int) -> tuple[list[float] | None, bool]:
+        """The values of the answer (None if unusable) and whether anything answered."""
+        outcome = pending.outcome()
+        if isinstance(outcome, RequestError):
+            if pending.answered:
+                log.warning("plume query: %s", outcome)
+            return None, pending.answered
+        if len(outcome.values_g_m3) != count:
+            log.warning("plume answered %d values for %d points", len(outcome.values_g_m3), count)
+            return None, True
+        return outcome.values_g_m3, True
 
     def _pace(self, sim_time_s: float) -> None:
         """Realtime mode: hold tick ``k`` until the wall clock reaches its sim time / factor."""
@@ -858,11 +838,6 @@ class PhysicsNode:
             if self._resume_note:
                 detail += f"; {self._resume_note}"
             self.rt.publish_health(sim_time_s=sim_time_s, detail=detail)
-
-
-def _refuse(query: zenoh.Query, field: str, reason: str) -> None:
-    query.reply_err(encode(ErrorReply(field=field, reason=reason[:1000])))
-    query.drop()
 
 
 class _StatePublisher:

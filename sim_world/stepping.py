@@ -9,7 +9,7 @@ not applied yet; a grant of n ticks runs it to tick k + n and pauses it there ag
 One client holds the clock: the first one to ask, until its liveliness token goes away. A
 request from another client, or a second request while one is running, is refused with a reason.
 The physics node feeds this from Zenoh callbacks under its own lock; ``Q`` is whatever the caller
-answers the request through (a ``zenoh.Query`` there, anything in tests).
+answers the request through (a ``swarmbus.reqrep.Incoming`` there, anything in tests).
 """
 
 from __future__ import annotations

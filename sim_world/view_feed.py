@@ -14,9 +14,9 @@ from collections.abc import Sequence
 import numpy as np
 import zenoh
 
-from swarmbus.codec import MessageError, decode, encode
 from swarmbus.keys import KeyNameError, Keys
-from swarmbus.messages import ErrorReply, PlumeMesh, PlumeMeshQuery
+from swarmbus.messages import PlumeMesh, PlumeMeshQuery
+from swarmbus.reqrep import NoReply, RequestError, ask
 from swarmbus.scenario import Scenario
 
 log = logging.getLogger(__name__)
@@ -123,22 +123,13 @@ def fetch_mesh(
     session: zenoh.Session, keys: Keys, query: PlumeMeshQuery, timeout_s: float = 10.0
 ) -> PlumeMesh | None:
     """One ``plume/mesh`` query; None when nobody answered or it failed (logged)."""
-    for reply in session.get(keys.plume_mesh(), payload=encode(query), timeout=timeout_s):
-        if reply.ok is not None:
-            try:
-                return decode(reply.ok.payload.to_bytes(), PlumeMesh)
-            except MessageError as exc:
-                log.warning("bad plume mesh: %s", exc)
-                return None
-        if reply.err is None:
-            return None
-        try:
-            err = decode(reply.err.payload.to_bytes(), ErrorReply)
-            log.warning("plume mesh refused: %s: %s", err.field, err.reason)
-        except MessageError:
-            log.warning("plume mesh query failed")
+    outcome = ask(session, keys.plume_mesh(), query, PlumeMesh, timeout_s).outcome()
+    if isinstance(outcome, NoReply):  # not there yet: asked again
         return None
-    return None
+    if isinstance(outcome, RequestError):
+        log.warning("plume mesh: %s", outcome)
+        return None
+    return outcome
 
 
 class MeshFetcher:
@@ -160,11 +151,7 @@ class MeshFetcher:
         pending = dict(enumerate(queries))
         while pending and not self._stop.is_set():
             for i, q in list(pending.items()):
-                try:
-                    mesh = fetch_mesh(session, keys, q)
-                except zenoh.ZError as exc:
-                    log.warning("plume mesh query: %s", exc)
-                    return
+                mesh = fetch_mesh(session, keys, q)
                 if mesh is not None:
                     with self._lock:
                         self.results[i] = mesh

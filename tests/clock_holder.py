@@ -16,7 +16,8 @@ from collections.abc import Callable, Sequence
 
 import zenoh
 
-from deploy.demo import StateDigest, send_command
+from agents import SwarmError, VehicleCommander
+from deploy.demo import StateDigest
 from swarmbus.codec import MessageError, decode, encode
 from swarmbus.keys import Keys
 from swarmbus.messages import ActuatorBatch, ActuatorCommand, Command, SimTick, VehicleState
@@ -132,8 +133,9 @@ class ClockHolder:
         for k in range(last_tick + 1):
             self.wait_answered(k)
             for vid, command in at_boundary(k):
-                reply = send_command(self.session, self.keys, vid, command)
-                if reply is None or not reply.accepted:
-                    raise ClockError(f"tick {k}: {vid} did not accept {command}: {reply}")
+                try:
+                    VehicleCommander(self.session, self.keys, vid, 5.0).send(command)
+                except SwarmError as exc:
+                    raise ClockError(f"tick {k}: {vid} did not accept {command}: {exc}") from None
             if k < last_tick:
                 self.release(k)

@@ -19,8 +19,8 @@ import msgspec
 import pytest
 import zenoh
 
+from agents import VehicleCommander
 from deploy.busview import BusView
-from deploy.demo import command_until_answered
 from deploy.recording.reader import Recording, segment_end
 from deploy.recording.schema import SegmentGap
 from deploy.scale_bench import loop_mission
@@ -113,9 +113,9 @@ def stack(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Stack]:
         deadline = time.monotonic() + 120.0
         for k, vid in enumerate(VEHICLES):
             upload = MissionUpload(items=loop_mission(sc, k))
-            command_until_answered(session, keys, vid, upload, deadline)
-            command_until_answered(session, keys, vid, Arm(), deadline)
-            command_until_answered(session, keys, vid, MissionStart(), deadline)
+            uav = VehicleCommander(session, keys, vid, 5.0)
+            for command in (upload, Arm(), MissionStart()):
+                uav.send(command, retry_until=deadline)
 
         def flying() -> bool:
             snap = st.view.snapshot().vehicles

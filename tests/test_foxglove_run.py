@@ -22,7 +22,7 @@ import pytest
 from mcap.reader import make_reader
 from websockets.sync.client import connect
 
-from deploy.demo import command_until_answered
+from agents import VehicleCommander
 from deploy.foxglove.layout import layout_json
 from deploy.launcher import LaunchOptions, plan
 from deploy.recording.reader import Recording
@@ -128,7 +128,9 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Run]:
                 deadline = time.monotonic() + 60.0
                 for v in sc.vehicles:
                     for cmd in (MissionUpload(items=v.mission), Arm(), MissionStart()):
-                        command_until_answered(session, keys_for(), v.id, cmd, deadline)
+                        VehicleCommander(session, keys_for(), v.id, 5.0).send(
+                            cmd, retry_until=deadline
+                        )
 
             live = watch_live(port, ids, fly)
     yield Run(live=live, recording=up.run / "recording.mcap")

@@ -16,8 +16,8 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from agents import Swarm
-from deploy.demo import StateDigest, send_command
+from agents import CommandRejected, CommandTimeout, Swarm, VehicleCommander
+from deploy.demo import StateDigest
 from deploy.fused import FusedRunner
 from swarmbus.codec import decode, encode
 from swarmbus.keys import Keys
@@ -148,10 +148,14 @@ def stepped_stream(
 
 
 def _accepted(session: zenoh.Session, keys: Keys, vid: str, command: Command) -> object:
-    reply = send_command(session, keys, vid, command)
-    if reply is not None and not reply.accepted and "no vehicle state" not in reply.reason:
-        raise AssertionError(f"{vid} refused {command}: {reply.reason}")
-    return reply if reply is not None and reply.accepted else None
+    try:
+        return VehicleCommander(session, keys, vid, 5.0).send(command)
+    except CommandTimeout:
+        return None
+    except CommandRejected as exc:
+        if "no vehicle state" in exc.reason:
+            return None
+        raise AssertionError(f"{vid} refused {command}: {exc.reason}") from None
 
 
 def stepped_scenario(tmp_path: Path, noisy_casting: bool = False) -> Path:

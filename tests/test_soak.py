@@ -22,7 +22,7 @@ import psutil
 import pytest
 import zenoh
 
-from deploy.demo import command_until_answered
+from agents import VehicleCommander
 from deploy.scale_bench import loop_mission
 from deploy.scaling import scale_scenario, write_scenario
 from swarmbus.codec import MessageError, decode
@@ -143,9 +143,9 @@ def test_soak_32_vehicles_ten_sim_minutes(tmp_path: Path) -> None:
         deadline = time.monotonic() + 300.0
         for k, vid in enumerate(ids):
             upload = MissionUpload(items=loop_mission(sc, k))
-            command_until_answered(session, keys, vid, upload, deadline)
-            command_until_answered(session, keys, vid, Arm(), deadline)
-            command_until_answered(session, keys, vid, MissionStart(), deadline)
+            uav = VehicleCommander(session, keys, vid, 5.0)
+            for command in (upload, Arm(), MissionStart()):
+                uav.send(command, retry_until=deadline)
         pids = up.pids()
         samples: list[tuple[float, dict[str, int]]] = []
         ready_wall = time.monotonic()

@@ -23,17 +23,16 @@ import threading
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Protocol
 
 import msgspec
 import zenoh
 
 from agents import ClockError, Swarm
-from deploy.demo import command_reply
 from deploy.fused import FusedRunner
 from deploy.launcher import Launcher, LaunchOptions
 from deploy.scaling import write_scenario
-from swarmbus.codec import MessageError, decode, encode
+from swarmbus.codec import MessageError, decode
 from swarmbus.keys import Keys
 from swarmbus.messages import (
     Command,
@@ -42,6 +41,7 @@ from swarmbus.messages import (
     SimTick,
     VehicleState,
 )
+from swarmbus.reqrep import ask, command_reply
 from swarmbus.scenario import Scenario
 from swarmbus.session import free_tcp_port
 
@@ -296,16 +296,11 @@ class BusBackend:
         if self._swarm is None:
             raise BackendError("the environment has no world before reset()")
         session = self._swarm.session
-        pending: list[tuple[str, Any]] = [
-            (
-                vid,
-                session.get(
-                    self._keys.vehicle_cmd(vid), payload=encode(cmd), timeout=COMMAND_TIMEOUT_S
-                ),
-            )
+        pending = [
+            (vid, ask(session, self._keys.vehicle_cmd(vid), cmd, CommandReply, COMMAND_TIMEOUT_S))
             for vid, cmd in commands
         ]
-        return [_reply_of(vid, replies) for vid, replies in pending]
+        return [command_reply(vid, p.outcome()) for vid, p in pending]
 
 
 def _has_clock(sw: Swarm) -> bool:
@@ -314,11 +309,3 @@ def _has_clock(sw: Swarm) -> bool:
     except ClockError:
         return False
     return True
-
-
-def _reply_of(vehicle_id: str, replies: Any) -> CommandReply:
-    reply = command_reply(vehicle_id, replies)
-    if reply is None:
-        reason = f"no autopilot answered within {COMMAND_TIMEOUT_S:.0f} s"
-        return CommandReply(vehicle_id=vehicle_id, accepted=False, reason=reason)
-    return reply

@@ -36,10 +36,11 @@ from deploy.recording.reader import RecordingError, SegmentEnd, segment_end
 from deploy.recording.segments import next_segment
 from deploy.recording.sink import DEFAULT_CHUNK_BYTES, DEFAULT_CHUNK_INTERVAL_S, McapSink
 from sim_world.view_feed import fetch_mesh, isosurface_queries
-from swarmbus.codec import MessageError, decode, encode
+from swarmbus.codec import encode
 from swarmbus.keys import Keys
 from swarmbus.messages import NodeHealth, PlumeInfo, PlumeInfoQuery, SimTick, VehicleState
 from swarmbus.node import NodeContext, NodeRuntime, package_version
+from swarmbus.reqrep import RequestError, request
 from swarmbus.scenario import Scenario
 
 log = logging.getLogger(__name__)
@@ -379,19 +380,16 @@ class Recorder:
         key = self._keys.plume_info()
         while not self._stopping.wait(0.0):
             try:
-                for reply in self._session.get(key, payload=encode(PlumeInfoQuery()), timeout=1.0):
-                    if reply.ok is None:
-                        continue
-                    payload = reply.ok.payload.to_bytes()
-                    decode(payload, PlumeInfo)
-                    self._queue.put((key, payload, time.time_ns(), None, True))
-                    log.info("recorded the plume's info")
-                    if self._foxglove is not None and self._scenario is not None:
-                        self._query_plume_meshes(self._scenario)
-                    return
-            except (zenoh.ZError, MessageError) as exc:
+                info = request(self._session, key, PlumeInfoQuery(), PlumeInfo, 1.0)
+            except RequestError as exc:
                 log.info("plume info not recorded yet: %s", exc)
-            self._stopping.wait(2.0)
+                self._stopping.wait(2.0)
+                continue
+            self._queue.put((key, encode(info), time.time_ns(), None, True))
+            log.info("recorded the plume's info")
+            if self._foxglove is not None and self._scenario is not None:
+                self._query_plume_meshes(self._scenario)
+            return
 
     def _query_plume_meshes(self, scenario: Scenario) -> None:
         # The isosurfaces the viewer draws (same levels and box), for the Foxglove scene; the
@@ -400,11 +398,7 @@ class Recorder:
         pending = isosurface_queries(scenario)
         while pending and not self._stopping.is_set():
             for query in list(pending):
-                try:
-                    mesh = fetch_mesh(self._session, self._keys, query)
-                except zenoh.ZError as exc:
-                    log.info("plume mesh not recorded: %s", exc)
-                    return
+                mesh = fetch_mesh(self._session, self._keys, query)
                 if mesh is not None:
                     self._queue.put((key, encode(mesh), time.time_ns(), None, True))
                     pending.remove(query)
