@@ -38,9 +38,9 @@ import threading
 import time
 from collections.abc import Callable
 from contextlib import suppress
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import msgspec
 import numpy as np
@@ -69,6 +69,7 @@ from swarmbus.messages import (
     VehicleStatus,
 )
 from swarmbus.node import NodeContext, NodeRuntime
+from swarmbus.options import OptionError, RoleOptions, parse_options
 from swarmbus.scenario import Scenario
 from swarmbus.session import SINGLE_THREAD_RUNTIME
 from swarmbus.wind import WindModel, wind_from_scenario
@@ -78,34 +79,19 @@ log = logging.getLogger(__name__)
 IDLE_STATUS_PERIOD_S = 1.0  # wall clock: status while no ticks arrive (physics not running)
 
 
-@dataclass(frozen=True)
-class NodeOptions:
+NonNegative = Annotated[float, msgspec.Meta(ge=0.0, le=1e9)]
+
+
+class NodeOptions(RoleOptions, frozen=True, kw_only=True):
+    """The autopilot role's options (``--set KEY=VALUE``)."""
+
     # 0: derived from the scenario, 0.4 × participant_timeout_s (so a slow answer on a loaded
     # machine is still waited for, and the lockstep never drops us for waiting).
-    sensor_timeout_s: float = 0.0
-    status_period_s: float = 0.5
-    position_noise_m: float = 0.0
-    velocity_noise_m_s: float = 0.0
+    sensor_timeout_s: NonNegative = 0.0
+    status_period_s: NonNegative = 0.5
+    position_noise_m: NonNegative = 0.0
+    velocity_noise_m_s: NonNegative = 0.0
     checkpoint: str = ""  # snapshots of the process's state (agents.resume); empty: none
-
-    @classmethod
-    def parse(cls, options: dict[str, str]) -> NodeOptions:
-        known = {f.name for f in fields(cls)}
-        values: dict[str, Any] = {}
-        for key, text in options.items():
-            if key not in known:
-                raise ValueError(f"unknown option {key!r}; options: {', '.join(sorted(known))}")
-            if key == "checkpoint":
-                values[key] = text.strip()
-                continue
-            try:
-                value = float(text)
-            except ValueError:
-                raise ValueError(f"option {key}: {text!r} is not a number") from None
-            if not value >= 0.0 or value == float("inf"):
-                raise ValueError(f"option {key}: must be a finite number >= 0, got {text!r}")
-            values[key] = value
-        return cls(**values)
 
 
 def behavior_rng(scenario: Scenario, vehicle_id: str) -> np.random.Generator:
@@ -720,10 +706,10 @@ def main(ctx: NodeContext) -> int:
         log.error("autopilot: no vehicle to serve (--vehicle ID)")
         return 2
     try:
-        options = NodeOptions.parse(ctx.options)
+        options = parse_options(NodeOptions, ctx.options)
         for vid in ctx.vehicle_ids:  # fail fast on a bad behaviour before joining the bus
             ctx.scenario.vehicle(vid)
-    except (ValueError, KeyError) as exc:
+    except (OptionError, KeyError) as exc:
         log.error("autopilot: %s", exc)
         return 2
     # Before the session opens (Zenoh reads it once, when its runtime starts); an operator's

@@ -44,6 +44,7 @@ from swarmbus.messages import (
     PlumeValues,
 )
 from swarmbus.node import NodeContext, NodeRuntime
+from swarmbus.options import OptionError, RoleOptions, parse_options
 from swarmbus.scenario import Scenario
 
 log = logging.getLogger(__name__)
@@ -284,73 +285,100 @@ def _handler(
     return handle
 
 
+class PlumeOptions(RoleOptions, frozen=True, kw_only=True):
+    """The plume role takes no options (everything is in the scenario): any ``--set`` is
+    refused."""
+
+
+def _declare_point_queries(rt: NodeRuntime, service: PlumeService) -> list[zenoh.Queryable[None]]:
+    keys = rt.keys
+    return [
+        rt.session.declare_queryable(
+            keys.plume_concentration(),
+            _handler(PlumeQuery, service.concentration, "concentration", memo=True),
+        ),
+        rt.session.declare_queryable(
+            keys.plume_info(), _handler(PlumeInfoQuery, service.info, "info")
+        ),
+    ]
+
+
+def _start_mesh_worker(
+    rt: NodeRuntime, service: PlumeService
+) -> tuple[zenoh.Queryable[None], threading.Thread]:
+    """Meshes take seconds: queue them to their own thread so point queries never wait.
+    (A blocking recv() on a zenoh channel can't be interrupted by undeclare; a Python queue
+    with a timeout can.)"""
+    mesh_queue: queue.Queue[zenoh.Query] = queue.Queue(maxsize=8)
+    handle_mesh = _handler(PlumeMeshQuery, service.mesh, "mesh")
+
+    def enqueue_mesh(query: zenoh.Query) -> None:
+        try:
+            mesh_queue.put_nowait(query)
+        except queue.Full:
+            query.reply_err(encode(ErrorReply(field="", reason="mesh queue full, retry later")))
+
+    def mesh_worker() -> None:
+        while not rt.stop.is_set():
+            try:
+                query = mesh_queue.get(timeout=0.2)
+            except queue.Empty:
+                continue
+            handle_mesh(query)
+            del query  # dropping the query finalises the reply
+
+    queryable = rt.session.declare_queryable(rt.keys.plume_mesh(), enqueue_mesh)
+    worker = threading.Thread(target=mesh_worker, name="plume-mesh", daemon=True)
+    worker.start()
+    return queryable, worker
+
+
+def _start_state_publisher(
+    rt: NodeRuntime, states: StatePublisher
+) -> tuple[zenoh.Subscriber[None], threading.Thread]:
+    """Publish the field's state on ``field/state`` at the sim times the clock reaches."""
+    publisher = rt.session.declare_publisher(rt.keys.plume_state())
+
+    def on_clock(sample: zenoh.Sample) -> None:
+        try:
+            clock = decode(sample.payload.to_bytes(), Clock)
+        except MessageError as exc:
+            log.warning("plume: bad clock message: %s", exc)
+            return
+        states.on_clock(clock.sim_time_s)
+
+    def state_worker() -> None:
+        while not rt.stop.is_set():
+            t = states.next_time(0.2)
+            if t is not None:
+                publisher.put(encode(states.state(t)))
+
+    subscriber = rt.session.declare_subscriber(rt.keys.clock(), on_clock)
+    state_thread = threading.Thread(target=state_worker, name="plume-state", daemon=True)
+    state_thread.start()
+    return subscriber, state_thread
+
+
 def main(ctx: NodeContext) -> int:
     """Serve the scenario's plume until stopped."""
+    try:
+        parse_options(PlumeOptions, ctx.options)
+    except OptionError as exc:
+        log.error("plume: %s", exc)
+        return 2
     service = PlumeService(field_from_scenario(ctx.scenario), ctx.scenario)
     states = StatePublisher(service.field, ctx.scenario.plume.state_period_s)
     with NodeRuntime(ctx, role="plume") as rt:
-        keys = rt.keys
-        queryables = [
-            rt.session.declare_queryable(
-                keys.plume_concentration(),
-                _handler(PlumeQuery, service.concentration, "concentration", memo=True),
-            ),
-            rt.session.declare_queryable(
-                keys.plume_info(), _handler(PlumeInfoQuery, service.info, "info")
-            ),
-        ]
-        # Meshes take seconds: queue them to their own thread so point queries never wait.
-        # (A blocking recv() on a zenoh channel can't be interrupted by undeclare; a Python
-        # queue with a timeout can.)
-        mesh_queue: queue.Queue[zenoh.Query] = queue.Queue(maxsize=8)
-        handle_mesh = _handler(PlumeMeshQuery, service.mesh, "mesh")
-
-        def enqueue_mesh(query: zenoh.Query) -> None:
-            try:
-                mesh_queue.put_nowait(query)
-            except queue.Full:
-                query.reply_err(encode(ErrorReply(field="", reason="mesh queue full, retry later")))
-
-        def mesh_worker() -> None:
-            while not rt.stop.is_set():
-                try:
-                    query = mesh_queue.get(timeout=0.2)
-                except queue.Empty:
-                    continue
-                handle_mesh(query)
-                del query  # dropping the query finalises the reply
-
-        queryables.append(rt.session.declare_queryable(keys.plume_mesh(), enqueue_mesh))
-        worker = threading.Thread(target=mesh_worker, name="plume-mesh", daemon=True)
-        worker.start()
-        state_thread = None
-        subscriber = None
-        if states.active:
-            publisher = rt.session.declare_publisher(keys.plume_state())
-
-            def on_clock(sample: zenoh.Sample) -> None:
-                try:
-                    clock = decode(sample.payload.to_bytes(), Clock)
-                except MessageError as exc:
-                    log.warning("plume: bad clock message: %s", exc)
-                    return
-                states.on_clock(clock.sim_time_s)
-
-            def state_worker() -> None:
-                while not rt.stop.is_set():
-                    t = states.next_time(0.2)
-                    if t is not None:
-                        publisher.put(encode(states.state(t)))
-
-            subscriber = rt.session.declare_subscriber(keys.clock(), on_clock)
-            state_thread = threading.Thread(target=state_worker, name="plume-state", daemon=True)
-            state_thread.start()
+        queryables = _declare_point_queries(rt, service)
+        mesh_queryable, mesh_worker = _start_mesh_worker(rt, service)
+        queryables.append(mesh_queryable)
+        state_feed = _start_state_publisher(rt, states) if states.active else None
         rt.ready()
         rt.stop.wait()
-        worker.join(timeout=30.0)
-        if state_thread is not None:
+        mesh_worker.join(timeout=30.0)
+        if state_feed is not None:
+            subscriber, state_thread = state_feed
             state_thread.join(timeout=30.0)
-        if subscriber is not None:
             subscriber.undeclare()
         for q in queryables:
             q.undeclare()
