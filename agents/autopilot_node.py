@@ -55,7 +55,7 @@ from agents.resume import StateKeeper
 from agents.sensor import ConcentrationSensor
 from agents.snapshot import PendingSnapshot, ProcessSnapshot, SnapshotError, capture, restore
 from swarmbus.codec import MessageError, decode, encode
-from swarmbus.keys import Keys
+from swarmbus.keys import Keys, autopilot_node
 from swarmbus.messages import (
     ActuatorBatch,
     ActuatorCommand,
@@ -72,6 +72,7 @@ from swarmbus.node import NodeContext, NodeRuntime
 from swarmbus.options import OptionError, RoleOptions, parse_options
 from swarmbus.scenario import Scenario
 from swarmbus.session import SINGLE_THREAD_RUNTIME
+from swarmbus.views import StateHead, TickView, state_head_decoder
 from swarmbus.wind import WindModel, wind_from_scenario
 
 log = logging.getLogger(__name__)
@@ -202,44 +203,22 @@ def _status_key(s: VehicleStatus) -> tuple[object, ...]:
     )
 
 
-class _TickView(msgspec.Struct, frozen=True, tag_field="schema", tag=SimTick.__struct_config__.tag):
-    """A ``SimTick`` whose states stay undecoded: an autopilot fully decodes only its own."""
-
-    tick: int
-    sim_time_s: float
-    states: list[msgspec.Raw]
-    plume_queried: bool = False
-    plume_values: PlumeSample | None = None
-
-
-class _StateHead(
-    msgspec.Struct, frozen=True, tag_field="schema", tag=VehicleState.__struct_config__.tag
-):
-    """What an autopilot needs of every state in a tick: who and where (the sensor query)."""
-
-    vehicle_id: str
-    position_enu_m: tuple[float, float, float]
-
-
-_head_decoder = msgspec.msgpack.Decoder(_StateHead)
-
-
 @dataclass
 class _Tick:
     """One decoded tick: number, time, who is where, and the raw states."""
 
     tick: int
     sim_time_s: float
-    heads: list[_StateHead]
+    heads: list[StateHead]
     raw: list[msgspec.Raw]
     plume_queried: bool = False
     plume_values: PlumeSample | None = None
 
     @classmethod
     def decode(cls, data: bytes) -> _Tick:
-        view = decode(data, _TickView)
+        view = decode(data, TickView)
         try:
-            heads = [_head_decoder.decode(r) for r in view.states]
+            heads = [state_head_decoder.decode(r) for r in view.states]
         except (msgspec.ValidationError, msgspec.DecodeError) as exc:
             raise MessageError("SimTick", "states", str(exc)) from None
         return cls(
@@ -249,7 +228,7 @@ class _Tick:
     @classmethod
     def of(cls, tick: SimTick) -> _Tick:
         raw = [msgspec.Raw(encode(s)) for s in tick.states]
-        heads = [_StateHead(s.vehicle_id, s.position_enu_m) for s in tick.states]
+        heads = [StateHead(s.vehicle_id, s.position_enu_m) for s in tick.states]
         return cls(tick.tick, tick.sim_time_s, heads, raw, tick.plume_queried, tick.plume_values)
 
 
@@ -257,7 +236,7 @@ class _Tick:
 class _PendingSensor:
     tick: int
     sim_time_s: float
-    states: list[_StateHead]
+    states: list[StateHead]
     replies: zenoh.handlers.Handler[zenoh.Reply] | None  # None: no plume node was alive
     by_physics: bool = False  # the physics queried: the answer comes with the next tick
 
@@ -333,7 +312,7 @@ class AutopilotNode:
                 )
             )
         for vid in self.served:
-            name = f"autopilot-{vid}"
+            name = autopilot_node(vid)
             if name != node_name:
                 self._tokens.append(
                     self.session.liveliness().declare_token(self.keys.node_health(name))
@@ -629,7 +608,7 @@ class AutopilotNode:
         self._snap_pending = p = snap.pending
         self.pending = None
         if p is not None:
-            heads = [_StateHead(vid, pos) for vid, pos in p.heads]
+            heads = [StateHead(vid, pos) for vid, pos in p.heads]
             pending = _PendingSensor(p.tick, p.sim_time_s, heads, None, p.by_physics)
             self.pending = pending if p.by_physics else self._ask_plume(pending)
         if self.keeper is not None:

@@ -31,11 +31,10 @@ import os
 import threading
 import time
 
-import msgspec
 import zenoh
 
 from swarmbus.codec import MessageError, decode, encode
-from swarmbus.keys import Keys
+from swarmbus.keys import Keys, autopilot_node
 from swarmbus.messages import (
     ActuatorBatch,
     ActuatorCommand,
@@ -53,21 +52,13 @@ from swarmbus.messages import (
 )
 from swarmbus.node import NodeContext, NodeRuntime
 from swarmbus.session import SINGLE_THREAD_RUNTIME, Presence
+from swarmbus.views import BatchView, TickView
 
 log = logging.getLogger(__name__)
 
 CLOCK_PERIOD_S = 0.1
 STATUS_PERIOD_S = 0.5
 ROTORS = 4
-
-
-class _TickNumber(
-    msgspec.Struct, frozen=True, tag_field="schema", tag=SimTick.__struct_config__.tag
-):
-    """All a stand-in reads of a tick."""
-
-    tick: int
-    states: list[msgspec.Raw]
 
 
 def _state(vid: str) -> VehicleState:
@@ -103,7 +94,7 @@ class _Barrier:
 
     def on_batch(self, sample: zenoh.Sample) -> None:
         try:
-            view = decode(sample.payload.to_bytes(), _BatchTick)
+            view = decode(sample.payload.to_bytes(), BatchView)
         except MessageError:
             return
         with self.cond:
@@ -126,13 +117,6 @@ class _Barrier:
             self.answered = 0
 
 
-class _BatchTick(
-    msgspec.Struct, frozen=True, tag_field="schema", tag=ActuatorBatch.__struct_config__.tag
-):
-    tick: int
-    commands: list[msgspec.Raw]
-
-
 def physics_main(ctx: NodeContext) -> int:
     """Stand-in for the physics: the tick loop with no world behind it."""
     sc = ctx.scenario
@@ -150,7 +134,7 @@ def physics_main(ctx: NodeContext) -> int:
         clock_pub = session.declare_publisher(keys.clock())
         presence = Presence(session, keys)
         presence.sync()
-        wanted = {f"autopilot-{v}" for v in ids}
+        wanted = {autopilot_node(v) for v in ids}
         if not presence.wait_for(lambda alive: wanted <= alive, sc.time.startup_timeout_s):
             log.error("ceiling-physics: autopilot stand-ins missing: %s", wanted - presence.alive)
             return 1
@@ -251,7 +235,7 @@ def autopilot_main(ctx: NodeContext) -> int:
 
         def on_tick(sample: zenoh.Sample) -> None:
             try:
-                tick = decode(sample.payload.to_bytes(), _TickNumber).tick
+                tick = decode(sample.payload.to_bytes(), TickView).tick
             except MessageError:
                 return
             commands = [
@@ -265,9 +249,9 @@ def autopilot_main(ctx: NodeContext) -> int:
 
         sub = session.declare_subscriber(keys.tick(), on_tick)
         tokens = [
-            session.liveliness().declare_token(keys.node_health(f"autopilot-{v}"))
+            session.liveliness().declare_token(keys.node_health(autopilot_node(v)))
             for v in served
-            if f"autopilot-{v}" != ctx.name
+            if autopilot_node(v) != ctx.name
         ]
         rt.ready()
         while not rt.stop.wait(STATUS_PERIOD_S):

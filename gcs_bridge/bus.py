@@ -35,11 +35,8 @@ from swarmbus.messages import (
     GcsHeartbeat,
     RejectCode,
     Setpoint,
-    SimTick,
-    SimTime,
-    Tick,
-    VehicleState,
 )
+from swarmbus.views import StateHead, TickView
 
 log = logging.getLogger(__name__)
 
@@ -111,21 +108,6 @@ class Inbox:
         return latest, calls
 
 
-class TickView(msgspec.Struct, frozen=True, tag_field="schema", tag=SimTick.__struct_config__.tag):
-    """A ``SimTick`` whose states stay undecoded (the gateway decodes a vehicle's state only
-    when its telemetry falls due or someone asks for it)."""
-
-    tick: Tick
-    sim_time_s: SimTime
-    states: list[msgspec.Raw]
-
-
-class _StateId(
-    msgspec.Struct, frozen=True, tag_field="schema", tag=VehicleState.__struct_config__.tag
-):
-    vehicle_id: str
-
-
 class Streams:
     """Ticks (every vehicle's state in one ``sim/tick`` message) and every vehicle's readings
     in ring buffers; the loop takes all ticks (a telemetry stream may be due at any of them)
@@ -174,7 +156,7 @@ class Streams:
         """Where each served vehicle's state is in ``view`` (the physics keeps the order, so
         this runs once, and again only when a tick's layout changes)."""
         try:  # through swarmbus.codec: garbage may also raise UnicodeDecodeError
-            ids = [decode(memoryview(raw), _StateId).vehicle_id for raw in view.states]
+            ids = [decode(memoryview(raw), StateHead).vehicle_id for raw in view.states]
         except MessageError as exc:
             log.warning("%s: states: %s", self._keys.tick(), exc)
             return False

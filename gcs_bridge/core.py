@@ -19,7 +19,7 @@ from gcs_bridge.links import Link
 from gcs_bridge.options import GatewayOptions
 from gcs_bridge.telemetry import StreamSchedule
 from gcs_bridge.vehicle import Vehicle
-from swarmbus.keys import Keys
+from swarmbus.keys import Keys, autopilot_node
 from swarmbus.messages import Command, CommandReply, RejectCode
 from swarmbus.session import Presence
 
@@ -80,11 +80,11 @@ class Core:
         """Is the vehicle's autopilot there (token, or a status lately)? Only then does it exist."""
         if now - v.last_status_wall_s < ALIVE_WITHOUT_TOKEN_S:
             return True
-        return self._presence is not None and f"autopilot-{v.id}" in self._presence.alive
+        return self._presence is not None and autopilot_node(v.id) in self._presence.alive
 
     def alive_in(self, v: Vehicle, now: float, names: frozenset[str]) -> bool:
         """:meth:`alive` against ``names``, one copy of the alive names for many vehicles."""
-        return now - v.last_status_wall_s < ALIVE_WITHOUT_TOKEN_S or f"autopilot-{v.id}" in names
+        return now - v.last_status_wall_s < ALIVE_WITHOUT_TOKEN_S or autopilot_node(v.id) in names
 
     # ------------------------------------------------------------------ sending
     def _send_all(self, v: Vehicle, msg: Msg, now: float) -> None:

@@ -34,7 +34,6 @@ from gcs_bridge.bus import (
     Commander,
     Inbox,
     Streams,
-    TickView,
     Waker,
     subscribe_statuses,
 )
@@ -54,6 +53,7 @@ from swarmbus.node import NodeContext, NodeRuntime
 from swarmbus.options import OptionError
 from swarmbus.scenario import Scenario, not_on_mavlink_note
 from swarmbus.session import Presence
+from swarmbus.views import TickView
 
 log = logging.getLogger(__name__)
 

@@ -54,8 +54,8 @@ from sim_world.lockstep import Lockstep, participant_of
 from sim_world.stepping import SteppedClock, StepRefused
 from sim_world.world import World
 from swarmbus.codec import MessageError, decode, encode
+from swarmbus.keys import autopilot_node
 from swarmbus.messages import (
-    MAX_BATCH_COMMANDS,
     ActuatorBatch,
     ActuatorCommand,
     Clock,
@@ -68,12 +68,12 @@ from swarmbus.messages import (
     SpeedMode,
     StepReply,
     StepRequest,
-    Tick,
     VehicleState,
 )
 from swarmbus.node import NodeContext, NodeRuntime
 from swarmbus.options import OptionError, RoleOptions, parse_options
 from swarmbus.session import Presence
+from swarmbus.views import BatchView
 
 log = logging.getLogger(__name__)
 
@@ -84,15 +84,6 @@ HEALTH_PERIOD_S = 1.0
 # before taking it for a slow answer from a live service.
 PLUME_DEPARTURE_S = 0.5
 RECORDER = "recorder"  # the recorder's node name: the clock waits for its restart too
-
-
-class _BatchView(
-    msgspec.Struct, frozen=True, tag_field="schema", tag=ActuatorBatch.__struct_config__.tag
-):
-    """An ``ActuatorBatch`` with undecoded entries: one bad entry does not sink the others."""
-
-    tick: Tick
-    commands: Annotated[list[msgspec.Raw], msgspec.Meta(max_length=MAX_BATCH_COMMANDS)]
 
 
 class PhysicsOptions(RoleOptions, frozen=True, kw_only=True):
@@ -302,7 +293,7 @@ class PhysicsNode:
     ) -> tuple[int, list[ActuatorCommand]] | None:
         """The good entries of a batch that failed to decode (each bad one is logged)."""
         try:
-            view = decode(data, _BatchView)
+            view = decode(data, BatchView)
         except MessageError:
             log.warning("ignoring actuator batch on %s: %s", key, exc)
             return None
@@ -394,7 +385,7 @@ class PhysicsNode:
                         "autopilots missing after %.1f s: %s (no liveliness token %s)",
                         self.scenario.time.startup_timeout_s,
                         ", ".join(missing),
-                        ", ".join(f"autopilot-{v}" for v in missing),
+                        ", ".join(autopilot_node(v) for v in missing),
                     )
                     return False
                 self._cond.wait(min(remaining, STOP_POLL_S))
