@@ -38,9 +38,9 @@ import threading
 import time
 from collections.abc import Callable
 from contextlib import suppress
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 import msgspec
 import numpy as np
@@ -55,7 +55,7 @@ from agents.resume import StateKeeper
 from agents.sensor import ConcentrationSensor
 from agents.snapshot import PendingSnapshot, ProcessSnapshot, SnapshotError, capture, restore
 from swarmbus.codec import MessageError, decode, encode
-from swarmbus.keys import Keys
+from swarmbus.keys import Keys, autopilot_node
 from swarmbus.messages import (
     ActuatorBatch,
     ActuatorCommand,
@@ -69,9 +69,11 @@ from swarmbus.messages import (
     VehicleStatus,
 )
 from swarmbus.node import NodeContext, NodeRuntime
+from swarmbus.options import OptionError, RoleOptions, parse_options
 from swarmbus.reqrep import Pending, RequestError, ask, serve
 from swarmbus.scenario import Scenario
 from swarmbus.session import SINGLE_THREAD_RUNTIME
+from swarmbus.views import StateHead, TickView, state_head_decoder
 from swarmbus.wind import WindModel, wind_from_scenario
 
 log = logging.getLogger(__name__)
@@ -79,34 +81,19 @@ log = logging.getLogger(__name__)
 IDLE_STATUS_PERIOD_S = 1.0  # wall clock: status while no ticks arrive (physics not running)
 
 
-@dataclass(frozen=True)
-class NodeOptions:
+NonNegative = Annotated[float, msgspec.Meta(ge=0.0, le=1e9)]
+
+
+class NodeOptions(RoleOptions, frozen=True, kw_only=True):
+    """The autopilot role's options (``--set KEY=VALUE``)."""
+
     # 0: derived from the scenario, 0.4 × participant_timeout_s (so a slow answer on a loaded
     # machine is still waited for, and the lockstep never drops us for waiting).
-    sensor_timeout_s: float = 0.0
-    status_period_s: float = 0.5
-    position_noise_m: float = 0.0
-    velocity_noise_m_s: float = 0.0
+    sensor_timeout_s: NonNegative = 0.0
+    status_period_s: NonNegative = 0.5
+    position_noise_m: NonNegative = 0.0
+    velocity_noise_m_s: NonNegative = 0.0
     checkpoint: str = ""  # snapshots of the process's state (agents.resume); empty: none
-
-    @classmethod
-    def parse(cls, options: dict[str, str]) -> NodeOptions:
-        known = {f.name for f in fields(cls)}
-        values: dict[str, Any] = {}
-        for key, text in options.items():
-            if key not in known:
-                raise ValueError(f"unknown option {key!r}; options: {', '.join(sorted(known))}")
-            if key == "checkpoint":
-                values[key] = text.strip()
-                continue
-            try:
-                value = float(text)
-            except ValueError:
-                raise ValueError(f"option {key}: {text!r} is not a number") from None
-            if not value >= 0.0 or value == float("inf"):
-                raise ValueError(f"option {key}: must be a finite number >= 0, got {text!r}")
-            values[key] = value
-        return cls(**values)
 
 
 def behavior_rng(scenario: Scenario, vehicle_id: str) -> np.random.Generator:
@@ -217,44 +204,22 @@ def _status_key(s: VehicleStatus) -> tuple[object, ...]:
     )
 
 
-class _TickView(msgspec.Struct, frozen=True, tag_field="schema", tag=SimTick.__struct_config__.tag):
-    """A ``SimTick`` whose states stay undecoded: an autopilot fully decodes only its own."""
-
-    tick: int
-    sim_time_s: float
-    states: list[msgspec.Raw]
-    plume_queried: bool = False
-    plume_values: PlumeSample | None = None
-
-
-class _StateHead(
-    msgspec.Struct, frozen=True, tag_field="schema", tag=VehicleState.__struct_config__.tag
-):
-    """What an autopilot needs of every state in a tick: who and where (the sensor query)."""
-
-    vehicle_id: str
-    position_enu_m: tuple[float, float, float]
-
-
-_head_decoder = msgspec.msgpack.Decoder(_StateHead)
-
-
 @dataclass
 class _Tick:
     """One decoded tick: number, time, who is where, and the raw states."""
 
     tick: int
     sim_time_s: float
-    heads: list[_StateHead]
+    heads: list[StateHead]
     raw: list[msgspec.Raw]
     plume_queried: bool = False
     plume_values: PlumeSample | None = None
 
     @classmethod
     def decode(cls, data: bytes) -> _Tick:
-        view = decode(data, _TickView)
+        view = decode(data, TickView)
         try:
-            heads = [_head_decoder.decode(r) for r in view.states]
+            heads = [state_head_decoder.decode(r) for r in view.states]
         except (msgspec.ValidationError, msgspec.DecodeError) as exc:
             raise MessageError("SimTick", "states", str(exc)) from None
         return cls(
@@ -264,7 +229,7 @@ class _Tick:
     @classmethod
     def of(cls, tick: SimTick) -> _Tick:
         raw = [msgspec.Raw(encode(s)) for s in tick.states]
-        heads = [_StateHead(s.vehicle_id, s.position_enu_m) for s in tick.states]
+        heads = [StateHead(s.vehicle_id, s.position_enu_m) for s in tick.states]
         return cls(tick.tick, tick.sim_time_s, heads, raw, tick.plume_queried, tick.plume_values)
 
 
@@ -272,7 +237,7 @@ class _Tick:
 class _PendingSensor:
     tick: int
     sim_time_s: float
-    states: list[_StateHead]
+    states: list[StateHead]
     replies: Pending[PlumeValues] | None  # None: no plume node was alive
     by_physics: bool = False  # the physics queried: the answer comes with the next tick
 
@@ -346,7 +311,7 @@ class AutopilotNode:
             commands = serve(self.session, key, Command, handler)  # type: ignore[arg-type]
             self._declared.append(commands)
         for vid in self.served:
-            name = f"autopilot-{vid}"
+            name = autopilot_node(vid)
             if name != node_name:
                 self._tokens.append(
                     self.session.liveliness().declare_token(self.keys.node_health(name))
@@ -628,7 +593,7 @@ class AutopilotNode:
         self._snap_pending = p = snap.pending
         self.pending = None
         if p is not None:
-            heads = [_StateHead(vid, pos) for vid, pos in p.heads]
+            heads = [StateHead(vid, pos) for vid, pos in p.heads]
             pending = _PendingSensor(p.tick, p.sim_time_s, heads, None, p.by_physics)
             self.pending = pending if p.by_physics else self._ask_plume(pending)
         if self.keeper is not None:
@@ -697,10 +662,10 @@ def main(ctx: NodeContext) -> int:
         log.error("autopilot: no vehicle to serve (--vehicle ID)")
         return 2
     try:
-        options = NodeOptions.parse(ctx.options)
+        options = parse_options(NodeOptions, ctx.options)
         for vid in ctx.vehicle_ids:  # fail fast on a bad behaviour before joining the bus
             ctx.scenario.vehicle(vid)
-    except (ValueError, KeyError) as exc:
+    except (OptionError, KeyError) as exc:
         log.error("autopilot: %s", exc)
         return 2
     # Before the session opens (Zenoh reads it once, when its runtime starts); an operator's

@@ -47,7 +47,7 @@ import numpy.typing as npt
 import zenoh
 
 from swarmbus.codec import MessageError, decode
-from swarmbus.keys import Keys
+from swarmbus.keys import AUTOPILOT_PREFIX, Keys, vehicle_of_autopilot
 from swarmbus.messages import (
     Arm,
     Clock,
@@ -91,7 +91,6 @@ log = logging.getLogger(__name__)
 T = TypeVar("T")
 M = TypeVar("M", bound=Message)
 Vec3 = tuple[float, float, float]
-AUTOPILOT_PREFIX = "autopilot-"
 CLOCK_CLIENT_PREFIX = "clock-"
 # A step's wall-clock deadline (only a dead or stuck physics reaches it): a base and a share
 # per granted tick, generous for a large swarm on a loaded machine.
@@ -432,9 +431,8 @@ class Swarm:
 
     def autopilots_alive(self) -> list[str]:
         """Ids of the vehicles whose autopilot token is alive right now."""
-        alive = self._presence.alive
-        n = len(AUTOPILOT_PREFIX)
-        return sorted(name[n:] for name in alive if name.startswith(AUTOPILOT_PREFIX))
+        ids = (vehicle_of_autopilot(name) for name in self._presence.alive)
+        return sorted(vid for vid in ids if vid is not None)
 
     def state(self, vehicle_id: str) -> VehicleState | None:
         with self._lock:

@@ -30,11 +30,10 @@ import os
 import threading
 import time
 
-import msgspec
 import zenoh
 
 from swarmbus.codec import MessageError, decode, encode
-from swarmbus.keys import Keys
+from swarmbus.keys import Keys, autopilot_node
 from swarmbus.messages import (
     ActuatorBatch,
     ActuatorCommand,
@@ -53,6 +52,7 @@ from swarmbus.messages import (
 from swarmbus.node import NodeContext, NodeRuntime
 from swarmbus.reqrep import Pending, RequestError, ask, serve
 from swarmbus.session import SINGLE_THREAD_RUNTIME, Presence
+from swarmbus.views import BatchView, TickView
 
 log = logging.getLogger(__name__)
 
@@ -60,15 +60,6 @@ CLOCK_PERIOD_S = 0.1
 STATUS_PERIOD_S = 0.5
 ROTORS = 4
 PLUME_TIMEOUT_S = 10.0  # a stand-in plume answers at once; this only bounds a lost query
-
-
-class _TickNumber(
-    msgspec.Struct, frozen=True, tag_field="schema", tag=SimTick.__struct_config__.tag
-):
-    """All a stand-in reads of a tick."""
-
-    tick: int
-    states: list[msgspec.Raw]
 
 
 def _state(vid: str) -> VehicleState:
@@ -104,7 +95,7 @@ class _Barrier:
 
     def on_batch(self, sample: zenoh.Sample) -> None:
         try:
-            view = decode(sample.payload.to_bytes(), _BatchTick)
+            view = decode(sample.payload.to_bytes(), BatchView)
         except MessageError:
             return
         with self.cond:
@@ -125,13 +116,6 @@ class _Barrier:
         with self.cond:
             self.tick = tick
             self.answered = 0
-
-
-class _BatchTick(
-    msgspec.Struct, frozen=True, tag_field="schema", tag=ActuatorBatch.__struct_config__.tag
-):
-    tick: int
-    commands: list[msgspec.Raw]
 
 
 def _answer(asked: tuple[int, Pending[PlumeValues]] | None) -> PlumeSample | None:
@@ -161,7 +145,7 @@ def physics_main(ctx: NodeContext) -> int:
         clock_pub = session.declare_publisher(keys.clock())
         presence = Presence(session, keys)
         presence.sync()
-        wanted = {f"autopilot-{v}" for v in ids}
+        wanted = {autopilot_node(v) for v in ids}
         if not presence.wait_for(lambda alive: wanted <= alive, sc.time.startup_timeout_s):
             log.error("ceiling-physics: autopilot stand-ins missing: %s", wanted - presence.alive)
             return 1
@@ -256,7 +240,7 @@ def autopilot_main(ctx: NodeContext) -> int:
 
         def on_tick(sample: zenoh.Sample) -> None:
             try:
-                tick = decode(sample.payload.to_bytes(), _TickNumber).tick
+                tick = decode(sample.payload.to_bytes(), TickView).tick
             except MessageError:
                 return
             commands = [
@@ -270,9 +254,9 @@ def autopilot_main(ctx: NodeContext) -> int:
 
         sub = session.declare_subscriber(keys.tick(), on_tick)
         tokens = [
-            session.liveliness().declare_token(keys.node_health(f"autopilot-{v}"))
+            session.liveliness().declare_token(keys.node_health(autopilot_node(v)))
             for v in served
-            if f"autopilot-{v}" != ctx.name
+            if autopilot_node(v) != ctx.name
         ]
         rt.ready()
         while not rt.stop.wait(STATUS_PERIOD_S):

@@ -154,8 +154,9 @@ def node(
     host_name: str | None,
 ) -> None:
     """Run one ROLE alone (for deployments across machines)."""
-    from swarmbus.keys import KeyNameError, check_name
+    from swarmbus.keys import KeyNameError, check_name, process_node
     from swarmbus.node import NodeContext
+    from swarmbus.options import OptionError, split_settings
 
     sc = scenario_from(scenario)
     known = {v.id for v in sc.vehicles}
@@ -164,18 +165,11 @@ def node(
             fail(f"--vehicle {vid!r} is not in the scenario (vehicles: {', '.join(sorted(known))})")
     if role in ("autopilot", "ceiling-autopilot") and not vehicles:
         fail("role 'autopilot' needs --vehicle ID")
-    opts: dict[str, str] = {}
-    for item in options:
-        key, sep, value = item.partition("=")
-        if not sep or not key:
-            fail(f"--set expects KEY=VALUE, got {item!r}")
-        opts[key] = value
-    if name:
-        node_name = name
-    elif len(vehicles) > 1:  # ids joined would outgrow a key segment: first id and a count
-        node_name = f"{role}-{vehicles[0]}-plus{len(vehicles) - 1}"
-    else:
-        node_name = f"{role}-{vehicles[0]}" if vehicles else role
+    try:
+        opts = split_settings(options)
+    except OptionError as exc:
+        fail(str(exc))
+    node_name = name or process_node(role, vehicles)
     try:
         check_name("node", node_name)
     except KeyNameError as exc:

@@ -49,6 +49,7 @@ from swarmbus.messages import (
 )
 from swarmbus.scenario import Scenario
 from swarmbus.session import NetworkConfig, free_tcp_port, open_session
+from swarmbus.views import STATE_TAG
 
 log = logging.getLogger(__name__)
 
@@ -66,7 +67,7 @@ class DemoError(RuntimeError):
 
 
 # ---------------------------------------------------------------------------- what we collect
-class _StateKey(msgspec.Struct, tag_field="schema", tag="vehicle_state/v1"):
+class _StateKey(msgspec.Struct, tag_field="schema", tag=STATE_TAG):
     """Just enough of a VehicleState to order the raw payloads (other fields are skipped)."""
 
     vehicle_id: str

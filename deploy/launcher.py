@@ -40,7 +40,7 @@ from deploy.supervisor import (
 )
 from sim_world import checkpoint
 from swarmbus.codec import encode
-from swarmbus.keys import Keys
+from swarmbus.keys import Keys, process_node
 from swarmbus.messages import RestartNotice
 from swarmbus.scenario import Scenario
 from swarmbus.session import DEFAULT_ROUTER, NetworkConfig, open_session
@@ -180,9 +180,7 @@ def plan(scenario: Scenario, opts: LaunchOptions) -> list[ProcessSpec]:
             k = max(1, opts.vehicles_per_process)
             for i in range(0, len(vehicle_ids), k):
                 chunk = vehicle_ids[i : i + k]
-                name = f"autopilot-{chunk[0]}" + (
-                    f"-plus{len(chunk) - 1}" if len(chunk) > 1 else ""
-                )
+                name = process_node("autopilot", chunk)
                 state = f"checkpoint={autopilot_state_path(opts, name)}"  # agents.resume
                 add(role, name, [a for vid in chunk for a in ("--vehicle", vid)] + net_args)
                 specs[-1] = replace(specs[-1], argv=(*specs[-1].argv, "--set", state))

@@ -7,12 +7,22 @@ import logging
 import msgspec
 
 from swarmbus.node import NodeContext, NodeRuntime
+from swarmbus.options import OptionError, RoleOptions, parse_options
 
 log = logging.getLogger(__name__)
 
 
+class RouterOptions(RoleOptions, frozen=True, kw_only=True):
+    """The router takes no options (its endpoints are ``--listen``): any ``--set`` is refused."""
+
+
 def main(ctx: NodeContext) -> int:
     """Run a router on ``ctx.network.listen`` (default: the scenario's first connect endpoint)."""
+    try:
+        parse_options(RouterOptions, ctx.options)
+    except OptionError as exc:
+        log.error("router: %s", exc)
+        return 2
     net = ctx.network
     listen = [e for e in net.listen if not e.endswith(":0")] or list(net.connect)
     router_net = msgspec.structs.replace(net, mode="router", listen=listen, connect=[])

@@ -36,7 +36,7 @@ import msgspec
 from deploy.certs import OPERATOR, HostIdentities, identity
 from deploy.hosts import Deployment, HostsError
 from deploy.launcher import LaunchOptions
-from swarmbus.keys import Keys
+from swarmbus.keys import Keys, autopilot_node
 from swarmbus.session import NetworkConfig, NetworkConfigError, TlsConfig, check_tls_files
 
 MESSAGES = (
@@ -83,7 +83,7 @@ def per_vehicle_identities(dep: Deployment) -> dict[str, str]:
 
 def vehicle_node(vehicle_id: str) -> str:
     """The node name of the autopilot process of one vehicle (its per-vehicle identity)."""
-    return f"autopilot-{vehicle_id}"
+    return autopilot_node(vehicle_id)
 
 
 def node_identity(dep: Deployment, host: str, role: str, node_name: str | None) -> str:

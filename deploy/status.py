@@ -8,7 +8,7 @@ from collections.abc import Sequence
 import msgspec
 
 from deploy.busview import BusView, Snapshot
-from swarmbus.keys import Keys
+from swarmbus.keys import Keys, autopilot_node
 from swarmbus.session import NetworkConfig, open_session
 
 PRESENCE_WAIT_S = 2.0
@@ -28,7 +28,7 @@ def _complete(snap: Snapshot, vehicle_ids: Sequence[str]) -> bool:
             v = snap.vehicles.get(vid)
             if v is None or v.state is None:
                 return False
-            if f"autopilot-{vid}" in snap.alive and v.status is None:
+            if autopilot_node(vid) in snap.alive and v.status is None:
                 return False
     return True
 

@@ -34,12 +34,9 @@ from swarmbus.messages import (
     GcsHeartbeat,
     RejectCode,
     Setpoint,
-    SimTick,
-    SimTime,
-    Tick,
-    VehicleState,
 )
 from swarmbus.reqrep import BadReply, RequestError, ask, command_reply
+from swarmbus.views import StateHead, TickView
 
 log = logging.getLogger(__name__)
 
@@ -109,21 +106,6 @@ class Inbox:
         while self._calls:
             calls.append(self._calls.popleft())
         return latest, calls
-
-
-class TickView(msgspec.Struct, frozen=True, tag_field="schema", tag=SimTick.__struct_config__.tag):
-    """A ``SimTick`` whose states stay undecoded (the gateway decodes a vehicle's state only
-    when its telemetry falls due or someone asks for it)."""
-
-    tick: Tick
-    sim_time_s: SimTime
-    states: list[msgspec.Raw]
-
-
-class _StateId(
-    msgspec.Struct, frozen=True, tag_field="schema", tag=VehicleState.__struct_config__.tag
-):
-    vehicle_id: str
 
 
 Readings = zenoh.Subscriber[zenoh.handlers.Handler[zenoh.Sample]]
@@ -207,7 +189,7 @@ class Streams:
         """Where each served vehicle's state is in ``view`` (the physics keeps the order, so
         this runs once, and again only when a tick's layout changes)."""
         try:  # through swarmbus.codec: garbage may also raise UnicodeDecodeError
-            ids = [decode(memoryview(raw), _StateId).vehicle_id for raw in view.states]
+            ids = [decode(memoryview(raw), StateHead).vehicle_id for raw in view.states]
         except MessageError as exc:
             log.warning("%s: states: %s", self._keys.tick(), exc)
             return False

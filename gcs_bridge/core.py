@@ -23,7 +23,7 @@ from gcs_bridge.commands import ACCEPTED, Facts
 from gcs_bridge.dialect import Msg, mavlink
 from gcs_bridge.links import Link, LinkSet
 from gcs_bridge.vehicle import Vehicle
-from swarmbus.keys import Keys
+from swarmbus.keys import Keys, autopilot_node
 from swarmbus.messages import Command, CommandReply, RejectCode
 from swarmbus.session import Presence
 
@@ -178,12 +178,12 @@ class Autopilots:
         """Is the vehicle's autopilot there (token, or a status lately)? Only then does it exist."""
         if now - v.last_status_wall_s < ALIVE_WITHOUT_TOKEN_S:
             return True
-        return self.presence is not None and f"autopilot-{v.id}" in self.presence.alive
+        return self.presence is not None and autopilot_node(v.id) in self.presence.alive
 
     @staticmethod
     def alive_in(v: Vehicle, now: float, names: frozenset[str]) -> bool:
         """:meth:`alive` against ``names`` (from :meth:`names`)."""
-        return now - v.last_status_wall_s < ALIVE_WITHOUT_TOKEN_S or f"autopilot-{v.id}" in names
+        return now - v.last_status_wall_s < ALIVE_WITHOUT_TOKEN_S or autopilot_node(v.id) in names
 
     def submit(self, v: Vehicle, command: Command, done: Done) -> None:
         """Queue ``command`` for the vehicle's autopilot; ``done`` runs on the loop."""

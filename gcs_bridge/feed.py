@@ -14,7 +14,7 @@ from __future__ import annotations
 import logging
 import math
 
-from gcs_bridge.bus import Streams, TickView
+from gcs_bridge.bus import Streams
 from gcs_bridge.core import Autopilots, Outbox
 from gcs_bridge.dialect import Msg, mavlink
 from gcs_bridge.handle_commands import GcsHeartbeats
@@ -23,6 +23,7 @@ from gcs_bridge.telemetry import BUILDERS, ID_MISSION_CURRENT
 from gcs_bridge.vehicle import Vehicle
 from swarmbus.codec import MessageError, decode
 from swarmbus.messages import VehicleState, VehicleStatus
+from swarmbus.views import TickView
 
 log = logging.getLogger(__name__)
 

@@ -36,7 +36,6 @@ from gcs_bridge.bus import (
     STREAM_POLL_S,
     Inbox,
     Streams,
-    TickView,
     Waker,
     subscribe_statuses,
 )
@@ -48,14 +47,16 @@ from gcs_bridge.handle_missions import MissionHandlers
 from gcs_bridge.handle_offboard import OffboardHandlers
 from gcs_bridge.handle_params import ParamHandlers
 from gcs_bridge.links import Link, LinkSet
-from gcs_bridge.options import GatewayOptions, OptionError, parse_options
+from gcs_bridge.options import GatewayOptions, gateway_options
 from gcs_bridge.telemetry import wind_enu
 from gcs_bridge.vehicle import Vehicle
 from swarmbus.codec import MessageError, decode
 from swarmbus.keys import Keys
 from swarmbus.messages import VehicleStatus
 from swarmbus.node import NodeContext, NodeRuntime
+from swarmbus.options import OptionError
 from swarmbus.scenario import Scenario, not_on_mavlink_note
+from swarmbus.views import TickView
 
 log = logging.getLogger(__name__)
 
@@ -317,9 +318,9 @@ class Gateway:
 def main(ctx: NodeContext) -> int:
     """Run the gateway for ``ctx.vehicle_ids`` (default: every vehicle of the scenario)."""
     try:
-        options = parse_options(ctx.scenario.gateway, ctx.options)
+        options = gateway_options(ctx.scenario.gateway, ctx.options)
     except OptionError as exc:
-        log.error("%s", exc)
+        log.error("gateway: %s", exc)
         return 2
     ids = list(ctx.vehicle_ids) or [v.id for v in ctx.scenario.vehicles]
     with NodeRuntime(ctx, role="gateway") as rt:

@@ -23,29 +23,39 @@ or others may read or write) or, for tests, ``signing_key_hex`` inline.
 from __future__ import annotations
 
 import ipaddress
-import math
 import re
 import stat
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Annotated, Literal
+
+import msgspec
 
 from gcs_bridge.dialect import mavlink
 from gcs_bridge.telemetry import default_rates
+from swarmbus.options import OptionError, RoleOptions, parse_options
 from swarmbus.scenario import Gateway
 
-KNOWN = {
-    "telemetry_hz",
-    "bind_host",
-    "gcs_bind_port",
-    "api_bind_port_base",
-    "api_links",
-    "signed_links",
-    "cmd_timeout_s",
-}
+Port = Annotated[int, msgspec.Meta(ge=0, le=65535)]
 
 
-class OptionError(ValueError):
-    pass
+class GatewaySettings(RoleOptions, frozen=True, kw_only=True):
+    """The gateway role's options as given (``--set KEY=VALUE``); see the module docstring."""
+
+    telemetry_hz: Annotated[float, msgspec.Meta(ge=0.01, le=1000.0)] = 4.0  # [gateway]'s
+    rate: dict[str, Annotated[float, msgspec.Meta(ge=0.0, le=1000.0)]] = msgspec.field(
+        default_factory=dict
+    )
+    bind_host: str = ""  # empty: from the GCS host (loopback or not)
+    gcs_bind_port: Port = 0
+    api_bind_port_base: Port = 0
+    api_links: bool = True
+    signed_links: Literal["all", "gcs", "api", "none"] = "all"
+    cmd_timeout_s: Annotated[float, msgspec.Meta(ge=0.01, le=60.0)] = 1.5
+
+
+_SIGNED = {"all": {"gcs", "api"}, "gcs": {"gcs"}, "api": {"api"}, "none": set[str]()}
 
 
 @dataclass(frozen=True)
@@ -67,81 +77,38 @@ class GatewayOptions:
         return self.signing_key if link_kind in self.signed_links else None
 
 
-def _float(key: str, text: str, lo: float, hi: float) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise OptionError(f"--set {key}: expected a number, got {text!r}") from None
-    if not math.isfinite(value) or not lo <= value <= hi:
-        raise OptionError(f"--set {key}: must be within [{lo:g}, {hi:g}], got {text!r}")
-    return value
-
-
-def _port(key: str, text: str) -> int:
-    value = _float(key, text, 0, 65535)
-    if value != int(value):
-        raise OptionError(f"--set {key}: expected a port number, got {text!r}")
-    return int(value)
-
-
-def _switch(key: str, text: str) -> bool:
-    if text.lower() in ("on", "true", "1", "yes"):
-        return True
-    if text.lower() in ("off", "false", "0", "no"):
-        return False
-    raise OptionError(f"--set {key}: expected on or off, got {text!r}")
-
-
-def _message_id(key: str) -> int:
-    name = key.removeprefix("rate.").upper()
-    msg_id = getattr(mavlink, f"MAVLINK_MSG_ID_{name}", None)
-    if not isinstance(msg_id, int):
-        raise OptionError(f"--set {key}: unknown MAVLink message {name!r}")
-    return msg_id
-
-
-def parse_options(section: Gateway, options: dict[str, str]) -> GatewayOptions:
-    """Validated options, or :class:`OptionError` naming the bad one."""
-    loopback = _is_loopback(section.host)
-    values: dict[str, object] = {}
-    telemetry_hz = section.telemetry_hz
-    rate_overrides: dict[int, float] = {}
-    for key, text in options.items():
-        if key.startswith("rate."):
-            rate_overrides[_message_id(key)] = _float(key, text, 0.0, 1000.0)
-        elif key not in KNOWN:
-            raise OptionError(
-                f"unknown gateway option {key!r}; known: {', '.join(sorted(KNOWN))}, rate.<MSG>"
-            )
-        elif key == "telemetry_hz":
-            telemetry_hz = _float(key, text, 0.01, 1000.0)
-        elif key == "bind_host":
-            values[key] = text
-        elif key in ("gcs_bind_port", "api_bind_port_base"):
-            values[key] = _port(key, text)
-        elif key == "api_links":
-            values[key] = _switch(key, text)
-        elif key == "cmd_timeout_s":
-            values[key] = _float(key, text, 0.01, 60.0)
-        elif key == "signed_links":
-            choice = {"all": {"gcs", "api"}, "gcs": {"gcs"}, "api": {"api"}, "none": set()}
-            if text not in choice:
-                raise OptionError(f"--set {key}: expected all, gcs, api or none, got {text!r}")
-            values[key] = frozenset(choice[text])
-    rates = default_rates(telemetry_hz)
-    for msg_id, hz in rate_overrides.items():
-        if msg_id not in rates:
-            raise OptionError(f"--set rate.*: message {msg_id} is not a telemetry stream")
-        rates[msg_id] = hz
+def gateway_options(section: Gateway, settings: Mapping[str, str]) -> GatewayOptions:
+    """The scenario's ``[gateway]`` with ``settings`` over it, or :class:`OptionError`."""
+    given = parse_options(
+        GatewaySettings, settings, GatewaySettings(telemetry_hz=section.telemetry_hz)
+    )
+    default_bind = "127.0.0.1" if _is_loopback(section.host) else "0.0.0.0"
     return GatewayOptions(
         host=section.host,
         gcs_port=section.gcs_port,
         api_port_base=section.api_port_base,
-        bind_host=str(values.pop("bind_host", "127.0.0.1" if loopback else "0.0.0.0")),
+        bind_host=given.bind_host or default_bind,
+        gcs_bind_port=given.gcs_bind_port,
+        api_bind_port_base=given.api_bind_port_base,
+        api_links=given.api_links,
         signing_key=signing_key(section),
-        rates_hz=rates,
-        **values,  # type: ignore[arg-type]
+        signed_links=frozenset(_SIGNED[given.signed_links]),
+        cmd_timeout_s=given.cmd_timeout_s,
+        rates_hz=stream_rates(given.telemetry_hz, given.rate),
     )
+
+
+def stream_rates(telemetry_hz: float, overrides: Mapping[str, float]) -> dict[int, float]:
+    """Every telemetry stream's rate (MAVLink message id → Hz), ``rate.<MESSAGE>`` applied."""
+    rates = default_rates(telemetry_hz)
+    for name, hz in overrides.items():
+        msg_id = getattr(mavlink, f"MAVLINK_MSG_ID_{name.upper()}", None)
+        if not isinstance(msg_id, int):
+            raise OptionError(f"--set rate.{name}={hz:g}: unknown MAVLink message {name!r}")
+        if msg_id not in rates:
+            raise OptionError(f"--set rate.{name}={hz:g}: {name} is not a telemetry stream")
+        rates[msg_id] = hz
+    return rates
 
 
 _KEY_HEX = re.compile(r"[0-9a-fA-F]{64}")

@@ -42,6 +42,7 @@ from swarmbus.messages import (
     PlumeValues,
 )
 from swarmbus.node import NodeContext, NodeRuntime
+from swarmbus.options import OptionError, RoleOptions, parse_options
 from swarmbus.reqrep import Incoming, serve, serve_later
 from swarmbus.scenario import Scenario
 
@@ -281,41 +282,55 @@ def serve_queries(
     return queryables, worker
 
 
+class PlumeOptions(RoleOptions, frozen=True, kw_only=True):
+    """The plume role takes no options (everything is in the scenario): any ``--set`` is
+    refused."""
+
+
+def _start_state_publisher(
+    rt: NodeRuntime, states: StatePublisher
+) -> tuple[zenoh.Subscriber[None], threading.Thread]:
+    """Publish the field's state on ``field/state`` at the sim times the clock reaches."""
+    publisher = rt.session.declare_publisher(rt.keys.plume_state())
+
+    def on_clock(sample: zenoh.Sample) -> None:
+        try:
+            clock = decode(sample.payload.to_bytes(), Clock)
+        except MessageError as exc:
+            log.warning("plume: bad clock message: %s", exc)
+            return
+        states.on_clock(clock.sim_time_s)
+
+    def state_worker() -> None:
+        while not rt.stop.is_set():
+            t = states.next_time(0.2)
+            if t is not None:
+                publisher.put(encode(states.state(t)))
+
+    subscriber = rt.session.declare_subscriber(rt.keys.clock(), on_clock)
+    state_thread = threading.Thread(target=state_worker, name="plume-state", daemon=True)
+    state_thread.start()
+    return subscriber, state_thread
+
+
 def main(ctx: NodeContext) -> int:
     """Serve the scenario's plume until stopped."""
+    try:
+        parse_options(PlumeOptions, ctx.options)
+    except OptionError as exc:
+        log.error("plume: %s", exc)
+        return 2
     service = PlumeService(field_from_scenario(ctx.scenario), ctx.scenario)
     states = StatePublisher(service.field, ctx.scenario.plume.state_period_s)
     with NodeRuntime(ctx, role="plume") as rt:
-        keys = rt.keys
-        queryables, worker = serve_queries(rt.session, keys, service, rt.stop)
-        state_thread = None
-        subscriber = None
-        if states.active:
-            publisher = rt.session.declare_publisher(keys.plume_state())
-
-            def on_clock(sample: zenoh.Sample) -> None:
-                try:
-                    clock = decode(sample.payload.to_bytes(), Clock)
-                except MessageError as exc:
-                    log.warning("plume: bad clock message: %s", exc)
-                    return
-                states.on_clock(clock.sim_time_s)
-
-            def state_worker() -> None:
-                while not rt.stop.is_set():
-                    t = states.next_time(0.2)
-                    if t is not None:
-                        publisher.put(encode(states.state(t)))
-
-            subscriber = rt.session.declare_subscriber(keys.clock(), on_clock)
-            state_thread = threading.Thread(target=state_worker, name="plume-state", daemon=True)
-            state_thread.start()
+        queryables, mesh_worker = serve_queries(rt.session, rt.keys, service, rt.stop)
+        state_feed = _start_state_publisher(rt, states) if states.active else None
         rt.ready()
         rt.stop.wait()
-        worker.join(timeout=30.0)
-        if state_thread is not None:
+        mesh_worker.join(timeout=30.0)
+        if state_feed is not None:
+            subscriber, state_thread = state_feed
             state_thread.join(timeout=30.0)
-        if subscriber is not None:
             subscriber.undeclare()
         for q in queryables:
             q.undeclare()

@@ -21,15 +21,13 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Sequence
 
-AUTOPILOT_TOKEN_PREFIX = "autopilot-"
+from swarmbus.keys import vehicle_of_autopilot
 
 
 def participant_of(node_name: str, vehicle_ids: Iterable[str]) -> str | None:
     """The vehicle id whose autopilot token ``node_name`` is, or ``None``."""
-    if not node_name.startswith(AUTOPILOT_TOKEN_PREFIX):
-        return None
-    vid = node_name[len(AUTOPILOT_TOKEN_PREFIX) :]
-    return vid if vid in vehicle_ids else None
+    vid = vehicle_of_autopilot(node_name)
+    return vid if vid is not None and vid in vehicle_ids else None
 
 
 class Lockstep:

@@ -41,8 +41,7 @@ import logging
 import sys
 import threading
 import time
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -55,8 +54,8 @@ from sim_world.lockstep import Lockstep, participant_of
 from sim_world.stepping import SteppedClock, StepRefused
 from sim_world.world import World
 from swarmbus.codec import MessageError, decode, encode
+from swarmbus.keys import autopilot_node
 from swarmbus.messages import (
-    MAX_BATCH_COMMANDS,
     ActuatorBatch,
     ActuatorCommand,
     Clock,
@@ -68,12 +67,13 @@ from swarmbus.messages import (
     SpeedMode,
     StepReply,
     StepRequest,
-    Tick,
     VehicleState,
 )
 from swarmbus.node import NodeContext, NodeRuntime
+from swarmbus.options import OptionError, RoleOptions, parse_options
 from swarmbus.reqrep import Incoming, Pending, RequestError, ask, serve_later
 from swarmbus.session import Presence
+from swarmbus.views import BatchView
 
 log = logging.getLogger(__name__)
 
@@ -86,89 +86,33 @@ PLUME_DEPARTURE_S = 0.5
 RECORDER = "recorder"  # the recorder's node name: the clock waits for its restart too
 
 
-class OptionError(ValueError):
-    pass
+class PhysicsOptions(RoleOptions, frozen=True, kw_only=True):
+    """The physics role's options (``--set KEY=VALUE``); mode, speed factor and checkpoint
+    period default to the scenario's ``[time]`` (:meth:`from_context`)."""
 
-
-class _BatchView(
-    msgspec.Struct, frozen=True, tag_field="schema", tag=ActuatorBatch.__struct_config__.tag
-):
-    """An ``ActuatorBatch`` with undecoded entries: one bad entry does not sink the others."""
-
-    tick: Tick
-    commands: Annotated[list[msgspec.Raw], msgspec.Meta(max_length=MAX_BATCH_COMMANDS)]
-
-
-def _bool(text: str) -> bool:
-    value = text.strip().lower()
-    if value in ("1", "true", "yes", "on"):
-        return True
-    if value in ("0", "false", "no", "off"):
-        return False
-    raise ValueError(f"expected true or false, got {text!r}")
-
-
-def _positive_float(text: str) -> float:
-    value = float(text)
-    if not value > 0.0:
-        raise ValueError(f"must be > 0, got {text!r}")
-    return value
-
-
-def _non_negative_float(text: str) -> float:
-    value = float(text)
-    if not 0.0 <= value < float("inf"):
-        raise ValueError(f"must be a finite number >= 0, got {text!r}")
-    return value
-
-
-def _path(text: str) -> Path | None:
-    return Path(text) if text.strip() else None
-
-
-def _non_negative_int(text: str) -> int:
-    value = int(text)
-    if value < 0:
-        raise ValueError(f"must be >= 0, got {text!r}")
-    return value
-
-
-@dataclass(frozen=True)
-class PhysicsOptions:
-    mode: SpeedMode
-    speed_factor: float
-    max_ticks: int | None = None
+    mode: SpeedMode = SpeedMode.LOCKSTEP
+    speed_factor: Annotated[float, msgspec.Meta(gt=0.0, le=1e6)] = 1.0
+    max_ticks: Annotated[int, msgspec.Meta(ge=0)] | None = None
     wait_for_autopilots: bool = True
-    clock_period_s: float = 0.1
+    clock_period_s: Annotated[float, msgspec.Meta(gt=0.0, le=1e6)] = 0.1
     shared_plume_query: bool = True
-    checkpoint: Path | None = None
-    checkpoint_period_s: float = 1.0
+    checkpoint: str = ""  # empty: none
+    checkpoint_period_s: Annotated[float, msgspec.Meta(ge=0.0, le=1e9)] = 1.0
+
+    @property
+    def checkpoint_path(self) -> Path | None:
+        return Path(self.checkpoint) if self.checkpoint.strip() else None
 
     @classmethod
     def from_context(cls, ctx: NodeContext) -> PhysicsOptions:
-        parsers: dict[str, Callable[[str], object]] = {
-            "mode": SpeedMode,
-            "speed_factor": _positive_float,
-            "max_ticks": _non_negative_int,
-            "wait_for_autopilots": _bool,
-            "clock_period_s": _positive_float,
-            "shared_plume_query": _bool,
-            "checkpoint": _path,
-            "checkpoint_period_s": _non_negative_float,
-        }
-        values: dict[str, object] = {
-            "mode": SpeedMode(ctx.scenario.time.mode),
-            "speed_factor": ctx.scenario.time.speed_factor,
-            "checkpoint_period_s": ctx.scenario.time.checkpoint_period_s,
-        }
-        for key, text in sorted(ctx.options.items()):
-            if key not in parsers:
-                raise OptionError(f"unknown physics option {key!r}; known: {', '.join(parsers)}")
-            try:
-                values[key] = parsers[key](text)
-            except ValueError as exc:
-                raise OptionError(f"physics option {key}: {exc}") from None
-        return cls(**values)  # type: ignore[arg-type]
+        """``ctx.options`` over the scenario's defaults, or :class:`OptionError`."""
+        time_ = ctx.scenario.time
+        defaults = cls(
+            mode=SpeedMode(time_.mode),
+            speed_factor=time_.speed_factor,
+            checkpoint_period_s=time_.checkpoint_period_s,
+        )
+        return parse_options(cls, ctx.options, defaults)
 
 
 class PhysicsNode:
@@ -191,7 +135,7 @@ class PhysicsNode:
         # Checkpoints every `_checkpoint_ticks` ticks; the loop's per-tick cost is one
         # comparison with `_next_checkpoint`. The marker notes each published tick.
         self._checkpoint_ticks = 0
-        if options.checkpoint is not None and options.checkpoint_period_s > 0.0:
+        if options.checkpoint_path is not None and options.checkpoint_period_s > 0.0:
             period = options.checkpoint_period_s * self.scenario.time.control_hz
             self._checkpoint_ticks = max(1, round(period))
         self._next_checkpoint = self._due_checkpoint = sys.maxsize
@@ -351,7 +295,7 @@ class PhysicsNode:
     ) -> tuple[int, list[ActuatorCommand]] | None:
         """The good entries of a batch that failed to decode (each bad one is logged)."""
         try:
-            view = decode(data, _BatchView)
+            view = decode(data, BatchView)
         except MessageError:
             log.warning("ignoring actuator batch on %s: %s", key, exc)
             return None
@@ -365,7 +309,7 @@ class PhysicsNode:
 
     # ------------------------------------------------------------------ phases
     def run(self) -> int:
-        last_run = self._resume() if self.options.checkpoint is not None else None
+        last_run = self._resume() if self.options.checkpoint_path is not None else None
         self.rt.ready()
         deadline = time.monotonic() + self.scenario.time.startup_timeout_s
         if self.options.wait_for_autopilots and not self._wait_for_tokens(deadline):
@@ -388,7 +332,7 @@ class PhysicsNode:
     # ------------------------------------------------------------------ checkpoints
     def _resume(self) -> float | None:
         """Restore the checkpoint if there is one; the last run's last tick's wall time."""
-        path = self.options.checkpoint
+        path = self.options.checkpoint_path
         assert path is not None
         last = ProgressMarker.read(checkpoint.marker_path(path))
         if path.exists():
@@ -443,7 +387,7 @@ class PhysicsNode:
                         "autopilots missing after %.1f s: %s (no liveliness token %s)",
                         self.scenario.time.startup_timeout_s,
                         ", ".join(missing),
-                        ", ".join(f"autopilot-{v}" for v in missing),
+                        ", ".join(autopilot_node(v) for v in missing),
                     )
                     return False
                 self._cond.wait(min(remaining, STOP_POLL_S))
@@ -869,7 +813,7 @@ def main(ctx: NodeContext) -> int:
     try:
         options = PhysicsOptions.from_context(ctx)
     except OptionError as exc:
-        log.error("%s", exc)
+        log.error("physics: %s", exc)
         return 2
     with World(ctx.scenario) as world, NodeRuntime(ctx, role="physics") as rt:
         node = PhysicsNode(rt, world, options)

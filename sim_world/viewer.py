@@ -27,11 +27,12 @@ import threading
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Annotated, Any
 
 import meshcat
 import meshcat.geometry as mg
 import meshcat.transformations as mtf
+import msgspec
 import numpy as np
 from meshcat.servers.zmqserver import ZMQWebSocketBridge
 
@@ -56,6 +57,7 @@ from swarmbus.messages import (
     VehicleState,
 )
 from swarmbus.node import NodeContext, NodeRuntime
+from swarmbus.options import OptionError, RoleOptions, parse_options
 from swarmbus.scenario import Scenario
 from swarmbus.session import free_tcp_port
 from swarmbus.vehicle_types import load_vehicle_type
@@ -68,28 +70,16 @@ WORLD_ROOT = "/world"
 HEALTH_PERIOD_S = 1.0
 
 
-@dataclass(frozen=True)
-class ViewerOptions:
-    http_port: int = 0
-    rate_hz: float = 25.0
-    vehicle_scale: float = 4.0
-    levels_g_m3: tuple[float, ...] = ()
-    mesh_resolution_m: float = 1.0
+class ViewerOptions(RoleOptions, frozen=True, kw_only=True):
+    """The viewer role's options (``--set KEY=VALUE``)."""
 
-    @classmethod
-    def from_ctx(cls, options: dict[str, str]) -> ViewerOptions:
-        known = {"http_port", "rate_hz", "vehicle_scale", "levels", "mesh_resolution_m"}
-        unknown = set(options) - known
-        if unknown:
-            raise ValueError(f"unknown viewer option(s) {sorted(unknown)}; known: {sorted(known)}")
-        levels = tuple(float(v) for v in options.get("levels", "").split(",") if v.strip())
-        return cls(
-            http_port=int(options.get("http_port", 0)),
-            rate_hz=min(25.0, float(options.get("rate_hz", 25.0))),
-            vehicle_scale=float(options.get("vehicle_scale", 4.0)),
-            levels_g_m3=levels,
-            mesh_resolution_m=float(options.get("mesh_resolution_m", 1.0)),
-        )
+    http_port: Annotated[int, msgspec.Meta(ge=0, le=65535)] = 0  # 0: any free port
+    rate_hz: Annotated[float, msgspec.Meta(gt=0.0, le=25.0)] = 25.0
+    vehicle_scale: Annotated[float, msgspec.Meta(gt=0.0, le=1000.0)] = 4.0
+    levels_g_m3: tuple[Annotated[float, msgspec.Meta(gt=0.0)], ...] = msgspec.field(
+        default=(), name="levels"
+    )
+    mesh_resolution_m: Annotated[float, msgspec.Meta(gt=0.0, le=1000.0)] = 1.0
 
 
 def pose_matrix(position: Sequence[float], xyzw: Sequence[float], scale: float = 1.0) -> Any:
@@ -382,8 +372,8 @@ def render(scene: Scene, feed: Feed, meshes: MeshFetcher) -> int:
 
 def main(ctx: NodeContext) -> int:
     try:
-        opts = ViewerOptions.from_ctx(ctx.options)
-    except ValueError as exc:
+        opts = parse_options(ViewerOptions, ctx.options)
+    except OptionError as exc:
         log.error("viewer: %s", exc)
         return 2
     with NodeRuntime(ctx, role="viewer") as rt, MeshcatServer(http_port=opts.http_port) as srv:

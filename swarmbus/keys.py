@@ -16,6 +16,7 @@ name. A process serving one vehicle still uses ``vehicle/<id>/actuators``.
 from __future__ import annotations
 
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 ROOT = "plumeswarm"
@@ -165,3 +166,31 @@ class Keys:
         key = str(key)
         p = self.prefix + "/"
         return key[len(p) :] if key.startswith(p) else key
+
+
+# -- node names ------------------------------------------------------------------------------
+# A process's node name is the ``<name>`` of its ``node/<name>`` presence keys. An autopilot
+# declares one token per vehicle it serves, ``autopilot-<vehicle id>``: that token is the
+# vehicle's lockstep participant, whatever the process is called.
+AUTOPILOT_PREFIX = "autopilot-"
+
+
+def autopilot_node(vehicle_id: str) -> str:
+    """The presence name of one vehicle's autopilot."""
+    return AUTOPILOT_PREFIX + check_name("vehicle", vehicle_id)
+
+
+def vehicle_of_autopilot(node_name: str) -> str | None:
+    """The vehicle id in an ``autopilot-<id>`` presence name; None for any other node."""
+    return (
+        node_name.removeprefix(AUTOPILOT_PREFIX) if node_name.startswith(AUTOPILOT_PREFIX) else None
+    )
+
+
+def process_node(role: str, vehicle_ids: Sequence[str] = ()) -> str:
+    """The default node name of a ``role`` process serving ``vehicle_ids``: ``role``,
+    ``role-<id>``, or ``role-<first id>-plus<n - 1>`` (all ids would outgrow a key segment)."""
+    if not vehicle_ids:
+        return role
+    more = f"-plus{len(vehicle_ids) - 1}" if len(vehicle_ids) > 1 else ""
+    return f"{role}-{vehicle_ids[0]}{more}"

@@ -489,4 +489,4 @@ def test_unknown_option_is_a_clear_error(tmp_path: Path) -> None:
         ["node", "physics", "--scenario", str(write_scenario(tmp_path)), "--set", "warp=9"]
     )
     assert result.returncode == 2
-    assert "unknown physics option 'warp'" in result.stderr
+    assert "--set warp=9: unknown option; known: checkpoint," in result.stderr

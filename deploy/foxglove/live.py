@@ -16,15 +16,17 @@ from __future__ import annotations
 import logging
 import sys
 import time
-from dataclasses import dataclass
+from typing import Annotated
 
 import foxglove
+import msgspec
 
 from deploy.foxglove.scene import FoxgloveScene, Out, channel_schema, encode
 from sim_world.view_feed import Feed, MeshFetcher, isosurface_queries
 from swarmbus.codec import MessageError, decode
 from swarmbus.messages import ConcentrationReading, SimTick
 from swarmbus.node import NodeContext, NodeRuntime
+from swarmbus.options import OptionError, RoleOptions, parse_options
 
 log = logging.getLogger(__name__)
 
@@ -33,39 +35,12 @@ DEFAULT_PORT = 8765
 HEALTH_PERIOD_S = 1.0
 
 
-@dataclass(frozen=True)
-class LiveOptions:
-    port: int = DEFAULT_PORT
-    rate_hz: float = 20.0
-    static_period_s: float = 2.0
+class LiveOptions(RoleOptions, frozen=True, kw_only=True):
+    """The foxglove role's options (``--set KEY=VALUE``)."""
 
-    @classmethod
-    def from_options(cls, options: dict[str, str]) -> LiveOptions:
-        known = {"port", "rate_hz", "static_period_s"}
-        unknown = set(options) - known
-        if unknown:
-            raise ValueError(
-                f"unknown foxglove option(s) {sorted(unknown)}; known: {sorted(known)}"
-            )
-        values: dict[str, float] = {}
-        for name, low, high in (
-            ("port", 0, 65535),
-            ("rate_hz", 0.1, 100.0),
-            ("static_period_s", 0.1, 3600.0),
-        ):
-            if name not in options:
-                continue
-            try:
-                values[name] = float(options[name])
-            except ValueError:
-                raise ValueError(f"option {name}: {options[name]!r} is not a number") from None
-            if not low <= values[name] <= high:
-                raise ValueError(f"option {name}: {options[name]} is not in [{low}, {high}]")
-        return cls(
-            port=int(values.get("port", DEFAULT_PORT)),
-            rate_hz=values.get("rate_hz", 20.0),
-            static_period_s=values.get("static_period_s", 2.0),
-        )
+    port: Annotated[int, msgspec.Meta(ge=0, le=65535)] = DEFAULT_PORT  # 0: any free port
+    rate_hz: Annotated[float, msgspec.Meta(ge=0.1, le=100.0)] = 20.0
+    static_period_s: Annotated[float, msgspec.Meta(ge=0.1, le=3600.0)] = 2.0
 
 
 class LiveChannels:
@@ -120,8 +95,8 @@ def convert(scene: FoxgloveScene, feed: Feed, meshes: MeshFetcher, channels: Liv
 
 def main(ctx: NodeContext) -> int:
     try:
-        opts = LiveOptions.from_options(ctx.options)
-    except ValueError as exc:
+        opts = parse_options(LiveOptions, ctx.options)
+    except OptionError as exc:
         log.error("foxglove: %s", exc)
         return 2
     context = foxglove.Context()

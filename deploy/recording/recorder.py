@@ -26,6 +26,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import Annotated
 
 import msgspec
 import zenoh
@@ -40,12 +41,25 @@ from swarmbus.codec import encode
 from swarmbus.keys import Keys
 from swarmbus.messages import NodeHealth, PlumeInfo, PlumeInfoQuery, SimTick, VehicleState
 from swarmbus.node import NodeContext, NodeRuntime, package_version
+from swarmbus.options import OptionError, RoleOptions, parse_options
 from swarmbus.reqrep import RequestError, request
 from swarmbus.scenario import Scenario
 
 log = logging.getLogger(__name__)
 
 HealthPublisher = Callable[[str], None]
+
+
+class RecorderSettings(RoleOptions, frozen=True, kw_only=True):
+    """The recorder role's options (``--set KEY=VALUE``)."""
+
+    out: str = ""  # empty: plumeswarm-<world>-<UTC time>.mcap
+    chunk_interval_s: Annotated[float, msgspec.Meta(gt=0.0, le=3600.0)] = DEFAULT_CHUNK_INTERVAL_S
+    chunk_bytes: Annotated[int, msgspec.Meta(ge=1, le=2**31)] = DEFAULT_CHUNK_BYTES
+    max_backlog: Annotated[int, msgspec.Meta(ge=1, le=10**9)] = 2_000_000
+    query_plume_info: bool = True
+    resume: bool = False
+    foxglove: bool = True
 
 
 @dataclass(frozen=True)
@@ -63,18 +77,11 @@ class RecorderOptions:
 
     @classmethod
     def from_ctx(cls, ctx: NodeContext) -> RecorderOptions:
-        opts = ctx.options
+        """``ctx.options`` resolved, or :class:`OptionError` naming the bad one."""
+        given = msgspec.structs.asdict(parse_options(RecorderSettings, ctx.options))
         stamp = datetime.now(UTC).strftime("%Y%m%d-%H%M%S")
-        out = Path(opts.get("out") or f"plumeswarm-{ctx.scenario.world.name}-{stamp}.mcap")
-        return cls(
-            out=out,
-            chunk_interval_s=float(opts.get("chunk_interval_s", DEFAULT_CHUNK_INTERVAL_S)),
-            chunk_bytes=int(opts.get("chunk_bytes", DEFAULT_CHUNK_BYTES)),
-            max_backlog=int(opts.get("max_backlog", 2_000_000)),
-            query_plume_info=opts.get("query_plume_info", "true").lower() != "false",
-            resume=opts.get("resume", "false").lower() == "true",
-            foxglove=opts.get("foxglove", "true").lower() != "false",
-        )
+        out = Path(given.pop("out") or f"plumeswarm-{ctx.scenario.world.name}-{stamp}.mcap")
+        return cls(out=out, **given)
 
 
 # key, payload, receive time (ns), publish time (ns, the sample's timestamp), is a query reply
@@ -415,7 +422,11 @@ GAP_SCAN_TIMEOUT_S = 60.0
 
 def run(ctx: NodeContext) -> int:
     """Record until SIGINT/SIGTERM; returns the process exit code."""
-    opts = RecorderOptions.from_ctx(ctx)
+    try:
+        opts = RecorderOptions.from_ctx(ctx)
+    except OptionError as exc:
+        log.error("recorder: %s", exc)
+        return 2
     sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)  # this process is the recorder alone
     metadata = {
         "world": ctx.scenario.world.name,
