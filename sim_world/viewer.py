@@ -35,17 +35,6 @@ import meshcat.transformations as mtf
 import numpy as np
 from meshcat.servers.zmqserver import ZMQWebSocketBridge
 
-from sim_world.view_feed import (
-    PALETTE,
-    PLUME_COLOURS,
-    READING_BINS,
-    Feed,
-    MeshFetcher,
-    default_levels,
-    isosurface_queries,
-    reading_colour,
-    scene_bounds,
-)
 from swarmbus.codec import MessageError, decode
 from swarmbus.messages import (
     ConcentrationReading,
@@ -59,6 +48,17 @@ from swarmbus.node import NodeContext, NodeRuntime
 from swarmbus.scenario import Scenario
 from swarmbus.session import free_tcp_port
 from swarmbus.vehicle_types import load_vehicle_type
+from swarmbus.view_feed import (
+    PALETTE,
+    PLUME_COLOURS,
+    READING_BINS,
+    Feed,
+    MeshFetcher,
+    default_levels,
+    isosurface_queries,
+    reading_colour,
+    scene_bounds,
+)
 
 log = logging.getLogger(__name__)
 

@@ -11,8 +11,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import LogNorm
 from matplotlib.figure import Figure
 
-from deploy.recording.flight import Flight, FloatArray
-from deploy.recording.plume_map import PlumeMap
+from recorder.flight import Flight, FloatArray
+from recorder.plume_map import PlumeMap
 
 log = logging.getLogger(__name__)
 
