@@ -26,7 +26,7 @@ def _ints(value: str) -> tuple[int, ...]:
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__)
+    ap = argparse.ArgumentParser(prog="python -m bench.scale", description=__doc__)
     ap.add_argument("--scenario", default=None, help="scenario file or name (default novak2018)")
     ap.add_argument("--vehicles", type=_ints, default=(1, 4, 16), help="comma-separated counts")
     ap.add_argument("--state", default="grounded,hovering", help="comma-separated states")

@@ -1,4 +1,5 @@
-"""The bodies of ``plumeswarm record``, ``replay`` and ``report`` (parsing stays in deploy.cli).
+"""The bodies of ``plumeswarm record``, ``replay`` and ``report`` (their options are parsed in
+:mod:`deploy.cli.main`).
 
 Each returns the process exit code; failures are one line on stderr, never a traceback.
 """
