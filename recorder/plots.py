@@ -68,7 +68,7 @@ def top_view(flight: Flight, plume: PlumeMap | None) -> Figure:
             del vid
         if sc is not None:
             figure.colorbar(sc, ax=axes, label="reported concentration (g/m³)")
-        title = "Trajectories, readings coloured (no plume model in the recording)"
+        title = "Trajectories, readings coloured (no steady plume map for this recording)"
     for vid, track in flight.tracks.items():
         c = track.columns
         colour = colour_of(flight, vid)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 from pathlib import Path
 
+import msgspec
 import numpy as np
 import pytest
 import zenoh
@@ -137,3 +138,31 @@ def test_map_field_is_the_plume_services_gaussian(lid_m: float | None) -> None:
         expected = service.concentration(points)
         atol = 1e-5 * float(expected.max())
         assert np.allclose(report.concentration(points), expected, rtol=1e-9, atol=atol)
+
+
+def test_map_only_for_a_steady_plume() -> None:
+    """A Gaussian plume (from plume/info, else from the scenario) has a map; a filament plume's
+    value changes with time and has none; without either there is none."""
+    from recorder.flight import Flight
+    from recorder.plume_map import SteadyPlume, plume_field
+    from swarmbus.messages import PlumeInfo, PlumeSource
+    from swarmbus.scenario import load_scenario, resolve_scenario_path
+
+    source = PlumeSource(x_m=0.0, y_m=0.0, release_rate_g_s=10.0, release_height_m=10.0)
+    info = PlumeInfo(
+        model="gaussian",
+        stability="D",
+        coefficients="novak2018",
+        wind_speed_m_s=6.0,
+        wind_from_deg=270.0,
+        mixing_height_m=None,
+        sources=[source],
+    )
+    steady = load_scenario(resolve_scenario_path("novak2018"))
+    filament = load_scenario(resolve_scenario_path("filament"))
+    assert isinstance(plume_field(Flight("w", plume_info=info)), SteadyPlume)
+    assert isinstance(plume_field(Flight("w", scenario=steady)), SteadyPlume)
+    assert plume_field(Flight("w", scenario=filament)) is None
+    moving = PlumeInfo(**{**msgspec.structs.asdict(info), "model": "filament"})
+    assert plume_field(Flight("w", plume_info=moving, scenario=steady)) is None
+    assert plume_field(Flight("w")) is None
