@@ -145,19 +145,12 @@ def test_map_only_for_a_steady_plume() -> None:
     value changes with time and has none; without either there is none."""
     from recorder.flight import Flight
     from recorder.plume_map import SteadyPlume, plume_field
-    from swarmbus.messages import PlumeInfo, PlumeSource
+    from swarmbus.messages import PlumeInfo
     from swarmbus.scenario import load_scenario, resolve_scenario_path
+    from tests.messages_samples import SAMPLES
 
-    source = PlumeSource(x_m=0.0, y_m=0.0, release_rate_g_s=10.0, release_height_m=10.0)
-    info = PlumeInfo(
-        model="gaussian",
-        stability="D",
-        coefficients="novak2018",
-        wind_speed_m_s=6.0,
-        wind_from_deg=270.0,
-        mixing_height_m=None,
-        sources=[source],
-    )
+    info = SAMPLES[PlumeInfo]
+    assert isinstance(info, PlumeInfo) and info.model == "gaussian"
     steady = load_scenario(resolve_scenario_path("novak2018"))
     filament = load_scenario(resolve_scenario_path("filament"))
     assert isinstance(plume_field(Flight("w", plume_info=info)), SteadyPlume)
