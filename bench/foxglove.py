@@ -4,7 +4,7 @@ Run with ``python -m bench.foxglove [--vehicles 32] [--seconds 20]``. A 32-vehic
 control as the bus carries it (per tick one ``sim/tick`` with every state and one
 ``vehicle/<id>/state`` per vehicle; a ``vehicle/<id>/concentration`` per vehicle at 10 Hz) is
 written through the recorder's sink (MessagePack → JSON → MCAP) with and without the Foxglove
-conversion (:class:`deploy.foxglove.scene.FoxgloveScene`). Prints a table and writes JSON: sim
+conversion (:class:`recorder.foxglove.scene.FoxgloveScene`). Prints a table and writes JSON: sim
 seconds written per wall second (the real-time factor the writer alone could keep up with), CPU
 per sim second, file size.
 """
@@ -19,9 +19,9 @@ from pathlib import Path
 from typing import Any
 
 from bench.recorder import STATE_HZ, state
-from deploy.foxglove.scene import TRAIL_MAX_POINTS, TRAILS_PERIOD_S, FoxgloveScene
-from deploy.foxglove.scene import encode as encode_message
-from deploy.recording.sink import McapSink
+from recorder.foxglove.scene import TRAIL_MAX_POINTS, TRAILS_PERIOD_S, FoxgloveScene
+from recorder.foxglove.scene import encode as encode_message
+from recorder.sink import McapSink
 from swarmbus.codec import encode
 from swarmbus.keys import Keys
 from swarmbus.messages import ConcentrationReading, SimTick

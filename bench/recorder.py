@@ -29,9 +29,9 @@ from typing import Any
 
 import psutil
 
-from deploy.recording.handshake import wait_until_recorded
-from deploy.recording.reader import Recording
-from deploy.recording.sink import McapSink
+from recorder.handshake import wait_until_recorded
+from recorder.reader import Recording
+from recorder.sink import McapSink
 from swarmbus.codec import encode
 from swarmbus.keys import Keys
 from swarmbus.messages import NodeState, VehicleState

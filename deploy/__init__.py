@@ -1,1 +1,3 @@
-"""deploy — the ``plumeswarm`` CLI, the launcher, scenarios and multi-host configuration."""
+"""deploy — composition: the launcher and supervisor, scenarios, multi-host configuration and
+security, the ``plumeswarm`` CLI (:mod:`deploy.cli`) and the tools it calls (demo, status,
+benches), the fused runner and the environments."""

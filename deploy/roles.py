@@ -20,8 +20,8 @@ ROLES: dict[str, str] = {
     "autopilot": "agents.autopilot_node:main",
     "gateway": "gcs_bridge.gateway:main",
     "viewer": "sim_world.viewer:main",
-    "recorder": "deploy.recorder:main",
-    "foxglove": "deploy.foxglove.live:main",
+    "recorder": "recorder.node:run",
+    "foxglove": "recorder.foxglove.live:main",
 }
 
 

@@ -36,17 +36,6 @@ import msgspec
 import numpy as np
 from meshcat.servers.zmqserver import ZMQWebSocketBridge
 
-from sim_world.view_feed import (
-    PALETTE,
-    PLUME_COLOURS,
-    READING_BINS,
-    Feed,
-    MeshFetcher,
-    default_levels,
-    isosurface_queries,
-    reading_colour,
-    scene_bounds,
-)
 from swarmbus.codec import MessageError, decode
 from swarmbus.messages import (
     ConcentrationReading,
@@ -61,6 +50,17 @@ from swarmbus.options import OptionError, RoleOptions, parse_options
 from swarmbus.scenario import Scenario
 from swarmbus.session import free_tcp_port
 from swarmbus.vehicle_types import load_vehicle_type
+from swarmbus.view_feed import (
+    PALETTE,
+    PLUME_COLOURS,
+    READING_BINS,
+    Feed,
+    MeshFetcher,
+    default_levels,
+    isosurface_queries,
+    reading_colour,
+    scene_bounds,
+)
 
 log = logging.getLogger(__name__)
 

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import msgspec
 
-from deploy.recording.handshake import wait_until_recorded
+from recorder.handshake import wait_until_recorded
 from swarmbus.codec import encode
 from swarmbus.messages import (
     ConcentrationReading,

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from matplotlib.image import imread
 
-from deploy.recording.report import READING_COLUMNS, TRACK_COLUMNS
+from recorder.report import READING_COLUMNS, TRACK_COLUMNS
 from tests.procs import run_cli
 from tests.test_report import PNGS
 

@@ -21,12 +21,12 @@ import zenoh
 
 from agents import VehicleCommander
 from deploy.busview import BusView
-from deploy.recording.reader import Recording, segment_end
-from deploy.recording.schema import SegmentGap
 from deploy.scale_bench import loop_mission
 from deploy.scaling import write_scenario
 from gcs_bridge.dialect import mavlink
 from gcs_bridge.modes import Px4AutoSub, Px4Main
+from recorder.reader import Recording, segment_end
+from recorder.schema import SegmentGap
 from swarmbus.codec import decode
 from swarmbus.keys import Keys
 from swarmbus.messages import (

@@ -23,9 +23,9 @@ from mcap.reader import make_reader
 from websockets.sync.client import connect
 
 from agents import VehicleCommander
-from deploy.foxglove.layout import layout_json
 from deploy.launcher import LaunchOptions, plan
-from deploy.recording.reader import Recording
+from recorder.foxglove.layout import layout_json
+from recorder.reader import Recording
 from swarmbus.messages import Arm, MissionStart, MissionUpload, SimTick
 from swarmbus.scenario import load_scenario, resolve_scenario_path
 from swarmbus.session import NetworkConfig, free_tcp_port, open_session

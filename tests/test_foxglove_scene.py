@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from deploy.foxglove.export import ExportError, export_foxglove
-from deploy.foxglove.layout import layout_json
-from deploy.foxglove.scene import (
+from recorder.foxglove.export import ExportError, export_foxglove
+from recorder.foxglove.layout import layout_json
+from recorder.foxglove.scene import (
     PLUME_TOPIC,
     TF_TOPIC,
     TRAILS_TOPIC,
@@ -29,7 +29,7 @@ from deploy.foxglove.scene import (
     encode,
     location_topic,
 )
-from deploy.recording.sink import McapSink
+from recorder.sink import McapSink
 from swarmbus import codec
 from swarmbus.keys import Keys
 from swarmbus.messages import ConcentrationReading, PlumeMesh, SimTick, VehicleState

@@ -9,9 +9,9 @@ from pathlib import Path
 import pytest
 
 from deploy.launcher import missing_roles
-from deploy.recording.reader import Recording
 from plume_service.from_scenario import field_from_scenario
 from plume_service.service import StatePublisher
+from recorder.reader import Recording
 from swarmbus.messages import AnemometerReading, ConcentrationReading, PlumeState
 from swarmbus.scenario import SCENARIOS_DIR, load_scenario
 from swarmbus.wind import wind_from_scenario

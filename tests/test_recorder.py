@@ -12,7 +12,7 @@ from typing import Any
 
 import zenoh
 
-from deploy.recording.reader import Recording
+from recorder.reader import Recording
 from swarmbus.codec import encode
 from tests.procs import REPO, Network, NodeProcs, keys_for, run_cli, wait_until
 

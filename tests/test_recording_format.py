@@ -8,9 +8,9 @@ from pathlib import Path
 import msgspec
 from mcap.reader import make_reader
 
-from deploy.recording import schema as sch
-from deploy.recording.reader import Recording
-from deploy.recording.sink import McapSink
+from recorder import schema as sch
+from recorder.reader import Recording
+from recorder.sink import McapSink
 from swarmbus.codec import encode
 from swarmbus.keys import Keys
 from swarmbus.messages import ALL_MESSAGES, FlightMode, PlumeMesh, VehicleStatus

@@ -7,10 +7,10 @@ from pathlib import Path
 
 import pytest
 
-from deploy.recording import schema as sch
-from deploy.recording.reader import Recording, RecordingError, segment_end
-from deploy.recording.segments import next_segment, recording_files, segment_path
-from deploy.recording.sink import McapSink
+from recorder import schema as sch
+from recorder.reader import Recording, RecordingError, segment_end
+from recorder.segments import next_segment, recording_files, segment_path
+from recorder.sink import McapSink
 from swarmbus.codec import encode
 from swarmbus.keys import Keys
 from swarmbus.messages import SimTick

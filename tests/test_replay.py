@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import zenoh
 
-from deploy.recording.reader import Recording
+from recorder.reader import Recording
 from tests.procs import Network, NodeProcs, run_cli
 from tests.test_recorder import run_publisher, start_recorder
 

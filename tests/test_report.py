@@ -5,12 +5,13 @@ from __future__ import annotations
 import csv
 from pathlib import Path
 
+import msgspec
 import numpy as np
 import pytest
 import zenoh
 from matplotlib.image import imread
 
-from deploy.recording.report import READING_COLUMNS, TRACK_COLUMNS
+from recorder.report import READING_COLUMNS, TRACK_COLUMNS
 from swarmbus.session import Presence
 from tests.procs import Network, NodeProcs, keys_for, run_cli
 from tests.scripted_publisher import PPM_PER_G_M3, RESISTANCE_OHM
@@ -110,3 +111,51 @@ def test_report_of_a_recording_without_vehicles_is_one_line(
     result = run_cli(["report", str(out), "--out", str(tmp_path / "r")])
     assert result.returncode == 2
     assert "no vehicle states or readings" in result.stderr.strip().splitlines()[-1]
+
+
+@pytest.mark.parametrize("lid_m", [None, 40.0])
+def test_map_field_is_the_plume_services_gaussian(lid_m: float | None) -> None:
+    """The report draws the plume the service serves: two sources, a lid or none, with points
+    far downwind where σz outgrows the lid (the service sums its images in Fourier form; the
+    report's bounded image sum is then within 1e-5 of the map's maximum)."""
+    from plume_service import GaussianPlume, PlumeField
+    from recorder.plume_map import SteadyPlume
+    from swarmbus.dispersion import dispersion_curves
+
+    sources = [(0.0, 0.0, 10.0, 10.0), (30.0, -20.0, 5.0, 2.0)]
+    rng = np.random.default_rng(7)
+    points = np.column_stack(
+        [rng.uniform(-50, 3000, 3000), rng.uniform(-300, 300, 3000), rng.uniform(0, 39, 3000)]
+    )
+    for family, stability in [("mcmullen", "A"), ("mcmullen", "D"), ("briggs-urban", "B")]:
+        service = PlumeField(
+            [
+                GaussianPlume(q, 4.0, h, stability, family, (x, y), 250.0, lid_m)
+                for x, y, q, h in sources
+            ]
+        )
+        report = SteadyPlume(dispersion_curves(family, stability), 4.0, 250.0, lid_m, sources)
+        expected = service.concentration(points)
+        atol = 1e-5 * float(expected.max())
+        assert np.allclose(report.concentration(points), expected, rtol=1e-9, atol=atol)
+
+
+def test_map_only_for_a_steady_plume() -> None:
+    """A Gaussian plume (from plume/info, else from the scenario) has a map; a filament plume's
+    value changes with time and has none; without either there is none."""
+    from recorder.flight import Flight
+    from recorder.plume_map import SteadyPlume, plume_field
+    from swarmbus.messages import PlumeInfo
+    from swarmbus.scenario import load_scenario, resolve_scenario_path
+    from tests.messages_samples import SAMPLES
+
+    info = SAMPLES[PlumeInfo]
+    assert isinstance(info, PlumeInfo) and info.model == "gaussian"
+    steady = load_scenario(resolve_scenario_path("novak2018"))
+    filament = load_scenario(resolve_scenario_path("filament"))
+    assert isinstance(plume_field(Flight("w", plume_info=info)), SteadyPlume)
+    assert isinstance(plume_field(Flight("w", scenario=steady)), SteadyPlume)
+    assert plume_field(Flight("w", scenario=filament)) is None
+    moving = PlumeInfo(**{**msgspec.structs.asdict(info), "model": "filament"})
+    assert plume_field(Flight("w", plume_info=moving, scenario=steady)) is None
+    assert plume_field(Flight("w")) is None

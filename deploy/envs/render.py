@@ -112,8 +112,8 @@ class Renderer:
             import meshcat
 
             from deploy.envs.meshcat_window import Window as _Window
-            from sim_world.view_feed import default_levels, scene_bounds
             from sim_world.viewer import MeshcatServer, Scene, ViewerOptions
+            from swarmbus.view_feed import default_levels, scene_bounds
 
         self._server = MeshcatServer().__enter__()
         window = _Window(self._server.zmq_url, False, [])

@@ -3,7 +3,7 @@ protocol (the foxglove SDK's server) on 127.0.0.1 — open ``ws://127.0.0.1:PORT
 
 A subscriber only, like the viewer: Zenoh callbacks keep the newest tick and the newest reading
 of each vehicle; a loop converts them at most ``rate_hz`` times a second with the same
-conversion the recorder uses (:class:`~deploy.foxglove.scene.FoxgloveScene`), so a slow client
+conversion the recorder uses (:class:`~recorder.foxglove.scene.FoxgloveScene`), so a slow client
 or a slow role drops frames and never slows the lockstep. The vehicles' bodies and the plume are
 sent again every ``static_period_s`` for clients that connect later.
 
@@ -21,12 +21,12 @@ from typing import Annotated
 import foxglove
 import msgspec
 
-from deploy.foxglove.scene import FoxgloveScene, Out, channel_schema, encode
-from sim_world.view_feed import Feed, MeshFetcher, isosurface_queries
+from recorder.foxglove.scene import FoxgloveScene, Out, channel_schema, encode
 from swarmbus.codec import MessageError, decode
 from swarmbus.messages import ConcentrationReading, SimTick
 from swarmbus.node import NodeContext, NodeRuntime
 from swarmbus.options import OptionError, RoleOptions, parse_options
+from swarmbus.view_feed import Feed, MeshFetcher, isosurface_queries
 
 log = logging.getLogger(__name__)
 

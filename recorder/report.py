@@ -21,11 +21,11 @@ import numpy as np
 from matplotlib.figure import Figure
 from tqdm import tqdm
 
-from deploy.recording import plots
-from deploy.recording.flight import READING_FIELDS, TRACK_FIELDS, Flight, load_flight
-from deploy.recording.plume_map import plume_map
-from deploy.recording.reader import Recording
-from deploy.recording.schema import EventKind
+from recorder import plots
+from recorder.flight import READING_FIELDS, TRACK_FIELDS, Flight, load_flight
+from recorder.plume_map import plume_map
+from recorder.reader import Recording
+from recorder.schema import EventKind
 
 log = logging.getLogger(__name__)
 

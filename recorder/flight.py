@@ -17,8 +17,8 @@ import numpy as np
 import numpy.typing as npt
 from tqdm import tqdm
 
-from deploy.recording.reader import Recorded, Recording, RecordingError
-from deploy.recording.schema import (
+from recorder.reader import Recorded, Recording, RecordingError
+from recorder.schema import (
     EVENTS_TOPIC,
     GAPS_TOPIC,
     RecorderEvent,
@@ -164,32 +164,47 @@ class _Collector:
             "status": self._status,
         }
         self._vehicle_leaf = leaf
+        # The recorder's own channels (not bus messages), then the bus keys read whole.
+        self._recorder_topics: dict[str, Callable[[Recorded], None]] = {
+            EVENTS_TOPIC: self._event,
+            GAPS_TOPIC: self._gap,
+        }
+        self._bus_topics: dict[str, Callable[[Recorded], None]] = {
+            keys.tick(): self._tick,
+            keys.plume_info(): self._plume_info,
+        }
 
     def add(self, rec: Recorded) -> None:
-        if rec.topic == EVENTS_TOPIC:
-            event = rec.event()
-            if event is not None:
-                self.events.append(event)
-            return
-        if rec.topic == GAPS_TOPIC:
-            self.gaps.append(gap_from_json(rec.data))
+        own = self._recorder_topics.get(rec.topic)
+        if own is not None:
+            own(rec)
             return
         if not rec.is_bus_message:
             return
-        relative = self.keys.relative(rec.topic)
-        if relative.startswith("vehicle/"):
-            handler = self._vehicle_leaf.get(relative.rsplit("/", 1)[-1])
-            if handler is not None:
-                handler(rec)
-        elif rec.topic == self.keys.tick():
-            msg = rec.message()
-            if isinstance(msg, SimTick):
-                for s in msg.states:
-                    self.tick_states[s.vehicle_id].append(_state_row(s))
-        elif rec.topic == self.keys.plume_info():
-            msg = rec.message()
-            if isinstance(msg, PlumeInfo):
-                self.plume_info = msg
+        handler = self._bus_topics.get(rec.topic)
+        if handler is None and self.keys.relative(rec.topic).startswith("vehicle/"):
+            handler = self._vehicle_leaf.get(rec.topic.rsplit("/", 1)[-1])
+        if handler is not None:
+            handler(rec)
+
+    def _event(self, rec: Recorded) -> None:
+        event = rec.event()
+        if event is not None:
+            self.events.append(event)
+
+    def _gap(self, rec: Recorded) -> None:
+        self.gaps.append(gap_from_json(rec.data))
+
+    def _tick(self, rec: Recorded) -> None:
+        msg = rec.message()
+        if isinstance(msg, SimTick):
+            for s in msg.states:
+                self.tick_states[s.vehicle_id].append(_state_row(s))
+
+    def _plume_info(self, rec: Recorded) -> None:
+        msg = rec.message()
+        if isinstance(msg, PlumeInfo):
+            self.plume_info = msg
 
     def _state(self, rec: Recorded) -> None:
         msg = rec.message()

@@ -26,7 +26,7 @@ def certs() -> None:
 def certs_generate(hosts_file: Path, out: Path | None, days: int) -> None:
     """A CA and one certificate per role and host (common name <role>.<host>)."""
     from deploy.certs import CertError, generate
-    from deploy.cli import fail
+    from deploy.cli.common import fail
     from deploy.hosts import HostsError, load_deployment
     from deploy.security import host_identities
 
@@ -53,7 +53,7 @@ def certs_generate(hosts_file: Path, out: Path | None, days: int) -> None:
 def certs_show(files: tuple[Path, ...]) -> None:
     """The identity (common name) of each certificate FILE."""
     from deploy.certs import common_name_of
-    from deploy.cli import fail
+    from deploy.cli.common import fail
 
     for f in files:
         try:

@@ -2,7 +2,7 @@
 
 A recorder restarted after a crash never overwrites what its predecessor wrote: it continues in
 the next free segment next to the first one (and records the gap there, see
-:class:`deploy.recording.schema.SegmentGap`). Readers take the first segment, or the directory
+:class:`recorder.schema.SegmentGap`). Readers take the first segment, or the directory
 holding them, and read every segment in order.
 """
 

@@ -21,9 +21,9 @@ from mcap.reader import make_reader
 from mcap.records import Channel, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 
-from deploy.recording import schema as sch
-from deploy.recording.schema import SegmentGap, gap_from_json
-from deploy.recording.segments import SegmentError, recording_files
+from recorder import schema as sch
+from recorder.schema import SegmentGap, gap_from_json
+from recorder.segments import SegmentError, recording_files
 from swarmbus.messages import Message as BusMessage
 from swarmbus.messages import SimTick
 

@@ -2,7 +2,7 @@
 
 Zenoh delivers samples on its own threads; the callback only stamps and queues them (it must never
 block, or publishers with the ``drop`` congestion policy would lose messages upstream). A writer
-thread transcodes and writes them (:class:`~deploy.recording.sink.McapSink`). Nothing is dropped
+thread transcodes and writes them (:class:`~recorder.sink.McapSink`). Nothing is dropped
 silently: per-key counts are kept, a queue that falls behind is logged and recorded as an event,
 and only a queue at its hard limit drops — counted, logged as an error and recorded. Messages lost
 in Zenoh before they reach the recorder (publishers use the ``drop`` congestion policy) cannot be
@@ -11,7 +11,7 @@ jump in ``tick`` is counted, logged and recorded as a ``gap`` event.
 
 The recorder acknowledges every ``NodeHealth`` it records from another node by publishing its own
 health with ``detail = "heard <name> <state>"``: a publisher that must not lose its first messages
-waits for that acknowledgement (:mod:`deploy.recording.handshake`) before it starts.
+waits for that acknowledgement (:mod:`recorder.handshake`) before it starts.
 """
 
 from __future__ import annotations
@@ -31,12 +31,11 @@ from typing import Annotated
 import msgspec
 import zenoh
 
-from deploy.foxglove.scene import FoxgloveScene
-from deploy.recording import schema as sch
-from deploy.recording.reader import RecordingError, SegmentEnd, segment_end
-from deploy.recording.segments import next_segment
-from deploy.recording.sink import DEFAULT_CHUNK_BYTES, DEFAULT_CHUNK_INTERVAL_S, McapSink
-from sim_world.view_feed import fetch_mesh, isosurface_queries
+from recorder import schema as sch
+from recorder.foxglove.scene import FoxgloveScene
+from recorder.reader import RecordingError, SegmentEnd, segment_end
+from recorder.segments import next_segment
+from recorder.sink import DEFAULT_CHUNK_BYTES, DEFAULT_CHUNK_INTERVAL_S, McapSink
 from swarmbus.codec import encode
 from swarmbus.keys import Keys
 from swarmbus.messages import NodeHealth, PlumeInfo, PlumeInfoQuery, SimTick, VehicleState
@@ -44,6 +43,7 @@ from swarmbus.node import NodeContext, NodeRuntime, package_version
 from swarmbus.options import OptionError, RoleOptions, parse_options
 from swarmbus.reqrep import RequestError, request
 from swarmbus.scenario import Scenario
+from swarmbus.view_feed import fetch_mesh, isosurface_queries
 
 log = logging.getLogger(__name__)
 
@@ -73,7 +73,7 @@ class RecorderOptions:
     health_period_s: float = 1.0
     query_plume_info: bool = True
     resume: bool = False  # ``out`` exists (a killed predecessor's): continue in its next segment
-    foxglove: bool = True  # also write the Foxglove channels (deploy.foxglove.scene)
+    foxglove: bool = True  # also write the Foxglove channels (recorder.foxglove.scene)
 
     @classmethod
     def from_ctx(cls, ctx: NodeContext) -> RecorderOptions:

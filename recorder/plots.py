@@ -11,8 +11,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import LogNorm
 from matplotlib.figure import Figure
 
-from deploy.recording.flight import Flight, FloatArray
-from deploy.recording.plume_map import PlumeMap
+from recorder.flight import Flight, FloatArray
+from recorder.plume_map import PlumeMap
 
 log = logging.getLogger(__name__)
 
@@ -68,7 +68,7 @@ def top_view(flight: Flight, plume: PlumeMap | None) -> Figure:
             del vid
         if sc is not None:
             figure.colorbar(sc, ax=axes, label="reported concentration (g/m³)")
-        title = "Trajectories, readings coloured (no plume model in the recording)"
+        title = "Trajectories, readings coloured (no steady plume map for this recording)"
     for vid, track in flight.tracks.items():
         c = track.columns
         colour = colour_of(flight, vid)

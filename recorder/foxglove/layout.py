@@ -9,7 +9,7 @@ from collections.abc import Sequence
 
 import foxglove.layouts as fl
 
-from deploy.foxglove.scene import (
+from recorder.foxglove.scene import (
     PLUME_TOPIC,
     READINGS_TOPIC,
     TRAILS_TOPIC,

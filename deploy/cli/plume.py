@@ -21,7 +21,7 @@ from plume_service.service import source_fields
 
 
 def _field(scenario: str | None, preset: str | None) -> ConcentrationField:
-    from deploy.cli import fail, scenario_from
+    from deploy.cli.common import fail, scenario_from
 
     if scenario is not None and preset is not None:
         fail("give --scenario or --preset, not both")
@@ -86,7 +86,7 @@ def sample(
     scenario: str | None, preset: str | None, coords: tuple[float, ...], fmt: str, time_s: float
 ) -> None:
     """Concentration at points X Y Z [X Y Z ...] (world ENU metres)."""
-    from deploy.cli import fail
+    from deploy.cli.common import fail
 
     if not (math.isfinite(time_s) and time_s >= 0.0):
         fail(f"--time must be a number >= 0, got {time_s}")
@@ -124,7 +124,7 @@ def mesh(
     scenario: str | None, preset: str | None, level: float, resolution: float, out: Path
 ) -> None:
     """Closed isosurface mesh of the plume at --level, by marching cubes."""
-    from deploy.cli import fail
+    from deploy.cli.common import fail
 
     if out.suffix.lower() not in (".stl", ".obj"):
         fail(f"--out must end in .stl or .obj, got {out}")
@@ -168,7 +168,7 @@ def plot(
     time_s: float | None,
 ) -> None:
     """PNGs: plan view, along-wind section, crosswind profiles."""
-    from deploy.cli import fail
+    from deploy.cli.common import fail
     from plume_service.plots import plot_all  # matplotlib: imported only when plotting
 
     if time_s is not None and not (math.isfinite(time_s) and time_s >= 0.0):
@@ -218,7 +218,7 @@ def series(
     """The field at --point(s) every --every sim seconds over --seconds, without starting any
     process: the same values the plume service would give at those sim times (filaments and
     puffs are time-dependent; a Gaussian plume repeats one value)."""
-    from deploy.cli import fail, scenario_from
+    from deploy.cli.common import fail, scenario_from
 
     if not all(math.isfinite(c) for p in points for c in p):
         fail("--point coordinates must be finite numbers")

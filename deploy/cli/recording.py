@@ -1,4 +1,5 @@
-"""The bodies of ``plumeswarm record``, ``replay`` and ``report`` (parsing stays in deploy.cli).
+"""The bodies of ``plumeswarm record``, ``replay`` and ``report`` (their options are parsed in
+:mod:`deploy.cli.main`).
 
 Each returns the process exit code; failures are one line on stderr, never a traceback.
 """
@@ -22,7 +23,7 @@ def _context(
 
 def record(scenario: Scenario, connect: list[str], out: Path | None) -> int:
     """Run the recorder in the foreground until Ctrl-C / SIGTERM."""
-    from deploy.recording.recorder import RecorderOptions, run
+    from recorder.node import RecorderOptions, run
 
     ctx = _context(scenario, connect, "recorder", {"out": str(out)} if out else {})
     target = RecorderOptions.from_ctx(ctx).out
@@ -62,8 +63,8 @@ def replay(
     recorded_by: str | None,
 ) -> int:
     """Publish a recording back onto the bus; one line on success or failure."""
-    from deploy.recording import replay as rp
-    from deploy.recording.reader import RecordingError
+    from recorder import replay as rp
+    from recorder.reader import RecordingError
 
     opts = rp.ReplayOptions(speed=speed, wait_for=wait_for, recorded_by=recorded_by)
     try:
@@ -77,8 +78,8 @@ def replay(
 
 def report(path: str, out: Path) -> int:
     """Write the report of a recording; one line on success or failure."""
-    from deploy.recording.reader import RecordingError
-    from deploy.recording.report import ReportError, make_report
+    from recorder.reader import RecordingError
+    from recorder.report import ReportError, make_report
 
     try:
         files = make_report(path, out)

@@ -15,9 +15,9 @@ from typing import IO
 import msgspec
 from mcap.writer import CompressionType, Writer
 
-from deploy.foxglove.scene import Out, channel_schema, encode
-from deploy.recording import schema as sch
-from deploy.recording.reader import Recorded
+from recorder import schema as sch
+from recorder.foxglove.scene import Out, channel_schema, encode
+from recorder.reader import Recorded
 from swarmbus.node import package_version
 
 log = logging.getLogger(__name__)
@@ -159,7 +159,7 @@ class McapSink:
         return None
 
     def write_foxglove(self, out: Out) -> None:
-        """Store one Foxglove message (:mod:`deploy.foxglove.scene`) on its channel, with the
+        """Store one Foxglove message (:mod:`recorder.foxglove.scene`) on its channel, with the
         schema the foxglove SDK declares; log and publish time are its simulation time."""
         cs = channel_schema(type(out.message))
         cid = self._channels.get((out.topic, cs.message_encoding))

@@ -18,8 +18,8 @@ from dataclasses import dataclass
 import msgspec
 import zenoh
 
-from deploy.recording.handshake import RecorderNotListening, wait_until_recorded
-from deploy.recording.reader import Recorded, Recording, RecordingError
+from recorder.handshake import RecorderNotListening, wait_until_recorded
+from recorder.reader import Recorded, Recording, RecordingError
 from swarmbus.codec import encode
 from swarmbus.keys import KeyNameError, Keys
 from swarmbus.messages import NodeState

@@ -1,32 +1,19 @@
-"""The ``plumeswarm`` command line. Argument parsing lives only here (click)."""
+"""The ``plumeswarm`` command line. Argument parsing lives only in :mod:`deploy.cli` (click)."""
 
 from __future__ import annotations
 
 import logging
 import sys
 from pathlib import Path
-from typing import NoReturn
 
 import click
 
+from deploy.cli.common import fail, scenario_from
 from deploy.roles import BENCH_ROLES, ROLES, RoleUnavailable, role_entry
-from swarmbus.scenario import Scenario, ScenarioError, load_scenario, resolve_scenario_path
+from swarmbus.scenario import Scenario, resolve_scenario_path
 from swarmbus.session import NetworkConfig
 
 log = logging.getLogger(__name__)
-
-
-def fail(message: str, code: int = 2) -> NoReturn:
-    """One clear line on stderr and a non-zero exit: never a traceback."""
-    click.echo(f"plumeswarm: error: {message}", err=True)
-    sys.exit(code)
-
-
-def scenario_from(name_or_path: str | None) -> Scenario:
-    try:
-        return load_scenario(resolve_scenario_path(name_or_path))
-    except ScenarioError as exc:
-        fail(str(exc))
 
 
 def setup_logging(verbose: int) -> None:
@@ -383,7 +370,7 @@ def status(
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None)
 def record(scenario: str | None, connect: tuple[str, ...], out: Path | None) -> None:
     """Record everything on the bus to an MCAP file (until Ctrl-C)."""
-    from deploy.recording import commands
+    from deploy.cli import recording as commands
 
     sys.exit(commands.record(scenario_from(scenario), list(connect), out))
 
@@ -404,7 +391,7 @@ def replay(
     recorded_by: str | None,
 ) -> None:
     """Publish a recording back onto the bus with its timing."""
-    from deploy.recording import commands
+    from deploy.cli import recording as commands
 
     sc = scenario_from(scenario)
     sys.exit(commands.replay(file, sc, list(connect), speed, wait_for, recorded_by))
@@ -415,7 +402,7 @@ def replay(
 @click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path))
 def report(file: str, out: Path) -> None:
     """Plots, CSV and a one-page report from a recording."""
-    from deploy.recording import commands
+    from deploy.cli import recording as commands
 
     sys.exit(commands.report(file, out))
 
@@ -437,10 +424,10 @@ def export() -> None:
 )
 def export_foxglove(src: str, dst: Path, layout_file: Path | None) -> None:
     """Write OUT: recording IN with its Foxglove channels (3D scene, map, plots) made anew."""
-    from deploy.foxglove.export import ExportError
-    from deploy.foxglove.export import export_foxglove as run_export
-    from deploy.foxglove.layout import layout_json
-    from deploy.recording.reader import RecordingError
+    from recorder.foxglove.export import ExportError
+    from recorder.foxglove.export import export_foxglove as run_export
+    from recorder.foxglove.layout import layout_json
+    from recorder.reader import RecordingError
 
     try:
         done = run_export(src, dst, lambda n: click.echo(f"  {n} messages", err=True))
@@ -711,8 +698,8 @@ def bench_gsl(
 
 
 def _register_groups() -> None:
-    from deploy.certs_cli import certs
-    from deploy.plume_cli import plume
+    from deploy.cli.certs import certs
+    from deploy.cli.plume import plume
 
     cli.add_command(plume)
     cli.add_command(certs)

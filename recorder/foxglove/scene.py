@@ -25,10 +25,10 @@ import msgspec
 import numpy as np
 from foxglove import messages as fm
 
-from sim_world.view_feed import PALETTE, PLUME_COLOURS, default_levels, reading_colour
 from swarmbus.messages import ConcentrationReading, PlumeMesh, SimTick, VehicleState
 from swarmbus.scenario import Scenario
 from swarmbus.vehicle_types import VehicleType, VehicleTypeError, load_vehicle_type
+from swarmbus.view_feed import PALETTE, PLUME_COLOURS, default_levels, reading_colour
 
 WORLD_FRAME = "world"
 TF_TOPIC = "/tf"
@@ -260,15 +260,9 @@ class FoxgloveScene:
 
     def _advance(self, t_s: float | None, log_time_ns: int) -> list[Out]:
         if t_s is not None:
-            if self._anchor_ns is None:
-                self._anchor_ns = log_time_ns - round(t_s * 1e9)
-            elif self._now_s - RESTART_S < t_s <= self._now_s:
-                # Not later than what is drawn: a tick's states once more, one by one.
-                if not (self._vehicles_pending or self._plume_pending):
-                    return []
-                t_s = None
-        if t_s is not None:
-            self._now_s = t_s
+            t_s = self._move_clock(t_s, log_time_ns)
+            if t_s is None and not (self._vehicles_pending or self._plume_pending):
+                return []
         if self._anchor_ns is None:
             return []  # nothing to stamp with yet: kept until the first sim time
         now_ns = self._anchor_ns + round(self._now_s * 1e9)
@@ -277,17 +271,29 @@ class FoxgloveScene:
             out.append(Out(VEHICLES_TOPIC, self.vehicles_update(now_ns), now_ns))
         if self._plume_pending:
             out.append(Out(PLUME_TOPIC, self.plume_update(now_ns), now_ns))
-        if t_s is None:
-            return out
-        # Scene-wide periods: nothing is done per vehicle on a tick where nothing is due.
+        if t_s is not None:
+            out += self._periodic(t_s, now_ns)
+        return out
+
+    def _move_clock(self, t_s: float, log_time_ns: int) -> float | None:
+        """Sim time ``t_s`` made the scene's now (the first one anchors the log time); None when
+        it is not later than what is drawn (a tick's states once more, one by one)."""
+        if self._anchor_ns is None:
+            self._anchor_ns = log_time_ns - round(t_s * 1e9)
+        elif self._now_s - RESTART_S < t_s <= self._now_s:
+            return None
+        self._now_s = t_s
+        return t_s
+
+    def _periodic(self, t_s: float, now_ns: int) -> list[Out]:
+        """Scene-wide periods: nothing is done per vehicle on a tick where nothing is due."""
+        out: list[Out] = []
         if self._trail_points.due(t_s):
             self._sample_trails()
         if self._has_state and self._tf.due(t_s):
             out.append(Out(TF_TOPIC, self.transforms(now_ns), now_ns))
         if self._locations.due(t_s):
-            for vid, v in self._vehicles.items():
-                if v.state is not None:
-                    out.append(Out(location_topic(vid), self.location(v, v.state, now_ns), now_ns))
+            out += self._locations_out(now_ns)
         if self._readings.due(t_s):
             update = self.readings_update(now_ns)
             if update is not None:
@@ -297,6 +303,13 @@ class FoxgloveScene:
             if trails is not None:
                 out.append(Out(TRAILS_TOPIC, trails, now_ns))
         return out
+
+    def _locations_out(self, now_ns: int) -> list[Out]:
+        return [
+            Out(location_topic(vid), self.location(v, v.state, now_ns), now_ns)
+            for vid, v in self._vehicles.items()
+            if v.state is not None
+        ]
 
     def static_messages(self) -> list[Out]:
         """The vehicles' bodies and the plume again (for a live client that joined late)."""
