@@ -7,11 +7,12 @@ serves ``vehicle/<id>/cmd``, publishes ``vehicle/<id>/status`` (on change and ev
 ``status_period_s`` of sim time) and the sensor's ``vehicle/<id>/concentration``.
 
 One loop over typed events (:meth:`AutopilotNode.run`): the bus callbacks only put a
-``TickArrived`` or a ``CommandArrived`` into the :class:`Inbox`, on Zenoh's own thread; the loop
-handles them one at a time in arrival order (of ticks that piled up, the newest; a repeated
-tick, the start handshake's, gets the same answer again), and publishes statuses while no tick
-arrives. Zenoh runs on ONE runtime thread (``ZENOH_RUNTIME``, set in :func:`main` unless the
-environment sets it): fewer thread hand-overs and wake-ups per tick (docs/agents.md).
+``TickArrived`` or a ``CommandArrived`` into the :class:`Inbox` (on zenoh-python's callback
+thread); the loop handles them one at a time in arrival order (of ticks that piled up, the
+newest; a repeated tick, the start handshake's, gets the same answer again), and publishes
+statuses while no tick arrives. Zenoh runs on ONE runtime thread (``ZENOH_RUNTIME``, set in
+:func:`main` unless the environment sets it): fewer thread hand-overs and wake-ups per tick
+(docs/agents.md).
 
 The sensor: on a sensor tick the physics asks the plume for every vehicle's position
 (``SimTick.plume_queried``) and puts the answer into a later tick (``SimTick.plume_values``);
@@ -37,7 +38,7 @@ from collections.abc import Callable, Iterator
 from contextlib import suppress
 from dataclasses import dataclass, fields
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any
 
 import msgspec
 import numpy as np
@@ -69,7 +70,6 @@ from swarmbus.session import SINGLE_THREAD_RUNTIME
 from swarmbus.wind import WindModel, wind_from_scenario
 
 log = logging.getLogger(__name__)
-_T = TypeVar("_T")
 
 IDLE_STATUS_PERIOD_S = 1.0  # wall clock: status while no ticks arrive (physics not running)
 # Longest wait for an event: the stop signal is seen this often (a signal's handler runs only
@@ -331,8 +331,9 @@ IDLE = Idle()
 
 
 class Inbox:
-    """The node's events in arrival order. Bus callbacks only :meth:`put` (on Zenoh's thread:
-    no node state, no blocking); the node's one loop takes them from :meth:`events`."""
+    """The node's events in arrival order. Bus callbacks only :meth:`put` (on zenoh-python's
+    callback thread: no node state, no blocking); the node's one loop takes them from
+    :meth:`events`."""
 
     def __init__(self) -> None:
         self._queue: queue.SimpleQueue[Event] = queue.SimpleQueue()
@@ -401,12 +402,12 @@ class AutopilotNode:
         if self.keeper is not None:
             self.keeper.open(self._snapshot())
         self._declared.append(
-            self.session.declare_subscriber(self.keys.tick(), _direct(self._on_tick_sample))
+            self.session.declare_subscriber(self.keys.tick(), self._on_tick_sample)
         )
         for vid, served in self.served.items():
             self._declared.append(
                 self.session.declare_queryable(
-                    self.keys.vehicle_cmd(vid), _direct(self._command_handler(served))
+                    self.keys.vehicle_cmd(vid), self._command_handler(served)
                 )
             )
         for vid in self.served:
@@ -662,12 +663,6 @@ class AutopilotNode:
             log.warning("physics sent %d values for %d points", len(values), len(pending.states))
             return None
         return values
-
-
-def _direct(callback: Callable[[_T], None]) -> zenoh.handlers.Callback[_T]:
-    """A callback run on Zenoh's own thread (no hand-over to a callback thread): fit only for
-    callbacks that put an event in the inbox and return."""
-    return zenoh.handlers.Callback(callback, indirect=False)
 
 
 def main(ctx: NodeContext) -> int:
