@@ -1,42 +1,40 @@
 """The autopilot process: ``plumeswarm node autopilot --vehicle ID [--vehicle ID2 …]``.
 
-One process serves one vehicle (or a few): it declares one liveliness token
+One process serves one vehicle or K of them: it declares one liveliness token
 ``node/autopilot-<id>/health`` per vehicle (the lockstep's participant list), answers every
-``sim/tick`` with an ``ActuatorCommand`` on ``vehicle/<id>/actuators`` — a process serving
-several vehicles puts one ``ActuatorBatch`` of all their commands on
-``autopilot/<node>/actuators`` instead (one message per process per tick) — serves
-``vehicle/<id>/cmd``, publishes ``vehicle/<id>/status`` (on change and every
+``sim/tick`` with one ``ActuatorBatch`` of its vehicles' commands on ``autopilot/<node>/actuators``,
+serves ``vehicle/<id>/cmd``, publishes ``vehicle/<id>/status`` (on change and every
 ``status_period_s`` of sim time) and the sensor's ``vehicle/<id>/concentration``.
 
-Ticks are handled in the ``sim/tick`` subscriber's callback, one at a time and in arrival order;
-when ticks pile up only the newest is handled (a repeated tick, the start handshake's, gets the
-same answer again). The rare tick that has to wait for this process's own plume query (the
-physics did not send it) is handed to a worker thread instead of blocking the callback. The
-process runs Zenoh on ONE runtime thread (``ZENOH_RUNTIME``, set in :func:`main` unless the
-environment sets it): per tick, fewer thread hand-overs and wake-ups — the autopilot's CPU per
-tick fell 10–30 % in the scale bench (docs/agents.md, Performance). The sensor's plume query
-for tick k (one batched query: every vehicle's position in the tick, i.e. own + peers) is sent
-right after tick k's commands and collected before tick k+1's, so its round trip overlaps the
-physics step and a behaviour always sees the reading of the previous sensor tick — the same
-run after run. When the physics sent that query itself for everyone (``SimTick.plume_queried``),
-the autopilot sends none and takes the answer from tick k+1 (``SimTick.plume_values``): the
-same values at the same tick. Commands are handled on Zenoh's thread under a lock.
+One loop over typed events (:meth:`AutopilotNode.run`): the bus callbacks only put a
+``TickArrived`` or a ``CommandArrived`` into the :class:`Inbox` (on zenoh-python's callback
+thread); the loop handles them one at a time in arrival order (of ticks that piled up, the
+newest; a repeated tick, the start handshake's, gets the same answer again), and publishes
+statuses while no tick arrives. Zenoh runs on ONE runtime thread (``ZENOH_RUNTIME``, set in
+:func:`main` unless the environment sets it): fewer thread hand-overs and wake-ups per tick
+(docs/agents.md).
 
-Options (``--set key=value``): ``sensor_timeout_s`` (0: 0.4 × participant timeout),
-``status_period_s`` (0.5; a stepped world gets a status every tick), ``position_noise_m`` /
-``velocity_noise_m_s`` (0: the estimate is the physics' truth), ``checkpoint`` (a file path;
-empty: none): keep snapshots of the process's state there, so a restarted process, or a physics
-resumed from its checkpoint, carries on with the same bits (:mod:`agents.resume`). Plume
-queries go out only while a ``plume`` node's token is alive.
+The sensor: on a sensor tick the physics asks the plume for every vehicle's position
+(``SimTick.plume_queried``) and puts the answer into a later tick (``SimTick.plume_values``);
+the node turns it into readings before that tick's control, so a behaviour sees the reading of
+the previous sensor tick, the same run after run. A sensor tick the physics did not query (no
+plume node alive) gives unavailable readings.
+
+Options (``--set key=value``): ``status_period_s`` (0.5; a stepped world gets a status every
+tick), ``position_noise_m`` / ``velocity_noise_m_s`` (0: the estimate is the physics' truth),
+``checkpoint`` (a file path; empty: none): keep snapshots of the process's state there, so a
+restarted process, or a physics resumed from its checkpoint, carries on with the same bits
+(:mod:`agents.resume`).
 """
 
 from __future__ import annotations
 
 import logging
 import os
+import queue
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from contextlib import suppress
 from dataclasses import dataclass
 from pathlib import Path
@@ -61,16 +59,13 @@ from swarmbus.messages import (
     ActuatorCommand,
     Command,
     CommandReply,
-    PlumeQuery,
     PlumeSample,
-    PlumeValues,
-    SimTick,
     VehicleState,
     VehicleStatus,
 )
 from swarmbus.node import NodeContext, NodeRuntime
 from swarmbus.options import OptionError, RoleOptions, parse_options
-from swarmbus.reqrep import Pending, RequestError, ask, serve
+from swarmbus.reqrep import Incoming, serve_later
 from swarmbus.scenario import Scenario
 from swarmbus.session import SINGLE_THREAD_RUNTIME
 from swarmbus.views import StateHead, TickView, state_head_decoder
@@ -79,6 +74,9 @@ from swarmbus.wind import WindModel, wind_from_scenario
 log = logging.getLogger(__name__)
 
 IDLE_STATUS_PERIOD_S = 1.0  # wall clock: status while no ticks arrive (physics not running)
+# Longest wait for an event: the stop signal is seen this often (a signal's handler runs only
+# when the main thread wakes).
+EVENT_POLL_S = 0.25
 
 
 NonNegative = Annotated[float, msgspec.Meta(ge=0.0, le=1e9)]
@@ -87,9 +85,6 @@ NonNegative = Annotated[float, msgspec.Meta(ge=0.0, le=1e9)]
 class NodeOptions(RoleOptions, frozen=True, kw_only=True):
     """The autopilot role's options (``--set KEY=VALUE``)."""
 
-    # 0: derived from the scenario, 0.4 × participant_timeout_s (so a slow answer on a loaded
-    # machine is still waited for, and the lockstep never drops us for waiting).
-    sensor_timeout_s: NonNegative = 0.0
     status_period_s: NonNegative = 0.5
     position_noise_m: NonNegative = 0.0
     velocity_noise_m_s: NonNegative = 0.0
@@ -155,27 +150,22 @@ class _Served:
         vehicle_id: str,
         options: NodeOptions,
         wind: WindModel,
-        own_actuators: bool = True,
     ) -> None:
         self.vehicle_id = vehicle_id
+        # Where the physics puts this vehicle's state in a tick (checked on every use).
+        self.index = [v.id for v in scenario.vehicles].index(vehicle_id)
         self.behavior_rng = behavior_rng(scenario, vehicle_id)
         self.flight = build_flight(scenario, vehicle_id, options, self.behavior_rng)
         self.autopilot = self.flight.autopilot
         self.sensor = self.flight.sensor
-        index = [v.id for v in scenario.vehicles].index(vehicle_id)
-        self.anemometer = Anemometer(scenario.anemometer, wind, scenario.world.seed, index)
+        self.anemometer = Anemometer(scenario.anemometer, wind, scenario.world.seed, self.index)
         self.wind_pub = (
             session.declare_publisher(keys.vehicle_wind(vehicle_id))
             if scenario.anemometer.period_ticks > 0
             else None
         )
-        # None: the process batches its vehicles' commands (AutopilotNode.batch_pub)
-        self.actuators = (
-            session.declare_publisher(keys.vehicle_actuators(vehicle_id)) if own_actuators else None
-        )
         self.status_pub = session.declare_publisher(keys.vehicle_status(vehicle_id))
         self.readings_pub = session.declare_publisher(keys.vehicle_concentration(vehicle_id))
-        self.last_command = b""
         self.last_status: VehicleStatus | None = None
         self.last_status_time_s = -1e9
 
@@ -187,6 +177,27 @@ class _Served:
             self.status_pub.put(encode(status))
             self.last_status = status
             self.last_status_time_s = status.sim_time_s
+
+    def step(self, tick: _Tick) -> ActuatorCommand | None:
+        """This vehicle's answer to ``tick`` (None: its state is not in the tick, or is bad)."""
+        vid = self.vehicle_id
+        try:
+            found = tick.state_of(vid, self.index)
+            if found is None:
+                return None
+            own, state = found
+            # Only a behaviour looks at the peers: decode them for it alone.
+            peers = tick.peers_of(own) if self.autopilot.behavior is not None else []
+        except MessageError as exc:
+            log.warning("%s: ignoring bad state in tick %d: %s", vid, tick.tick, exc)
+            return None
+        if self.wind_pub is not None and self.anemometer.due(tick.tick):
+            wind = self.anemometer.read(vid, tick.tick, tick.sim_time_s, state.position_enu_m)
+            self.wind_pub.put(encode(wind))
+        rotor = self.flight.step(state, peers)
+        for event in self.autopilot.modes.mission.drain_events():
+            log.info("%s: mission item %d reached at %.2f s", vid, event.index, event.sim_time_s)
+        return ActuatorCommand(vehicle_id=vid, tick=tick.tick, rotor_commands=rotor)
 
 
 def _status_key(s: VehicleStatus) -> tuple[object, ...]:
@@ -204,82 +215,140 @@ def _status_key(s: VehicleStatus) -> tuple[object, ...]:
     )
 
 
-@dataclass
 class _Tick:
-    """One decoded tick: number, time, who is where, and the raw states."""
+    """One tick, decoded as far as it is used: a vehicle's own state always, every vehicle's
+    position on a sensor tick, the peers' full states only for a behaviour (once per process)."""
 
-    tick: int
-    sim_time_s: float
-    heads: list[StateHead]
-    raw: list[msgspec.Raw]
-    plume_queried: bool = False
-    plume_values: PlumeSample | None = None
+    def __init__(self, view: TickView) -> None:
+        self.tick = view.tick
+        self.sim_time_s = view.sim_time_s
+        self.raw = view.states
+        self.plume_queried = view.plume_queried
+        self.plume_values = view.plume_values
+        self._heads: list[StateHead] | None = None
+        self._states: list[VehicleState] | None = None
 
     @classmethod
     def decode(cls, data: bytes) -> _Tick:
-        view = decode(data, TickView)
-        try:
-            heads = [state_head_decoder.decode(r) for r in view.states]
-        except (msgspec.ValidationError, msgspec.DecodeError) as exc:
-            raise MessageError("SimTick", "states", str(exc)) from None
-        return cls(
-            view.tick, view.sim_time_s, heads, view.states, view.plume_queried, view.plume_values
-        )
+        return cls(decode(data, TickView))
 
-    @classmethod
-    def of(cls, tick: SimTick) -> _Tick:
-        raw = [msgspec.Raw(encode(s)) for s in tick.states]
-        heads = [StateHead(s.vehicle_id, s.position_enu_m) for s in tick.states]
-        return cls(tick.tick, tick.sim_time_s, heads, raw, tick.plume_queried, tick.plume_values)
+    def state_of(self, vehicle_id: str, hint: int) -> tuple[int, VehicleState] | None:
+        """``vehicle_id``'s index and state: at ``hint`` (its place in the scenario, where the
+        physics puts it) or, should the list differ, wherever its head says."""
+        if 0 <= hint < len(self.raw):
+            state = decode(self.raw[hint], VehicleState)
+            if state.vehicle_id == vehicle_id:
+                return hint, state
+        for k, head in enumerate(self.heads()):
+            if head.vehicle_id == vehicle_id:
+                return k, decode(self.raw[k], VehicleState)
+        return None
+
+    def heads(self) -> list[StateHead]:
+        """Who is where in this tick."""
+        if self._heads is None:
+            try:
+                self._heads = [state_head_decoder.decode(r) for r in self.raw]
+            except (msgspec.ValidationError, msgspec.DecodeError) as exc:
+                raise MessageError("SimTick", "states", str(exc)) from None
+        return self._heads
+
+    def peers_of(self, own: int) -> list[VehicleState]:
+        if self._states is None:
+            self._states = [decode(r, VehicleState) for r in self.raw]
+        return self._states[:own] + self._states[own + 1 :]
 
 
 @dataclass
 class _PendingSensor:
+    """A sensor tick whose plume values the node waits for."""
+
     tick: int
     sim_time_s: float
     states: list[StateHead]
-    replies: Pending[PlumeValues] | None  # None: no plume node was alive
-    by_physics: bool = False  # the physics queried: the answer comes with the next tick
+    by_physics: bool  # the physics queried: the answer comes with a later tick (else: none)
+
+
+# ---------------------------------------------------------------------- events
+@dataclass(frozen=True, slots=True)
+class TickArrived:
+    """A ``sim/tick`` sample (still encoded)."""
+
+    data: bytes
+
+
+@dataclass(frozen=True, slots=True)
+class CommandArrived:
+    """A decoded command for one served vehicle, to answer from the loop."""
+
+    served: _Served
+    incoming: Incoming[Command]
+
+
+@dataclass(frozen=True, slots=True)
+class Idle:
+    """Nothing arrived for ``EVENT_POLL_S``."""
+
+
+Event = TickArrived | CommandArrived | Idle
+IDLE = Idle()
+
+
+class Inbox:
+    """The node's events in arrival order. Bus callbacks only :meth:`put` (on zenoh-python's
+    callback thread: no node state, no blocking); the node's one loop takes them from
+    :meth:`events`."""
+
+    def __init__(self) -> None:
+        self._queue: queue.SimpleQueue[Event] = queue.SimpleQueue()
+
+    def put(self, event: Event) -> None:
+        self._queue.put(event)
+
+    def events(self, stop: threading.Event) -> Iterator[Event]:
+        """Every event in order, ``Idle`` after ``EVENT_POLL_S`` without one, until ``stop``.
+        Of ticks that piled up only the newest is handed out (behind: only the latest counts)."""
+        q = self._queue
+        while not stop.is_set():
+            try:
+                arrived = [q.get(timeout=EVENT_POLL_S)]
+            except queue.Empty:
+                yield IDLE
+                continue
+            while not q.empty():
+                arrived.append(q.get_nowait())
+            ticks = [k for k, e in enumerate(arrived) if isinstance(e, TickArrived)]
+            newest = ticks[-1] if ticks else -1
+            for k, event in enumerate(arrived):
+                if k == newest or not isinstance(event, TickArrived):
+                    yield event
+            del arrived  # the events handed out must not outlive their handling (queries)
 
 
 class AutopilotNode:
-    """The loop of one autopilot process (bus glue around :class:`Autopilot`)."""
+    """One autopilot process: one loop over its events (:meth:`run`)."""
 
     def __init__(self, session: zenoh.Session, ctx: NodeContext, options: NodeOptions) -> None:
         self.session = session
         self.keys = ctx.keys
         self.options = options
-        self.lock = threading.Lock()
-        batched = len(ctx.vehicle_ids) > 1
+        self.inbox = Inbox()
         wind = wind_from_scenario(ctx.scenario)  # one wind for every vehicle served here
         self.served = {
-            vid: _Served(session, self.keys, ctx.scenario, vid, options, wind, not batched)
+            vid: _Served(session, self.keys, ctx.scenario, vid, options, wind)
             for vid in ctx.vehicle_ids
         }
-        self.batch_pub = (
-            session.declare_publisher(self.keys.autopilot_actuators(ctx.name)) if batched else None
-        )
-        self.last_batch = b""
+        self.batch_pub = session.declare_publisher(self.keys.autopilot_actuators(ctx.name))
+        self.last_batch = b""  # the answer to last_tick (sent again if the tick repeats)
         self.last_tick = -1
         self.last_tick_wall = 0.0
+        self._idle_status_wall = 0.0
         self.control_dt_s = 1.0 / ctx.scenario.time.control_hz
         # A stepped world's client decides between steps on what it has seen: a status every
         # tick lets it know it has seen the tick it paused at (agents.Swarm waits for that).
         stepped = ctx.scenario.time.mode == "stepped"
         self.status_period_s = 0.0 if stepped else options.status_period_s
-        self._slot_lock = threading.Lock()  # guards _latest and _draining
-        self._latest: zenoh.Sample | None = None  # the newest tick not handled yet
-        self._draining = False  # a thread is handling ticks
-        self._handoff = threading.Event()  # the worker thread takes over the draining
-        self._stop = threading.Event()
         self.pending: _PendingSensor | None = None
-        self.plume_key = self.keys.plume_concentration()
-        self.sensor_timeout_s = options.sensor_timeout_s or (
-            0.4 * ctx.scenario.time.participant_timeout_s
-        )
-        # Queries go out only while a plume node is alive: a dead service is reported as
-        # unavailable at once instead of costing every tick the full timeout.
-        self.plume_nodes: set[str] = set()
         self._declared: list[Any] = []  # subscribers and queryables, undeclared on close
         self._tokens: list[zenoh.LivelinessToken] = []
         # Snapshots (agents.resume): the keeper, and the tick part of the latest snapshot.
@@ -288,7 +357,7 @@ class AutopilotNode:
             period = ctx.scenario.time.checkpoint_period_s * ctx.scenario.time.control_hz
             self.keeper = StateKeeper(Path(options.checkpoint), round(period))
         self._snap_pending: PendingSnapshot | None = None
-        self._snap_tick = -1  # the tick of the state under the lock (last_tick runs ahead)
+        self._snap_tick = -1  # the tick of the state (last_tick runs ahead while resuming)
         self.node_name = ctx.name
 
     # ------------------------------------------------------------------ set-up
@@ -297,18 +366,11 @@ class AutopilotNode:
         if self.keeper is not None:
             self.keeper.open(self._snapshot())
         self._declared.append(
-            self.session.liveliness().declare_subscriber(
-                self.keys.all_node_health(), self._on_presence, history=True
-            )
-        )
-        # A callback subscriber (zenoh-python runs it on its callback thread, not on a Zenoh
-        # runtime thread): see _on_tick_sample for order, exclusion and the blocking case.
-        self._declared.append(
             self.session.declare_subscriber(self.keys.tick(), self._on_tick_sample)
         )
         for vid, served in self.served.items():
             key, handler = self.keys.vehicle_cmd(vid), self._command_handler(served)
-            commands = serve(self.session, key, Command, handler)  # type: ignore[arg-type]
+            commands = serve_later(self.session, key, Command, handler)  # type: ignore[arg-type]
             self._declared.append(commands)
         for vid in self.served:
             name = autopilot_node(vid)
@@ -318,17 +380,6 @@ class AutopilotNode:
                 )
         for served in self.served.values():
             served.publish_status(force=True, period_s=self.status_period_s)
-
-    def _on_presence(self, sample: zenoh.Sample) -> None:
-        try:
-            name = self.keys.node_name_of(str(sample.key_expr))
-        except ValueError:
-            return
-        if name == "plume" or name.startswith("plume-"):
-            if sample.kind == zenoh.SampleKind.PUT:
-                self.plume_nodes.add(name)
-            else:
-                self.plume_nodes.discard(name)
 
     def close(self) -> None:
         if self.keeper is not None:
@@ -340,101 +391,82 @@ class AutopilotNode:
             with suppress(zenoh.ZError):
                 entity.undeclare()
 
-    def _command_handler(self, served: _Served) -> Callable[[Command], CommandReply]:
-        def handle(command: Command) -> CommandReply:
-            with self.lock:
-                reply = served.autopilot.handle(command)
-                served.publish_status(force=False, period_s=self.status_period_s)
-                self._save()
-            if not reply.accepted:
-                log.info(
-                    "%s: %s refused: %s", served.vehicle_id, type(command).__name__, reply.reason
-                )
-            return reply
+    # ------------------------------------------------------------------ bus callbacks
+    def _on_tick_sample(self, sample: zenoh.Sample) -> None:
+        self.inbox.put(TickArrived(sample.payload.to_bytes()))
+
+    def _command_handler(self, served: _Served) -> Callable[[Incoming[Command]], None]:
+        def handle(incoming: Incoming[Command]) -> None:
+            self.inbox.put(CommandArrived(served, incoming))
 
         return handle
 
-    # ------------------------------------------------------------------ loop
+        return handle
+
+    # ------------------------------------------------------------------ the loop
     def run(self, stop: threading.Event) -> None:
-        """Ticks run in the subscriber's callback (and on a worker for the rare blocking case);
-        the main thread keeps statuses flowing while none arrive."""
-        self._stop = stop
-        worker = threading.Thread(
-            target=self._blocking_ticks, args=(stop,), name="ticks", daemon=True
-        )
-        worker.start()
-        while not stop.wait(IDLE_STATUS_PERIOD_S):
-            with self.lock:
-                if time.monotonic() - self.last_tick_wall >= IDLE_STATUS_PERIOD_S:
-                    for served in self.served.values():
-                        served.publish_status(force=True, period_s=0.0)
-        self._handoff.set()  # wake the worker to end
+        """Handle every event, one at a time and in arrival order, until ``stop``."""
+        for event in self.inbox.events(stop):
+            match event:
+                case TickArrived(data):
+                    self._on_tick_data(data)
+                case CommandArrived():
+                    self._on_command(event)
+                    self._idle_statuses()
+                case Idle():
+                    self._idle_statuses()
 
-    def _on_tick_sample(self, sample: zenoh.Sample) -> None:
-        """The tick subscriber's callback (zenoh-python's callback thread; written to be safe on
-        any number of Zenoh rx threads too, should the callback be made direct).
-
-        One thread at a time drains ticks: a sample that arrives while another thread drains is
-        left in the slot and the draining thread takes it next; a newer sample replaces an
-        unhandled one (behind: only the latest counts), so ticks stay in arrival order and never
-        run concurrently. A tick that would wait for this autopilot's own plume query (the
-        physics did not query) is not handled here — blocking a callback thread could hold up the
-        reply it waits for, and other callbacks — but handed to the worker thread, which drains
-        until no tick is left.
-        """
-        with self._slot_lock:
-            self._latest = sample
-            if self._draining:
-                return
-            self._draining = True
-        self._drain(may_block=False)
-
-    def _drain(self, may_block: bool) -> None:
-        while True:
-            with self._slot_lock:
-                sample = self._latest
-                if sample is None or self._stop.is_set():
-                    self._draining = False
-                    return
-                if not may_block and self.pending is not None and self.pending.replies is not None:
-                    self._handoff.set()  # the worker drains on (the flag stays set for it)
-                    return
-                self._latest = None
-            self._handle_sample(sample)
-
-    def _blocking_ticks(self, stop: threading.Event) -> None:
-        while not stop.is_set():
-            self._handoff.wait()
-            self._handoff.clear()
-            if stop.is_set():
-                return
-            self._drain(may_block=True)
-
-    def _handle_sample(self, sample: zenoh.Sample) -> None:
+    def _on_tick_data(self, data: bytes) -> None:
         try:
-            tick = _Tick.decode(sample.payload.to_bytes())
+            tick = _Tick.decode(data)
         except MessageError as exc:
             log.warning("ignoring bad tick: %s", exc)
             return
         try:
             self.on_tick(tick)
         except Exception:  # never let one tick end the ticks; physics would drop us
-            if not self._stop.is_set():
-                log.exception("tick %d failed", tick.tick)
+            log.exception("tick %d failed", tick.tick)
 
-    def on_tick(self, tick: SimTick | _Tick) -> None:
-        if isinstance(tick, SimTick):
-            tick = _Tick.of(tick)
+    def _on_command(self, event: CommandArrived) -> None:
+        served = event.served
+        event.incoming.answer(lambda command: self._handle_command(served, command))
+
+    def _handle_command(self, served: _Served, command: Command) -> CommandReply:
+        reply = served.autopilot.handle(command)
+        served.publish_status(force=False, period_s=self.status_period_s)
+        self._save()
+        if not reply.accepted:
+            log.info("%s: %s refused: %s", served.vehicle_id, type(command).__name__, reply.reason)
+        return reply
+
+    def _idle_statuses(self) -> None:
+        """While no ticks arrive (physics not running), a status every IDLE_STATUS_PERIOD_S."""
+        now = time.monotonic()
+        if min(now - self.last_tick_wall, now - self._idle_status_wall) >= IDLE_STATUS_PERIOD_S:
+            self._idle_status_wall = now
+            for served in self.served.values():
+                served.publish_status(force=True, period_s=0.0)
+
+    def on_tick(self, tick: _Tick) -> None:
+        """Tick k: readings of the last sensor tick, each vehicle's step, one batch back."""
         self.last_tick_wall = time.monotonic()
         if self.keeper is not None:
             self._resume(tick)
         if tick.tick == self.last_tick:  # the start handshake repeats a tick: same answer
-            if self.batch_pub is not None and self.last_batch:
+            if self.last_batch:
                 self.batch_pub.put(self.last_batch)
-            for served in self.served.values():
-                if served.actuators is not None and served.last_command:
-                    served.actuators.put(served.last_command)
             return
+        self._advance(tick)
+        self._collect_readings(tick)
+        sensing = bool(tick.raw) and any(s.sensor.due(tick.tick) for s in self.served.values())
+        commands = [c for s in self.served.values() if (c := s.step(tick)) is not None]
+        self._answer(tick, commands, sensing)
+        if sensing:
+            self.pending = _PendingSensor(
+                tick.tick, tick.sim_time_s, tick.heads(), tick.plume_queried
+            )
+
+    def _advance(self, tick: _Tick) -> None:
         if tick.tick < self.last_tick:
             # Physics restarted from a checkpoint: fly on from its tick (timers stretch by it).
             log.warning(
@@ -449,67 +481,27 @@ class AutopilotNode:
         self.last_tick = tick.tick
         if self.keeper is not None:
             self.keeper.before_tick(tick.tick)
-        self._collect_readings(tick)
-        index = {h.vehicle_id: k for k, h in enumerate(tick.heads)}
-        batch: list[ActuatorCommand] = []
-        sensing = any(s.sensor.due(tick.tick) for s in self.served.values()) and bool(tick.heads)
-        with self.lock:
-            for vid, served in self.served.items():
-                own = index.get(vid)
-                if own is None:
-                    continue
-                try:
-                    state = decode(tick.raw[own], VehicleState)
-                    # Only a behaviour looks at the peers: decode them for it alone.
-                    peers = (
-                        [decode(r, VehicleState) for k, r in enumerate(tick.raw) if k != own]
-                        if served.autopilot.behavior is not None
-                        else []
-                    )
-                except MessageError as exc:
-                    log.warning("%s: ignoring bad state in tick %d: %s", vid, tick.tick, exc)
-                    continue
-                if served.wind_pub is not None and served.anemometer.due(tick.tick):
-                    wind = served.anemometer.read(
-                        vid, tick.tick, tick.sim_time_s, state.position_enu_m
-                    )
-                    served.wind_pub.put(encode(wind))
-                rotor = served.flight.step(state, peers)
-                command = ActuatorCommand(vehicle_id=vid, tick=tick.tick, rotor_commands=rotor)
-                if served.actuators is None:
-                    batch.append(command)
-                else:
-                    served.last_command = encode(command)
-                for event in served.autopilot.modes.mission.drain_events():
-                    log.info(
-                        "%s: mission item %d reached at %.2f s", vid, event.index, event.sim_time_s
-                    )
-            if self.batch_pub is not None and batch:
-                self.last_batch = encode(ActuatorBatch(tick=tick.tick, commands=batch))
-            self._snap_tick = tick.tick
-            if self.keeper is not None:  # saved before the answer goes out (agents.resume)
-                self._snap_pending = self._pending_after(tick, sensing)
-                self._save()
-            if self.batch_pub is not None and batch:
-                self.batch_pub.put(self.last_batch)
-            for served in self.served.values():
-                if served.actuators is not None and served.last_command:
-                    served.actuators.put(served.last_command)
-            for served in self.served.values():
-                served.publish_status(force=False, period_s=self.status_period_s)
-        if sensing:
-            if tick.plume_queried:
-                self.pending = _PendingSensor(tick.tick, tick.sim_time_s, tick.heads, None, True)
-            else:
-                self._query_plume(tick)
+
+    def _answer(self, tick: _Tick, commands: list[ActuatorCommand], sensing: bool) -> None:
+        """Snapshot, then the batch of commands, then the statuses."""
+        if commands:
+            self.last_batch = encode(ActuatorBatch(tick=tick.tick, commands=commands))
+        self._snap_tick = tick.tick
+        if self.keeper is not None:  # saved before the answer goes out (agents.resume)
+            self._snap_pending = self._pending_after(tick, sensing)
+            self._save()
+        if commands:
+            self.batch_pub.put(self.last_batch)
+        for served in self.served.values():
+            served.publish_status(force=False, period_s=self.status_period_s)
 
     # ------------------------------------------------------------------ snapshots
     def _pending_after(self, tick: _Tick, sensing: bool) -> PendingSnapshot | None:
-        """The sensor query in flight once ``tick`` is handled (see on_tick's end)."""
+        """The sensor tick awaited once ``tick`` is handled (see on_tick's end)."""
         p = self.pending
         if sensing:
             heads, sim_time, tick_no, by_physics = (
-                tick.heads,
+                tick.heads(),
                 tick.sim_time_s,
                 tick.tick,
                 tick.plume_queried,
@@ -526,13 +518,13 @@ class AutopilotNode:
         )
 
     def _snapshot(self) -> bytes:
-        """The process's state now (caller holds the lock, or no tick has run yet)."""
+        """The process's state now."""
         served = list(self.served.values())
         snap = ProcessSnapshot(
             node=self.node_name,
             tick=self._snap_tick,
             vehicles=[capture(s.autopilot, s.sensor, s.behavior_rng) for s in served],
-            commands=[s.last_command for s in served],
+            commands=[b"" for _ in served],
             batch=self.last_batch,
             status_times_s=[s.last_status_time_s for s in served],
             pending=self._snap_pending,
@@ -566,8 +558,7 @@ class AutopilotNode:
             return
         if snap is None:
             return
-        with self.lock:
-            self._restore(snap)
+        self._restore(snap)
         log.warning(
             "%s: restored the state of tick %d for tick %d (%s)",
             ", ".join(self.served),
@@ -581,11 +572,8 @@ class AutopilotNode:
         if [v.vehicle_id for v in snap.vehicles] != list(self.served):
             log.error("snapshot of %s, not of this process's vehicles: not restored", snap.node)
             return
-        for s, v, cmd, when in zip(
-            served, snap.vehicles, snap.commands, snap.status_times_s, strict=True
-        ):
+        for s, v, when in zip(served, snap.vehicles, snap.status_times_s, strict=True):
             restore(s.autopilot, s.sensor, v, s.behavior_rng)
-            s.last_command = cmd
             s.last_status_time_s = when
             s.flight.new_readings = []
         self.last_batch = snap.batch
@@ -594,26 +582,11 @@ class AutopilotNode:
         self.pending = None
         if p is not None:
             heads = [StateHead(vid, pos) for vid, pos in p.heads]
-            pending = _PendingSensor(p.tick, p.sim_time_s, heads, None, p.by_physics)
-            self.pending = pending if p.by_physics else self._ask_plume(pending)
+            self.pending = _PendingSensor(p.tick, p.sim_time_s, heads, p.by_physics)
         if self.keeper is not None:
             self.keeper.save(msgspec.msgpack.encode(snap))
 
     # ------------------------------------------------------------------ sensor
-    def _ask_plume(self, pending: _PendingSensor) -> _PendingSensor:
-        """``pending`` with this autopilot's own query for its positions (no plume: none)."""
-        if not self.plume_nodes:
-            return _PendingSensor(pending.tick, pending.sim_time_s, pending.states, None)
-        query = PlumeQuery(
-            points_enu_m=[s.position_enu_m for s in pending.states],
-            sim_time_s=pending.sim_time_s,
-        )
-        replies = ask(self.session, self.plume_key, query, PlumeValues, self.sensor_timeout_s)
-        return _PendingSensor(pending.tick, pending.sim_time_s, pending.states, replies)
-
-    def _query_plume(self, tick: _Tick) -> None:
-        self.pending = self._ask_plume(_PendingSensor(tick.tick, tick.sim_time_s, tick.heads, None))
-
     def _collect_readings(self, tick: _Tick) -> None:
         pending = self.pending
         if pending is None:
@@ -622,36 +595,21 @@ class AutopilotNode:
         if pending.by_physics and (answer is None or answer.tick != pending.tick):
             return  # not the tick with the physics' answer (e.g. garbage on sim/tick): wait
         self.pending = None
-        values = self._values(pending, tick.plume_values)
+        values = self._values(pending, answer)
         flights = [served.flight for served in self.served.values()]
         taken = take_readings(flights, pending.tick, pending.sim_time_s, pending.states, values)
         for flight, reading in taken:
             self.served[flight.vehicle_id].readings_pub.put(encode(reading))
 
-    def _values(
-        self, pending: _PendingSensor, from_physics: PlumeSample | None
-    ) -> list[float] | None:
-        """The plume's values for the pending query, or None (no answer in time, or an error)."""
-        if pending.by_physics:
-            if from_physics is None or from_physics.tick != pending.tick:
-                return None  # not reached: _collect_readings waits for the answering tick
-            values = from_physics.values_g_m3
-            if values is not None and len(values) != len(pending.states):
-                log.warning(
-                    "physics sent %d values for %d points", len(values), len(pending.states)
-                )
-                return None
-            return values
-        if pending.replies is None:
+    @staticmethod
+    def _values(pending: _PendingSensor, answer: PlumeSample | None) -> list[float] | None:
+        """The plume's values for the pending sensor tick, or None (no plume was alive, it did
+        not answer in time, or answered wrong: the readings are unavailable)."""
+        if not pending.by_physics or answer is None:
             return None
-        outcome = pending.replies.outcome()
-        if isinstance(outcome, RequestError):
-            if pending.replies.answered:  # (no answer at all: no plume service any more)
-                log.warning("plume query: %s", outcome)
-            return None
-        values = outcome.values_g_m3
-        if len(values) != len(pending.states):
-            log.warning("plume answered %d values for %d points", len(values), len(pending.states))
+        values = answer.values_g_m3
+        if values is not None and len(values) != len(pending.states):
+            log.warning("physics sent %d values for %d points", len(values), len(pending.states))
             return None
         return values
 

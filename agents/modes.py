@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 from agents.control import Estimate, Target, yaw_of
 from agents.geofence import zone_error, zones_violation
-from agents.mission import Mission, MissionError
+from agents.mission import Mission, MissionError, ResolvedItem
 from swarmbus.messages import (
     FenceZone,
     FlightMode,
@@ -532,40 +532,49 @@ class FlightModes:
                 return Target((tx, ty), self._climb_alt_m, self._yaw)
             self._climb_alt_m = None
         if mission.index != self._item_seen:
-            self._item_seen = mission.index
-            self._target = est.position
-            self._land_descending = False
-            if item.yaw_rad is not None:
-                self._yaw = item.yaw_rad
-        x, y, z = est.position
+            self._start_item(item, est)
         if item.command == MissionCommand.RTL:
             mission.reached(now)
             self.rtl(est)
             return self._guide_rtl(est, now)
         if item.command == MissionCommand.TAKEOFF:
-            tx, ty, _ = self._target
-            if abs(z - item.z) < item.acceptance_radius_m and mission.arrived(now):
-                return self._guide_mission(est, now)
-            return Target((tx, ty), item.z, self._yaw, max_speed_xy_m_s=item.speed_m_s)
+            return self._mission_takeoff(item, est, now)
         if item.command == MissionCommand.LAND:
-            if not self._land_descending:
-                if math.hypot(x - item.x, y - item.y) < item.acceptance_radius_m:
-                    self._land_descending = True
-                else:
-                    return Target(
-                        (item.x, item.y),
-                        self._target[2],
-                        self._yaw,
-                        max_speed_xy_m_s=item.speed_m_s,
-                    )
-            target = self._descend(est, now, (item.x, item.y))
-            if target is None:
-                mission.reached(now)
-            return target
+            return self._mission_land(item, est, now)
+        x, y, z = est.position
         dist = math.sqrt((x - item.x) ** 2 + (y - item.y) ** 2 + (z - item.z) ** 2)
         if dist < item.acceptance_radius_m and mission.arrived(now):
             return self._guide_mission(est, now)
         return Target((item.x, item.y), item.z, self._yaw, max_speed_xy_m_s=item.speed_m_s)
+
+    def _start_item(self, item: ResolvedItem, est: Estimate) -> None:
+        """A mission item seen for the first time: it starts from where the vehicle is."""
+        self._item_seen = self.mission.index
+        self._target = est.position
+        self._land_descending = False
+        if item.yaw_rad is not None:
+            self._yaw = item.yaw_rad
+
+    def _mission_takeoff(self, item: ResolvedItem, est: Estimate, now: float) -> Target | None:
+        tx, ty, _ = self._target
+        if abs(est.position[2] - item.z) < item.acceptance_radius_m and self.mission.arrived(now):
+            return self._guide_mission(est, now)
+        return Target((tx, ty), item.z, self._yaw, max_speed_xy_m_s=item.speed_m_s)
+
+    def _mission_land(self, item: ResolvedItem, est: Estimate, now: float) -> Target | None:
+        """Fly to the item's point at the item's height, then descend there and land."""
+        if not self._land_descending:
+            x, y, _ = est.position
+            if math.hypot(x - item.x, y - item.y) < item.acceptance_radius_m:
+                self._land_descending = True
+            else:
+                return Target(
+                    (item.x, item.y), self._target[2], self._yaw, max_speed_xy_m_s=item.speed_m_s
+                )
+        target = self._descend(est, now, (item.x, item.y))
+        if target is None:
+            self.mission.reached(now)
+        return target
 
     def _guide_orbit(self, est: Estimate, now: float) -> Target | None:
         """On the circle at the vehicle's bearing from the centre, the tangential speed as

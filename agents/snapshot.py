@@ -468,8 +468,8 @@ class ProcessSnapshot(msgspec.Struct, frozen=True, kw_only=True):
     node: str
     tick: int  # -1: before the first tick
     vehicles: list[VehicleSnapshot]
-    commands: list[bytes]  # each vehicle's encoded answer to ``tick`` (resent if it repeats)
-    batch: bytes = b""  # or the process's batch of them
+    commands: list[bytes]  # one per vehicle, empty: the process answers with ``batch``
+    batch: bytes = b""  # the process's ActuatorBatch for ``tick`` (resent if it repeats)
     status_times_s: list[float]
     pending: PendingSnapshot | None
 

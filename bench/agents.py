@@ -6,9 +6,10 @@ Run with ``python -m bench.agents [--counts 1,3,8,16,32,64] [--seconds 5] [--dri
    mixer), and of the node's whole per-tick path (decode the SimTick, step, encode the
    ActuatorCommand).
 2. Lockstep with N autopilot processes (one per vehicle) hovering at 5 m, plus the plume service
-   (each autopilot queries it every tick) and the physics process (``--driver physics``) or, when
-   the physics role is not available, a minimal lockstep stand-in (``--driver stub``: hovering
-   states published in one SimTick, answers awaited; no dynamics). Prints ticks/s, the
+   (the physics queries it on every sensor tick) and the physics process (``--driver physics``)
+   or, when the physics role is not available, a minimal lockstep stand-in (``--driver stub``:
+   hovering states published in one SimTick, answers awaited; no dynamics, no plume query, so
+   the readings are unavailable). Prints ticks/s, the
    real-time factor at 120 Hz control and the machine's CPU share.
 """
 

@@ -26,8 +26,7 @@ their state of the tick before and replay the same bits).
 Options (``--set KEY=VALUE``): ``max_ticks`` (stop once this tick is published and answered),
 ``mode`` (lockstep|realtime|stepped), ``speed_factor``, ``wait_for_autopilots`` (true|false: start
 without waiting for the configured autopilots), ``clock_period_s``, ``checkpoint`` (a file
-path; empty: none), ``checkpoint_period_s`` (default ``time.checkpoint_period_s``; 0: never),
-``shared_plume_query`` (true|false: false leaves the sensor query to every autopilot).
+path; empty: none), ``checkpoint_period_s`` (default ``time.checkpoint_period_s``; 0: never).
 
 Stepped mode (``mode = stepped``): after each tick is published and answered the physics waits
 for the clock holder's grant (``clock/step``, :mod:`sim_world.stepping`) before it applies the
@@ -95,7 +94,6 @@ class PhysicsOptions(RoleOptions, frozen=True, kw_only=True):
     max_ticks: Annotated[int, msgspec.Meta(ge=0)] | None = None
     wait_for_autopilots: bool = True
     clock_period_s: Annotated[float, msgspec.Meta(gt=0.0, le=1e6)] = 0.1
-    shared_plume_query: bool = True
     checkpoint: str = ""  # empty: none
     checkpoint_period_s: Annotated[float, msgspec.Meta(ge=0.0, le=1e9)] = 1.0
 
@@ -415,18 +413,11 @@ class PhysicsNode:
         return True
 
     def _loop(self) -> int:
-        opts = self.options
-        duration_s = self.scenario.time.duration_s
-        paced = opts.mode == SpeedMode.REALTIME
+        """Tick after tick: the commands of tick k, the step, tick k + 1 out."""
+        paced = self.options.mode == SpeedMode.REALTIME
         while not self.rt.stop.is_set():
             commands = self._await_commands()
-            if commands is None:
-                break
-            if self._stepped and not self._await_grant():
-                break
-            if opts.max_ticks is not None and self.tick >= opts.max_ticks:
-                break
-            if duration_s > 0.0 and self.world.sim_time_s >= duration_s:
+            if commands is None or not self._may_step():
                 break
             self._apply(commands)
             self.world.step(self.substeps)
@@ -443,6 +434,22 @@ class PhysicsNode:
                 self.barrier.begin(self.tick)
             self._publish_tick(states)
             self._maybe_publish_clock(sim_time)
+        self._stopped()
+        return 0
+
+    def _may_step(self) -> bool:
+        """Whether the answered tick may be stepped: granted (stepped mode), within the run's
+        ``max_ticks`` and the scenario's duration."""
+        if self._stepped and not self._await_grant():
+            return False
+        max_ticks = self.options.max_ticks
+        if max_ticks is not None and self.tick >= max_ticks:
+            return False
+        duration_s = self.scenario.time.duration_s
+        return not (duration_s > 0.0 and self.world.sim_time_s >= duration_s)
+
+    def _stopped(self) -> None:
+        """The last clock, the stepped clock's holder answered, the run's figures logged."""
         self._publish_clock(self.world.sim_time_s, force=True)
         with self._cond:
             abandoned = self.clock_gate.abandon()
@@ -468,7 +475,6 @@ class PhysicsNode:
                 1e3 * w.longest_write_s,
                 1e3 * w.waited_s,
             )
-        return 0
 
     def _await_commands(self) -> dict[str, Sequence[float]] | None:
         """Block until the current tick is complete or its deadline passed (then drop)."""
@@ -655,12 +661,7 @@ class PhysicsNode:
         plume_values = self._plume_answer()
         if self._plume_lost and self.tick % self._sensor_period == 0:
             self._plume_restarted()  # the plume left between queries: wait for it likewise
-        query = (
-            self.options.shared_plume_query
-            and self.tick % self._sensor_period == 0
-            and bool(self._plume_nodes)
-            and bool(states)
-        )
+        query = self.tick % self._sensor_period == 0 and bool(self._plume_nodes) and bool(states)
         msg = SimTick(
             tick=self.tick,
             sim_time_s=self.world.sim_time_s,

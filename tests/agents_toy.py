@@ -203,9 +203,11 @@ class ToyWorld:
 class BusToyPhysics:
     """A stand-in for the physics process on the bus, speaking the agreed lockstep protocol.
 
-    Publishes ``SimTick`` k (and each ``VehicleState``), waits for every participant's
-    ``ActuatorCommand`` for tick k (re-publishing tick 0 until all answered: the start
-    handshake), steps the toy vehicles, repeats. Runs on its own thread until ``stop``.
+    Publishes ``SimTick`` k (and each ``VehicleState``), on sensor ticks asks the plume for
+    every vehicle's position and puts the answer into tick k + 1 (as the physics does), waits
+    for every participant's ``ActuatorCommand`` for tick k (re-publishing tick 0 until all
+    answered: the start handshake), steps the toy vehicles, repeats. Runs on its own thread
+    until ``stop``.
     """
 
     def __init__(
@@ -279,6 +281,18 @@ class BusToyPhysics:
     def sim_time_s(self) -> float:
         return self.tick * self.dt
 
+    def _ask_plume(self, query: object) -> list[float] | None:
+        from swarmbus.codec import decode, encode
+        from swarmbus.messages import PlumeValues
+
+        for reply in self.session.get(
+            self.keys.plume_concentration(), payload=encode(query), timeout=self.timeout_s
+        ):
+            if reply.ok is None:
+                return None
+            return decode(reply.ok.payload.to_bytes(), PlumeValues).values_g_m3
+        return None  # no plume service
+
     def _answered(self, k: int) -> bool:
         return all(self._commands.get(v, (-1, []))[0] == k for v in self.participants)
 
@@ -286,18 +300,32 @@ class BusToyPhysics:
         import time
 
         from swarmbus.codec import encode
-        from swarmbus.messages import SimTick
+        from swarmbus.messages import PlumeQuery, PlumeSample, SimTick
 
+        period = self.scenario.sensor.resolved().period_ticks
+        answer: PlumeSample | None = None
         while not self._stop.is_set():
             k = self.tick
             states = [toy.state(k, self.sim_time_s) for toy in self.vehicles.values()]
-            payload = encode(
-                SimTick(tick=k, sim_time_s=self.sim_time_s, control_dt_s=self.dt, states=states)
+            queried = k % period == 0
+            tick = SimTick(
+                tick=k,
+                sim_time_s=self.sim_time_s,
+                control_dt_s=self.dt,
+                states=states,
+                plume_queried=queried,
+                plume_values=answer,
             )
+            payload = encode(tick)
             for s in states:
                 self._state_pubs[s.vehicle_id].put(encode(s))
             deadline = time.monotonic() + self.timeout_s
             self._pub.put(payload)
+            if queried:
+                query = PlumeQuery(
+                    points_enu_m=[s.position_enu_m for s in states], sim_time_s=self.sim_time_s
+                )
+                answer = PlumeSample(tick=k, values_g_m3=self._ask_plume(query))
             republish = time.monotonic() + 0.05
             with self._cond:
                 while not self._answered(k):
