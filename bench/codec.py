@@ -10,7 +10,7 @@ import time
 
 from swarmbus import messages as m
 from swarmbus.codec import decode, encode
-from tests.messages_samples import SAMPLES
+from tests.support.messages_samples import SAMPLES
 
 
 def per_call_us(fn: object, n: int) -> float:

@@ -19,9 +19,9 @@ from pathlib import Path
 
 import psutil
 
-from tests.gateway_stack import gateway, vehicles
-from tests.mavclient import MavClient, measure_rates, write_scenario
-from tests.procs import zenoh_network
+from tests.support.gateway_stack import gateway, vehicles
+from tests.support.mavclient import MavClient, measure_rates, write_scenario
+from tests.support.procs import zenoh_network
 
 FAST = (
     "SYS_STATUS",
