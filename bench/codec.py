@@ -10,11 +10,28 @@ import time
 
 from swarmbus import messages as m
 from swarmbus.codec import decode, encode
-from tests.support.messages_samples import SAMPLES
+
+# One of each message timed: a hovering vehicle's state, its four rotor commands, a two-point
+# plume query.
+STATE = m.VehicleState(
+    vehicle_id="uav1",
+    tick=42,
+    sim_time_s=0.35,
+    position_enu_m=(20.0, -4.0, 10.0),
+    velocity_enu_m_s=(1.0, 0.0, -0.1),
+    attitude_xyzw=(0.0, 0.0, 0.0, 1.0),
+    body_rates_rad_s=(0.01, -0.02, 0.0),
+    lat_deg=47.397742,
+    lon_deg=8.545859,
+    alt_m=498.0,
+    on_ground=False,
+)
+ACTUATORS = m.ActuatorCommand(vehicle_id="uav1", tick=42, rotor_commands=[0.5, 0.5, 0.5, 0.5])
+QUERY = m.PlumeQuery(points_enu_m=[(20.0, 0.0, 10.0), (30.0, 1.0, 9.0)], sim_time_s=2.0)
 
 
 def per_call_us(fn: object, n: int) -> float:
-    call = fn  # type: ignore[assignment]
+    call = fn
     best = float("inf")
     for _ in range(5):
         t0 = time.perf_counter()
@@ -28,13 +45,13 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("-n", type=int, default=20000, help="calls per timing round")
     args = parser.parse_args()
-    state = SAMPLES[m.VehicleState]
+    state = STATE
     tick64 = m.SimTick(tick=1, sim_time_s=0.1, control_dt_s=1 / 120, states=[state] * 64)
     rows = [
         ("VehicleState", state, m.VehicleState),
-        ("ActuatorCommand (4 rotors)", SAMPLES[m.ActuatorCommand], m.ActuatorCommand),
+        ("ActuatorCommand (4 rotors)", ACTUATORS, m.ActuatorCommand),
         ("SimTick, 64 vehicle states", tick64, m.SimTick),
-        ("PlumeQuery, 2 points", SAMPLES[m.PlumeQuery], m.PlumeQuery),
+        ("PlumeQuery, 2 points", QUERY, m.PlumeQuery),
     ]
     print(f"{'message':32} {'bytes':>7} {'encode µs':>10} {'decode µs':>10}")
     for name, msg, cls in rows:

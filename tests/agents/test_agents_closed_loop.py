@@ -19,6 +19,7 @@ from swarmbus.messages import (
     Land,
     MissionCommand,
     MissionDownload,
+    MissionFrame,
     MissionItem,
     MissionStart,
     MissionUpload,
@@ -142,7 +143,7 @@ def test_global_frame_items_resolve_through_the_scenario_origin() -> None:
     ap = aps["uav1"]
     o = sc.world.origin
     # 0.0001° of latitude north of the origin ≈ 11.1 m north
-    item = MissionItem(x=o.lat_deg + 1e-4, y=o.lon_deg, z=o.alt_m + 5.0, frame="global")
+    item = MissionItem(x=o.lat_deg + 1e-4, y=o.lon_deg, z=o.alt_m + 5.0, frame=MissionFrame.GLOBAL)
     ok(ap.handle(MissionUpload(items=[item])))
     got = ap.modes.mission.resolved[0]
     assert got.x == pytest.approx(0.0, abs=1e-3)
@@ -260,7 +261,7 @@ def test_commands_are_refused_with_the_right_reason() -> None:
     refused(ap, MissionStart(start_index=3), "mission has 1 item", code="invalid")
     refused(
         ap,
-        MissionUpload(items=[MissionItem(x=95.0, y=0.0, z=5.0, frame="global")]),
+        MissionUpload(items=[MissionItem(x=95.0, y=0.0, z=5.0, frame=MissionFrame.GLOBAL)]),
         "latitude",
         code="invalid",
     )
@@ -422,17 +423,17 @@ def test_offboard_acceleration_yaw_rate_and_body_rates_act_in_their_frames() -> 
     v = w.vehicles["uav1"].v
     assert 2.2 < v[1] < 3.1 and abs(v[0]) < 0.2, v  # vz: whatever the take-off left
     # velocity with a yaw rate of 30 °/s (ENU, counter-clockwise) for 2 s: yaw grows ≈ 60°
-    yaw0 = yaw_of(ap.est.attitude_xyzw)  # type: ignore[union-attr]
+    yaw0 = yaw_of(ap.est.attitude_xyzw)
     _offboard_with(w, ap, Setpoint(velocity_enu_m_s=(0.0, 0.0, 0.0), yaw_rate_deg_s=30.0), 2.0)
-    turned = math.degrees(yaw_of(ap.est.attitude_xyzw) - yaw0)  # type: ignore[union-attr]
+    turned = math.degrees(yaw_of(ap.est.attitude_xyzw) - yaw0)
     assert 45.0 < (turned + 180.0) % 360.0 - 180.0 < 65.0, turned
     # body rates: 0.5 rad/s about body z (FLU: counter-clockwise seen from above)
-    yaw1 = yaw_of(ap.est.attitude_xyzw)  # type: ignore[union-attr]
+    yaw1 = yaw_of(ap.est.attitude_xyzw)
     iris_hover = 0.0
     for vt in (ap.controller,):
         iris_hover = vt.mass * 9.80665 / vt.max_thrust_n
     _offboard_with(w, ap, Setpoint(body_rates_rad_s=(0.0, 0.0, 0.5), thrust=iris_hover), 1.0)
-    spun = math.degrees(yaw_of(ap.est.attitude_xyzw) - yaw1)  # type: ignore[union-attr]
+    spun = math.degrees(yaw_of(ap.est.attitude_xyzw) - yaw1)
     assert 20.0 < (spun + 180.0) % 360.0 - 180.0 < 32.0, spun
 
 
@@ -481,6 +482,6 @@ def test_orbit_circles_clockwise_at_its_radius_facing_the_centre() -> None:
     assert worst < 0.8, worst
     p = w.vehicles["uav1"].p
     to_centre = math.atan2(cy - p[1], cx - p[0])
-    yaw = yaw_of(ap.est.attitude_xyzw)  # type: ignore[union-attr]
+    yaw = yaw_of(ap.est.attitude_xyzw)
     assert abs((yaw - to_centre + math.pi) % (2 * math.pi) - math.pi) < math.radians(10)
     ok(ap.handle(Land()))

@@ -124,7 +124,7 @@ def test_novak2018_three_iris_hold_fly_the_mission_land_and_read_the_plume(
         lambda: min(states[v][-1].sim_time_s for v in ids) > t0 + 15.0, 120.0, "15 s of hover"
     )
     for vid in ids:
-        home = sw.status(vid).home_enu_m  # type: ignore[union-attr]
+        home = sw.status(vid).home_enu_m
         hold = [s for s in states[vid] if t0 + 5.0 <= s.sim_time_s <= t0 + 15.0]
         assert len(hold) > 100
         target = (home[0], home[1], home[2] + 10.0)
@@ -147,9 +147,13 @@ def test_novak2018_three_iris_hold_fly_the_mission_land_and_read_the_plume(
     plume = GaussianPlume.preset("novak2018")
     assert readings and all(r.available for r in readings)
     truth = plume.concentration(np.array([r.position_enu_m for r in readings]))
-    np.testing.assert_allclose([r.true_g_m3 for r in readings], truth, rtol=1e-9, atol=0)
+    np.testing.assert_allclose(
+        np.array([r.true_g_m3 for r in readings], float), truth, rtol=1e-9, atol=0
+    )
     window = np.where(truth < 0.01, 0.0, np.minimum(truth, 0.2))
-    np.testing.assert_allclose([r.reported_g_m3 for r in readings], window, rtol=1e-9, atol=0)
+    np.testing.assert_allclose(
+        np.array([r.reported_g_m3 for r in readings], float), window, rtol=1e-9, atol=0
+    )
     inside = (window > 0.0) & (window < 0.2)
     assert inside.sum() > 100, "the mission should cross the sensor's window"
 
@@ -227,7 +231,7 @@ def test_failsafe_datalink_loss_lands(run_factory: object, tmp_path: Path) -> No
         lambda: run.mode("uav1") in (FlightMode.LAND, FlightMode.DISARMED), 30, "landing"
     )
     run.wait_mode("uav1", FlightMode.DISARMED)
-    assert not run.sw.status("uav1").crashed  # type: ignore[union-attr]
+    assert not run.sw.status("uav1").crashed
 
 
 def test_failsafe_geofence_returns_home(run_factory: object, tmp_path: Path) -> None:
@@ -243,9 +247,9 @@ def test_failsafe_geofence_returns_home(run_factory: object, tmp_path: Path) -> 
     )
     uav.set_param("GF_MAX_HOR_DIST", 5.0)  # now it is outside the fence
     run.wait_mode("uav1", FlightMode.RTL, 30)
-    assert run.sw.status("uav1").failsafe.startswith("geofence")  # type: ignore[union-attr]
+    assert run.sw.status("uav1").failsafe.startswith("geofence")
     run.wait_mode("uav1", FlightMode.DISARMED, 120)
-    p = run.sw.state("uav1").position_enu_m  # type: ignore[union-attr]
+    p = run.sw.state("uav1").position_enu_m
     assert math.hypot(p[0] - 20.0, p[1]) < 1.0
 
 
@@ -300,7 +304,7 @@ def test_casting_behaviour_ends_closer_to_the_source(run_factory: object, tmp_pa
     assert run.mode("moth") == FlightMode.OFFBOARD
     source = (0.0, 0.0, 10.0)
     before = math.dist(start.position_enu_m, source)
-    after = math.dist(sw.state("moth").position_enu_m, source)  # type: ignore[union-attr]
+    after = math.dist(sw.state("moth").position_enu_m, source)
     assert after < 0.5 * before, (before, after)
 
 
@@ -319,7 +323,7 @@ def test_mox_sensor_readings_reach_the_swarm_client_with_ppm_and_resistance(
     readings: list[ConcentrationReading] = []
     sub = sw.subscribe(on_reading=readings.append)
     take_off(run, "uav1", 10.0)
-    t_hold = sw.state("uav1").sim_time_s  # type: ignore[union-attr]
+    t_hold = sw.state("uav1").sim_time_s
     sw.wait_until(
         lambda: bool(readings) and readings[-1].sim_time_s > t_hold + 20.0, 120.0, "20 s of hover"
     )
@@ -330,6 +334,7 @@ def test_mox_sensor_readings_reach_the_swarm_client_with_ppm_and_resistance(
     for r in readings:
         assert r.available and r.gas == "ethanol"
         assert r.reported_g_m3 is not None and r.resistance_ohm is not None
+        assert r.reported_ppm is not None and r.true_g_m3 is not None
         assert r.reported_ppm == pytest.approx(r.reported_g_m3 * ppm_per_g_m3, rel=1e-12)
         if r.reported_ppm > 0.0:  # RS/R0 on the published curve, read back by the calibration
             assert r.resistance_ohm / 3000.0 == pytest.approx(
@@ -337,7 +342,9 @@ def test_mox_sensor_readings_reach_the_swarm_client_with_ppm_and_resistance(
             )
         else:
             assert r.resistance_ohm == 21.0 * 3000.0  # clean air
-    climbing = [r for r in readings if r.sim_time_s < t_hold and r.true_g_m3 > 0.01]
-    assert any(r.reported_g_m3 < 0.9 * r.true_g_m3 for r in climbing), "no rise lag seen"
+    true = np.array([r.true_g_m3 for r in readings], float)
+    reported = np.array([r.reported_g_m3 for r in readings], float)
+    climbing = (np.array([r.sim_time_s for r in readings]) < t_hold) & (true > 0.01)
+    assert np.any(reported[climbing] < 0.9 * true[climbing]), "no rise lag seen"
     last = readings[-1]
     assert last.reported_g_m3 == pytest.approx(last.true_g_m3, rel=0.03)

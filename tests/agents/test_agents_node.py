@@ -16,7 +16,7 @@ import zenoh
 from agents import CommandRejected, Swarm, WaitTimeout
 from plume_service import GaussianPlume
 from swarmbus.codec import decode
-from swarmbus.messages import ErrorReply, FlightMode, RejectCode
+from swarmbus.messages import ConcentrationReading, ErrorReply, FlightMode, RejectCode
 from swarmbus.scenario import DEFAULT_SCENARIO, load_scenario
 from swarmbus.session import Presence
 from tests.support.agents_toy import BusToyPhysics
@@ -62,7 +62,7 @@ def test_one_vehicle_over_the_bus_with_the_plume_service(
             with pytest.raises(CommandRejected) as info:
                 uav.takeoff(5.0)
             assert info.value.code == RejectCode.DENIED and "already flying" in info.value.reason
-            readings = []
+            readings: list[ConcentrationReading] = []
             sub = swarm.subscribe(on_reading=readings.append)
             uav.goto(30.0, 0.0, 10.0)
             swarm.wait_until(lambda: len(readings) > 300, 60, "300 readings")
@@ -77,9 +77,13 @@ def test_one_vehicle_over_the_bus_with_the_plume_service(
     pos = np.array([r.position_enu_m for r in readings])
     truth = plume.concentration(pos)
     assert all(r.available for r in readings)
-    np.testing.assert_allclose([r.true_g_m3 for r in readings], truth, rtol=1e-9, atol=0)
+    np.testing.assert_allclose(
+        np.array([r.true_g_m3 for r in readings], float), truth, rtol=1e-9, atol=0
+    )
     window = np.where(truth < 0.01, 0.0, np.minimum(truth, 0.2))
-    np.testing.assert_allclose([r.reported_g_m3 for r in readings], window, rtol=1e-9, atol=0)
+    np.testing.assert_allclose(
+        np.array([r.reported_g_m3 for r in readings], float), window, rtol=1e-9, atol=0
+    )
     assert ((window > 0.01) & (window < 0.2)).any()  # some readings inside the window
     peers = readings[-1].peers
     assert {p.vehicle_id for p in peers} == {"uav1", "uav3"}

@@ -121,6 +121,7 @@ def test_mox_curve_rs_r0_at_10_ppm_and_the_reading_carries_the_resistance() -> N
     s.sample(ten_ppm_g_m3, 0.0)
     r = s.reading("uav1", 1000.0, (0.0, 0.0, 0.0), ten_ppm_g_m3, [])  # lag long settled
     assert r.resistance_ohm == pytest.approx(expected_rs_r0 * 3000.0, rel=1e-9)
+    assert r.resistance_ohm is not None
     assert r.resistance_ohm / 3000.0 == pytest.approx(12.00, rel=1e-3)
     assert r.gas == "ethanol"
     assert r.reported_g_m3 == pytest.approx(ten_ppm_g_m3, rel=1e-9)  # calibrated back
@@ -198,6 +199,7 @@ def test_pid_preset_is_fast_and_reports_isobutylene_ppm() -> None:
     r = s.reading("uav1", 3.0, (0.0, 0.0, 0.0), 1.0, [])
     assert r.reported_g_m3 == pytest.approx(0.9, abs=0.01)  # 90 % after T90
     isobutylene_g_mol = 4 * 12.011 + 8 * 1.008
+    assert r.reported_g_m3 is not None
     assert r.reported_ppm == pytest.approx(
         r.reported_g_m3 / isobutylene_g_mol * MOLAR_VOLUME_M3 * 1e6
     )

@@ -126,8 +126,8 @@ def fly_px4(w: ToyWorld, ap: Autopilot) -> None:
         MissionItem(command=MissionCommand.LAND, x=35.0, y=10.0, z=0.0),
     ]
     assert ap.handle(MissionUpload(items=items)).accepted
-    for cmd in (Arm(), MissionStart(start_index=0)):
-        assert ap.handle(cmd).accepted
+    for start in (Arm(), MissionStart(start_index=0)):
+        assert ap.handle(start).accepted
     w.run(10.0, until=lambda: w.vehicles["uav1"].p[2] > 3.0)
     assert ap.modes.mode == FlightMode.MISSION and ap.modes._climb_alt_m is not None
 
@@ -242,9 +242,9 @@ def test_a_behaviour_whose_state_cannot_be_saved_is_named() -> None:
     with pytest.raises(SnapshotError, match=r"HoldsAFunction.*snapshot\(\) and restore"):
         capture(ap, ConcentrationSensor(sc.sensor, 0, 0))
     ap.behavior = build_autopilot(sc, "uav1", NodeOptions()).behavior
-    ap.behavior.opaque = object()  # type: ignore[union-attr]
+    ap.behavior.opaque = object()
     with pytest.raises(SnapshotError, match=r"Casting.*snapshot\(\) and restore"):
-        ap.behavior.state_attributes = ("opaque",)  # type: ignore[union-attr]
+        ap.behavior.state_attributes = ("opaque",)
         capture(ap, ConcentrationSensor(sc.sensor, 0, 0))
 
 

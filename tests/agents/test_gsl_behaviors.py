@@ -18,11 +18,16 @@ from agents.behaviors.search import WindFrame
 from agents.behaviors.surge_cast import SurgeCast
 from plume_service import GaussianPlume
 from swarmbus.dispersion import dispersion_curves
-from swarmbus.messages import ConcentrationReading, PeerReading, VehicleState
+from swarmbus.messages import ConcentrationReading, PeerReading, Setpoint, VehicleState
 from swarmbus.plume_formula import gaussian_plume_g_m3, plume_frame
 from swarmbus.scenario import load_scenario
 
 SCENARIO = load_scenario()  # novak2018: wind 6 m/s from 270° (toward +x), source at the origin
+
+
+def velocity(sp: Setpoint | None) -> tuple[float, float, float]:
+    assert sp is not None and sp.velocity_enu_m_s is not None, sp
+    return sp.velocity_enu_m_s
 
 
 def ctx(index: int = 0, seed: int = 1, dt: float = 0.05) -> BehaviorContext:
@@ -203,12 +208,12 @@ def test_surge_cast_state_machine() -> None:
     t = 0.0
     sp = beh.step(state(50.0, 5.0, t), [], [])
     assert beh.state == "search"
-    vx, vy, _ = sp.velocity_enu_m_s
+    vx, vy, _ = velocity(sp)
     assert vx == pytest.approx(0.0) and abs(vy) == pytest.approx(2.5)  # crosswind
     t = 1.0
     sp = beh.step(state(50.0, 5.0, t), [], [reading(50.0, 5.0, t, 0.002)])
     assert beh.state == "surge"
-    assert sp.velocity_enu_m_s[:2] == pytest.approx((-2.0, 0.0))  # straight upwind
+    assert velocity(sp)[:2] == pytest.approx((-2.0, 0.0))  # straight upwind
     # Still within lost_s of the hit: keeps surging on a sub-threshold reading.
     t = 1.3
     beh.step(state(49.4, 5.0, t), [], [reading(49.4, 5.0, t, 0.0005)])
@@ -216,7 +221,7 @@ def test_surge_cast_state_machine() -> None:
     t = 1.6
     sp = beh.step(state(48.8, 5.0, t), [], [reading(48.8, 5.0, t, 0.0)])
     assert beh.state == "cast"
-    vx, vy, _ = sp.velocity_enu_m_s
+    vx, vy, _ = velocity(sp)
     assert vx == pytest.approx(0.5) and abs(vy) == pytest.approx(2.5)  # drift down, cross
     assert beh.declaration is None  # the strongest reading is only the first one
 
@@ -245,12 +250,12 @@ def test_casting_surges_casts_and_declares() -> None:
     beh = Casting(ctx())
     t = 0.0
     sp = beh.step(state(30.0, 0.0, t), [], [reading(30.0, 0.0, t, 0.01)])
-    assert sp.velocity_enu_m_s[0] == pytest.approx(-Casting.surge_speed_m_s)  # surging upwind
+    assert velocity(sp)[0] == pytest.approx(-Casting.surge_speed_m_s)  # surging upwind
     t = 0.1
     beh.step(state(1.0, 0.0, t), [], [reading(1.0, 0.0, t, 1.0)])
     t = 1.5  # gas lost for more than lost_s: cast, drifting downwind
     sp = beh.step(state(-0.5, 0.0, t), [], [reading(-0.5, 0.0, t, 0.0)])
-    assert sp.velocity_enu_m_s[0] == pytest.approx(Casting.cast_drift_m_s)
+    assert velocity(sp)[0] == pytest.approx(Casting.cast_drift_m_s)
     assert beh.declaration is None
     t = 1.6
     beh.step(state(0.5, 0.0, t), [], [reading(0.5, 0.0, t, 0.2)])
@@ -271,7 +276,7 @@ def test_random_walk_statistics_match_a_run_and_tumble_walk() -> None:
         x = y = 0.0
         for k in range(steps):
             sp = beh.step(state(x, y, k * dt), [], [])
-            vx, vy, _ = sp.velocity_enu_m_s
+            vx, vy, _ = velocity(sp)
             assert math.hypot(vx, vy) == pytest.approx(v)
             x += vx * dt
             y += vy * dt

@@ -8,7 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from tests.support.procs import free_tcp_port, run_cli
+from swarmbus.session import free_tcp_port
+from tests.support.procs import run_cli
 
 BAD_KINDS = ("missing", "directory", "garbage", "malformed", "wrong-schema", "empty")
 # every command reads its scenario through the same loader: the commands get the four kinds

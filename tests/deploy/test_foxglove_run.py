@@ -21,6 +21,7 @@ from typing import Any
 import pytest
 from mcap.reader import make_reader
 from websockets.sync.client import connect
+from websockets.typing import Subprotocol
 
 from deploy.demo import command_until_answered
 from deploy.foxglove.layout import layout_json
@@ -72,7 +73,9 @@ def watch_live(port: int, vehicle_ids: list[str], fly: Any) -> Live:
     wanted = wanted_topics(vehicle_ids)
     deadline = time.monotonic() + LIVE_TIMEOUT_S
     flown = False
-    with connect(f"ws://127.0.0.1:{port}", subprotocols=[SUBPROTOCOL], open_timeout=30) as ws:
+    with connect(
+        f"ws://127.0.0.1:{port}", subprotocols=[Subprotocol(SUBPROTOCOL)], open_timeout=30
+    ) as ws:
         assert ws.subprotocol == SUBPROTOCOL
         while True:
             have = {t for t, msgs in live.decoded.items() if msgs}

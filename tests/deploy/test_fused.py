@@ -11,6 +11,7 @@ every tick from 0.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from functools import partial
 from pathlib import Path
 
 import pytest
@@ -24,6 +25,7 @@ from swarmbus.keys import Keys
 from swarmbus.messages import (
     Arm,
     Command,
+    CommandReply,
     FlightMode,
     MissionStart,
     PlumeQuery,
@@ -136,7 +138,7 @@ def stepped_stream(
                     # paused at tick k: an autopilot that has not seen tick 0 yet refuses (no
                     # state), and nothing moves until the next step however long this takes
                     reply = wait_until(
-                        lambda vid=vid, command=command: _accepted(session, keys, vid, command),
+                        partial(_accepted, session, keys, vid, command),
                         60.0,
                         f"{vid} to accept {command}",
                     )
@@ -147,7 +149,9 @@ def stepped_stream(
     return digest.result()
 
 
-def _accepted(session: zenoh.Session, keys: Keys, vid: str, command: Command) -> object:
+def _accepted(
+    session: zenoh.Session, keys: Keys, vid: str, command: Command
+) -> CommandReply | None:
     reply = send_command(session, keys, vid, command)
     if reply is not None and not reply.accepted and "no vehicle state" not in reply.reason:
         raise AssertionError(f"{vid} refused {command}: {reply.reason}")

@@ -9,9 +9,11 @@ import os
 import signal
 import subprocess
 import sys
+from functools import partial
 from pathlib import Path
 
 import pytest
+import zenoh
 
 from deploy.certs import common_name_of
 from deploy.hosts import Deployment, HostsError, load_deployment
@@ -55,6 +57,10 @@ def client(dep: Deployment, host: str, role: str, node: str | None = None) -> Ne
     return secure_network(base, dep, host, role, KEYS, node)
 
 
+def _reply_with(text: str, query: zenoh.Query) -> None:
+    query.reply(query.key_expr, text)
+
+
 def test_one_certificate_per_vehicle_and_none_for_any_vehicle(
     deployment: tuple[Deployment, Path],
 ) -> None:
@@ -90,7 +96,7 @@ def test_router_drops_what_an_autopilot_publishes_or_answers_for_another_vehicle
         # Commands: it may serve its own vehicle's, not another's.
         with open_session(uav2) as ap, open_session(client(dep, "gcs", "operator")) as op:
             served = [
-                ap.declare_queryable(KEYS.vehicle_cmd(v), lambda q, v=v: q.reply(q.key_expr, v))
+                ap.declare_queryable(KEYS.vehicle_cmd(v), partial(_reply_with, v))
                 for v in ("uav1", "uav2")
             ]
 

@@ -53,6 +53,23 @@ UNSUPPORTED = mavlink.MAV_RESULT_UNSUPPORTED
 FAILED = mavlink.MAV_RESULT_FAILED
 
 
+def _accept_after(delay_s: float) -> Callable[[Any], CommandReply]:
+    """A reply script: accept, after ``delay_s`` of wall time."""
+
+    def reply(cmd: Any) -> CommandReply:
+        time.sleep(delay_s)
+        return CommandReply(vehicle_id="uav3", accepted=True)
+
+    return reply
+
+
+def _refuse_with(code: RejectCode) -> Callable[[Any], CommandReply]:
+    def reply(cmd: Any) -> CommandReply:
+        return CommandReply(vehicle_id="uav3", accepted=False, code=code, reason="scripted")
+
+    return reply
+
+
 @dataclass
 class ScriptedVehicle:
     """uav3: a liveliness token, a cmd queryable answering from ``replies``, and a status."""
@@ -84,7 +101,7 @@ class ScriptedVehicle:
         self._pub.put(encode(VehicleStatus(**base)))
 
     def _on_query(self, query: zenoh.Query) -> None:
-        cmd = decode(query.payload.to_bytes() if query.payload else b"", Command)  # type: ignore[arg-type]
+        cmd: Any = decode(query.payload.to_bytes() if query.payload else b"", Command)  # type: ignore[arg-type]
         with self.lock:
             self.received.append(cmd)
             reply_of = self.replies.get(type(cmd))
@@ -102,7 +119,9 @@ class ScriptedVehicle:
 
 
 @dataclass
-class Swarm:
+class FlowRig:
+    """The gateway under test, its MAVLink client, and uav3 as this test plays it."""
+
     net: Network
     gcs: MavClient
     uav3: ScriptedVehicle
@@ -111,7 +130,7 @@ class Swarm:
 
 
 @pytest.fixture(scope="module")
-def swarm(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Swarm]:
+def swarm(tmp_path_factory: pytest.TempPathFactory) -> Iterator[FlowRig]:
     tmp = tmp_path_factory.mktemp("gateway")
     scenario, gcs_port, api_base = write_scenario(tmp / "scenario.toml", 3)
     with (
@@ -138,7 +157,7 @@ def swarm(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Swarm]:
                     )
 
                 wait_until(uav3_ready, 30.0, "uav3's status in its heartbeat")
-                yield Swarm(net, gcs, uav3, api_base, tmp)
+                yield FlowRig(net, gcs, uav3, api_base, tmp)
                 assert gw.poll() is None, "the gateway died during the tests"
         finally:
             uav3.stop()
@@ -150,7 +169,7 @@ def ready(c: MavClient, sysid: int) -> None:
 
 
 # ----------------------------------------------------------------------------- connect
-def test_qgc_connect_sequence(swarm: Swarm) -> None:
+def test_qgc_connect_sequence(swarm: FlowRig) -> None:
     c = swarm.gcs
     for sysid in (1, 2, 3):
         hb = c.wait_type("HEARTBEAT", sysid)
@@ -200,7 +219,7 @@ def test_qgc_connect_sequence(swarm: Swarm) -> None:
     } <= seen
 
 
-def test_telemetry_content(swarm: Swarm) -> None:
+def test_telemetry_content(swarm: FlowRig) -> None:
     c = swarm.gcs
     c.drain()
     pos = c.wait_type("GLOBAL_POSITION_INT", 2)
@@ -228,7 +247,7 @@ def test_telemetry_content(swarm: Swarm) -> None:
 
 
 # ----------------------------------------------------------------------------- flying
-def test_qgc_takeoff_then_modes_by_set_mode(swarm: Swarm) -> None:
+def test_qgc_takeoff_then_modes_by_set_mode(swarm: FlowRig) -> None:
     c = swarm.gcs
     ready(c, 1)
     takeoff_amsl = ORIGIN.alt_m + 6.0
@@ -256,7 +275,7 @@ def test_qgc_takeoff_then_modes_by_set_mode(swarm: Swarm) -> None:
     assert c.command(1, 400, 0) == TEMP_REJECTED  # already disarmed: the autopilot says no
 
 
-def test_a_command_right_after_arm_follows_the_arm(swarm: Swarm) -> None:
+def test_a_command_right_after_arm_follows_the_arm(swarm: FlowRig) -> None:
     """The autopilot publishes its status before replying, but the gateway may handle the reply
     first. A takeoff sent the moment the ARM's ACK arrives (MAVSDK: arm, then takeoff), or while
     the Arm is still on its way, goes to the autopilot after the Arm — it is not kept back as
@@ -282,10 +301,7 @@ def test_a_command_right_after_arm_follows_the_arm(swarm: Swarm) -> None:
         ]
         assert c.command(UAV3, 400, 0) == ACCEPTED  # Disarm: selections work as before again
         # 2. the Arm still on its way when the takeoff comes
-        v.replies[Arm] = lambda cmd: (
-            time.sleep(0.5),
-            CommandReply(vehicle_id="uav3", accepted=True),
-        )[1]
+        v.replies[Arm] = _accept_after(0.5)
         before = len(v.received)
         c.drain()
         c.send(UAV3, mavlink.MAVLink_command_long_message(UAV3, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0))
@@ -308,7 +324,7 @@ def test_a_command_right_after_arm_follows_the_arm(swarm: Swarm) -> None:
         assert isinstance(v.received[-1], Disarm)
 
 
-def test_mission_upload_start_reached_and_download(swarm: Swarm) -> None:
+def test_mission_upload_start_reached_and_download(swarm: FlowRig) -> None:
     c = swarm.gcs
     ready(c, 2)
     places = [enu_to_geodetic(p, ORIGIN) for p in [(20, 0, 0), (26, 0, 0), (26, 4, 0), (22, 4, 0)]]
@@ -326,7 +342,7 @@ def test_mission_upload_start_reached_and_download(swarm: Swarm) -> None:
     c.set_mode(2, 4, 4)
     c.wait_mode(2, 4, 4, armed=False)
     assert c.command(2, 400, 1) == ACCEPTED
-    reached = []
+    reached: list[int] = []
     while len(reached) < 4:
         reached.append(c.wait_type("MISSION_ITEM_REACHED", 2, timeout_s=60.0).seq)
     assert reached == [0, 1, 3, 4]  # MAVLink seqs: the speed item is not a place
@@ -335,7 +351,7 @@ def test_mission_upload_start_reached_and_download(swarm: Swarm) -> None:
     c.wait_disarmed(2)
 
 
-def test_mission_protocol_errors(swarm: Swarm) -> None:
+def test_mission_protocol_errors(swarm: FlowRig) -> None:
     c = swarm.gcs
     v = swarm.uav3
     lat, lon, _ = enu_to_geodetic((20, 2, 0), ORIGIN)
@@ -371,7 +387,7 @@ def test_mission_protocol_errors(swarm: Swarm) -> None:
 
 
 # ----------------------------------------------------------------------------- results
-def test_command_results_follow_the_autopilot(swarm: Swarm) -> None:
+def test_command_results_follow_the_autopilot(swarm: FlowRig) -> None:
     c, v = swarm.gcs, swarm.uav3
     cases = [
         (RejectCode.DENIED, TEMP_REJECTED),
@@ -382,9 +398,7 @@ def test_command_results_follow_the_autopilot(swarm: Swarm) -> None:
     from swarmbus.messages import Land
 
     for code, result in cases:
-        v.replies[Land] = lambda cmd, code=code: CommandReply(
-            vehicle_id="uav3", accepted=False, code=code, reason="scripted"
-        )
+        v.replies[Land] = _refuse_with(code)
         assert c.command(UAV3, mavlink.MAV_CMD_NAV_LAND) == result
     v.replies[Land] = lambda cmd: None  # no reply at all: FAILED after the gateway's timeout
     assert c.command(UAV3, mavlink.MAV_CMD_NAV_LAND) == FAILED
@@ -393,14 +407,11 @@ def test_command_results_follow_the_autopilot(swarm: Swarm) -> None:
     assert c.command(UAV3, 31000) == UNSUPPORTED
 
 
-def test_a_retried_command_waits_for_one_answer(swarm: Swarm) -> None:
+def test_a_retried_command_waits_for_one_answer(swarm: FlowRig) -> None:
     c, v = swarm.gcs, swarm.uav3
     from swarmbus.messages import ReturnToLaunch
 
-    v.replies[ReturnToLaunch] = lambda cmd: (
-        time.sleep(0.3),
-        CommandReply(vehicle_id="uav3", accepted=True),
-    )[1]
+    v.replies[ReturnToLaunch] = _accept_after(0.3)
     msg = mavlink.MAVLink_command_long_message(UAV3, 1, 20, 0, 0, 0, 0, 0, 0, 0, 0)
     before = len(v.commands(ReturnToLaunch))
     c.send(UAV3, msg)
@@ -410,7 +421,7 @@ def test_a_retried_command_waits_for_one_answer(swarm: Swarm) -> None:
     v.replies.pop(ReturnToLaunch)
 
 
-def test_parameters_are_the_autopilots(swarm: Swarm) -> None:
+def test_parameters_are_the_autopilots(swarm: FlowRig) -> None:
     c, v = swarm.gcs, swarm.uav3
     real32, int32 = mavlink.MAV_PARAM_TYPE_REAL32, mavlink.MAV_PARAM_TYPE_INT32
     v.replies[SetParam] = lambda cmd: CommandReply(
@@ -437,7 +448,7 @@ def test_parameters_are_the_autopilots(swarm: Swarm) -> None:
     assert v.commands(GetParams), "the gateway never asked the autopilot for its parameters"
 
 
-def test_message_intervals(swarm: Swarm) -> None:
+def test_message_intervals(swarm: FlowRig) -> None:
     c = swarm.gcs
     assert c.command(2, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 30, 100_000) == ACCEPTED
     assert c.command(2, mavlink.MAV_CMD_GET_MESSAGE_INTERVAL, 30) == ACCEPTED
@@ -446,7 +457,7 @@ def test_message_intervals(swarm: Swarm) -> None:
     assert c.command(2, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 30, 0) == ACCEPTED
 
 
-def test_gcs_heartbeats_reach_the_autopilot(swarm: Swarm) -> None:
+def test_gcs_heartbeats_reach_the_autopilot(swarm: FlowRig) -> None:
     c, v = swarm.gcs, swarm.uav3
     before = len(v.commands(GcsHeartbeat))
     c.heartbeat()
@@ -454,7 +465,7 @@ def test_gcs_heartbeats_reach_the_autopilot(swarm: Swarm) -> None:
 
 
 # ----------------------------------------------------------------------------- hostile
-def test_hostile_frames_never_hurt_the_gateway(swarm: Swarm) -> None:
+def test_hostile_frames_never_hurt_the_gateway(swarm: FlowRig) -> None:
     c, v = swarm.gcs, swarm.uav3
     from swarmbus.messages import Arm
 

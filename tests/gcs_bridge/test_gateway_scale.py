@@ -4,11 +4,12 @@ included. Rates are measured from the messages' own sim timestamps, never from w
 
 from __future__ import annotations
 
+from functools import partial
 from pathlib import Path
 
 from gcs_bridge.dialect import mavlink
 from tests.support.gateway_stack import gateway, vehicles
-from tests.support.mavclient import MavClient, measure_rates, write_scenario
+from tests.support.mavclient import MavClient, heard_all, measure_rates, write_scenario
 from tests.support.procs import zenoh_network
 
 N = 16
@@ -34,12 +35,10 @@ def test_sixteen_vehicles_telemetry_rates(tmp_path: Path) -> None:
         gateway(net, scenario, tmp_path, "api_links=off", "cmd_timeout_s=3"),
         MavClient(gcs_port) as c,
     ):
-        sysids = set()
+        sysids: set[int] = set()
         c.wait(
             "all 16 sysids",
-            lambda m: (
-                m.get_type() == "HEARTBEAT" and (sysids.add(m.get_srcSystem()) or len(sysids) == N)
-            ),
+            partial(heard_all, sysids, N),
             120.0,
         )
         assert sysids == set(range(1, N + 1))

@@ -11,6 +11,7 @@ import re
 import socket
 import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 from pymavlink import mavutil
@@ -199,6 +200,29 @@ def forged(msg: Msg, key: bytes, link_id: int, timestamp: int) -> bytes:
     return bytes(pack(mav, msg))
 
 
+def unsigned_wrong_and_stale(lat: float, lon: float, unsigned: Any, wrong: bytes) -> list[bytes]:
+    """Every attack frame unsigned (MAVLink 2, and 1 where it fits), with a wrong key, and
+    signed with the right key but 10 min stale."""
+    stamp = signing_timestamp_now()
+    frames: list[bytes] = []
+    for msg in attacks(lat, lon):
+        frames.append(bytes(pack(unsigned, msg)))
+        if msg.id < 256:
+            frames.append(bytes(msg.pack(unsigned, force_mavlink1=True)))
+        frames.append(forged(msg, wrong, 0, stamp))
+        frames.append(forged(msg, KEY, 7, stamp - 10 * 60 * 100_000))  # 10 min old
+    return frames
+
+
+def assert_unchanged(statuses: list[VehicleStatus], before: VehicleStatus) -> None:
+    for st in statuses:
+        assert (st.armed, st.mode, st.mission_count) == (
+            before.armed,
+            before.mode,
+            before.mission_count,
+        ), f"a refused frame changed the vehicle: {st}"
+
+
 def test_unsigned_forged_and_replayed_frames_change_nothing_signed_ones_fly(
     tmp_path: Path,
 ) -> None:
@@ -254,16 +278,9 @@ def test_unsigned_forged_and_replayed_frames_change_nothing_signed_ones_fly(
                 statuses.extend(watch.status_window("uav1"))
 
             # 1. on the ground, disarmed: unsigned (MAVLink 2 and 1), wrong key, stale
-            stamp = signing_timestamp_now()
             wrong = os.urandom(32)
-            frames: list[bytes] = []
             unsigned = new_mav(GCS_SYSID, GCS_COMPID)
-            for msg in attacks(lat, lon):
-                frames.append(bytes(pack(unsigned, msg)))
-                if msg.id < 256:
-                    frames.append(bytes(msg.pack(unsigned, force_mavlink1=True)))
-                frames.append(forged(msg, wrong, 0, stamp))
-                frames.append(forged(msg, KEY, 7, stamp - 10 * 60 * 100_000))  # 10 min old
+            frames = unsigned_wrong_and_stale(lat, lon, unsigned, wrong)
             # and the fuzzer's unsigned traffic (each of its client frames would be answered)
             fuzz = [d.data for d in Fuzzer(1, [Target(1, False, lat, lon)]).datagrams(5000)]
             before = watch.latest_status("uav1")
@@ -271,12 +288,7 @@ def test_unsigned_forged_and_replayed_frames_change_nothing_signed_ones_fly(
                 attack(fuzz[chunk : chunk + 40])
             attack(frames)
             assert before is not None and not before.armed
-            for s in statuses:
-                assert (s.armed, s.mode, s.mission_count) == (
-                    before.armed,
-                    before.mode,
-                    before.mission_count,
-                ), f"a refused frame changed the vehicle: {s}"
+            assert_unchanged(statuses, before)
             assert gcs.param("MIS_TAKEOFF_ALT") == takeoff_alt
 
             # 2. the signed client: upload, takeoff + arm, DO_SET_MODE hold, SET_MODE mission
@@ -325,9 +337,9 @@ def test_unsigned_forged_and_replayed_frames_change_nothing_signed_ones_fly(
             frames += [forged(m, wrong, 0, signing_timestamp_now()) for m in attacks(lat, lon)]
             statuses.clear()
             attack(frames)
-            for s in statuses:
-                assert s.mode == FlightMode.HOLD and s.armed and s.mission_count == 3, (
-                    f"a refused frame changed the vehicle in the air: {s}"
+            for st in statuses:
+                assert st.mode == FlightMode.HOLD and st.armed and st.mission_count == 3, (
+                    f"a refused frame changed the vehicle in the air: {st}"
                 )
             for s in attackers:
                 with pytest.raises(BlockingIOError):

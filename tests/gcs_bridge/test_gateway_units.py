@@ -38,6 +38,7 @@ from gcs_bridge.modes import (
     flight_mode_for,
     mav_type_of,
 )
+from gcs_bridge.offboard import Here
 from gcs_bridge.params import INT32, ParamError, ParamTable, float_bits_of_int
 from gcs_bridge.telemetry import StreamSchedule, landed_state_of, wind_enu
 from swarmbus.messages import (
@@ -364,8 +365,7 @@ def test_a_long_statustext_travels_as_mavlink2_chunks() -> None:
 
 
 # ------------------------------------------------------------------ offboard setpoints
-def _here(yaw_enu_rad: float = 0.0) -> object:
-    from gcs_bridge.offboard import Here
+def _here(yaw_enu_rad: float = 0.0) -> Here:
 
     return Here(
         position_enu=(25.0, -1.0, 6.0),

@@ -11,7 +11,7 @@ from swarmbus.codec import decode
 from swarmbus.messages import SimTick
 from swarmbus.session import Presence
 from tests.sim_world import test_physics_node
-from tests.support.procs import NodeProcs
+from tests.support.procs import NodeProcs, wait_until
 
 setup = test_physics_node.setup  # the same fixture: physics network, procs and tick watch
 Watch = test_physics_node.Watch
@@ -49,7 +49,7 @@ def test_a_filament_scenario_twice_in_lockstep_gives_the_same_ticks_and_plume_va
     setup: tuple[NodeProcs, Watch], tmp_path: Path
 ) -> None:
     procs, watch = setup
-    sc = test_physics_node.write_scenario(tmp_path, extra_time=DYNAMIC)
+    sc = test_physics_node.two_vehicle_scenario(tmp_path, extra_time=DYNAMIC)
     _start_plume(procs, watch, sc)
     ticks = 480
     first = test_physics_node.stream_hash(procs, watch, sc, ticks, "run1")
@@ -79,9 +79,7 @@ def _run(
     )  # fmt: skip
     assert test_physics_node.exit_code(physics, "physics") == 0
     assert test_physics_node.exit_code(script, "participant") == 0
-    test_physics_node.wait_until(
-        lambda: watch.last_tick >= last, 10.0, f"tick {last} at the subscriber"
-    )
+    wait_until(lambda: watch.last_tick >= last, 10.0, f"tick {last} at the subscriber")
     with watch.lock:
         return dict(watch.raw)
 
@@ -93,7 +91,7 @@ def test_a_physics_stopped_and_resumed_from_its_checkpoint_sees_the_same_plume_a
     checkpoint (tick 240) to 480: from the restored tick on, every SimTick is the same bytes —
     states under the meandering wind's drag and the filaments' values at the vehicles."""
     procs, watch = setup
-    sc = test_physics_node.write_scenario(tmp_path, extra_time=DYNAMIC)
+    sc = test_physics_node.two_vehicle_scenario(tmp_path, extra_time=DYNAMIC)
     _start_plume(procs, watch, sc)
     straight = _run(procs, watch, sc, "straight", 480)
     ckpt = tmp_path / "physics.ckpt"

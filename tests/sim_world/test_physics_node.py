@@ -34,13 +34,14 @@ WORLD = "physics-test"
 KEYS = Keys(WORLD)
 
 
-def write_scenario(
+def two_vehicle_scenario(
     tmp_path: Path,
     timeout_s: float = 1.0,
     startup_s: float = 60.0,
     name: str = "sc.toml",
     extra_time: str = "",
 ) -> Path:
+    """Vehicles a (iris) and b (typhoon_h480) in world ``physics-test``; returns the path."""
     path = tmp_path / name
     path.write_text(
         f"""
@@ -153,7 +154,7 @@ def test_lockstep_holds_while_a_participant_delays_its_answer(
     setup: tuple[NodeProcs, Watch], tmp_path: Path
 ) -> None:
     procs, watch = setup
-    sc = write_scenario(tmp_path, timeout_s=10.0)
+    sc = two_vehicle_scenario(tmp_path, timeout_s=10.0)
     physics = procs.start("physics", "--scenario", str(sc), "--set", "max_ticks=60", name="physics")
     slow = start_script(
         procs, sc, "--vehicle", "a", "--throttle", "0.3", "--delay-tick", "30", "--delay-s",
@@ -179,7 +180,7 @@ def test_sigkilled_participant_is_dropped_others_go_on_and_a_restart_rejoins(
     setup: tuple[NodeProcs, Watch], tmp_path: Path
 ) -> None:
     procs, watch = setup
-    sc = write_scenario(tmp_path, timeout_s=1.0)
+    sc = two_vehicle_scenario(tmp_path, timeout_s=1.0)
     procs.start("physics", "--scenario", str(sc), name="physics")
     victim = start_script(procs, sc, "--vehicle", "a", "--throttle", "0.2", label="script-a")
     start_script(procs, sc, "--vehicle", "b", "--throttle", "0.2", label="script-b")
@@ -206,7 +207,7 @@ def test_stalled_participant_is_dropped_at_the_timeout_and_rejoins(
     setup: tuple[NodeProcs, Watch], tmp_path: Path
 ) -> None:
     procs, watch = setup
-    sc = write_scenario(tmp_path, timeout_s=0.5)
+    sc = two_vehicle_scenario(tmp_path, timeout_s=0.5)
     procs.start("physics", "--scenario", str(sc), name="physics")
     start_script(
         procs, sc, "--vehicle", "a", "--throttle", "0.2", "--stall-at-tick", "20",
@@ -221,7 +222,7 @@ def test_stalled_participant_is_dropped_at_the_timeout_and_rejoins(
 
 def test_late_joiner_is_admitted(setup: tuple[NodeProcs, Watch], tmp_path: Path) -> None:
     procs, watch = setup
-    sc = write_scenario(tmp_path, timeout_s=1.0)
+    sc = two_vehicle_scenario(tmp_path, timeout_s=1.0)
     procs.start(
         "physics", "--scenario", str(sc), "--set", "wait_for_autopilots=false", name="physics"
     )
@@ -268,7 +269,7 @@ def test_two_runs_of_the_same_scenario_give_identical_state_streams(
     setup: tuple[NodeProcs, Watch], tmp_path: Path
 ) -> None:
     procs, watch = setup
-    sc = write_scenario(tmp_path)
+    sc = two_vehicle_scenario(tmp_path)
     first = stream_hash(procs, watch, sc, 240, "run1")
     second = stream_hash(procs, watch, sc, 240, "run2")
     assert first == second
@@ -278,7 +279,7 @@ def test_one_batch_per_process_gives_the_state_stream_of_one_command_per_vehicle
     setup: tuple[NodeProcs, Watch], tmp_path: Path
 ) -> None:
     procs, watch = setup
-    sc = write_scenario(tmp_path)
+    sc = two_vehicle_scenario(tmp_path)
     singles = stream_hash(procs, watch, sc, 240, "singles")
     batched = stream_hash(procs, watch, sc, 240, "batched", "--batch")
     assert singles == batched
@@ -288,7 +289,7 @@ def test_bad_entries_of_a_batch_are_dropped_and_logged(
     setup: tuple[NodeProcs, Watch], tmp_path: Path
 ) -> None:
     procs, watch = setup
-    sc = write_scenario(tmp_path, timeout_s=1.0)
+    sc = two_vehicle_scenario(tmp_path, timeout_s=1.0)
     procs.start(
         "physics", "--scenario", str(sc), "--set", "wait_for_autopilots=false", name="physics"
     )
@@ -437,7 +438,7 @@ def test_one_shared_plume_query_per_sensor_tick_answered_in_the_next_tick(
     setup: tuple[NodeProcs, Watch], tmp_path: Path
 ) -> None:
     procs, watch = setup
-    sc = write_scenario(tmp_path)
+    sc = two_vehicle_scenario(tmp_path)
     procs.start("plume", "--scenario", str(sc), name="plume")
     presence = Presence(watch.session, KEYS)
     assert presence.wait_for(lambda alive: "plume" in alive, 60.0), sorted(presence.alive)
@@ -466,7 +467,7 @@ def test_missing_autopilots_fail_start_up_naming_them(
     setup: tuple[NodeProcs, Watch], tmp_path: Path
 ) -> None:
     procs, _ = setup
-    sc = write_scenario(tmp_path, startup_s=1.0)
+    sc = two_vehicle_scenario(tmp_path, startup_s=1.0)
     physics = procs.start("physics", "--scenario", str(sc), name="physics")
     assert exit_code(physics, "physics") == 1
     log = (tmp_path / "physics.log").read_text()
@@ -477,7 +478,7 @@ def test_realtime_mode_with_a_duration_ends_at_that_sim_time(
     setup: tuple[NodeProcs, Watch], tmp_path: Path
 ) -> None:
     procs, watch = setup
-    sc = write_scenario(
+    sc = two_vehicle_scenario(
         tmp_path, extra_time='mode = "realtime"\nspeed_factor = 4.0\nduration_s = 1.0'
     )
     physics = procs.start(
@@ -492,7 +493,7 @@ def test_realtime_mode_with_a_duration_ends_at_that_sim_time(
 
 def test_unknown_option_is_a_clear_error(tmp_path: Path) -> None:
     result = run_cli(
-        ["node", "physics", "--scenario", str(write_scenario(tmp_path)), "--set", "warp=9"]
+        ["node", "physics", "--scenario", str(two_vehicle_scenario(tmp_path)), "--set", "warp=9"]
     )
     assert result.returncode == 2
     assert "unknown physics option 'warp'" in result.stderr

@@ -4,7 +4,8 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
+from functools import partial
 from pathlib import Path
 
 import msgspec
@@ -69,9 +70,7 @@ class Stepped:
         self.sw = sw
         self.states: dict[int, VehicleState] = {}
         self.statuses: list[VehicleStatus] = []
-        sw.subscribe(
-            on_state=lambda s: self.states.setdefault(s.tick, s), on_status=self.statuses.append
-        )
+        sw.subscribe(on_state=partial(_keep_first, self.states), on_status=self.statuses.append)
 
 
 @pytest.fixture(scope="module")
@@ -97,7 +96,7 @@ def test_step_pauses_the_world_at_the_granted_tick(stepped: Stepped) -> None:
     assert reply.tick == 10
     assert reply.sim_time_s == pytest.approx(10 / CONTROL_HZ, rel=1e-12)
     assert sw.sim_time == reply.sim_time_s and sw.holds_clock
-    assert max(stepped.states) == 10 and sw.state("uav1").tick == 10  # type: ignore[union-attr]
+    assert max(stepped.states) == 10 and sw.state("uav1").tick == 10
     # paused: nothing moves however long we wait
     with pytest.raises(WaitTimeout):
         sw.wait_until(lambda: max(stepped.states) > 10, timeout_s=0.5)
@@ -110,9 +109,9 @@ def test_step_until_stops_on_the_first_tick_that_holds(stepped: Stepped) -> None
     sw.command("uav1").takeoff(5.0)
 
     def above_1m() -> bool:
-        return sw.state("uav1").position_enu_m[2] > 1.0  # type: ignore[union-attr]
+        return sw.state("uav1").position_enu_m[2] > 1.0
 
-    reply_tick = sw.step_until(lambda: above_1m() and sw.state("uav1").tick, 30.0, "1 m up")  # type: ignore[union-attr]
+    reply_tick = sw.step_until(lambda: above_1m() and sw.state("uav1").tick, 30.0, "1 m up")
     states = stepped.states
     assert states[reply_tick].position_enu_m[2] > 1.0 >= states[reply_tick - 1].position_enu_m[2]
     before = sw.sim_time
@@ -141,7 +140,11 @@ def test_one_client_holds_the_clock_until_it_closes(stepped: Stepped) -> None:
         assert tick > 1
 
 
-def _sim_time_or_none(sw: Swarm) -> object:
+def _keep_first(states: dict[int, VehicleState], state: VehicleState) -> None:
+    states.setdefault(state.tick, state)
+
+
+def _sim_time_or_none(sw: Swarm) -> Callable[[], float | None]:
     def attempt() -> float | None:
         try:
             return sw.sim_time + 1.0  # truthy at t = 0 too
@@ -151,7 +154,7 @@ def _sim_time_or_none(sw: Swarm) -> object:
     return attempt
 
 
-def _step_or_none(sw: Swarm) -> object:
+def _step_or_none(sw: Swarm) -> Callable[[], int | None]:
     def attempt() -> int | None:
         try:
             return sw.step(1).tick
@@ -198,7 +201,7 @@ def _fly(tmp: Path, land_at: int | None) -> dict[int, VehicleState]:
         procs.start("physics")
         with Swarm.connect(connect=[net.endpoint], command_timeout_s=20.0) as sw:
             wait_until(_sim_time_or_none(sw), 120.0, "the stepped world's clock")
-            sw.subscribe(on_state=lambda s: states.setdefault(s.tick, s))
+            sw.subscribe(on_state=partial(_keep_first, states))
             uav = sw.command("uav1")
             sw.step(1)
             uav.arm()
@@ -207,7 +210,7 @@ def _fly(tmp: Path, land_at: int | None) -> dict[int, VehicleState]:
             if land_at is not None:
                 uav.land()
             sw.step(4)
-            mode = sw.status("uav1").mode  # type: ignore[union-attr]
+            mode = sw.status("uav1").mode
             assert mode == FlightMode.LAND if land_at is not None else mode == FlightMode.HOLD
     return states
 
@@ -242,4 +245,4 @@ def test_up_stepped_waits_for_a_client_to_step_it(tmp_path: Path) -> None:
             assert sw.sim_time == 0.0
             reply = sw.step(3)
             assert reply.tick == 3 and sw.vehicles == ["uav1", "uav2", "uav3"]
-            assert {sw.state(v).tick for v in sw.vehicles} == {3}  # type: ignore[union-attr]
+            assert {sw.state(v).tick for v in sw.vehicles} == {3}

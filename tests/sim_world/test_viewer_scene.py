@@ -13,16 +13,13 @@ import zenoh
 with warnings.catch_warnings():
     # meshcat 0.3.2 imports pyzmq's deprecated zmq.eventloop.ioloop; not ours to fix.
     warnings.simplefilter("ignore", DeprecationWarning)
+    from sim_world.view_feed import Feed, default_levels, reading_colour, scene_bounds
     from sim_world.viewer import (
         WORLD_ROOT,
-        Feed,
         Scene,
         ViewerOptions,
-        default_levels,
         mesh_queries,
         pose_matrix,
-        reading_colour,
-        scene_bounds,
     )
 from swarmbus.codec import encode
 from swarmbus.messages import ConcentrationReading, PlumeMesh, PlumeState, SimTick, VehicleState
@@ -77,7 +74,7 @@ def state(vid: str, tick: int, pos: tuple[float, float, float]) -> VehicleState:
 @pytest.fixture
 def scene() -> tuple[Scene, FakeVis]:
     vis = FakeVis()
-    sc = Scene(vis, load_scenario(), ViewerOptions())  # type: ignore[arg-type]
+    sc = Scene(vis, load_scenario(), ViewerOptions())
     sc.draw_static()
     return sc, vis
 

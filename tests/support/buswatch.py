@@ -34,7 +34,7 @@ class BusWatch:
 
         def callback(sample: zenoh.Sample) -> None:
             try:
-                msg = decode(sample.payload.to_bytes(), kind)
+                msg: Any = decode(sample.payload.to_bytes(), kind)
             except MessageError:
                 return
             with self._lock:

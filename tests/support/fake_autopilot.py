@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import pymap3d
+import zenoh
 
 from swarmbus.codec import MessageError, decode, encode
 from swarmbus.keys import Keys
@@ -108,8 +109,7 @@ class World:
         self.lock = threading.Lock()
         self.t = 0.0
         self.vehicles = {
-            v.id: Fake(v.id, list(v.spawn_enu_m), home=tuple(v.spawn_enu_m))
-            for v in scenario.vehicles
+            v.id: Fake(v.id, list(v.spawn_enu_m), home=v.spawn_enu_m) for v in scenario.vehicles
         }
         o = self.origin
         lat1, lon1, _ = pymap3d.enu2geodetic(1.0, 1.0, 0.0, o.lat_deg, o.lon_deg, o.alt_m)
@@ -120,12 +120,17 @@ class World:
 
     # ------------------------------------------------------------------ commands
     def handle(self, f: Fake, cmd: Command) -> CommandReply:
-        ok = CommandReply(vehicle_id=f.vid, accepted=True)
-        denied = RejectCode.DENIED
-        here = (f.pos[0], f.pos[1], f.pos[2])
+        for part in (self._admin, self._arming, self._mission, self._flight):
+            reply = part(f, cmd)
+            if reply is not None:
+                return reply
+        return refuse(f.vid, RejectCode.UNSUPPORTED, f"{type(cmd).__name__} not faked")
+
+    def _admin(self, f: Fake, cmd: Command) -> CommandReply | None:
+        """Heartbeats, parameters, and what the fake accepts and ignores."""
         if isinstance(cmd, GcsHeartbeat):
             f.gcs_heartbeats += 1
-            return ok
+            return CommandReply(vehicle_id=f.vid, accepted=True)
         if isinstance(cmd, GetParams):
             return CommandReply(vehicle_id=f.vid, accepted=True, params=dict(f.params))
         if isinstance(cmd, SetParam):
@@ -133,65 +138,77 @@ class World:
                 return refuse(f.vid, RejectCode.UNSUPPORTED, f"unknown parameter {cmd.name}")
             f.params[cmd.name] = cmd.value
             return CommandReply(vehicle_id=f.vid, accepted=True, params=dict(f.params))
+        if isinstance(cmd, Setpoint | GeofenceUpload | RallyUpload):
+            return CommandReply(vehicle_id=f.vid, accepted=True)
+        return None
+
+    def _arming(self, f: Fake, cmd: Command) -> CommandReply | None:
+        denied = RejectCode.DENIED
+        here = (f.pos[0], f.pos[1], f.pos[2])
         if isinstance(cmd, Arm):
             if f.mode != M.DISARMED:
                 return refuse(f.vid, denied, "already armed")
             f.mode, f.home, f.target = M.ARMED, here, here
-            return ok
-        if isinstance(cmd, Disarm):
+        elif isinstance(cmd, Disarm):
             if f.mode == M.DISARMED:
                 return refuse(f.vid, denied, "already disarmed")
             if f.mode in AIRBORNE and not f.on_ground and not cmd.force:
                 return refuse(f.vid, denied, "in the air")
             f.mode = M.DISARMED
-            return ok
-        if isinstance(cmd, Takeoff):
+        elif isinstance(cmd, Takeoff):
             if f.mode != M.ARMED:
                 return refuse(f.vid, denied, "arm before taking off")
             f.mode, f.target = M.TAKEOFF, (here[0], here[1], f.home[2] + cmd.altitude_m)
-            return ok
+        else:
+            return None
+        return CommandReply(vehicle_id=f.vid, accepted=True)
+
+    def _mission(self, f: Fake, cmd: Command) -> CommandReply | None:
         if isinstance(cmd, MissionUpload):
             if f.mode == M.MISSION:
-                return refuse(f.vid, denied, "a mission is flying")
+                return refuse(f.vid, RejectCode.DENIED, "a mission is flying")
             f.items = [self.enu(i) for i in cmd.items]
             f.index, f.reached, f.finished = (0 if f.items else -1), 0, False
-            return ok
-        if isinstance(cmd, MissionClear):
+        elif isinstance(cmd, MissionClear):
             f.items, f.index, f.reached, f.finished = [], -1, 0, False
-            return ok
-        if isinstance(cmd, MissionDownload):
+        elif isinstance(cmd, MissionDownload):
             return CommandReply(vehicle_id=f.vid, accepted=True, mission=list(f.items))
-        if isinstance(cmd, MissionStart | SetMode) and (
-            isinstance(cmd, MissionStart) or cmd.mode == M.MISSION
-        ):
-            if f.mode == M.DISARMED:
-                return refuse(f.vid, denied, "disarmed: arm before starting a mission")
-            if not f.items:
-                return refuse(f.vid, denied, "no mission uploaded")
-            if isinstance(cmd, MissionStart):
-                f.index, f.reached, f.finished = cmd.start_index, 0, False
-            first = f.items[f.index]
-            if f.mode == M.ARMED and first.command != MissionCommand.TAKEOFF:
-                f.climb_to = max(first.z, f.home[2] + f.params["MIS_TAKEOFF_ALT"])
-            f.mode, f.descending = M.MISSION, False
-            return ok
-        if isinstance(cmd, Setpoint | GeofenceUpload | RallyUpload):
-            return ok
+        elif isinstance(cmd, MissionStart) or (isinstance(cmd, SetMode) and cmd.mode == M.MISSION):
+            return self._start_mission(f, cmd)
+        else:
+            return None
+        return CommandReply(vehicle_id=f.vid, accepted=True)
+
+    def _start_mission(self, f: Fake, cmd: MissionStart | SetMode) -> CommandReply:
+        if f.mode == M.DISARMED:
+            return refuse(f.vid, RejectCode.DENIED, "disarmed: arm before starting a mission")
+        if not f.items:
+            return refuse(f.vid, RejectCode.DENIED, "no mission uploaded")
+        if isinstance(cmd, MissionStart):
+            f.index, f.reached, f.finished = cmd.start_index, 0, False
+        first = f.items[f.index]
+        if f.mode == M.ARMED and first.command != MissionCommand.TAKEOFF:
+            f.climb_to = max(first.z, f.home[2] + f.params["MIS_TAKEOFF_ALT"])
+        f.mode, f.descending = M.MISSION, False
+        return CommandReply(vehicle_id=f.vid, accepted=True)
+
+    def _flight(self, f: Fake, cmd: Command) -> CommandReply | None:
+        """Mode changes in the air: land, return, hold, go to."""
+        mode = cmd.mode if isinstance(cmd, SetMode) else None
+        here = (f.pos[0], f.pos[1], f.pos[2])
         if f.mode not in AIRBORNE:
-            return refuse(f.vid, denied, "not flying")
-        if isinstance(cmd, Land) or (isinstance(cmd, SetMode) and cmd.mode == M.LAND):
+            return refuse(f.vid, RejectCode.DENIED, "not flying")
+        if isinstance(cmd, Land) or mode == M.LAND:
             f.mode, f.target = M.LAND, here
-        elif isinstance(cmd, ReturnToLaunch) or (isinstance(cmd, SetMode) and cmd.mode == M.RTL):
+        elif isinstance(cmd, ReturnToLaunch) or mode == M.RTL:
             f.mode, f.descending = M.RTL, False
-        elif isinstance(cmd, Hold | MissionPause) or (
-            isinstance(cmd, SetMode) and cmd.mode == M.HOLD
-        ):
+        elif isinstance(cmd, Hold | MissionPause) or mode == M.HOLD:
             f.mode, f.target = M.HOLD, here
         elif isinstance(cmd, Goto):
             f.mode, f.target = M.HOLD, cmd.position_enu_m
         else:
-            return refuse(f.vid, RejectCode.UNSUPPORTED, f"{type(cmd).__name__} not faked")
-        return ok
+            return None
+        return CommandReply(vehicle_id=f.vid, accepted=True)
 
     def enu(self, item: MissionItem) -> MissionItem:
         if item.frame == MissionFrame.ENU:
@@ -238,14 +255,18 @@ class World:
             if self._descend(f, f.target[0], f.target[1]):
                 f.mode = M.DISARMED
         elif f.mode == M.RTL:
-            alt = f.home[2] + f.params["RTL_RETURN_ALT"]
-            if not f.descending:
-                if self._move(f, (f.home[0], f.home[1], max(alt, f.pos[2]))) < 0.5:
-                    f.descending = True
-            elif self._descend(f, f.home[0], f.home[1]):
-                f.mode = M.DISARMED
+            self._return(f)
         elif f.mode == M.MISSION:
             self._fly_mission(f)
+
+    def _return(self, f: Fake) -> None:
+        """RTL: climb to the return altitude on the way home, then land there."""
+        alt = f.home[2] + f.params["RTL_RETURN_ALT"]
+        if not f.descending:
+            if self._move(f, (f.home[0], f.home[1], max(alt, f.pos[2]))) < 0.5:
+                f.descending = True
+        elif self._descend(f, f.home[0], f.home[1]):
+            f.mode = M.DISARMED
 
     def _fly_mission(self, f: Fake) -> None:
         if f.climb_to is not None:
@@ -283,7 +304,7 @@ class World:
             vehicle_id=f.vid,
             tick=tick,
             sim_time_s=self.t,
-            position_enu_m=tuple(f.pos),
+            position_enu_m=(f.pos[0], f.pos[1], f.pos[2]),
             velocity_enu_m_s=f.vel,
             attitude_xyzw=(0.0, 0.0, 0.0, 1.0),
             body_rates_rad_s=(0.0, 0.0, 0.0),
@@ -308,6 +329,92 @@ class World:
         )
 
 
+Pubs = dict[str, tuple[Any, Any, Any]]  # vehicle → (state, status, concentration) publishers
+
+
+def command_server(world: World, f: Fake, mute: list[str], pubs: Pubs) -> Any:
+    """The queryable callback of ``f``'s command key: decode, handle, status, then reply."""
+
+    def on_query(query: zenoh.Query) -> None:
+        if f.vid in mute:
+            return
+        try:
+            payload = query.payload.to_bytes() if query.payload else b""
+            cmd: Any = decode(payload, Command)  # type: ignore[arg-type]
+        except MessageError as exc:
+            query.reply_err(encode(ErrorReply(field=exc.field, reason=exc.reason[:900])))
+            return
+        with world.lock:
+            reply = world.handle(f, cmd)
+            status = world.status(f)
+        pubs[f.vid][1].put(encode(status))  # as the autopilot: status, then reply
+        query.reply(query.key_expr, encode(reply))
+
+    return on_query
+
+
+def vehicle_messages(
+    world: World, f: Fake, tick: int, pubs: Pubs, last_status: dict[str, tuple[object, ...]]
+) -> tuple[VehicleState, list[tuple[Any, bytes]]]:
+    """One tick of ``f``: its state, its status when it changed (or each 60 ticks), a reading."""
+    st_pub, status_pub, conc_pub = pubs[f.vid]
+    state = world.state(f, tick)
+    out: list[tuple[Any, bytes]] = [(st_pub, encode(state))]
+    status = world.status(f)
+    key = (
+        status.mode,
+        status.armed,
+        status.landed,
+        status.mission_index,
+        status.mission_count,
+        status.mission_items_reached,
+        status.mission_finished,
+        status.home_enu_m,
+    )
+    if last_status.get(f.vid) != key or tick % 60 == 0:
+        last_status[f.vid] = key
+        out.append((status_pub, encode(status)))
+    if tick % 12 == 0:
+        value = round(0.01 * (1 + math.sin(world.t)), 6)
+        reading = ConcentrationReading(
+            vehicle_id=f.vid,
+            sim_time_s=world.t,
+            position_enu_m=(f.pos[0], f.pos[1], f.pos[2]),
+            available=True,
+            reported_g_m3=value,
+            true_g_m3=value,
+        )
+        out.append((conc_pub, encode(reading)))
+    return state, out
+
+
+def run(world: World, speed: float, pubs: Pubs, tick_pub: Any) -> None:
+    """Step every vehicle at ``speed`` × real time and publish, until interrupted."""
+    start = time.monotonic()
+    tick = 0
+    last_status: dict[str, tuple[object, ...]] = {}
+    while True:
+        wall = time.monotonic() - start
+        if world.t > wall * speed:
+            time.sleep(min(0.01, world.t / speed - wall))
+            continue
+        out: list[tuple[Any, bytes]] = []
+        states: list[VehicleState] = []
+        with world.lock:  # step under the lock, publish outside it
+            tick += 1
+            world.t = tick * DT
+            for f in world.vehicles.values():
+                world.step(f)
+                state, messages = vehicle_messages(world, f, tick, pubs, last_status)
+                states.append(state)
+                out += messages
+            # as the physics: every state in one tick (the gateway reads these)
+            tick_msg = SimTick(tick=tick, sim_time_s=world.t, control_dt_s=DT, states=states)
+            out.insert(0, (tick_pub, encode(tick_msg)))
+        for pub, payload in out:
+            pub.put(payload)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--connect", required=True)
@@ -323,25 +430,7 @@ def main() -> None:
         world.vehicles.pop(vid, None)
     net = NetworkConfig(connect=[args.connect], listen=["tcp/127.0.0.1:0"])
     with open_session(net) as session:
-
-        def serve(f: Fake):
-            def on_query(query):
-                if f.vid in args.mute:
-                    return
-                try:
-                    cmd = decode(query.payload.to_bytes() if query.payload else b"", Command)
-                except MessageError as exc:
-                    query.reply_err(encode(ErrorReply(field=exc.field, reason=exc.reason[:900])))
-                    return
-                with world.lock:
-                    reply = world.handle(f, cmd)  # type: ignore[arg-type]
-                    status = world.status(f)
-                pubs[f.vid][1].put(encode(status))  # as the autopilot: status, then reply
-                query.reply(query.key_expr, encode(reply))
-
-            return on_query
-
-        pubs = {
+        pubs: Pubs = {
             f.vid: (
                 session.declare_publisher(keys.vehicle_state(f.vid)),
                 session.declare_publisher(keys.vehicle_status(f.vid)),
@@ -350,65 +439,17 @@ def main() -> None:
             for f in world.vehicles.values()
         }
         declared = [
-            session.declare_queryable(keys.vehicle_cmd(f.vid), serve(f))
+            session.declare_queryable(
+                keys.vehicle_cmd(f.vid), command_server(world, f, args.mute, pubs)
+            )
             for f in world.vehicles.values()
         ]
         tokens = [
             session.liveliness().declare_token(keys.node_health(f"autopilot-{f.vid}"))
             for f in world.vehicles.values()
         ]
-        tick_pub = session.declare_publisher(keys.tick())
-        start = time.monotonic()
-        tick = 0
-        last_status: dict[str, tuple[object, ...]] = {}
         try:
-            while True:
-                wall = time.monotonic() - start
-                if world.t > wall * args.speed:
-                    time.sleep(min(0.01, world.t / args.speed - wall))
-                    continue
-                out: list[tuple[Any, bytes]] = []
-                states: list[VehicleState] = []
-                with world.lock:  # step under the lock, publish outside it
-                    tick += 1
-                    world.t = tick * DT
-                    for f in world.vehicles.values():
-                        world.step(f)
-                        st_pub, status_pub, conc_pub = pubs[f.vid]
-                        states.append(world.state(f, tick))
-                        out.append((st_pub, encode(states[-1])))
-                        status = world.status(f)
-                        key = (
-                            status.mode,
-                            status.armed,
-                            status.landed,
-                            status.mission_index,
-                            status.mission_count,
-                            status.mission_items_reached,
-                            status.mission_finished,
-                            status.home_enu_m,
-                        )
-                        if last_status.get(f.vid) != key or tick % 60 == 0:
-                            last_status[f.vid] = key
-                            out.append((status_pub, encode(status)))
-                        if tick % 12 == 0:
-                            value = round(0.01 * (1 + math.sin(world.t)), 6)
-                            reading = ConcentrationReading(
-                                vehicle_id=f.vid,
-                                sim_time_s=world.t,
-                                position_enu_m=tuple(f.pos),
-                                available=True,
-                                reported_g_m3=value,
-                                true_g_m3=value,
-                            )
-                            out.append((conc_pub, encode(reading)))
-                    # as the physics: every state in one tick (the gateway reads these)
-                    tick_msg = SimTick(
-                        tick=tick, sim_time_s=world.t, control_dt_s=DT, states=states
-                    )
-                    out.insert(0, (tick_pub, encode(tick_msg)))
-                for pub, payload in out:
-                    pub.put(payload)
+            run(world, args.speed, pubs, session.declare_publisher(keys.tick()))
         except KeyboardInterrupt:
             pass
         finally:

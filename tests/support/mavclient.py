@@ -16,6 +16,7 @@ import socket
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -110,6 +111,13 @@ def write_scenario(path: Path, vehicles: int, **kw: Any) -> tuple[Path, int, int
     api = free_udp_block(vehicles)
     path.write_text(scenario_text(vehicles, gcs, api, **kw))
     return path, gcs, api
+
+
+def heard_all(seen: set[int], n: int, msg: Msg) -> bool:
+    """A ``MavClient.wait`` predicate: heartbeats from ``n`` systems (noted in ``seen``)."""
+    if msg.get_type() == "HEARTBEAT":
+        seen.add(msg.get_srcSystem())
+    return len(seen) == n
 
 
 class MavClient:
@@ -407,6 +415,48 @@ def clients(*ports: int, **kw: Any) -> Iterator[list[MavClient]]:
 TIMESTAMPED = {"ATTITUDE", "GLOBAL_POSITION_INT", "LOCAL_POSITION_NED", "NAMED_VALUE_FLOAT"}
 
 
+@dataclass
+class RateWindow:
+    """What ``measure_rates`` heard of each vehicle inside its window of sim time."""
+
+    sim_seconds: float
+    seen: dict[int, list[Any]]
+    first: dict[int, int] = field(default_factory=dict)  # ATTITUDE time_boot_ms
+    last: dict[int, int] = field(default_factory=dict)
+
+    def full(self, s: int) -> bool:
+        return s in self.last and self.last[s] - self.first[s] >= self.sim_seconds * 1000
+
+    def done(self) -> bool:
+        return all(s in self.first and self.full(s) for s in self.seen)
+
+    def take(self, m: Any) -> None:
+        s = m.get_srcSystem()
+        if s not in self.seen:
+            return
+        if m.get_type() == "ATTITUDE":
+            self.first.setdefault(s, m.time_boot_ms)
+            if not self.full(s):
+                self.last[s] = m.time_boot_ms
+        if s in self.first and not self.full(s):
+            self.seen[s].append(m)
+
+
+def rates_of(msgs: list[Any], span_s: float) -> dict[str, float]:
+    """Messages per second by type: timestamped ones over their own span, others over ``span_s``."""
+    counts: dict[str, list[Any]] = collections.defaultdict(list)
+    for m in msgs:
+        counts[m.get_type()].append(m)
+    out: dict[str, float] = {}
+    for kind, ms in counts.items():
+        if kind in TIMESTAMPED and len(ms) > 1:
+            t = [m.time_boot_ms for m in ms]
+            out[kind] = (len(ms) - 1) / max((max(t) - min(t)) / 1000.0, 1e-9)
+        else:
+            out[kind] = len(ms) / span_s
+    return out
+
+
 def measure_rates(
     c: MavClient, sysids: list[int], sim_seconds: float, timeout_s: float
 ) -> tuple[dict[int, dict[str, float]], float]:
@@ -417,42 +467,17 @@ def measure_rates(
     """
     c.drain()
     start = time.monotonic()
-    first: dict[int, int] = {}
-    last: dict[int, int] = {}
-    seen: dict[int, list[Any]] = {s: [] for s in sysids}
-
-    def done() -> bool:
-        return all(s in first and last[s] - first[s] >= sim_seconds * 1000 for s in sysids)
-
-    while not done():
+    window = RateWindow(sim_seconds, {s: [] for s in sysids})
+    while not window.done():
         if time.monotonic() - start > timeout_s:
-            spans = {s: (last.get(s, 0) - first.get(s, 0)) / 1000 for s in sysids}
+            spans = {s: (window.last.get(s, 0) - window.first.get(s, 0)) / 1000 for s in sysids}
             raise AssertionError(f"sim time did not advance {sim_seconds} s in time: {spans}")
         c.pump()
         while c.inbox:
-            m = c.inbox.popleft()
-            s = m.get_srcSystem()
-            if s not in seen:
-                continue
-            if m.get_type() == "ATTITUDE":
-                first.setdefault(s, m.time_boot_ms)
-                if s in first and not (s in last and last[s] - first[s] >= sim_seconds * 1000):
-                    last[s] = m.time_boot_ms
-            if s in first and not (s in last and last[s] - first[s] >= sim_seconds * 1000):
-                seen[s].append(m)
+            window.take(c.inbox.popleft())
     wall = time.monotonic() - start
-    rates: dict[int, dict[str, float]] = {}
-    for s, msgs in seen.items():
-        span = (last[s] - first[s]) / 1000.0
-        counts: dict[str, list[Any]] = collections.defaultdict(list)
-        for m in msgs:
-            counts[m.get_type()].append(m)
-        out: dict[str, float] = {}
-        for kind, ms in counts.items():
-            if kind in TIMESTAMPED and len(ms) > 1:
-                t = [m.time_boot_ms for m in ms]
-                out[kind] = (len(ms) - 1) / max((max(t) - min(t)) / 1000.0, 1e-9)
-            else:
-                out[kind] = len(ms) / span
-        rates[s] = out
+    rates = {
+        s: rates_of(msgs, (window.last[s] - window.first[s]) / 1000.0)
+        for s, msgs in window.seen.items()
+    }
     return rates, wall

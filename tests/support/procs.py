@@ -14,7 +14,7 @@ import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager, suppress
 from pathlib import Path
-from typing import TypeVar
+from typing import IO, Literal, TypeVar
 
 import zenoh
 
@@ -25,7 +25,12 @@ REPO = Path(__file__).resolve().parents[2]
 T = TypeVar("T")
 
 
-def wait_until(predicate: Callable[[], T], timeout_s: float, what: str, poll_s: float = 0.02) -> T:
+def wait_until(
+    predicate: Callable[[], T | Literal[False] | None],
+    timeout_s: float,
+    what: str,
+    poll_s: float = 0.02,
+) -> T:
     """Poll ``predicate`` until it returns something truthy; fail naming ``what`` otherwise."""
     deadline = time.monotonic() + timeout_s
     while True:
@@ -90,14 +95,14 @@ class NodeProcs:
             cmd += ["--scenario", self.scenario]
         cmd += list(args)
         label = name or "-".join([role, *[a for a in args if not a.startswith("-")]])
-        out = subprocess.DEVNULL
+        out: int | IO[bytes] = subprocess.DEVNULL
         if self.log_dir is not None:
             out = open(self.log_dir / f"{label}.log", "wb")  # noqa: SIM115 - closed with the proc
         env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONUNBUFFERED="1")
         proc = subprocess.Popen(
             cmd, cwd=REPO, stdout=out, stderr=subprocess.STDOUT, env=env, start_new_session=True
         )
-        if out is not subprocess.DEVNULL:
+        if not isinstance(out, int):
             out.close()  # the child holds its own descriptor
         self.procs.append((label, proc))
         return proc

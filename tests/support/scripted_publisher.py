@@ -23,6 +23,7 @@ import msgspec
 
 from deploy.recording.handshake import wait_until_recorded
 from swarmbus.codec import encode
+from swarmbus.keys import Keys
 from swarmbus.messages import (
     ConcentrationReading,
     FlightMode,
@@ -99,6 +100,32 @@ def messages(vehicle: str, index: int, step: int, args: argparse.Namespace) -> l
     return out
 
 
+def run_steps(
+    args: argparse.Namespace, vehicles: list[str], keys: Keys, put: Callable[[str, bytes], None]
+) -> None:
+    """The script: ``args.steps`` steps at ``args.rate_hz``, with the pause, gap and garbage."""
+    key_of: dict[type, Callable[[str], str]] = {
+        VehicleState: keys.vehicle_state,
+        VehicleStatus: keys.vehicle_status,
+        ConcentrationReading: keys.vehicle_concentration,
+    }
+    next_t = time.monotonic()
+    for step in range(args.steps):
+        if step == args.pause_at:
+            next_t += args.pause_s
+        delay = next_t - time.monotonic()
+        if delay > 0:
+            time.sleep(delay)
+        next_t += 1.0 / args.rate_hz
+        if args.skip_at <= step < args.skip_at + args.skip_n:
+            continue
+        for i, v in enumerate(vehicles):
+            for msg in messages(v, i, step, args):
+                put(key_of[type(msg)](v), encode(msg))
+        if args.garbage and step == args.steps // 2:
+            put(keys.vehicle_status(vehicles[0]), b"\xc1 not a message")
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser()
     p.add_argument("--connect", required=True)
@@ -132,11 +159,6 @@ def main(argv: list[str] | None = None) -> int:
                 keys.vehicle_concentration(v),
             ):
                 pubs[key] = rt.session.declare_publisher(key)
-        key_of: dict[type, Callable[[str], str]] = {
-            VehicleState: keys.vehicle_state,
-            VehicleStatus: keys.vehicle_status,
-            ConcentrationReading: keys.vehicle_concentration,
-        }
 
         def put(key: str, payload: bytes) -> None:
             pubs[key].put(payload)
@@ -151,22 +173,7 @@ def main(argv: list[str] | None = None) -> int:
             lambda: rt.publish_health(NodeState.UP),
             recorder=args.recorder,
         )
-        start = time.monotonic()
-        next_t = start
-        for step in range(args.steps):
-            if step == args.pause_at:
-                next_t += args.pause_s
-            delay = next_t - time.monotonic()
-            if delay > 0:
-                time.sleep(delay)
-            next_t += 1.0 / args.rate_hz
-            if args.skip_at <= step < args.skip_at + args.skip_n:
-                continue
-            for i, v in enumerate(vehicles):
-                for msg in messages(v, i, step, args):
-                    put(key_of[type(msg)](v), encode(msg))
-            if args.garbage and step == args.steps // 2:
-                put(keys.vehicle_status(vehicles[0]), b"\xc1 not a message")
+        run_steps(args, vehicles, keys, put)
         wait_until_recorded(
             rt.session,
             keys,

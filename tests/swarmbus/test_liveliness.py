@@ -7,11 +7,16 @@ import signal
 import subprocess
 import sys
 import threading
+from functools import partial
 
 import zenoh
 
 from swarmbus.session import NetworkConfig, Presence, open_session
 from tests.support.procs import REPO, Network, keys_for
+
+
+def _note(changes: list[tuple[str, bool]], name: str, alive: bool) -> None:
+    changes.append((name, alive))
 
 
 def test_token_appears_and_disappears_on_sigkill(network: tuple[Network, zenoh.Session]) -> None:
@@ -58,7 +63,7 @@ def test_sync_knows_the_present_tokens_when_it_returns(
         probe.close()
         for _ in range(5):  # several fresh observers: each knows all three on return
             changes: list[tuple[str, bool]] = []
-            presence = Presence(router, keys, on_change=lambda n, a, c=changes: c.append((n, a)))
+            presence = Presence(router, keys, on_change=partial(_note, changes))
             presence.sync(timeout_s=5.0)
             assert {"early-0", "early-1", "early-2"} <= presence.alive
             presence.wait_for(lambda a: False, 0.2)  # let the history arrive as well

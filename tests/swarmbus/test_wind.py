@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import Literal
 
 import numpy as np
 import pytest
@@ -34,7 +35,7 @@ def test_scenario_wind_defaults_to_steady_and_presets_resolve() -> None:
 @pytest.mark.parametrize(("preset", "expected_std"), [("small", 0.47), ("large", 1.41)])
 @pytest.mark.parametrize("step_s", [0.01, 0.05, 0.1])
 def test_meander_stationary_std_is_independent_of_step(
-    preset: str, expected_std: float, step_s: float
+    preset: Literal["small", "large"], expected_std: float, step_s: float
 ) -> None:
     """Farrell's presets: G √(0.01 s) √(ω/4ζ) = 0.474 (small), 1.414 m/s (large), by hand."""
     copies = 2000

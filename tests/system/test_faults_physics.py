@@ -12,7 +12,8 @@ from pathlib import Path
 
 import zenoh
 
-from deploy.launcher import Launcher, LaunchOptions, RestartMode, checkpoint_path
+from deploy.launcher import Launcher, LaunchOptions, checkpoint_path
+from deploy.supervisor import RestartMode
 from sim_world import checkpoint
 from sim_world.world import World
 from swarmbus.codec import decode

@@ -216,7 +216,7 @@ def test_recorder_killed_continues_in_a_new_segment_with_the_gap(
     # the new segment has messages after the restart: ticks from first_tick on
     rec1 = Recording.open(seg1)
     ticks = [
-        m.message().tick  # type: ignore[union-attr]
+        m.message().tick
         for m in rec1.messages()
         if m.topic == stack.keys.tick() and isinstance(m.message(), SimTick)
     ]
@@ -251,8 +251,8 @@ def _heartbeat_mode(gcs: MavClient, sysid: int, main: int, sub: int) -> bool:
 def test_gcs_heartbeats_stop_each_vehicle_runs_its_own_failsafe(stack: Stack) -> None:
     sysid = {vid: i + 1 for i, vid in enumerate(VEHICLES)}
     with MavClient(stack.gcs_port) as gcs:
-        for s in sysid.values():
-            gcs.wait_type("HEARTBEAT", s, timeout_s=60.0)
+        for sid in sysid.values():
+            gcs.wait_type("HEARTBEAT", sid, timeout_s=60.0)
         gcs.beat = True  # QGC-like: a GCS HEARTBEAT every wall second while pumping
         t_beat = stack.sim_time_s()
         longest = max(t for _, t in LINK_LOSS.values())
@@ -284,9 +284,9 @@ def test_gcs_heartbeats_stop_each_vehicle_runs_its_own_failsafe(stack: Stack) ->
     lines = []
     for vid in VEHICLES:
         action, timeout_s = LINK_LOSS[vid]
-        s = stack.link_lost[vid]
-        assert s.mode == PX4_MODE[action][2] and s.armed, (vid, s)
-        after = s.sim_time_s - t_stop
+        lost = stack.link_lost[vid]
+        assert lost.mode == PX4_MODE[action][2] and lost.armed, (vid, lost)
+        after = lost.sim_time_s - t_stop
         # the gateway forwards the GCS's heartbeat once per sim second: the last one the
         # vehicle got is at most ~1 s of sim time before the test stopped beating
         assert after >= timeout_s - 1.5, (vid, after)
