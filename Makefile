@@ -34,7 +34,7 @@ test-prereqs:
 			|| echo "could not install$$missing: their tests will skip"; \
 	else echo "not root: not installing$$missing; their tests will skip"; fi
 
-# The 10-minute sim-time soak (tests/test_soak.py, marker soak) runs as its own, slower step.
+# The 10-minute sim-time soak (tests/system/test_soak.py, marker soak) runs as its own, slower step.
 test: $(STAMP) lint typecheck test-prereqs
 	$(BIN)/python -m pytest -m "not soak"
 	$(BIN)/python -m pytest -m soak -s

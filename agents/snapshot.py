@@ -9,7 +9,7 @@ configuration (parameters may have been set) and its timers, the controller's in
 derivative memory, the last state and estimate, the estimator's and the sensor's random
 generators, the sensor's lag, and the behaviour plug-in's state with its generator. Restoring
 it into a freshly built autopilot of the same scenario makes the next tick's command the same
-bits as the killed process would have sent (``tests/test_agents_snapshot.py`` checks every
+bits as the killed process would have sent (``tests/agents/test_agents_snapshot.py`` checks every
 attribute and the commands).
 
 A behaviour is saved with its ``snapshot()`` / ``restore(data)`` methods when it has them

@@ -38,6 +38,7 @@ from swarmbus.messages import (
     Arm,
     Clock,
     SimTick,
+    SpeedMode,
     Takeoff,
     VehicleState,
 )
@@ -223,7 +224,7 @@ class StubPhysics:
                         Clock(
                             tick=self.tick,
                             sim_time_s=self.tick / 120,
-                            mode="lockstep",
+                            mode=SpeedMode.LOCKSTEP,
                             speed_factor=1.0,
                             real_time_factor=0.0,
                         )

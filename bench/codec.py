@@ -30,7 +30,7 @@ QUERY = m.PlumeQuery(points_enu_m=[(20.0, 0.0, 10.0), (30.0, 1.0, 9.0)], sim_tim
 
 
 def per_call_us(fn: object, n: int) -> float:
-    call = fn  # type: ignore[assignment]
+    call = fn
     best = float("inf")
     for _ in range(5):
         t0 = time.perf_counter()

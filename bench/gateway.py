@@ -15,13 +15,14 @@ import argparse
 import sys
 import tempfile
 import time
+from functools import partial
 from pathlib import Path
 
 import psutil
 
-from tests.gateway_stack import gateway, vehicles
-from tests.mavclient import MavClient, measure_rates, write_scenario
-from tests.procs import zenoh_network
+from tests.support.gateway_stack import gateway, vehicles
+from tests.support.mavclient import MavClient, heard_all, measure_rates, write_scenario
+from tests.support.procs import zenoh_network
 
 FAST = (
     "SYS_STATUS",
@@ -47,9 +48,7 @@ def row(n: int, speed: float, tmp: Path, backend: str) -> str:
         seen: set[int] = set()
         c.wait(
             "every sysid",
-            lambda m: (
-                m.get_type() == "HEARTBEAT" and (seen.add(m.get_srcSystem()) or len(seen) == n)
-            ),
+            partial(heard_all, seen, n),
             120.0,
         )
         proc = psutil.Process(gw.pid)

@@ -4,7 +4,7 @@
 128), grounded (zero throttle, resting on the ground: contacts every step) and hovering
 (open-loop hover throttle at 20 m: no contacts), the ticks/s and real-time factor of
 ``plumeswarm node physics`` in lockstep mode at 240 Hz physics / 120 Hz control, answered by
-scripted participants (``tests/scripted_autopilot.py``; a few processes each serving many
+scripted participants (``tests/support/scripted_autopilot.py``; a few processes each serving many
 vehicles, answering inside the subscriber callback), plus the physics process's CPU share and
 CPU milliseconds per tick (which, unlike ticks/s, barely depends on what else the machine
 runs). A first table times the pure :class:`~sim_world.world.World` (no bus): control ticks
@@ -136,7 +136,7 @@ def process_row(n: int, hovering: bool, seconds: float, tmp: Path) -> dict[str, 
                 procs.append(
                     _spawn(
                         [
-                            *(sys.executable, "-m", "tests.scripted_autopilot", "--inline"),
+                            *(sys.executable, "-m", "tests.support.scripted_autopilot", "--inline"),
                             *("--connect", endpoint, "--scenario", str(sc), *vehicles, *throttle),
                         ],
                         tmp / f"script{i}-{sc.stem}.log",

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -65,14 +66,14 @@ def main() -> None:
     for count in (3, 256):
         points = query_points(count)
         results[f"filament_query_{count}_ms"] = 1e3 * best_seconds(
-            lambda points=points: filament_concentration(points, state.positions, radii, masses),
+            partial(filament_concentration, points, state.positions, radii, masses),
             repeats,
         )
         results[f"puff_query_{count}_ms"] = 1e3 * best_seconds(
-            lambda points=points: puffs.concentration(points, 610.0), repeats
+            partial(puffs.concentration, points, 610.0), repeats
         )
         results[f"gaussian_query_{count}_ms"] = 1e3 * best_seconds(
-            lambda points=points: gaussian.concentration(points), repeats
+            partial(gaussian.concentration, points), repeats
         )
     one = query_points(1)
     results["meander_wind_query_us"] = 1e6 * best_seconds(lambda: wind.velocity(one, t), repeats)

@@ -4,7 +4,7 @@ The same formulas as ``pymap3d.enu2geodetic`` (``enu2ecef``, then ``ecef2geodeti
 2000, without iterations), written with the ``math`` module: pymap3d on numpy arrays costs
 ~190 µs per call whatever the number of points — more than stepping three vehicles — while
 this costs ~2 µs per point. Agrees with pymap3d to ~1e-12 degrees and ~1e-8 m
-(tests/test_physics_world.py); the origin's ECEF position and rotation are computed once.
+(tests/sim_world/test_physics_world.py); the origin's ECEF position and rotation are computed once.
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ from collections.abc import Iterator
 import pytest
 import zenoh
 
-from tests.procs import Network, zenoh_network
+from tests.support.procs import Network, zenoh_network
 
 
 @pytest.fixture

@@ -1,0 +1,167 @@
+"""The autopilot process on a real Zenoh network, driven by a lockstep stand-in for physics.
+
+The physics process is replaced by :class:`tests.support.agents_toy.BusToyPhysics` (the agreed
+tick / actuator protocol over toy dynamics); the plume service is the real process.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+import zenoh
+
+from agents import CommandRejected, Swarm, WaitTimeout
+from plume_service import GaussianPlume
+from swarmbus.codec import decode
+from swarmbus.messages import ConcentrationReading, ErrorReply, FlightMode, RejectCode
+from swarmbus.scenario import DEFAULT_SCENARIO, load_scenario
+from swarmbus.session import Presence
+from tests.support.agents_toy import BusToyPhysics
+from tests.support.procs import Network, NodeProcs, keys_for
+
+
+@pytest.fixture
+def swarm(network: tuple[Network, zenoh.Session]) -> Iterator[Swarm]:
+    net, _ = network
+    with Swarm.connect(connect=[net.endpoint], command_timeout_s=5.0) as sw:
+        yield sw
+
+
+def start_autopilots(procs: NodeProcs, sw: Swarm, ids: list[str]) -> None:
+    for vid in ids:
+        procs.start("autopilot", "--vehicle", vid)
+    sw.wait_until(lambda: set(ids) <= set(sw.vehicles), 30.0, f"autopilot tokens of {ids}")
+
+
+def test_one_vehicle_over_the_bus_with_the_plume_service(
+    network: tuple[Network, zenoh.Session], swarm: Swarm, tmp_path: Path
+) -> None:
+    net, router = network
+    sc = load_scenario()
+    with NodeProcs(net, DEFAULT_SCENARIO, tmp_path) as procs:
+        procs.start("plume")
+        start_autopilots(procs, swarm, ["uav2"])
+        uav = swarm.command("uav2")
+        with pytest.raises(CommandRejected, match="no vehicle state yet"):
+            uav.arm()
+        # garbage on the command queryable: an ErrorReply, and the process lives on
+        replies = list(
+            router.get(keys_for().vehicle_cmd("uav2"), payload=b"\x93garbage", timeout=5)
+        )
+        assert replies and replies[0].err is not None
+        assert decode(replies[0].err.payload.to_bytes(), ErrorReply).reason
+        physics = BusToyPhysics(router, sc, participants=["uav2"]).start()
+        try:
+            swarm.wait_until(lambda: swarm.state("uav2"), 10.0, "uav2 state")
+            uav.arm()
+            uav.takeoff(10.0)
+            swarm.wait_until(lambda: swarm.status("uav2").mode == FlightMode.HOLD, 60, "hover")
+            with pytest.raises(CommandRejected) as info:
+                uav.takeoff(5.0)
+            assert info.value.code == RejectCode.DENIED and "already flying" in info.value.reason
+            readings: list[ConcentrationReading] = []
+            sub = swarm.subscribe(on_reading=readings.append)
+            uav.goto(30.0, 0.0, 10.0)
+            swarm.wait_until(lambda: len(readings) > 300, 60, "300 readings")
+            sub.close()
+            uav.land()
+            swarm.wait_until(lambda: not swarm.status("uav2").armed, 60, "landed and disarmed")
+        finally:
+            physics.stop()
+        assert physics.error is None, physics.error
+        assert all(p.poll() is None for _, p in procs.procs), "a node died"
+    plume = GaussianPlume.preset("novak2018")
+    pos = np.array([r.position_enu_m for r in readings])
+    truth = plume.concentration(pos)
+    assert all(r.available for r in readings)
+    np.testing.assert_allclose(
+        np.array([r.true_g_m3 for r in readings], float), truth, rtol=1e-9, atol=0
+    )
+    window = np.where(truth < 0.01, 0.0, np.minimum(truth, 0.2))
+    np.testing.assert_allclose(
+        np.array([r.reported_g_m3 for r in readings], float), window, rtol=1e-9, atol=0
+    )
+    assert ((window > 0.01) & (window < 0.2)).any()  # some readings inside the window
+    peers = readings[-1].peers
+    assert {p.vehicle_id for p in peers} == {"uav1", "uav3"}
+    np.testing.assert_allclose(
+        [p.true_g_m3 for p in peers],
+        plume.concentration([p.position_enu_m for p in peers]),
+        rtol=1e-9,
+    )
+
+
+def test_without_a_plume_service_readings_are_unavailable_never_zero(
+    network: tuple[Network, zenoh.Session], swarm: Swarm
+) -> None:
+    net, router = network
+    sc = load_scenario()
+    with NodeProcs(net, DEFAULT_SCENARIO) as procs:
+        start_autopilots(procs, swarm, ["uav1"])
+        physics = BusToyPhysics(router, sc, participants=["uav1"]).start()
+        try:
+            swarm.wait_until(lambda: swarm.reading("uav1"), 30.0, "a reading")
+            r = swarm.reading("uav1")
+            assert r is not None and not r.available
+            assert r.reported_g_m3 is None and r.true_g_m3 is None
+            swarm.wait_until(
+                lambda: "plume service" in swarm.status("uav1").health, 10.0, "sensor health"
+            )
+        finally:
+            physics.stop()
+
+
+def test_one_process_serves_several_vehicles_with_one_token_each(
+    network: tuple[Network, zenoh.Session], swarm: Swarm
+) -> None:
+    net, router = network
+    sc = load_scenario()
+    with NodeProcs(net, DEFAULT_SCENARIO) as procs:
+        procs.start("autopilot", "--vehicle", "uav1", "--vehicle", "uav3")
+        presence = Presence(router, keys_for())
+        assert presence.wait_for(
+            lambda alive: {"autopilot-uav1", "autopilot-uav3"} <= alive, 30.0
+        ), sorted(presence.alive)
+        presence.close()
+        physics = BusToyPhysics(router, sc, participants=["uav1", "uav3"]).start()
+        try:
+            swarm.wait_until(lambda: swarm.state("uav3"), 10.0, "uav3 state")
+            for vid in ("uav1", "uav3"):
+                swarm.command(vid).arm()
+                swarm.command(vid).takeoff(3.0)
+            swarm.wait_until(
+                lambda: all(swarm.status(v).mode == FlightMode.HOLD for v in ("uav1", "uav3")),
+                60,
+                "both hovering",
+            )
+        finally:
+            physics.stop()
+        assert physics.error is None
+
+
+def test_wait_until_names_what_did_not_happen(swarm: Swarm) -> None:
+    with pytest.raises(WaitTimeout, match="waiting for the impossible"):
+        swarm.wait_until(lambda: False, 0.1, "the impossible")
+
+
+def test_command_to_a_missing_vehicle_times_out(swarm: Swarm) -> None:
+    from agents import CommandTimeout
+
+    swarm.command_timeout_s = 0.3
+    with pytest.raises(CommandTimeout, match="autopilot-ghost"):
+        swarm.command("ghost").arm()
+
+
+def test_invalid_payload_values_are_rejected_by_the_decoder(
+    network: tuple[Network, zenoh.Session], swarm: Swarm
+) -> None:
+    net, _ = network
+    with NodeProcs(net, DEFAULT_SCENARIO) as procs:
+        start_autopilots(procs, swarm, ["uav1"])
+        with pytest.raises(CommandRejected) as info:
+            swarm.command("uav1").goto(float("nan"), 0.0, 5.0)
+        assert info.value.code == RejectCode.INVALID and "position_enu_m" in info.value.field
+        assert procs.procs[0][1].poll() is None

@@ -1,0 +1,306 @@
+"""Autopilot snapshots: a fresh autopilot restored from one is the same autopilot, attribute
+for attribute, and flies on with the same bits (toy dynamics); the slot files survive a torn
+write."""
+
+from __future__ import annotations
+
+import collections
+import copy
+import dataclasses
+import enum
+import importlib
+import inspect
+import math
+import pkgutil
+from pathlib import Path
+from typing import Any
+
+import msgspec
+import numpy as np
+import pytest
+
+import agents.behaviors
+from agents.autopilot import Autopilot
+from agents.autopilot_node import NodeOptions, behavior_rng, build_autopilot
+from agents.sensor import ConcentrationSensor
+from agents.snapshot import SnapshotError, SnapshotSlots, VehicleSnapshot, capture, restore
+from plume_service import GaussianPlume
+from swarmbus.messages import (
+    Arm,
+    FenceZone,
+    FlightMode,
+    GcsHeartbeat,
+    GeofenceUpload,
+    MissionCommand,
+    MissionItem,
+    MissionStart,
+    MissionUpload,
+    Orbit,
+    RallyUpload,
+    ReturnToLaunch,
+    SetMode,
+    SetParam,
+    Takeoff,
+)
+from swarmbus.scenario import Scenario, load_scenario
+from tests.support.agents_toy import ToyWorld
+
+NOISY = NodeOptions(position_noise_m=0.05, velocity_noise_m_s=0.02)
+
+
+def state_of(obj: Any, seen: set[int] | None = None) -> Any:
+    """Every attribute reachable from ``obj`` as plain data (generators by their state;
+    functions, bound methods and objects already visited left out)."""
+    seen = set() if seen is None else seen
+    if isinstance(obj, np.random.Generator):
+        return obj.bit_generator.state
+    if isinstance(obj, np.ndarray):
+        return [obj.dtype.str, obj.shape, obj.tobytes()]
+    if isinstance(obj, (str, int, float, bool, type(None), enum.Enum, bytes)):
+        return obj
+    if isinstance(obj, (list, tuple, collections.deque)):
+        return [state_of(v, seen) for v in obj]
+    if isinstance(obj, dict):
+        return {k: state_of(v, seen) for k, v in obj.items() if not callable(v)}
+    if isinstance(obj, msgspec.Struct):
+        return msgspec.to_builtins(obj)
+    if id(obj) in seen:
+        return "<seen>"
+    seen.add(id(obj))
+    if dataclasses.is_dataclass(obj):
+        names = [f.name for f in dataclasses.fields(obj)]
+    elif hasattr(obj, "__dict__"):
+        names = list(vars(obj))
+    else:
+        names = [n for c in type(obj).__mro__ for n in getattr(c, "__slots__", ())]
+    return {n: state_of(getattr(obj, n), seen) for n in names if not callable(getattr(obj, n))}
+
+
+def fly(sc: Scenario, options: NodeOptions, flight: str) -> tuple[ToyWorld, Autopilot]:
+    ap = build_autopilot(sc, "uav1", options, behavior_rng(sc, "uav1"))
+    field = GaussianPlume.preset("novak2018").concentration
+    w = ToyWorld(sc, {"uav1": ap}, field=field)
+    w.run(0.05)
+    assert ap.handle(GcsHeartbeat()).accepted
+    assert ap.handle(SetParam(name="COM_DL_LOSS_T", value=600.0)).accepted
+    if flight == "px4":
+        fly_px4(w, ap)
+    elif flight == "casting":
+        for cmd in (Arm(), Takeoff(altitude_m=10.0)):
+            assert ap.handle(cmd).accepted
+        w.run(20.0, until=lambda: ap.modes.mode == FlightMode.HOLD)
+        assert ap.handle(SetMode(mode=FlightMode.OFFBOARD)).accepted
+        w.run(15.0)
+        assert ap.modes.mode == FlightMode.OFFBOARD
+    else:
+        assert ap.handle(Arm()).accepted
+        assert ap.handle(MissionStart(start_index=0)).accepted
+        w.run(60.0, until=lambda: ap.modes.mission.index >= 2)
+        w.run(0.4)  # somewhere between items
+        assert ap.modes.mode == FlightMode.MISSION
+    return w, ap
+
+
+def fly_px4(w: ToyWorld, ap: Autopilot) -> None:
+    """Fence zones and a rally point uploaded, an orbit, RTL to the rally point (closer than
+    home), then a mission without a take-off item started on the ground: caught while it
+    climbs, with every piece of that state different from a fresh autopilot's."""
+    zones = [
+        FenceZone(center_enu_m=(20.0, -4.0), radius_m=60.0),
+        FenceZone(inclusion=False, center_enu_m=(-30.0, -4.0), radius_m=5.0),
+    ]
+    rally = (30.0, 2.0, 0.0)
+    assert ap.handle(GeofenceUpload(zones=zones)).accepted
+    assert ap.handle(RallyUpload(points_enu_m=[rally])).accepted
+    for cmd in (Arm(), Takeoff(altitude_m=10.0)):
+        assert ap.handle(cmd).accepted
+    w.run(20.0, until=lambda: ap.modes.mode == FlightMode.HOLD)
+    assert ap.handle(Orbit(center_enu_m=(25.0, -4.0, 10.0), radius_m=5.0, speed_m_s=2.0)).accepted
+    w.run(5.0)
+    assert ap.modes.mode == FlightMode.ORBIT
+    assert ap.handle(ReturnToLaunch()).accepted
+    w.run(60.0, until=lambda: ap.modes.mode == FlightMode.DISARMED)
+    assert math.dist(w.vehicles["uav1"].p[:2], rally[:2]) < 1.5  # landed at the rally point
+    items = [
+        MissionItem(x=35.0, y=10.0, z=8.0),
+        MissionItem(command=MissionCommand.LAND, x=35.0, y=10.0, z=0.0),
+    ]
+    assert ap.handle(MissionUpload(items=items)).accepted
+    for start in (Arm(), MissionStart(start_index=0)):
+        assert ap.handle(start).accepted
+    w.run(10.0, until=lambda: w.vehicles["uav1"].p[2] > 3.0)
+    assert ap.modes.mode == FlightMode.MISSION and ap.modes._climb_alt_m is not None
+
+
+def casting_scenario(behavior: str = "agents.behaviors.casting:Casting") -> Scenario:
+    sc = load_scenario()
+    v = msgspec.structs.replace(sc.vehicles[0], spawn_enu_m=(45.0, 6.0, 0.0), behavior=behavior)
+    return msgspec.structs.replace(sc, vehicles=[v])
+
+
+def every_behavior() -> list[str]:
+    """``module:Class`` of every behaviour in agents/behaviors (a class with a step method)."""
+    specs = []
+    for info in pkgutil.iter_modules(agents.behaviors.__path__):
+        module = importlib.import_module(f"agents.behaviors.{info.name}")
+        for name, cls in inspect.getmembers(module, inspect.isclass):
+            if cls.__module__ == module.__name__ and callable(getattr(cls, "step", None)):
+                specs.append(f"{module.__name__}:{name}")
+    return sorted(specs)
+
+
+BEHAVIORS = every_behavior()
+
+
+@pytest.mark.parametrize(
+    "flight", ["mission", "casting", "px4"], ids=["mission", "offboard-casting", "px4"]
+)
+def test_a_restored_autopilot_is_the_same_and_flies_the_same_bits(flight: str) -> None:
+    sc = casting_scenario() if flight == "casting" else load_scenario()
+    w, ap = fly(sc, NOISY, flight)
+    sensor = w.sensors["uav1"]
+    ap.modes.mission.drain_events()  # as the node does after every step (they are log lines)
+    rng = ap.behavior.__dict__.get("rng") if ap.behavior else None  # Casting keeps none
+    snap = capture(ap, sensor, rng)
+    wire = msgspec.msgpack.encode(snap)
+    back = msgspec.msgpack.decode(wire, type=VehicleSnapshot)
+
+    fresh_rng = behavior_rng(sc, "uav1")
+    fresh = build_autopilot(sc, "uav1", NOISY, fresh_rng)
+    fresh_sensor = ConcentrationSensor(sc.sensor, sc.world.seed, 0)
+    assert state_of(fresh) != state_of(ap)  # the test can tell them apart
+    restore(fresh, fresh_sensor, back, fresh_rng)
+    assert state_of(fresh) == state_of(ap)
+    assert state_of(fresh_sensor) == state_of(sensor)
+
+    fly_on_together(w, ap, fresh, fresh_sensor)
+    assert math.dist(w.vehicles["uav1"].p, (0.0, 0.0, 0.0)) > 1.0  # it flew somewhere
+
+
+def fly_on_together(
+    w: ToyWorld, ap: Autopilot, fresh: Autopilot, fresh_sensor: ConcentrationSensor
+) -> None:
+    """``w`` and a copy of it flown by the restored autopilot: 8 s later, the same bits."""
+    twin = copy.deepcopy(w)
+    twin.autopilots = {"uav1": fresh}
+    twin.sensors = {"uav1": fresh_sensor}
+    w.run(8.0)
+    twin.run(8.0)
+    assert twin.vehicles["uav1"].p.tolist() == w.vehicles["uav1"].p.tolist()
+    assert twin.readings["uav1"] == w.readings["uav1"]
+    assert state_of(fresh) == state_of(ap)
+
+
+def test_every_gsl_algorithm_is_among_the_behaviours_checked() -> None:
+    from deploy.gsl_episode import ALGORITHMS
+
+    assert {a.behavior for a in ALGORITHMS.values()} <= set(BEHAVIORS)
+    assert len(BEHAVIORS) >= 6
+
+
+@pytest.mark.parametrize("spec", BEHAVIORS, ids=[s.rpartition(":")[2] for s in BEHAVIORS])
+def test_every_behaviour_is_restored_and_flies_on_with_the_same_bits(spec: str) -> None:
+    """Each behaviour flown offboard for 15 s, captured, restored into a fresh autopilot (its
+    own generator, its own sensor): the two fly on for 8 s to the same bits."""
+    sc = casting_scenario(spec)
+    w, ap = fly(sc, NOISY, "casting")
+    sensor = w.sensors["uav1"]
+    ap.modes.mission.drain_events()
+    gens = [v for v in vars(ap.behavior).values() if isinstance(v, np.random.Generator)]
+    rng = gens[0] if gens else None  # the context's generator, if the behaviour draws from it
+    wire = msgspec.msgpack.encode(capture(ap, sensor, rng))
+    snap = msgspec.msgpack.decode(wire, type=VehicleSnapshot)
+    assert snap.behavior is not None
+    saved = msgspec.msgpack.decode(snap.behavior.data)
+    assert "read_wind" not in saved  # the wind input is wiring, not state
+
+    fresh_rng = behavior_rng(sc, "uav1")
+    fresh = build_autopilot(sc, "uav1", NOISY, fresh_rng)
+    fresh_sensor = ConcentrationSensor(sc.sensor, sc.world.seed, 0)
+    assert state_of(fresh.behavior) != state_of(ap.behavior)  # the test can tell them apart
+    restore(fresh, fresh_sensor, snap, fresh_rng)
+    assert state_of(fresh) == state_of(ap)
+
+    fly_on_together(w, ap, fresh, fresh_sensor)
+    assert math.dist(w.vehicles["uav1"].p[:2], (45.0, 6.0)) > 1.0  # it flew somewhere
+
+
+class HoldsAFunction:
+    """A behaviour without snapshot() whose attributes are not plain data."""
+
+    def __init__(self) -> None:
+        self.read_wind = lambda own: (5.0, 0.0)
+
+    def step(self, *args: Any) -> None:
+        return None
+
+
+def test_a_behaviour_whose_state_cannot_be_saved_is_named() -> None:
+    sc = casting_scenario()
+    ap = build_autopilot(sc, "uav1", NodeOptions())
+    ap.behavior = HoldsAFunction()
+    with pytest.raises(SnapshotError, match=r"HoldsAFunction.*snapshot\(\) and restore"):
+        capture(ap, ConcentrationSensor(sc.sensor, 0, 0))
+    ap.behavior = build_autopilot(sc, "uav1", NodeOptions()).behavior
+    ap.behavior.opaque = object()
+    with pytest.raises(SnapshotError, match=r"Casting.*snapshot\(\) and restore"):
+        ap.behavior.state_attributes = ("opaque",)
+        capture(ap, ConcentrationSensor(sc.sensor, 0, 0))
+
+
+def test_slots_keep_the_previous_record_when_the_newest_is_torn(tmp_path: Path) -> None:
+    slots = SnapshotSlots(tmp_path / "ap.state")
+    slots.open()
+    for k in range(5):
+        slots.write(f"record {k}".encode() * (k + 1))
+    assert [p for _, p in slots.read_all()] == [b"record 4" * 5, b"record 3" * 4]
+    newest = next(p for p in slots.paths() if b"record 4" in p.read_bytes())
+    data = bytearray(newest.read_bytes())
+    data[-3] ^= 0xFF  # a write cut short by a kill
+    newest.write_bytes(bytes(data))
+    assert [p for _, p in slots.read_all()] == [b"record 3" * 4]
+    slots.close()
+    again = SnapshotSlots(tmp_path / "ap.state")
+    again.open()  # a restarted writer goes on after the records it found
+    again.write(b"next")
+    assert next(p for _, p in again.read_all()) == b"next"
+    again.close()
+
+
+def test_saved_state_comes_back_with_the_same_types_and_bits() -> None:
+    """An own generator (mid-stream, with a cached 32-bit half), arrays, deques of tuples,
+    an estimate and a nested helper survive msgpack; configuration is left as built."""
+    from agents.behaviors.search import CrosswindSweep, SavesState, SourceEstimate
+
+    class Holder(SavesState):
+        state_attributes = ("gen", "grid", "trail", "estimate", "sweep", "counts")
+
+        def __init__(self, seed: int, speed: float) -> None:
+            self.speed = speed  # configuration: not saved
+            self.gen = np.random.default_rng(seed)
+            self.grid = np.zeros((0, 2))
+            self.trail: collections.deque[tuple[float, float]] = collections.deque()
+            self.estimate: SourceEstimate | None = None
+            self.sweep = CrosswindSweep(2.0, 0.5, 5.0, 1.6)
+            self.counts: dict[str, list[int]] = {}
+
+    a = Holder(7, 1.0)
+    a.gen.random(3)
+    a.gen.integers(0, 10, dtype=np.uint32)  # leaves a cached half word in the state
+    a.grid = a.gen.normal(size=(4, 2)).astype(np.float32)
+    a.trail.extend([(0.1, 0.2), (0.3, 1e-300)])
+    a.estimate = SourceEstimate(x_m=1.5, y_m=-2.0, sim_time_s=3.0, spread_m=0.25)
+    a.sweep.side, a.sweep.anchor_across_m, a.sweep.half_width_m = -1.0, 4.0, 8.0
+    a.counts = {"hits": [1, 2]}
+    data = msgspec.msgpack.decode(msgspec.msgpack.encode(a.snapshot()))
+    b = Holder(99, 2.0)
+    b.restore(data)
+    assert b.speed == 2.0
+    assert b.grid.dtype == np.float32 and b.grid.tobytes() == a.grid.tobytes()
+    assert b.trail == a.trail and isinstance(b.trail, collections.deque)
+    assert b.estimate == a.estimate and b.counts == a.counts
+    assert state_of(b.sweep) == state_of(a.sweep)
+    assert b.gen.integers(0, 10, dtype=np.uint32) == a.gen.integers(0, 10, dtype=np.uint32)
+    assert b.gen.random(5).tobytes() == a.gen.random(5).tobytes()
+    with pytest.raises(ValueError, match="'grid'"):
+        Holder(0, 1.0).restore({k: v for k, v in data.items() if k != "grid"})

@@ -1,0 +1,293 @@
+"""Source-seeking behaviours: each against a value derived independently of its code."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.special import k0
+
+from agents.behavior import BehaviorContext
+from agents.behaviors.casting import Casting
+from agents.behaviors.gradient_swarm import GradientSwarm, log_gradient
+from agents.behaviors.infotaxis import Infotaxis, bayes_update
+from agents.behaviors.particle_filter import SourceTermFilter
+from agents.behaviors.random_walk import RandomWalk
+from agents.behaviors.search import WindFrame
+from agents.behaviors.surge_cast import SurgeCast
+from plume_service import GaussianPlume
+from swarmbus.dispersion import dispersion_curves
+from swarmbus.messages import ConcentrationReading, PeerReading, Setpoint, VehicleState
+from swarmbus.plume_formula import gaussian_plume_g_m3, plume_frame
+from swarmbus.scenario import load_scenario
+
+SCENARIO = load_scenario()  # novak2018: wind 6 m/s from 270° (toward +x), source at the origin
+
+
+def velocity(sp: Setpoint | None) -> tuple[float, float, float]:
+    assert sp is not None and sp.velocity_enu_m_s is not None, sp
+    return sp.velocity_enu_m_s
+
+
+def ctx(index: int = 0, seed: int = 1, dt: float = 0.05) -> BehaviorContext:
+    rng = np.random.Generator(np.random.PCG64(seed))
+    return BehaviorContext(f"uav{index + 1}", index, SCENARIO, dt, rng)
+
+
+def state(x: float, y: float, t: float, vid: str = "uav1", z: float = 10.0) -> VehicleState:
+    return VehicleState(
+        vehicle_id=vid,
+        tick=0,
+        sim_time_s=t,
+        position_enu_m=(x, y, z),
+        velocity_enu_m_s=(0.0, 0.0, 0.0),
+        attitude_xyzw=(0.0, 0.0, 0.0, 1.0),
+        body_rates_rad_s=(0.0, 0.0, 0.0),
+        lat_deg=0.0,
+        lon_deg=0.0,
+        alt_m=z,
+        on_ground=False,
+    )
+
+
+def reading(x: float, y: float, t: float, value: float, peers: list[PeerReading] | None = None):
+    return ConcentrationReading(
+        vehicle_id="uav1",
+        sim_time_s=t,
+        position_enu_m=(x, y, 10.0),
+        available=True,
+        reported_g_m3=value,
+        true_g_m3=value,
+        peers=peers or [],
+    )
+
+
+# ---------------------------------------------------------------- shared forward model
+def test_the_shared_formula_matches_the_plume_service() -> None:
+    plume = GaussianPlume(7.0, 4.0, 8.0, "D", "novak2018", (3.0, -2.0), 250.0)
+    rng = np.random.default_rng(5)
+    pts = np.column_stack(
+        [rng.uniform(-20, 120, 500), rng.uniform(-60, 60, 500), rng.uniform(0, 30, 500)]
+    )
+    x, y = plume_frame(pts[:, 0], pts[:, 1], 3.0, -2.0, 250.0)
+    mine = gaussian_plume_g_m3(x, y, pts[:, 2], 7.0, 4.0, 8.0, plume.dispersion)
+    np.testing.assert_allclose(mine, plume.concentration(pts), rtol=1e-10, atol=1e-300)
+    assert (mine > 0).sum() > 100  # the comparison covers the plume, not only zeros
+
+
+# ---------------------------------------------------------------- infotaxis
+def test_infotaxis_belief_update_matches_a_hand_computed_posterior() -> None:
+    beh = Infotaxis(ctx())
+    frame = WindFrame.of((6.0, 0.0))  # toward +x at 6 m/s
+    beh.cells_xy = np.array([[0.0, 0.0], [0.0, 3.0], [10.0, 0.0], [-5.0, 0.0]])
+    prior = np.array([0.4, 0.3, 0.2, 0.1])
+    beh.belief = prior
+    searcher, dt = (6.0, 1.0), 1.5
+    # Vergassola et al. 2007, eq. 1, with the wind along +x (their −y):
+    # R = R0/ln(λ/a) · exp(V(x − x0)/2D) · K0(d/λ), λ = √(Dτ/(1 + V²τ/4D)).
+    d_, tau, v, r0, a, bg = 1.0, 50.0, 6.0, 100.0, 0.1, 0.02
+    lam = math.sqrt(d_ * tau / (1 + v * v * tau / (4 * d_)))
+    expected_p = []
+    for x0, y0 in beh.cells_xy:
+        dist = max(math.hypot(searcher[0] - x0, searcher[1] - y0), a)
+        rate = r0 / math.log(lam / a) * math.exp(v * (searcher[0] - x0) / (2 * d_))
+        rate *= float(k0(dist / lam))
+        expected_p.append(1 - math.exp(-(rate + bg) * dt))
+    p = np.array(expected_p)
+    hit_post = prior * p / (prior * p).sum()
+    miss_post = prior * (1 - p) / (prior * (1 - p)).sum()
+    got_p = beh.hit_probability(frame, *searcher, dt)
+    np.testing.assert_allclose(got_p, p, rtol=1e-9)
+    np.testing.assert_allclose(bayes_update(prior, got_p, True), hit_post, rtol=1e-9)
+    np.testing.assert_allclose(bayes_update(prior, got_p, False), miss_post, rtol=1e-9)
+    # The source 6 m upwind on the axis explains a hit; one downwind of the searcher hardly can.
+    assert hit_post[0] > prior[0] and hit_post[2] < 0.1 * prior[2]
+    # A source upwind of the searcher but 3 m off the axis makes a hit less likely than one on it
+    assert p[1] < p[0]
+
+
+# ---------------------------------------------------------------- particle filter
+def test_particle_filter_recovers_the_source_term_of_a_noiseless_plume() -> None:
+    x0, y0, q = 3.0, -2.0, 7.0
+    wind_from = 250.0
+    plume = GaussianPlume(q, 5.0, 10.0, "D", "novak2018", (x0, y0), wind_from)
+    rng = np.random.default_rng(11)
+    n = 3000
+    prior = np.column_stack(
+        [rng.uniform(-40, 40, n), rng.uniform(-40, 40, n), np.exp(rng.uniform(0, math.log(50), n))]
+    )
+    stf = SourceTermFilter(prior, dispersion_curves("novak2018", "D"), 10.0, rng)
+    toward = math.radians(wind_from + 180.0)
+    dw = (math.sin(toward), math.cos(toward))
+    cw = (-dw[1], dw[0])
+    wind = (5.0 * dw[0], 5.0 * dw[1])
+    # A lawnmower of crosswind legs 3–30 m downwind of the source, at the release height.
+    for along in np.arange(30.0, 2.0, -1.5):
+        for across in np.linspace(-6.0, 6.0, 13):
+            px = x0 + along * dw[0] + across * cw[0]
+            py = y0 + along * dw[1] + across * cw[1]
+            value = float(plume.concentration([[px, py, 10.0]])[0])
+            stf.update(px, py, 10.0, value, wind)
+    ex, ey, eq, spread = stf.estimate()
+    assert math.hypot(ex - x0, ey - y0) < 0.5, (ex, ey)
+    assert abs(eq / q - 1.0) < 0.15, eq
+    assert spread < 1.0
+
+
+# ---------------------------------------------------------------- gradient swarm
+def test_log_gradient_is_exact_for_an_exponential_field() -> None:
+    pts = np.array([[1.0, 2.0], [3.0, -1.0], [-2.0, 0.5], [0.0, 4.0]])
+    values = np.exp(-3.0 + 0.2 * pts[:, 0] - 0.7 * pts[:, 1])
+    gx, gy = log_gradient(pts, values, floor_g_m3=0.0)
+    assert gx == pytest.approx(0.2, abs=1e-12) and gy == pytest.approx(-0.7, abs=1e-12)
+
+
+def test_swarm_gradient_estimate_matches_the_analytic_gradient_of_the_plume() -> None:
+    plume = GaussianPlume.preset("novak2018")  # wind toward +x, source at the origin, H 10 m
+    x, y, h = 40.0, 3.0, 10.0
+    # Analytic ∂/∂x, ∂/∂y of ln C at z = H from the published σ(x) = exp(I + J ln x + K ln²x)
+    # (novak2018's class D: σy (−2.555, 1.0423, −0.0087), σz (−3.186, 1.1737, +0.0316)).
+    lx = math.log(x)
+    sy = math.exp(-2.555 + 1.0423 * lx - 0.0087 * lx * lx)
+    sz = math.exp(-3.186 + 1.1737 * lx + 0.0316 * lx * lx)
+    dsy = sy * (1.0423 - 2 * 0.0087 * lx) / x
+    dsz = sz * (1.1737 + 2 * 0.0316 * lx) / x
+    image = math.exp(-2 * h * h / sz**2)
+    d_ln_g = image * (4 * h * h / sz**3) * dsz / (1 + image)
+    grad_x = -dsy / sy - dsz / sz + y * y * dsy / sy**3 + d_ln_g
+    grad_y = -y / sy**2
+    r = 0.005  # the fit is of a plane: curvature errors scale with the spacing
+    pts = np.array([[x + r * math.cos(a), y + r * math.sin(a)] for a in (0.3, 2.4, 4.5)])
+    values = plume.concentration(np.column_stack([pts, np.full(3, h)]))
+    gx, gy = log_gradient(pts, values)
+    assert gx == pytest.approx(grad_x, rel=0.02)
+    assert gy == pytest.approx(grad_y, rel=0.02)
+
+
+def test_gradient_swarm_climbs_in_formation() -> None:
+    plume = GaussianPlume.preset("novak2018")
+    members = [GradientSwarm(ctx(i)) for i in range(3)]
+    # The formation the behaviour keeps: radius 2 m, first vertex upwind (−x), by id order.
+    centre = (40.0, 3.0)
+    slots = [
+        (centre[0] - 2 * math.cos(a), centre[1] + 2 * math.sin(a))
+        for a in (0.0, 2 * math.pi / 3, 4 * math.pi / 3)
+    ]
+    values = plume.concentration([[px, py, 10.0] for px, py in slots])
+    states = [state(px, py, 1.0, f"uav{i + 1}") for i, (px, py) in enumerate(slots)]
+    velocities = []
+    for i, beh in enumerate(members):
+        peers = [
+            PeerReading(
+                vehicle_id=f"uav{j + 1}",
+                position_enu_m=(*slots[j], 10.0),
+                true_g_m3=float(values[j]),
+            )
+            for j in range(3)
+            if j != i
+        ]
+        sp = beh.step(
+            states[i],
+            states[:i] + states[i + 1 :],
+            [reading(*slots[i], 1.0, float(values[i]), peers)],
+        )
+        assert sp is not None and sp.velocity_enu_m_s is not None
+        velocities.append(sp.velocity_enu_m_s[:2])
+    # In formation every member flies the same climb velocity: toward the axis and upwind.
+    for v in velocities[1:]:
+        assert v == pytest.approx(velocities[0], abs=1e-9)
+    vx, vy = velocities[0]
+    assert math.hypot(vx, vy) == pytest.approx(2.0, rel=1e-6)
+    assert vy < 0.0  # y = 3 m: the axis is toward −y
+
+
+# ---------------------------------------------------------------- casting and surge-cast
+def test_surge_cast_state_machine() -> None:
+    beh = SurgeCast(ctx())
+    t = 0.0
+    sp = beh.step(state(50.0, 5.0, t), [], [])
+    assert beh.state == "search"
+    vx, vy, _ = velocity(sp)
+    assert vx == pytest.approx(0.0) and abs(vy) == pytest.approx(2.5)  # crosswind
+    t = 1.0
+    sp = beh.step(state(50.0, 5.0, t), [], [reading(50.0, 5.0, t, 0.002)])
+    assert beh.state == "surge"
+    assert velocity(sp)[:2] == pytest.approx((-2.0, 0.0))  # straight upwind
+    # Still within lost_s of the hit: keeps surging on a sub-threshold reading.
+    t = 1.3
+    beh.step(state(49.4, 5.0, t), [], [reading(49.4, 5.0, t, 0.0005)])
+    assert beh.state == "surge"
+    t = 1.6
+    sp = beh.step(state(48.8, 5.0, t), [], [reading(48.8, 5.0, t, 0.0)])
+    assert beh.state == "cast"
+    vx, vy, _ = velocity(sp)
+    assert vx == pytest.approx(0.5) and abs(vy) == pytest.approx(2.5)  # drift down, cross
+    assert beh.declaration is None  # the strongest reading is only the first one
+
+
+def test_surge_cast_declares_after_repeated_losses_at_a_peak() -> None:
+    beh = SurgeCast(ctx())
+    t = 0.0
+    beh.step(state(30.0, 0.0, t), [], [reading(30.0, 0.0, t, 0.002)])
+    t = 0.1
+    beh.step(state(1.0, 0.2, t), [], [reading(1.0, 0.2, t, 0.5)])  # 250× the first: the peak
+    for k in range(2):  # lose it, find a weaker reading nearby, lose it again
+        t += 1.0
+        beh.step(state(-0.5, 0.2, t), [], [reading(-0.5, 0.2, t, 0.0)])
+        assert (beh.state == "cast") == (k == 0)
+        t += 0.1
+        beh.step(state(1.5, 0.2, t), [], [reading(1.5, 0.2, t, 0.1)])
+    t += 1.0
+    sp = beh.step(state(-0.5, 0.2, t), [], [reading(-0.5, 0.2, t, 0.0)])
+    assert beh.state == "declared"
+    assert beh.declaration is not None
+    assert (beh.declaration.x_m, beh.declaration.y_m) == (1.0, 0.2)
+    assert sp.position_enu_m == (1.0, 0.2, 10.0)
+
+
+def test_casting_surges_casts_and_declares() -> None:
+    beh = Casting(ctx())
+    t = 0.0
+    sp = beh.step(state(30.0, 0.0, t), [], [reading(30.0, 0.0, t, 0.01)])
+    assert velocity(sp)[0] == pytest.approx(-Casting.surge_speed_m_s)  # surging upwind
+    t = 0.1
+    beh.step(state(1.0, 0.0, t), [], [reading(1.0, 0.0, t, 1.0)])
+    t = 1.5  # gas lost for more than lost_s: cast, drifting downwind
+    sp = beh.step(state(-0.5, 0.0, t), [], [reading(-0.5, 0.0, t, 0.0)])
+    assert velocity(sp)[0] == pytest.approx(Casting.cast_drift_m_s)
+    assert beh.declaration is None
+    t = 1.6
+    beh.step(state(0.5, 0.0, t), [], [reading(0.5, 0.0, t, 0.2)])
+    t = 3.0
+    sp = beh.step(state(-0.5, 0.0, t), [], [reading(-0.5, 0.0, t, 0.0)])
+    assert beh.declaration is not None
+    assert (beh.declaration.x_m, beh.declaration.y_m) == (1.0, 0.0)
+    assert sp.position_enu_m == (1.0, 0.0, 10.0)
+
+
+# ---------------------------------------------------------------- random walk
+def test_random_walk_statistics_match_a_run_and_tumble_walk() -> None:
+    dt, steps, walkers = 0.1, 300, 600
+    tau, v = RandomWalk.mean_run_s, RandomWalk.speed_m_s
+    finals = []
+    for w in range(walkers):
+        beh = RandomWalk(ctx(seed=1000 + w, dt=dt))
+        x = y = 0.0
+        for k in range(steps):
+            sp = beh.step(state(x, y, k * dt), [], [])
+            vx, vy, _ = velocity(sp)
+            assert math.hypot(vx, vy) == pytest.approx(v)
+            x += vx * dt
+            y += vy * dt
+        finals.append((x, y))
+    arr = np.array(finals)
+    msd = float((arr**2).sum(axis=1).mean())
+    # Heading kept each tick with probability p = exp(−dt/τ), else redrawn uniformly, so
+    # <v_i·v_j> = v² p^|i−j| and MSD = v²dt² [n + 2 Σ_{k=1}^{n−1} (n − k) p^k].
+    p = math.exp(-dt / tau)
+    expected = v * v * dt * dt * (steps + 2 * sum((steps - k) * p**k for k in range(1, steps)))
+    assert msd == pytest.approx(expected, rel=0.12)  # ≈ 3 standard errors with 600 walkers
+    se = math.sqrt(expected / 2 / walkers)
+    assert abs(arr[:, 0].mean()) < 4 * se and abs(arr[:, 1].mean()) < 4 * se
+    assert RandomWalk(ctx(seed=3)).heading_rad == RandomWalk(ctx(seed=3)).heading_rad

@@ -1,0 +1,125 @@
+"""``plumeswarm bench gsl``: same seed → same bytes, the statistics, the refusals."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import pytest
+
+from deploy.gsl_bench import make_options, rows_of, run_all, wilson_interval, write_outputs
+from deploy.gsl_episode import (
+    ALGORITHMS,
+    START_ACROSS_M,
+    START_ALONG_M,
+    EpisodeSpec,
+    run_episode,
+    start_point,
+)
+from swarmbus.scenario import load_scenario
+from tests.support.procs import run_cli
+
+
+@pytest.mark.parametrize(
+    ("successes", "runs", "low", "high"),
+    # Newcombe (1998), Statistics in Medicine 17:857, Table I, method 3 (Wilson score).
+    [
+        (81, 263, 0.2553, 0.3662),
+        (15, 148, 0.0624, 0.1605),
+        (0, 20, 0.0, 0.1611),
+        (1, 29, 0.0061, 0.1718),
+    ],
+)
+def test_wilson_interval_matches_newcombe(successes: int, runs: int, low: float, high: float):
+    got = wilson_interval(successes, runs)
+    assert got == pytest.approx((low, high), abs=1e-4)
+
+
+def test_starts_are_inside_the_protocol_box() -> None:
+    sc = load_scenario()  # source at the origin, wind toward +x
+    for run in range(200):
+        x, y = start_point(sc, 7, run)
+        assert START_ALONG_M[0] <= x <= START_ALONG_M[1]
+        assert START_ACROSS_M[0] <= y <= START_ACROSS_M[1]
+
+
+def test_same_seed_same_table_byte_for_byte(tmp_path: Path) -> None:
+    def once(jobs: int, out: Path) -> tuple[bytes, bytes]:
+        opts = make_options(
+            ["random_walk", "casting"],
+            ["steady_gaussian"],
+            ["ideal"],
+            runs=2,
+            seed=4,
+            time_limit_s=20.0,
+            jobs=jobs,
+        )
+        outcomes = run_all(opts)
+        write_outputs(out, opts, rows_of(opts, outcomes), outcomes)
+        return (out / "gsl.md").read_bytes(), (out / "gsl.json").read_bytes()
+
+    first = once(1, tmp_path / "a")
+    second = once(2, tmp_path / "b")
+    assert first == second
+    rows = json.loads(first[1])
+    assert [r["algorithm"] for r in rows] == ["random_walk", "casting"]
+    for row in rows:
+        assert {
+            "algorithm",
+            "environment",
+            "sensor",
+            "runs",
+            "success_rate",
+            "success_ci95",
+            "median_time_s",
+            "path_ratio",
+            "final_error_m",
+        } <= set(row)
+        assert row["runs"] == 2 and row["environment"] == "steady_gaussian"
+    assert (tmp_path / "a" / "trajectories_steady_gaussian.png").stat().st_size > 10_000
+
+
+def test_same_seed_same_filament_cell_byte_for_byte(tmp_path: Path) -> None:
+    """A time-dependent field, its anemometer and the MOX sensor repeat their bits too."""
+
+    def once(jobs: int, out: Path) -> tuple[bytes, bytes]:
+        opts = make_options(
+            ["casting"], ["meander_small"], ["mox"], runs=2, seed=4, time_limit_s=20.0, jobs=jobs
+        )
+        outcomes = run_all(opts)
+        write_outputs(out, opts, rows_of(opts, outcomes), outcomes)
+        return (out / "gsl.md").read_bytes(), (out / "gsl.json").read_bytes()
+
+    first = once(1, tmp_path / "a")
+    assert first == once(2, tmp_path / "b")
+    (row,) = json.loads(first[1])
+    assert (row["environment"], row["sensor"], row["runs"]) == ("meander_small", "mox", 2)
+
+
+def test_missing_environments_and_unknown_algorithms_are_refused_clearly() -> None:
+    res = run_cli(["bench", "gsl", "--environments", "filament", "--runs", "1"])
+    assert res.returncode == 2
+    assert "'filament'" in res.stderr and "meander_large" in res.stderr
+    assert "Traceback" not in res.stderr
+    res = run_cli(["bench", "gsl", "--algorithms", "moth", "--runs", "1"])
+    assert res.returncode == 2 and "'moth'" in res.stderr and "casting" in res.stderr
+
+
+def test_full_dynamics_takes_off_and_casting_climbs_the_plume() -> None:
+    opts = make_options(["casting"], [], [], runs=1, time_limit_s=20.0, dynamics="full")
+    assert (opts.control_hz, opts.sensor_period_ticks) == (120, 12)  # the scenario's rates
+    spec = EpisodeSpec("casting", "steady_gaussian", "ideal", 1, 0, 20.0, 120, 12, True, "full")
+    outcome = run_episode(spec)
+    track = outcome.trajectories[0]
+    # It starts hovering over its start point (taken off there) and surges upwind (−x).
+    assert math.dist(track[0], start_point(load_scenario(), 0, 1)) < 1.0
+    assert track[-1][0] < track[0][0] - 20.0
+    assert outcome.final_error_m < outcome.initial_distance_m - 20.0
+
+
+@pytest.mark.parametrize("algorithm", sorted(ALGORITHMS))
+def test_every_registered_algorithm_flies_an_episode(algorithm: str) -> None:
+    outcome = run_episode(EpisodeSpec(algorithm, "steady_gaussian", "ideal", 0, 0, 5.0))
+    assert outcome.path_length_m > 1.0  # it moved
+    assert outcome.initial_distance_m > 25.0

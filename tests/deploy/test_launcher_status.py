@@ -1,0 +1,151 @@
+"""``plumeswarm status`` against a bus where stand-ins publish what physics and an autopilot do."""
+
+from __future__ import annotations
+
+import json
+import os
+import threading
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
+
+import zenoh
+
+from swarmbus.codec import encode
+from swarmbus.messages import (
+    Clock,
+    ConcentrationReading,
+    FlightMode,
+    SpeedMode,
+    VehicleState,
+    VehicleStatus,
+)
+from swarmbus.node import NodeContext, NodeRuntime
+from swarmbus.scenario import load_scenario
+from tests.support.procs import Network, run_cli
+
+
+def state(vid: str, x: float) -> VehicleState:
+    return VehicleState(
+        vehicle_id=vid,
+        tick=240,
+        sim_time_s=2.0,
+        position_enu_m=(x, 1.0, 10.0),
+        velocity_enu_m_s=(0.0, 0.0, 0.0),
+        attitude_xyzw=(0.0, 0.0, 0.0, 1.0),
+        body_rates_rad_s=(0.0, 0.0, 0.0),
+        lat_deg=47.0,
+        lon_deg=8.0,
+        alt_m=500.0,
+        on_ground=False,
+    )
+
+
+@contextmanager
+def stand_ins(net: Network) -> Iterator[None]:
+    """A 'physics' and an 'autopilot-uav1' node publishing until the block ends."""
+    sc = load_scenario()
+    stop = threading.Event()
+    with ExitStack() as stack:
+        phys = stack.enter_context(
+            NodeRuntime(NodeContext(sc, net.client, "physics"), "physics", install_signals=False)
+        )
+        ap = stack.enter_context(
+            NodeRuntime(
+                NodeContext(sc, net.client, "autopilot-uav1", ("uav1",)),
+                "autopilot",
+                install_signals=False,
+            )
+        )
+        phys.ready()
+        ap.ready()
+        keys = phys.keys
+
+        def publish() -> None:
+            s: zenoh.Session = phys.session
+            while not stop.wait(0.05):
+                s.put(
+                    keys.clock(),
+                    encode(
+                        Clock(
+                            tick=240,
+                            sim_time_s=2.0,
+                            mode=SpeedMode.LOCKSTEP,
+                            speed_factor=1.0,
+                            real_time_factor=7.5,
+                        )
+                    ),
+                )
+                for i, vid in enumerate(v.id for v in sc.vehicles):
+                    s.put(keys.vehicle_state(vid), encode(state(vid, 20.0 + i)))
+                ap.session.put(
+                    keys.vehicle_status("uav1"),
+                    encode(
+                        VehicleStatus(
+                            vehicle_id="uav1",
+                            sim_time_s=2.0,
+                            mode=FlightMode.MISSION,
+                            armed=True,
+                            landed=False,
+                        )
+                    ),
+                )
+                ap.session.put(
+                    keys.vehicle_concentration("uav1"),
+                    encode(
+                        ConcentrationReading(
+                            vehicle_id="uav1",
+                            sim_time_s=2.0,
+                            position_enu_m=(20.0, 1.0, 10.0),
+                            available=True,
+                            reported_g_m3=0.05,
+                            true_g_m3=0.05,
+                        )
+                    ),
+                )
+
+        t = threading.Thread(target=publish, daemon=True)
+        t.start()
+        try:
+            yield
+        finally:
+            stop.set()
+            t.join(5)
+
+
+def test_status_json_has_the_documented_shape(network: tuple[Network, zenoh.Session]) -> None:
+    net, _ = network
+    with stand_ins(net):
+        result = run_cli(["status", "--json", "--connect", net.endpoint, "--timeout", "20"])
+    assert result.returncode == 0, result.stderr
+    data = json.loads(result.stdout)
+    assert set(data) == {"sim_time", "real_time_factor", "nodes", "vehicles"}
+    assert data["sim_time"] == 2.0 and data["real_time_factor"] == 7.5
+    nodes = {n["name"]: n for n in data["nodes"]}
+    assert {"physics", "autopilot-uav1"} <= set(nodes)
+    assert nodes["physics"]["pid"] == os.getpid() and nodes["physics"]["host"]
+    assert nodes["autopilot-uav1"]["role"] == "autopilot"
+    uav1 = data["vehicles"]["uav1"]
+    assert uav1 == {
+        "mode": "mission",
+        "armed": True,
+        "position": [20.0, 1.0, 10.0],
+        "reading": 0.05,
+    }
+    assert data["vehicles"]["uav3"]["position"] == [22.0, 1.0, 10.0]
+
+
+def test_status_text_lists_nodes_and_vehicles(network: tuple[Network, zenoh.Session]) -> None:
+    net, _ = network
+    with stand_ins(net):
+        result = run_cli(["status", "--connect", net.endpoint, "--timeout", "20"])
+    assert result.returncode == 0, result.stderr
+    assert "real-time factor 7.50x" in result.stdout
+    assert "autopilot-uav1" in result.stdout and "mission" in result.stdout
+
+
+def test_status_with_nothing_running_says_so() -> None:
+    from swarmbus.session import free_tcp_port
+
+    result = run_cli(["status", "--connect", f"tcp/127.0.0.1:{free_tcp_port()}", "--timeout", "1"])
+    assert result.returncode == 1
+    assert "nothing is running" in result.stderr

@@ -1,0 +1,217 @@
+"""Zenoh over mutual TLS with the deployment's access-control list, on loopback (no root).
+
+A hosts file with ``[tls]`` and three hosts on 127.0.0.1, certificates from ``plumeswarm certs
+generate``, and in-process sessions built with the very functions the CLI uses
+(:func:`deploy.security.secure_network`): the router enforces the ACL on its links, and a peer
+enforces it on a direct link. The namespace test (``test_netns_tls.py``) does the same across
+hosts with the real processes flying.
+"""
+
+from __future__ import annotations
+
+import re
+import shutil
+from collections.abc import Iterator
+from pathlib import Path
+
+import msgspec
+import pytest
+
+from deploy import certs
+from deploy.certs import common_name_of
+from deploy.hosts import Deployment, HostsError, load_deployment
+from deploy.security import access_control, host_identities, secure_network
+from swarmbus.keys import Keys
+from swarmbus.session import NetworkConfig, free_tcp_port, open_session
+from tests.deploy.test_faults_cli import assert_one_clear_line, bad_file
+from tests.support.procs import run_cli
+from tests.support.tls_probe import (
+    door,
+    forbidden_keys,
+    forged_puts_seen,
+    stranger_tls,
+)
+
+KEYS = Keys("default")
+ROLES = {"sim": ["router", "physics", "plume"], "agents": ["autopilot"], "gcs": ["gateway"]}
+
+
+def write_tls_hosts(path: Path, router: str, addresses: dict[str, str], certs: str) -> Path:
+    lines = [f'router = "{router}"', "", "[tls]", f'certs = "{certs}"', ""]
+    for host, roles in ROLES.items():
+        lines += [
+            "[[hosts]]",
+            f'name = "{host}"',
+            f'address = "{addresses[host]}"',
+            "roles = [" + ", ".join(f'"{r}"' for r in roles) + "]",
+            f'listen = ["tls/{addresses[host]}:0"]',
+            "",
+        ]
+    path.write_text("\n".join(lines))
+    return path
+
+
+def generate(hosts_file: Path, *extra: str) -> None:
+    res = run_cli(["certs", "generate", "--hosts", str(hosts_file), *extra])
+    assert res.returncode == 0, res.stderr
+
+
+@pytest.fixture(scope="module")
+def certified(tmp_path_factory: pytest.TempPathFactory) -> tuple[Deployment, Path]:
+    """A loopback hosts file with its certificates (by the CLI) and another CA's."""
+    tmp = tmp_path_factory.mktemp("tls")
+    router = f"tls/127.0.0.1:{free_tcp_port()}"
+    hosts_file = write_tls_hosts(
+        tmp / "hosts.toml", router, dict.fromkeys(ROLES, "127.0.0.1"), "certs"
+    )
+    generate(hosts_file)
+    dep = load_deployment(hosts_file)
+    certs.generate(host_identities(dep), tmp / "other-ca", days=1)
+    return dep, tmp
+
+
+@pytest.fixture(scope="module")
+def deployment(certified: tuple[Deployment, Path]) -> Iterator[tuple[Deployment, Path]]:
+    """``certified`` with a running router enforcing the ACL."""
+    dep, tmp = certified
+    router = dep.router
+    net = NetworkConfig(mode="router", connect=[], listen=[router])
+    with open_session(secure_network(net, dep, "sim", "router", KEYS)):
+        yield dep, tmp
+
+
+def as_role(dep: Deployment, host: str, role: str, **changes: object) -> NetworkConfig:
+    """A client session of ``role`` on ``host`` (a peer that listens on nothing would reach
+    nobody: a zenoh 1.10 router does not route between peers)."""
+    base = NetworkConfig(mode="client", connect=[dep.router], listen=[])
+    return msgspec.structs.replace(secure_network(base, dep, host, role, KEYS), **changes)
+
+
+def test_generated_certificates_carry_the_identities(certified: tuple[Deployment, Path]) -> None:
+    _, tmp = certified
+    out = tmp / "certs"
+    assert common_name_of(out / "agents" / "autopilot.agents.pem") == "autopilot.agents"
+    assert common_name_of(out / "gcs" / "operator.gcs.pem") == "operator.gcs"
+    assert (out / "sim" / "physics.sim.key").stat().st_mode & 0o077 == 0
+    again = run_cli(["certs", "generate", "--hosts", str(tmp / "hosts.toml")])
+    assert again.returncode != 0 and "refusing to replace" in again.stderr
+
+
+def test_acl_names_who_may_publish_what(tmp_path: Path) -> None:
+    hosts_file = write_tls_hosts(
+        tmp_path / "hosts.toml", "tls/10.0.0.1:7447", dict.fromkeys(ROLES, "10.0.0.1"), "c"
+    )
+    acl = access_control(load_deployment(hosts_file), KEYS)
+    assert acl["default_permission"] == "deny"
+    subjects = {s["id"]: set(s["cert_common_names"]) for s in acl["subjects"]}
+    assert "autopilot.agents" not in subjects["not-actuators-publishers"]
+    assert {"gateway.gcs", "physics.sim", "operator.sim"} <= subjects["not-actuators-publishers"]
+    assert "physics.sim" not in subjects["not-world-publishers"]
+    assert "autopilot.agents" in subjects["not-world-publishers"]
+    assert (
+        "router.sim" not in subjects["not-world-publishers"] | subjects["not-actuators-publishers"]
+    )
+
+
+@pytest.mark.parametrize(
+    ("publisher", "allowed"),
+    [
+        (("agents", "autopilot"), {"actuators"}),
+        (("sim", "physics"), {"state", "tick"}),
+        (("gcs", "gateway"), set()),
+        (("gcs", "operator"), set()),
+        (("sim", "plume"), set()),
+    ],
+)
+def test_router_lets_only_the_right_role_publish(
+    deployment: tuple[Deployment, Path], publisher: tuple[str, str], allowed: set[str]
+) -> None:
+    dep, _ = deployment
+    listener = as_role(dep, "sim", "physics")  # the real subscriber of actuators
+    result = forged_puts_seen(listener, as_role(dep, *publisher), KEYS)
+    assert result["marker"], "the publisher's marker never arrived: nothing was tested"
+    leaf = {k: k.rsplit("/", 1)[-1] for k in forbidden_keys(KEYS)}
+    assert {leaf[k] for k in result["seen"]} == allowed
+
+
+def test_a_peer_enforces_the_acl_on_a_direct_link(deployment: tuple[Deployment, Path]) -> None:
+    """A gateway that connects straight to physics's listener (no router between) is refused
+    there too; an autopilot on the same kind of link is not."""
+    dep, _ = deployment
+    physics_ep = f"tls/127.0.0.1:{free_tcp_port()}"
+    physics = as_role(dep, "sim", "physics", mode="peer", connect=[], listen=[physics_ep])
+    for host, role, allowed in (("gcs", "gateway", 0), ("agents", "autopilot", 1)):
+        direct = as_role(dep, host, role, connect=[physics_ep])
+        result = forged_puts_seen(physics, direct, KEYS)
+        assert result["marker"]
+        assert len(result["seen"]) == allowed, (role, result)
+
+
+def test_strangers_cannot_join(deployment: tuple[Deployment, Path]) -> None:
+    dep, tmp = deployment
+    stranger = stranger_tls(tmp / "certs", tmp / "strangers", "stranger.gcs")
+    with open_session(as_role(dep, "sim", "plume")) as s:
+        token = s.liveliness().declare_token(KEYS.node_health("plume"))
+        result = door(dep, "gcs", KEYS, tmp / "other-ca", stranger)
+        token.undeclare()
+    assert result["operator_tokens"] == [KEYS.node_health("plume")]
+    assert result["operator"] is None, f"our own operator could not join: {result['operator']}"
+    assert result["no_cert"] is not None, "a client without a certificate joined"
+    assert result["other_ca"] is not None, "a client with another CA's certificate joined"
+    assert result["plain_tcp"] is not None, "a plain TCP client joined"
+    # A certificate of our CA with an unknown name connects but is shown nothing.
+    assert result["stranger_tokens"] == []
+
+
+@pytest.mark.parametrize(
+    ("which", "kind"), [("root_ca", "missing"), ("cert", "directory"), ("key", "not-pem")]
+)
+def test_bad_tls_files_are_one_clear_line(
+    certified: tuple[Deployment, Path], tmp_path: Path, which: str, kind: str
+) -> None:
+    _, tmp = certified
+    shutil.copytree(tmp / "certs", tmp_path / "certs")
+    hosts_file = tmp_path / "hosts.toml"
+    shutil.copy(tmp / "hosts.toml", hosts_file)
+    files = {
+        "root_ca": tmp_path / "certs" / "ca.pem",
+        "cert": tmp_path / "certs" / "agents" / "autopilot.agents.pem",
+        "key": tmp_path / "certs" / "agents" / "autopilot.agents.key",
+    }
+    bad = files[which]
+    bad.unlink()
+    if kind == "directory":
+        bad.mkdir()
+    elif kind == "not-pem":
+        bad.write_bytes(b"\x00garbage")
+    res = run_cli(
+        ["node", "autopilot", "--vehicle", "uav1", "--hosts", str(hosts_file), "--host", "agents"]
+    )
+    assert res.returncode != 0
+    assert "Traceback" not in res.stderr, res.stderr
+    lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and str(bad) in lines[0], res.stderr
+
+
+@pytest.mark.parametrize(
+    ("router", "listen", "tls", "error"),
+    [
+        ("tcp/10.0.0.1:7447", "tls/10.0.0.1:0", True, "every endpoint must be tls/"),
+        ("tls/10.0.0.1:7447", "tcp/10.0.0.1:0", True, "every endpoint must be tls/"),
+        ("tls/10.0.0.1:7447", "tls/10.0.0.1:0", False, "need a [tls] section"),
+    ],
+)
+def test_tls_endpoints_and_section_go_together(
+    tmp_path: Path, router: str, listen: str, tls: bool, error: str
+) -> None:
+    text = f'router = "{router}"\n' + ('[tls]\ncerts = "c"\n' if tls else "")
+    text += f'[[hosts]]\nname = "sim"\nroles = ["router"]\nlisten = ["{listen}"]\n'
+    (tmp_path / "hosts.toml").write_text(text)
+    with pytest.raises(HostsError, match=re.escape(error)):
+        load_deployment(tmp_path / "hosts.toml")
+
+
+@pytest.mark.parametrize("kind", ["missing", "garbage"])
+def test_certs_generate_with_a_bad_hosts_file_is_one_line(tmp_path: Path, kind: str) -> None:
+    f = bad_file(tmp_path, kind, ".toml")
+    assert_one_clear_line(["certs", "generate", "--hosts", f, "--out", str(tmp_path / "c")])

@@ -1,0 +1,497 @@
+"""PX4 workflows a MAVSDK user brings from PX4 SITL, through MAVSDK's own plugins (4.x, its
+bundled C++ core) on the vehicle's API port, against the real stack (plume + physics +
+autopilot + gateway).
+
+One stack start covers several workflows in turn on one vehicle:
+- a mission started on the ground without a takeoff item, with MAVSDK's "return to launch
+  after mission": it takes off by itself, flies every item, returns and lands where it armed;
+- the horizontal fence set through the param plugin (off by default, as PX4) refuses a go-to
+  beyond it with COMMAND_DENIED and a status text naming GF_MAX_HOR_DIST and its value;
+- an inclusion polygon uploaded with the geofence plugin stops a go-to outside it (one inside
+  flies) and downloads again; a rally point uploaded with mission_raw is where RTL lands;
+- offboard through the offboard plugin: a local NED position is measured from the vehicle's
+  own origin (its spawn, not the world origin); body-frame velocity goes where the nose
+  points; an attitude setpoint (nose down) accelerates the way the nose points; a global
+  position setpoint is reached;
+- orbit (action plugin, DO_ORBIT): the vehicle circles the given centre clockwise at the
+  given radius, the heartbeat showing PX4's orbit mode (POSCTL / ORBIT);
+- position mode with MANUAL_CONTROL sticks (manual_control plugin): forward stick flies
+  along the nose, centred sticks stop; the heartbeat shows POSCTL;
+- follow-me (follow_me plugin, FOLLOW_TARGET): the vehicle keeps FLW_TGT_DST behind a target
+  walking north, at FLW_TGT_HT (MAVSDK's minimum, as PX4's, is 8 m);
+- a QGroundControl ``.plan`` (mission without a takeoff item, ending in RTL; an inclusion
+  polygon; a rally point) imported with mission_raw and uploaded: the vehicle takes off, flies
+  it and lands at the rally point;
+- then, as QGroundControl on the shared GCS port (raw MAVLink): a fence circle uploads as
+  mission type 1, and QGC's *Start Mission* (mode Mission while disarmed, then ARM) flies a
+  mission without a takeoff item to its end and its RTL.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from gcs_bridge.dialect import mavlink
+from gcs_bridge.frames import enu_to_geodetic
+from swarmbus.scenario import Origin
+from swarmbus.vehicle_types import load_vehicle_type
+from tests.support.gateway_stack import gateway, vehicles
+from tests.support.mavclient import clients, first, mission_item, write_scenario
+from tests.support.procs import zenoh_network
+
+mavsdk = pytest.importorskip("mavsdk")
+
+from mavsdk.asyncio import ComponentType, Configuration, Mavsdk  # noqa: E402
+from mavsdk.asyncio.plugins.action import ActionAsync, ActionError  # noqa: E402
+from mavsdk.asyncio.plugins.follow_me import FollowMeAsync  # noqa: E402
+from mavsdk.asyncio.plugins.geofence import GeofenceAsync  # noqa: E402
+from mavsdk.asyncio.plugins.manual_control import ManualControlAsync  # noqa: E402
+from mavsdk.asyncio.plugins.mission import MissionAsync, MissionItem, MissionPlan  # noqa: E402
+from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync  # noqa: E402
+from mavsdk.asyncio.plugins.offboard import OffboardAsync  # noqa: E402
+from mavsdk.asyncio.plugins.param import ParamAsync  # noqa: E402
+from mavsdk.asyncio.plugins.telemetry import TelemetryAsync  # noqa: E402
+from mavsdk.plugins.action import OrbitYawBehavior  # noqa: E402
+from mavsdk.plugins.follow_me import Config as FollowConfig  # noqa: E402
+from mavsdk.plugins.follow_me import TargetLocation  # noqa: E402
+from mavsdk.plugins.geofence import FenceType, GeofenceData, Point, Polygon  # noqa: E402
+from mavsdk.plugins.mission_raw import MissionItem as RawItem  # noqa: E402
+from mavsdk.plugins.offboard import (  # noqa: E402
+    Attitude,
+    PositionGlobalYaw,
+    PositionNedYaw,
+    VelocityBodyYawspeed,
+)
+
+ORIGIN = Origin()
+SPAWN_ENU = (20.0, 0.0)  # tests.support.mavclient.scenario_text, one vehicle
+MISSION_ALT_M = 6.0
+
+
+def waypoint(east_m: float, north_m: float, rel_alt_m: float) -> MissionItem:
+    lat, lon, _ = enu_to_geodetic((east_m, north_m, 0.0), ORIGIN)
+    return MissionItem(
+        latitude_deg=lat,
+        longitude_deg=lon,
+        relative_altitude_m=rel_alt_m,
+        is_fly_through=True,
+        acceptance_radius_m=1.0,
+    )
+
+
+def horizontal_m(a: Any, b: Any) -> float:
+    """Distance between two telemetry positions (small-angle, metres)."""
+    north = (a.latitude_deg - b.latitude_deg) * 111_320.0
+    east = (a.longitude_deg - b.longitude_deg) * 111_320.0 * math.cos(math.radians(a.latitude_deg))
+    return math.hypot(north, east)
+
+
+async def mission_from_the_ground_with_rtl(system: Any) -> None:
+    tel, act, mis = TelemetryAsync(system), ActionAsync(system), MissionAsync(system)
+    await first(tel.subscribe_health(), lambda h: h.is_armable, "ready to arm")
+    home = await first(tel.subscribe_position(), lambda p: True, "a position")
+    e0, n0 = SPAWN_ENU
+    plan = MissionPlan(
+        [waypoint(e0 + 15.0, n0, MISSION_ALT_M), waypoint(e0 + 15.0, n0 + 8.0, MISSION_ALT_M)]
+    )
+    await mis.set_return_to_launch_after_mission(True)
+    await mis.upload_mission(plan)
+    await act.arm()
+    await mis.start_mission()
+    await first(tel.subscribe_in_air(), bool, "in the air after starting the mission")
+    await first(
+        tel.subscribe_position(),
+        lambda p: p.relative_altitude_m > MISSION_ALT_M - 1.0,
+        f"the climb to {MISSION_ALT_M} m",
+    )
+    await first(
+        mis.subscribe_mission_progress(),
+        lambda p: p.total > 0 and p.current == p.total,
+        "mission progress to the end",
+    )
+    await first(tel.subscribe_armed(), lambda armed: not armed, "landed and disarmed", 180.0)
+    landed = await first(tel.subscribe_position(), lambda p: True, "a position after landing")
+    assert horizontal_m(landed, home) < 1.5, "return to launch did not land at home"
+
+
+async def take_off(system: Any, alt_m: float) -> None:
+    tel, act = TelemetryAsync(system), ActionAsync(system)
+    await first(tel.subscribe_health(), lambda h: h.is_armable, "ready to arm")
+    await act.set_takeoff_altitude(alt_m)
+    await act.arm()
+    await act.takeoff()
+    await first(
+        tel.subscribe_position(), lambda p: p.relative_altitude_m > alt_m - 0.5, f"at {alt_m} m"
+    )
+
+
+async def goto_refused_by_the_fence_parameter(system: Any) -> None:
+    tel, act, param = TelemetryAsync(system), ActionAsync(system), ParamAsync(system)
+    assert await param.get_param_float("GF_MAX_HOR_DIST") == 0.0, "PX4 default: no fence"
+    await param.set_param_float("GF_MAX_HOR_DIST", 30.0)
+    here = await first(tel.subscribe_position(), lambda p: True, "a position")
+    texts: list[str] = []
+
+    async def listen() -> None:
+        async for t in tel.subscribe_status_text():
+            texts.append(t.text)
+
+    listener = asyncio.create_task(listen())
+    try:
+        e0, n0 = SPAWN_ENU
+        lat, lon, _ = enu_to_geodetic((e0 + 60.0, n0, 0.0), ORIGIN)
+        with pytest.raises(ActionError) as refused:
+            await act.goto_location(lat, lon, here.absolute_altitude_m, math.nan)
+        assert refused.value.result.name == "COMMAND_DENIED", refused.value
+        deadline = asyncio.get_running_loop().time() + 10.0
+        while not any("GF_MAX_HOR_DIST 30 m" in t for t in texts):
+            assert asyncio.get_running_loop().time() < deadline, f"status texts: {texts}"
+            await asyncio.sleep(0.1)
+    finally:
+        listener.cancel()
+    await param.set_param_float("GF_MAX_HOR_DIST", 0.0)
+
+
+def latlon(east_m: float, north_m: float) -> tuple[float, float]:
+    lat, lon, _ = enu_to_geodetic((east_m, north_m, 0.0), ORIGIN)
+    return lat, lon
+
+
+async def fence_stops_goto_and_rtl_lands_at_rally(system: Any) -> None:
+    tel, act = TelemetryAsync(system), ActionAsync(system)
+    fence, raw = GeofenceAsync(system), MissionRawAsync(system)
+    e0, n0 = SPAWN_ENU
+    corners = [(e0 - 30, n0 - 30), (e0 + 30, n0 - 30), (e0 + 30, n0 + 30), (e0 - 30, n0 + 30)]
+    square = Polygon([Point(*latlon(e, n)) for e, n in corners], FenceType.INCLUSION)
+    await fence.upload_geofence(GeofenceData(polygons=[square], circles=[]))
+    assert len(await raw.download_geofence()) == 4
+    here = await first(tel.subscribe_position(), lambda p: True, "a position")
+    with pytest.raises(ActionError) as refused:
+        await act.goto_location(*latlon(e0 + 45.0, n0), here.absolute_altitude_m, math.nan)
+    assert refused.value.result.name == "COMMAND_DENIED", refused.value
+    await act.goto_location(*latlon(e0 + 20.0, n0), here.absolute_altitude_m, math.nan)
+    lat, lon = latlon(e0 + 20.0, n0)
+    await first(
+        tel.subscribe_position(),
+        lambda p: (
+            abs(p.latitude_deg - lat) * 111_320 < 1.0 and abs(p.longitude_deg - lon) * 75_000 < 1.0
+        ),
+        "the go-to inside the fence",
+    )
+    rally_lat, rally_lon = latlon(e0 + 15.0, n0 + 10.0)
+    rally = RawItem(
+        0, 6, 5100, 0, 1, 0, 0, 0, 0, round(rally_lat * 1e7), round(rally_lon * 1e7), 0.0, 2
+    )
+    await raw.upload_rally_points([rally])
+    await act.return_to_launch()
+    await first(tel.subscribe_armed(), lambda armed: not armed, "landed and disarmed", 180.0)
+    landed = await first(tel.subscribe_position(), lambda p: True, "a position after RTL")
+    target = type("P", (), {"latitude_deg": rally_lat, "longitude_deg": rally_lon})()
+    assert horizontal_m(landed, target) < 1.5, "RTL did not land at the closer rally point"
+    await fence.clear_geofence()
+
+
+def east_north_of(p: Any) -> tuple[float, float]:
+    """ENU metres of a telemetry position (small-angle, about the origin)."""
+    o = ORIGIN
+    north = (p.latitude_deg - o.lat_deg) * 111_320.0
+    east = (p.longitude_deg - o.lon_deg) * 111_320.0 * math.cos(math.radians(o.lat_deg))
+    return east, north
+
+
+async def arrive(tel: Any, east: float, north: float, what: str, within_m: float = 1.0) -> None:
+    await first(
+        tel.subscribe_position(),
+        lambda p: math.dist(east_north_of(p), (east, north)) < within_m,
+        what,
+    )
+
+
+async def moved(tel: Any, distance_m: float, what: str) -> tuple[float, float]:
+    """The unit direction (east, north) of the next ``distance_m`` flown."""
+    start = east_north_of(await first(tel.subscribe_position(), lambda p: True, "a position"))
+    end = east_north_of(
+        await first(
+            tel.subscribe_position(),
+            lambda p: math.dist(east_north_of(p), start) > distance_m,
+            what,
+            60.0,
+        )
+    )
+    d = math.dist(end, start)
+    return (end[0] - start[0]) / d, (end[1] - start[1]) / d
+
+
+async def orbit_clockwise(system: Any, east: float, north: float) -> None:
+    tel, act = TelemetryAsync(system), ActionAsync(system)
+    here = await first(tel.subscribe_position(), lambda p: True, "a position")
+    lat, lon = latlon(east, north)
+    await act.do_orbit(
+        8.0, 2.0, OrbitYawBehavior.HOLD_FRONT_TO_CIRCLE_CENTER, lat, lon, here.absolute_altitude_m
+    )
+
+    def radius(p: Any) -> float:
+        return math.dist(east_north_of(p), (east, north))
+
+    await first(tel.subscribe_position(), lambda p: abs(radius(p) - 8.0) < 0.7, "on the circle")
+    start = east_north_of(await first(tel.subscribe_position(), lambda p: True, "a position"))
+    a0 = math.atan2(start[1] - north, start[0] - east)
+
+    def swept(p: Any) -> float:
+        e, n = east_north_of(p)
+        return (math.atan2(n - north, e - east) - a0 + math.pi) % (2 * math.pi) - math.pi
+
+    # clockwise seen from above: the bearing from the centre decreases (ENU)
+    await first(
+        tel.subscribe_position(),
+        lambda p: -1.5 < swept(p) < -1.0 and abs(radius(p) - 8.0) < 1.0,
+        "a quarter turn clockwise on the circle",
+        60.0,
+    )
+
+
+async def position_mode_with_sticks(system: Any) -> None:
+    tel, manual = TelemetryAsync(system), ManualControlAsync(system)
+    sticks = [0.0, 0.0, 0.5, 0.0]  # x forward, y right, z throttle (0.5: hold), r yaw
+
+    async def joystick() -> None:  # a ground station sends its sticks continuously
+        while True:
+            await manual.set_manual_control_input(*sticks)
+            await asyncio.sleep(0.02)
+
+    stream = asyncio.create_task(joystick())
+    try:
+        await asyncio.sleep(0.2)
+        await manual.start_position_control()
+        await first(tel.subscribe_flight_mode(), lambda m: m.name == "POSCTL", "POSCTL")
+        heading = (await first(tel.subscribe_heading(), lambda h: True, "a heading")).heading_deg
+        sticks[0] = 0.4
+        east, north = await moved(tel, 5.0, "forward stick")
+        nose = (math.sin(math.radians(heading)), math.cos(math.radians(heading)))
+        assert east * nose[0] + north * nose[1] > 0.9, f"flew ({east:.2f}, {north:.2f})"
+        sticks[0] = 0.0
+        await first(
+            tel.subscribe_velocity_ned(),
+            lambda v: math.hypot(v.north_m_s, v.east_m_s) < 0.3,
+            "a stop with centred sticks",
+        )
+    finally:
+        stream.cancel()
+
+
+async def follow_a_walking_target(system: Any) -> None:
+    tel, follow = TelemetryAsync(system), FollowMeAsync(system)
+    await follow.set_config(FollowConfig(follow_height_m=9.0, follow_distance_m=6.0))
+    here = east_north_of(await first(tel.subscribe_position(), lambda p: True, "a position"))
+    walk = {"north": here[1] + 10.0}
+
+    async def target() -> None:  # someone walking north at 1.5 m/s (wall clock), 1 Hz fixes
+        while True:
+            lat, lon = latlon(here[0], walk["north"])
+            await follow.set_target_location(TargetLocation(lat, lon, ORIGIN.alt_m, 1.5, 0.0, 0.0))
+            await asyncio.sleep(0.2)
+            walk["north"] += 0.3
+
+    walker = asyncio.create_task(target())
+    try:
+        await follow.start()
+        await first(tel.subscribe_flight_mode(), lambda m: m.name == "FOLLOW_ME", "FOLLOW_ME")
+
+        def behind(p: Any) -> bool:
+            e, n = east_north_of(p)
+            return (
+                abs(e - here[0]) < 1.5
+                and abs(n - (walk["north"] - 6.0)) < 2.5
+                and abs(p.relative_altitude_m - 9.0) < 1.0
+            )
+
+        await first(tel.subscribe_position(), behind, "6 m behind the walker at 9 m", 60.0)
+        await follow.stop()
+    finally:
+        walker.cancel()
+
+
+async def offboard_setpoints_as_px4(system: Any) -> None:
+    tel, act, param = TelemetryAsync(system), ActionAsync(system), ParamAsync(system)
+    off = OffboardAsync(system)
+    # the simulation runs faster than real time: MAVSDK's 20 Hz stream must not look lost
+    await param.set_param_float("COM_OF_LOSS_T", 30.0)
+    await take_off(system, 5.0)
+    e0, n0 = SPAWN_ENU
+    # local NED from the vehicle's own origin: 5 m north of its spawn, nose east (NED yaw 90)
+    await off.set_position_ned(PositionNedYaw(5.0, 0.0, -6.0, 90.0))
+    await off.start()
+    await arrive(tel, e0, n0 + 5.0, "local NED (5, 0) from the spawn")
+    await first(tel.subscribe_heading(), lambda h: abs(h.heading_deg - 90.0) < 5.0, "nose east")
+    await off.set_velocity_body(VelocityBodyYawspeed(2.0, 0.0, 0.0, 0.0))
+    east, north = await moved(tel, 5.0, "body-frame forward flight")
+    assert east > 0.95, f"body forward with the nose east flew ({east:.2f}, {north:.2f})"
+    # attitude from rest, nose north: 20 degrees nose down, thrust to hold the altitude; the
+    # tilt (g·tan 20° ≈ 3.6 m/s²) outweighs the drag of the 6 m/s west wind
+    here = east_north_of(await first(tel.subscribe_position(), lambda p: True, "a position"))
+    await off.set_position_ned(PositionNedYaw(here[1] - n0, here[0] - e0, -6.0, 0.0))
+    await first(
+        tel.subscribe_velocity_ned(),
+        lambda v: math.hypot(v.north_m_s, v.east_m_s) < 0.2,
+        "a stop before the attitude setpoint",
+    )
+    await first(
+        tel.subscribe_heading(),
+        lambda h: min(h.heading_deg % 360.0, 360.0 - h.heading_deg % 360.0) < 5.0,
+        "nose north",
+    )
+    iris = load_vehicle_type("iris")
+    hover = iris.mass_kg * 9.80665 / iris.max_total_thrust_n
+    await off.set_attitude(Attitude(0.0, -20.0, 0.0, hover / math.cos(math.radians(20.0))))
+    east, north = await moved(tel, 4.0, "the attitude setpoint's acceleration")
+    assert north > 0.8, f"nose down heading north flew ({east:.2f}, {north:.2f})"
+    lat, lon = latlon(e0 - 5.0, n0 + 10.0)
+    await off.set_position_global(
+        PositionGlobalYaw(lat, lon, 6.0, 0.0, PositionGlobalYaw.AltitudeType.REL_HOME)
+    )
+    await arrive(tel, e0 - 5.0, n0 + 10.0, "the global setpoint", within_m=1.5)
+    await off.stop()
+    await orbit_clockwise(system, e0 + 3.0, n0 + 10.0)
+    await position_mode_with_sticks(system)
+    await follow_a_walking_target(system)
+    await act.land()
+    await first(tel.subscribe_armed(), lambda armed: not armed, "landed and disarmed", 180.0)
+
+
+def qgc_plan(path: Path) -> Path:
+    """A QGroundControl plan file as its Plan view saves it (relative altitudes, frame 3)."""
+    e0, n0 = SPAWN_ENU
+
+    def item(seq: int, command: int, east: float, north: float, alt: float) -> dict[str, Any]:
+        lat, lon = latlon(east, north)
+        return {
+            "type": "SimpleItem",
+            "autoContinue": True,
+            "command": command,
+            "doJumpId": seq + 1,
+            "frame": 3 if command == 16 else 2,
+            "params": [0, 0, 0, None, lat, lon, alt] if command == 16 else [0] * 7,
+        }
+
+    fence = [latlon(e0 + de, n0 + dn) for de, dn in ((-50, -50), (50, -50), (50, 50), (-50, 50))]
+    plan = {
+        "fileType": "Plan",
+        "version": 1,
+        "groundStation": "QGroundControl",
+        "mission": {
+            "version": 2,
+            "firmwareType": 12,
+            "vehicleType": 2,
+            "cruiseSpeed": 5,
+            "hoverSpeed": 3,
+            "plannedHomePosition": [*latlon(e0, n0), ORIGIN.alt_m],
+            "items": [
+                item(0, 16, e0 + 10.0, n0 + 20.0, 6.0),
+                item(1, 16, e0 + 20.0, n0 + 20.0, 6.0),
+                item(2, 20, 0.0, 0.0, 0.0),
+            ],
+        },
+        "geoFence": {
+            "version": 2,
+            "circles": [],
+            "polygons": [{"inclusion": True, "polygon": [list(p) for p in fence], "version": 1}],
+        },
+        "rallyPoints": {"version": 2, "points": [[*latlon(e0 + 22.0, n0 + 22.0), 6.0]]},
+    }
+    path.write_text(json.dumps(plan))
+    return path
+
+
+async def qgc_plan_imported_and_flown(system: Any, plan: Path) -> None:
+    tel, act, raw = TelemetryAsync(system), ActionAsync(system), MissionRawAsync(system)
+    imported = await raw.import_qgroundcontrol_mission(str(plan))
+    assert len(imported.mission_items) == 3 and len(imported.rally_items) == 1
+    await raw.upload_mission(imported.mission_items)
+    await raw.upload_geofence(imported.geofence_items)
+    await raw.upload_rally_points(imported.rally_items)
+    assert len(await raw.download_geofence()) == len(imported.geofence_items) == 4
+    assert len(await raw.download_rallypoints()) == 1
+    await first(tel.subscribe_health(), lambda h: h.is_armable, "ready to arm")
+    await act.arm()
+    await raw.start_mission()
+    await first(tel.subscribe_in_air(), bool, "in the air on the imported mission")
+    await first(tel.subscribe_armed(), lambda armed: not armed, "landed and disarmed", 180.0)
+    landed = await first(tel.subscribe_position(), lambda p: True, "a position after the plan")
+    e0, n0 = SPAWN_ENU
+    assert math.dist(east_north_of(landed), (e0 + 22.0, n0 + 22.0)) < 1.5, "not at the rally point"
+
+
+async def connect(api_port: int) -> tuple[Mavsdk, Any]:
+    config = Configuration.create_with_component_type(ComponentType.GROUND_STATION)
+    sdk = Mavsdk(config)
+    await sdk.__aenter__()
+    await sdk.add_any_connection(f"udpin://127.0.0.1:{api_port}")
+
+    async def found() -> Any:
+        while True:
+            for s in await sdk.get_systems():
+                if await s.has_autopilot():
+                    return s
+            await asyncio.sleep(0.2)
+
+    return sdk, await asyncio.wait_for(found(), 120.0)
+
+
+async def workflows(api_port: int, plan: Path) -> None:
+    sdk, system = await connect(api_port)
+    try:
+        await mission_from_the_ground_with_rtl(system)
+        await take_off(system, 5.0)
+        await goto_refused_by_the_fence_parameter(system)
+        await fence_stops_goto_and_rtl_lands_at_rally(system)
+        await offboard_setpoints_as_px4(system)
+        await qgc_plan_imported_and_flown(system, plan)
+    finally:
+        await sdk.__aexit__(None, None, None)
+
+
+def qgc_fence_and_start_mission(gcs_port: int) -> None:
+    accepted = int(mavlink.MAV_MISSION_ACCEPTED)
+    with clients(gcs_port) as (c,):
+        c.wait_standby(1)  # the client heartbeats once a second, as QGC does
+        pos = c.wait_type("GLOBAL_POSITION_INT", 1)
+        lat, lon = pos.lat * 1e-7, pos.lon * 1e-7
+        circle = mavlink.MAVLink_mission_item_int_message(
+            1, 1, 0, int(mavlink.MAV_FRAME_GLOBAL_INT), 5003, 0, 1, 200.0, 0, 0, 0,
+            pos.lat, pos.lon, 0.0, 1,
+        )  # fmt: skip
+        assert c.upload(1, [circle], mission_type=1) == accepted
+        east = lon + 10.0 / (111_320.0 * math.cos(math.radians(lat)))
+        north = lat + 5.0 / 111_320.0
+        items = [
+            mission_item(1, 0, 16, lat, east, 5.0),
+            mission_item(1, 1, 16, north, east, 5.0),
+            mission_item(1, 2, 20, 0.0, 0.0, 0.0),
+        ]
+        assert c.upload(1, items) == accepted
+        c.set_mode(1, 4, 4)  # QGC's Start Mission: the mode first, disarmed ...
+        c.wait_mode(1, 4, 4, armed=False)
+        assert c.command(1, 400, 1) == int(mavlink.MAV_RESULT_ACCEPTED)  # ... then ARM
+        reached = [c.wait_type("MISSION_ITEM_REACHED", 1, timeout_s=90.0).seq for _ in range(2)]
+        assert reached == [0, 1]
+        c.wait_disarmed(1, timeout_s=120.0)
+
+
+def test_px4_workflows_through_mavsdk_plugins(tmp_path: Path) -> None:
+    scenario, gcs, api = write_scenario(tmp_path / "scenario.toml", 1)
+    text = scenario.read_text()  # the seed's own 500 m fence out: the default applies
+    scenario.write_text(text.replace("geofence_max_distance_m = 500.0\n", ""))
+    assert scenario.read_text() != text
+    with (
+        zenoh_network() as (net, _router),
+        vehicles(net, scenario, tmp_path, ["uav1"], backend="real"),
+        gateway(net, scenario, tmp_path, "cmd_timeout_s=3"),
+    ):
+        asyncio.run(workflows(api, qgc_plan(tmp_path / "survey.plan")))
+        qgc_fence_and_start_mission(gcs)

@@ -1,0 +1,176 @@
+"""The viewer in headless Chromium: the page shows the scene, and its tree holds vehicles and plume.
+
+The real plume node answers ``plume/mesh``; stand-ins in the test process play physics
+(``sim/tick``) and the autopilots' readings. The screenshot is kept as docs/viewer.png when
+PLUMESWARM_SAVE_SCREENSHOT=1.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import matplotlib.image
+import numpy as np
+import pytest
+import zenoh
+
+from deploy.busview import BusView
+from swarmbus.codec import encode
+from swarmbus.messages import (
+    ConcentrationReading,
+    SimTick,
+    VehicleState,
+)
+from swarmbus.scenario import load_scenario
+from tests.support.procs import REPO, Network, NodeProcs, keys_for, wait_until
+
+CHROMIUM = shutil.which("chromium")
+CHROME_FLAGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
+
+pytestmark = [
+    pytest.mark.browser,
+    pytest.mark.skipif(
+        CHROMIUM is None,
+        reason="Debian's chromium is not installed (`make test` installs it when run as root)",
+    ),
+]
+
+
+def state(vid: str, tick: int, pos: tuple[float, float, float]) -> VehicleState:
+    return VehicleState(
+        vehicle_id=vid,
+        tick=tick,
+        sim_time_s=tick / 120,
+        position_enu_m=pos,
+        velocity_enu_m_s=(0.0, 0.0, 0.0),
+        attitude_xyzw=(0.0, 0.0, math.sin(0.2), math.cos(0.2)),
+        body_rates_rad_s=(0.0, 0.0, 0.0),
+        lat_deg=47.0,
+        lon_deg=8.0,
+        alt_m=500.0,
+        on_ground=False,
+    )
+
+
+@contextmanager
+def flying_stand_ins(session: zenoh.Session) -> Iterator[None]:
+    """Physics' ticks and the autopilots' readings: vehicles circling inside the plume."""
+    keys = keys_for()
+    sc = load_scenario()
+    stop = threading.Event()
+
+    def fly() -> None:
+        tick = 0
+        while not stop.wait(0.02):
+            tick += 1
+            states = []
+            for i, v in enumerate(sc.vehicles):
+                a = tick / 60 + i * 2.0
+                pos = (30.0 + 10 * math.cos(a), 6.0 * (i - 1) + 6 * math.sin(a), 10.0)
+                states.append(state(v.id, tick, pos))
+                reading = ConcentrationReading(
+                    vehicle_id=v.id,
+                    sim_time_s=tick / 120,
+                    position_enu_m=pos,
+                    available=True,
+                    reported_g_m3=0.05 * (i + 1),
+                    true_g_m3=0.05 * (i + 1),
+                )
+                session.put(keys.vehicle_concentration(v.id), encode(reading))
+            tick_msg = SimTick(
+                tick=tick, sim_time_s=tick / 120, control_dt_s=1 / 120, states=states
+            )
+            session.put(keys.tick(), encode(tick_msg))
+
+    t = threading.Thread(target=fly, daemon=True)
+    t.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        t.join(5)
+
+
+SCENE_NAMES = ["vehicles", "plume", "level_0", "level_1", "trails", "readings", "source"]
+
+
+def test_viewer_page_shows_vehicles_and_plume(
+    network: tuple[Network, zenoh.Session], tmp_path: Path
+) -> None:
+    from playwright.sync_api import sync_playwright
+
+    net, _ = network
+    sc = load_scenario()
+    names = SCENE_NAMES + [v.id for v in sc.vehicles]
+    shot = tmp_path / "viewer.png"
+    with (
+        _client(net) as session,
+        flying_stand_ins(session),
+        NodeProcs(net, log_dir=tmp_path) as procs,
+    ):
+        view = BusView(session, keys_for())
+        procs.start("plume", name="plume")
+        procs.start("viewer", name="viewer")
+        health = wait_until(
+            lambda: (h := view.snapshot().health.get("viewer")) and "plume=3/3" in h.detail and h,
+            90.0,
+            "the viewer's health saying all 3 plume levels arrived",
+        )
+        url = health.detail.split()[0].removeprefix("url=")
+        assert url.startswith("http://127.0.0.1:") and url.endswith("/static/")
+        # Explicit waits on the page's own state (no virtual-time budget: software WebGL on a
+        # loaded 2-core machine renders at its own pace, and a budget can stall behind it).
+        with sync_playwright() as pw:
+            browser = pw.chromium.launch(executable_path=CHROMIUM, args=CHROME_FLAGS[1:])
+            try:
+                page = browser.new_page(viewport={"width": 1024, "height": 640})
+                page.goto(url, timeout=60_000)
+                # meshcat's control panel lists every scene node it received, one element each.
+                page.wait_for_function(
+                    """names => names.every(n => [...document.querySelectorAll('*')].some(
+                        e => e.childElementCount === 0 && e.textContent === n))""",
+                    arg=names,
+                    timeout=120_000,
+                )
+                html = page.content()
+                # A few frames after the scene is complete, then the picture.
+                page.wait_for_timeout(1_000)
+                page.screenshot(path=str(shot), timeout=120_000)
+            finally:
+                browser.close()
+        view.close()
+    # The page's scene tree holds every node (the wait above would have timed out otherwise;
+    # the static check here reads the same document once more).
+    for name in names:
+        assert f">{name}<" in html, f"{name!r} not in the page's scene tree"
+    # Not blank: many distinct colours, and the translucent plume's purples/reds are there.
+    img = matplotlib.image.imread(shot)[:, :, :3]
+    assert img.shape[:2] == (640, 1024)
+    colours = np.unique((img * 255).astype(np.uint8).reshape(-1, 3), axis=0)
+    assert len(colours) > 500, f"only {len(colours)} colours: blank page?"
+    assert img.std() > 0.05
+    if os.environ.get("PLUMESWARM_SAVE_SCREENSHOT") == "1":
+        shutil.copy(shot, REPO / "docs" / "viewer.png")
+
+
+@contextmanager
+def _client(net: Network) -> Iterator[zenoh.Session]:
+    from swarmbus.session import open_session
+
+    with open_session(net.client) as session:
+        yield session

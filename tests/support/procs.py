@@ -1,0 +1,150 @@
+"""Helpers for tests that start real processes on a real Zenoh network on loopback.
+
+Every process is started in its own process group and stopped by the test (``NodeProcs``);
+every wait has a deadline and fails with a message saying what did not arrive.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager, suppress
+from pathlib import Path
+from typing import IO, Literal, TypeVar
+
+import zenoh
+
+from swarmbus.keys import Keys
+from swarmbus.session import NetworkConfig, free_tcp_port, open_session
+
+REPO = Path(__file__).resolve().parents[2]
+T = TypeVar("T")
+
+
+def wait_until(
+    predicate: Callable[[], T | Literal[False] | None],
+    timeout_s: float,
+    what: str,
+    poll_s: float = 0.02,
+) -> T:
+    """Poll ``predicate`` until it returns something truthy; fail naming ``what`` otherwise."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout_s:.1f} s waiting for {what}")
+        time.sleep(poll_s)
+
+
+def wait_for_queryable(
+    session: zenoh.Session, key: str, payload: bytes, timeout_s: float, what: str
+) -> zenoh.Reply:
+    """Query ``key`` until a reply arrives (a node's queryable reaches a new peer shortly
+    after its liveliness token does); fail naming ``what`` at the deadline."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        replies = list(session.get(key, payload=payload, timeout=2.0))
+        if replies:
+            return replies[0]
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout_s:.1f} s waiting for {what}")
+        time.sleep(0.05)
+
+
+class Network:
+    """A router on a free loopback port and the config clients use to reach it."""
+
+    def __init__(self, port: int) -> None:
+        self.port = port
+        self.endpoint = f"tcp/127.0.0.1:{port}"
+        self.client = NetworkConfig(connect=[self.endpoint], listen=["tcp/127.0.0.1:0"])
+        self.router = NetworkConfig(mode="router", connect=[], listen=[self.endpoint])
+
+    def cli_args(self) -> list[str]:
+        return ["--connect", self.endpoint, "--listen", "tcp/127.0.0.1:0"]
+
+
+@contextmanager
+def zenoh_network() -> Iterator[tuple[Network, zenoh.Session]]:
+    """A router session in this test process (so the network outlives any child)."""
+    net = Network(free_tcp_port())
+    with open_session(net.router) as router:
+        yield net, router
+
+
+class NodeProcs:
+    """Starts ``plumeswarm node ROLE`` processes; ``stop_all`` (or the context exit) ends them."""
+
+    def __init__(
+        self, net: Network, scenario: str | Path | None = None, log_dir: Path | None = None
+    ):
+        self.net = net
+        self.scenario = str(scenario) if scenario is not None else None
+        self.log_dir = log_dir
+        self.procs: list[tuple[str, subprocess.Popen[bytes]]] = []
+
+    def start(self, role: str, *args: str, name: str | None = None) -> subprocess.Popen[bytes]:
+        cmd = [sys.executable, "-m", "deploy", "node", role, *self.net.cli_args()]
+        if self.scenario is not None:
+            cmd += ["--scenario", self.scenario]
+        cmd += list(args)
+        label = name or "-".join([role, *[a for a in args if not a.startswith("-")]])
+        out: int | IO[bytes] = subprocess.DEVNULL
+        if self.log_dir is not None:
+            out = open(self.log_dir / f"{label}.log", "wb")  # noqa: SIM115 - closed with the proc
+        env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONUNBUFFERED="1")
+        proc = subprocess.Popen(
+            cmd, cwd=REPO, stdout=out, stderr=subprocess.STDOUT, env=env, start_new_session=True
+        )
+        if not isinstance(out, int):
+            out.close()  # the child holds its own descriptor
+        self.procs.append((label, proc))
+        return proc
+
+    def kill(self, proc: subprocess.Popen[bytes], sig: int = signal.SIGKILL) -> None:
+        with suppress(ProcessLookupError):
+            os.killpg(proc.pid, sig)
+        proc.wait(timeout=10)
+
+    def stop_all(self, timeout_s: float = 10.0) -> None:
+        for _, proc in self.procs:
+            if proc.poll() is None:
+                with suppress(ProcessLookupError):
+                    os.killpg(proc.pid, signal.SIGTERM)
+        deadline = time.monotonic() + timeout_s
+        for _, proc in self.procs:
+            try:
+                proc.wait(timeout=max(0.1, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                with suppress(ProcessLookupError):
+                    os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait(timeout=5)
+
+    def __enter__(self) -> NodeProcs:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop_all()
+
+
+def keys_for(world: str = "default") -> Keys:
+    return Keys(world)
+
+
+def run_cli(args: Sequence[str], timeout_s: float = 120.0) -> subprocess.CompletedProcess[str]:
+    """Run ``python -m deploy ARGS`` to completion (bounded)."""
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    return subprocess.run(
+        [sys.executable, "-m", "deploy", *args],
+        cwd=REPO,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=timeout_s,
+    )

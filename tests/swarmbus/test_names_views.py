@@ -1,0 +1,46 @@
+"""Node names and partial-decode views live in swarmbus, one copy each: they must read what the
+full messages encode and name processes the way the launcher, lockstep and clients expect."""
+
+from __future__ import annotations
+
+import msgspec
+import pytest
+
+from swarmbus.codec import decode, encode
+from swarmbus.keys import KeyNameError, autopilot_node, process_node, vehicle_of_autopilot
+from swarmbus.messages import ActuatorBatch, ActuatorCommand, SimTick, VehicleState
+from swarmbus.views import BatchView, StateHead, TickView, state_head_decoder
+from tests.support.messages_samples import STATE
+
+
+def test_node_names() -> None:
+    assert autopilot_node("uav1") == "autopilot-uav1"
+    assert vehicle_of_autopilot("autopilot-uav-2") == "uav-2"
+    assert vehicle_of_autopilot("physics") is None
+    assert process_node("physics") == "physics"
+    assert process_node("autopilot", ["uav1"]) == "autopilot-uav1"
+    assert process_node("autopilot", ["uav1", "uav2", "uav3"]) == "autopilot-uav1-plus2"
+    with pytest.raises(KeyNameError):
+        autopilot_node("a/b")
+
+
+def test_views_read_what_the_full_messages_encode() -> None:
+    other = msgspec.structs.replace(STATE, vehicle_id="uav2", position_enu_m=(1.0, 2.0, 3.0))
+    tick = SimTick(tick=7, sim_time_s=0.5, control_dt_s=1 / 120, states=[STATE, other])
+    view = decode(encode(tick), TickView)
+    assert (view.tick, view.sim_time_s, view.plume_queried, view.plume_values) == (
+        7,
+        0.5,
+        False,
+        None,
+    )
+    heads = [state_head_decoder.decode(raw) for raw in view.states]
+    assert heads == [
+        StateHead(STATE.vehicle_id, STATE.position_enu_m),
+        StateHead("uav2", (1.0, 2.0, 3.0)),
+    ]
+    assert [decode(bytes(raw), VehicleState) for raw in view.states] == [STATE, other]
+
+    cmd = ActuatorCommand(vehicle_id="uav1", tick=7, rotor_commands=[0.5] * 4)
+    batch = decode(encode(ActuatorBatch(tick=7, commands=[cmd])), BatchView)
+    assert batch.tick == 7 and [decode(bytes(r), ActuatorCommand) for r in batch.commands] == [cmd]

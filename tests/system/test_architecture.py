@@ -1,0 +1,226 @@
+"""Process packages meet only through swarmbus; the public surfaces change only on purpose."""
+
+from __future__ import annotations
+
+import ast
+import tomllib
+from collections.abc import Mapping
+from pathlib import Path
+
+import pytest
+
+from tests.support.procs import REPO, run_cli
+
+PROCESS_PACKAGES = ["sim_world", "agents", "plume_service", "gcs_bridge", "recorder"]
+# The composition layer: it may import the process packages (launcher, CLI, fused runner).
+COMPOSITION = "deploy"
+PACKAGES = ["swarmbus", *PROCESS_PACKAGES, COMPOSITION]
+# Ours too, but never imported by the packages: the benchmark scripts and the tests.
+TOOLS = ["bench", "tests"]
+
+
+def _imports(path: Path) -> set[str]:
+    tree = ast.parse(path.read_text(), filename=str(path))
+    out: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out.update(alias.name.split(".")[0] for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            out.add(node.module.split(".")[0])
+    return out
+
+
+def test_every_package_is_covered() -> None:
+    """Each top-level package of the repository, and each one pyproject installs, is one the
+    rules below know."""
+    on_disk = {p.parent.name for p in REPO.glob("*/__init__.py")}
+    assert on_disk == set(PACKAGES) | set(TOOLS)
+    project = tomllib.loads((REPO / "pyproject.toml").read_text())
+    installed = {
+        p.rstrip("*") for p in project["tool"]["setuptools"]["packages"]["find"]["include"]
+    }
+    assert installed == set(PACKAGES)
+    assert set(project["tool"]["mypy"]["packages"]) >= set(PACKAGES)
+
+
+@pytest.mark.parametrize("package", PROCESS_PACKAGES)
+def test_process_packages_do_not_import_each_other(package: str) -> None:
+    others = {*PROCESS_PACKAGES, COMPOSITION} - {package}
+    bad = []
+    for path in sorted((REPO / package).rglob("*.py")):
+        hits = _imports(path) & others
+        if hits:
+            bad.append(f"{path.relative_to(REPO)} imports {sorted(hits)}")
+    assert not bad, "process packages must meet only through swarmbus: " + "; ".join(bad)
+
+
+def test_swarmbus_imports_no_process_package() -> None:
+    for path in sorted((REPO / "swarmbus").rglob("*.py")):
+        assert not (_imports(path) & (set(PACKAGES) - {"swarmbus"})), path
+
+
+@pytest.mark.parametrize("package", PACKAGES)
+def test_packages_do_not_import_the_tests_or_the_benches(package: str) -> None:
+    bad = [
+        str(path.relative_to(REPO))
+        for path in sorted((REPO / package).rglob("*.py"))
+        if _imports(path) & set(TOOLS)
+    ]
+    assert not bad, bad
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(REPO).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _import_targets(name: str, path: Path, modules: Mapping[str, Path]) -> set[str]:
+    """The modules of ours that ``name`` imports, at any level of the file (a function's import
+    runs too); ``from package import submodule`` points at the submodule."""
+    package = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
+    out: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+        if isinstance(node, ast.Import):
+            out.update(alias.name for alias in node.names if alias.name in modules)
+        elif isinstance(node, ast.ImportFrom):
+            base = package[: len(package) - node.level + 1] if node.level else []
+            module = ".".join([*base, *([node.module] if node.module else [])])
+            for alias in node.names:
+                if f"{module}.{alias.name}" in modules:
+                    out.add(f"{module}.{alias.name}")
+                elif module in modules:
+                    out.add(module)
+    out.discard(name)
+    return out
+
+
+def import_graph(packages: list[str]) -> dict[str, set[str]]:
+    """Module → the modules of ``packages`` it imports."""
+    modules = {
+        _module_name(path): path for p in packages for path in sorted((REPO / p).rglob("*.py"))
+    }
+    return {name: _import_targets(name, path, modules) for name, path in modules.items()}
+
+
+def find_cycle(graph: Mapping[str, set[str]]) -> list[str]:
+    """One cycle of ``graph`` as [a, b, …, a] (depth-first search), or [] when there is none."""
+    done: set[str] = set()
+    path: list[str] = []
+    on_path: set[str] = set()
+
+    def visit(node: str) -> list[str]:
+        path.append(node)
+        on_path.add(node)
+        for nxt in sorted(graph.get(node, ())):
+            if nxt in on_path:
+                return [*path[path.index(nxt) :], nxt]
+            if nxt not in done:
+                cycle = visit(nxt)
+                if cycle:
+                    return cycle
+        path.pop()
+        on_path.discard(node)
+        done.add(node)
+        return []
+
+    for start in sorted(graph):
+        if start not in done:
+            cycle = visit(start)
+            if cycle:
+                return cycle
+    return []
+
+
+def test_find_cycle_finds_a_cycle_and_only_a_cycle() -> None:
+    assert find_cycle({"a": {"b"}, "b": {"c"}, "c": set(), "d": {"b", "c"}}) == []
+    assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
+    assert find_cycle({"x": {"y"}, "y": {"y2"}, "y2": {"y"}}) == ["y", "y2", "y"]
+    assert find_cycle({"a": {"a"}}) == ["a", "a"]
+
+
+def test_import_graph_sees_each_kind_of_import() -> None:
+    graph = import_graph(PACKAGES)
+    assert "deploy.cli.common" in graph["deploy.cli.plume"]  # inside a function
+    assert "recorder.schema" in graph["recorder.reader"]  # from package import submodule
+    assert "swarmbus.codec" in graph["swarmbus.node"]
+
+
+def test_the_import_graph_has_no_cycle() -> None:
+    graph = import_graph([*PACKAGES, "bench"])
+    assert len(graph) > 100
+    assert find_cycle(graph) == []
+
+
+def test_only_the_cli_parses_arguments_and_nothing_calls_back_into_it() -> None:
+    """Tools (demo, benches, status, the recorder's commands) are library functions the CLI
+    calls: only ``deploy.cli`` uses click, and only ``python -m deploy`` imports the CLI."""
+    graph = import_graph([*PACKAGES, "bench"])
+    callers = sorted(
+        name
+        for name, targets in graph.items()
+        if not name.startswith("deploy.cli") and any(t.startswith("deploy.cli") for t in targets)
+    )
+    assert callers == ["deploy.__main__"]
+    clicks = sorted(
+        str(path.relative_to(REPO))
+        for package in [*PACKAGES, "bench"]
+        for path in (REPO / package).rglob("*.py")
+        if "click" in _imports(path)
+    )
+    assert clicks and all(c.startswith("deploy/cli/") for c in clicks), clicks
+
+
+def test_key_expressions_are_built_only_in_swarmbus_keys() -> None:
+    offenders = []
+    for package in PACKAGES:
+        for path in (REPO / package).rglob("*.py"):
+            if path == REPO / "swarmbus" / "keys.py":
+                continue
+            if '"plumeswarm/' in path.read_text() or "'plumeswarm/" in path.read_text():
+                offenders.append(str(path.relative_to(REPO)))
+    assert not offenders, offenders
+
+
+PUBLIC_COMMANDS = {
+    "up",
+    "demo",
+    "status",
+    "node",
+    "plume",
+    "scenario",
+    "record",
+    "replay",
+    "report",
+    "bench",
+    "certs",
+    "export",
+}
+
+
+def test_cli_lists_the_public_commands() -> None:
+    res = run_cli(["--help"])
+    assert res.returncode == 0
+    listed = set()
+    in_commands = False
+    for line in res.stdout.splitlines():
+        if line.strip() == "Commands:":
+            in_commands = True
+            continue
+        if in_commands and line.startswith("  ") and line.strip():
+            listed.add(line.split()[0])
+    assert listed == PUBLIC_COMMANDS
+
+
+def test_node_roles_are_the_designed_ones() -> None:
+    from deploy.roles import ROLES
+
+    assert set(ROLES) == {
+        "router",
+        "plume",
+        "physics",
+        "autopilot",
+        "gateway",
+        "viewer",
+        "recorder",
+        "foxglove",
+    }

@@ -1,0 +1,285 @@
+"""Nothing lost when a process dies (lockstep): SIGKILL of an autopilot while its vehicle flies
+a mission, and of the physics and that autopilot at once, under the launcher that ``plumeswarm
+up`` runs (router, plume, physics, three autopilots). The physics holds the clock while the
+autopilot is restarted, the new autopilot restores the state of the tick before and flies on:
+every vehicle's state stream is bit-identical to a run without the kill, the killed vehicle
+finishes its mission and lands; every plume reading is the same too.
+
+The missions start on a known tick, so that two runs can be compared bit for bit: a fourth
+vehicle, parked on the ground, is a scripted lockstep participant that holds tick
+``START_TICK`` until the test has armed the three and started their missions.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager, suppress
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TypeVar
+
+import msgspec
+import pytest
+import zenoh
+
+from deploy.launcher import Launcher, LaunchOptions
+from swarmbus.codec import decode, encode
+from swarmbus.messages import (
+    Arm,
+    CommandReply,
+    ConcentrationReading,
+    MissionStart,
+    VehicleState,
+    VehicleStatus,
+)
+from swarmbus.scenario import load_scenario
+from swarmbus.session import free_tcp_port
+from tests.support.mavclient import write_scenario
+from tests.support.procs import REPO, keys_for, wait_until
+
+VEHICLES = ("uav1", "uav2", "uav3")
+GATE = "uav4"  # parked, scripted: holds START_TICK until the missions are started
+START_TICK = 60
+KILLED = "uav1"
+T = TypeVar("T")
+
+
+class _Key(msgspec.Struct, tag_field="schema", tag="vehicle_state/v1"):
+    vehicle_id: str
+    tick: int
+
+
+_key = msgspec.msgpack.Decoder(_Key)
+
+
+@dataclass
+class Flight:
+    launcher: Launcher
+    lock: threading.Lock = field(default_factory=threading.Lock)
+    # every state payload by vehicle and tick (the first seen; a replay must repeat it)
+    states: dict[str, dict[int, bytes]] = field(default_factory=dict)
+    conflicts: list[tuple[str, int]] = field(default_factory=list)
+    status: dict[str, VehicleStatus] = field(default_factory=dict)
+    # every concentration reading payload by vehicle and sim time (the first seen)
+    readings: dict[str, dict[float, bytes]] = field(default_factory=dict)
+
+    def on_reading(self, sample: zenoh.Sample) -> None:
+        payload = sample.payload.to_bytes()
+        r = decode(payload, ConcentrationReading)
+        with self.lock:
+            old = self.readings.setdefault(r.vehicle_id, {}).setdefault(r.sim_time_s, payload)
+            if old != payload:
+                self.conflicts.append((r.vehicle_id, -1))
+
+    def on_state(self, sample: zenoh.Sample) -> None:
+        payload = sample.payload.to_bytes()
+        k = _key.decode(payload)
+        with self.lock:
+            old = self.states.setdefault(k.vehicle_id, {}).setdefault(k.tick, payload)
+            if old != payload:
+                self.conflicts.append((k.vehicle_id, k.tick))
+
+    def on_status(self, sample: zenoh.Sample) -> None:
+        s = decode(sample.payload.to_bytes(), VehicleStatus)
+        with self.lock:
+            self.status[s.vehicle_id] = s
+
+    def wait(self, predicate: Callable[[], T], timeout_s: float, what: str) -> T:
+        """``wait_until`` that supervises (reaps and restarts) meanwhile, as ``up`` does."""
+
+        def check() -> T:
+            self.launcher.supervise_once()
+            with self.lock:
+                return predicate()
+
+        return wait_until(check, timeout_s, what, poll_s=0.05)
+
+    def command(self, vid: str, cmd: object) -> CommandReply:
+        key = self.launcher.keys.vehicle_cmd(vid)
+        for reply in self.launcher.session.get(key, payload=encode(cmd), timeout=30.0):
+            assert reply.ok is not None, reply.err
+            return decode(reply.ok.payload.to_bytes(), CommandReply)
+        raise AssertionError(f"no reply from {vid}")
+
+    def last_tick(self, vid: str) -> int:
+        ticks = self.states.get(vid)
+        return max(ticks) if ticks else -1
+
+    def done(self) -> bool:
+        """Every mission finished and every vehicle landed and disarmed (caller holds lock)."""
+        return all(
+            (s := self.status.get(v)) is not None
+            and s.mission_finished
+            and s.landed
+            and not s.armed
+            for v in VEHICLES
+        )
+
+    def z(self, vid: str, tick: int) -> float:
+        return decode(self.states[vid][tick], VehicleState).position_enu_m[2]
+
+
+@contextmanager
+def flight(tmp: Path, per_process: int = 1) -> Iterator[Flight]:
+    """The stack flying the three missions from tick START_TICK + 1 on (``per_process``
+    vehicles per autopilot process)."""
+    path, _, _ = write_scenario(tmp / "scenario.toml", len(VEHICLES) + 1)
+    scenario = load_scenario(path)
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    opts = LaunchOptions(
+        scenario_path=path,
+        headless=True,
+        run_dir=tmp / "run",
+        connect=(endpoint,),
+        roles=("router", "plume", "physics", "autopilot"),
+        vehicles=VEHICLES,
+        vehicles_per_process=per_process,
+    )
+    launcher = Launcher(scenario, opts)
+    f = Flight(launcher)
+    subs: list[zenoh.Subscriber[None]] = []
+    release = tmp / "release"
+
+    def on_bus(session: zenoh.Session) -> None:  # before anything else runs: tick 0 on
+        keys = keys_for()
+        subs.append(session.declare_subscriber(keys.all_vehicle_states(), f.on_state))
+        subs.append(session.declare_subscriber(keys.all_vehicle_status(), f.on_status))
+        subs.append(session.declare_subscriber(keys.all_vehicle_concentration(), f.on_reading))
+
+    gate: subprocess.Popen[bytes] | None = None
+    try:
+        launcher.start(on_bus)
+        gate = subprocess.Popen(
+            [sys.executable, "-m", "tests.support.scripted_autopilot", "--connect", endpoint,
+             "--scenario", str(path), "--vehicle", GATE, "--throttle", "0",
+             "--delay-tick", str(START_TICK), "--delay-s", "300", "--release-file", str(release),
+             "--follow-rewinds"],
+            cwd=REPO, env=dict(os.environ, PYTHONPATH=str(REPO)), start_new_session=True,
+            stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT,
+        )  # fmt: skip
+        f.wait(
+            lambda: all(f.last_tick(v) >= START_TICK for v in (*VEHICLES, GATE)),
+            120.0,
+            f"tick {START_TICK}",
+        )
+        for vid in VEHICLES:
+            for cmd in (Arm(), MissionStart(start_index=0)):
+                reply = f.command(vid, cmd)
+                assert reply.accepted, (vid, cmd, reply.reason)
+        assert all(f.last_tick(v) == START_TICK for v in VEHICLES), "the gate did not hold"
+        release.touch()
+        yield f
+    finally:
+        if gate is not None:
+            with suppress(ProcessLookupError):
+                os.killpg(gate.pid, signal.SIGTERM)
+            gate.wait(10)
+        for sub in subs:
+            sub.undeclare()
+        launcher.stop()
+
+
+@pytest.fixture(scope="module")
+def baseline(tmp_path_factory: pytest.TempPathFactory) -> Flight:
+    """The flight without any kill."""
+    with flight(tmp_path_factory.mktemp("baseline")) as f:
+        f.wait(f.done, 300.0, "every mission finished and landed")
+        f.launcher.supervise_once()
+        time.sleep(0.5)  # a few more ticks on the ground
+    return f
+
+
+def kill(f: Flight, *names: str) -> None:
+    pids = f.launcher.supervisor.pids()
+    for name in names:
+        os.killpg(pids[name], signal.SIGKILL)
+
+
+def fly_with_kill(tmp: Path, *names: str, per_process: int = 1) -> tuple[Flight, int]:
+    """Fly the missions, SIGKILL ``names`` while uav1 flies its first leg at 10 m; the flight
+    and the last tick of uav1 seen before the kill."""
+    with flight(tmp, per_process) as f:
+        f.wait(
+            lambda: (s := f.status.get(KILLED)) is not None and s.mission_index >= 1,
+            300.0,
+            f"{KILLED} on its first leg",
+        )
+        with f.lock:
+            before = f.last_tick(KILLED)
+        old = f.launcher.supervisor.pids()
+        kill(f, *names)
+        f.wait(
+            lambda: all(f.launcher.supervisor.pids().get(n) not in (None, old[n]) for n in names),
+            120.0,
+            f"{', '.join(names)} restarted",
+        )
+        f.wait(f.done, 300.0, "every mission finished and landed after the kill")
+        time.sleep(0.5)
+    return f, before
+
+
+def assert_nothing_lost(f: Flight, baseline: Flight, killed_at: int) -> None:
+    assert not f.conflicts, f"replayed ticks differ: {f.conflicts[:5]}"
+    # the killed vehicle was flying at the kill, and flew on as it did without the kill: no
+    # tick of it lower by more than 1 m than in the run without the kill ...
+    assert f.z(KILLED, killed_at) > 8.0, f.z(KILLED, killed_at)
+    common = sorted(set(f.states[KILLED]) & set(baseline.states[KILLED]))
+    drop = max(baseline.z(KILLED, t) - f.z(KILLED, t) for t in common if t >= killed_at)
+    assert drop < 1.0, drop
+    # ... and every vehicle's state stream is the bits of the run without the kill
+    for vid in (*VEHICLES, GATE):
+        got, want = f.states[vid], baseline.states[vid]
+        end = min(max(got), max(want))
+        assert end > killed_at + 120 * 5, (vid, end)
+        missing = [t for t in range(end + 1) if t not in got or t not in want]
+        assert not missing, (vid, missing[:5])
+        differ = [t for t in range(end + 1) if got[t] != want[t]]
+        assert not differ, f"{vid}: {len(differ)} ticks differ from the run without the kill"
+    # ... and so is every reading of the plume, through the kill (sensor state and queries)
+    for vid in VEHICLES:
+        got_r, want_r = f.readings[vid], baseline.readings[vid]
+        end_s = min(max(got_r), max(want_r))
+        times = sorted(t for t in set(got_r) | set(want_r) if t <= end_s)
+        assert end_s > killed_at / 120.0 + 5.0, (vid, end_s)
+        lost = [t for t in times if t not in got_r or t not in want_r]
+        assert not lost, (vid, lost[:5])
+        assert all(got_r[t] == want_r[t] for t in times), f"{vid}: readings differ"
+
+
+def test_autopilot_killed_mid_mission_the_clock_waits_and_nothing_is_lost(
+    baseline: Flight, tmp_path: Path
+) -> None:
+    f, killed_at = fly_with_kill(tmp_path, f"autopilot-{KILLED}")
+    assert_nothing_lost(f, baseline, killed_at)
+    run = f.launcher.run_dir
+    assert "holding the clock for uav1" in (run / "physics.log").read_text()
+    assert "restored the state of tick" in (run / f"autopilot-{KILLED}.log").read_text()
+
+
+def test_physics_and_autopilot_killed_at_once_nothing_is_lost(
+    baseline: Flight, tmp_path: Path
+) -> None:
+    f, killed_at = fly_with_kill(tmp_path, "physics", f"autopilot-{KILLED}")
+    assert_nothing_lost(f, baseline, killed_at)
+    run = f.launcher.run_dir
+    assert "resumed from checkpoint" in (run / "physics.log").read_text()
+    for vid in VEHICLES:
+        assert "restored the state of tick" in (run / f"autopilot-{vid}.log").read_text(), vid
+
+
+def test_a_process_of_two_autopilots_killed_both_vehicles_resume(
+    baseline: Flight, tmp_path: Path
+) -> None:
+    """Two vehicles in one process (one ActuatorBatch per tick): the clock holds both, the new
+    process restores both, and the streams are the bits of the run without the kill (flown one
+    vehicle per process: batching changes no bit either)."""
+    f, killed_at = fly_with_kill(tmp_path, "autopilot-uav1-plus1", per_process=2)
+    assert_nothing_lost(f, baseline, killed_at)
+    log = (f.launcher.run_dir / "physics.log").read_text()
+    assert "holding the clock for uav1, uav2: autopilot-uav1-plus1 is being restarted" in log
