@@ -89,6 +89,11 @@ class Stack:
         with self.lock:
             return self.states[vid].tick if vid in self.states else -1
 
+    def holding(self, vid: str) -> bool:
+        with self.lock:
+            s = self.status.get(vid)
+        return s is not None and s.mode == FlightMode.HOLD
+
 
 @pytest.fixture(scope="module")
 def stack(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Stack]:
@@ -131,6 +136,9 @@ def stack(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Stack]:
             "all vehicles at altitude",
             poll_s=0.2,
         )
+        # The tests start from a hold: the take-off ends (mode HOLD) only once at altitude, so a
+        # test that kills a process right at ALTITUDE_M - 2 would catch a vehicle still climbing.
+        wait_until(lambda: all(st.holding(v) for v in VEHICLES), 120.0, "every vehicle holding")
         yield st
         for s in subs:
             s.undeclare()
