@@ -36,6 +36,7 @@ from __future__ import annotations
 import math
 import struct
 from collections import deque
+from collections.abc import Iterable
 from typing import NamedTuple
 
 import numpy as np
@@ -118,6 +119,15 @@ class ConcentrationSensor:
             world.pressure_pa,
             history_samples=samples,
         )
+
+    @property
+    def lag_history(self) -> deque[tuple[float, float]]:
+        """(sim time, lag state) of the latest samples, newest last (the sensor's memory)."""
+        return self._history
+
+    def resume(self, history: Iterable[tuple[float, float]]) -> None:
+        """Continue from a saved :attr:`lag_history` (empty: switched on in clean air)."""
+        self._history = deque(history, maxlen=self._history.maxlen)
 
     def due(self, tick: int) -> bool:
         return tick % self.config.period_ticks == 0

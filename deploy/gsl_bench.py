@@ -1,9 +1,9 @@
 """``plumeswarm bench gsl``: source-seeking algorithms × environments × sensors, N seeded runs.
 
 Every cell runs the same N starts (:func:`deploy.gsl_episode.start_point`), spread over the
-worker processes; the episodes are independent and seeded from (seed, run, algorithm,
-vehicle), so the table and ``gsl.json`` are the same bytes for the same arguments whatever
-the number of workers. Columns (docs/gsl.md): success % with its Wilson 95 % interval, median
+worker processes; the episodes are independent and seeded from (seed, run, vehicle), so the
+table and ``gsl.json`` are the same bytes for the same arguments whatever the number of
+workers. Columns (docs/gsl.md): success % with its Wilson 95 % interval, median
 time to success with its interquartile range, median path length, median path / initial
 distance, median final error, mean detections per minute.
 """

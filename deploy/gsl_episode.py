@@ -1,13 +1,19 @@
-"""One source-seeking episode in kinematic dynamics, and the registries the bench sweeps.
+"""One source-seeking episode, in either dynamics, and the registries the bench sweeps.
 
 An *episode*: one algorithm (a behaviour plug-in on 1 or more vehicles), one environment (a
-concentration field and its wind), one sensor model, one seeded start. Vehicles are point
-masses that follow their setpoint exactly (a velocity setpoint is flown as given, capped at
-``MAX_SPEED_M_S``; a position setpoint is approached at ``POSITION_GAIN_HZ``·distance, capped
-likewise): the behaviours' decisions, not a controller's, make the result. The field is
-sampled at every vehicle's position every ``sensor_period_ticks``; each vehicle's reading goes
-through the scenario's sensor model (:class:`agents.sensor.ConcentrationSensor`) and carries
-the field's values at its peers' positions, as on the bus.
+concentration field and its wind), one sensor model, one seeded start — all of it a scenario
+(:func:`episode_scenario`). Two ways to fly it:
+
+- ``kinematic`` (:func:`kinematic_episode`): point masses that follow their setpoint exactly (a
+  velocity setpoint is flown as given, capped at ``MAX_SPEED_M_S``; a position setpoint is
+  approached at ``POSITION_GAIN_HZ``·distance, capped likewise): the behaviours' decisions,
+  not a controller's, make the result. The field is sampled at every vehicle's position every
+  ``sensor_period_ticks``; each vehicle's reading goes through its sensor model and carries the
+  field's values at its peers' positions, as on the bus, and reaches the behaviour that tick.
+- ``full`` (:func:`fused_episode`): the scenario on the fused runner (:mod:`deploy.fused`) —
+  the distributed stack's physics, autopilots, sensors and plume, the same bits; a take-off
+  and an offboard switch at recorded tick boundaries (:class:`Schedule`), so the same episode
+  can be flown on the distributed stack.
 
 Registries (:data:`ALGORITHMS`, :data:`ENVIRONMENTS`, :data:`SENSORS`) are plain dicts: add an
 entry to add a row. An environment or sensor whose model this build lacks is listed with what
@@ -17,26 +23,37 @@ is missing, so the bench can say which cells it could not run.
 from __future__ import annotations
 
 import math
-import zlib
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import msgspec
 import numpy as np
 import numpy.typing as npt
 
-from agents.anemometer import Anemometer
+from agents.autopilot_node import behavior_rng
 from agents.behavior import Behavior, BehaviorContext, load_behavior
 from agents.behaviors.search import PLUME_THRESHOLD_G_M3, SourceEstimate
 from agents.sensor import ConcentrationSensor
+from deploy.fused import FusedRunner, StatesObserver
 from plume_service.from_scenario import field_from_scenario
-from swarmbus.messages import ConcentrationReading, PeerReading, Setpoint, VehicleState
+from swarmbus.messages import (
+    Arm,
+    Command,
+    ConcentrationReading,
+    FlightMode,
+    PeerReading,
+    SetMode,
+    Setpoint,
+    Takeoff,
+    VehicleState,
+)
 from swarmbus.plume_formula import downwind_unit
 from swarmbus.scenario import Scenario, Sensor, Vehicle, load_scenario
 from swarmbus.wind import WindModel, wind_from_scenario
 
 FloatArray = npt.NDArray[np.float64]
 Field = Callable[[FloatArray, float], FloatArray]
+Point = tuple[float, float]
 
 MAX_SPEED_M_S = 5.0
 POSITION_GAIN_HZ = 1.0
@@ -185,19 +202,34 @@ def start_point(scenario: Scenario, seed: int, run: int) -> tuple[float, float]:
     return src.x_m + along * dw[0] + across * cw[0], src.y_m + along * dw[1] + across * cw[1]
 
 
+def episode_starts(scenario: Scenario, spec: EpisodeSpec, count: int) -> list[list[float]]:
+    """Where each vehicle starts (ENU, at ``START_ALTITUDE_M``): run ``spec.run``'s start; a
+    swarm on a circle of 2 m around it."""
+    sx, sy = start_point(scenario, spec.seed, spec.run)
+    starts = [[sx, sy, START_ALTITUDE_M] for _ in range(count)]
+    if count > 1:
+        for i, p in enumerate(starts):
+            angle = 2.0 * math.pi * i / count
+            p[0] += 2.0 * math.cos(angle)
+            p[1] += 2.0 * math.sin(angle)
+    return starts
+
+
 def episode_scenario(base: Scenario, spec: EpisodeSpec) -> Scenario:
+    """The episode as a scenario: the algorithm's behaviour on each vehicle, spawned on the
+    ground under its start, the sensor, the environment's models, and the run's own seed
+    (seed × 100003 + run: the sensors' noise, the anemometers, the behaviours' generators and a
+    time-dependent field's realisation). Any runner of the scenario flies the same episode."""
     algo = ALGORITHMS[spec.algorithm]
     sensor = SENSORS[spec.sensor].config
     assert sensor is not None
     sensor = msgspec.structs.replace(sensor, period_ticks=spec.sensor_period_ticks)
+    starts = episode_starts(base, spec, algo.vehicles)
     vehicles = [
-        Vehicle(id=f"uav{i + 1}", behavior=algo.behavior, mission=[]) for i in range(algo.vehicles)
+        Vehicle(id=f"uav{i + 1}", behavior=algo.behavior, mission=[], spawn_enu_m=(p[0], p[1], 0.0))
+        for i, p in enumerate(starts)
     ]
-    # A time-dependent field draws its own realisation for each run.
-    seed = spec.seed
-    if ENVIRONMENTS[spec.environment].time_dependent:
-        seed = spec.seed * 100_003 + spec.run
-    world = msgspec.structs.replace(base.world, seed=seed)
+    world = msgspec.structs.replace(base.world, seed=spec.seed * 100_003 + spec.run)
     time = msgspec.structs.replace(base.time, control_hz=spec.control_hz)
     scenario = msgspec.structs.replace(
         base, world=world, time=time, sensor=sensor, vehicles=vehicles
@@ -223,143 +255,6 @@ def _follow(setpoint: Setpoint | None, p: list[float]) -> tuple[float, float, fl
     return v[0], v[1], v[2]
 
 
-class KinematicFlight:
-    """Point masses that fly their behaviour's setpoint."""
-
-    def __init__(
-        self,
-        scenario: Scenario,
-        behaviors: list[Behavior],
-        starts: list[list[float]],
-        dt: float,
-        start_tick: int = 0,
-    ) -> None:
-        self.ids = [v.id for v in scenario.vehicles]
-        self.behaviors = behaviors
-        self.positions = [list(p) for p in starts]
-        self.velocities = [(0.0, 0.0, 0.0)] * len(starts)
-        self.dt = dt
-        self.start_tick = start_tick
-
-    def states(self, tick: int, t: float) -> list[VehicleState]:
-        return [
-            _state(self.ids[i], tick, t, p, self.velocities[i])
-            for i, p in enumerate(self.positions)
-        ]
-
-    def act(
-        self,
-        i: int,
-        own: VehicleState,
-        peers: list[VehicleState],
-        readings: list[ConcentrationReading],
-    ) -> None:
-        self.velocities[i] = _follow(
-            self.behaviors[i].step(own, peers, readings), self.positions[i]
-        )
-
-    def advance(self) -> None:
-        for p, v in zip(self.positions, self.velocities, strict=True):
-            p[0] += v[0] * self.dt
-            p[1] += v[1] * self.dt
-            p[2] += v[2] * self.dt
-
-    def close(self) -> None:
-        pass
-
-
-class FullFlight:
-    """The real vehicles: pybullet physics (:class:`sim_world.world.World`) and one
-    :class:`agents.autopilot.Autopilot` per vehicle running its behaviour in offboard mode,
-    stepped in lockstep in this process. Each vehicle is armed on the ground at its start,
-    takes off to the start altitude, and is switched to offboard once all hover within
-    ``altitude_tolerance_m`` of it; the episode starts then, or at sim time ``start_s`` if
-    that is later (the vehicles hover till then)."""
-
-    takeoff_timeout_s = 60.0
-    altitude_tolerance_m = 0.03
-
-    def __init__(
-        self,
-        scenario: Scenario,
-        behaviors: list[Behavior],
-        starts: list[list[float]],
-        start_s: float = 0.0,
-    ):
-        from agents.autopilot import Autopilot
-        from sim_world.world import World
-
-        vehicles = [
-            msgspec.structs.replace(v, spawn_enu_m=(p[0], p[1], 0.0))
-            for v, p in zip(scenario.vehicles, starts, strict=True)
-        ]
-        self.scenario = msgspec.structs.replace(scenario, vehicles=vehicles)
-        self.ids = [v.id for v in vehicles]
-        self.world = World(self.scenario)
-        self.autopilots = [
-            Autopilot(self.scenario, vid, behavior=b)
-            for vid, b in zip(self.ids, behaviors, strict=True)
-        ]
-        self.substeps = self.scenario.substeps
-        self.dt = 1.0 / self.scenario.time.control_hz
-        self.tick = 0
-        self._take_off(starts[0][2])
-        self._run_ticks(max(0, round(start_s / self.dt) - self.tick))  # hover until start_s
-        self.start_tick = self.tick
-
-    def _run_ticks(self, count: int) -> None:
-        for _ in range(count):
-            states = self.states(self.tick, self.tick * self.dt)
-            for i, state in enumerate(states):
-                self.act(i, state, states[:i] + states[i + 1 :], [])
-            self.advance()
-
-    def _take_off(self, altitude_m: float) -> None:
-        from swarmbus.messages import Arm, FlightMode, SetMode, Takeoff
-
-        self._run_ticks(2)
-        for ap in self.autopilots:
-            for cmd in (Arm(), Takeoff(altitude_m=altitude_m)):
-                reply = ap.handle(cmd)
-                if not reply.accepted:
-                    raise RuntimeError(f"{ap.vehicle_id}: {type(cmd).__name__}: {reply.reason}")
-        deadline = self.tick + round(self.takeoff_timeout_s / self.dt)
-        # Hovering, and at the start altitude: the take-off hands over to hold within 0.3 m of
-        # it, and the behaviours keep the altitude they begin at.
-        while any(ap.modes.mode != FlightMode.HOLD for ap in self.autopilots) or any(
-            abs(s.position_enu_m[2] - altitude_m) > self.altitude_tolerance_m
-            for s in self.states(self.tick, self.tick * self.dt)
-        ):
-            if self.tick > deadline:
-                raise RuntimeError(
-                    f"vehicles not hovering at {altitude_m} m after {self.takeoff_timeout_s} s"
-                )
-            self._run_ticks(1)
-        for ap in self.autopilots:
-            reply = ap.handle(SetMode(mode=FlightMode.OFFBOARD))
-            if not reply.accepted:
-                raise RuntimeError(f"{ap.vehicle_id}: offboard: {reply.reason}")
-
-    def states(self, tick: int, t: float) -> list[VehicleState]:
-        return self.world.states(tick, t)
-
-    def act(
-        self,
-        i: int,
-        own: VehicleState,
-        peers: list[VehicleState],
-        readings: list[ConcentrationReading],
-    ) -> None:
-        self.world.apply(self.ids[i], self.autopilots[i].step(own, peers, readings))
-
-    def advance(self) -> None:
-        self.world.step(self.substeps)
-        self.tick += 1
-
-    def close(self) -> None:
-        self.world.close()
-
-
 def _state(
     vehicle_id: str, tick: int, t: float, p: list[float], v: tuple[float, ...]
 ) -> VehicleState:
@@ -378,162 +273,281 @@ def _state(
     )
 
 
-def behavior_rng(spec: EpisodeSpec, vehicle_index: int) -> np.random.Generator:
-    salt = zlib.crc32(spec.algorithm.encode())
-    ss = np.random.SeedSequence([spec.seed, spec.run, vehicle_index, salt])
-    return np.random.Generator(np.random.PCG64(ss))
+def episode_behaviors(spec: EpisodeSpec, scenario: Scenario) -> list[Behavior]:
+    """The episode's behaviours, built as an autopilot process builds them (same context,
+    same generator): each reads the wind from its vehicle's anemometer."""
+    dt = 1.0 / spec.control_hz
+    return [
+        load_behavior(
+            v.behavior or "", BehaviorContext(v.id, i, scenario, dt, behavior_rng(scenario, v.id))
+        )
+        for i, v in enumerate(scenario.vehicles)
+    ]
+
+
+def declaration_of(behaviors: Sequence[object]) -> SourceEstimate | None:
+    """The first declaration among the behaviours, if any."""
+    return next((d for b in behaviors if (d := getattr(b, "declaration", None)) is not None), None)
+
+
+class Tally:
+    """What an episode measures as it flies: path, track, first arrival, detections."""
+
+    def __init__(
+        self, spec: EpisodeSpec, n: int, dt: float, t0: float, start: Point, source: Point
+    ) -> None:
+        self.spec, self.n, self.t0 = spec, n, t0
+        self.start, self.source = start, source
+        self.path = [0.0] * n
+        self.detections = 0
+        self.first_inside_s: float | None = None
+        self.keep_every = max(1, round(TRAJECTORY_EVERY_S / dt))
+        self.tracks: list[list[tuple[float, float]]] = [[] for _ in range(n)]
+        self.previous: list[tuple[float, float, float]] | None = None
+        self.count = 0
+
+    def observe(self, t: float, positions: Sequence[tuple[float, float, float]]) -> None:
+        """Every vehicle's position at sim time ``t`` (one call per control tick)."""
+        if self.previous is not None:
+            for i, (p, q) in enumerate(zip(positions, self.previous, strict=True)):
+                self.path[i] += math.hypot(p[0] - q[0], p[1] - q[1])
+        self.previous = list(positions)
+        if self.spec.keep_trajectory and self.count % self.keep_every == 0:
+            for i, p in enumerate(positions):
+                self.tracks[i].append((p[0], p[1]))
+        self.count += 1
+        cx = sum(p[0] for p in positions) / self.n
+        cy = sum(p[1] for p in positions) / self.n
+        if self.first_inside_s is None and math.dist((cx, cy), self.source) <= SUCCESS_RADIUS_M:
+            self.first_inside_s = t - self.t0
+
+    def reading(self, reading: ConcentrationReading) -> None:
+        value = reading.reported_g_m3
+        if value is not None and value >= PLUME_THRESHOLD_G_M3:
+            self.detections += 1
+
+    def outcome(self, elapsed_s: float, declared: SourceEstimate | None) -> Outcome:
+        """The episode's result; the last :meth:`observe` was where the vehicles end."""
+        assert self.previous is not None
+        final = self.previous
+        if declared is not None:
+            estimate = (declared.x_m, declared.y_m)
+        else:
+            estimate = (
+                sum(p[0] for p in final) / self.n,
+                sum(p[1] for p in final) / self.n,
+            )
+        error = math.dist(estimate, self.source)
+        success = error <= SUCCESS_RADIUS_M
+        time_s: float | None = None
+        if success:
+            time_s = declared.sim_time_s - self.t0 if declared else self.first_inside_s
+        return Outcome(
+            spec=self.spec,
+            success=success,
+            time_to_success_s=time_s,
+            path_length_m=sum(self.path) / self.n,
+            initial_distance_m=math.dist(self.start, self.source),
+            final_error_m=error,
+            detections_per_min=self.detections / self.n / (elapsed_s / 60.0),
+            declared=declared is not None,
+            estimate_xy=estimate,
+            trajectories=self.tracks if self.spec.keep_trajectory else [],
+        )
 
 
 def run_episode(spec: EpisodeSpec, base: Scenario | None = None) -> Outcome:
     """Fly one episode to its declaration or its time limit; deterministic in ``spec``."""
-    base = base if base is not None else load_scenario()
-    env = ENVIRONMENTS[spec.environment]
-    assert env.missing is None
-    scenario = episode_scenario(base, spec)
-    concentration, wind = environment_field(scenario)
-    start_s = FIELD_WARMUP_S if env.time_dependent else 0.0
-    src = scenario.plume.sources[0]
-    sx, sy = start_point(scenario, spec.seed, spec.run)
-    n = len(scenario.vehicles)
-    starts = [[sx, sy, START_ALTITUDE_M] for _ in range(n)]
-    if n > 1:  # a swarm starts on a circle of 2 m around the start point
-        for i, p in enumerate(starts):
-            angle = 2.0 * math.pi * i / n
-            p[0] += 2.0 * math.cos(angle)
-            p[1] += 2.0 * math.sin(angle)
-    dt = 1.0 / spec.control_hz
-    behaviors = episode_behaviors(spec, scenario, wind)
-    sensors = [
-        ConcentrationSensor(scenario.sensor, spec.seed * 100_003 + spec.run, i) for i in range(n)
-    ]
-    flight: KinematicFlight | FullFlight
     if spec.dynamics == "full":
-        flight = FullFlight(scenario, behaviors, starts, start_s)
-    else:
-        flight = KinematicFlight(scenario, behaviors, starts, dt, round(start_s / dt))
-    try:
-        return _fly(spec, flight, behaviors, sensors, concentration, (sx, sy), (src.x_m, src.y_m))
-    finally:
-        flight.close()
+        return fused_episode(spec, base)[0]
+    return kinematic_episode(spec, base)
 
 
-def episode_behaviors(spec: EpisodeSpec, scenario: Scenario, wind: WindModel) -> list[Behavior]:
-    """The episode's behaviours; in a time-dependent environment each reads ``wind`` through
-    its vehicle's anemometer instead of the scenario's mean wind."""
+def _tally(spec: EpisodeSpec, scenario: Scenario, dt: float, t0: float) -> Tally:
+    src = scenario.plume.sources[0]
+    return Tally(
+        spec,
+        len(scenario.vehicles),
+        dt,
+        t0,
+        start_point(scenario, spec.seed, spec.run),
+        (src.x_m, src.y_m),
+    )
+
+
+def kinematic_episode(spec: EpisodeSpec, base: Scenario | None = None) -> Outcome:
+    """The episode with point masses; the field sampled here, each reading handed to its
+    behaviour on the tick it is sampled."""
+    base = base if base is not None else load_scenario()
+    scenario = episode_scenario(base, spec)
+    concentration, _ = environment_field(scenario)
     dt = 1.0 / spec.control_hz
-    behaviors = []
-    for i, v in enumerate(scenario.vehicles):
-        ctx = BehaviorContext(v.id, i, scenario, dt, behavior_rng(spec, i))
-        behavior = load_behavior(v.behavior or "", ctx)
-        if ENVIRONMENTS[spec.environment].time_dependent and hasattr(behavior, "read_wind"):
-            behavior.read_wind = _anemometer_reader(scenario, wind, i, v.id)
-        behaviors.append(behavior)
-    return behaviors
-
-
-def _anemometer_reader(
-    scenario: Scenario, wind: WindModel, index: int, vehicle_id: str
-) -> Callable[[VehicleState], tuple[float, float]]:
-    """A behaviour's ``read_wind``: the vehicle's anemometer at its state's tick and position."""
-    anemometer = Anemometer(scenario.anemometer, wind, scenario.world.seed, index)
-
-    def read(own: VehicleState) -> tuple[float, float]:
-        r = anemometer.read(vehicle_id, own.tick, own.sim_time_s, own.position_enu_m)
-        return r.wind_enu_m_s[0], r.wind_enu_m_s[1]
-
-    return read
-
-
-def _fly(
-    spec: EpisodeSpec,
-    flight: KinematicFlight | FullFlight,
-    behaviors: list[Behavior],
-    sensors: list[ConcentrationSensor],
-    concentration: Field,
-    start: tuple[float, float],
-    source: tuple[float, float],
-) -> Outcome:
-    ids = flight.ids
-    dt = flight.dt
-    n = len(ids)
-    period = sensors[0].config.period_ticks
-    t0 = flight.start_tick * dt
-    path = [0.0] * n
-    detections = 0
-    first_inside_s: float | None = None
+    start_tick = round(_start_s(spec) / dt)
+    ids = [v.id for v in scenario.vehicles]
+    behaviors = episode_behaviors(spec, scenario)
+    sensors = [ConcentrationSensor.for_vehicle(scenario, i) for i in range(len(ids))]
+    positions = episode_starts(base, spec, len(ids))
+    velocities = [(0.0, 0.0, 0.0)] * len(ids)
+    tally = _tally(spec, scenario, dt, start_tick * dt)
+    period = scenario.sensor.period_ticks
     declared: SourceEstimate | None = None
-    keep_every = max(1, round(TRAJECTORY_EVERY_S / dt))
-    tracks: list[list[tuple[float, float]]] = [[] for _ in range(n)]
-    previous: list[tuple[float, float, float]] | None = None
-    ticks = round(spec.time_limit_s / dt)
     k = 0
-    for k in range(ticks):
-        tick = flight.start_tick + k
+    for k in range(round(spec.time_limit_s / dt)):
+        tick = start_tick + k
         t = tick * dt
-        states = flight.states(tick, t)
-        positions = [s.position_enu_m for s in states]
-        if previous is not None:
-            for i, (p, q) in enumerate(zip(positions, previous, strict=True)):
-                path[i] += math.hypot(p[0] - q[0], p[1] - q[1])
-        previous = positions
-        if spec.keep_trajectory and k % keep_every == 0:
-            for i, p in enumerate(positions):
-                tracks[i].append((p[0], p[1]))
-        cx = sum(p[0] for p in positions) / n
-        cy = sum(p[1] for p in positions) / n
-        if first_inside_s is None and math.dist((cx, cy), source) <= SUCCESS_RADIUS_M:
-            first_inside_s = t - t0
-        readings: list[list[ConcentrationReading]] = [[] for _ in range(n)]
-        if tick % period == 0:
-            values = concentration(np.array(positions, dtype=np.float64), t)
-            for i in range(n):
-                peers = [
-                    PeerReading(
-                        vehicle_id=ids[j], position_enu_m=positions[j], true_g_m3=float(values[j])
-                    )
-                    for j in range(n)
-                    if j != i
-                ]
-                r = sensors[i].reading(ids[i], t, positions[i], float(values[i]), peers)
-                if r.reported_g_m3 is not None and r.reported_g_m3 >= PLUME_THRESHOLD_G_M3:
-                    detections += 1
-                readings[i].append(r)
-        for i in range(n):
-            flight.act(i, states[i], states[:i] + states[i + 1 :], readings[i])
-        flight.advance()
-        declared = next(
-            (d for b in behaviors if (d := getattr(b, "declaration", None)) is not None), None
-        )
+        states = [
+            _state(vid, tick, t, p, velocities[i])
+            for i, (vid, p) in enumerate(zip(ids, positions, strict=True))
+        ]
+        tally.observe(t, [s.position_enu_m for s in states])
+        readings = _sample(tally, sensors, states, concentration) if tick % period == 0 else None
+        for i, b in enumerate(behaviors):
+            own = [readings[i]] if readings is not None else []
+            setpoint = b.step(states[i], states[:i] + states[i + 1 :], own)
+            velocities[i] = _follow(setpoint, positions[i])
+        for p, v in zip(positions, velocities, strict=True):
+            p[0] += v[0] * dt
+            p[1] += v[1] * dt
+            p[2] += v[2] * dt
+        declared = declaration_of(behaviors)
         if declared is not None:
             break
-    elapsed_s = (k + 1) * dt
-    final = flight.states(flight.start_tick + k + 1, t0 + elapsed_s)
-    if previous is not None:
-        for i, (s, q) in enumerate(zip(final, previous, strict=True)):
-            path[i] += math.hypot(s.position_enu_m[0] - q[0], s.position_enu_m[1] - q[1])
-    if declared is not None:
-        estimate = (declared.x_m, declared.y_m)
-    else:
-        estimate = (
-            sum(s.position_enu_m[0] for s in final) / n,
-            sum(s.position_enu_m[1] for s in final) / n,
+    tally.observe((start_tick + k + 1) * dt, [(p[0], p[1], p[2]) for p in positions])
+    return tally.outcome((k + 1) * dt, declared)
+
+
+def _sample(
+    tally: Tally,
+    sensors: list[ConcentrationSensor],
+    states: list[VehicleState],
+    concentration: Field,
+) -> list[ConcentrationReading]:
+    """Every vehicle's reading of this sensor tick (peers' field values attached, as on the
+    bus)."""
+    positions = [s.position_enu_m for s in states]
+    t = states[0].sim_time_s
+    values = concentration(np.array(positions, dtype=np.float64), t)
+    everyone = [
+        PeerReading(vehicle_id=s.vehicle_id, position_enu_m=s.position_enu_m, true_g_m3=float(v))
+        for s, v in zip(states, values, strict=True)
+    ]
+    readings = []
+    for i, (sensor, s) in enumerate(zip(sensors, states, strict=True)):
+        peers = everyone[:i] + everyone[i + 1 :]
+        r = sensor.reading(s.vehicle_id, t, s.position_enu_m, float(values[i]), peers)
+        tally.reading(r)
+        readings.append(r)
+    return readings
+
+
+def _start_s(spec: EpisodeSpec) -> float:
+    return FIELD_WARMUP_S if ENVIRONMENTS[spec.environment].time_dependent else 0.0
+
+
+#: Commands given at tick boundaries: {tick: [(vehicle, command)]}; given when the runner
+#: stands at that tick, each takes effect on the next.
+Boundary = dict[int, list[tuple[str, Command]]]
+
+
+@dataclass(frozen=True)
+class Schedule:
+    """What a full-dynamics episode did, enough to fly it again on any runner of the same
+    scenario: the commands at their tick boundaries and the last tick."""
+
+    scenario: Scenario
+    commands: Boundary
+    last_tick: int
+
+
+class FusedEpisode:
+    """A full-dynamics episode on the fused runner (:class:`deploy.fused.FusedRunner`: the
+    distributed stack's world, autopilots, sensors and plume in one process, the same bits).
+
+    Each vehicle is armed on the ground at its start and takes off to the start altitude;
+    once all hover within ``altitude_tolerance_m`` of it in hold mode — and not before sim
+    time ``start_s`` — all switch to offboard and their behaviours fly the episode. Every
+    command is recorded at its tick boundary (:attr:`commands`)."""
+
+    takeoff_timeout_s = 60.0
+    altitude_tolerance_m = 0.03
+
+    def __init__(self, scenario: Scenario, on_states: StatesObserver | None = None) -> None:
+        self.runner = FusedRunner(scenario, on_states=on_states)
+        self.commands: Boundary = {}
+        self.autopilots = [f.autopilot for f in self.runner.flights.values()]
+
+    def give(self, command: Command) -> None:
+        """``command`` to every vehicle at the runner's tick; it must be accepted."""
+        at = self.commands.setdefault(self.runner.tick, [])
+        for vid in self.runner.flights:
+            reply = self.runner.command(vid, command)
+            if not reply.accepted:
+                raise RuntimeError(f"{vid}: {type(command).__name__}: {reply.reason}")
+            at.append((vid, command))
+
+    def _hovering(self, altitude_m: float) -> bool:
+        return all(ap.modes.mode == FlightMode.HOLD for ap in self.autopilots) and all(
+            abs(s.position_enu_m[2] - altitude_m) <= self.altitude_tolerance_m
+            for s in self.runner.states
         )
-    error = math.dist(estimate, source)
-    success = error <= SUCCESS_RADIUS_M
-    if declared is not None:
-        time_s: float | None = declared.sim_time_s - t0 if success else None
-    else:
-        time_s = first_inside_s if success else None
-    initial = math.dist(start, source)
-    return Outcome(
-        spec=spec,
-        success=success,
-        time_to_success_s=time_s,
-        path_length_m=sum(path) / n,
-        initial_distance_m=initial,
-        final_error_m=error,
-        detections_per_min=detections / n / (elapsed_s / 60.0),
-        declared=declared is not None,
-        estimate_xy=estimate,
-        trajectories=tracks if spec.keep_trajectory else [],
-    )
+
+    def take_off(self, altitude_m: float, start_s: float) -> None:
+        """Arm, take off, hover till ``start_s``, then offboard: the behaviours fly from the
+        next tick on."""
+        run = self.runner
+        self.give(Arm())
+        self.give(Takeoff(altitude_m=altitude_m))
+        deadline = round(self.takeoff_timeout_s / run.control_dt_s)
+        while not self._hovering(altitude_m):
+            if run.tick > deadline:
+                raise RuntimeError(
+                    f"vehicles not hovering at {altitude_m} m after {self.takeoff_timeout_s} s"
+                )
+            run.step()
+        run.step(max(0, round(start_s / run.control_dt_s) - 1 - run.tick))
+        self.give(SetMode(mode=FlightMode.OFFBOARD))
+
+    def close(self) -> None:
+        self.runner.close()
+
+
+def fused_episode(
+    spec: EpisodeSpec, base: Scenario | None = None, on_states: StatesObserver | None = None
+) -> tuple[Outcome, Schedule]:
+    """The episode with the real vehicles on the fused runner; its outcome and schedule
+    (``on_states`` sees every tick's states from tick 0)."""
+    base = base if base is not None else load_scenario()
+    scenario = episode_scenario(base, spec)
+    episode = FusedEpisode(scenario, on_states)
+    try:
+        run = episode.runner
+        episode.take_off(START_ALTITUDE_M, _start_s(spec))
+        behaviors = [ap.behavior for ap in episode.autopilots]
+        dt = run.control_dt_s
+        run.step()  # the first tick the behaviours fly
+        tally = _tally(spec, scenario, dt, run.sim_time_s)
+        tally.observe(run.sim_time_s, [s.position_enu_m for s in run.states])
+        declared = _fly_fused(spec, run, behaviors, tally)
+        elapsed_s = run.sim_time_s - tally.t0
+        return tally.outcome(elapsed_s, declared), Schedule(scenario, episode.commands, run.tick)
+    finally:
+        episode.close()
+
+
+def _fly_fused(
+    spec: EpisodeSpec, run: FusedRunner, behaviors: Sequence[object], tally: Tally
+) -> SourceEstimate | None:
+    """Step until a declaration or the time limit; every tick's positions and every new
+    reading go to ``tally``."""
+    seen = dict(run.latest_readings)
+    for _ in range(round(spec.time_limit_s * run.scenario.time.control_hz)):
+        run.step()
+        tally.observe(run.sim_time_s, [s.position_enu_m for s in run.states])
+        for vid, r in run.latest_readings.items():
+            if seen.get(vid) is not r:
+                seen[vid] = r
+                tally.reading(r)
+        declared = declaration_of(behaviors)
+        if declared is not None:
+            return declared
+    return None

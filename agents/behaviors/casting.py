@@ -2,7 +2,8 @@
 
 The moth strategy (Kennedy & Marsh 1974, Science 184:999; as a robot algorithm, e.g. Ishida et
 al. 1994 and Lochmatter & Martinoli 2008). The wind comes from the wind input
-(:mod:`agents.behaviors.search`): while the sensor reads gas
+(:mod:`agents.behaviors.search`): while the sensor reads gas (with a slow-recovery sensor such
+as the metal-oxide preset: while its reading rises, :func:`~agents.behaviors.search.detector_for`)
 the vehicle *surges* upwind, weaving cross-wind and turning back whenever the reading drops
 (climbing the cross-wind gradient, which keeps it on the plume's axis). When the gas is lost
 for ``lost_s`` it *casts*: cross-wind legs of growing width centred on where it last smelled
@@ -28,8 +29,9 @@ from agents.behaviors.search import (
     SourceEstimate,
     WindFrame,
     WindReader,
+    anemometer_wind,
+    detector_for,
     hold_at,
-    scenario_wind,
     start_or_hold,
 )
 from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
@@ -37,6 +39,7 @@ from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
 
 class Casting(SavesState):
     state_attributes = (
+        "detector",
         "downwind",
         "crosswind",
         "declarer",
@@ -61,11 +64,12 @@ class Casting(SavesState):
     altitude_gain = 1.0
 
     def __init__(self, ctx: BehaviorContext) -> None:
-        self.read_wind: WindReader = scenario_wind(ctx)  # the anemometer input
+        self.read_wind: WindReader = anemometer_wind(ctx)
         toward = math.radians(270.0 - ctx.scenario.wind.from_deg)  # ENU angle the air moves to
         self.downwind = (math.cos(toward), math.sin(toward))
         self.crosswind = (-self.downwind[1], self.downwind[0])
         self.declarer = BestReadingDeclarer()
+        self.detector = detector_for(ctx, 0.0)  # a fast sensor: any gas
         self.declaration: SourceEstimate | None = None
         self.was_surging = False
         self.altitude_m: float | None = None
@@ -84,7 +88,7 @@ class Casting(SavesState):
                 continue
             value = r.reported_g_m3
             self.declarer.observe(r.position_enu_m[0], r.position_enu_m[1], value)
-            if value > 0.0:
+            if self.detector.hit(value):
                 if value < self.turn_fraction * self.leg_best:  # going down the gradient: turn
                     self.side = -self.side
                     self.leg_best = value

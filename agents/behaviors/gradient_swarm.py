@@ -8,9 +8,14 @@ simplest form: every member fits a plane to ln(c + ε) over the swarm's simultan
 at ``climb_speed_m_s``. ln c turns the Gaussian plume's crosswind profile into a parabola, so
 the fitted direction points toward the plume's axis and up it to the source at any distance.
 
-The readings: a vehicle's own reading carries its peers' values of the same sensor tick
-(``ConcentrationReading.peers``, the field's values at the peers' positions), so every member
-fits the same points and computes the same motion — no extra messages. Formation: the members
+The readings: a vehicle's own reading carries its peers' positions and the field's values there
+at the same sensor tick (``ConcentrationReading.peers``). The fit uses what each peer's sensor
+reports, as a swarm sharing its readings would: every member passes each peer's field value
+through a copy of that peer's sensor model (:class:`agents.sensor.ConcentrationSensor` with the
+peer's index and seed — the same lag, noise and transducer, so the same bits the peer reports
+for the samples it has seen since this member's first reading), so every member fits the same
+kind of values (its own sensor output and its peers') and computes the same motion — no extra
+messages. Formation: the members
 (sorted by vehicle id) sit on a regular polygon of radius ``formation_radius_m`` around the
 swarm's centroid, the first vertex upwind; each flies the common climb velocity plus a
 proportional pull to its vertex.
@@ -29,6 +34,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -40,12 +46,13 @@ from agents.behaviors.search import (
     SourceEstimate,
     WindFrame,
     WindReader,
+    anemometer_wind,
     fly,
     hold_at,
-    scenario_wind,
     start_or_hold,
 )
-from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
+from agents.sensor import ConcentrationSensor
+from swarmbus.messages import ConcentrationReading, PeerReading, Setpoint, VehicleState
 
 #: Added to every reading before the logarithm (g/m³), so that a zero reading is finite.
 LOG_FLOOR_G_M3 = 1e-12
@@ -73,6 +80,7 @@ class GradientSwarm(SavesState):
         "best_xy",
         "centroids",
         "sweep",
+        "peer_lags",
     )
     climb_speed_m_s = 2.0
     formation_radius_m = 2.0
@@ -86,7 +94,11 @@ class GradientSwarm(SavesState):
 
     def __init__(self, ctx: BehaviorContext) -> None:
         self.vehicle_id = ctx.vehicle_id
-        self.read_wind: WindReader = scenario_wind(ctx)  # the anemometer input
+        self.scenario = ctx.scenario
+        # each peer's sensor model, and its lag history (the state a snapshot keeps)
+        self.peer_sensors: dict[str, ConcentrationSensor] = {}
+        self.peer_lags: dict[str, deque[tuple[float, float]]] = {}
+        self.read_wind: WindReader = anemometer_wind(ctx)
         self.altitude_m: float | None = None
         self.declaration: SourceEstimate | None = None
         self.gradient: tuple[float, float] | None = None
@@ -105,7 +117,7 @@ class GradientSwarm(SavesState):
             vals = [r.reported_g_m3]
             for p in r.peers:
                 pts.append((p.position_enu_m[0], p.position_enu_m[1]))
-                vals.append(p.true_g_m3)
+                vals.append(self.peer_output(p, r.sim_time_s))
             for (x, y), v in zip(pts, vals, strict=True):
                 if v > self.best_g_m3:
                     self.best_g_m3, self.best_xy = v, (x, y)
@@ -113,6 +125,21 @@ class GradientSwarm(SavesState):
                 self.gradient = log_gradient(pts, vals)
             elif max(vals) <= 0.0:
                 self.gradient = None
+
+    def restore(self, data: dict[str, Any]) -> None:
+        super().restore(data)
+        self.peer_sensors = {}  # rebuilt from peer_lags on the next reading
+
+    def peer_output(self, peer: PeerReading, sim_time_s: float) -> float:
+        """What ``peer``'s sensor reports for its field value at ``sim_time_s``."""
+        sensor = self.peer_sensors.get(peer.vehicle_id)
+        if sensor is None:
+            index = [v.id for v in self.scenario.vehicles].index(peer.vehicle_id)
+            sensor = ConcentrationSensor.for_vehicle(self.scenario, index)
+            sensor.resume(self.peer_lags.get(peer.vehicle_id, ()))
+            self.peer_sensors[peer.vehicle_id] = sensor
+            self.peer_lags[peer.vehicle_id] = sensor.lag_history
+        return sensor.sample(peer.true_g_m3, sim_time_s)
 
     def _stalled(self, now: float, cx: float, cy: float) -> bool:
         self.centroids.append((now, cx, cy))

@@ -12,7 +12,8 @@ eq. 1, in the wind frame with x downwind):
 with V the measured wind speed and D, τ, R, a the parameters below (they shape the modelled
 plume, not the simulated one). Observations are binary per decision step (the common variant
 of the paper's hit counts): a *hit* when any reading of the step is at least
-:data:`~agents.behaviors.search.PLUME_THRESHOLD_G_M3`, with probability 1 − exp(−(R + r_bg)·Δt)
+:data:`~agents.behaviors.search.PLUME_THRESHOLD_G_M3` (a slow-recovery sensor: rose by the
+equivalent, :func:`~agents.behaviors.search.detector_for`), with probability 1 − exp(−(R + r_bg)·Δt)
 (``background_rate_hz`` r_bg keeps a hit where the model says "no gas" from ruling a cell out
 for good). After each step Bayes' rule updates b; the next step (``step_m`` upwind, downwind,
 left, right, or stay) is the one with the lowest expected entropy of the updated belief,
@@ -40,9 +41,10 @@ from agents.behaviors.search import (
     SourceEstimate,
     WindFrame,
     WindReader,
+    anemometer_wind,
+    detector_for,
     fly,
     hold_at,
-    scenario_wind,
     start_or_hold,
     toward,
 )
@@ -87,6 +89,7 @@ def entropy(belief: FloatArray) -> float:
 class Infotaxis(SavesState):
     # ``cells_xy`` is rebuilt from ``grid_origin`` (where the grid was laid) on restore
     state_attributes = (
+        "detector",
         "grid_origin",
         "altitude_m",
         "declaration",
@@ -111,8 +114,9 @@ class Infotaxis(SavesState):
     declare_mass = 0.9
 
     def __init__(self, ctx: BehaviorContext) -> None:
-        self.read_wind: WindReader = scenario_wind(ctx)  # the anemometer input
+        self.read_wind: WindReader = anemometer_wind(ctx)
         self.altitude_m: float | None = None
+        self.detector = detector_for(ctx, self.threshold_g_m3)
         self.declaration: SourceEstimate | None = None
         self.cells_xy: FloatArray | None = None  # (n, 2) ENU centres
         self.grid_origin: tuple[tuple[float, float], float, float] | None = None  # wind, x, y
@@ -166,11 +170,7 @@ class Infotaxis(SavesState):
 
     def _observe(self, readings: Sequence[ConcentrationReading]) -> None:
         for r in readings:
-            if (
-                r.available
-                and r.reported_g_m3 is not None
-                and r.reported_g_m3 >= self.threshold_g_m3
-            ):
+            if r.available and r.reported_g_m3 is not None and self.detector.hit(r.reported_g_m3):
                 self.hit = True
 
     def _expected_entropy(self, frame: WindFrame, x: float, y: float, dt_s: float) -> float:

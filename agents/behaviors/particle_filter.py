@@ -50,9 +50,9 @@ from agents.behaviors.search import (
     SourceEstimate,
     WindFrame,
     WindReader,
+    anemometer_wind,
     fly,
     hold_at,
-    scenario_wind,
     start_or_hold,
     toward,
 )
@@ -179,7 +179,7 @@ class ParticleFilter(SavesState):
 
     def __init__(self, ctx: BehaviorContext) -> None:
         self.rng = ctx.rng
-        self.read_wind: WindReader = scenario_wind(ctx)  # the anemometer input
+        self.read_wind: WindReader = anemometer_wind(ctx)
         plume = ctx.scenario.plume
         self.curves = dispersion_curves(plume.coefficients, plume.stability)
         self.release_height_m = plume.sources[0].release_height_m

@@ -1,10 +1,16 @@
 """What the source-seeking behaviours share: the wind input, the declared estimate, the frame.
 
 **The wind input.** A behaviour reads the wind through ``self.read_wind(own)``, a
-:data:`WindReader` returning the air velocity (east, north) in m/s at the vehicle — what an
-anemometer on the vehicle measures. Built with :func:`scenario_wind` it returns the scenario's
-``[wind]``, which is exact for a steady plume; a runner whose vehicles carry an anemometer
-replaces it (``behavior.read_wind = reader``) and nothing else in the behaviour changes.
+:data:`WindReader` returning the air velocity (east, north) in m/s at the vehicle. Built with
+:func:`anemometer_wind` it is the vehicle's anemometer (:class:`agents.anemometer.Anemometer`:
+the scenario's wind at the vehicle's position and the state's sim time, plus the
+``[anemometer]`` noise seeded by (scenario seed, vehicle index, tick)) — the reading the
+autopilot process publishes on ``vehicle/<id>/wind``, the same bits in every runner.
+:func:`scenario_wind` (the scenario's mean ``[wind]``, noiseless) is kept for tests.
+
+**Detection.** :class:`PlumeDetector` says whether a reading is a detection: a level
+threshold for a fast sensor, the rise between two samples for a slow-recovery (metal-oxide)
+sensor; :func:`detector_for` picks by the scenario's sensor model.
 
 **The declaration.** A behaviour that decides where the source is sets ``self.declaration``
 to a :class:`SourceEstimate` (once; it then holds position). Runners read it; the bench
@@ -28,9 +34,11 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from agents.anemometer import Anemometer
 from agents.behavior import BehaviorContext
 from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
 from swarmbus.plume_formula import downwind_unit
+from swarmbus.wind import wind_from_scenario
 
 #: (east, north) air velocity in m/s at the vehicle, as an anemometer would measure it.
 WindReader = Callable[[VehicleState], tuple[float, float]]
@@ -47,6 +55,21 @@ def scenario_wind(ctx: BehaviorContext) -> WindReader:
     speed = ctx.scenario.wind.speed_m_s
     wind = (speed * ux, speed * uy)
     return lambda own: wind
+
+
+def anemometer_wind(ctx: BehaviorContext) -> WindReader:
+    """The vehicle's anemometer as a :data:`WindReader`: read at the state's tick, sim time
+    and position (what the autopilot process publishes for that tick)."""
+    scenario = ctx.scenario
+    wind = wind_from_scenario(scenario)
+    anemometer = Anemometer(scenario.anemometer, wind, scenario.world.seed, ctx.vehicle_index)
+    vehicle_id = ctx.vehicle_id
+
+    def read(own: VehicleState) -> tuple[float, float]:
+        r = anemometer.read(vehicle_id, own.tick, own.sim_time_s, own.position_enu_m)
+        return r.wind_enu_m_s[0], r.wind_enu_m_s[1]
+
+    return read
 
 
 @dataclass(frozen=True)
@@ -111,30 +134,65 @@ class SavesState:
             setattr(self, name, decode_state(data[name], getattr(self, name)))
 
 
+def _encode_int(value: int) -> Any:
+    # msgpack holds 64 bits; a generator's 128-bit words go as decimal text
+    return value if -(2**63) <= value < 2**64 else {"$": "int", "v": str(value)}
+
+
+def _tagged(tag: str, value: Any) -> dict[str, Any]:
+    return {"$": tag, "v": value}
+
+
+#: How each kind of value is saved, in the order the kinds are tried (bool before int).
+_ENCODERS: tuple[tuple[type | tuple[type, ...], Callable[[Any], Any]], ...] = (
+    ((bool, str, float, type(None)), lambda v: v),
+    (int, _encode_int),
+    (SavesState, lambda v: _tagged("state", v.snapshot())),
+    (np.ndarray, lambda v: _tagged("ndarray", [v.dtype.str, list(v.shape), v.tobytes()])),
+    (np.random.Generator, lambda v: _tagged("generator", encode_state(v.bit_generator.state))),
+    (SourceEstimate, lambda v: _tagged("estimate", encode_state(dataclasses.asdict(v)))),
+    (tuple, lambda v: _tagged("tuple", [encode_state(x) for x in v])),
+    (deque, lambda v: _tagged("deque", [encode_state(x) for x in v])),
+    (list, lambda v: [encode_state(x) for x in v]),
+)
+
+
 def encode_state(value: Any) -> Any:
     """``value`` as msgpack-encodable data that :func:`decode_state` turns back exactly."""
-    if value is None or isinstance(value, (bool, str, float)):
-        return value
-    if isinstance(value, int):
-        # msgpack holds 64 bits; a generator's 128-bit words go as decimal text
-        return value if -(2**63) <= value < 2**64 else {"$": "int", "v": str(value)}
-    if isinstance(value, SavesState):
-        return {"$": "state", "v": value.snapshot()}
-    if isinstance(value, np.ndarray):
-        return {"$": "ndarray", "v": [value.dtype.str, list(value.shape), value.tobytes()]}
-    if isinstance(value, np.random.Generator):
-        return {"$": "generator", "v": encode_state(value.bit_generator.state)}
-    if isinstance(value, SourceEstimate):
-        return {"$": "estimate", "v": encode_state(dataclasses.asdict(value))}
-    if isinstance(value, tuple):
-        return {"$": "tuple", "v": [encode_state(v) for v in value]}
-    if isinstance(value, deque):
-        return {"$": "deque", "v": [encode_state(v) for v in value]}
-    if isinstance(value, list):
-        return [encode_state(v) for v in value]
+    for kind, encode in _ENCODERS:
+        if isinstance(value, kind):
+            return encode(value)
     if isinstance(value, dict) and all(isinstance(k, str) for k in value):
-        return {"$": "dict", "v": {k: encode_state(v) for k, v in value.items()}}
+        return _tagged("dict", {k: encode_state(v) for k, v in value.items()})
     raise TypeError(f"cannot save a {type(value).__name__} as behaviour state")
+
+
+def _restore_into(current: Any, v: Any) -> Any:
+    current.restore(v)
+    return current
+
+
+def _generator_into(current: Any, v: Any) -> Any:
+    current.bit_generator.state = decode_state(v)
+    return current
+
+
+def _ndarray(v: Any) -> Any:
+    dtype, shape, raw = v
+    return np.frombuffer(raw, dtype=np.dtype(dtype)).reshape(shape).copy()
+
+
+#: The tagged kinds: tag -> (saved value, the fresh attribute) -> value.
+_DECODERS: dict[str, Callable[[Any, Any], Any]] = {
+    "int": lambda v, current: int(v),
+    "state": lambda v, current: _restore_into(current, v),
+    "ndarray": lambda v, current: _ndarray(v),
+    "generator": lambda v, current: _generator_into(current, v),
+    "estimate": lambda v, current: SourceEstimate(**decode_state(v)),
+    "tuple": lambda v, current: tuple(decode_state(x) for x in v),
+    "deque": lambda v, current: deque(decode_state(x) for x in v),
+    "dict": lambda v, current: {k: decode_state(x) for k, x in v.items()},
+}
 
 
 def decode_state(data: Any, current: Any = None) -> Any:
@@ -145,26 +203,10 @@ def decode_state(data: Any, current: Any = None) -> Any:
     if not isinstance(data, dict):
         return data
     tag, v = data["$"], data["v"]
-    if tag == "int":
-        return int(v)
-    if tag == "state":
-        current.restore(v)
-        return current
-    if tag == "ndarray":
-        dtype, shape, raw = v
-        return np.frombuffer(raw, dtype=np.dtype(dtype)).reshape(shape).copy()
-    if tag == "generator":
-        current.bit_generator.state = decode_state(v)
-        return current
-    if tag == "estimate":
-        return SourceEstimate(**decode_state(v))
-    if tag == "tuple":
-        return tuple(decode_state(x) for x in v)
-    if tag == "deque":
-        return deque(decode_state(x) for x in v)
-    if tag == "dict":
-        return {k: decode_state(x) for k, x in v.items()}
-    raise ValueError(f"behaviour snapshot: unknown value kind {tag!r}")
+    decoder = _DECODERS.get(tag)
+    if decoder is None:
+        raise ValueError(f"behaviour snapshot: unknown value kind {tag!r}")
+    return decoder(v, current)
 
 
 def valid_values(readings: Sequence[ConcentrationReading]) -> list[tuple[float, float, float]]:
@@ -208,6 +250,53 @@ def toward(own: VehicleState, x_m: float, y_m: float, speed_m_s: float) -> tuple
         return 0.0, 0.0
     speed = min(speed_m_s, dist)
     return speed * dx / dist, speed * dy / dist
+
+
+#: A sensor whose decay time constant is longer than this (s) recovers too slowly for a level
+#: threshold: after one burst its reading stays above the threshold for minutes.
+SLOW_DECAY_S = 5.0
+
+
+class PlumeDetector(SavesState):
+    """Whether each reading is a detection ("in the plume"), one sample after another.
+
+    ``level``: the reading is at least ``threshold_g_m3``. ``rise``: the reading rose by at
+    least ``threshold_g_m3`` (and above 0) since the previous sample — for a slow-recovery
+    sensor, which rises while gas arrives (rise time constant) and decays slowly after it
+    (a metal-oxide sensor's 15.71 s keeps one burst above 0.001 g/m³ for ≈ 2 min), so a
+    level says little about now but a rise does. Give it the available readings only.
+    """
+
+    state_attributes = ("previous_g_m3",)
+
+    def __init__(self, mode: str = "level", threshold_g_m3: float = 0.0) -> None:
+        if mode not in ("level", "rise"):
+            raise ValueError(f"detector mode {mode!r}: valid: level, rise")
+        self.mode = mode
+        self.threshold_g_m3 = threshold_g_m3
+        self.previous_g_m3: float | None = None
+
+    def hit(self, value_g_m3: float) -> bool:
+        previous, self.previous_g_m3 = self.previous_g_m3, value_g_m3
+        if self.mode == "level":
+            return value_g_m3 > 0.0 and value_g_m3 >= self.threshold_g_m3
+        if previous is None:
+            return False
+        rise = value_g_m3 - previous
+        return rise > 0.0 and rise >= self.threshold_g_m3
+
+
+def detector_for(ctx: BehaviorContext, level_g_m3: float = PLUME_THRESHOLD_G_M3) -> PlumeDetector:
+    """The detector for the scenario's sensor: a level of ``level_g_m3`` for a fast sensor;
+    for a slow-recovery one (decay time constant > :data:`SLOW_DECAY_S`) a rise, per sample,
+    of what a sensor in clean air shows in one sample on meeting ``level_g_m3``:
+    ``level_g_m3`` × (1 − exp(−sample period / rise time constant))."""
+    sensor = ctx.scenario.sensor.resolved()
+    if sensor.decay_s <= SLOW_DECAY_S:
+        return PlumeDetector("level", level_g_m3)
+    period_s = sensor.period_ticks / ctx.scenario.time.control_hz
+    rise = -math.expm1(-period_s / sensor.rise_s) if sensor.rise_s > 0.0 else 1.0
+    return PlumeDetector("rise", level_g_m3 * rise)
 
 
 class BestReadingDeclarer(SavesState):

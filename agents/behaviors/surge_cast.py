@@ -3,7 +3,9 @@
 Lochmatter, T. & Martinoli, A. (2008), "Tracking odor plumes in a laminar wind field with
 bio-inspired algorithms", *Experimental Robotics* (ISER 2008), Springer STAR 54:473–482; and
 Lochmatter's thesis (EPFL 2010). The sensor is read as binary: in the plume when the reading
-is at least :data:`~agents.behaviors.search.PLUME_THRESHOLD_G_M3`.
+is at least :data:`~agents.behaviors.search.PLUME_THRESHOLD_G_M3` (with a slow-recovery sensor
+such as the metal-oxide preset: when it rose by the equivalent per sample,
+:func:`~agents.behaviors.search.detector_for`).
 
 States (``self.state``):
 
@@ -32,9 +34,10 @@ from agents.behaviors.search import (
     SourceEstimate,
     WindFrame,
     WindReader,
+    anemometer_wind,
+    detector_for,
     fly,
     hold_at,
-    scenario_wind,
     start_or_hold,
 )
 from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
@@ -42,6 +45,7 @@ from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
 
 class SurgeCast(SavesState):
     state_attributes = (
+        "detector",
         "state",
         "declarer",
         "declaration",
@@ -60,8 +64,9 @@ class SurgeCast(SavesState):
     threshold_g_m3 = PLUME_THRESHOLD_G_M3
 
     def __init__(self, ctx: BehaviorContext) -> None:
-        self.read_wind: WindReader = scenario_wind(ctx)  # the anemometer input
+        self.read_wind: WindReader = anemometer_wind(ctx)
         self.state = "search"
+        self.detector = detector_for(ctx, self.threshold_g_m3)
         self.declarer = BestReadingDeclarer(detection_g_m3=self.threshold_g_m3)
         self.declaration: SourceEstimate | None = None
         self.altitude_m: float | None = None
@@ -83,7 +88,7 @@ class SurgeCast(SavesState):
             if not r.available or r.reported_g_m3 is None:
                 continue
             self.declarer.observe(r.position_enu_m[0], r.position_enu_m[1], r.reported_g_m3)
-            if r.reported_g_m3 >= self.threshold_g_m3:
+            if self.detector.hit(r.reported_g_m3):
                 self.last_hit_s = r.sim_time_s
 
     def _transition(self, now: float) -> None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import msgspec
 import numpy as np
 import pytest
 from scipy.special import k0
@@ -14,13 +15,19 @@ from agents.behaviors.gradient_swarm import GradientSwarm, log_gradient
 from agents.behaviors.infotaxis import Infotaxis, bayes_update
 from agents.behaviors.particle_filter import SourceTermFilter
 from agents.behaviors.random_walk import RandomWalk
-from agents.behaviors.search import WindFrame
+from agents.behaviors.search import (
+    PLUME_THRESHOLD_G_M3,
+    PlumeDetector,
+    WindFrame,
+    detector_for,
+)
 from agents.behaviors.surge_cast import SurgeCast
+from agents.sensor import ConcentrationSensor
 from plume_service import GaussianPlume
 from swarmbus.dispersion import dispersion_curves
 from swarmbus.messages import ConcentrationReading, PeerReading, Setpoint, VehicleState
 from swarmbus.plume_formula import gaussian_plume_g_m3, plume_frame
-from swarmbus.scenario import load_scenario
+from swarmbus.scenario import Scenario, Sensor, load_scenario
 
 SCENARIO = load_scenario()  # novak2018: wind 6 m/s from 270° (toward +x), source at the origin
 
@@ -30,9 +37,19 @@ def velocity(sp: Setpoint | None) -> tuple[float, float, float]:
     return sp.velocity_enu_m_s
 
 
-def ctx(index: int = 0, seed: int = 1, dt: float = 0.05) -> BehaviorContext:
+#: The same with the ideal sensor and a noiseless anemometer: the behaviours see the field.
+IDEAL = msgspec.structs.replace(
+    SCENARIO,
+    sensor=Sensor(preset="ideal"),
+    anemometer=msgspec.structs.replace(SCENARIO.anemometer, noise_std_m_s=0.0),
+)
+
+
+def ctx(
+    index: int = 0, seed: int = 1, dt: float = 0.05, scenario: Scenario = IDEAL
+) -> BehaviorContext:
     rng = np.random.Generator(np.random.PCG64(seed))
-    return BehaviorContext(f"uav{index + 1}", index, SCENARIO, dt, rng)
+    return BehaviorContext(f"uav{index + 1}", index, scenario, dt, rng)
 
 
 def state(x: float, y: float, t: float, vid: str = "uav1", z: float = 10.0) -> VehicleState:
@@ -202,6 +219,25 @@ def test_gradient_swarm_climbs_in_formation() -> None:
     assert vy < 0.0  # y = 3 m: the axis is toward −y
 
 
+def test_the_swarm_fits_its_peers_sensor_outputs_not_their_true_values() -> None:
+    """With a lagging sensor (time constant 1 s) a peer sensor switched on in gas reads 0
+    (clean air) at its first sample, true × (1 − e^(−0.5)) 0.5 s later and true × (1 − e^(−1))
+    1 s later: the member's fit must use those, as its own reading does, not the true value."""
+    lagging = msgspec.structs.replace(
+        IDEAL, sensor=Sensor(preset="ideal", time_constant_s=1.0, period_ticks=10)
+    )
+    member = GradientSwarm(ctx(0, scenario=lagging))
+    peer = PeerReading(vehicle_id="uav2", position_enu_m=(40.0, 0.0, 10.0), true_g_m3=0.8)
+    assert member.peer_output(peer, 1.0) == 0.0
+    assert member.peer_output(peer, 1.5) == pytest.approx(0.8 * -math.expm1(-0.5), rel=1e-12)
+    # a snapshot keeps the peers' sensor memory: the restored member goes on the same
+    twin = GradientSwarm(ctx(0, scenario=lagging))
+    twin.restore(member.snapshot())
+    third = member.peer_output(peer, 2.0)
+    assert third == pytest.approx(0.8 * -math.expm1(-1.0), rel=1e-12)
+    assert twin.peer_output(peer, 2.0) == third
+
+
 # ---------------------------------------------------------------- casting and surge-cast
 def test_surge_cast_state_machine() -> None:
     beh = SurgeCast(ctx())
@@ -291,3 +327,42 @@ def test_random_walk_statistics_match_a_run_and_tumble_walk() -> None:
     se = math.sqrt(expected / 2 / walkers)
     assert abs(arr[:, 0].mean()) < 4 * se and abs(arr[:, 1].mean()) < 4 * se
     assert RandomWalk(ctx(seed=3)).heading_rad == RandomWalk(ctx(seed=3)).heading_rad
+
+
+# ---------------------------------------------------------------- detection with a slow sensor
+MOX = msgspec.structs.replace(IDEAL, sensor=Sensor(preset="mox-tgs2620", period_ticks=12))
+
+
+def _burst_hits(detector: PlumeDetector, bursts_at_s: tuple[float, ...]) -> list[float]:
+    """A metal-oxide sensor sampled at 10 Hz for 150 s in clean air but for one 0.1 s sample
+    of 65 g/m³ (a filament's peak) at each of ``bursts_at_s``; when ``detector`` hits."""
+    sensor = ConcentrationSensor.for_vehicle(MOX, 0)
+    hits = []
+    for k in range(1500):
+        t = 0.1 * k
+        true = 65.0 if any(abs(t - b) < 1e-9 for b in bursts_at_s) else 0.0
+        if detector.hit(sensor.sample(true, t)):
+            hits.append(round(t, 1))
+    return hits
+
+
+def test_a_rise_detector_sees_each_burst_of_a_slow_sensor_once() -> None:
+    """The metal-oxide preset (rise 2.96 s, decay 15.71 s): one burst lifts the reading by
+    ≈ 65 × (1 − e^(−0.1/2.96)) ≈ 2.2 g/m³, and the decay keeps it above 0.001 g/m³ for
+    15.71 × ln(2.2 / 0.001) ≈ 120 s: a level detector is still "in the plume" a minute later,
+    while the rise detector hits on the burst samples only."""
+    level = _burst_hits(PlumeDetector("level", PLUME_THRESHOLD_G_M3), (10.0, 90.0))
+    assert level[0] == 10.0 and 70.0 in level and 89.9 in level  # a minute later: still "gas"
+    detector = detector_for(ctx(scenario=MOX))
+    # the rise a sensor in clean air shows in one 0.1 s sample on meeting 0.001 g/m³
+    assert detector.mode == "rise"
+    assert detector.threshold_g_m3 == pytest.approx(0.001 * (1 - math.exp(-0.1 / 2.96)))
+    assert _burst_hits(detector, (10.0, 90.0)) == [10.0, 90.0]
+    # an ideal sensor keeps the level
+    assert detector_for(ctx()).mode == "level"
+
+
+def test_source_seekers_use_the_rise_detector_with_the_mox_sensor() -> None:
+    for cls in (Casting, SurgeCast, Infotaxis):
+        assert cls(ctx(scenario=MOX)).detector.mode == "rise", cls
+        assert cls(ctx()).detector.mode == "level", cls

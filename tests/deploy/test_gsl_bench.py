@@ -14,6 +14,7 @@ from deploy.gsl_episode import (
     START_ACROSS_M,
     START_ALONG_M,
     EpisodeSpec,
+    fused_episode,
     run_episode,
     start_point,
 )
@@ -123,3 +124,14 @@ def test_every_registered_algorithm_flies_an_episode(algorithm: str) -> None:
     outcome = run_episode(EpisodeSpec(algorithm, "steady_gaussian", "ideal", 0, 0, 5.0))
     assert outcome.path_length_m > 1.0  # it moved
     assert outcome.initial_distance_m > 25.0
+
+
+def test_full_dynamics_in_a_time_dependent_plume_hovers_until_the_release_has_spread() -> None:
+    """The vehicles take off and hold; the behaviours fly from 60 s of sim time on (the
+    offboard switch at the boundary before tick 60 s × 120 Hz), and the episode's clock with
+    them: a 5 s limit ends 5 s later."""
+    spec = EpisodeSpec("surge_cast", "meander_small", "mox", 0, 0, 5.0, 120, 12, False, "full")
+    outcome, schedule = fused_episode(spec)
+    assert sorted(schedule.commands) == [0, 60 * 120 - 1]
+    assert schedule.last_tick == 60 * 120 + 5 * 120
+    assert 5.0 < outcome.path_length_m < 5.0 * 5.0  # flew for 5 s, at most 5 m/s

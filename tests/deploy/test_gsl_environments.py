@@ -59,15 +59,19 @@ def test_the_filament_field_is_the_same_whoever_asks_and_differs_between_runs() 
     assert forward != series(2, slice(None))  # another run, another realisation
 
 
-def test_behaviours_read_their_anemometer_in_a_meandering_wind() -> None:
-    """Meander "large" has a stationary std of 1.41 m/s on each horizontal component
+@pytest.mark.parametrize(
+    "algorithm", ["casting", "surge_cast", "gradient_swarm", "infotaxis", "particle_filter"]
+)
+def test_behaviours_read_their_anemometer_in_a_meandering_wind(algorithm: str) -> None:
+    """Every wind-using behaviour, built as an autopilot builds it. Meander "large" has a
+    stationary std of 1.41 m/s on each horizontal component
     (Farrell et al. 2002's G 20, ζ 0.1, ω 0.2): the wind a behaviour reads follows the
     meander (the true wind at its position and time, plus 0.1 m/s anemometer noise), not the
     scenario's mean wind of 6 m/s toward +x."""
-    spec = EpisodeSpec("casting", "meander_large", "ideal", 0, 0)
+    spec = EpisodeSpec(algorithm, "meander_large", "ideal", 0, 0)
     scenario = episode_scenario(load_scenario(), spec)
     _, wind = environment_field(scenario)
-    behavior = episode_behaviors(spec, scenario, wind)[0]
+    behavior = episode_behaviors(spec, scenario)[0]
     read, true = [], []
     for k in range(300):
         t = FIELD_WARMUP_S + k
