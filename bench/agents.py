@@ -4,7 +4,7 @@ Run with ``python -m bench.agents [--counts 1,3,8,16,32,64] [--seconds 5] [--dri
 
 1. In-process cost of one control tick per vehicle (estimate → modes → cascaded control →
    mixer), and of the node's whole per-tick path (decode the SimTick, step, encode the
-   ActuatorCommand).
+   one-vehicle ActuatorBatch).
 2. Lockstep with N autopilot processes (one per vehicle) hovering at 5 m, plus the plume service
    (the physics queries it on every sensor tick) and the physics process (``--driver physics``)
    or, when the physics role is not available, a minimal lockstep stand-in (``--driver stub``:
@@ -96,7 +96,8 @@ def control_cost(vehicle_type: str, n: int = 20000) -> tuple[float, float]:
         own = next(s for s in msg.states if s.vehicle_id == v.id)
         peers = [s for s in msg.states if s.vehicle_id != v.id]
         u = ap.step(own, peers)
-        encode(ActuatorCommand(vehicle_id=v.id, tick=msg.tick, rotor_commands=u))
+        cmd = ActuatorCommand(vehicle_id=v.id, tick=msg.tick, rotor_commands=u)
+        encode(ActuatorBatch(tick=msg.tick, commands=[cmd]))
     path_us = (time.perf_counter() - t0) / n * 1e6
     return step_us, path_us
 
@@ -178,7 +179,6 @@ class StubPhysics:
         self.pub = session.declare_publisher(keys.tick())
         self.clock = session.declare_publisher(keys.clock())
         self.subs = [
-            session.declare_subscriber(keys.all_vehicle_actuators(), self._on),
             session.declare_subscriber(keys.all_autopilot_actuators(), self._on),
         ]
         self.stop_event = threading.Event()
@@ -186,9 +186,9 @@ class StubPhysics:
 
     def _on(self, sample: object) -> None:
         data = sample.payload.to_bytes()  # type: ignore[attr-defined]
-        msg = decode(data, ActuatorCommand | ActuatorBatch)  # type: ignore[arg-type]
+        msg = decode(data, ActuatorBatch)
         with self.cond:
-            for cmd in msg.commands if isinstance(msg, ActuatorBatch) else [msg]:
+            for cmd in msg.commands:
                 self.answered[cmd.vehicle_id] = cmd.tick
             self.cond.notify_all()
 

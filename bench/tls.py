@@ -19,7 +19,7 @@ import msgspec
 from deploy import certs
 from deploy.hosts import AclSection, Deployment, Host, TlsSection
 from deploy.security import host_identities, secure_network
-from swarmbus.keys import Keys
+from swarmbus.keys import Keys, autopilot_node
 from swarmbus.session import NetworkConfig, free_tcp_port, open_session
 
 KEYS = Keys("bench")
@@ -43,7 +43,10 @@ def round_trips(dep: Deployment, n: int) -> list[float]:
         return msgspec.structs.replace(secure_network(base, dep, host, role, KEYS), **kw)
 
     router = net("sim", "router", mode="router", connect=[], listen=[dep.router])
-    ping_key, pong_key = KEYS.vehicle_state("uav1"), KEYS.vehicle_actuators("uav1")
+    ping_key, pong_key = (
+        KEYS.vehicle_state("uav1"),
+        KEYS.autopilot_actuators(autopilot_node("uav1")),
+    )
     got = threading.Event()
     payload = bytes(100)
     with (

@@ -9,17 +9,20 @@ link to the router:
 - default deny: a certificate of the deployment's CA whose common name is not one of the
   deployment's identities can connect but nothing flows to or from it;
 - every identity may do everything on every key, except
-- publishing (put/delete) actuators (``vehicle/*/actuators`` and the batched
-  ``autopilot/*/actuators``) unless it is an autopilot, and
+- publishing (put/delete) actuators (``autopilot/*/actuators``, the one actuator route) unless
+  it is an autopilot, and
   publishing the world (``sim/tick``, ``sim/clock``, ``vehicle/*/state``) unless it is physics
   (roles configurable in ``[acl]``).
 
 With ``[acl] per_vehicle = true`` each autopilot process (one vehicle each) runs as its own
 identity ``autopilot-<vehicle>.<host>`` (its node name and host), which is not one of the
-members above: it may publish only its own vehicle's actuators, status and concentration
-readings and its own health, declare only its own liveliness token, serve and answer only its
-own vehicle's commands, and subscribe and query anywhere. A forged sample of another vehicle
-from it is dropped at the first process it reaches (the router, or a peer on a direct link).
+members above: it may publish only its own actuator batch (``autopilot/autopilot-<vehicle>/
+actuators``), its own vehicle's status and concentration readings and its own health, declare
+only its own liveliness token, serve and answer only its own vehicle's commands, and subscribe
+and query anywhere. A forged sample on another vehicle's key from it is dropped at the first
+process it reaches (the router, or a peer on a direct link); a command for another vehicle
+inside its own batch is dropped by the physics, which accepts on a one-vehicle node's key only
+that vehicle's commands.
 
 The router's identity is not denied: it forwards what others publish, and checked them when
 they arrived.
@@ -125,7 +128,7 @@ def access_control(dep: Deployment, keys: Keys) -> dict[str, Any]:
     policies: list[dict[str, Any]] = [{"rules": ["members"], "subjects": ["members"]}]
     planes = {
         "actuators": (
-            [keys.all_vehicle_actuators(), keys.all_autopilot_actuators()],
+            [keys.all_autopilot_actuators()],
             dep.acl.actuators,
         ),
         "world": ([keys.tick(), keys.clock(), keys.all_vehicle_states()], dep.acl.world),
@@ -171,7 +174,6 @@ def _vehicle_rules(keys: Keys, vehicle_id: str) -> list[dict[str, Any]]:
     """What a per-vehicle identity may send (ingress): its own vehicle's data and answers."""
     node = vehicle_node(vehicle_id)
     own_data = [
-        keys.vehicle_actuators(vehicle_id),
         keys.vehicle_status(vehicle_id),
         keys.vehicle_concentration(vehicle_id),
         keys.autopilot_actuators(node),

@@ -3,11 +3,12 @@
 Each control tick ``k`` it publishes all vehicle states in one ``SimTick`` on ``sim/tick`` and
 each state on ``vehicle/<id>/state`` (only while a subscriber matches that key: most readers
 take the tick, and N puts per tick that nobody receives cost real time), waits for every live
-autopilot's ``ActuatorCommand`` for tick ``k`` (:class:`~sim_world.lockstep.Lockstep`) — on
-``vehicle/<id>/actuators``, or as an entry of an autopilot process's ``ActuatorBatch`` on
-``autopilot/<node>/actuators`` (one message for the K vehicles it serves; each entry counts as
-that vehicle's command, a bad entry is dropped with a log line like a bad single command) —
-applies them, steps ``scenario.substeps`` physics steps and publishes tick ``k + 1``.
+autopilot's ``ActuatorCommand`` for tick ``k`` (:class:`~sim_world.lockstep.Lockstep`) as an
+entry of an autopilot process's ``ActuatorBatch`` on ``autopilot/<node>/actuators`` (one message
+for the K vehicles it serves, K = 1 included; each entry counts as that vehicle's command, a bad
+entry is dropped with a log line; on a one-vehicle node's key, ``autopilot-<id>``, an entry for
+another vehicle is dropped, counted in the health detail and logged once per key) — applies them,
+steps ``scenario.substeps`` physics steps and publishes tick ``k + 1``.
 ``sim/clock`` carries sim time and the achieved real-time factor about ten times a wall-clock
 second.
 
@@ -53,7 +54,7 @@ from sim_world.lockstep import Lockstep, participant_of
 from sim_world.stepping import SteppedClock, StepRefused
 from sim_world.world import World
 from swarmbus.codec import MessageError, decode, encode
-from swarmbus.keys import autopilot_node
+from swarmbus.keys import KeyNameError, autopilot_node, vehicle_of_autopilot
 from swarmbus.messages import (
     ActuatorBatch,
     ActuatorCommand,
@@ -148,11 +149,12 @@ class PhysicsNode:
             _StatePublisher(session, self.keys.vehicle_state(v)) for v in world.vehicle_ids
         ]
         self.states_sent = 0  # per-vehicle state puts (health detail)
-        self._actuator_subs = [
-            session.declare_subscriber(self.keys.all_vehicle_actuators(), self._on_actuators),
-            session.declare_subscriber(self.keys.all_autopilot_actuators(), self._on_batch),
-        ]
+        self._actuator_sub = session.declare_subscriber(
+            self.keys.all_autopilot_actuators(), self._on_batch
+        )
         self._known = frozenset(world.vehicle_ids)
+        self.foreign_dropped = 0  # commands for another vehicle on a one-vehicle node's key
+        self._foreign_logged: set[str] = set()  # the keys that sent them (logged once each)
         # The shared sensor query (see the module doc).
         self._plume_key = self.keys.plume_concentration()
         self._sensor_period = self.scenario.sensor.resolved().period_ticks
@@ -195,8 +197,7 @@ class PhysicsNode:
         self._presence.close()
         self._step_queryable.undeclare()
         self._restart_sub.undeclare()
-        for sub in self._actuator_subs:
-            sub.undeclare()
+        self._actuator_sub.undeclare()
         for pub in self._state_pubs:
             pub.close()
         if self._writer is not None:
@@ -239,25 +240,6 @@ class PhysicsNode:
             self._cond.notify_all()
         log.info("autopilot of %s %s", vid, "arrived" if alive else "left")
 
-    def _on_actuators(self, sample: zenoh.Sample) -> None:
-        try:
-            cmd = decode(sample.payload.to_bytes(), ActuatorCommand)
-        except MessageError as exc:
-            log.warning("ignoring actuators on %s: %s", sample.key_expr, exc)
-            return
-        try:
-            key_vid = self.keys.vehicle_id_of(str(sample.key_expr))
-        except ValueError:
-            key_vid = ""
-        if cmd.vehicle_id != key_vid:
-            log.warning("ignoring actuators for %s sent on %s", cmd.vehicle_id, sample.key_expr)
-            return
-        with self._cond:
-            # Wake the loop once per tick, not once per command.
-            counted = self.barrier.receive(cmd.vehicle_id, cmd.tick, cmd.rotor_commands)
-            if counted and self.barrier.complete():
-                self._cond.notify_all()
-
     def _on_batch(self, sample: zenoh.Sample) -> None:
         data = sample.payload.to_bytes()
         try:
@@ -268,11 +250,16 @@ class PhysicsNode:
             if salvaged is None:
                 return
             tick, commands = salvaged
+        key = str(sample.key_expr)
+        only = self._sender_vehicle(key)
         counted = False
         with self._cond:
             barrier = self.barrier
             for cmd in commands:
                 vid = cmd.vehicle_id
+                if only is not None and vid != only:
+                    self._drop_foreign(key, vid)
+                    continue
                 if cmd.tick != tick or vid not in self._known:
                     log.warning(
                         "ignoring actuators for %s of tick %d in the batch of tick %d on %s",
@@ -286,6 +273,28 @@ class PhysicsNode:
             # Wake the loop once per tick, not once per command.
             if counted and barrier.complete():
                 self._cond.notify_all()
+
+    def _sender_vehicle(self, key: str) -> str | None:
+        """The one vehicle a batch on ``key`` may command: ``<id>`` on a one-vehicle node's
+        key (``autopilot/autopilot-<id>/actuators``, the only key a per-vehicle identity may
+        put on), None on any other node's key (a process serving several vehicles)."""
+        try:
+            vid = vehicle_of_autopilot(self.keys.autopilot_node_of(key))
+        except KeyNameError:
+            return None
+        return vid if vid in self._known else None
+
+    def _drop_foreign(self, key: str, vehicle_id: str) -> None:
+        """Count a command for ``vehicle_id`` on another vehicle's key (logged once a key)."""
+        self.foreign_dropped += 1
+        if key not in self._foreign_logged:
+            self._foreign_logged.add(key)
+            log.warning(
+                "ignoring actuators for %s on %s: a one-vehicle node commands only its own "
+                "vehicle (further ones from this key are counted in the health detail)",
+                vehicle_id,
+                key,
+            )
 
     @staticmethod
     def _salvage(
@@ -780,6 +789,8 @@ class PhysicsNode:
         if force or now - self._health_wall >= HEALTH_PERIOD_S:
             self._health_wall = now
             detail = f"tick {self.tick} dropped {self.dropped_total} states {self.states_sent}"
+            if self.foreign_dropped:
+                detail += f" foreign commands {self.foreign_dropped}"
             if self._resume_note:
                 detail += f"; {self._resume_note}"
             self.rt.publish_health(sim_time_s=sim_time_s, detail=detail)

@@ -1,16 +1,19 @@
 """Every Zenoh key expression of plumeswarm, built in one place.
 
 All keys live under ``plumeswarm/<world>/``. Three planes are kept apart so that a
-wildcard never crosses them: ``sim/`` and ``vehicle/*/{state,actuators,status,concentration}``
-carry data, ``vehicle/*/cmd``, ``plume/*`` and ``clock/step`` are queryables (control),
-``node/*`` is presence. No other module formats a key expression.
+wildcard never crosses them: ``sim/``, ``autopilot/*/actuators`` and
+``vehicle/*/{state,status,concentration,wind}`` carry data, ``vehicle/*/cmd``, ``plume/*``
+and ``clock/step`` are queryables (control), ``node/*`` is presence. No other module formats a
+key expression.
 
-The one key that is not per vehicle or per service: ``autopilot/<node>/actuators`` carries an
-``ActuatorBatch`` (the commands of every vehicle an autopilot process serves, one put per process
-per tick). A process serving K vehicles would otherwise put K ``vehicle/<id>/actuators`` per
-tick and the physics would wake K times; it is not per vehicle, so it cannot live under
-``vehicle/<id>/``, and it is not the physics' ``sim/`` plane. ``<node>`` is the process's node
-name. A process serving one vehicle still uses ``vehicle/<id>/actuators``.
+The one key that is not per vehicle or per service, and the one actuator route:
+``autopilot/<node>/actuators`` carries an ``ActuatorBatch`` (the commands of every vehicle an
+autopilot process serves, one put per process per tick, for any K including 1), so the physics
+wakes once per process per tick, not once per vehicle. It is not per vehicle, so it cannot live
+under ``vehicle/<id>/``, and it is not the physics' ``sim/`` plane. ``<node>`` is the process's
+node name: ``autopilot-<id>`` for a process serving one vehicle, ``autopilot-<first id>-plus<n>``
+for more (:func:`process_node`). On a one-vehicle node's key the physics accepts commands for
+that vehicle only, so a per-vehicle identity (which may put only there) cannot move another.
 """
 
 from __future__ import annotations
@@ -73,9 +76,6 @@ class Keys:
     def vehicle_state(self, vehicle_id: str) -> str:
         return self._vehicle(vehicle_id, "state")
 
-    def vehicle_actuators(self, vehicle_id: str) -> str:
-        return self._vehicle(vehicle_id, "actuators")
-
     def vehicle_status(self, vehicle_id: str) -> str:
         return self._vehicle(vehicle_id, "status")
 
@@ -87,9 +87,6 @@ class Keys:
 
     def all_vehicle_states(self) -> str:
         return f"{self.prefix}/vehicle/*/state"
-
-    def all_vehicle_actuators(self) -> str:
-        return f"{self.prefix}/vehicle/*/actuators"
 
     def all_vehicle_status(self) -> str:
         return f"{self.prefix}/vehicle/*/status"
@@ -159,6 +156,18 @@ class Keys:
         head = self.prefix.split("/")
         if parts[: len(head)] != head or len(parts) < len(head) + 3 or parts[len(head)] != "node":
             raise KeyNameError(f"{key!r} is not a node key of world {self.world!r}")
+        return parts[len(head) + 1]
+
+    def autopilot_node_of(self, key: str) -> str:
+        """The node name in an ``autopilot/<node>/actuators`` key of this world."""
+        parts = str(key).split("/")
+        head = self.prefix.split("/")
+        if (
+            parts[: len(head)] != head
+            or len(parts) != len(head) + 3
+            or parts[len(head)] != "autopilot"
+        ):
+            raise KeyNameError(f"{key!r} is not an autopilot key of world {self.world!r}")
         return parts[len(head) + 1]
 
     def relative(self, key: str) -> str:

@@ -108,7 +108,8 @@ class SimTick(Message, frozen=True, kw_only=True, tag=_tag("sim_tick")):
 
 
 class ActuatorCommand(Message, frozen=True, kw_only=True, tag=_tag("actuators")):
-    """``vehicle/<id>/actuators``: normalised rotor commands (0..1) for tick ``tick``."""
+    """One vehicle's normalised rotor commands (0..1) for tick ``tick``: an entry of an
+    ``ActuatorBatch`` (the one actuator route, ``autopilot/<node>/actuators``)."""
 
     vehicle_id: Name
     tick: Tick

@@ -20,7 +20,14 @@ from deploy.hosts import Deployment, HostsError, load_deployment
 from deploy.security import secure_network
 from swarmbus.codec import decode, encode
 from swarmbus.keys import Keys
-from swarmbus.messages import CommandReply, GetParams, VehicleStatus
+from swarmbus.messages import (
+    ActuatorBatch,
+    ActuatorCommand,
+    CommandReply,
+    GetParams,
+    SimTick,
+    VehicleStatus,
+)
 from swarmbus.session import NetworkConfig, free_tcp_port, open_session
 from tests.support.procs import REPO, run_cli, wait_until
 from tests.support.tls_probe import forged_puts_seen
@@ -79,19 +86,20 @@ def test_router_drops_what_an_autopilot_publishes_or_answers_for_another_vehicle
     with open_session(secure_network(router, dep, "sim", "router", KEYS)):
         listener = client(dep, "sim", "physics")
         uav2 = client(dep, "agents", "autopilot", "autopilot-uav2")
+        own = KEYS.autopilot_actuators("autopilot-uav2")  # the control that the probe sees
         forged = [
-            KEYS.vehicle_actuators("uav1"),
             KEYS.autopilot_actuators("autopilot-uav1"),
+            KEYS.autopilot_actuators("autopilot-uav1-plus1"),
             KEYS.vehicle_status("uav1"),
             KEYS.vehicle_state("uav2"),
             KEYS.tick(),
-            KEYS.vehicle_actuators("uav2"),  # its own: the control that the probe sees
+            own,
         ]
         result = forged_puts_seen(
             listener, uav2, KEYS, forged_keys=forged, marker_key=KEYS.vehicle_status("uav2")
         )
         assert result["marker"], "the marker on its own status never arrived: nothing tested"
-        assert result["seen"] == [KEYS.vehicle_actuators("uav2")], result
+        assert result["seen"] == [own], result
 
         # Commands: it may serve its own vehicle's, not another's.
         with open_session(uav2) as ap, open_session(client(dep, "gcs", "operator")) as op:
@@ -208,3 +216,83 @@ def test_a_real_autopilot_process_serves_its_vehicle_under_its_own_identity(
             os.killpg(proc.pid, signal.SIGTERM)
             proc.wait(30)
     assert statuses[0].vehicle_id == "uav1"
+
+
+VEHICLE_X = (("uav1", 0.0), ("uav2", 5.0))
+SCENARIO = (
+    '[world]\nname = "default"\nseed = 7\n[time]\nparticipant_timeout_s = 120.0\n'
+    "startup_timeout_s = 120.0\n"
+    + "".join(f'[[vehicles]]\nid = "{v}"\nspawn_enu_m = [{x}, 0.0, 0.0]\n' for v, x in VEHICLE_X)
+)
+
+
+def test_a_vehicle_identity_cannot_answer_for_another_vehicle_in_its_own_batch(
+    deployment: tuple[Deployment, Path], tmp_path: Path
+) -> None:
+    """``autopilot-uav2.agents`` may put on its own batch key; a real physics under mTLS + ACL
+    takes only uav2's command from it. uav1's autopilot is present but silent, so a forged
+    command for uav1 in uav2's batch is the only thing that could answer tick 0 for it: tick 0
+    must stay held (and the drop be logged) until uav1's own identity answers on its own key."""
+    dep, tmp = deployment
+    scenario = tmp_path / "sc.toml"
+    scenario.write_text(SCENARIO)
+    router = NetworkConfig(mode="router", connect=[], listen=[dep.router])
+    cmd = [
+        sys.executable, "-m", "deploy", "node", "physics", "--scenario", str(scenario),
+        "--hosts", str(tmp / "hosts.toml"), "--host", "sim", "--listen", "tls/127.0.0.1:0",
+    ]  # fmt: skip
+    ticks: list[int] = []
+    log_path = tmp_path / "physics.log"
+
+    def command(vid: str, tick: int) -> ActuatorCommand:
+        return ActuatorCommand(vehicle_id=vid, tick=tick, rotor_commands=[0.0] * 4)
+
+    with (
+        open_session(secure_network(router, dep, "sim", "router", KEYS)),
+        open_session(client(dep, "gcs", "operator")) as op,
+        open_session(client(dep, "agents", "autopilot", "autopilot-uav1")) as uav1,
+        open_session(client(dep, "agents", "autopilot", "autopilot-uav2")) as uav2,
+        open(log_path, "wb") as log,
+    ):
+        watch = op.declare_subscriber(
+            KEYS.tick(), lambda s: ticks.append(decode(s.payload.to_bytes(), SimTick).tick)
+        )
+        own_key = KEYS.autopilot_actuators("autopilot-uav2")
+
+        def answer_for_both(sample: zenoh.Sample) -> None:
+            k = decode(sample.payload.to_bytes(), SimTick).tick
+            batch = ActuatorBatch(tick=k, commands=[command("uav2", k), command("uav1", k)])
+            uav2.put(own_key, encode(batch))
+
+        forger = uav2.declare_subscriber(KEYS.tick(), answer_for_both)
+        tokens = [
+            s.liveliness().declare_token(KEYS.node_health(f"autopilot-{v}"))
+            for s, v in ((uav1, "uav1"), (uav2, "uav2"))
+        ]
+        proc = subprocess.Popen(
+            cmd, cwd=REPO, env=dict(os.environ, PYTHONPATH=str(REPO), PYTHONUNBUFFERED="1"),
+            start_new_session=True, stdout=log, stderr=subprocess.STDOUT,
+        )  # fmt: skip
+        try:
+            wait_until(
+                lambda: (
+                    "ignoring actuators for uav1 on" in log_path.read_text()
+                    or max(ticks, default=0)
+                ),
+                120.0,
+                "the physics dropping uav1's command from uav2's batch",
+                poll_s=0.5,
+            )
+            assert ticks and max(ticks) == 0, f"uav2's batch answered for uav1: ticks {ticks}"
+            assert "ignoring actuators for uav1 on" in log_path.read_text()
+            uav1.put(KEYS.autopilot_actuators("autopilot-uav1"), encode(
+                ActuatorBatch(tick=0, commands=[command("uav1", 0)])
+            ))  # fmt: skip
+            wait_until(lambda: max(ticks) >= 1, 30.0, "tick 1 once uav1 answered on its own key")
+        finally:
+            os.killpg(proc.pid, signal.SIGTERM)
+            proc.wait(30)
+            for t in tokens:
+                t.undeclare()
+            forger.undeclare()
+            watch.undeclare()

@@ -231,10 +231,11 @@ def test_late_joiner_is_admitted(setup: tuple[NodeProcs, Watch], tmp_path: Path)
     joined_from = watch.last_tick
     assert watch.motors[joined_from]["b"] is False  # nobody flies b yet
     # Garbage, a command on another vehicle's key and a command without a token change nothing.
-    watch.session.put(KEYS.vehicle_actuators("b"), b"\x00garbage")
+    watch.session.put(KEYS.autopilot_actuators("autopilot-b"), b"\x00garbage")
     for key_vid in ("a", "b"):
         cmd = ActuatorCommand(vehicle_id="b", tick=watch.last_tick, rotor_commands=[1.0] * 6)
-        watch.session.put(KEYS.vehicle_actuators(key_vid), encode(cmd))
+        batch = ActuatorBatch(tick=cmd.tick, commands=[cmd])
+        watch.session.put(KEYS.autopilot_actuators(f"autopilot-{key_vid}"), encode(batch))
     wait_until(lambda: watch.last_tick >= joined_from + 50, 30.0, "ticks go on")
     assert watch.first_tick_after(joined_from, "b", True) == 0
     start_script(procs, sc, "--vehicle", "b", "--throttle", "0.2", label="script-b")
@@ -322,6 +323,38 @@ def test_bad_entries_of_a_batch_are_dropped_and_logged(
     wait_until(lambda: watch.first_tick_after(tick, "b", True), 60.0, "b admitted by a batch")
 
 
+def test_a_one_vehicle_nodes_batch_commands_only_its_own_vehicle(
+    setup: tuple[NodeProcs, Watch], tmp_path: Path
+) -> None:
+    """b holds tick 20; a batch on a's own key carrying b's command for tick 20 must not
+    answer for b (the tick stays held), while the same batch on a process key that is not one
+    vehicle's (``autopilot-a-plus1``) does."""
+    procs, watch = setup
+    sc = two_vehicle_scenario(tmp_path, timeout_s=60.0)
+    release = tmp_path / "release"
+    procs.start("physics", "--scenario", str(sc), name="physics")
+    start_script(procs, sc, "--vehicle", "a", "--throttle", "0.2", label="script-a")
+    start_script(
+        procs, sc, "--vehicle", "b", "--throttle", "0.2", "--delay-tick", "20",
+        "--delay-s", "60", "--release-file", str(release), label="script-b",
+    )  # fmt: skip
+    wait_until(lambda: watch.last_tick >= 20, 60.0, "tick 20 published")
+    forged = ActuatorCommand(vehicle_id="b", tick=20, rotor_commands=[1.0] * 6)
+    batch = encode(ActuatorBatch(tick=20, commands=[forged]))
+    for _ in range(3):  # counted each time, logged once
+        watch.session.put(KEYS.autopilot_actuators("autopilot-a"), batch)
+    log = tmp_path / "physics.log"
+    wait_until(
+        lambda: "ignoring actuators for b on" in log.read_text(), 30.0, "the dropped command"
+    )
+    assert watch.last_tick == 20, "b's tick was answered by a's batch"
+    assert log.read_text().count("ignoring actuators for b on") == 1
+    watch.session.put(KEYS.autopilot_actuators("autopilot-a-plus1"), batch)
+    wait_until(lambda: watch.last_tick >= 21, 30.0, "a multi-vehicle node's batch answers b")
+    release.touch()
+    wait_until(lambda: watch.last_tick >= 60, 30.0, "ticks go on")
+
+
 PACKED = ("a", "b", "c", "d")
 
 
@@ -346,15 +379,12 @@ class Answers:
     def __init__(self, session: zenoh.Session) -> None:
         self.lock = threading.Lock()
         self.tick: dict[str, int] = {}
-        self._subs = [
-            session.declare_subscriber(KEYS.all_vehicle_actuators(), self._on),
-            session.declare_subscriber(KEYS.all_autopilot_actuators(), self._on),
-        ]
+        self._subs = [session.declare_subscriber(KEYS.all_autopilot_actuators(), self._on)]
 
     def _on(self, sample: zenoh.Sample) -> None:
-        msg = decode(sample.payload.to_bytes(), ActuatorCommand | ActuatorBatch)  # type: ignore[arg-type]
+        msg = decode(sample.payload.to_bytes(), ActuatorBatch)
         with self.lock:
-            for cmd in msg.commands if isinstance(msg, ActuatorBatch) else [msg]:
+            for cmd in msg.commands:
                 self.tick[cmd.vehicle_id] = max(cmd.tick, self.tick.get(cmd.vehicle_id, -1))
 
     def close(self) -> None:

@@ -249,7 +249,6 @@ class BusToyPhysics:
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
         self._subs = [
-            session.declare_subscriber(self.keys.all_vehicle_actuators(), self._on_cmd),
             session.declare_subscriber(self.keys.all_autopilot_actuators(), self._on_cmd),
         ]
         self._pub = session.declare_publisher(self.keys.tick())
@@ -259,11 +258,11 @@ class BusToyPhysics:
 
     def _on_cmd(self, sample: zenoh.Sample) -> None:
         from swarmbus.codec import decode
-        from swarmbus.messages import ActuatorBatch, ActuatorCommand
+        from swarmbus.messages import ActuatorBatch
 
-        msg = decode(sample.payload.to_bytes(), ActuatorCommand | ActuatorBatch)  # type: ignore[arg-type]
+        msg = decode(sample.payload.to_bytes(), ActuatorBatch)
         with self._cond:
-            for cmd in msg.commands if isinstance(msg, ActuatorBatch) else [msg]:
+            for cmd in msg.commands:
                 self._commands[cmd.vehicle_id] = (cmd.tick, list(cmd.rotor_commands))
             self._cond.notify_all()
 

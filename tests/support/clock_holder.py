@@ -19,7 +19,7 @@ import zenoh
 from agents import SwarmError, VehicleCommander
 from deploy.demo import StateDigest
 from swarmbus.codec import MessageError, decode, encode
-from swarmbus.keys import Keys
+from swarmbus.keys import Keys, autopilot_node
 from swarmbus.messages import ActuatorBatch, ActuatorCommand, Command, SimTick, VehicleState
 
 
@@ -46,14 +46,13 @@ class ClockHolder:
         self._cond = threading.Condition()
         self._answered: dict[int, set[str]] = {}
         self._released = -1
-        self._pub = session.declare_publisher(keys.vehicle_actuators(vehicle_id))
+        self._pub = session.declare_publisher(keys.autopilot_actuators(autopilot_node(vehicle_id)))
         self._subs = [
             session.declare_subscriber(keys.tick(), self._on_tick),
-            session.declare_subscriber(keys.all_vehicle_actuators(), self._on_command),
             session.declare_subscriber(keys.all_autopilot_actuators(), self._on_batch),
         ]
         self._token = session.liveliness().declare_token(
-            keys.node_health(f"autopilot-{vehicle_id}")
+            keys.node_health(autopilot_node(vehicle_id))
         )
 
     def close(self) -> None:
@@ -82,12 +81,6 @@ class ClockHolder:
                 if cmd.tick > self._released:
                     self._answered.setdefault(cmd.tick, set()).add(cmd.vehicle_id)
             self._cond.notify_all()
-
-    def _on_command(self, sample: zenoh.Sample) -> None:
-        try:
-            self._answer([decode(sample.payload.to_bytes(), ActuatorCommand)])
-        except MessageError:
-            return
 
     def _on_batch(self, sample: zenoh.Sample) -> None:
         try:
@@ -123,7 +116,7 @@ class ClockHolder:
                     del self._states[old]
                 for old in [k for k in self._answered if k <= tick]:
                     del self._answered[old]
-        self._pub.put(encode(cmd))
+        self._pub.put(encode(ActuatorBatch(tick=tick, commands=[cmd])))
 
     def run(
         self, last_tick: int, at_boundary: Callable[[int], Sequence[tuple[str, Command]]]

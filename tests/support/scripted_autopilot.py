@@ -3,10 +3,13 @@
 ``python -m tests.support.scripted_autopilot --connect EP --scenario F --vehicle a --vehicle b ...``
 declares one ``autopilot-<id>`` liveliness token per vehicle and answers every ``sim/tick`` with
 an ``ActuatorCommand`` per vehicle: a fixed throttle, the open-loop hover throttle, or a simple
-altitude hold (so the commands depend on the states it receives); ``--batch`` sends them as one
-``ActuatorBatch`` per tick. It can delay one answer (for a time, or until a file exists) or
-stall for a while, and writes a JSON report on exit: how many ticks it answered and whether it
-ever saw tick ``k + 1`` before it had answered tick ``k`` (a lockstep violation).
+altitude hold (so the commands depend on the states it receives). Each command goes as a
+one-entry ``ActuatorBatch`` on its vehicle's own ``autopilot/autopilot-<id>/actuators`` (as K
+one-vehicle processes would send); ``--batch`` sends them as one ``ActuatorBatch`` per tick on
+the key of a process serving them all (``autopilot-<first>-plus<n>``). It can delay one
+answer (for a time, or until a file exists) or stall for a while, and writes a JSON report on
+exit: how many ticks it answered and whether it ever saw tick ``k + 1`` before it had answered
+tick ``k`` (a lockstep violation).
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ from typing import Any
 import zenoh
 
 from swarmbus.codec import MessageError, decode, encode
-from swarmbus.keys import Keys
+from swarmbus.keys import Keys, autopilot_node, process_node
 from swarmbus.messages import ActuatorBatch, ActuatorCommand, SimTick, VehicleState
 from swarmbus.scenario import load_scenario
 from swarmbus.session import NetworkConfig, open_session
@@ -129,7 +132,7 @@ class Script:
             self.batch_pub.put(encode(ActuatorBatch(tick=msg.tick, commands=commands)))
         else:
             for cmd in commands:
-                self.pubs[cmd.vehicle_id].put(encode(cmd))
+                self.pubs[cmd.vehicle_id].put(encode(ActuatorBatch(tick=msg.tick, commands=[cmd])))
         if a.max_tick is not None and msg.tick >= a.max_tick:
             self.stop.set()
 
@@ -162,12 +165,14 @@ class Script:
         net = NetworkConfig(connect=[a.connect], listen=["tcp/127.0.0.1:0"])
         with open_session(net) as session:
             self.pubs = {
-                v: session.declare_publisher(self.keys.vehicle_actuators(v)) for v in a.vehicle
+                v: session.declare_publisher(self.keys.autopilot_actuators(autopilot_node(v)))
+                for v in a.vehicle
             }
-            self.batch_pub = session.declare_publisher(self.keys.autopilot_actuators("script"))
+            node = process_node("autopilot", a.vehicle)
+            self.batch_pub = session.declare_publisher(self.keys.autopilot_actuators(node))
             sub = session.declare_subscriber(self.keys.tick(), self.on_tick)
             tokens = [
-                session.liveliness().declare_token(self.keys.node_health(f"autopilot-{v}"))
+                session.liveliness().declare_token(self.keys.node_health(autopilot_node(v)))
                 for v in a.vehicle
             ]
             try:

@@ -26,7 +26,7 @@ import zenoh
 from deploy.certs import OPERATOR, identity
 from deploy.hosts import Deployment, load_deployment
 from deploy.security import secure_network
-from swarmbus.keys import Keys
+from swarmbus.keys import Keys, autopilot_node
 from swarmbus.scenario import load_scenario, resolve_scenario_path
 from swarmbus.session import NetworkConfig, TlsConfig, open_session, tls_settings, zenoh_config
 
@@ -35,7 +35,11 @@ MARKER_KEY = "plumeswarm-probe/marker"  # outside every world: no node decodes i
 
 
 def forbidden_keys(keys: Keys) -> list[str]:
-    return [keys.vehicle_actuators("uav1"), keys.vehicle_state("uav1"), keys.tick()]
+    return [
+        keys.autopilot_actuators(autopilot_node("uav1")),
+        keys.vehicle_state("uav1"),
+        keys.tick(),
+    ]
 
 
 def forged_puts_seen(

@@ -22,9 +22,9 @@ import zenoh
 
 from deploy.busview import BusView
 from swarmbus.codec import MessageError, decode, encode
-from swarmbus.keys import Keys
+from swarmbus.keys import Keys, autopilot_node
 from swarmbus.messages import (
-    ActuatorCommand,
+    ActuatorBatch,
     Arm,
     Clock,
     Command,
@@ -230,7 +230,7 @@ def fuzz_targets(
     for v in VEHICLES:
         topics += [
             (keys.vehicle_state(v), VehicleState),
-            (keys.vehicle_actuators(v), ActuatorCommand),
+            (keys.autopilot_actuators(autopilot_node(v)), ActuatorBatch),
             (keys.vehicle_status(v), VehicleStatus),
             (keys.vehicle_concentration(v), ConcentrationReading),
         ]
