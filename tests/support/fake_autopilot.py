@@ -7,8 +7,9 @@ serves every vehicle of the scenario but the skipped ones: a liveliness token
 mode rules as the autopilot: arm on the ground, take off only when armed, missions need an
 upload, …), and tick (``sim/tick``, as the physics) / state / status / concentration
 publications with kinematic motion at 120 Hz of sim time, paced at ``--speed`` × real time.
-It lets the gateway's own logic be tested before the real autopilot and physics are on main;
-it flies nothing for real. ``--mute ID`` leaves one vehicle's commands unanswered.
+The gateway's tests fly many vehicles against it without the cost of pybullet and one
+autopilot per vehicle; it flies nothing for real. ``--mute ID`` leaves one vehicle's commands
+unanswered.
 """
 
 from __future__ import annotations
