@@ -1,10 +1,10 @@
-"""Benchmark of the physics process: ticks/s and real-time factor against scripted participants.
+"""Benchmark of the physics process: ticks/s and real-time factor against lockstep participants.
 
 ``python -m bench.physics`` prints one markdown table: for N vehicles (default 1, 8, 32, 64,
 128), grounded (zero throttle, resting on the ground: contacts every step) and hovering
 (open-loop hover throttle at 20 m: no contacts), the ticks/s and real-time factor of
 ``plumeswarm node physics`` in lockstep mode at 240 Hz physics / 120 Hz control, answered by
-scripted participants (``tests/support/scripted_autopilot.py``; a few processes each serving many
+lockstep participants (``bench/lockstep_participant.py``; a few processes each serving many
 vehicles, answering inside the subscriber callback), plus the physics process's CPU share and
 CPU milliseconds per tick (which, unlike ticks/s, barely depends on what else the machine
 runs). A first table times the pure :class:`~sim_world.world.World` (no bus): control ticks
@@ -136,7 +136,7 @@ def process_row(n: int, hovering: bool, seconds: float, tmp: Path) -> dict[str, 
                 procs.append(
                     _spawn(
                         [
-                            *(sys.executable, "-m", "tests.support.scripted_autopilot", "--inline"),
+                            *(sys.executable, "-m", "bench.lockstep_participant"),
                             *("--connect", endpoint, "--scenario", str(sc), *vehicles, *throttle),
                         ],
                         tmp / f"script{i}-{sc.stem}.log",
@@ -218,7 +218,7 @@ def main(argv: list[str] | None = None) -> int:
             )
     if args.no_bus:
         return 0
-    print("\n## physics process over Zenoh with scripted participants\n")
+    print("\n## physics process over Zenoh with lockstep participants\n")
     print(
         "| N | state | participant procs | ticks/s | real-time factor | physics CPU "
         "| physics CPU ms/tick |"

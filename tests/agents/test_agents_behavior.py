@@ -13,7 +13,7 @@ from agents.behavior import BehaviorError
 from plume_service import GaussianPlume
 from swarmbus.messages import Arm, FlightMode, SetMode, Takeoff
 from swarmbus.scenario import Scenario, load_scenario
-from tests.support.agents_toy import ToyWorld
+from tests.support.toy_physics import ToyWorld
 
 CASTING = "agents.behaviors.casting:Casting"
 SOURCE = (0.0, 0.0, 10.0)

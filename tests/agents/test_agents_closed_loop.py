@@ -29,7 +29,7 @@ from swarmbus.messages import (
     Takeoff,
 )
 from swarmbus.scenario import Scenario, load_scenario
-from tests.support.agents_toy import ToyWorld
+from tests.support.toy_physics import ToyWorld
 
 
 def scenario(**failsafe: object) -> Scenario:

@@ -1,6 +1,6 @@
 """The autopilot process on a real Zenoh network, driven by a lockstep stand-in for physics.
 
-The physics process is replaced by :class:`tests.support.agents_toy.BusToyPhysics` (the agreed
+The physics process is replaced by :class:`tests.support.toy_physics.BusToyPhysics` (the agreed
 tick / actuator protocol over toy dynamics); the plume service is the real process.
 """
 
@@ -19,8 +19,8 @@ from swarmbus.codec import decode
 from swarmbus.messages import ConcentrationReading, ErrorReply, FlightMode, RejectCode
 from swarmbus.scenario import DEFAULT_SCENARIO, load_scenario
 from swarmbus.session import Presence
-from tests.support.agents_toy import BusToyPhysics
 from tests.support.procs import Network, NodeProcs, keys_for
+from tests.support.toy_physics import BusToyPhysics
 
 
 @pytest.fixture

@@ -43,7 +43,7 @@ from swarmbus.messages import (
     Takeoff,
 )
 from swarmbus.scenario import Scenario, load_scenario
-from tests.support.agents_toy import ToyWorld
+from tests.support.toy_physics import ToyWorld
 
 NOISY = NodeOptions(position_noise_m=0.05, velocity_noise_m_s=0.02)
 

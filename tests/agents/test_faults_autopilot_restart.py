@@ -10,7 +10,7 @@ import math
 from agents.autopilot import Autopilot
 from swarmbus.messages import Arm, FlightMode, Takeoff
 from swarmbus.scenario import load_scenario
-from tests.support.agents_toy import ToyWorld
+from tests.support.toy_physics import ToyWorld
 
 
 def test_restarted_in_the_air_holds_where_it_is() -> None:

@@ -13,8 +13,7 @@ import pytest
 
 from deploy.scaling import scale_scenario, write_scenario
 from swarmbus.scenario import load_scenario
-from swarmbus.session import NetworkConfig, Presence, free_tcp_port, open_session
-from tests.support.mavclient import free_udp_block
+from swarmbus.session import NetworkConfig, Presence, free_tcp_port, free_udp_block, open_session
 from tests.support.procs import keys_for, wait_until
 from tests.support.upstack import spawn_up
 

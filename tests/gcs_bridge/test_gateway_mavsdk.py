@@ -3,8 +3,7 @@
 Discover all three, set the takeoff altitude (a parameter), arm, take off, upload a 4-waypoint
 mission to each, start them, see every MISSION_ITEM_REACHED and the progress reach the end,
 read the concentration (NAMED_VALUE_FLOAT via MavlinkDirect), land, see them disarm.
-Runs against the scripted fake autopilot always, and against the real plume + physics +
-autopilot stack when those are on the branch.
+Runs against the real plume + physics + autopilot stack.
 """
 
 from __future__ import annotations
@@ -34,10 +33,6 @@ from mavsdk.asyncio.plugins.telemetry import TelemetryAsync  # noqa: E402
 ORIGIN = Origin()
 N = 3
 ALT_M = 8.0
-BACKENDS = [
-    "fake",
-    "real",
-]
 
 
 def spawn_y(i: int) -> float:  # tests.support.mavclient.scenario_text's row of vehicles
@@ -144,13 +139,12 @@ async def discover_and_fly(port: int) -> dict[int, dict[str, Any]]:
         return dict(zip(sorted(systems), results, strict=True))
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
-def test_mavsdk_flies_three_vehicles(backend: str, tmp_path: Path) -> None:
+def test_mavsdk_flies_three_vehicles(tmp_path: Path) -> None:
     scenario, gcs_port, _ = write_scenario(tmp_path / "scenario.toml", N)
     ids = [f"uav{i + 1}" for i in range(N)]
     with (
         zenoh_network() as (net, _router),
-        vehicles(net, scenario, tmp_path, ids, backend=backend, speed=3.0),
+        vehicles(net, scenario, tmp_path, ids, backend="real"),
         gateway(net, scenario, tmp_path, "cmd_timeout_s=3"),
     ):
         results = asyncio.run(discover_and_fly(gcs_port))

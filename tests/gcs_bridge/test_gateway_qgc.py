@@ -1,15 +1,13 @@
 """QGroundControl's flows, replayed with raw pymavlink, on three vehicles at once: the connect
 sequence, takeoff (NAV_TAKEOFF while disarmed, then ARM) and a mode change by SET_MODE (RTL),
-start mission (SET_MODE mission while disarmed, then ARM) with every item reached, and — with
-the real autopilot — the data-link-loss failsafe configured by PARAM_SET and fed by the GCS's
-heartbeats. Against the fake stack always; against plume + physics + autopilots when present.
+start mission (SET_MODE mission while disarmed, then ARM) with every item reached, and the
+data-link-loss failsafe configured by PARAM_SET and fed by the GCS's heartbeats. Against the
+real stack (plume + physics + autopilots).
 """
 
 from __future__ import annotations
 
 from pathlib import Path
-
-import pytest
 
 from gcs_bridge.dialect import mavlink
 from gcs_bridge.params import float_bits_of_int
@@ -20,10 +18,6 @@ from tests.support.procs import zenoh_network
 
 NAN = float("nan")
 ORIGIN = Origin()
-BACKENDS = [
-    "fake",
-    "real",
-]
 ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
 
 
@@ -39,12 +33,11 @@ def at_altitude(c: MavClient, sysid: int, metres: float) -> None:
     )
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
-def test_qgc_flows(backend: str, tmp_path: Path) -> None:
+def test_qgc_flows(tmp_path: Path) -> None:
     scenario, gcs_port, _ = write_scenario(tmp_path / "scenario.toml", 3)
     with (
         zenoh_network() as (net, _router),
-        vehicles(net, scenario, tmp_path, ["uav1", "uav2", "uav3"], backend=backend, speed=3.0),
+        vehicles(net, scenario, tmp_path, ["uav1", "uav2", "uav3"], backend="real"),
         gateway(net, scenario, tmp_path, "cmd_timeout_s=3"),
         MavClient(gcs_port) as c,
     ):
@@ -81,8 +74,6 @@ def test_qgc_flows(backend: str, tmp_path: Path) -> None:
         c.wait_disarmed(2, 180.0)  # the last item lands
         c.wait_disarmed(1, 180.0)  # RTL lands too
 
-        if backend != "real":
-            return
         # uav3 — data-link loss: the failsafe is configured by PARAM_SET (the autopilot's
         # values), fed by our heartbeats, and trips in sim time once they stop
         assert c.param_set(

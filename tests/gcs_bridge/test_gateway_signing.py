@@ -41,7 +41,7 @@ def test_signed_gcs_link_refuses_unsigned_and_wrong_keys(tmp_path: Path) -> None
     )
     with (
         zenoh_network() as (net, _router),
-        vehicles(net, scenario, tmp_path, ["uav1"], speed=2.0),
+        vehicles(net, scenario, tmp_path, ["uav1"], backend="real"),
         gateway(net, scenario, tmp_path, "signed_links=gcs", "cmd_timeout_s=3"),
         MavClient(gcs_port, signing_key=KEY) as signed,
         MavClient(0) as unsigned,
@@ -368,7 +368,7 @@ def test_mavproxy_is_ignored_until_it_has_the_passphrase(tmp_path: Path) -> None
     )
     with (
         zenoh_network() as (net, _router),
-        vehicles(net, scenario, tmp_path, ["uav1"], speed=2.0),
+        vehicles(net, scenario, tmp_path, ["uav1"], backend="real"),
         gateway(net, scenario, tmp_path, "cmd_timeout_s=3"),
         MavClient(gcs_port) as watch,  # listens only: no key needed to read signed telemetry
     ):

@@ -15,8 +15,8 @@ from gcs_bridge.gateway import Gateway
 from gcs_bridge.options import gateway_options
 from swarmbus.keys import Keys
 from swarmbus.scenario import load_scenario
-from swarmbus.session import open_session
-from tests.support.mavclient import MavClient, free_udp_block
+from swarmbus.session import free_udp_block, open_session
+from tests.support.mavclient import MavClient
 from tests.support.procs import Network
 
 N = 256

@@ -73,7 +73,7 @@ def start_script(
     cmd = [
         sys.executable,
         "-m",
-        "tests.support.scripted_autopilot",
+        "tests.support.scripted_participant",
         "--connect",
         procs.net.endpoint,
     ]

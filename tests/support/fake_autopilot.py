@@ -1,14 +1,13 @@
 """A scripted stand-in for physics + autopilots, speaking only the bus contract.
 
-``python -m tests.support.fake_autopilot --connect EP --scenario F [--speed X] [--mute ID]
-[--skip ID]``
+``python -m tests.support.fake_autopilot --connect EP --scenario F [--speed X] [--skip ID]``
 serves every vehicle of the scenario but the skipped ones: a liveliness token
 ``autopilot-<id>``, the ``vehicle/<id>/cmd`` queryable with the contract's replies (the same
 mode rules as the autopilot: arm on the ground, take off only when armed, missions need an
 upload, …), and tick (``sim/tick``, as the physics) / state / status / concentration
 publications with kinematic motion at 120 Hz of sim time, paced at ``--speed`` × real time.
-It lets the gateway's own logic be tested before the real autopilot and physics are on main;
-it flies nothing for real. ``--mute ID`` leaves one vehicle's commands unanswered.
+The gateway's tests fly many vehicles against it without the cost of pybullet and one
+autopilot per vehicle; it flies nothing for real.
 """
 
 from __future__ import annotations
@@ -332,12 +331,10 @@ class World:
 Pubs = dict[str, tuple[Any, Any, Any]]  # vehicle → (state, status, concentration) publishers
 
 
-def command_server(world: World, f: Fake, mute: list[str], pubs: Pubs) -> Any:
+def command_server(world: World, f: Fake, pubs: Pubs) -> Any:
     """The queryable callback of ``f``'s command key: decode, handle, status, then reply."""
 
     def on_query(query: zenoh.Query) -> None:
-        if f.vid in mute:
-            return
         try:
             payload = query.payload.to_bytes() if query.payload else b""
             cmd: Any = decode(payload, Command)  # type: ignore[arg-type]
@@ -420,7 +417,6 @@ def main() -> None:
     ap.add_argument("--connect", required=True)
     ap.add_argument("--scenario", required=True)
     ap.add_argument("--speed", type=float, default=2.0)
-    ap.add_argument("--mute", action="append", default=[])
     ap.add_argument("--skip", action="append", default=[], help="vehicle the test plays itself")
     args = ap.parse_args()
     scenario = load_scenario(args.scenario)
@@ -439,9 +435,7 @@ def main() -> None:
             for f in world.vehicles.values()
         }
         declared = [
-            session.declare_queryable(
-                keys.vehicle_cmd(f.vid), command_server(world, f, args.mute, pubs)
-            )
+            session.declare_queryable(keys.vehicle_cmd(f.vid), command_server(world, f, pubs))
             for f in world.vehicles.values()
         ]
         tokens = [

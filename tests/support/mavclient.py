@@ -10,7 +10,6 @@ from __future__ import annotations
 import asyncio
 import collections
 import math
-import random
 import select
 import socket
 import time
@@ -22,30 +21,12 @@ from typing import Any
 
 from gcs_bridge.dialect import mavlink, new_mav, pack
 from gcs_bridge.links import signing_timestamp_now
+from swarmbus.session import free_udp_block
 from tests.support.procs import REPO
 
 Msg = Any
 GCS_SYSID = 255
 GCS_COMPID = 190
-
-
-def free_udp_block(count: int, tries: int = 200) -> int:
-    """A base port such that base … base+count-1 are free UDP ports on loopback right now."""
-    for _ in range(tries):
-        base = random.randint(20000, 60000 - count)
-        socks: list[socket.socket] = []
-        try:
-            for port in range(base, base + count):
-                s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-                socks.append(s)
-                s.bind(("127.0.0.1", port))
-            return base
-        except OSError:
-            continue
-        finally:
-            for s in socks:
-                s.close()
-    raise RuntimeError("no free block of UDP ports")
 
 
 def scenario_text(

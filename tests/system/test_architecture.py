@@ -69,6 +69,40 @@ def test_packages_do_not_import_the_tests_or_the_benches(package: str) -> None:
     assert not bad, bad
 
 
+def _uses_of(path: Path, tool: str) -> list[str]:
+    """Where the file at ``path`` imports ``tool`` or names one of its modules in a string (a
+    command line such as ``python -m tool.x`` or an import by name)."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    hits = sorted(_imports(path) & {tool})
+    for node in ast.walk(tree):
+        value = node.value if isinstance(node, ast.Constant) else None
+        if isinstance(value, str) and value.startswith(f"{tool}."):
+            hits.append(repr(value))
+    return hits
+
+
+@pytest.mark.parametrize(("tool", "other"), [("bench", "tests"), ("tests", "bench")])
+def test_the_benches_and_the_tests_do_not_use_each_other(tool: str, other: str) -> None:
+    """The benches measure the stack with their own code and the tests check it with theirs:
+    neither imports the other or starts the other's modules (``python -m tests.…``)."""
+    bad = [
+        f"{path.relative_to(REPO)}: {hits}"
+        for path in sorted((REPO / tool).rglob("*.py"))
+        if (hits := _uses_of(path, other))
+    ]
+    assert not bad, bad
+
+
+def test_uses_of_sees_an_import_and_a_module_started_by_name(tmp_path: Path) -> None:
+    src = tmp_path / "x.py"
+    src.write_text('import os\nfrom tests.support import procs\nARGS = ["-m", "tests.support.x"]\n')
+    assert _uses_of(src, "tests") == ["tests", "'tests.support.x'"]
+    src.write_text(
+        '"""Unlike tests.support, this docstring names no module."""\nimport testsuite\n'
+    )
+    assert _uses_of(src, "tests") == []
+
+
 def _module_name(path: Path) -> str:
     parts = list(path.relative_to(REPO).with_suffix("").parts)
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)

@@ -156,7 +156,7 @@ def flight(tmp: Path, per_process: int = 1) -> Iterator[Flight]:
     try:
         launcher.start(on_bus)
         gate = subprocess.Popen(
-            [sys.executable, "-m", "tests.support.scripted_autopilot", "--connect", endpoint,
+            [sys.executable, "-m", "tests.support.scripted_participant", "--connect", endpoint,
              "--scenario", str(path), "--vehicle", GATE, "--throttle", "0",
              "--delay-tick", str(START_TICK), "--delay-s", "300", "--release-file", str(release),
              "--follow-rewinds"],

@@ -1,6 +1,6 @@
-"""A scripted lockstep participant for physics tests and benches (not an autopilot).
+"""A scripted lockstep participant for physics tests (not an autopilot).
 
-``python -m tests.support.scripted_autopilot --connect EP --scenario F --vehicle a --vehicle b ...``
+``python -m tests.support.scripted_participant --connect EP --scenario F --vehicle a ...``
 declares one ``autopilot-<id>`` liveliness token per vehicle and answers every ``sim/tick`` with
 an ``ActuatorCommand`` per vehicle: a fixed throttle, the open-loop hover throttle, or a simple
 altitude hold (so the commands depend on the states it receives). Each command goes as a
