@@ -38,6 +38,7 @@ _NEW_STREAM_WINDOW = 60 * 100_000  # one minute, in 10 µs units
 PEER_EXPIRY_S = 15.0
 MAX_PEERS = 16  # per link: one datagram must not buy a stranger our telemetry stream forever
 MAX_DATAGRAMS_PER_POLL = 256
+SEND_ATTEMPTS = 8  # a send refused for earlier datagrams' ICMP errors is tried again
 REFUSED_HOLD_S = 2.5  # > the heartbeat period: heartbeats keep an absent listener's mark fresh
 IP_RECVERR = getattr(socket, "IP_RECVERR", 11)  # Linux's value; Python does not export it
 _NOBODY_THERE = {errno.ECONNREFUSED, errno.EHOSTUNREACH, errno.ENETUNREACH}
@@ -250,12 +251,17 @@ class Link:
                 log.debug("%s: send to %s failed: %s", self.name, addr, exc)
 
     def _sendto(self, buf: bytes, addr: Addr) -> None:
-        try:
-            self.sock.sendto(buf, addr)
-        except ConnectionRefusedError:
-            # an earlier datagram's ICMP error, reported on this call (IP_RECVERR): this one
-            # was not sent, and the error is now taken
-            self.sock.sendto(buf, addr)
+        # With IP_RECVERR an earlier datagram's ICMP error is reported by a later send call,
+        # which then sends nothing and takes the error. Another error can arrive before the
+        # next try (the ICMP of each datagram sent to a port where nobody listens), so try
+        # until sent: a refused call never sent its datagram, so nothing goes out twice.
+        for _ in range(SEND_ATTEMPTS - 1):
+            try:
+                self.sock.sendto(buf, addr)
+                return
+            except ConnectionRefusedError:
+                continue
+        self.sock.sendto(buf, addr)
 
 
 class LinkSet:
