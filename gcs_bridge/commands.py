@@ -1,9 +1,9 @@
 """MAVLink flight commands (COMMAND_LONG / COMMAND_INT, SET_MODE) → bus commands, and the
 autopilot's reply → MAV_RESULT. Pure: the gateway supplies what it knows of the vehicle.
 
-Takeoff altitude semantics differ between clients (MAVLINK.md): QGC sends param7 as AMSL with
-NaN lat/lon, MAVSDK sends NaN (meaning MIS_TAKEOFF_ALT), MAVProxy sends a relative altitude with
-lat/lon 0. COMMAND_INT carries its frame, which settles it.
+Takeoff altitude semantics differ between clients (checked on the wire): QGC sends param7 as
+AMSL with NaN lat/lon, MAVSDK sends NaN (meaning MIS_TAKEOFF_ALT), MAVProxy sends a relative
+altitude with lat/lon 0. COMMAND_INT carries its frame, which settles it.
 """
 
 from __future__ import annotations

@@ -55,7 +55,8 @@ def test_vertices_lie_on_the_level(seed_mesh):
 
 def test_mesh_spans_the_seed_window(seed_mesh):
     _, vertices, _ = seed_mesh
-    # The centreline at z = 10 m drops to 0.01 g/m³ near x ≈ 50.2 m (FACTS.md).
+    # The centreline at z = 10 m drops to 0.01 g/m³ near x ≈ 50.2 m (the closed-form
+    # Gaussian with the seed's coefficients).
     assert vertices[:, 0].max() == pytest.approx(50.2, abs=0.5)
     assert vertices[:, 0].min() >= 0.0
 

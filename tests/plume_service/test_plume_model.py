@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 
 from plume_service import ConcentrationField, GaussianPlume, PlumeField
 
-# McMullen class D as published (FACTS.md; Turner 1970 via McMullen 1975).
+# McMullen class D as published (Turner 1970 via McMullen 1975).
 D_Y = (-2.555, 1.0423, -0.0087)
 D_Z = (-3.186, 1.1737, -0.0316)
 CLASSES = ("A", "B", "C", "D", "E", "F")
@@ -88,7 +88,7 @@ def test_point_value_matches_hand_computed_beychok_equation():
 
 def test_novak2018_preset_is_the_seed_plume():
     plume = GaussianPlume.preset("novak2018")
-    # Seed coefficients with K_z = +0.0316: σz(100 m) ≈ 18 m (FACTS.md), not 4.7 m.
+    # Seed coefficients with K_z = +0.0316: σz(100 m) ≈ 18 m, not 4.7 m.
     _, sigma_z = plume.sigmas(np.array([100.0]))
     assert sigma_z[0] == pytest.approx(mcmullen_sigma((-3.186, 1.1737, 0.0316), 100.0), rel=1e-12)
     assert 17.5 < sigma_z[0] < 18.5
@@ -105,7 +105,7 @@ def test_novak2018_preset_is_the_seed_plume():
     [("novak2018", None, 14.1, 50.2), (None, "mcmullen", 17.6, 83.6)],
 )
 def test_sensor_window_on_the_centreline_matches_the_seed(preset, coefficients, near, far):
-    # FACTS.md: the [0.01, 0.2] g/m³ window holds at z = 10 m between these distances.
+    # From the closed form: the [0.01, 0.2] g/m³ window holds at z = 10 m between these distances.
     if preset:
         plume = GaussianPlume.preset(preset)
     else:
