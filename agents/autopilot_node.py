@@ -318,11 +318,29 @@ class Inbox:
             while not q.empty():
                 arrived.append(q.get_nowait())
             ticks = [k for k, e in enumerate(arrived) if isinstance(e, TickArrived)]
-            newest = ticks[-1] if ticks else -1
+            newest = _newest_tick(arrived, ticks)
             for k, event in enumerate(arrived):
                 if k == newest or not isinstance(event, TickArrived):
                     yield event
             del arrived  # the events handed out must not outlive their handling (queries)
+
+
+def _newest_tick(arrived: list[Event], ticks: list[int]) -> int:
+    """The index of the newest of the piled-up ticks that is a tick at all: a sample on
+    ``sim/tick`` that does not decode (garbage, a stranger's put) must not push the real tick
+    it arrived behind out of the pile, or the physics would wait for an answer that never
+    comes. None decodes: the newest (the loop logs and ignores it)."""
+    if len(ticks) < 2:
+        return ticks[-1] if ticks else -1
+    for k in reversed(ticks):
+        event = arrived[k]
+        assert isinstance(event, TickArrived)
+        try:
+            decode(event.data, TickView)
+        except MessageError:
+            continue
+        return k
+    return ticks[-1]
 
 
 class AutopilotNode:

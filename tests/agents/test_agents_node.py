@@ -6,6 +6,7 @@ tick / actuator protocol over toy dynamics); the plume service is the real proce
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -14,9 +15,16 @@ import pytest
 import zenoh
 
 from agents import CommandRejected, Swarm, WaitTimeout
+from agents.autopilot_node import Inbox, TickArrived
 from plume_service import GaussianPlume
-from swarmbus.codec import decode
-from swarmbus.messages import ConcentrationReading, ErrorReply, FlightMode, RejectCode
+from swarmbus.codec import decode, encode
+from swarmbus.messages import (
+    ConcentrationReading,
+    ErrorReply,
+    FlightMode,
+    RejectCode,
+    SimTick,
+)
 from swarmbus.scenario import DEFAULT_SCENARIO, load_scenario
 from swarmbus.session import Presence
 from tests.support.procs import Network, NodeProcs, keys_for
@@ -165,3 +173,15 @@ def test_invalid_payload_values_are_rejected_by_the_decoder(
             swarm.command("uav1").goto(float("nan"), 0.0, 5.0)
         assert info.value.code == RejectCode.INVALID and "position_enu_m" in info.value.field
         assert procs.procs[0][1].poll() is None
+
+
+def test_a_garbage_sample_behind_a_real_tick_does_not_push_it_out_of_the_inbox() -> None:
+    """Ticks that pile up are handed out newest only; a sample on ``sim/tick`` that is no tick
+    (garbage, a stranger's put) must not be the "newest" that replaces the real one, or the
+    physics would wait for an answer that never comes."""
+    real = encode(SimTick(tick=7, sim_time_s=7 / 120, control_dt_s=1 / 120, states=[]))
+    inbox = Inbox()
+    inbox.put(TickArrived(real))
+    inbox.put(TickArrived(b"\x92\x01garbage"))
+    first = next(inbox.events(threading.Event()))
+    assert isinstance(first, TickArrived) and first.data == real
