@@ -60,6 +60,7 @@ from swarmbus.messages import (
     Command,
     CommandReply,
     PlumeSample,
+    SimTick,
     VehicleState,
     VehicleStatus,
 )
@@ -326,17 +327,18 @@ class Inbox:
 
 
 def _newest_tick(arrived: list[Event], ticks: list[int]) -> int:
-    """The index of the newest of the piled-up ticks that is a tick at all: a sample on
-    ``sim/tick`` that does not decode (garbage, a stranger's put) must not push the real tick
-    it arrived behind out of the pile, or the physics would wait for an answer that never
-    comes. None decodes: the newest (the loop logs and ignores it)."""
+    """The index of the newest of the piled-up ticks that is a whole SimTick: a sample on
+    ``sim/tick`` that is not (garbage, a stranger's put) must not push the real tick it arrived
+    behind out of the pile, or the physics would wait for an answer that never comes. None
+    decodes: the newest (the loop logs and ignores it). Piles are rare (a held tick re-sent,
+    a realtime clock running ahead), so the whole decode costs little."""
     if len(ticks) < 2:
         return ticks[-1] if ticks else -1
     for k in reversed(ticks):
         event = arrived[k]
         assert isinstance(event, TickArrived)
         try:
-            decode(event.data, TickView)
+            decode(event.data, SimTick)  # whole: a partial view lets a mangled tick through
         except MessageError:
             continue
         return k
@@ -437,6 +439,11 @@ class AutopilotNode:
     def _on_tick_data(self, data: bytes) -> None:
         try:
             tick = _Tick.decode(data)
+            if tick.tick < self.last_tick:
+                # Time going back is a physics resumed from its checkpoint, and the whole
+                # replay hangs on it: only a tick that is a SimTick in every state counts
+                # (the partial view leaves the other vehicles' states unchecked).
+                decode(data, SimTick)
         except MessageError as exc:
             log.warning("ignoring bad tick: %s", exc)
             return

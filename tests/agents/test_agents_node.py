@@ -10,14 +10,15 @@ import threading
 from collections.abc import Iterator
 from pathlib import Path
 
+import msgspec
 import numpy as np
 import pytest
 import zenoh
 
 from agents import CommandRejected, Swarm, WaitTimeout
-from agents.autopilot_node import Inbox, TickArrived
+from agents.autopilot_node import AutopilotNode, Inbox, NodeOptions, TickArrived
 from plume_service import GaussianPlume
-from swarmbus.codec import decode, encode
+from swarmbus.codec import MessageError, decode, encode
 from swarmbus.messages import (
     ConcentrationReading,
     ErrorReply,
@@ -25,8 +26,10 @@ from swarmbus.messages import (
     RejectCode,
     SimTick,
 )
+from swarmbus.node import NodeContext
 from swarmbus.scenario import DEFAULT_SCENARIO, load_scenario
-from swarmbus.session import Presence
+from swarmbus.session import NetworkConfig, Presence, open_session
+from tests.support.messages_samples import STATE as STATE_SAMPLE
 from tests.support.procs import Network, NodeProcs, keys_for
 from tests.support.toy_physics import BusToyPhysics
 
@@ -185,3 +188,40 @@ def test_a_garbage_sample_behind_a_real_tick_does_not_push_it_out_of_the_inbox()
     inbox.put(TickArrived(b"\x92\x01garbage"))
     first = next(inbox.events(threading.Event()))
     assert isinstance(first, TickArrived) and first.data == real
+
+
+def test_a_tick_going_back_counts_only_if_it_is_a_whole_sim_tick(tmp_path: Path) -> None:
+    """A tick number below the last is a physics resumed from its checkpoint, and the node
+    rewinds to it. A sample that only looks like such a tick (its own state decodes, the rest is
+    mangled: here ``control_dt_s``) is garbage, not a resume: the node must not fly the state it
+    carries. Real session (loopback, no peers), the node's own tick handler."""
+    scenario = load_scenario(DEFAULT_SCENARIO)
+    own = STATE_SAMPLE
+    ctx = NodeContext(
+        scenario=scenario,
+        network=NetworkConfig(connect=[], listen=[]),
+        name="autopilot-uav1",
+        vehicle_ids=("uav1",),
+    )
+
+    def tick_bytes(tick: int, control_dt_s: float) -> bytes:
+        fields = msgspec.to_builtins(
+            SimTick(tick=tick, sim_time_s=tick / 120, control_dt_s=1 / 120, states=[own])
+        )
+        fields["control_dt_s"] = control_dt_s
+        return msgspec.msgpack.encode(fields)
+
+    with open_session(ctx.network) as session:
+        node = AutopilotNode(session, ctx, NodeOptions())
+        try:
+            node._on_tick_data(tick_bytes(100, 1 / 120))
+            assert node.last_tick == 100
+            mangled = tick_bytes(42, -1.0)
+            with pytest.raises(MessageError):
+                decode(mangled, SimTick)
+            node._on_tick_data(mangled)
+            assert node.last_tick == 100, "a mangled tick rewound the node"
+            node._on_tick_data(tick_bytes(42, 1 / 120))  # a real resume still rewinds
+            assert node.last_tick == 42
+        finally:
+            node.close()
