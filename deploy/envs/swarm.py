@@ -23,10 +23,10 @@ import numpy.typing as npt
 from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
+from agents.anemometer import Anemometer
 from deploy.envs.backends import Backend, BackendError, BusBackend, FusedBackend
 from deploy.envs.render import Renderer
 from deploy.scaling import scale_scenario
-from sim_world.world import wind_vector_enu
 from swarmbus.messages import (
     Arm,
     Command,
@@ -39,6 +39,7 @@ from swarmbus.messages import (
     VehicleState,
 )
 from swarmbus.scenario import Scenario, load_scenario, resolve_scenario_path
+from swarmbus.wind import wind_from_scenario
 
 Obs = npt.NDArray[np.float32]
 Action = npt.NDArray[np.float32]
@@ -181,9 +182,14 @@ class PlumeSwarmEnv(ParallelEnv[str, Obs, Action]):  # type: ignore[misc]
         self.backend = make_backend(backend, attach)
         self.possible_agents = [v.id for v in self.scenario.vehicles]
         self.agents: list[str] = []
-        self.wind_enu_m_s = wind_vector_enu(
-            self.scenario.wind.speed_m_s, self.scenario.wind.from_deg
-        )
+        # Each vehicle's anemometer, as its autopilot and its behaviours read it: the scenario's
+        # wind at the vehicle's position and sim time, plus the anemometer's seeded noise.
+        wind = wind_from_scenario(self.scenario)
+        seed = self.scenario.world.seed
+        self.anemometers = {
+            v.id: Anemometer(self.scenario.anemometer, wind, seed, k)
+            for k, v in enumerate(self.scenario.vehicles)
+        }
         self.sources_enu_m = np.array(
             [(s.x_m, s.y_m, s.release_height_m) for s in self.scenario.plume.sources]
         )
@@ -395,7 +401,10 @@ class PlumeSwarmEnv(ParallelEnv[str, Obs, Action]):  # type: ignore[misc]
             obs = np.zeros(self.observation_size, dtype=np.float64)
             obs[0:3] = state.position_enu_m
             obs[3:6] = state.velocity_enu_m_s
-            obs[6:9] = self.wind_enu_m_s
+            wind = self.anemometers[vid].read(
+                vid, state.tick, state.sim_time_s, state.position_enu_m
+            )
+            obs[6:9] = wind.wind_enu_m_s
             obs[9] = values[i]
             if self.k_peers and len(ids) > 1:
                 rel = np.delete(positions, i, axis=0) - positions[i]

@@ -20,8 +20,9 @@ from pettingzoo.test import parallel_api_test
 from deploy.envs import ENV_ID, AgentStep, PlumeSourceEnv, PlumeSwarmEnv
 from deploy.launcher import Launcher, LaunchOptions
 from deploy.scaling import write_scenario
-from swarmbus.scenario import ScenarioError, load_scenario, parse_scenario
+from swarmbus.scenario import ScenarioError, WindMeander, load_scenario, parse_scenario
 from swarmbus.session import free_tcp_port
+from swarmbus.wind import wind_from_scenario
 from tests.support.procs import REPO, run_cli
 
 
@@ -265,3 +266,53 @@ def test_a_bad_env_section_names_its_field(env_section: str, field: str, words: 
         parse_scenario(text, "sc.toml")
     assert err.value.field == field
     assert words in err.value.reason
+
+
+def _wind_entries(scenario: object, steps: int) -> list[tuple[float, np.ndarray, np.ndarray]]:
+    """(sim time, position, wind entry) of every agent after each of ``steps`` zero actions."""
+    env = PlumeSwarmEnv(scenario)  # type: ignore[arg-type]
+    out = []
+    try:
+        env.reset(seed=3)
+        for _ in range(steps):
+            obs, *_ = env.step({a: np.zeros(4, dtype=np.float32) for a in env.agents})
+            states = env.backend.states()
+            for agent, o in obs.items():
+                out.append((states[agent].sim_time_s, o[0:3].copy(), o[6:9].copy()))
+    finally:
+        env.close()
+    return out
+
+
+def test_the_wind_entry_is_the_vehicles_anemometer() -> None:
+    """Entries 6-8 are what the vehicle's anemometer reads. Steady wind, no noise: the scenario's
+    wind vector (from 240 deg at 4 m/s: the air moves toward 60 deg, closed form). Meandering
+    wind: it changes from step to step and is the wind the physics applies at the vehicle's
+    position and time (swarmbus.wind), not the mean. Noise: scattered around the true wind with
+    the anemometer's standard deviation."""
+    base = load_scenario(None)
+    wind = msgspec.structs.replace(base.wind, speed_m_s=4.0, from_deg=240.0)
+    quiet = msgspec.structs.replace(base.anemometer, noise_std_m_s=0.0)
+    steady = msgspec.structs.replace(base, wind=wind, anemometer=quiet)
+    to = math.radians(240.0 + 180.0)
+    expected = np.array([4.0 * math.sin(to), 4.0 * math.cos(to), 0.0])
+    for _, _, w in _wind_entries(steady, 5):
+        assert np.allclose(w, expected, atol=1e-9), w
+
+    meander = msgspec.structs.replace(
+        steady,
+        wind=msgspec.structs.replace(wind, model="meander", meander=WindMeander(preset="large")),
+    )
+    model = wind_from_scenario(meander)
+    seen = _wind_entries(meander, 8)
+    for t, position, w in seen:
+        assert np.allclose(w, model.velocity([position], t)[0], atol=1e-6), (t, w)
+    spread = np.ptp(np.array([w for _, _, w in seen]), axis=0)
+    assert spread[:2].max() > 0.05, spread  # the mean wind would not move at all
+
+    noisy = msgspec.structs.replace(
+        steady, anemometer=msgspec.structs.replace(quiet, noise_std_m_s=0.5)
+    )
+    errors = np.array([w - expected for _, _, w in _wind_entries(noisy, 40)])
+    assert errors.shape[0] >= 100
+    assert abs(errors.mean()) < 0.1 and 0.4 < errors.std() < 0.6, (errors.mean(), errors.std())
