@@ -1,6 +1,6 @@
 """Plume benchmarks: vectorised model vs the seed's scalar loop, isosurface mesh, bus queries.
 
-Run with ``python -m bench.plume``. Prints one table; targets from issue 3:
+Run with ``python -m bench.plume``. Prints one table; the plume service's targets:
 vectorised/scalar ratio ≥ 200×, 0.1 m mesh of the seed domain < 10 s,
 1-point bus query p50 < 0.5 ms.
 """

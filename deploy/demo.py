@@ -37,7 +37,7 @@ from deploy.console import Console
 from deploy.launcher import Launcher, LaunchError, LaunchOptions, missing_roles
 from deploy.scaling import scale_scenario, write_scenario
 from swarmbus.codec import encode
-from swarmbus.keys import Keys
+from swarmbus.keys import Keys, autopilot_node
 from swarmbus.messages import (
     Arm,
     Command,
@@ -49,7 +49,7 @@ from swarmbus.messages import (
 )
 from swarmbus.scenario import Scenario
 from swarmbus.session import NetworkConfig, free_tcp_port, open_session
-from swarmbus.views import STATE_TAG
+from swarmbus.views import state_key_decoder
 
 log = logging.getLogger(__name__)
 
@@ -67,16 +67,6 @@ class DemoError(RuntimeError):
 
 
 # ---------------------------------------------------------------------------- what we collect
-class _StateKey(msgspec.Struct, tag_field="schema", tag=STATE_TAG):
-    """Just enough of a VehicleState to order the raw payloads (other fields are skipped)."""
-
-    vehicle_id: str
-    tick: int
-
-
-_state_key_decoder = msgspec.msgpack.Decoder(_StateKey)
-
-
 class StateDigest:
     """SHA-256 of every vehicle-state payload, ordered by (tick, vehicle id)."""
 
@@ -88,7 +78,7 @@ class StateDigest:
 
     def add(self, payload: bytes) -> None:
         try:
-            key = _state_key_decoder.decode(payload)
+            key = state_key_decoder.decode(payload)
         except (msgspec.ValidationError, msgspec.DecodeError):
             self.bad += 1
             return
@@ -382,7 +372,7 @@ class AttachedStack:
         self.view = BusView(self._session, self.keys)
         if on_bus is not None:
             on_bus(self._session)
-        wanted = {f"autopilot-{v.id}" for v in self.scenario.vehicles} | {"physics", "plume"}
+        wanted = {autopilot_node(v.id) for v in self.scenario.vehicles} | {"physics", "plume"}
         timeout = self.scenario.time.startup_timeout_s
         if not self.view.presence.wait_for(lambda alive: wanted <= alive, timeout):
             missing = ", ".join(sorted(wanted - self.view.presence.alive))

@@ -46,6 +46,16 @@ class StateHead(msgspec.Struct, frozen=True, tag_field="schema", tag=STATE_TAG):
 state_head_decoder = msgspec.msgpack.Decoder(StateHead)
 
 
+class StateKey(msgspec.Struct, frozen=True, tag_field="schema", tag=STATE_TAG):
+    """Which vehicle and tick a ``VehicleState`` is of (ordering raw state payloads)."""
+
+    vehicle_id: str
+    tick: Tick
+
+
+state_key_decoder = msgspec.msgpack.Decoder(StateKey)
+
+
 class BatchView(msgspec.Struct, frozen=True, tag_field="schema", tag=BATCH_TAG):
     """An ``ActuatorBatch`` with undecoded entries: one bad entry does not sink the others."""
 

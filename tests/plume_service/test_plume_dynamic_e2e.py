@@ -6,9 +6,6 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import pytest
-
-from deploy.launcher import missing_roles
 from plume_service.from_scenario import field_from_scenario
 from plume_service.service import StatePublisher
 from recorder.reader import Recording
@@ -16,10 +13,6 @@ from swarmbus.messages import AnemometerReading, ConcentrationReading, PlumeStat
 from swarmbus.scenario import SCENARIOS_DIR, load_scenario
 from swarmbus.wind import wind_from_scenario
 from tests.support.procs import run_cli
-
-pytestmark = pytest.mark.skipif(
-    bool(missing_roles(["plume", "physics", "autopilot"])), reason="roles not built"
-)
 
 VEHICLES = """
 [[vehicles]]

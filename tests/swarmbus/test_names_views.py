@@ -9,7 +9,14 @@ import pytest
 from swarmbus.codec import decode, encode
 from swarmbus.keys import KeyNameError, autopilot_node, process_node, vehicle_of_autopilot
 from swarmbus.messages import ActuatorBatch, ActuatorCommand, SimTick, VehicleState
-from swarmbus.views import BatchView, StateHead, TickView, state_head_decoder
+from swarmbus.views import (
+    BatchView,
+    StateHead,
+    StateKey,
+    TickView,
+    state_head_decoder,
+    state_key_decoder,
+)
 from tests.support.messages_samples import STATE
 
 
@@ -40,6 +47,10 @@ def test_views_read_what_the_full_messages_encode() -> None:
         StateHead("uav2", (1.0, 2.0, 3.0)),
     ]
     assert [decode(bytes(raw), VehicleState) for raw in view.states] == [STATE, other]
+    assert [state_key_decoder.decode(raw) for raw in view.states] == [
+        StateKey(STATE.vehicle_id, STATE.tick),
+        StateKey("uav2", STATE.tick),
+    ]
 
     cmd = ActuatorCommand(vehicle_id="uav1", tick=7, rotor_commands=[0.5] * 4)
     batch = decode(encode(ActuatorBatch(tick=7, commands=[cmd])), BatchView)

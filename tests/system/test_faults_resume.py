@@ -24,7 +24,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TypeVar
 
-import msgspec
 import pytest
 import zenoh
 
@@ -40,6 +39,7 @@ from swarmbus.messages import (
 )
 from swarmbus.scenario import load_scenario
 from swarmbus.session import free_tcp_port
+from swarmbus.views import state_key_decoder
 from tests.support.mavclient import write_scenario
 from tests.support.procs import REPO, keys_for, wait_until
 
@@ -48,14 +48,6 @@ GATE = "uav4"  # parked, scripted: holds START_TICK until the missions are start
 START_TICK = 60
 KILLED = "uav1"
 T = TypeVar("T")
-
-
-class _Key(msgspec.Struct, tag_field="schema", tag="vehicle_state/v1"):
-    vehicle_id: str
-    tick: int
-
-
-_key = msgspec.msgpack.Decoder(_Key)
 
 
 @dataclass
@@ -79,7 +71,7 @@ class Flight:
 
     def on_state(self, sample: zenoh.Sample) -> None:
         payload = sample.payload.to_bytes()
-        k = _key.decode(payload)
+        k = state_key_decoder.decode(payload)
         with self.lock:
             old = self.states.setdefault(k.vehicle_id, {}).setdefault(k.tick, payload)
             if old != payload:
