@@ -129,6 +129,11 @@ class Renderer:
             self._scene.set_plume(index, service.mesh(query))
         log.info("plumeswarm environment viewer: %s", self._server.web_url)
 
+    @property
+    def web_url(self) -> str | None:
+        """The meshcat page of ``human`` (None for ``rgb_array``)."""
+        return self._server.web_url if self._server is not None else None
+
     def draw(
         self, states: Mapping[str, VehicleState], readings: Mapping[str, ConcentrationReading]
     ) -> npt.NDArray[np.uint8] | None:

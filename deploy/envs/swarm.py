@@ -429,6 +429,12 @@ class PlumeSwarmEnv(ParallelEnv[str, Obs, Action]):  # type: ignore[misc]
             self._renderer = Renderer(self.scenario, self.render_mode)
         return self._renderer.draw(self.backend.states(), self.backend.readings())
 
+    @property
+    def viewer_url(self) -> str | None:
+        """The meshcat page that ``render_mode="human"`` serves on 127.0.0.1 (None before the
+        first render, and in the other modes)."""
+        return self._renderer.web_url if self._renderer is not None else None
+
     def close(self) -> None:
         if self._renderer is not None:
             self._renderer.close()

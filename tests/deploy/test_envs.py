@@ -23,6 +23,7 @@ from deploy.scaling import write_scenario
 from swarmbus.scenario import ScenarioError, WindMeander, load_scenario, parse_scenario
 from swarmbus.session import free_tcp_port
 from swarmbus.wind import wind_from_scenario
+from tests.support.browser import CHROMIUM, chromium_page, wait_for_scene_nodes
 from tests.support.procs import REPO, run_cli
 
 
@@ -316,3 +317,24 @@ def test_the_wind_entry_is_the_vehicles_anemometer() -> None:
     errors = np.array([w - expected for _, _, w in _wind_entries(noisy, 40)])
     assert errors.shape[0] >= 100
     assert abs(errors.mean()) < 0.1 and 0.4 < errors.std() < 0.6, (errors.mean(), errors.std())
+
+
+@pytest.mark.browser
+@pytest.mark.skipif(CHROMIUM is None, reason="Debian's chromium is not installed")
+def test_human_render_mode_serves_the_viewer_with_every_vehicle() -> None:
+    """``render_mode="human"`` opens the meshcat viewer: a page on 127.0.0.1 whose scene tree
+    holds every vehicle, the source and the plume's surfaces (read in headless Chromium)."""
+    env = PlumeSwarmEnv(render_mode="human")
+    try:
+        env.reset(seed=2)
+        for _ in range(3):
+            env.step({a: np.zeros(4, dtype=np.float32) for a in env.agents})
+        assert env.render() is None
+        url = env.viewer_url
+        assert url is not None and url.startswith("http://127.0.0.1:"), url
+        names = ["vehicles", "source", "plume", "level_0", *env.possible_agents]
+        with chromium_page(url, 800, 500) as page:
+            wait_for_scene_nodes(page, names, 120_000)
+    finally:
+        env.close()
+    assert env.viewer_url is None  # closed with the environment

@@ -148,7 +148,7 @@ def _screenshot(url: str, tmp_path: Path) -> None:
     assert chromium is not None, "PLUMESWARM_SAVE_SCREENSHOT=1 needs Debian's chromium"
     import matplotlib.image
 
-    from tests.sim_world.test_viewer_browser import CHROME_FLAGS
+    from tests.support.browser import CHROME_FLAGS
 
     shot = tmp_path / "flight.png"
     subprocess.run(

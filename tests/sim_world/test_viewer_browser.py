@@ -17,7 +17,6 @@ from pathlib import Path
 
 import matplotlib.image
 import numpy as np
-import pytest
 import zenoh
 
 from deploy.busview import BusView
@@ -28,27 +27,10 @@ from swarmbus.messages import (
     VehicleState,
 )
 from swarmbus.scenario import load_scenario
+from tests.support.browser import NEEDS_CHROMIUM, chromium_page, wait_for_scene_nodes
 from tests.support.procs import REPO, Network, NodeProcs, keys_for, wait_until
 
-CHROMIUM = shutil.which("chromium")
-CHROME_FLAGS = [
-    "--headless",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--disable-quic",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-]
-
-pytestmark = [
-    pytest.mark.browser,
-    pytest.mark.skipif(
-        CHROMIUM is None,
-        reason="Debian's chromium is not installed (`make test` installs it when run as root)",
-    ),
-]
+pytestmark = NEEDS_CHROMIUM
 
 
 def state(vid: str, tick: int, pos: tuple[float, float, float]) -> VehicleState:
@@ -112,8 +94,6 @@ SCENE_NAMES = ["vehicles", "plume", "level_0", "level_1", "trails", "readings", 
 def test_viewer_page_shows_vehicles_and_plume(
     network: tuple[Network, zenoh.Session], tmp_path: Path
 ) -> None:
-    from playwright.sync_api import sync_playwright
-
     net, _ = network
     sc = load_scenario()
     names = SCENE_NAMES + [v.id for v in sc.vehicles]
@@ -135,24 +115,13 @@ def test_viewer_page_shows_vehicles_and_plume(
         assert url.startswith("http://127.0.0.1:") and url.endswith("/static/")
         # Explicit waits on the page's own state (no virtual-time budget: software WebGL on a
         # loaded 2-core machine renders at its own pace, and a budget can stall behind it).
-        with sync_playwright() as pw:
-            browser = pw.chromium.launch(executable_path=CHROMIUM, args=CHROME_FLAGS[1:])
-            try:
-                page = browser.new_page(viewport={"width": 1024, "height": 640})
-                page.goto(url, timeout=60_000)
-                # meshcat's control panel lists every scene node it received, one element each.
-                page.wait_for_function(
-                    """names => names.every(n => [...document.querySelectorAll('*')].some(
-                        e => e.childElementCount === 0 && e.textContent === n))""",
-                    arg=names,
-                    timeout=120_000,
-                )
-                html = page.content()
-                # A few frames after the scene is complete, then the picture.
-                page.wait_for_timeout(1_000)
-                page.screenshot(path=str(shot), timeout=120_000)
-            finally:
-                browser.close()
+        with chromium_page(url, 1024, 640) as page:
+            # meshcat's control panel lists every scene node it received, one element each.
+            wait_for_scene_nodes(page, names, 120_000)
+            html = page.content()
+            # A few frames after the scene is complete, then the picture.
+            page.wait_for_timeout(1_000)
+            page.screenshot(path=str(shot), timeout=120_000)
         view.close()
     # The page's scene tree holds every node (the wait above would have timed out otherwise;
     # the static check here reads the same document once more).
