@@ -1,6 +1,6 @@
 """The Foxglove layout for a run (built with the foxglove SDK's layout types): a 3D panel of the
-world (vehicles, trails, readings, plume), a map of the vehicles' fixes and one concentration
-plot per vehicle (reported and true)."""
+world (vehicles, trails, readings, plume, a time-dependent plume's filaments or puffs), a map of
+the vehicles' fixes and one concentration plot per vehicle (reported and true)."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ from collections.abc import Sequence
 import foxglove.layouts as fl
 
 from recorder.foxglove.scene import (
+    PLUME_STATE_TOPIC,
     PLUME_TOPIC,
     READINGS_TOPIC,
     TRAILS_TOPIC,
@@ -23,7 +24,13 @@ from recorder.foxglove.scene import (
 def layout(vehicle_ids: Sequence[str]) -> fl.Layout:
     scene_topics: dict[str, fl.BaseRendererTopicSettings] = {
         topic: fl.BaseRendererSceneUpdateTopicSettings(visible=True)
-        for topic in (VEHICLES_TOPIC, TRAILS_TOPIC, READINGS_TOPIC, PLUME_TOPIC)
+        for topic in (
+            VEHICLES_TOPIC,
+            TRAILS_TOPIC,
+            READINGS_TOPIC,
+            PLUME_TOPIC,
+            PLUME_STATE_TOPIC,
+        )
     }
     three_d = fl.ThreeDeePanel(
         title="World (ENU)",

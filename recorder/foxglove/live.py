@@ -4,8 +4,10 @@ protocol (the foxglove SDK's server) on 127.0.0.1 — open ``ws://127.0.0.1:PORT
 A subscriber only, like the viewer: Zenoh callbacks keep the newest tick and the newest reading
 of each vehicle; a loop converts them at most ``rate_hz`` times a second with the same
 conversion the recorder uses (:class:`~recorder.foxglove.scene.FoxgloveScene`), so a slow client
-or a slow role drops frames and never slows the lockstep. The vehicles' bodies and the plume are
-sent again every ``static_period_s`` for clients that connect later.
+or a slow role drops frames and never slows the lockstep; a time-dependent plume's newest
+``field/state`` is converted the same way. The vehicles' bodies and the plume are sent again
+every ``static_period_s`` (with the newest filaments or puffs) for clients that connect
+later.
 
 Options (``--set KEY=VALUE``): ``port`` (8765, Foxglove's default; 0: any free port),
 ``rate_hz`` (20), ``static_period_s`` (2).
@@ -16,14 +18,14 @@ from __future__ import annotations
 import logging
 import sys
 import time
-from typing import Annotated
+from typing import Annotated, TypeVar
 
 import foxglove
 import msgspec
 
 from recorder.foxglove.scene import FoxgloveScene, Out, channel_schema, encode
 from swarmbus.codec import MessageError, decode
-from swarmbus.messages import ConcentrationReading, SimTick
+from swarmbus.messages import ConcentrationReading, PlumeState, SimTick
 from swarmbus.node import NodeContext, NodeRuntime
 from swarmbus.options import OptionError, RoleOptions, parse_options
 from swarmbus.view_feed import Feed, MeshFetcher, isosurface_queries
@@ -33,6 +35,8 @@ log = logging.getLogger(__name__)
 HOST = "127.0.0.1"
 DEFAULT_PORT = 8765
 HEALTH_PERIOD_S = 1.0
+
+T = TypeVar("T")
 
 
 class LiveOptions(RoleOptions, frozen=True, kw_only=True):
@@ -66,31 +70,34 @@ class LiveChannels:
         self.sent += 1
 
 
+def _decoded(raw: bytes, type_: type[T], what: str) -> T | None:
+    try:
+        return decode(raw, type_)
+    except MessageError as exc:
+        log.warning("ignoring %s: %s", what, exc)
+        return None
+
+
 def convert(scene: FoxgloveScene, feed: Feed, meshes: MeshFetcher, channels: LiveChannels) -> int:
     """Feed what is new to ``scene`` and send what it makes; the newest tick, or -1."""
     now = time.time_ns()
-    newest = -1
     for mesh in meshes.take().values():
         for out in scene.feed(mesh, now):
             channels.log(out)
     tick_raw, readings_raw = feed.take()
-    messages: list[object] = []
-    if tick_raw is not None:
-        try:
-            tick = decode(tick_raw, SimTick)
-            messages.append(tick)
-            newest = tick.tick
-        except MessageError as exc:
-            log.warning("ignoring tick: %s", exc)
-    for vid, raw in readings_raw.items():
-        try:
-            messages.append(decode(raw, ConcentrationReading))
-        except MessageError as exc:
-            log.warning("ignoring reading of %s: %s", vid, exc)
+    tick = None if tick_raw is None else _decoded(tick_raw, SimTick, "tick")
+    messages: list[object | None] = [tick]
+    messages += [
+        _decoded(raw, ConcentrationReading, f"reading of {vid}")
+        for vid, raw in readings_raw.items()
+    ]
+    state_raw = feed.take_plume_state()  # after the tick, which anchors the scene's clock
+    if state_raw is not None:
+        messages.append(_decoded(state_raw, PlumeState, "plume state"))
     for message in messages:
         for out in scene.feed(message, now):
             channels.log(out)
-    return newest
+    return -1 if tick is None else tick.tick
 
 
 def main(ctx: NodeContext) -> int:

@@ -25,7 +25,13 @@ import msgspec
 import numpy as np
 from foxglove import messages as fm
 
-from swarmbus.messages import ConcentrationReading, PlumeMesh, SimTick, VehicleState
+from swarmbus.messages import (
+    ConcentrationReading,
+    PlumeMesh,
+    PlumeState,
+    SimTick,
+    VehicleState,
+)
 from swarmbus.scenario import Scenario
 from swarmbus.vehicle_types import VehicleType, VehicleTypeError, load_vehicle_type
 from swarmbus.view_feed import PALETTE, PLUME_COLOURS, default_levels, reading_colour
@@ -36,6 +42,7 @@ VEHICLES_TOPIC = "/scene/vehicles"
 TRAILS_TOPIC = "/scene/trails"
 READINGS_TOPIC = "/scene/readings"
 PLUME_TOPIC = "/scene/plume"
+PLUME_STATE_TOPIC = "/scene/plume_state"
 LOCATION_PREFIX = "/location/"
 CONCENTRATION_PREFIX = "/concentration/"
 
@@ -47,6 +54,10 @@ SERIES_PERIOD_S = 0.05  # up to 20 Hz per vehicle (the sensor's own rate when lo
 TRAILS_PERIOD_S = 2.0  # 0.5 Hz: every trail, whole (a seek shows the newest message only)
 TRAIL_POINT_PERIOD_S = 1.0  # a trail point per vehicle per sim second ...
 TRAIL_MAX_POINTS = 300  # ... the last 5 minutes of it (a full 32-vehicle update: 9600 points)
+PLUME_STATE_PERIOD_S = 0.5  # at most 2 Hz: the plume's default field/state period
+PLUME_STATE_MAX_SPHERES = 1000  # more filaments or puffs are thinned evenly to this many
+PLUME_STATE_MIN_DIAMETER_M = 0.2  # a fresh filament (R0 ≈ 3 cm) would be a pixel at 50 m
+PLUME_STATE_ALPHA = 0.5
 
 VEHICLE_SCALE = 4.0  # drawn size (as the meshcat viewer): a 0.5 m quadcopter vanishes at 60 m
 NO_READING_RGB = 0x9E9E9E
@@ -193,6 +204,8 @@ class FoxgloveScene:
         self._has_state = False
         self._plume_meshes: dict[float, PlumeMesh] = {}
         self._plume_pending = False
+        self._plume_state: PlumeState | None = None
+        self._plume_states = _Every(PLUME_STATE_PERIOD_S)
         self._vehicles_pending = False
         self.full_scale_g_m3 = 1.0
         if scenario is not None:
@@ -253,10 +266,19 @@ class FoxgloveScene:
         self._plume_pending = True
         return self._advance(None, log_time_ns)
 
+    def _on_plume_state(self, state: PlumeState, log_time_ns: int) -> list[Out]:
+        # Stamped with its own sim time; like a reading, it moves the clock only to anchor it.
+        clock_s = state.sim_time_s if self._anchor_ns is None else None
+        out = self._advance(clock_s, log_time_ns)
+        if self._anchor_ns is not None and self._plume_states.due(state.sim_time_s):
+            self._plume_state = state
+            out.append(self._plume_state_out(state))
+        return out
+
     # ------------------------------------------------------------------ time
-    def _ns(self, reading: ConcentrationReading) -> int:
+    def _ns(self, message: ConcentrationReading | PlumeState) -> int:
         assert self._anchor_ns is not None
-        return self._anchor_ns + round(reading.sim_time_s * 1e9)
+        return self._anchor_ns + round(message.sim_time_s * 1e9)
 
     def _advance(self, t_s: float | None, log_time_ns: int) -> list[Out]:
         if t_s is not None:
@@ -316,10 +338,13 @@ class FoxgloveScene:
         if self._anchor_ns is None:
             return []
         now_ns = self._anchor_ns + round(self._now_s * 1e9)
-        return [
+        out = [
             Out(VEHICLES_TOPIC, self.vehicles_update(now_ns), now_ns),
             Out(PLUME_TOPIC, self.plume_update(now_ns), now_ns),
         ]
+        if self._plume_state is not None:
+            out.append(self._plume_state_out(self._plume_state))
+        return out
 
     # ------------------------------------------------------------------ vehicles
     def _vehicle(self, vid: str, type_name: str = DEFAULT_VEHICLE_TYPE) -> _Vehicle:
@@ -446,7 +471,8 @@ class FoxgloveScene:
     # ------------------------------------------------------------------ plume
     def plume_update(self, now_ns: int) -> fm.SceneUpdate:
         """The plume: its sources and what is known of its shape — the isosurfaces of the
-        Gaussian plume (``plume/mesh`` replies), one translucent surface per level."""
+        Gaussian plume (``plume/mesh`` replies), one translucent surface per level (a filament
+        or puff plume's state is drawn on ``PLUME_STATE_TOPIC``, :func:`plume_state_update`)."""
         self._plume_pending = False
         ts = stamp(now_ns)
         entities = list(self._source_entities(ts))
@@ -455,6 +481,10 @@ class FoxgloveScene:
             if entity is not None:
                 entities.append(entity)
         return fm.SceneUpdate(entities=entities)
+
+    def _plume_state_out(self, state: PlumeState) -> Out:
+        ns = self._ns(state)
+        return Out(PLUME_STATE_TOPIC, plume_state_update(state, ns), ns)
 
     def _source_entities(self, ts: fm.Timestamp) -> Iterable[fm.SceneEntity]:
         if self.scenario is None:
@@ -504,6 +534,56 @@ def _isosurface_entity(
         metadata=[fm.KeyValuePair(key="level_g_m3", value=f"{level:g}")],
         triangles=[triangles],
     )
+
+
+def plume_state_update(state: PlumeState, now_ns: int) -> fm.SceneUpdate:
+    """A time-dependent plume's filaments or puffs (``field/state``) as one entity of spheres,
+    each of diameter 2R (a filament's R, a puff's σy; at least
+    ``PLUME_STATE_MIN_DIAMETER_M``), coloured by its peak density (∝ R⁻³: the message carries
+    no masses, and one source's filaments or puffs all carry the same) on a log scale from the
+    frame's most diluted (blue) to its densest (red). One entity id, so each frame replaces
+    the last; above ``PLUME_STATE_MAX_SPHERES`` every k-th is drawn (they are in release
+    order)."""
+    # A garbled sample that still decodes (the bus is open) draws what is whole of it.
+    centres = _floats(state.centres_f32, per_row=3).reshape(-1, 3)
+    radii = _floats(state.radii_f32)
+    n = min(len(centres), len(radii))
+    stride = max(1, math.ceil(n / PLUME_STATE_MAX_SPHERES))
+    centres, radii = centres[:n:stride], radii[:n:stride]
+    diameters = np.maximum(2.0 * radii, PLUME_STATE_MIN_DIAMETER_M)
+    density = _log_relative_density(radii)
+    spheres = [
+        fm.SpherePrimitive(
+            pose=pose(x, y, z),
+            size=fm.Vector3(x=d, y=d, z=d),
+            color=colour(reading_colour(t, 1.0), alpha=PLUME_STATE_ALPHA),
+        )
+        for (x, y, z), d, t in zip(centres.tolist(), diameters.tolist(), density, strict=True)
+    ]
+    meta = {"model": state.model, "count": str(state.count), "drawn": str(len(spheres))}
+    entity = fm.SceneEntity(
+        timestamp=stamp(now_ns),
+        frame_id=WORLD_FRAME,
+        id="plume/state",
+        metadata=[fm.KeyValuePair(key=k, value=v) for k, v in meta.items()],
+        spheres=spheres,
+    )
+    return fm.SceneUpdate(entities=[entity])
+
+
+def _log_relative_density(radii: np.ndarray[Any, np.dtype[np.float64]]) -> list[float]:
+    """0 (the largest R) … 1 (the smallest) by log R: the log of R⁻³, rescaled."""
+    log_r = np.log(np.maximum(radii, 1e-9))
+    span = float(log_r.max() - log_r.min()) if radii.size else 0.0
+    if not span > 0.0:  # one size (or none, or NaN): all dense
+        return [1.0] * radii.size
+    out: list[float] = ((log_r.max() - log_r) / span).tolist()
+    return out
+
+
+def _floats(raw: bytes, per_row: int = 1) -> np.ndarray[Any, np.dtype[np.float64]]:
+    whole = len(raw) // (4 * per_row) * 4 * per_row
+    return np.frombuffer(raw[:whole], dtype="<f4").astype(float)
 
 
 @cache
@@ -560,4 +640,5 @@ _HANDLERS: dict[type, Any] = {
     VehicleState: FoxgloveScene._on_state,
     ConcentrationReading: FoxgloveScene._on_reading,
     PlumeMesh: FoxgloveScene._on_mesh,
+    PlumeState: FoxgloveScene._on_plume_state,
 }

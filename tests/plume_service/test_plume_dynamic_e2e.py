@@ -1,5 +1,6 @@
 """A filament scenario flown by the real stack (plume service, physics, autopilots, recorder):
-the distributed field is the offline field, bit for bit."""
+the distributed field is the offline field, bit for bit, and the recorder draws its filaments
+in the Foxglove scene."""
 
 from __future__ import annotations
 
@@ -8,10 +9,12 @@ from pathlib import Path
 
 from plume_service.from_scenario import field_from_scenario
 from plume_service.service import StatePublisher
+from recorder.foxglove.scene import PLUME_STATE_TOPIC
 from recorder.reader import Recording
 from swarmbus.messages import AnemometerReading, ConcentrationReading, PlumeState
 from swarmbus.scenario import SCENARIOS_DIR, load_scenario
 from swarmbus.wind import wind_from_scenario
+from tests.support.foxglove_decode import topic_messages
 from tests.support.procs import run_cli
 
 VEHICLES = """
@@ -43,7 +46,8 @@ def test_a_filament_flight_reads_the_field_offline_evaluation_gives_bit_for_bit(
     """The demo's vehicles take off and land on ticks set by its commands (wall-clock), so two
     flights differ in their tracks; what must not differ is the field: every reading's true
     value is the scenario's field at the reading's (position, sim time), which this process
-    recomputes offline, in reverse order, bit for bit; the same for the recorded field/state."""
+    recomputes offline, in reverse order, bit for bit; the same for the recorded field/state,
+    which the recorder's Foxglove scene draws."""
     base = (SCENARIOS_DIR / "filament.toml").read_text().split("[[vehicles]]")[0]
     path = tmp_path / "short.toml"
     path.write_text(base + VEHICLES)
@@ -80,3 +84,8 @@ def test_a_filament_flight_reads_the_field_offline_evaluation_gives_bit_for_bit(
     for state in reversed(states):
         assert isinstance(state, PlumeState)
         assert publisher.state(state.sim_time_s) == state
+    # the recorder drew each state in the Foxglove scene: its filaments, one frame per state
+    frames = topic_messages(Path(summary["recording"]), PLUME_STATE_TOPIC)
+    assert [len(f.entities[0].spheres) for _, f in frames] == [
+        s.count for s in states if isinstance(s, PlumeState)
+    ]

@@ -7,17 +7,25 @@ from __future__ import annotations
 import itertools
 import json
 import math
+import time
 from collections import Counter
 from pathlib import Path
 from typing import Any
 
+import foxglove
 import numpy as np
 import pytest
 from mcap.reader import make_reader
 
+from plume_service.from_scenario import field_from_scenario
+from plume_service.service import StatePublisher
 from recorder.foxglove.export import ExportError, export_foxglove
 from recorder.foxglove.layout import layout_json
+from recorder.foxglove.live import LiveChannels, convert
 from recorder.foxglove.scene import (
+    PLUME_STATE_MAX_SPHERES,
+    PLUME_STATE_MIN_DIAMETER_M,
+    PLUME_STATE_TOPIC,
     PLUME_TOPIC,
     TF_TOPIC,
     TRAILS_TOPIC,
@@ -32,9 +40,17 @@ from recorder.foxglove.scene import (
 from recorder.sink import McapSink
 from swarmbus import codec
 from swarmbus.keys import Keys
-from swarmbus.messages import ConcentrationReading, PlumeMesh, SimTick, VehicleState
+from swarmbus.messages import (
+    ConcentrationReading,
+    PlumeMesh,
+    PlumeState,
+    SimTick,
+    VehicleState,
+)
 from swarmbus.scenario import load_scenario, resolve_scenario_path
-from tests.support.foxglove_decode import ChannelDecoder
+from swarmbus.session import NetworkConfig, free_tcp_port, open_session
+from swarmbus.view_feed import Feed, MeshFetcher
+from tests.support.foxglove_decode import ChannelDecoder, topic_messages
 from tests.support.procs import REPO
 
 CONTROL_HZ = 120
@@ -197,6 +213,123 @@ def test_plume_isosurfaces_wait_for_the_clock_then_are_drawn_with_the_sources() 
     assert plume[0].log_time_ns == WALL0_NS + 7_000 + 3_000_000_000  # sim 3 s, anchored
 
 
+def filament_states(*times_s: float) -> list[PlumeState]:
+    """The ``field/state`` messages the plume service publishes for the bundled filament
+    scenario at ``times_s``."""
+    sc = load_scenario(resolve_scenario_path("filament"))
+    publisher = StatePublisher(field_from_scenario(sc), sc.plume.state_period_s)
+    return [publisher.state(t) for t in times_s]
+
+
+def filaments_of(state: PlumeState) -> tuple[list[list[float]], list[float]]:
+    centres = np.frombuffer(state.centres_f32, dtype="<f4").reshape(-1, 3)
+    return centres.tolist(), np.frombuffer(state.radii_f32, dtype="<f4").tolist()
+
+
+def plume_state_entity(o: Out) -> Any:
+    (entity,) = decoded(o).entities
+    return entity
+
+
+def test_filaments_become_spheres_at_their_centres_and_each_state_replaces_the_last() -> None:
+    sc = load_scenario(resolve_scenario_path("filament"))
+    scene = FoxgloveScene(sc)
+    early, skipped, later = filament_states(10.0, 10.25, 10.5)
+    out = fly(scene, 0.1, [v.id for v in sc.vehicles], sim0_s=10.0)  # the clock: 10 s
+    out += scene.feed(early, WALL0_NS + 10_300_000_000)
+    out += scene.feed(skipped, WALL0_NS + 10_600_000_000)  # within 0.5 s: not drawn
+    out += scene.feed(later, WALL0_NS + 10_800_000_000)
+    frames = [o for o in out if o.topic == PLUME_STATE_TOPIC]
+    assert len(frames) == 2
+    anchor = WALL0_NS + 7_000  # fly() receives sim time t at WALL0_NS + t + 7 µs
+    for o, state in zip(frames, (early, later), strict=True):
+        centres, radii = filaments_of(state)
+        assert 0 < len(radii) < PLUME_STATE_MAX_SPHERES
+        entity = plume_state_entity(o)
+        assert entity.id == "plume/state" and entity.frame_id == "world"  # one id: replaced
+        assert {kv.key: kv.value for kv in entity.metadata}["count"] == str(len(radii))
+        assert len(entity.spheres) == len(radii)
+        for sphere, (x, y, z), r in zip(entity.spheres, centres, radii, strict=True):
+            p = sphere.pose.position
+            assert (p.x, p.y, p.z) == (x, y, z)
+            assert sphere.size.x == sphere.size.z == max(2 * r, PLUME_STATE_MIN_DIAMETER_M)
+        # the freshest (thinnest) filament is the densest: red; the oldest (widest) blue
+        young = entity.spheres[radii.index(min(radii))]
+        old = entity.spheres[radii.index(max(radii))]
+        assert (young.color.r, young.color.b) == (1.0, 0.0)
+        assert (old.color.r, old.color.b) == (0.0, 1.0)
+        assert o.log_time_ns == anchor + round(state.sim_time_s * 1e9)  # its own sim time
+        ts = entity.timestamp
+        assert ts.seconds * 1_000_000_000 + ts.nanos == o.log_time_ns
+    assert len(filaments_of(later)[1]) > len(filaments_of(early)[1])  # the plume grew
+
+
+def test_a_crowded_plume_state_is_thinned_evenly_and_a_torn_one_draws_what_is_whole() -> None:
+    scene = FoxgloveScene(None)
+    n = 2 * PLUME_STATE_MAX_SPHERES + 1
+    centres = np.stack([np.arange(n), np.zeros(n), np.full(n, 5.0)], axis=1).astype("<f4")
+    radii = np.full(n, 0.5, dtype="<f4")
+    crowded = PlumeState(
+        sim_time_s=1.0,
+        model="puff",
+        count=n,
+        centres_f32=centres.tobytes(),
+        radii_f32=radii.tobytes(),
+    )
+    (o,) = scene.feed(crowded, WALL0_NS)  # the first sim time anchors the clock
+    xs = [s.pose.position.x for s in plume_state_entity(o).spheres]
+    assert PLUME_STATE_MAX_SPHERES / 2 < len(xs) <= PLUME_STATE_MAX_SPHERES
+    steps = {b - a for a, b in itertools.pairwise(xs)}
+    assert xs[0] == 0.0 and len(steps) == 1 and xs[-1] + steps.pop() > n - 1  # whole length
+    assert all(s.size.x == 1.0 for s in plume_state_entity(o).spheres)
+    torn = PlumeState(
+        sim_time_s=2.0,
+        model="filament",
+        count=3,
+        centres_f32=centres[:3].tobytes()[:-5],  # two whole centres
+        radii_f32=radii[:3].tobytes(),
+    )
+    (o,) = scene.feed(torn, WALL0_NS + 1_000_000_000)
+    assert [s.pose.position.x for s in plume_state_entity(o).spheres] == [0.0, 1.0]
+
+
+def test_the_live_role_converts_the_plume_state_from_the_bus(tmp_path: Path) -> None:
+    """The live role's conversion step on a real bus: a tick and a field/state published on a
+    Zenoh session reach its Feed; what it sends through the SDK's channels is read back from
+    an MCAP the SDK writes from the same context."""
+    sc = load_scenario(resolve_scenario_path("filament"))
+    keys = Keys(sc.world.name)
+    (state,) = filament_states(10.0)
+    tick = SimTick(tick=1200, sim_time_s=10.0, control_dt_s=1 / CONTROL_HZ, states=[])
+    scene = FoxgloveScene(sc)
+    context = foxglove.Context()
+    channels = LiveChannels(context)
+    path = tmp_path / "live.mcap"
+    net = NetworkConfig(connect=[], listen=[f"tcp/127.0.0.1:{free_tcp_port()}"])
+    with open_session(net) as session, foxglove.open_mcap(path, context=context):
+        feed = Feed(session, keys)
+        meshes = MeshFetcher(session, keys, [])
+        try:
+            session.put(keys.tick(), codec.encode(tick))
+            session.put(keys.plume_state(), codec.encode(state))
+            deadline = time.monotonic() + 10.0
+            newest = -1
+            while channels.sent < 2 or newest < 0:  # the vehicles' bodies and the plume state
+                assert time.monotonic() < deadline, (
+                    f"live: tick {newest}, {channels.sent} messages sent within 10 s"
+                )
+                newest = max(newest, convert(scene, feed, meshes, channels))
+                time.sleep(0.05)
+        finally:
+            feed.close()
+            meshes.close()
+    frames = [update for _, update in topic_messages(path, PLUME_STATE_TOPIC)]
+    assert newest == 1200 and len(frames) == 1
+    centres, _ = filaments_of(state)
+    spheres = frames[0].entities[0].spheres
+    assert [[s.pose.position.x, s.pose.position.y, s.pose.position.z] for s in spheres] == centres
+
+
 def test_every_message_decodes_against_the_schema_the_sdk_declares() -> None:
     sc = load_scenario(resolve_scenario_path(None))
     scene = FoxgloveScene(sc)
@@ -243,7 +376,7 @@ def test_the_layout_in_docs_is_the_one_made_for_the_bundled_scenario() -> None:
     assert plotted == {concentration_topic(v) for v in ids}
     three_d = next(p for p in panels if p["panelType"] == "ThreeDee")
     assert set(three_d["config"]["topics"]) == {
-        VEHICLES_TOPIC, TRAILS_TOPIC, PLUME_TOPIC, "/scene/readings"
+        VEHICLES_TOPIC, TRAILS_TOPIC, PLUME_TOPIC, PLUME_STATE_TOPIC, "/scene/readings"
     }  # fmt: skip
 
 
@@ -277,6 +410,31 @@ def test_export_makes_each_segment_its_own_scene_as_the_recorder_did(tmp_path: P
     assert WALL0_NS in tf and later_ns + 300 * 1_000_000 in tf
     assert len(tf) == 2 * 20  # 1 s of sim per segment at 20 Hz
     assert meta["plumeswarm.summary"] == {"received_total": "120"}
+
+
+def test_export_draws_the_recorded_plume_states(tmp_path: Path) -> None:
+    """A recording of ticks and ``field/state`` (as the filament scenario's plume publishes it
+    every 0.5 s of sim) exported: one plume-state frame per recorded state, each at its sim
+    time, each the filaments of that state."""
+    states = filament_states(1.0, 1.5, 2.0)
+    sink = McapSink(tmp_path / "rec.mcap", metadata={"world": "filament"})
+    keys = Keys("filament")
+    for k in range(CONTROL_HZ, 2 * CONTROL_HZ + 1):
+        tick = SimTick(tick=k, sim_time_s=k / CONTROL_HZ, control_dt_s=1 / CONTROL_HZ, states=[])
+        sink.write_bus(keys.tick(), codec.encode(tick), WALL0_NS + k * 1_000_000)
+        for st in states:
+            if round(st.sim_time_s * CONTROL_HZ) == k:  # published once the clock reached it
+                sink.write_bus(keys.plume_state(), codec.encode(st), WALL0_NS + k * 1_000_000 + 1)
+    sink.close()
+    export_foxglove(tmp_path / "rec.mcap", tmp_path / "out.mcap")
+    frames = topic_messages(tmp_path / "out.mcap", PLUME_STATE_TOPIC)
+    anchor = WALL0_NS + CONTROL_HZ * 1_000_000 - 1_000_000_000  # first tick (1 s) received − 1 s
+    assert [t for t, _ in frames] == [anchor + round(st.sim_time_s * 1e9) for st in states]
+    for (_, update), st in zip(frames, states, strict=True):
+        centres, _ = filaments_of(st)
+        drawn = [[s.pose.position.x, s.pose.position.y, s.pose.position.z]
+                 for s in update.entities[0].spheres]  # fmt: skip
+        assert drawn == centres
 
 
 def test_export_refuses_to_overwrite_its_input(tmp_path: Path) -> None:

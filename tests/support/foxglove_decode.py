@@ -4,11 +4,13 @@ and comparing that schema with the one the foxglove SDK declares for the type.""
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import jsonschema
 import msgspec
 from foxglove import messages as fm
+from mcap.reader import make_reader
 from mcap.records import Schema
 from mcap_protobuf.decoder import DecoderFactory
 
@@ -37,3 +39,15 @@ class ChannelDecoder:
         value = msgspec.json.decode(data)
         jsonschema.validate(value, msgspec.json.decode(schema_data))
         return value
+
+
+def topic_messages(path: Path, topic: str) -> list[tuple[int, Any]]:
+    """The messages on ``topic`` of the MCAP file ``path``, (log time, decoded), in file order."""
+    decoder = ChannelDecoder()
+    with open(path, "rb") as f:
+        return [
+            (message.log_time, decoder.decode(schema.name, schema.encoding, schema.data,
+                                              message.data))
+            for schema, channel, message in make_reader(f).iter_messages(log_time_order=False)
+            if channel.topic == topic and schema is not None
+        ]  # fmt: skip
