@@ -459,7 +459,10 @@ async def workflows(api_port: int, plan: Path) -> None:
 def qgc_fence_and_start_mission(gcs_port: int) -> None:
     accepted = int(mavlink.MAV_MISSION_ACCEPTED)
     with clients(gcs_port) as (c,):
-        c.wait_standby(1)  # the client heartbeats once a second, as QGC does
+        # heartbeats once a wall second, as QGC does: MAVSDK has gone, and a silent ground
+        # station trips the seed scenario's data-link-loss RTL (NAV_DLL_ACT) mid-mission
+        c.beat = True
+        c.wait_standby(1)
         pos = c.wait_type("GLOBAL_POSITION_INT", 1)
         lat, lon = pos.lat * 1e-7, pos.lon * 1e-7
         circle = mavlink.MAVLink_mission_item_int_message(
