@@ -9,6 +9,8 @@ One stack start covers several workflows in turn on one vehicle:
   beyond it with COMMAND_DENIED and a status text naming GF_MAX_HOR_DIST and its value;
 - an inclusion polygon uploaded with the geofence plugin stops a go-to outside it (one inside
   flies) and downloads again; a rally point uploaded with mission_raw is where RTL lands;
+- the info plugin: PX4's version (v1.14.0 release), plumeswarm's as the vendor version, the
+  sysid's identity in both uids, the lockstep's speed factor;
 - offboard through the offboard plugin: a local NED position is measured from the vehicle's
   own origin (its spawn, not the world origin); body-frame velocity goes where the nose
   points; an attitude setpoint (nose down) accelerates the way the nose points; a global
@@ -32,10 +34,12 @@ from __future__ import annotations
 import asyncio
 import json
 import math
+from importlib.metadata import version
 from pathlib import Path
 from typing import Any
 
 import pytest
+from packaging.version import Version
 
 from gcs_bridge.dialect import mavlink
 from gcs_bridge.frames import enu_to_geodetic
@@ -51,6 +55,7 @@ from mavsdk.asyncio import ComponentType, Configuration, Mavsdk  # noqa: E402
 from mavsdk.asyncio.plugins.action import ActionAsync, ActionError  # noqa: E402
 from mavsdk.asyncio.plugins.follow_me import FollowMeAsync  # noqa: E402
 from mavsdk.asyncio.plugins.geofence import GeofenceAsync  # noqa: E402
+from mavsdk.asyncio.plugins.info import InfoAsync  # noqa: E402
 from mavsdk.asyncio.plugins.manual_control import ManualControlAsync  # noqa: E402
 from mavsdk.asyncio.plugins.mission import MissionAsync, MissionItem, MissionPlan  # noqa: E402
 from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync  # noqa: E402
@@ -61,6 +66,7 @@ from mavsdk.plugins.action import OrbitYawBehavior  # noqa: E402
 from mavsdk.plugins.follow_me import Config as FollowConfig  # noqa: E402
 from mavsdk.plugins.follow_me import TargetLocation  # noqa: E402
 from mavsdk.plugins.geofence import FenceType, GeofenceData, Point, Polygon  # noqa: E402
+from mavsdk.plugins.info import InfoError  # noqa: E402
 from mavsdk.plugins.mission_raw import MissionItem as RawItem  # noqa: E402
 from mavsdk.plugins.offboard import (  # noqa: E402
     Attitude,
@@ -71,6 +77,8 @@ from mavsdk.plugins.offboard import (  # noqa: E402
 
 ORIGIN = Origin()
 SPAWN_ENU = (20.0, 0.0)  # tests.support.mavclient.scenario_text, one vehicle
+SYSID = 1  # ditto
+TELEMETRY_HZ = 4.0  # ditto: GLOBAL_POSITION_INT per simulated second
 MISSION_ALT_M = 6.0
 
 
@@ -90,6 +98,62 @@ def horizontal_m(a: Any, b: Any) -> float:
     north = (a.latitude_deg - b.latitude_deg) * 111_320.0
     east = (a.longitude_deg - b.longitude_deg) * 111_320.0 * math.cos(math.radians(a.latitude_deg))
     return math.hypot(north, east)
+
+
+async def received(get: Any, what: str, usable: Any = None, timeout_s: float = 10.0) -> Any:
+    """An info getter's answer once what it is made of has come (the AUTOPILOT_VERSION the
+    plugin asks for; for the speed factor, ATTITUDEs a sim time apart)."""
+    deadline = asyncio.get_running_loop().time() + timeout_s
+    while True:
+        try:
+            value = await get()
+            if usable is None or usable(value):
+                return value
+        except InfoError as e:
+            if e.result.name != "INFORMATION_NOT_RECEIVED_YET":
+                raise
+        assert asyncio.get_running_loop().time() < deadline, f"no {what} from the info plugin"
+        await asyncio.sleep(0.2)
+
+
+async def sim_seconds_per_wall_second(tel: Any, positions: int) -> float:
+    """The lockstep's speed as the telemetry rate shows it: ``positions`` position messages
+    take ``positions / TELEMETRY_HZ`` simulated seconds."""
+    loop = asyncio.get_running_loop()
+    stream = tel.subscribe_position()
+    try:
+        await first(stream, lambda p: True, "a position")
+        start = loop.time()
+        for _ in range(positions):
+            await first(stream, lambda p: True, "a position")
+        return positions / TELEMETRY_HZ / (loop.time() - start)
+    finally:
+        await stream.aclose()
+
+
+async def info_as_px4(system: Any) -> None:
+    """What the info plugin reads (AUTOPILOT_VERSION, ATTITUDE's time) against what
+    docs/qgroundcontrol.md promises: PX4 v1.14.0 release, plumeswarm's version as the
+    vendor's, "PLUME" then the sysid as the uid."""
+    info, tel = InfoAsync(system), TelemetryAsync(system)
+    v = await received(info.get_version, "version")
+    assert (v.flight_sw_major, v.flight_sw_minor, v.flight_sw_patch) == (1, 14, 0), v
+    assert v.flight_sw_version_type.name == "RELEASE", v
+    ours = (*Version(version("plumeswarm")).release, 0, 0)[:3]
+    vendor = (v.flight_sw_vendor_major, v.flight_sw_vendor_minor, v.flight_sw_vendor_patch)
+    assert vendor == ours, f"vendor version {vendor}, plumeswarm {ours}"
+    identity = b"PLUME" + SYSID.to_bytes(3, "big")
+    ident = await received(info.get_identification, "identification")
+    assert ident.legacy_uid == int.from_bytes(identity, "big"), hex(ident.legacy_uid)
+    assert ident.hardware_uid.startswith(identity.hex()), ident.hardware_uid
+    assert set(ident.hardware_uid[len(identity.hex()) :]) <= {"0"}, ident.hardware_uid
+    product = await received(info.get_product, "product")
+    assert (product.vendor_id, product.product_id) == (0, 0), product  # no hardware
+    # MAVSDK averages over the last 50 ATTITUDEs, 12.5 s of sim time at 4 Hz: the same window
+    await received(info.get_speed_factor, "speed factor", math.isfinite)
+    measured = await sim_seconds_per_wall_second(tel, 50)
+    factor = await info.get_speed_factor()
+    assert 0.5 < factor / measured < 2.0, f"speed factor {factor}, telemetry shows {measured}"
 
 
 async def mission_from_the_ground_with_rtl(system: Any) -> None:
@@ -446,6 +510,7 @@ async def connect(api_port: int) -> tuple[Mavsdk, Any]:
 async def workflows(api_port: int, plan: Path) -> None:
     sdk, system = await connect(api_port)
     try:
+        await info_as_px4(system)
         await mission_from_the_ground_with_rtl(system)
         await take_off(system, 5.0)
         await goto_refused_by_the_fence_parameter(system)
