@@ -4,11 +4,13 @@ parameters, the mission as MAVLink sees it, and the events its status changes im
 
 from __future__ import annotations
 
+import functools
 import logging
 from dataclasses import dataclass, field
 from typing import Generic, Protocol, TypeVar
 
 import msgspec
+from packaging.version import InvalidVersion, Version
 
 from gcs_bridge.dialect import Msg, mavlink
 from gcs_bridge.frames import Vec3, enu_to_geodetic
@@ -30,6 +32,7 @@ from swarmbus.messages import (
     VehicleState,
     VehicleStatus,
 )
+from swarmbus.node import package_version
 from swarmbus.scenario import Origin, Scenario
 from swarmbus.vehicle_types import load_vehicle_type
 
@@ -43,10 +46,23 @@ CAPABILITIES = (
 log = logging.getLogger(__name__)
 
 UID_BASE = 0x504C554D45000000  # "PLUME" + sysid
+UID2_LEN = 18
 # MISSION_CURRENT.mission_mode (not named in pymavlink 2.4.50): 1 in mission mode, 2 suspended.
 MISSION_MODE_ACTIVE = 1
 MISSION_MODE_SUSPENDED = 2
 ARMING_SETTLE_S = 5.0  # wall: how long an accepted Arm stands in for a status saying armed
+
+
+@functools.cache
+def vendor_custom_version() -> tuple[int, ...]:
+    """AUTOPILOT_VERSION.flight_custom_version: plumeswarm's major.minor.patch in its first
+    three bytes, patch first (where MAVSDK reads a vendor version), the git-hash bytes zero."""
+    try:
+        release = Version(package_version()).release
+    except InvalidVersion:
+        release = ()
+    major, minor, patch = (*release, 0, 0, 0)[:3]
+    return (patch & 0xFF, minor & 0xFF, major & 0xFF, 0, 0, 0, 0, 0)
 
 
 Buffer = bytes | msgspec.Raw
@@ -220,9 +236,25 @@ class Vehicle:
         return None
 
     def autopilot_version(self) -> Msg:
+        """PX4's version (what ground stations key PX4 features on), plumeswarm's own as the
+        vendor version, and the sysid's identity in both uid fields: MAVSDK's hardware_uid is
+        uid2, and all-zero uid2s would make every vehicle of a swarm look the same."""
         zeros = [0] * 8
+        uid = UID_BASE | self.sysid
+        uid2 = list(uid.to_bytes(8, "big")) + [0] * (UID2_LEN - 8)
         return mavlink.MAVLink_autopilot_version_message(
-            CAPABILITIES, PX4_VERSION, 0, 0, 0, zeros, zeros, zeros, 0, 0, UID_BASE | self.sysid
+            CAPABILITIES,
+            PX4_VERSION,
+            0,
+            0,
+            0,
+            vendor_custom_version(),
+            zeros,
+            zeros,
+            0,
+            0,
+            uid,
+            uid2,
         )
 
     # -- home -------------------------------------------------------------------

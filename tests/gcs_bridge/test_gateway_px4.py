@@ -9,10 +9,15 @@ One stack start covers several workflows in turn on one vehicle:
   beyond it with COMMAND_DENIED and a status text naming GF_MAX_HOR_DIST and its value;
 - an inclusion polygon uploaded with the geofence plugin stops a go-to outside it (one inside
   flies) and downloads again; a rally point uploaded with mission_raw is where RTL lands;
+- the info plugin: PX4's version (v1.14.0 release), plumeswarm's as the vendor version, the
+  sysid's identity in both uids, the lockstep's speed factor;
 - offboard through the offboard plugin: a local NED position is measured from the vehicle's
   own origin (its spawn, not the world origin); body-frame velocity goes where the nose
   points; an attitude setpoint (nose down) accelerates the way the nose points; a global
-  position setpoint is reached;
+  position setpoint is reached; NED velocity flies its direction; a position with a velocity
+  feed-forward (and with an acceleration one too) is flown to along the straight line; an
+  acceleration against the wind builds speed along its axis; a body yaw rate turns the nose
+  the commanded way;
 - orbit (action plugin, DO_ORBIT): the vehicle circles the given centre clockwise at the
   given radius, the heartbeat showing PX4's orbit mode (POSCTL / ORBIT);
 - position mode with MANUAL_CONTROL sticks (manual_control plugin): forward stick flies
@@ -32,10 +37,12 @@ from __future__ import annotations
 import asyncio
 import json
 import math
+from importlib.metadata import version
 from pathlib import Path
 from typing import Any
 
 import pytest
+from packaging.version import Version
 
 from gcs_bridge.dialect import mavlink
 from gcs_bridge.frames import enu_to_geodetic
@@ -51,6 +58,7 @@ from mavsdk.asyncio import ComponentType, Configuration, Mavsdk  # noqa: E402
 from mavsdk.asyncio.plugins.action import ActionAsync, ActionError  # noqa: E402
 from mavsdk.asyncio.plugins.follow_me import FollowMeAsync  # noqa: E402
 from mavsdk.asyncio.plugins.geofence import GeofenceAsync  # noqa: E402
+from mavsdk.asyncio.plugins.info import InfoAsync  # noqa: E402
 from mavsdk.asyncio.plugins.manual_control import ManualControlAsync  # noqa: E402
 from mavsdk.asyncio.plugins.mission import MissionAsync, MissionItem, MissionPlan  # noqa: E402
 from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync  # noqa: E402
@@ -61,16 +69,22 @@ from mavsdk.plugins.action import OrbitYawBehavior  # noqa: E402
 from mavsdk.plugins.follow_me import Config as FollowConfig  # noqa: E402
 from mavsdk.plugins.follow_me import TargetLocation  # noqa: E402
 from mavsdk.plugins.geofence import FenceType, GeofenceData, Point, Polygon  # noqa: E402
+from mavsdk.plugins.info import InfoError  # noqa: E402
 from mavsdk.plugins.mission_raw import MissionItem as RawItem  # noqa: E402
 from mavsdk.plugins.offboard import (  # noqa: E402
+    AccelerationNed,
     Attitude,
+    AttitudeRate,
     PositionGlobalYaw,
     PositionNedYaw,
     VelocityBodyYawspeed,
+    VelocityNedYaw,
 )
 
 ORIGIN = Origin()
 SPAWN_ENU = (20.0, 0.0)  # tests.support.mavclient.scenario_text, one vehicle
+SYSID = 1  # ditto
+TELEMETRY_HZ = 4.0  # ditto: GLOBAL_POSITION_INT per simulated second
 MISSION_ALT_M = 6.0
 
 
@@ -90,6 +104,62 @@ def horizontal_m(a: Any, b: Any) -> float:
     north = (a.latitude_deg - b.latitude_deg) * 111_320.0
     east = (a.longitude_deg - b.longitude_deg) * 111_320.0 * math.cos(math.radians(a.latitude_deg))
     return math.hypot(north, east)
+
+
+async def received(get: Any, what: str, usable: Any = None, timeout_s: float = 10.0) -> Any:
+    """An info getter's answer once what it is made of has come (the AUTOPILOT_VERSION the
+    plugin asks for; for the speed factor, ATTITUDEs a sim time apart)."""
+    deadline = asyncio.get_running_loop().time() + timeout_s
+    while True:
+        try:
+            value = await get()
+            if usable is None or usable(value):
+                return value
+        except InfoError as e:
+            if e.result.name != "INFORMATION_NOT_RECEIVED_YET":
+                raise
+        assert asyncio.get_running_loop().time() < deadline, f"no {what} from the info plugin"
+        await asyncio.sleep(0.2)
+
+
+async def sim_seconds_per_wall_second(tel: Any, positions: int) -> float:
+    """The lockstep's speed as the telemetry rate shows it: ``positions`` position messages
+    take ``positions / TELEMETRY_HZ`` simulated seconds."""
+    loop = asyncio.get_running_loop()
+    stream = tel.subscribe_position()
+    try:
+        await first(stream, lambda p: True, "a position")
+        start = loop.time()
+        for _ in range(positions):
+            await first(stream, lambda p: True, "a position")
+        return positions / TELEMETRY_HZ / (loop.time() - start)
+    finally:
+        await stream.aclose()
+
+
+async def info_as_px4(system: Any) -> None:
+    """What the info plugin reads (AUTOPILOT_VERSION, ATTITUDE's time) against what
+    docs/qgroundcontrol.md promises: PX4 v1.14.0 release, plumeswarm's version as the
+    vendor's, "PLUME" then the sysid as the uid."""
+    info, tel = InfoAsync(system), TelemetryAsync(system)
+    v = await received(info.get_version, "version")
+    assert (v.flight_sw_major, v.flight_sw_minor, v.flight_sw_patch) == (1, 14, 0), v
+    assert v.flight_sw_version_type.name == "RELEASE", v
+    ours = (*Version(version("plumeswarm")).release, 0, 0)[:3]
+    vendor = (v.flight_sw_vendor_major, v.flight_sw_vendor_minor, v.flight_sw_vendor_patch)
+    assert vendor == ours, f"vendor version {vendor}, plumeswarm {ours}"
+    identity = b"PLUME" + SYSID.to_bytes(3, "big")
+    ident = await received(info.get_identification, "identification")
+    assert ident.legacy_uid == int.from_bytes(identity, "big"), hex(ident.legacy_uid)
+    assert ident.hardware_uid.startswith(identity.hex()), ident.hardware_uid
+    assert set(ident.hardware_uid[len(identity.hex()) :]) <= {"0"}, ident.hardware_uid
+    product = await received(info.get_product, "product")
+    assert (product.vendor_id, product.product_id) == (0, 0), product  # no hardware
+    # MAVSDK averages over the last 50 ATTITUDEs, 12.5 s of sim time at 4 Hz: the same window
+    await received(info.get_speed_factor, "speed factor", math.isfinite)
+    measured = await sim_seconds_per_wall_second(tel, 50)
+    factor = await info.get_speed_factor()
+    assert 0.5 < factor / measured < 2.0, f"speed factor {factor}, telemetry shows {measured}"
 
 
 async def mission_from_the_ground_with_rtl(system: Any) -> None:
@@ -317,6 +387,100 @@ async def follow_a_walking_target(system: Any) -> None:
         walker.cancel()
 
 
+IRIS = load_vehicle_type("iris")
+HOVER_THRUST = IRIS.mass_kg * 9.80665 / IRIS.max_total_thrust_n  # fraction of the maximum
+
+
+async def hold_here(off: Any, tel: Any, before: str) -> tuple[float, float]:
+    """Hold the position, nose north, 6 m up, until stopped; where (east, north) it held."""
+    e0, n0 = SPAWN_ENU
+    here = east_north_of(await first(tel.subscribe_position(), lambda p: True, "a position"))
+    await off.set_position_ned(PositionNedYaw(here[1] - n0, here[0] - e0, -6.0, 0.0))
+    await first(
+        tel.subscribe_velocity_ned(),
+        lambda v: math.hypot(v.north_m_s, v.east_m_s) < 0.2,
+        f"a stop before {before}",
+    )
+    return here
+
+
+async def turned_deg(tel: Any, beyond_deg: float, what: str) -> float:
+    """The heading's change (degrees, clockwise positive) once it is more than ``beyond_deg``
+    either way; followed sample by sample so that a turn past 180 degrees stays a turn."""
+    stream = tel.subscribe_heading()
+    try:
+        last = (await first(stream, lambda h: True, "a heading")).heading_deg
+        total = 0.0
+
+        def far(h: Any) -> bool:
+            nonlocal last, total
+            total += (h.heading_deg - last + 180.0) % 360.0 - 180.0
+            last = h.heading_deg
+            return abs(total) > beyond_deg
+
+        await first(stream, far, what, 60.0)
+        return total
+    finally:
+        await stream.aclose()
+
+
+async def flown_straight(
+    off: Any, tel: Any, offset: tuple[float, float], accel_m_s2: float | None
+) -> None:
+    """From a hover, a position ``offset`` (east, north) metres away with a 1.5 m/s velocity
+    feed-forward towards it (and an ``accel_m_s2`` one): flown along the line to it."""
+    e0, n0 = SPAWN_ENU
+    kind = "position-velocity" if accel_m_s2 is None else "position-velocity-acceleration"
+    what = f"the {kind} setpoint"
+    here = await hold_here(off, tel, what)
+    goal = (here[0] + offset[0], here[1] + offset[1])
+    d = math.hypot(*offset)
+    east_u, north_u = offset[0] / d, offset[1] / d
+    position = PositionNedYaw(goal[1] - n0, goal[0] - e0, -6.0, 0.0)
+    velocity = VelocityNedYaw(1.5 * north_u, 1.5 * east_u, 0.0, 0.0)
+    if accel_m_s2 is None:
+        await off.set_position_velocity_ned(position, velocity)
+    else:
+        acceleration = AccelerationNed(accel_m_s2 * north_u, accel_m_s2 * east_u, 0.0)
+        await off.set_position_velocity_acceleration_ned(position, velocity, acceleration)
+    east, north = await moved(tel, d / 2.0, what)
+    cos = east * east_u + north * north_u
+    assert cos > 0.95, f"towards ({east_u:.2f}, {north_u:.2f}) flew ({east:.2f}, {north:.2f})"
+    await arrive(tel, *goal, what)
+
+
+async def offboard_ned_setpoints_as_px4(off: Any, tel: Any) -> None:
+    """NED velocity, position with velocity (and acceleration) feed-forward, acceleration and
+    body rates, each from a hover, nose north."""
+    # velocity north-west at 2.5 m/s: the velocity loop flies the direction, wind or not
+    await hold_here(off, tel, "the NED velocity setpoint")
+    await off.set_velocity_ned(VelocityNedYaw(1.5, -2.0, 0.0, 0.0))
+    east, north = await moved(tel, 5.0, "the NED velocity setpoint")
+    cos = (east * -2.0 + north * 1.5) / 2.5
+    assert cos > 0.95, f"velocity NED (1.5, -2.0) flew ({east:.2f}, {north:.2f})"
+    # a position with a velocity feed-forward, then one with an acceleration feed-forward too
+    await flown_straight(off, tel, (7.0, -4.0), None)
+    await flown_straight(off, tel, (-7.0, 4.0), 0.3)
+    # 3 m/s² west, into the 6 m/s west wind (its drag, ≈ 1 m/s² at rest, is along the same
+    # axis): PX4 takes an acceleration alone as feed-forward, so the speed builds westward
+    await hold_here(off, tel, "the acceleration setpoint")
+    await off.set_acceleration_ned(AccelerationNed(0.0, -3.0, 0.0))
+    v = await first(
+        tel.subscribe_velocity_ned(),
+        lambda v: math.hypot(v.north_m_s, v.east_m_s) > 2.5,
+        "2.5 m/s from the acceleration setpoint",
+        60.0,
+    )
+    cos = -v.east_m_s / math.hypot(v.north_m_s, v.east_m_s)
+    assert cos > 0.95, f"3 m/s² west built ({v.north_m_s:.2f}, {v.east_m_s:.2f}) m/s NE"
+    # body rates: yaw −45 °/s (counter-clockwise seen from above), no roll or pitch, hover thrust
+    await hold_here(off, tel, "the attitude-rate setpoint")
+    await off.set_attitude_rate(AttitudeRate(0.0, 0.0, -45.0, HOVER_THRUST))
+    turn = await turned_deg(tel, 60.0, "a 60 degree turn from the yaw rate")
+    assert turn < 0.0, f"yaw rate −45 °/s turned the heading {turn:+.0f} degrees"
+    await hold_here(off, tel, "the end of offboard")
+
+
 async def offboard_setpoints_as_px4(system: Any) -> None:
     tel, act, param = TelemetryAsync(system), ActionAsync(system), ParamAsync(system)
     off = OffboardAsync(system)
@@ -334,21 +498,13 @@ async def offboard_setpoints_as_px4(system: Any) -> None:
     assert east > 0.95, f"body forward with the nose east flew ({east:.2f}, {north:.2f})"
     # attitude from rest, nose north: 20 degrees nose down, thrust to hold the altitude; the
     # tilt (g·tan 20° ≈ 3.6 m/s²) outweighs the drag of the 6 m/s west wind
-    here = east_north_of(await first(tel.subscribe_position(), lambda p: True, "a position"))
-    await off.set_position_ned(PositionNedYaw(here[1] - n0, here[0] - e0, -6.0, 0.0))
-    await first(
-        tel.subscribe_velocity_ned(),
-        lambda v: math.hypot(v.north_m_s, v.east_m_s) < 0.2,
-        "a stop before the attitude setpoint",
-    )
+    await hold_here(off, tel, "the attitude setpoint")
     await first(
         tel.subscribe_heading(),
         lambda h: min(h.heading_deg % 360.0, 360.0 - h.heading_deg % 360.0) < 5.0,
         "nose north",
     )
-    iris = load_vehicle_type("iris")
-    hover = iris.mass_kg * 9.80665 / iris.max_total_thrust_n
-    await off.set_attitude(Attitude(0.0, -20.0, 0.0, hover / math.cos(math.radians(20.0))))
+    await off.set_attitude(Attitude(0.0, -20.0, 0.0, HOVER_THRUST / math.cos(math.radians(20.0))))
     east, north = await moved(tel, 4.0, "the attitude setpoint's acceleration")
     assert north > 0.8, f"nose down heading north flew ({east:.2f}, {north:.2f})"
     lat, lon = latlon(e0 - 5.0, n0 + 10.0)
@@ -356,6 +512,7 @@ async def offboard_setpoints_as_px4(system: Any) -> None:
         PositionGlobalYaw(lat, lon, 6.0, 0.0, PositionGlobalYaw.AltitudeType.REL_HOME)
     )
     await arrive(tel, e0 - 5.0, n0 + 10.0, "the global setpoint", within_m=1.5)
+    await offboard_ned_setpoints_as_px4(off, tel)
     await off.stop()
     await orbit_clockwise(system, e0 + 3.0, n0 + 10.0)
     await position_mode_with_sticks(system)
@@ -446,6 +603,7 @@ async def connect(api_port: int) -> tuple[Mavsdk, Any]:
 async def workflows(api_port: int, plan: Path) -> None:
     sdk, system = await connect(api_port)
     try:
+        await info_as_px4(system)
         await mission_from_the_ground_with_rtl(system)
         await take_off(system, 5.0)
         await goto_refused_by_the_fence_parameter(system)
@@ -459,7 +617,10 @@ async def workflows(api_port: int, plan: Path) -> None:
 def qgc_fence_and_start_mission(gcs_port: int) -> None:
     accepted = int(mavlink.MAV_MISSION_ACCEPTED)
     with clients(gcs_port) as (c,):
-        c.wait_standby(1)  # the client heartbeats once a second, as QGC does
+        # heartbeats once a wall second, as QGC does: MAVSDK has gone, and a silent ground
+        # station trips the seed scenario's data-link-loss RTL (NAV_DLL_ACT) mid-mission
+        c.beat = True
+        c.wait_standby(1)
         pos = c.wait_type("GLOBAL_POSITION_INT", 1)
         lat, lon = pos.lat * 1e-7, pos.lon * 1e-7
         circle = mavlink.MAVLink_mission_item_int_message(
