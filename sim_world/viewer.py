@@ -94,16 +94,29 @@ class LoopbackBridge(ZMQWebSocketBridge):  # type: ignore[misc]
     """meshcat's bridge, but its web server listens on ``host`` only (meshcat's own binds every
     interface, whatever ``host`` says)."""
 
+    http_server: Any = None
+
     def make_app(self) -> Any:
         app = super().make_app()
         plain_listen = app.listen
         host = self.host
 
         def listen(port: int, **kwargs: Any) -> Any:
-            return plain_listen(port, address=host, **kwargs)
+            self.http_server = plain_listen(port, address=host, **kwargs)
+            return self.http_server
 
         app.listen = listen
         return app
+
+    def close(self) -> None:
+        """Close its sockets (on its loop's thread, once the loop has stopped): a bridge inside
+        a longer-lived process (an environment's viewer) must not leave them to the collector."""
+        if self.http_server is not None:
+            self.http_server.stop()
+        for page in list(self.websocket_pool):  # browsers still connected
+            page.close()
+        self.zmq_stream.close(linger=0)
+        self.ioloop.close(all_fds=False)  # tornado's loop, and the asyncio loop under it
 
 
 class MeshcatServer:
@@ -128,8 +141,10 @@ class MeshcatServer:
             self._started.set()
             return
         self._started.set()
-        self._bridge.run()
-        loop.close()
+        try:
+            self._bridge.run()
+        finally:
+            self._bridge.close()
 
     @property
     def web_url(self) -> str:
