@@ -1,6 +1,6 @@
-"""Every listener of the stack binds loopback by default: ``plumeswarm up`` (with the viewer)
-is started with the bundled scenario's defaults and every LISTEN TCP socket and every bound
-UDP socket of its processes is checked with psutil."""
+"""Every listener of the stack binds loopback by default: ``plumeswarm up`` (with the viewer and
+the live Foxglove server) is started with the bundled scenario's defaults and every LISTEN TCP
+socket and every bound UDP socket of its processes is checked with psutil."""
 
 from __future__ import annotations
 
@@ -8,6 +8,8 @@ from pathlib import Path
 
 import psutil
 
+from swarmbus.session import free_tcp_port
+from tests.support.procs import wait_until
 from tests.support.upstack import plumeswarm_up
 
 LOOPBACK = {"127.0.0.1", "::1"}
@@ -31,14 +33,18 @@ def listeners(procs: list[psutil.Process]) -> list[tuple[str, str, str, int]]:
 
 
 def test_every_listener_of_up_is_on_loopback(tmp_path: Path) -> None:
-    with plumeswarm_up(None, tmp_path) as up:
+    fox_port = free_tcp_port()
+    with plumeswarm_up(None, tmp_path, "--foxglove-port", str(fox_port)) as up:
         family = [
             psutil.Process(up.proc.pid),
             *psutil.Process(up.proc.pid).children(recursive=True),
         ]
         roles = {" ".join(p.cmdline()[3:5]) for p in family}
-        found = listeners(family)
-        assert found, f"no listener at all in {roles}"
+        found = wait_until(
+            lambda: (f := listeners(family)) and any(port == fox_port for *_, port in f) and f,
+            30.0,
+            f"the live Foxglove server listening on {fox_port} among {roles}",
+        )
         kinds = {k for _, k, _, _ in found}
         assert "udp" in kinds, f"no gateway UDP socket: {found}"
         exposed = [f for f in found if f[2] not in LOOPBACK]
