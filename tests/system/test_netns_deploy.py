@@ -120,10 +120,15 @@ def write_hosts(path: Path, roles: dict[str, list[str]], tls_certs: str | None =
 
 
 class Hosts:
-    """``plumeswarm up`` per namespace; stops them all and checks nothing survives."""
+    """``plumeswarm up`` per namespace; stops them all and checks nothing survives. ``stepped``:
+    every host flies the stepped scenario (``up --stepped``), so a demo attached to it steps
+    the clock and each command lands on a known tick. Free-running, when each vehicle's mission
+    starts depends on the machine's load, and the seed scenario's return legs cross at one
+    altitude: a loaded run once started uav1 and uav3 so that they met mid-air."""
 
-    def __init__(self, ns: dict[str, str], hosts_file: Path, out: Path) -> None:
+    def __init__(self, ns: dict[str, str], hosts_file: Path, out: Path, stepped: bool = False):
         self.ns, self.hosts_file, self.out = ns, hosts_file, out
+        self.stepped = stepped
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
         self.family: list[psutil.Process] = []
 
@@ -150,6 +155,7 @@ class Hosts:
                     host,
                     "--out",
                     str(run),
+                    *(["--stepped"] if self.stepped else []),
                 ],
                 cwd=REPO,
                 env=self.env(),
@@ -219,6 +225,7 @@ def fly_demo(h: Hosts, out: Path, router: str, *extra: str) -> dict[str, Any]:
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-2000:]
     summary: dict[str, Any] = json.loads((out / "summary.json").read_text())
     assert summary["ok"]
+    assert summary["clock"] == ("stepped" if h.stepped else "lockstep"), summary["clock"]
     for vid, v in summary["vehicles"].items():
         assert v["mission_completed"] and v["landed"], vid
         assert v["readings"] > 0 and v["max_concentration_g_m3"] > 0.0, vid
@@ -253,7 +260,7 @@ def test_seed_scenario_flies_across_three_namespaces(hosts: dict[str, str], tmp_
         tmp_path / "hosts.toml",
         {"sim": ["router", "physics", "plume"], "agents": ["autopilot"], "gcs": gcs_roles},
     )
-    h = Hosts(hosts, hosts_file, tmp_path)
+    h = Hosts(hosts, hosts_file, tmp_path, stepped=True)
     try:
         sim = h.up("sim")
         agents = h.up("agents")

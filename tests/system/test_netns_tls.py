@@ -51,7 +51,7 @@ def test_seed_scenario_flies_over_mutual_tls_and_strangers_stay_out(tmp_path: Pa
         assert res.returncode == 0, res.stderr
         dep = load_deployment(hosts_file)
         certs.generate(host_identities(dep), tmp_path / "other-ca", days=1)
-        h = Hosts(ns, hosts_file, tmp_path)
+        h = Hosts(ns, hosts_file, tmp_path, stepped=True)
         try:
             sim = h.up("sim")
             agents = h.up("agents")
