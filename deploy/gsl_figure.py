@@ -22,8 +22,9 @@ from swarmbus.scenario import load_scenario
 
 
 def plot_trajectories(path: Path, environment: str, samples: Sequence[Outcome]) -> Path:
-    """Run 0 of every algorithm over log10 of the field at the flight altitude when run 0
-    starts (a time-dependent field: its snapshot then)."""
+    """Run 0 of every algorithm (and sensor, named in the legend when there are several) over
+    log10 of the field at the flight altitude when run 0 starts (a time-dependent field: its
+    snapshot then)."""
     fig = Figure(figsize=(9, 6))
     FigureCanvasAgg(fig)
     ax = fig.add_subplot()
@@ -42,11 +43,15 @@ def plot_trajectories(path: Path, environment: str, samples: Sequence[Outcome]) 
         src = scenario.plume.sources[0]
         ax.plot(src.x_m, src.y_m, "r*", markersize=14, label="source")
     colours = colormaps["tab10"]
+    several_sensors = len({outcome.spec.sensor for outcome in samples}) > 1
     for k, outcome in enumerate(samples):
         colour = colours(k % 10)
+        name = outcome.spec.algorithm
+        if several_sensors:
+            name += f" ({outcome.spec.sensor})"
         for i, track in enumerate(outcome.trajectories):
             arr = np.asarray(track)
-            label = outcome.spec.algorithm if i == 0 else None
+            label = name if i == 0 else None
             ax.plot(arr[:, 0], arr[:, 1], color=colour, lw=1.0, label=label)
             ax.plot(arr[0, 0], arr[0, 1], "o", color=colour, ms=4)
         ex, ey = outcome.estimate_xy
