@@ -58,6 +58,7 @@ from swarmbus.view_feed import (
     MeshFetcher,
     default_levels,
     isosurface_queries,
+    plume_points,
     reading_colour,
     scene_bounds,
 )
@@ -343,8 +344,7 @@ class Scene:
 
     def set_plume_state(self, state: PlumeState) -> None:
         """Filament or puff centres as one point cloud, points sized by the mean radius."""
-        centres = np.frombuffer(state.centres_f32, dtype="<f4").reshape(-1, 3)
-        radii = np.frombuffer(state.radii_f32, dtype="<f4")
+        centres, radii = plume_points(state)  # whole rows only: a torn sample draws fewer
         size = float(np.clip(2.0 * radii.mean(), 0.05, 5.0)) if radii.size else 0.1
         self._set(
             "/plume/state",

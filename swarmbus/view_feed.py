@@ -10,12 +10,13 @@ import logging
 import math
 import threading
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import zenoh
 
 from swarmbus.keys import KeyNameError, Keys
-from swarmbus.messages import PlumeMesh, PlumeMeshQuery
+from swarmbus.messages import PlumeMesh, PlumeMeshQuery, PlumeState
 from swarmbus.reqrep import NoReply, RequestError, ask
 from swarmbus.scenario import Scenario
 
@@ -68,6 +69,23 @@ def reading_colour(value: float, full_scale: float) -> int:
     t = round(t * (READING_BINS - 1)) / (READING_BINS - 1)
     r, g, b = int(255 * t), int(80 * (1 - abs(2 * t - 1))), int(255 * (1 - t))
     return (r << 16) | (g << 8) | b
+
+
+def plume_points(
+    state: PlumeState,
+) -> tuple[np.ndarray[Any, np.dtype[np.float64]], np.ndarray[Any, np.dtype[np.float64]]]:
+    """A ``field/state``'s filament or puff centres (P, 3) and radii (P,). The bus is open: a
+    torn or garbled payload that still decodes gives only its whole rows (as many as both
+    arrays have), never an exception."""
+    centres = _whole_f32(state.centres_f32, per_row=3).reshape(-1, 3)
+    radii = _whole_f32(state.radii_f32)
+    n = min(len(centres), len(radii))
+    return centres[:n], radii[:n]
+
+
+def _whole_f32(raw: bytes, per_row: int = 1) -> np.ndarray[Any, np.dtype[np.float64]]:
+    whole = len(raw) // (4 * per_row) * 4 * per_row
+    return np.frombuffer(raw[:whole], dtype="<f4").astype(np.float64)
 
 
 class Feed:

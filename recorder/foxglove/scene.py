@@ -34,7 +34,13 @@ from swarmbus.messages import (
 )
 from swarmbus.scenario import Scenario
 from swarmbus.vehicle_types import VehicleType, VehicleTypeError, load_vehicle_type
-from swarmbus.view_feed import PALETTE, PLUME_COLOURS, default_levels, reading_colour
+from swarmbus.view_feed import (
+    PALETTE,
+    PLUME_COLOURS,
+    default_levels,
+    plume_points,
+    reading_colour,
+)
 
 WORLD_FRAME = "world"
 TF_TOPIC = "/tf"
@@ -544,12 +550,9 @@ def plume_state_update(state: PlumeState, now_ns: int) -> fm.SceneUpdate:
     frame's most diluted (blue) to its densest (red). One entity id, so each frame replaces
     the last; above ``PLUME_STATE_MAX_SPHERES`` every k-th is drawn (they are in release
     order)."""
-    # A garbled sample that still decodes (the bus is open) draws what is whole of it.
-    centres = _floats(state.centres_f32, per_row=3).reshape(-1, 3)
-    radii = _floats(state.radii_f32)
-    n = min(len(centres), len(radii))
-    stride = max(1, math.ceil(n / PLUME_STATE_MAX_SPHERES))
-    centres, radii = centres[:n:stride], radii[:n:stride]
+    centres, radii = plume_points(state)  # a garbled sample draws what is whole of it
+    stride = max(1, math.ceil(len(radii) / PLUME_STATE_MAX_SPHERES))
+    centres, radii = centres[::stride], radii[::stride]
     diameters = np.maximum(2.0 * radii, PLUME_STATE_MIN_DIAMETER_M)
     density = _log_relative_density(radii)
     spheres = [
@@ -579,11 +582,6 @@ def _log_relative_density(radii: np.ndarray[Any, np.dtype[np.float64]]) -> list[
         return [1.0] * radii.size
     out: list[float] = ((log_r.max() - log_r) / span).tolist()
     return out
-
-
-def _floats(raw: bytes, per_row: int = 1) -> np.ndarray[Any, np.dtype[np.float64]]:
-    whole = len(raw) // (4 * per_row) * 4 * per_row
-    return np.frombuffer(raw[:whole], dtype="<f4").astype(float)
 
 
 @cache

@@ -206,6 +206,17 @@ def test_plume_state_becomes_a_point_cloud_and_filaments_ask_no_meshes(
     geometry, _ = vis.objects[WORLD_ROOT + "/plume/state"]
     assert np.asarray(geometry.position).T.tolist() == centres.tolist()
     assert sc.plume_state_time_s == 2.5
+    # A torn sample that still decodes (the bus is open): its whole rows, no exception.
+    torn = PlumeState(
+        sim_time_s=3.0,
+        model="filament",
+        count=2,
+        centres_f32=centres.tobytes()[:20],  # one whole centre and two floats of the next
+        radii_f32=radii.tobytes(),
+    )
+    sc.set_plume_state(torn)
+    geometry, _ = vis.objects[WORLD_ROOT + "/plume/state"]
+    assert np.asarray(geometry.position).T.tolist() == centres[:1].tolist()
     filament = load_scenario(resolve_scenario_path("filament"))
     assert mesh_queries(filament, ViewerOptions()) == []
     assert mesh_queries(load_scenario(), ViewerOptions())  # the Gaussian keeps its isosurfaces
