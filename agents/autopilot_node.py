@@ -14,11 +14,11 @@ statuses while no tick arrives. Zenoh runs on ONE runtime thread (``ZENOH_RUNTIM
 :func:`main` unless the environment sets it): fewer thread hand-overs and wake-ups per tick
 (docs/agents.md).
 
-The sensor: on a sensor tick the physics asks the plume for every vehicle's position
-(``SimTick.plume_queried``) and puts the answer into a later tick (``SimTick.plume_values``);
-the node turns it into readings before that tick's control, so a behaviour sees the reading of
-the previous sensor tick, the same run after run. A sensor tick the physics did not query (no
-plume node alive) gives unavailable readings.
+The sensor: the plume service samples every vehicle's position of a sensor tick
+(``SimTick.plume_queried``: the tick waits for its sample) and the physics puts the sample into
+a later tick (``SimTick.plume_values``); the node turns it into readings before that tick's
+control, so a behaviour sees the reading of the previous sensor tick, the same run after run. A
+sensor tick no plume service took part in gives unavailable readings.
 
 Options (``--set key=value``): ``status_period_s`` (0.5; a stepped world gets a status every
 tick), ``position_noise_m`` / ``velocity_noise_m_s`` (0: the estimate is the physics' truth),
@@ -421,8 +421,6 @@ class AutopilotNode:
 
         return handle
 
-        return handle
-
     # ------------------------------------------------------------------ the loop
     def run(self, stop: threading.Event) -> None:
         """Handle every event, one at a time and in arrival order, until ``stop``."""
@@ -502,7 +500,7 @@ class AutopilotNode:
                 tick.sim_time_s,
                 (self.last_tick - tick.tick) * self.control_dt_s,
             )
-            self.pending = None  # the sensor query of a tick that is being replayed
+            self.pending = None  # the sensor tick of a tick that is being replayed
         self.last_tick = tick.tick
         if self.keeper is not None:
             self.keeper.before_tick(tick.tick)

@@ -453,7 +453,8 @@ class SnapshotSlots:
 
 # ---------------------------------------------------------------------------- a process
 class PendingSnapshot(msgspec.Struct, frozen=True, kw_only=True):
-    """The sensor query a process had in flight: asked again (or awaited from the physics)."""
+    """The sensor tick whose plume values a process awaits (they come in a later tick;
+    ``by_physics``: that tick waited for the plume's sample, ``SimTick.plume_queried``)."""
 
     tick: int
     sim_time_s: float

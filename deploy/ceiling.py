@@ -8,17 +8,18 @@ real roles exchange and nothing else:
 
 - ``ceiling-physics`` publishes one ``SimTick`` holding N vehicle states per tick (with the
   plume values of the previous sensor tick, as the physics does), waits until every vehicle's
-  command for that tick has arrived, then publishes the next; on sensor ticks it sends the
-  shared plume query of N points (answered asynchronously, as the physics does); ``sim/clock``
-  every 0.1 s of wall time, so the bench measures both runs the same way. No pybullet.
+  command for that tick has arrived — and on a sensor tick the plume's sample too, when a plume
+  stand-in was there at the start — then publishes the next; ``sim/clock`` every 0.1 s of
+  wall time, so the bench measures both runs the same way. No pybullet.
 - ``ceiling-autopilot`` (one process per K vehicles, one Zenoh runtime thread as the
   autopilot) answers each tick with one ``ActuatorBatch`` of K commands, puts each vehicle's
   reading (N - 1 peers) on sensor ticks and its status twice a second. No control, no decoding
   beyond the tick number.
-- ``ceiling-plume`` answers each plume query with N values; ``ceiling-gateway`` subscribes to
-  the ticks, statuses and readings the gateway subscribes to and drops them.
+- ``ceiling-plume`` reads every tick and answers each sensor tick with a sample of N values;
+  ``ceiling-gateway`` subscribes to the ticks, statuses and readings the gateway subscribes to
+  and drops them.
 
-Every message is encoded once at start-up except the tick number; what is left is the cost of
+Every message is built once at start-up but for its tick number; what is left is the cost of
 the handshake itself: Python wake-ups, Zenoh's transport and routing, one put and one receive
 per process per tick.
 """
@@ -39,18 +40,16 @@ from swarmbus.messages import (
     ActuatorCommand,
     Clock,
     ConcentrationReading,
+    FieldSample,
     FlightMode,
     PeerReading,
-    PlumeQuery,
     PlumeSample,
-    PlumeValues,
     SimTick,
     SpeedMode,
     VehicleState,
     VehicleStatus,
 )
 from swarmbus.node import NodeContext, NodeRuntime
-from swarmbus.reqrep import Pending, RequestError, ask, serve
 from swarmbus.session import SINGLE_THREAD_RUNTIME, Presence
 from swarmbus.views import BatchView, TickView
 
@@ -59,7 +58,6 @@ log = logging.getLogger(__name__)
 CLOCK_PERIOD_S = 0.1
 STATUS_PERIOD_S = 0.5
 ROTORS = 4
-PLUME_TIMEOUT_S = 10.0  # a stand-in plume answers at once; this only bounds a lost query
 
 
 def _state(vid: str) -> VehicleState:
@@ -84,7 +82,8 @@ def _sensor_period(ctx: NodeContext) -> int:
 
 # ---------------------------------------------------------------------------- physics
 class _Barrier:
-    """Counts the commands of the current tick (one per vehicle, in batches)."""
+    """Counts the answers of the current tick: one command per vehicle (in batches), and the
+    plume's sample on a sensor tick it waits for."""
 
     def __init__(self, keys: Keys, vehicles: int) -> None:
         self.keys = keys
@@ -92,6 +91,7 @@ class _Barrier:
         self.cond = threading.Condition()
         self.tick = 0
         self.answered = 0
+        self.expected = vehicles
 
     def on_batch(self, sample: zenoh.Sample) -> None:
         try:
@@ -101,31 +101,33 @@ class _Barrier:
         with self.cond:
             if view.tick == self.tick:
                 self.answered += len(view.commands)
-                if self.answered >= self.vehicles:
+                if self.answered >= self.expected:
+                    self.cond.notify()
+
+    def on_sample(self, sample: zenoh.Sample) -> None:
+        try:
+            tick = decode(sample.payload.to_bytes(), FieldSample).tick
+        except MessageError:
+            return
+        with self.cond:
+            if tick == self.tick and self.expected > self.vehicles:
+                self.answered += 1
+                if self.answered >= self.expected:
                     self.cond.notify()
 
     def wait(self, stop: threading.Event) -> bool:
         with self.cond:
-            while self.answered < self.vehicles:
+            while self.answered < self.expected:
                 if stop.is_set():
                     return False
                 self.cond.wait(0.25)
             return True
 
-    def next(self, tick: int) -> None:
+    def next(self, tick: int, plume: bool) -> None:
         with self.cond:
             self.tick = tick
             self.answered = 0
-
-
-def _answer(asked: tuple[int, Pending[PlumeValues]] | None) -> PlumeSample | None:
-    """The plume's answer to the last query, if it is in (never waits)."""
-    if asked is None or not asked[1].done():
-        return None
-    outcome = asked[1].outcome()
-    if isinstance(outcome, RequestError):
-        return None
-    return PlumeSample(tick=asked[0], values_g_m3=outcome.values_g_m3)
+            self.expected = self.vehicles + plume
 
 
 def physics_main(ctx: NodeContext) -> int:
@@ -136,11 +138,13 @@ def physics_main(ctx: NodeContext) -> int:
     states = [_state(v) for v in ids]
     dt = 1.0 / sc.time.control_hz
     period = _sensor_period(ctx)
-    query = encode(PlumeQuery(points_enu_m=[(0.0, 0.0, 0.0)] * len(ids)))
     with NodeRuntime(ctx, role="physics") as rt:
         session = rt.session
         barrier = _Barrier(keys, len(ids))
-        sub = session.declare_subscriber(keys.all_autopilot_actuators(), barrier.on_batch)
+        subs = [
+            session.declare_subscriber(keys.all_autopilot_actuators(), barrier.on_batch),
+            session.declare_subscriber(keys.plume_sample(), barrier.on_sample),
+        ]
         tick_pub = session.declare_publisher(keys.tick())
         clock_pub = session.declare_publisher(keys.clock())
         presence = Presence(session, keys)
@@ -149,17 +153,16 @@ def physics_main(ctx: NodeContext) -> int:
         if not presence.wait_for(lambda alive: wanted <= alive, sc.time.startup_timeout_s):
             log.error("ceiling-physics: autopilot stand-ins missing: %s", wanted - presence.alive)
             return 1
+        plume = "plume" in presence.alive
         rt.ready()
-        asked: tuple[int, Pending[PlumeValues]] | None = None  # tick, query
+        sample: PlumeSample | None = None  # what the next tick carries
+        values = [0.0] * len(ids)
 
         tick = 0
         wall0 = clock_wall = time.monotonic()
         while not rt.stop.is_set():
-            queried = tick % period == 0
-            sample = _answer(asked)
-            if sample is not None:
-                asked = None
-            barrier.next(tick)
+            queried = plume and tick % period == 0
+            barrier.next(tick, queried)
             tick_pub.put(
                 encode(
                     SimTick(
@@ -172,11 +175,9 @@ def physics_main(ctx: NodeContext) -> int:
                     )
                 )
             )
-            if queried:
-                key = keys.plume_concentration()
-                asked = (tick, ask(session, key, query, PlumeValues, PLUME_TIMEOUT_S))
             if not barrier.wait(rt.stop):
                 break
+            sample = PlumeSample(tick=tick, values_g_m3=values) if queried else None
             tick += 1
             now = time.monotonic()
             if now - clock_wall >= CLOCK_PERIOD_S:
@@ -192,7 +193,8 @@ def physics_main(ctx: NodeContext) -> int:
                         )
                     )
                 )
-        sub.undeclare()
+        for sub in subs:
+            sub.undeclare()
         presence.close()
     return 0
 
@@ -270,15 +272,26 @@ def autopilot_main(ctx: NodeContext) -> int:
 
 # ---------------------------------------------------------------------------- plume, gateway
 def plume_main(ctx: NodeContext) -> int:
-    """Stand-in for the plume service: N values for every query."""
+    """Stand-in for the plume service: a sample of N values for every sensor tick."""
     keys = Keys(ctx.scenario.world.name)
-    values = PlumeValues(values_g_m3=[0.0] * len(ctx.scenario.vehicles))
+    values = [0.0] * len(ctx.scenario.vehicles)
+    period = _sensor_period(ctx)
     with NodeRuntime(ctx, role="plume") as rt:
-        key = keys.plume_concentration()
-        q = serve(rt.session, key, PlumeQuery, lambda _: values, memo=True)
+        pub = rt.session.declare_publisher(keys.plume_sample())
+
+        def on_tick(sample: zenoh.Sample) -> None:
+            try:
+                view = decode(sample.payload.to_bytes(), TickView)
+            except MessageError:
+                return
+            if view.tick % period == 0:
+                answer = FieldSample(tick=view.tick, sim_time_s=view.sim_time_s, values_g_m3=values)
+                pub.put(encode(answer))
+
+        sub = rt.session.declare_subscriber(keys.tick(), on_tick)
         rt.ready()
         rt.stop.wait()
-        q.undeclare()
+        sub.undeclare()
     return 0
 
 

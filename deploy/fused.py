@@ -6,7 +6,8 @@ service object answer the same questions in the same order as the distributed st
 the same scenario, seed and commands the state stream is the same, bit for bit. One tick ``k``:
 
 1. the physics has the states of tick ``k`` (the physics process publishes them in ``sim/tick``);
-   on a sensor tick it asks the plume for every vehicle's position at ``k``;
+   on a sensor tick the plume samples every vehicle's position at ``k`` (the plume service
+   answers that tick with its ``FieldSample``);
 2. each autopilot first takes the readings of the last sensor tick before ``k`` (the plume's
    answer arrives with tick ``k`` in the distributed stack), then steps on tick ``k``'s state;
 3. the physics applies the rotor commands of tick ``k``, steps ``substeps`` physics steps and
@@ -28,7 +29,7 @@ from agents.flight import Flight, take_readings
 from plume_service.from_scenario import field_from_scenario
 from plume_service.service import PlumeService
 from sim_world.world import World
-from swarmbus.messages import CommandReply, ConcentrationReading, PlumeQuery, VehicleState
+from swarmbus.messages import CommandReply, ConcentrationReading, VehicleState
 from swarmbus.scenario import Scenario
 
 log = logging.getLogger(__name__)
@@ -114,7 +115,7 @@ class FusedRunner:
 
     # ------------------------------------------------------------------ one tick
     def _publish(self) -> None:
-        """The physics' half of a tick: the states, and the sensor tick's plume question."""
+        """The physics' half of a tick: the states."""
         world = self.world
         sim_time_s = world.sim_time_s
         states = self.states = world.states(self.tick, sim_time_s)
@@ -139,12 +140,10 @@ class FusedRunner:
             commands[flight.vehicle_id] = flight.step(state, peers)
         self._commands = commands
         if self.tick % self._sensor_period == 0 and states:
-            self._pending = (self.tick, self.world.sim_time_s, states, self._ask_plume(states))
+            self._pending = (self.tick, self.world.sim_time_s, states, self._sample_plume(states))
 
-    def _ask_plume(self, states: list[VehicleState]) -> list[float] | None:
+    def _sample_plume(self, states: list[VehicleState]) -> list[float] | None:
         if self.plume is None:
             return None
-        query = PlumeQuery(
-            points_enu_m=[s.position_enu_m for s in states], sim_time_s=self.world.sim_time_s
-        )
-        return self.plume.concentration(query).values_g_m3
+        points = [s.position_enu_m for s in states]
+        return self.plume.sample(self.tick, self.world.sim_time_s, points).values_g_m3

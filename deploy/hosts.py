@@ -47,6 +47,10 @@ def _default_world() -> list[str]:
     return ["physics"]
 
 
+def _default_field() -> list[str]:
+    return ["plume"]
+
+
 class AclSection(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """Who may publish what (roles); everything else is open to every identity of the
     deployment and closed to anybody else. Enforced only with ``[tls]`` (identities are the
@@ -55,6 +59,7 @@ class AclSection(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
     enabled: bool = True
     actuators: list[RoleName] = msgspec.field(default_factory=_default_actuators)
     world: list[RoleName] = msgspec.field(default_factory=_default_world)  # ticks, states, clock
+    field: list[RoleName] = msgspec.field(default_factory=_default_field)  # plume samples, state
     # One identity per autopilot process (one vehicle each), allowed to speak for its own
     # vehicle only (deploy.security); the hosts running autopilots then list their vehicles.
     per_vehicle: bool = False

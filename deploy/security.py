@@ -11,8 +11,10 @@ link to the router:
 - every identity may do everything on every key, except
 - publishing (put/delete) actuators (``autopilot/*/actuators``, the one actuator route) unless
   it is an autopilot, and
-  publishing the world (``sim/tick``, ``sim/clock``, ``vehicle/*/state``) unless it is physics
-  (roles configurable in ``[acl]``).
+  publishing the world (``sim/tick``, ``sim/clock``, ``vehicle/*/state``) unless it is physics,
+  and
+- publishing the plume's data (``field/sample``, the sensors' values, and ``field/state``)
+  unless it is the plume (roles configurable in ``[acl]``).
 
 With ``[acl] per_vehicle = true`` each autopilot process (one vehicle each) runs as its own
 identity ``autopilot-<vehicle>.<host>`` (its node name and host), which is not one of the
@@ -132,6 +134,7 @@ def access_control(dep: Deployment, keys: Keys) -> dict[str, Any]:
             dep.acl.actuators,
         ),
         "world": ([keys.tick(), keys.clock(), keys.all_vehicle_states()], dep.acl.world),
+        "field": ([keys.plume_sample(), keys.plume_state()], dep.acl.field),
     }
     for plane, (key_exprs, roles) in planes.items():
         others = [n for n in members if _role_of(n) not in {*roles, "router"}]

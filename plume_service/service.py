@@ -1,7 +1,13 @@
 """``plumeswarm node plume``: the concentration field served on the bus.
 
-Three queryables: ``plume/concentration`` (a batch of points → values in one reply, at the
-query's ``sim_time_s`` for the time-dependent filament and puff models),
+The sensors' values: the service is a lockstep participant of the sensor ticks. It reads
+``sim/tick``, and on every sensor tick (``sensor.period_ticks``) publishes the concentration at
+the position of every state of that tick, at its sim time, as a ``FieldSample`` on
+``field/sample``; the physics waits for it as it waits for the autopilots' commands and carries
+it to the autopilots in the next tick (a tick published again gets the same answer again).
+
+Three queryables for everyone else: ``plume/concentration`` (a batch of points → values in
+one reply, at the query's ``sim_time_s`` for the time-dependent filament and puff models),
 ``plume/info`` (model, parameters, sources, wind, σ fits used outside their published range)
 and ``plume/mesh`` (isosurface at a level). For filaments and puffs it also follows the
 physics' ``sim/clock`` and publishes their state on ``field/state`` every
@@ -17,7 +23,9 @@ import logging
 import math
 import queue
 import threading
+from collections.abc import Callable
 
+import msgspec
 import numpy as np
 import zenoh
 
@@ -32,6 +40,7 @@ from swarmbus.codec import MessageError, decode, encode
 from swarmbus.keys import Keys
 from swarmbus.messages import (
     Clock,
+    FieldSample,
     PlumeInfo,
     PlumeInfoQuery,
     PlumeMesh,
@@ -40,11 +49,13 @@ from swarmbus.messages import (
     PlumeSource,
     PlumeState,
     PlumeValues,
+    Vec3,
 )
 from swarmbus.node import NodeContext, NodeRuntime
 from swarmbus.options import OptionError, RoleOptions, parse_options
 from swarmbus.reqrep import Incoming, serve, serve_later
 from swarmbus.scenario import Scenario
+from swarmbus.views import TickView, state_head_decoder
 
 log = logging.getLogger(__name__)
 
@@ -70,6 +81,13 @@ class PlumeService:
         values = self.field.concentration(points, query.sim_time_s)
         self.sigma_use.note(points, values)
         return PlumeValues(values_g_m3=values.tolist(), sim_time_s=query.sim_time_s)
+
+    def sample(self, tick: int, sim_time_s: float, points: list[Vec3]) -> FieldSample:
+        """The sensors' values of one sensor tick: the concentration at ``points`` (every
+        state's position, in order) at the tick's sim time."""
+        query = PlumeQuery(points_enu_m=points, sim_time_s=sim_time_s)
+        values = self.concentration(query).values_g_m3
+        return FieldSample(tick=tick, sim_time_s=sim_time_s, values_g_m3=values)
 
     def info(self, _query: PlumeInfoQuery) -> PlumeInfo:
         sources = source_fields(self.field)
@@ -247,6 +265,43 @@ class StatePublisher:
         )
 
 
+class SensorAnswers:
+    """The service's part of the lockstep: answers each sensor tick of ``sim/tick`` with a
+    :class:`FieldSample` through ``put`` (see the module doc)."""
+
+    def __init__(
+        self, service: PlumeService, period_ticks: int, put: Callable[[bytes], object]
+    ) -> None:
+        self.service = service
+        self.period_ticks = period_ticks
+        self._put = put
+        self._last: tuple[int, bytes] | None = None  # the last answer: tick, payload
+        self._lock = threading.Lock()
+
+    def on_tick(self, data: bytes) -> None:
+        try:
+            view = decode(data, TickView)
+        except MessageError as exc:
+            log.warning("plume: ignoring a tick: %s", exc)
+            return
+        if view.tick % self.period_ticks:
+            return
+        with self._lock:
+            last = self._last
+            if last is None or last[0] != view.tick:
+                last = self._last = (view.tick, self._answer(view))
+        self._put(last[1])
+
+    def _answer(self, view: TickView) -> bytes:
+        try:
+            points = [state_head_decoder.decode(raw).position_enu_m for raw in view.states]
+            sample = self.service.sample(view.tick, view.sim_time_s, points)
+        except (msgspec.DecodeError, ValueError) as exc:
+            log.warning("plume: no values for tick %d: %s", view.tick, exc)
+            sample = FieldSample(tick=view.tick, sim_time_s=view.sim_time_s, values_g_m3=None)
+        return encode(sample)
+
+
 def serve_queries(
     session: zenoh.Session, keys: Keys, service: PlumeService, stop: threading.Event
 ) -> tuple[list[zenoh.Queryable[None]], threading.Thread]:
@@ -254,8 +309,8 @@ def serve_queries(
 
     Meshes take seconds: they queue to their own thread so point queries never wait. (A
     blocking recv() on a zenoh channel can't be interrupted by undeclare; a Python queue with a
-    timeout can.) Point queries are memoised: in lockstep every autopilot asks for the same
-    tick's positions, and one computation serves them all."""
+    timeout can.) Point queries are memoised: clients asking the same points at the same sim
+    time (viewers, tools) share one computation."""
     mesh_queue: queue.Queue[Incoming[PlumeMeshQuery]] = queue.Queue(maxsize=8)
 
     def enqueue_mesh(incoming: Incoming[PlumeMeshQuery]) -> None:
@@ -324,6 +379,13 @@ def main(ctx: NodeContext) -> int:
     states = StatePublisher(service.field, ctx.scenario.plume.state_period_s)
     with NodeRuntime(ctx, role="plume") as rt:
         queryables, mesh_worker = serve_queries(rt.session, rt.keys, service, rt.stop)
+        sample_pub = rt.session.declare_publisher(rt.keys.plume_sample())
+        answers = SensorAnswers(
+            service, ctx.scenario.sensor.resolved().period_ticks, sample_pub.put
+        )
+        tick_sub = rt.session.declare_subscriber(
+            rt.keys.tick(), lambda sample: answers.on_tick(sample.payload.to_bytes())
+        )
         state_feed = _start_state_publisher(rt, states) if states.active else None
         rt.ready()
         rt.stop.wait()
@@ -332,6 +394,7 @@ def main(ctx: NodeContext) -> int:
             subscriber, state_thread = state_feed
             state_thread.join(timeout=30.0)
             subscriber.undeclare()
+        tick_sub.undeclare()
         for q in queryables:
             q.undeclare()
     return 0

@@ -5,7 +5,8 @@ pybullet's own state (every body's pose and velocities and its contact cache, as
 ``saveBullet``; restoring poses and velocities alone is not bit-exact and lets grounded
 vehicles drift by millimetres within a few seconds), every vehicle's motor state (rotor speeds,
 targets, enabled) and contact flags (landed, crashed, in contact, fastest speed of the tick),
-the step count and the tick. The file is one msgpack document, written atomically (temporary
+the step count and the tick, and the plume's values that this tick carries to the autopilots
+(``SimTick.plume_values``). The file is one msgpack document, written atomically (temporary
 file + rename), so a reader sees the previous checkpoint or the next one, never half of one.
 
 :class:`CheckpointWriter` writes on its own thread, so the disk's latency stays out of the
@@ -30,9 +31,11 @@ from types import TracebackType
 
 import msgspec
 
+from swarmbus.messages import PlumeSample
+
 log = logging.getLogger(__name__)
 
-FORMAT = "physics_checkpoint/v1"
+FORMAT = "physics_checkpoint/v2"
 # pybullet writes its state to a file only; a RAM-backed directory keeps that off the disk.
 _SCRATCH_DIR = "/dev/shm" if os.path.isdir("/dev/shm") else None
 _MARKER = struct.Struct("<qq")  # last published tick, time.monotonic_ns() at publication
@@ -71,10 +74,9 @@ class WorldCheckpoint(msgspec.Struct, frozen=True, kw_only=True):
     sim_time_s: float
     vehicles: list[VehicleCheckpoint]
     bullet: bytes  # pybullet ``saveBullet`` of the whole world
-    # The physics process's shared sensor query in flight (its answer goes into this tick):
-    # the tick it was made for and the encoded PlumeQuery; asked again on resume.
-    plume_query_tick: int | None = None
-    plume_query: bytes = b""
+    # The plume's answer to the last sensor tick that goes into this tick's ``plume_values``
+    # (the physics has it before it steps to this tick), carried again on resume.
+    plume_sample: PlumeSample | None = None
 
 
 _encoder = msgspec.msgpack.Encoder()

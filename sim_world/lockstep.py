@@ -10,6 +10,12 @@ while the barrier waits for it. :meth:`Lockstep.start` makes every present parti
 active: its motors go to zero); a dropped or newly arrived participant becomes active again
 as soon as it answers a tick published since (it has caught up), and is waited for from then on.
 
+A *periodic* participant (the plume service, which answers every sensor tick) is waited for only
+on the ticks its period divides, and is no vehicle: the start does not wait for its token
+(:meth:`Lockstep.missing_tokens` names vehicles only) and its answers are no motor commands
+(:meth:`Lockstep.commands` holds the vehicles' alone). Otherwise it is a participant like any:
+present, active, dropped, rejoining and held by the same rules.
+
 Restarts (lockstep mode): a participant whose token goes while the launcher may be restarting
 its process is *held* instead (:meth:`Lockstep.held_leave`): it stays active, the tick waits
 for it until its usual deadline (time for the launcher's word), and a restart notice
@@ -19,7 +25,7 @@ tick like any tick; after the grace it is dropped like a silent participant.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 
 from swarmbus.keys import vehicle_of_autopilot
 
@@ -34,10 +40,19 @@ class Lockstep:
     """Barrier state for one world; not thread-safe (the caller holds a lock)."""
 
     def __init__(
-        self, vehicle_ids: Sequence[str], timeout_s: float, clock: Callable[[], float]
+        self,
+        vehicle_ids: Sequence[str],
+        timeout_s: float,
+        clock: Callable[[], float],
+        periodic: Mapping[str, int] | None = None,
     ) -> None:
         self.vehicle_ids = tuple(vehicle_ids)
-        self._known = frozenset(vehicle_ids)
+        self._periods = dict(periodic or {})  # participant → its period in ticks (>= 1)
+        if any(p < 1 for p in self._periods.values()) or self._periods.keys() & set(vehicle_ids):
+            raise ValueError(f"bad periodic participants {self._periods}")
+        self._order = (*self.vehicle_ids, *self._periods)
+        self._known = frozenset(self._order)
+        self.participants = self._known  # vehicles and periodic participants
         self.timeout_s = timeout_s
         self._clock = clock
         self._present: set[str] = set()
@@ -89,24 +104,26 @@ class Lockstep:
     def start(self) -> None:
         """Every present participant takes part from now on (before tick 0)."""
         self._active = set(self._present)
-        self._waiting = self._active - self._commands.keys()
+        waiting = {p for p in self._active if self.waits_for(p, self.tick)}
+        self._waiting = waiting - self._commands.keys()
 
     def begin(self, tick: int, timeout_s: float | None = None) -> None:
         """Tick ``tick`` was published: wait for its commands until the deadline."""
         self.tick = tick
         self._commands = {}
-        self._waiting = set(self._active)
+        self._waiting = {p for p in self._active if self.waits_for(p, tick)}
         self._deadline = self._clock() + (self.timeout_s if timeout_s is None else timeout_s)
 
     def receive(self, vehicle_id: str, tick: int, rotor_commands: Sequence[float]) -> bool:
         """A command arrived; returns whether it counts for the current tick."""
-        if vehicle_id not in self._present:
-            return False  # no token, no participant
+        if vehicle_id not in self._present or not self.waits_for(vehicle_id, tick):
+            return False  # no token, no participant; or not a tick it answers
         if vehicle_id not in self._active:
             if tick < self._rejoin_from.get(vehicle_id, 0):
                 return False  # sent before it was dropped
             self._active.add(vehicle_id)
-            self._waiting.add(vehicle_id)
+            if self.waits_for(vehicle_id, self.tick):
+                self._waiting.add(vehicle_id)
         if tick != self.tick:
             return False
         self._commands[vehicle_id] = rotor_commands
@@ -115,13 +132,24 @@ class Lockstep:
             self._held.pop(vehicle_id, None)  # its new process answered: the hold is over
         return True
 
+    def waits_for(self, participant: str, tick: int) -> bool:
+        """Whether ``participant`` answers ``tick`` (a periodic one: only the ticks its period
+        divides), if it is active."""
+        period = self._periods.get(participant)
+        return period is None or tick % period == 0
+
+    def waits(self, participant: str) -> bool:
+        """Whether the current tick waits for ``participant``'s answer (still)."""
+        return participant in self._waiting
+
     def complete(self) -> bool:
         """Every active participant has answered the current tick."""
         return not self._waiting
 
     def missing(self) -> list[str]:
-        """Active participants that have not answered the current tick, in scenario order."""
-        return [v for v in self.vehicle_ids if v in self._waiting]
+        """Active participants that have not answered the current tick, in scenario order
+        (vehicles, then the periodic participants)."""
+        return [v for v in self._order if v in self._waiting]
 
     def remaining_s(self) -> float:
         if self._held:
@@ -141,8 +169,10 @@ class Lockstep:
         return dropped
 
     def commands(self) -> dict[str, Sequence[float]]:
-        """The current tick's commands of active participants (others get zero motors)."""
-        return {v: c for v, c in self._commands.items() if v in self._active}
+        """The current tick's commands of active vehicles (others get zero motors)."""
+        return {
+            v: c for v, c in self._commands.items() if v in self._active and v not in self._periods
+        }
 
     # ------------------------------------------------------------------ restarts
     def held_leave(self, vehicle_id: str) -> bool:

@@ -12,11 +12,15 @@ steps ``scenario.substeps`` physics steps and publishes tick ``k + 1``.
 ``sim/clock`` carries sim time and the achieved real-time factor about ten times a wall-clock
 second.
 
-The sensor's plume query: on every sensor tick (``sensor.period_ticks``) while a plume node is
-alive, the physics sends ONE query with every vehicle's position right after publishing the
-tick, and puts the answer into the next tick (``SimTick.plume_values``); the autopilots build
-their readings from it instead of each sending the same query (N round trips per tick → 1).
-The answer is awaited after the tick's commands, so it overlaps the autopilots' work.
+The sensor's plume values: the plume service is a lockstep participant of the sensor ticks
+(``sensor.period_ticks``). It reads each sensor tick from ``sim/tick`` like the autopilots and
+answers with a ``FieldSample`` on ``field/sample`` (every vehicle's concentration at that tick's
+positions); the tick is complete when the autopilots' commands and the plume's sample are in,
+and the next tick carries the sample (``SimTick.plume_values``), from which the autopilots build
+their readings. The physics asks nothing: it waits for the plume as it waits for an autopilot
+(:class:`~sim_world.lockstep.Lockstep`, a periodic participant), and holds the clock for a
+plume service the launcher restarts as it does for an autopilot. ``SimTick.plume_queried``
+says whether the tick waits for the plume (a plume service is taking part).
 
 With a ``checkpoint`` path it saves the world there every ``checkpoint_period_s`` of sim time
 (:mod:`sim_world.checkpoint`) and, when that file exists at start, resumes from it instead of
@@ -59,9 +63,8 @@ from swarmbus.messages import (
     ActuatorBatch,
     ActuatorCommand,
     Clock,
-    PlumeQuery,
+    FieldSample,
     PlumeSample,
-    PlumeValues,
     RestartNotice,
     SimTick,
     SpeedMode,
@@ -71,7 +74,7 @@ from swarmbus.messages import (
 )
 from swarmbus.node import NodeContext, NodeRuntime
 from swarmbus.options import OptionError, RoleOptions, parse_options
-from swarmbus.reqrep import Incoming, Pending, RequestError, ask, serve_later
+from swarmbus.reqrep import Incoming, serve_later
 from swarmbus.session import Presence
 from swarmbus.views import BatchView
 
@@ -80,9 +83,7 @@ log = logging.getLogger(__name__)
 HANDSHAKE_REPUBLISH_S = 0.1  # tick 0 is re-sent until every participant has answered it
 STOP_POLL_S = 0.2  # longest wait between checks of the stop signal
 HEALTH_PERIOD_S = 1.0
-# A plume query that got no reply: how long to wait for the service's token to go (it died)
-# before taking it for a slow answer from a live service.
-PLUME_DEPARTURE_S = 0.5
+PLUME = "plume"  # the plume service's participant in the lockstep (any node named plume[-*])
 RECORDER = "recorder"  # the recorder's node name: the clock waits for its restart too
 
 
@@ -126,8 +127,12 @@ class PhysicsNode:
         self.control_dt_s = 1.0 / self.scenario.time.control_hz
         self.substeps = self.scenario.substeps
         self._cond = threading.Condition()
+        self._sensor_period = self.scenario.sensor.resolved().period_ticks
         self.barrier = Lockstep(
-            world.vehicle_ids, self.scenario.time.participant_timeout_s, time.monotonic
+            world.vehicle_ids,
+            self.scenario.time.participant_timeout_s,
+            time.monotonic,
+            periodic={PLUME: self._sensor_period},
         )
         self.tick = 0
         self._last_tick_msg = b""
@@ -155,28 +160,26 @@ class PhysicsNode:
         self._known = frozenset(world.vehicle_ids)
         self.foreign_dropped = 0  # commands for another vehicle on a one-vehicle node's key
         self._foreign_logged: set[str] = set()  # the keys that sent them (logged once each)
-        # The shared sensor query (see the module doc).
-        self._plume_key = self.keys.plume_concentration()
-        self._sensor_period = self.scenario.sensor.resolved().period_ticks
-        self._plume_timeout_s = 0.4 * self.scenario.time.participant_timeout_s
-        self._plume_nodes: set[str] = set()
-        self._plume_pending: tuple[int, int, Pending[PlumeValues]] | None = None  # tick, points
+        # The plume's part of the sensor ticks (see the module doc).
+        self._plume_nodes: set[str] = set()  # live plume services (one participant)
+        self._sample: FieldSample | None = None  # the plume's answer to the current tick
+        self._plume_values: PlumeSample | None = None  # what the next tick carries
+        self._queried = False  # the current tick waits for the plume's sample
+        self._last_tick_states = 0  # how many states the current tick has
+        self._sample_sub = session.declare_subscriber(
+            self.keys.plume_sample(), self._on_field_sample
+        )
         # The stepped clock (served in every mode: the others answer with an error).
         self._stepped = options.mode == SpeedMode.STEPPED
         self.clock_gate: SteppedClock[Incoming[StepRequest]] = SteppedClock()
         self._step_queryable = serve_later(
             session, self.keys.clock_step(), StepRequest, self._on_step
         )
-        self._plume_asked: tuple[int, bytes] | None = None  # the pending query: tick, payload
-        self._resume_query: tuple[int, bytes] | None = None  # a checkpoint's, to ask again
         # Restarts (lockstep): hold the tick for an autopilot the launcher is restarting.
         self._restart_grace_s = (
             self.scenario.time.restart_grace_s if options.mode != SpeedMode.REALTIME else 0.0
         )
         self._held_republish = 0.0  # wall time of the last re-publication during a hold
-        self._plume_restart_until = 0.0  # the plume is being restarted: wait for it until then
-        self._plume_lost = False
-        self._plume_arrivals = 0  # plume tokens that arrived (a restarted service is a new one)
         self._recorder_arrivals = 0
         self._recorder_lost = False  # the recorder's token went: hold before the next tick
         self._recorder_until = 0.0  # it is being restarted: hold until it is back, or this
@@ -198,6 +201,7 @@ class PhysicsNode:
         self._step_queryable.undeclare()
         self._restart_sub.undeclare()
         self._actuator_sub.undeclare()
+        self._sample_sub.undeclare()
         for pub in self._state_pubs:
             pub.close()
         if self._writer is not None:
@@ -207,15 +211,8 @@ class PhysicsNode:
 
     # ------------------------------------------------------------------ bus callbacks
     def _on_presence(self, name: str, alive: bool) -> None:
-        if name == "plume" or name.startswith("plume-"):
-            with self._cond:
-                if alive:
-                    self._plume_nodes.add(name)
-                    self._plume_arrivals += 1
-                else:
-                    self._plume_nodes.discard(name)
-                self._plume_lost = not self._plume_nodes  # a plume was here and is gone
-                self._cond.notify_all()
+        if name == PLUME or name.startswith(PLUME + "-"):
+            self._on_plume_presence(name, alive)
             return
         if name == RECORDER and self._restart_grace_s > 0.0:
             with self._cond:
@@ -231,14 +228,43 @@ class PhysicsNode:
                         log.info("the stepped clock's holder %s left: the clock is free", name)
             return
         with self._cond:
-            if alive:
-                self.barrier.joined(vid)
-            elif self._restart_grace_s > 0.0:
-                self.barrier.held_leave(vid)  # the launcher may be restarting it
-            else:
-                self.barrier.left(vid)
-            self._cond.notify_all()
+            self._participant(vid, alive)
         log.info("autopilot of %s %s", vid, "arrived" if alive else "left")
+
+    def _on_plume_presence(self, name: str, alive: bool) -> None:
+        """Plume services are one participant: present while any of them is."""
+        with self._cond:
+            was = bool(self._plume_nodes)
+            if alive:
+                self._plume_nodes.add(name)
+            else:
+                self._plume_nodes.discard(name)
+            if was != bool(self._plume_nodes):
+                self._participant(PLUME, alive)
+        log.info("plume service %s %s", name, "arrived" if alive else "left")
+
+    def _participant(self, participant: str, alive: bool) -> None:
+        """A participant's token came or went (the caller holds the lock)."""
+        if alive:
+            self.barrier.joined(participant)
+        elif self._restart_grace_s > 0.0:
+            self.barrier.held_leave(participant)  # the launcher may be restarting it
+        else:
+            self.barrier.left(participant)
+        self._cond.notify_all()
+
+    def _on_field_sample(self, sample: zenoh.Sample) -> None:
+        """The plume's answer to a sensor tick: counts like an autopilot's command."""
+        try:
+            answer = decode(sample.payload.to_bytes(), FieldSample)
+        except MessageError as exc:
+            log.warning("ignoring plume sample on %s: %s", sample.key_expr, exc)
+            return
+        with self._cond:
+            if self.barrier.receive(PLUME, answer.tick, ()):
+                self._sample = answer
+                if self.barrier.complete():
+                    self._cond.notify_all()
 
     def _on_batch(self, sample: zenoh.Sample) -> None:
         data = sample.payload.to_bytes()
@@ -321,12 +347,11 @@ class PhysicsNode:
         deadline = time.monotonic() + self.scenario.time.startup_timeout_s
         if self.options.wait_for_autopilots and not self._wait_for_tokens(deadline):
             return 0 if self.rt.stop.is_set() else 1  # a stop signal is not a failure
-        # Who is alive now (the plume, for tick 0's sensor query), not when history arrives.
+        # Who is alive now (the plume, for tick 0's sensor values), not when history arrives.
         self._presence.sync(timeout_s=min(2.0, max(0.1, deadline - time.monotonic())))
         with self._cond:
             self.barrier.start()
             self.barrier.begin(self.tick, timeout_s=max(0.0, deadline - time.monotonic()))
-        self._ask_again()
         self._publish_tick(self.world.states(self.tick, self.world.sim_time_s))
         if not self._handshake():
             return 0 if self.rt.stop.is_set() else 1
@@ -346,8 +371,7 @@ class PhysicsNode:
             cp = checkpoint.load(path)
             self.world.restore(cp)
             self.tick = cp.tick
-            if cp.plume_query_tick is not None:
-                self._resume_query = (cp.plume_query_tick, cp.plume_query)
+            self._plume_values = cp.plume_sample
             self._resume_note = (
                 f"resumed from checkpoint at tick {cp.tick} (sim t={cp.sim_time_s:.3f} s)"
             )
@@ -375,9 +399,8 @@ class PhysicsNode:
         if self.tick >= self._due_checkpoint:
             t0 = time.monotonic()
             cp = self.world.checkpoint(self.tick)
-            asked = self._plume_asked if self._plume_pending is not None else None
-            if asked is not None:  # its answer belongs to the tick being saved
-                cp = msgspec.structs.replace(cp, plume_query_tick=asked[0], plume_query=asked[1])
+            if self._plume_values is not None:  # the values this tick carries
+                cp = msgspec.structs.replace(cp, plume_sample=self._plume_values)
             writer.submit(cp)
             self._capture_s += time.monotonic() - t0
             self._due_checkpoint = self.tick + self._checkpoint_ticks
@@ -428,6 +451,7 @@ class PhysicsNode:
             commands = self._await_commands()
             if commands is None or not self._may_step():
                 break
+            self._plume_values = self._take_sample()
             self._apply(commands)
             self.world.step(self.substeps)
             self.tick += 1
@@ -496,14 +520,7 @@ class PhysicsNode:
                 if remaining <= 0.0:
                     held = barrier.held
                     dropped = barrier.expire()
-                    self.dropped_total += len(dropped)
-                    log.warning(
-                        "tick %d: dropped %s after %.2f s without actuators (motors off)",
-                        self.tick,
-                        ", ".join(dropped),
-                        barrier.timeout_s,
-                    )
-                    self._report_expired_holds(held, dropped)
+                    self._report_dropped(held, dropped)
                     break
                 self._cond.wait(min(remaining, STOP_POLL_S))
                 if barrier.held:
@@ -564,14 +581,8 @@ class PhysicsNode:
                 self._recorder_lost = self._recorder_lost and notice.restarting
                 self._cond.notify_all()
             return
-        if notice.role == "plume" and self._restart_grace_s > 0.0:
-            with self._cond:
-                grace = notice.delay_s + self._restart_grace_s
-                self._plume_restart_until = time.monotonic() + grace if notice.restarting else 0.0
-                self._plume_lost = self._plume_lost and notice.restarting
-                self._cond.notify_all()
-            return
-        vids = [v for v in notice.vehicles if v in self._known]
+        known = [PLUME] if notice.role == PLUME else notice.vehicles
+        vids = [v for v in known if v in self.barrier.participants]
         if not vids or self._restart_grace_s <= 0.0:
             return
         with self._cond:
@@ -600,34 +611,6 @@ class PhysicsNode:
             self._held_republish = now
             self._tick_pub.put(self._last_tick_msg)
 
-    def _plume_restarted(self) -> bool:
-        """No plume answer, or the plume service left (lockstep): hold the clock until a plume
-        service arrives — up to the participant timeout (time for the launcher's word), or up
-        to the grace when the launcher says it restarts it. Whether one arrived."""
-        if self._restart_grace_s <= 0.0:
-            return False
-        word = time.monotonic() + self.scenario.time.participant_timeout_s
-        with self._cond:
-            # The tick is not out yet: its participants' deadline starts when it is.
-            timeout = max(self.barrier.timeout_s, self.barrier.remaining_s())
-            seen = self._plume_arrivals
-            alive_until = time.monotonic() + PLUME_DEPARTURE_S
-            while self._plume_arrivals == seen and not self.rt.stop.is_set():
-                now = time.monotonic()
-                if self._plume_nodes and not self._plume_restart_until and now > alive_until:
-                    break  # still there: a slow answer, not a dead service
-                remaining = max(word, self._plume_restart_until) - now
-                if remaining <= 0.0:
-                    break
-                self._cond.wait(min(remaining, STOP_POLL_S / 4))
-            self._plume_restart_until = 0.0
-            self.barrier.begin(self.tick, timeout)
-            back = self._plume_arrivals != seen
-            if not back and not self._plume_nodes:
-                log.warning("tick %d: no plume service came back", self.tick)
-            self._plume_lost = False  # once per departure, not every tick
-            return back
-
     def _wait_for_recorder(self) -> None:
         """The recorder left (lockstep): hold the next tick until a recorder is back — up to
         the participant timeout for the launcher's word, up to the grace if it restarts it —
@@ -651,8 +634,27 @@ class PhysicsNode:
             "it is back" if back else "it did not come back",
         )
 
+    def _report_dropped(self, held: frozenset[str], dropped: list[str]) -> None:
+        self.dropped_total += len(dropped)
+        vehicles = [v for v in dropped if v != PLUME]
+        if vehicles:
+            log.warning(
+                "tick %d: dropped %s after %.2f s without actuators (motors off)",
+                self.tick,
+                ", ".join(vehicles),
+                self.barrier.timeout_s,
+            )
+        if PLUME in dropped:
+            log.warning(
+                "tick %d: no plume sample after %.2f s: this sensor tick's readings are "
+                "unavailable; the plume service takes part again once it answers a sensor tick",
+                self.tick,
+                self.barrier.timeout_s,
+            )
+        self._report_expired_holds(held, dropped)
+
     def _report_expired_holds(self, held: frozenset[str], dropped: list[str]) -> None:
-        expired = [v for v in dropped if v in held]
+        expired = [v for v in dropped if v in held and v != PLUME]
         if expired:
             log.warning(
                 "tick %d: restart grace of %.1f s passed: %s dropped (motors off, failsafe)",
@@ -667,22 +669,23 @@ class PhysicsNode:
 
     # ------------------------------------------------------------------ output
     def _publish_tick(self, states: list[VehicleState]) -> None:
-        plume_values = self._plume_answer()
-        if self._plume_lost and self.tick % self._sensor_period == 0:
-            self._plume_restarted()  # the plume left between queries: wait for it likewise
-        query = self.tick % self._sensor_period == 0 and bool(self._plume_nodes) and bool(states)
+        """Tick k out (the barrier has begun it): its states and the plume's values of the
+        last sensor tick; whether it waits for the plume's sample of its own positions."""
+        with self._cond:
+            self._sample = None
+            queried = self._queried = self.barrier.waits(PLUME)
         msg = SimTick(
             tick=self.tick,
             sim_time_s=self.world.sim_time_s,
             control_dt_s=self.control_dt_s,
             states=states,
-            plume_queried=query,
-            plume_values=plume_values,
+            plume_queried=queried,
+            plume_values=self._plume_values,
         )
+        self._plume_values = None
         self._last_tick_msg = encode(msg)
+        self._last_tick_states = len(states)
         self._tick_pub.put(self._last_tick_msg)
-        if query:
-            self._plume_query(states)
         if self._marker is not None:
             self._marker.mark(self.tick)
         for pub, state in zip(self._state_pubs, states, strict=True):
@@ -690,61 +693,23 @@ class PhysicsNode:
                 pub.put(encode(state))
                 self.states_sent += 1
 
-    def _plume_query(self, states: list[VehicleState]) -> None:
-        query = PlumeQuery(
-            points_enu_m=[s.position_enu_m for s in states], sim_time_s=self.world.sim_time_s
-        )
-        payload = encode(query)
-        pending = ask(self.rt.session, self._plume_key, payload, PlumeValues, self._plume_timeout_s)
-        self._plume_pending = (self.tick, len(states), pending)
-        self._plume_asked = (self.tick, payload)
-
-    def _ask_again(self) -> None:
-        """Resumed from a checkpoint: the sensor query whose answer goes into its tick, again
-        (so the replayed tick carries the same plume values as the first time)."""
-        resumed, self._resume_query = self._resume_query, None
-        if resumed is None or not self._plume_nodes:
-            return
-        tick, payload = resumed
-        try:
-            count = len(decode(payload, PlumeQuery).points_enu_m)
-        except MessageError as exc:
-            log.warning("not asking the checkpoint's plume query again: %s", exc)
-            return
-        pending = ask(self.rt.session, self._plume_key, payload, PlumeValues, self._plume_timeout_s)
-        self._plume_pending = (tick, count, pending)
-        self._plume_asked = (tick, payload)
-
-    def _plume_answer(self) -> PlumeSample | None:
-        """The answer to the pending sensor query (waits for it up to its timeout)."""
-        pending, self._plume_pending = self._plume_pending, None
-        if pending is None:
-            return None
-        tick, count, asking = pending
-        values, replied = self._values(asking, count)
-        asked = self._plume_asked
-        silent = not replied and asked is not None and asked[0] == tick
-        if silent and self._plume_restarted():
-            assert asked is not None
-            # the plume died with this query: the clock waited for its restart; ask again
-            log.warning("tick %d: asking the restarted plume service again", self.tick)
-            again = ask(
-                self.rt.session, self._plume_key, asked[1], PlumeValues, self._plume_timeout_s
+    def _take_sample(self) -> PlumeSample | None:
+        """What the next tick carries of the plume: its sample of this tick if the tick waited
+        for one (values None if it did not come or does not fit the tick's states)."""
+        with self._cond:
+            if not self._queried:
+                return None
+            answer, self._sample = self._sample, None
+        values = answer.values_g_m3 if answer is not None else None
+        if values is not None and len(values) != self._last_tick_states:
+            log.warning(
+                "tick %d: plume sampled %d points of %d states",
+                self.tick,
+                len(values),
+                self._last_tick_states,
             )
-            values, _ = self._values(again, count)
-        return PlumeSample(tick=tick, values_g_m3=values)
-
-    def _values(self, pending: Pending[PlumeValues], count: int) -> tuple[list[float] | None, bool]:
-        """The values of the answer (None if unusable) and whether anything answered."""
-        outcome = pending.outcome()
-        if isinstance(outcome, RequestError):
-            if pending.answered:
-                log.warning("plume query: %s", outcome)
-            return None, pending.answered
-        if len(outcome.values_g_m3) != count:
-            log.warning("plume answered %d values for %d points", len(outcome.values_g_m3), count)
-            return None, True
-        return outcome.values_g_m3, True
+            values = None
+        return PlumeSample(tick=self.tick, values_g_m3=values)
 
     def _pace(self, sim_time_s: float) -> None:
         """Realtime mode: hold tick ``k`` until the wall clock reaches its sim time / factor."""

@@ -117,6 +117,10 @@ class Keys:
         """Filaments or puffs of a time-dependent plume (data, not a queryable: not plume/)."""
         return f"{self.prefix}/field/state"
 
+    def plume_sample(self) -> str:
+        """The plume service's values at a sensor tick's positions (its lockstep answer)."""
+        return f"{self.prefix}/field/sample"
+
     def vehicle_wind(self, vehicle_id: str) -> str:
         return self._vehicle(vehicle_id, "wind")
 

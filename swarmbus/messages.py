@@ -94,9 +94,10 @@ class PlumeSample(msgspec.Struct, frozen=True, kw_only=True):
 class SimTick(Message, frozen=True, kw_only=True, tag=_tag("sim_tick")):
     """``sim/tick``: all vehicle states of tick k in one message (the lockstep's go signal).
 
-    ``plume_queried``: the physics sent the sensor's plume query for this tick's positions
-    itself (one query for every vehicle instead of one per autopilot); its answer comes in
-    ``plume_values`` of the next tick. Autopilots query the plume themselves otherwise.
+    ``plume_queried``: a sensor tick that a plume service takes part in: the physics waits for
+    the service's :class:`FieldSample` of this tick's positions and carries its values in
+    ``plume_values`` of the next tick. False: no plume service takes part (the readings of
+    this tick are unavailable).
     """
 
     tick: Tick
@@ -418,6 +419,17 @@ class PlumeValues(Message, frozen=True, kw_only=True, tag=_tag("plume_values")):
     sim_time_s: SimTime | None = None
 
 
+class FieldSample(Message, frozen=True, kw_only=True, tag=_tag("field_sample")):
+    """``field/sample``: the plume service's answer to sensor tick ``tick`` of ``sim/tick``: the
+    concentration at the position of every state of that tick, in that order, at its sim time
+    (a lockstep participant's answer, like an autopilot's actuators); ``values_g_m3`` None
+    when the service could not compute them (the readings are then unavailable)."""
+
+    tick: Tick
+    sim_time_s: SimTime
+    values_g_m3: Annotated[list[NonNegative], msgspec.Meta(max_length=MAX_BATCH_POINTS)] | None
+
+
 class PlumeSource(msgspec.Struct, frozen=True, kw_only=True):
     x_m: Finite
     y_m: Finite
@@ -591,6 +603,7 @@ ALL_MESSAGES: tuple[type[Message], ...] = (
     StepReply,
     RestartNotice,
     PlumeState,
+    FieldSample,
     AnemometerReading,
 )
 

@@ -64,7 +64,7 @@ def test_one_vehicle_over_the_bus_with_the_plume_service(
         )
         assert replies and replies[0].err is not None
         assert decode(replies[0].err.payload.to_bytes(), ErrorReply).reason
-        physics = BusToyPhysics(router, sc, participants=["uav2"]).start()
+        physics = BusToyPhysics(router, sc, participants=["uav2"], plume=True).start()
         try:
             swarm.wait_until(lambda: swarm.state("uav2"), 10.0, "uav2 state")
             uav.arm()

@@ -108,6 +108,8 @@ def test_acl_names_who_may_publish_what(tmp_path: Path) -> None:
     assert {"gateway.gcs", "physics.sim", "operator.sim"} <= subjects["not-actuators-publishers"]
     assert "physics.sim" not in subjects["not-world-publishers"]
     assert "autopilot.agents" in subjects["not-world-publishers"]
+    assert "plume.sim" not in subjects["not-field-publishers"]
+    assert {"physics.sim", "autopilot.agents"} <= subjects["not-field-publishers"]
     assert (
         "router.sim" not in subjects["not-world-publishers"] | subjects["not-actuators-publishers"]
     )

@@ -191,3 +191,98 @@ def test_no_hold_for_a_process_that_is_not_restarted_or_a_dropped_participant() 
     clock.now += 1.0
     assert ls.expire() == ["a", "c"]
     assert not ls.restarting("c", grace_s=20.0)  # already dropped: it rejoins by answering
+
+
+def periodic_barrier(period: int) -> tuple[Lockstep, FakeClock]:
+    clock = FakeClock()
+    ls = Lockstep(["a", "b"], timeout_s=0.5, clock=clock, periodic={"plume": period})
+    return ls, clock
+
+
+def test_a_periodic_participant_is_waited_for_only_on_the_ticks_its_period_divides() -> None:
+    ls, _ = periodic_barrier(3)
+    for p in ("a", "b", "plume"):
+        ls.joined(p)
+    assert ls.missing_tokens() == []
+    ls.start()
+    for tick in range(7):
+        ls.begin(tick)
+        assert ls.waits("plume") == (tick in (0, 3, 6))
+        ls.receive("a", tick, [0.1])
+        ls.receive("b", tick, [0.2])
+        assert ls.complete() == (tick not in (0, 3, 6)), tick
+        if tick % 3 == 0:
+            assert ls.missing() == ["plume"]
+            assert ls.receive("plume", tick, ())
+            assert ls.complete()
+        assert ls.commands() == {"a": [0.1], "b": [0.2]}  # its answer is no motor command
+
+
+def test_the_start_waits_for_vehicle_tokens_only_and_a_late_periodic_one_joins_by_answering() -> (
+    None
+):
+    ls, clock = periodic_barrier(2)
+    ls.joined("a")
+    assert ls.missing_tokens() == ["b"]  # not the plume's
+    ls.joined("b")
+    ls.start()
+    ls.begin(0)
+    assert not ls.waits("plume")  # absent at the start: not waited for
+    ls.joined("plume")
+    ls.receive("a", 0, [0.0])
+    ls.receive("b", 0, [0.0])
+    assert ls.complete()
+    ls.begin(1)
+    assert not ls.receive("plume", 1, ())  # not its tick: it answers even ticks only
+    ls.receive("a", 1, [0.0])
+    ls.receive("b", 1, [0.0])
+    assert ls.complete()  # an answer to a tick it does not answer did not make it wait
+    ls.begin(2)
+    assert not ls.waits("plume")
+    assert ls.receive("plume", 2, ())  # its first answer admits it
+    ls.begin(4)
+    assert ls.waits("plume")
+    clock.now += 0.6
+    assert ls.expire() == ["a", "b", "plume"]
+
+
+def test_a_periodic_participant_dropped_at_the_deadline_rejoins_without_stalling_other_ticks() -> (
+    None
+):
+    ls, clock = periodic_barrier(2)
+    for p in ("a", "b", "plume"):
+        ls.joined(p)
+    ls.start()
+    ls.begin(0)
+    ls.receive("a", 0, [0.0])
+    ls.receive("b", 0, [0.0])
+    clock.now += 0.6
+    assert ls.expire() == ["plume"]
+    ls.begin(1)
+    assert ls.receive("plume", 0, ()) is False  # its late answer to tick 0: too late to count
+    assert not ls.waits("plume")  # ...and it makes no odd tick wait for it
+    ls.receive("a", 1, [0.0])
+    ls.receive("b", 1, [0.0])
+    assert ls.complete()
+    ls.begin(2)
+    assert ls.waits("plume")  # active again since it answered a tick since its drop
+
+
+def test_a_held_periodic_participant_holds_only_its_own_ticks() -> None:
+    ls, clock = periodic_barrier(3)
+    for p in ("a", "b", "plume"):
+        ls.joined(p)
+    ls.start()
+    ls.begin(1)
+    assert ls.held_leave("plume") and ls.restarting("plume", 10.0)
+    ls.receive("a", 1, [0.0])
+    ls.receive("b", 1, [0.0])
+    assert ls.complete()  # tick 1 is not the plume's
+    ls.begin(3)
+    ls.receive("a", 3, [0.0])
+    ls.receive("b", 3, [0.0])
+    clock.now += 5.0
+    assert not ls.complete() and ls.expire() == []  # held within its grace
+    ls.joined("plume")
+    assert ls.receive("plume", 3, ())
+    assert ls.complete() and ls.held == frozenset()

@@ -92,6 +92,7 @@ SAMPLES: dict[type[m.Message], m.Message] = {
     m.PlumeState: m.PlumeState(
         sim_time_s=1.5, model="filament", count=1, centres_f32=b"\x00" * 12, radii_f32=b"\x00" * 4
     ),
+    m.FieldSample: m.FieldSample(tick=24, sim_time_s=0.2, values_g_m3=[0.0, 0.031]),
     m.AnemometerReading: m.AnemometerReading(
         vehicle_id="uav1",
         sim_time_s=1.5,

@@ -203,11 +203,12 @@ class ToyWorld:
 class BusToyPhysics:
     """A stand-in for the physics process on the bus, speaking the agreed lockstep protocol.
 
-    Publishes ``SimTick`` k (and each ``VehicleState``), on sensor ticks asks the plume for
-    every vehicle's position and puts the answer into tick k + 1 (as the physics does), waits
-    for every participant's ``ActuatorCommand`` for tick k (re-publishing tick 0 until all
-    answered: the start handshake), steps the toy vehicles, repeats. Runs on its own thread
-    until ``stop``.
+    Publishes ``SimTick`` k (and each ``VehicleState``), waits for every participant's
+    ``ActuatorCommand`` for tick k (re-publishing tick 0 until all answered: the start
+    handshake) and, with ``plume``, on a sensor tick for the plume service's ``FieldSample`` of
+    tick k, which goes into tick k + 1 (as the physics does); steps the toy vehicles, repeats.
+    Without ``plume`` no tick waits for a plume (its readings are unavailable). Runs on its own
+    thread until ``stop``.
     """
 
     def __init__(
@@ -216,6 +217,7 @@ class BusToyPhysics:
         scenario: Scenario,
         participants: list[str] | None = None,
         timeout_s: float = 5.0,
+        plume: bool = False,
     ) -> None:
         import threading
 
@@ -227,6 +229,8 @@ class BusToyPhysics:
         self.keys = Keys(scenario.world.name)
         self.participants = participants or [v.id for v in scenario.vehicles]
         self.timeout_s = timeout_s
+        self.plume = plume
+        self._sample: tuple[int, list[float] | None] | None = None  # the plume's: tick, values
         speed = scenario.wind.speed_m_s
         toward = math.radians(270.0 - scenario.wind.from_deg)
         wind = (speed * math.cos(toward), speed * math.sin(toward), 0.0)
@@ -250,6 +254,7 @@ class BusToyPhysics:
         self._thread = threading.Thread(target=self._run, daemon=True)
         self._subs = [
             session.declare_subscriber(self.keys.all_autopilot_actuators(), self._on_cmd),
+            session.declare_subscriber(self.keys.plume_sample(), self._on_sample),
         ]
         self._pub = session.declare_publisher(self.keys.tick())
         self._state_pubs = {
@@ -266,6 +271,15 @@ class BusToyPhysics:
                 self._commands[cmd.vehicle_id] = (cmd.tick, list(cmd.rotor_commands))
             self._cond.notify_all()
 
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        from swarmbus.codec import decode
+        from swarmbus.messages import FieldSample
+
+        msg = decode(sample.payload.to_bytes(), FieldSample)
+        with self._cond:
+            self._sample = (msg.tick, msg.values_g_m3)
+            self._cond.notify_all()
+
     def start(self) -> BusToyPhysics:
         self._thread.start()
         return self
@@ -280,33 +294,22 @@ class BusToyPhysics:
     def sim_time_s(self) -> float:
         return self.tick * self.dt
 
-    def _ask_plume(self, query: object) -> list[float] | None:
-        from swarmbus.codec import decode, encode
-        from swarmbus.messages import PlumeValues
-
-        for reply in self.session.get(
-            self.keys.plume_concentration(), payload=encode(query), timeout=self.timeout_s
-        ):
-            if reply.ok is None:
-                return None
-            return decode(reply.ok.payload.to_bytes(), PlumeValues).values_g_m3
-        return None  # no plume service
-
-    def _answered(self, k: int) -> bool:
-        return all(self._commands.get(v, (-1, []))[0] == k for v in self.participants)
+    def _answered(self, k: int, queried: bool) -> bool:
+        sampled = not queried or (self._sample is not None and self._sample[0] == k)
+        return sampled and all(self._commands.get(v, (-1, []))[0] == k for v in self.participants)
 
     def _run(self) -> None:
         import time
 
         from swarmbus.codec import encode
-        from swarmbus.messages import PlumeQuery, PlumeSample, SimTick
+        from swarmbus.messages import PlumeSample, SimTick
 
         period = self.scenario.sensor.resolved().period_ticks
         answer: PlumeSample | None = None
         while not self._stop.is_set():
             k = self.tick
             states = [toy.state(k, self.sim_time_s) for toy in self.vehicles.values()]
-            queried = k % period == 0
+            queried = self.plume and k % period == 0
             tick = SimTick(
                 tick=k,
                 sim_time_s=self.sim_time_s,
@@ -320,14 +323,9 @@ class BusToyPhysics:
                 self._state_pubs[s.vehicle_id].put(encode(s))
             deadline = time.monotonic() + self.timeout_s
             self._pub.put(payload)
-            if queried:
-                query = PlumeQuery(
-                    points_enu_m=[s.position_enu_m for s in states], sim_time_s=self.sim_time_s
-                )
-                answer = PlumeSample(tick=k, values_g_m3=self._ask_plume(query))
             republish = time.monotonic() + 0.05
             with self._cond:
-                while not self._answered(k):
+                while not self._answered(k, queried):
                     if self._stop.is_set():
                         return
                     now = time.monotonic()
@@ -335,13 +333,15 @@ class BusToyPhysics:
                         missing = [
                             v for v in self.participants if self._commands.get(v, (-1, []))[0] != k
                         ]
-                        self.error = f"tick {k}: no actuators from {missing}"
+                        self.error = f"tick {k}: no actuators from {missing} (or no plume sample)"
                         return
                     if k == 0 and now > republish:  # start-up handshake
                         self._pub.put(payload)
                         republish = now + 0.05
                     self._cond.wait(0.05)
                 commands = {v: self._commands[v][1] for v in self.participants}
+                sampled = self._sample if queried else None
+            answer = PlumeSample(tick=k, values_g_m3=sampled[1]) if sampled is not None else None
             for vid, toy in self.vehicles.items():
                 toy.step(commands.get(vid, [0.0] * len(toy.vt.rotors)), self.scenario.substeps)
             self.tick += 1

@@ -30,6 +30,7 @@ from swarmbus.messages import (
     Command,
     CommandReply,
     ConcentrationReading,
+    FieldSample,
     FlightMode,
     Message,
     NodeHealth,
@@ -146,8 +147,9 @@ def stack(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Stack]:
 
 
 def test_plume_killed_the_clock_waits_and_no_reading_is_lost(stack: Stack) -> None:
-    """Lockstep: the physics holds the clock while the launcher restarts the plume service and
-    asks the new one the query the old one died with: no reading unavailable, none missing."""
+    """Lockstep: the plume is a participant of the sensor ticks; the physics holds the clock
+    while the launcher restarts it, and the new service answers the held sensor tick: no
+    reading unavailable, none missing."""
     wait_until(lambda: any(r.available for r in stack.readings[-10:]), 60.0, "an available reading")
     start = len(stack.readings)
     _, restart_s = stack.kill("plume")
@@ -169,8 +171,8 @@ def test_plume_killed_the_clock_waits_and_no_reading_is_lost(stack: Stack) -> No
         assert steps and max(steps) < 1.5 * min(steps), (vid, min(steps), max(steps))
     log = (stack.up.run / "physics.log").read_text()
     print(f"plume: restarted in {restart_s:.1f} s, {len(during)} readings since the kill "
-          f"({back_s:.1f} s), none unavailable or missing; physics asked again: "
-          f"{'asking the restarted plume service again' in log}")  # fmt: skip
+          f"({back_s:.1f} s), none unavailable or missing; physics held the clock for it: "
+          f"{'holding the clock for plume' in log}")  # fmt: skip
 
 
 def test_gateway_killed_clients_see_every_vehicle_again(stack: Stack) -> None:
@@ -226,6 +228,7 @@ def fuzz_targets(
         (keys.clock(), Clock),
         (keys.node_health("physics"), NodeHealth),
         (keys.plume_info(), None),
+        (keys.plume_sample(), FieldSample),
     ]
     for v in VEHICLES:
         topics += [
