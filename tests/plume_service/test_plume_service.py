@@ -38,7 +38,7 @@ def plume_service() -> object:
             assert presence.wait_for(lambda a: "plume" in a, 30.0), "plume service never came up"
             presence.close()
             wait_for_queryable(
-                session, keys_for().plume_info(), encode(PlumeInfoQuery()), 30.0, "plume/info"
+                session, keys_for().plume_info(), PlumeInfoQuery(), PlumeInfo, 30.0, "plume/info"
             )
             yield net, session
 
