@@ -29,6 +29,7 @@ from swarmbus.messages import (
     FlightMode,
     MissionStart,
     PlumeQuery,
+    PlumeValues,
     SetMode,
     SimTick,
     Takeoff,
@@ -91,7 +92,8 @@ def start_plume_and_autopilots(procs: NodeProcs, session: zenoh.Session, keys: K
     wait_for_queryable(
         session,
         keys.plume_concentration(),
-        encode(PlumeQuery(points_enu_m=[(30.0, 0.0, 10.0)], sim_time_s=0.0)),
+        PlumeQuery(points_enu_m=[(30.0, 0.0, 10.0)], sim_time_s=0.0),
+        PlumeValues,
         60.0,
         "the plume service",
     )

@@ -27,7 +27,7 @@ from deploy.gsl_episode import EpisodeSpec, Outcome, Schedule, fused_episode
 from deploy.scaling import write_scenario
 from swarmbus.codec import encode
 from swarmbus.keys import Keys
-from swarmbus.messages import Command, PlumeQuery, VehicleState
+from swarmbus.messages import Command, PlumeQuery, PlumeValues, VehicleState
 from swarmbus.scenario import Scenario, load_scenario
 from tests.support.procs import NodeProcs, wait_for_queryable, wait_until, zenoh_network
 
@@ -78,7 +78,7 @@ def distributed(schedule: Schedule, tmp: Path) -> States:
         src = scenario.plume.sources[0]
         probe = PlumeQuery(points_enu_m=[(src.x_m + 30.0, src.y_m, 10.0)], sim_time_s=0.0)
         wait_for_queryable(
-            session, keys.plume_concentration(), encode(probe), 60.0, "the plume service"
+            session, keys.plume_concentration(), probe, PlumeValues, 60.0, "the plume service"
         )
         for v in scenario.vehicles:
             procs.start("autopilot", "--vehicle", v.id)

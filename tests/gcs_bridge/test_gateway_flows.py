@@ -2,8 +2,8 @@
 
 uav1 and uav2 are flown by a scripted fake autopilot process
 (tests/support/fake_autopilot.py: the bus contract with kinematic motion); uav3 is played by
-this test itself, so that it can see exactly which bus commands the gateway sends and choose the
-replies. The client replays what
+this test itself on the same fake autopilot's bus side (``FakeAutopilot``), so that it can see
+exactly which bus commands the gateway sends and choose the replies. The client replays what
 QGroundControl does (connect sequence, takeoff, SET_MODE, missions) and hostile frames.
 """
 
@@ -24,7 +24,6 @@ import zenoh
 from gcs_bridge.dialect import mavlink
 from gcs_bridge.frames import enu_to_geodetic
 from gcs_bridge.params import float_bits_of_int
-from swarmbus.codec import decode, encode
 from swarmbus.keys import Keys
 from swarmbus.messages import (
     Command,
@@ -39,6 +38,7 @@ from swarmbus.messages import (
 )
 from swarmbus.scenario import Origin
 from swarmbus.session import open_session
+from tests.support.fake_autopilot import FakeAutopilot
 from tests.support.gateway_stack import gateway, vehicles
 from tests.support.mavclient import MavClient, mission_item, write_scenario
 from tests.support.procs import Network, wait_until, zenoh_network
@@ -72,7 +72,8 @@ def _refuse_with(code: RejectCode) -> Callable[[Any], CommandReply]:
 
 @dataclass
 class ScriptedVehicle:
-    """uav3: a liveliness token, a cmd queryable answering from ``replies``, and a status."""
+    """uav3: the fake autopilot's bus side for one vehicle, answering from ``replies`` (accept
+    when no script; a script's None is no reply), and the statuses this test publishes."""
 
     session: zenoh.Session
     keys: Keys
@@ -82,11 +83,8 @@ class ScriptedVehicle:
     lock: threading.Lock = field(default_factory=threading.Lock)
 
     def start(self) -> None:
-        self._q = self.session.declare_queryable(self.keys.vehicle_cmd(self.vid), self._on_query)
-        self._token = self.session.liveliness().declare_token(
-            self.keys.node_health(f"autopilot-{self.vid}")
-        )
-        self._pub = self.session.declare_publisher(self.keys.vehicle_status(self.vid))
+        self._autopilot = FakeAutopilot(self.session, self.keys, self.vid)
+        self._autopilot.serve(self._on_command)
 
     def publish_status(self, **kw: Any) -> None:
         base: dict[str, Any] = dict(
@@ -98,24 +96,20 @@ class ScriptedVehicle:
             home_enu_m=(20.0, 2.0, 0.0),
         )
         base.update(kw)
-        self._pub.put(encode(VehicleStatus(**base)))
+        self._autopilot.publish_status(VehicleStatus(**base))
 
-    def _on_query(self, query: zenoh.Query) -> None:
-        cmd: Any = decode(query.payload.to_bytes() if query.payload else b"", Command)  # type: ignore[arg-type]
+    def _on_command(self, cmd: Command) -> CommandReply | None:
         with self.lock:
             self.received.append(cmd)
             reply_of = self.replies.get(type(cmd))
-        reply = reply_of(cmd) if reply_of else CommandReply(vehicle_id=self.vid, accepted=True)
-        if reply is not None:
-            query.reply(query.key_expr, encode(reply))
+        return reply_of(cmd) if reply_of else CommandReply(vehicle_id=self.vid, accepted=True)
 
     def commands(self, kind: type) -> list[Any]:
         with self.lock:
             return [c for c in self.received if isinstance(c, kind)]
 
     def stop(self) -> None:
-        self._token.undeclare()
-        self._q.undeclare()
+        self._autopilot.close()
 
 
 @dataclass

@@ -17,12 +17,14 @@ from swarmbus.messages import (
     PlumeQuery,
     PlumeValues,
 )
+from swarmbus.reqrep import request
 from swarmbus.session import Presence, open_session
 from tests.support.procs import Network, NodeProcs, keys_for, run_cli, wait_for_queryable
 
 
-def _get(session: zenoh.Session, key: str, payload: bytes, timeout_s: float = 10.0) -> zenoh.Reply:
-    replies = list(session.get(key, payload=payload, timeout=timeout_s))
+def _raw_get(session: zenoh.Session, key: str, payload: bytes) -> zenoh.Reply:
+    """The wire as it is, not through reqrep: for the requests that must get an ErrorReply."""
+    replies = list(session.get(key, payload=payload, timeout=10.0))
     assert len(replies) == 1, f"expected one reply from {key}, got {len(replies)}"
     return replies[0]
 
@@ -38,7 +40,7 @@ def plume_service() -> object:
             assert presence.wait_for(lambda a: "plume" in a, 30.0), "plume service never came up"
             presence.close()
             wait_for_queryable(
-                session, keys_for().plume_info(), encode(PlumeInfoQuery()), 30.0, "plume/info"
+                session, keys_for().plume_info(), PlumeInfoQuery(), PlumeInfo, 30.0, "plume/info"
             )
             yield net, session
 
@@ -49,13 +51,8 @@ def test_batch_of_1000_points_in_one_reply(plume_service: tuple[Network, zenoh.S
     points = np.column_stack(
         [rng.uniform(-20, 120, 1000), rng.uniform(-30, 30, 1000), rng.uniform(0, 30, 1000)]
     )
-    reply = _get(
-        session,
-        keys_for().plume_concentration(),
-        encode(PlumeQuery(points_enu_m=[tuple(p) for p in points.tolist()], sim_time_s=3.0)),
-    )
-    assert reply.ok is not None, "service replied with an error"
-    values = decode(reply.ok.payload.to_bytes(), PlumeValues)
+    query = PlumeQuery(points_enu_m=[tuple(p) for p in points.tolist()], sim_time_s=3.0)
+    values = request(session, keys_for().plume_concentration(), query, PlumeValues, 10.0)
     expected = GaussianPlume.preset("novak2018").concentration(points)
     assert len(values.values_g_m3) == 1000
     np.testing.assert_allclose(values.values_g_m3, expected, rtol=1e-12, atol=0)
@@ -69,17 +66,16 @@ def test_malformed_query_gets_an_error_and_service_keeps_serving(
     _, session = plume_service
     key = keys_for().plume_concentration()
     bad = encode(PlumeInfoQuery())  # right encoding, wrong message for this key
-    err = _get(session, key, bad).err
+    err = _raw_get(session, key, bad).err
     assert err is not None
     error = decode(err.payload.to_bytes(), ErrorReply)
     assert error.field == "schema"
-    garbage = _get(session, key, b"\xc1\xff\x00").err
+    garbage = _raw_get(session, key, b"\xc1\xff\x00").err
     assert garbage is not None
     assert decode(garbage.payload.to_bytes(), ErrorReply).reason
     # still serving
-    ok = _get(session, key, encode(PlumeQuery(points_enu_m=[(20.0, 0.0, 10.0)]))).ok
-    assert ok is not None
-    (value,) = decode(ok.payload.to_bytes(), PlumeValues).values_g_m3
+    query = PlumeQuery(points_enu_m=[(20.0, 0.0, 10.0)])
+    (value,) = request(session, key, query, PlumeValues, 10.0).values_g_m3
     assert value == pytest.approx(
         float(GaussianPlume.preset("novak2018").concentration([[20.0, 0.0, 10.0]])[0]), rel=1e-12
     )
@@ -87,9 +83,7 @@ def test_malformed_query_gets_an_error_and_service_keeps_serving(
 
 def test_info_describes_the_scenario_plume(plume_service: tuple[Network, zenoh.Session]) -> None:
     _, session = plume_service
-    ok = _get(session, keys_for().plume_info(), encode(PlumeInfoQuery())).ok
-    assert ok is not None
-    info = decode(ok.payload.to_bytes(), PlumeInfo)
+    info = request(session, keys_for().plume_info(), PlumeInfoQuery(), PlumeInfo, 10.0)
     assert (info.stability, info.coefficients, info.wind_speed_m_s) == ("D", "novak2018", 6.0)
     (src,) = info.sources
     assert (src.release_rate_g_s, src.release_height_m) == (10.0, 10.0)
@@ -97,14 +91,8 @@ def test_info_describes_the_scenario_plume(plume_service: tuple[Network, zenoh.S
 
 def test_mesh_over_the_bus(plume_service: tuple[Network, zenoh.Session]) -> None:
     _, session = plume_service
-    ok = _get(
-        session,
-        keys_for().plume_mesh(),
-        encode(PlumeMeshQuery(level_g_m3=0.05, resolution_m=0.5)),
-        timeout_s=60.0,
-    ).ok
-    assert ok is not None
-    mesh = decode(ok.payload.to_bytes(), PlumeMesh)
+    query = PlumeMeshQuery(level_g_m3=0.05, resolution_m=0.5)
+    mesh = request(session, keys_for().plume_mesh(), query, PlumeMesh, 60.0)
     vertices = np.frombuffer(mesh.vertices_f32, dtype="<f4").reshape(-1, 3)
     faces = np.frombuffer(mesh.faces_i32, dtype="<i4").reshape(-1, 3)
     assert len(faces) > 100

@@ -8,6 +8,11 @@ upload, …), and tick (``sim/tick``, as the physics) / state / status / concent
 publications with kinematic motion at 120 Hz of sim time, paced at ``--speed`` × real time.
 The gateway's tests fly many vehicles against it without the cost of pybullet and one
 autopilot per vehicle; it flies nothing for real.
+
+:class:`FakeAutopilot` is one vehicle's autopilot as the bus sees it (the token, the command
+queryable served through ``swarmbus.reqrep``, the status publisher) with the answers left to
+its owner: this process answers with the mode rules of :class:`World`, a test that plays a
+vehicle itself (tests/gcs_bridge/test_gateway_flows.py) with a script of its own.
 """
 
 from __future__ import annotations
@@ -16,13 +21,14 @@ import argparse
 import math
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
 import pymap3d
 import zenoh
 
-from swarmbus.codec import MessageError, decode, encode
+from swarmbus.codec import encode
 from swarmbus.keys import Keys
 from swarmbus.messages import (
     Arm,
@@ -30,7 +36,6 @@ from swarmbus.messages import (
     CommandReply,
     ConcentrationReading,
     Disarm,
-    ErrorReply,
     FlightMode,
     GcsHeartbeat,
     GeofenceUpload,
@@ -57,6 +62,7 @@ from swarmbus.messages import (
     VehicleState,
     VehicleStatus,
 )
+from swarmbus.reqrep import Incoming, serve_later
 from swarmbus.scenario import Scenario, load_scenario
 from swarmbus.session import NetworkConfig, open_session
 
@@ -328,26 +334,61 @@ class World:
         )
 
 
-Pubs = dict[str, tuple[Any, Any, Any]]  # vehicle → (state, status, concentration) publishers
+class FakeAutopilot:
+    """One vehicle's autopilot on the bus: its status publisher, then (:meth:`serve`) its
+    ``vehicle/<id>/cmd`` queryable and its liveliness token ``autopilot-<id>``.
+
+    Commands come decoded through ``swarmbus.reqrep`` (one that does not decode is refused with
+    an ``ErrorReply`` there); ``on_command`` answers each on Zenoh's thread with a
+    ``CommandReply``, or with None for no reply at all."""
+
+    def __init__(self, session: zenoh.Session, keys: Keys, vid: str) -> None:
+        self.session = session
+        self.keys = keys
+        self.vid = vid
+        self.status_pub = session.declare_publisher(keys.vehicle_status(vid))
+        self._declared: list[Any] = []
+
+    def serve(self, on_command: Callable[[Command], CommandReply | None]) -> None:
+        """Take commands (answered by ``on_command``), then say the autopilot is alive."""
+
+        def answer(incoming: Incoming[Command]) -> None:
+            reply = on_command(incoming.request)
+            if reply is None:
+                incoming.drop()  # the client sees no reply
+            else:
+                incoming.reply(reply)
+
+        key, token = self.keys.vehicle_cmd(self.vid), self.keys.node_health(f"autopilot-{self.vid}")
+        commands = serve_later(self.session, key, Command, answer)  # type: ignore[arg-type]
+        self._declared += [commands, self.session.liveliness().declare_token(token)]
+
+    def publish_status(self, status: VehicleStatus) -> None:
+        self.status_pub.put(encode(status))
+
+    def close(self) -> None:
+        """Undeclare the token, then the queryable."""
+        for declared in reversed(self._declared):
+            declared.undeclare()
+        self._declared.clear()
 
 
-def command_server(world: World, f: Fake, pubs: Pubs) -> Any:
-    """The queryable callback of ``f``'s command key: decode, handle, status, then reply."""
+def command_handler(
+    world: World, f: Fake, autopilot: FakeAutopilot
+) -> Callable[[Command], CommandReply]:
+    """``f``'s commands under the world's rules: handle, publish the status, then reply."""
 
-    def on_query(query: zenoh.Query) -> None:
-        try:
-            payload = query.payload.to_bytes() if query.payload else b""
-            cmd: Any = decode(payload, Command)  # type: ignore[arg-type]
-        except MessageError as exc:
-            query.reply_err(encode(ErrorReply(field=exc.field, reason=exc.reason[:900])))
-            return
+    def handle(cmd: Command) -> CommandReply:
         with world.lock:
             reply = world.handle(f, cmd)
             status = world.status(f)
-        pubs[f.vid][1].put(encode(status))  # as the autopilot: status, then reply
-        query.reply(query.key_expr, encode(reply))
+        autopilot.publish_status(status)  # as the autopilot: status, then reply
+        return reply
 
-    return on_query
+    return handle
+
+
+Pubs = dict[str, tuple[Any, Any, Any]]  # vehicle → (state, status, concentration) publishers
 
 
 def vehicle_messages(
@@ -426,31 +467,24 @@ def main() -> None:
         world.vehicles.pop(vid, None)
     net = NetworkConfig(connect=[args.connect], listen=["tcp/127.0.0.1:0"])
     with open_session(net) as session:
+        autopilots = {vid: FakeAutopilot(session, keys, vid) for vid in world.vehicles}
         pubs: Pubs = {
-            f.vid: (
-                session.declare_publisher(keys.vehicle_state(f.vid)),
-                session.declare_publisher(keys.vehicle_status(f.vid)),
-                session.declare_publisher(keys.vehicle_concentration(f.vid)),
+            vid: (
+                session.declare_publisher(keys.vehicle_state(vid)),
+                autopilot.status_pub,
+                session.declare_publisher(keys.vehicle_concentration(vid)),
             )
-            for f in world.vehicles.values()
+            for vid, autopilot in autopilots.items()
         }
-        declared = [
-            session.declare_queryable(keys.vehicle_cmd(f.vid), command_server(world, f, pubs))
-            for f in world.vehicles.values()
-        ]
-        tokens = [
-            session.liveliness().declare_token(keys.node_health(f"autopilot-{f.vid}"))
-            for f in world.vehicles.values()
-        ]
+        for vid, autopilot in autopilots.items():
+            autopilot.serve(command_handler(world, world.vehicles[vid], autopilot))
         try:
             run(world, args.speed, pubs, session.declare_publisher(keys.tick()))
         except KeyboardInterrupt:
             pass
         finally:
-            for t in tokens:
-                t.undeclare()
-            for d in declared:
-                d.undeclare()
+            for autopilot in autopilots.values():
+                autopilot.close()
 
 
 if __name__ == "__main__":

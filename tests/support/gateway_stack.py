@@ -1,6 +1,7 @@
 """Starting what the gateway tests fly against: the gateway process, and either the scripted
 fake autopilot (tests/support/fake_autopilot.py) or the real stack (plume + physics +
-autopilots)."""
+autopilots). A vehicle the fake skips is the test's to play, on the fake's own bus side
+(``fake_autopilot.FakeAutopilot``) with replies of its choosing."""
 
 from __future__ import annotations
 

@@ -19,6 +19,7 @@ from typing import IO, Literal, TypeVar
 import zenoh
 
 from swarmbus.keys import Keys
+from swarmbus.reqrep import NoReply, request
 from swarmbus.session import NetworkConfig, free_tcp_port, open_session
 
 REPO = Path(__file__).resolve().parents[2]
@@ -43,15 +44,22 @@ def wait_until(
 
 
 def wait_for_queryable(
-    session: zenoh.Session, key: str, payload: bytes, timeout_s: float, what: str
-) -> zenoh.Reply:
-    """Query ``key`` until a reply arrives (a node's queryable reaches a new peer shortly
-    after its liveliness token does); fail naming ``what`` at the deadline."""
+    session: zenoh.Session,
+    key: str,
+    message: object,
+    reply_type: type[T],
+    timeout_s: float,
+    what: str,
+) -> T:
+    """Ask ``key`` (through ``swarmbus.reqrep``) until it replies, and return the reply (a
+    node's queryable reaches a new peer shortly after its liveliness token does); fail naming
+    ``what`` at the deadline. A refusal or a reply of another type raises at once."""
     deadline = time.monotonic() + timeout_s
     while True:
-        replies = list(session.get(key, payload=payload, timeout=2.0))
-        if replies:
-            return replies[0]
+        try:
+            return request(session, key, message, reply_type, 2.0)
+        except NoReply:
+            pass
         if time.monotonic() > deadline:
             raise AssertionError(f"timed out after {timeout_s:.1f} s waiting for {what}")
         time.sleep(0.05)
