@@ -58,7 +58,8 @@ def test_one_vehicle_over_the_bus_with_the_plume_service(
         uav = swarm.command("uav2")
         with pytest.raises(CommandRejected, match="no vehicle state yet"):
             uav.arm()
-        # garbage on the command queryable: an ErrorReply, and the process lives on
+        # garbage on the command queryable: an ErrorReply, and the process lives on (raw on
+        # purpose: the ErrorReply on the wire is what this checks)
         replies = list(
             router.get(keys_for().vehicle_cmd("uav2"), payload=b"\x93garbage", timeout=5)
         )

@@ -28,7 +28,7 @@ import pytest
 import zenoh
 
 from deploy.launcher import Launcher, LaunchOptions
-from swarmbus.codec import decode, encode
+from swarmbus.codec import decode
 from swarmbus.messages import (
     Arm,
     CommandReply,
@@ -37,6 +37,7 @@ from swarmbus.messages import (
     VehicleState,
     VehicleStatus,
 )
+from swarmbus.reqrep import request
 from swarmbus.scenario import load_scenario
 from swarmbus.session import free_tcp_port
 from swarmbus.views import state_key_decoder
@@ -94,10 +95,7 @@ class Flight:
 
     def command(self, vid: str, cmd: object) -> CommandReply:
         key = self.launcher.keys.vehicle_cmd(vid)
-        for reply in self.launcher.session.get(key, payload=encode(cmd), timeout=30.0):
-            assert reply.ok is not None, reply.err
-            return decode(reply.ok.payload.to_bytes(), CommandReply)
-        raise AssertionError(f"no reply from {vid}")
+        return request(self.launcher.session, key, cmd, CommandReply, 30.0)
 
     def last_tick(self, vid: str) -> int:
         ticks = self.states.get(vid)

@@ -43,6 +43,7 @@ from swarmbus.messages import (
     VehicleState,
     VehicleStatus,
 )
+from swarmbus.reqrep import NoReply, request
 from swarmbus.session import NetworkConfig, open_session
 from tests.support.mavclient import MavClient, write_scenario
 from tests.support.messages_samples import SAMPLES
@@ -69,14 +70,13 @@ class Stack:
         return self.up.pids()
 
     def command(self, vid: str, cmd: object) -> CommandReply:
-        reply = wait_until(
-            lambda: next(
-                iter(self.session.get(self.keys.vehicle_cmd(vid), payload=encode(cmd))), None
-            ),
-            30.0,
-            f"a reply from {vid}",
-        )
-        return decode(reply.ok.payload.to_bytes(), CommandReply)
+        def ask_once() -> CommandReply | None:  # until its queryable is reachable
+            try:
+                return request(self.session, self.keys.vehicle_cmd(vid), cmd, CommandReply, 10.0)
+            except NoReply:
+                return None
+
+        return wait_until(ask_once, 30.0, f"a reply from {vid}")
 
     def kill(self, name: str) -> tuple[int, float]:
         """SIGKILL ``name``; (new pid, wall seconds until the supervisor restarted it)."""
