@@ -15,7 +15,8 @@ real roles exchange and nothing else:
   autopilot) answers each tick with one ``ActuatorBatch`` of K commands, puts each vehicle's
   reading (N - 1 peers) on sensor ticks and its status twice a second. No control, no decoding
   beyond the tick number.
-- ``ceiling-plume`` reads every tick and answers each sensor tick with a sample of N values;
+- ``ceiling-plume`` reads the sensor ticks (``sim/sensor``, which the stand-in physics puts as
+  the physics does) and answers each with a sample of N values;
   ``ceiling-gateway`` subscribes to the ticks, statuses and readings the gateway subscribes to
   and drops them.
 
@@ -146,6 +147,7 @@ def physics_main(ctx: NodeContext) -> int:
             session.declare_subscriber(keys.plume_sample(), barrier.on_sample),
         ]
         tick_pub = session.declare_publisher(keys.tick())
+        sensor_pub = session.declare_publisher(keys.sensor_tick())
         clock_pub = session.declare_publisher(keys.clock())
         presence = Presence(session, keys)
         presence.sync()
@@ -163,18 +165,19 @@ def physics_main(ctx: NodeContext) -> int:
         while not rt.stop.is_set():
             queried = plume and tick % period == 0
             barrier.next(tick, queried)
-            tick_pub.put(
-                encode(
-                    SimTick(
-                        tick=tick,
-                        sim_time_s=tick * dt,
-                        control_dt_s=dt,
-                        states=states,
-                        plume_queried=queried,
-                        plume_values=sample,
-                    )
+            payload = encode(
+                SimTick(
+                    tick=tick,
+                    sim_time_s=tick * dt,
+                    control_dt_s=dt,
+                    states=states,
+                    plume_queried=queried,
+                    plume_values=sample,
                 )
             )
+            tick_pub.put(payload)
+            if tick % period == 0:
+                sensor_pub.put(payload)
             if not barrier.wait(rt.stop):
                 break
             sample = PlumeSample(tick=tick, values_g_m3=values) if queried else None
@@ -273,9 +276,9 @@ def autopilot_main(ctx: NodeContext) -> int:
 # ---------------------------------------------------------------------------- plume, gateway
 def plume_main(ctx: NodeContext) -> int:
     """Stand-in for the plume service: a sample of N values for every sensor tick."""
+    os.environ.setdefault("ZENOH_RUNTIME", SINGLE_THREAD_RUNTIME)  # as the plume
     keys = Keys(ctx.scenario.world.name)
     values = [0.0] * len(ctx.scenario.vehicles)
-    period = _sensor_period(ctx)
     with NodeRuntime(ctx, role="plume") as rt:
         pub = rt.session.declare_publisher(keys.plume_sample())
 
@@ -284,11 +287,10 @@ def plume_main(ctx: NodeContext) -> int:
                 view = decode(sample.payload.to_bytes(), TickView)
             except MessageError:
                 return
-            if view.tick % period == 0:
-                answer = FieldSample(tick=view.tick, sim_time_s=view.sim_time_s, values_g_m3=values)
-                pub.put(encode(answer))
+            answer = FieldSample(tick=view.tick, sim_time_s=view.sim_time_s, values_g_m3=values)
+            pub.put(encode(answer))
 
-        sub = rt.session.declare_subscriber(keys.tick(), on_tick)
+        sub = rt.session.declare_subscriber(keys.sensor_tick(), on_tick)
         rt.ready()
         rt.stop.wait()
         sub.undeclare()

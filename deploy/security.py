@@ -10,9 +10,9 @@ link to the router:
   deployment's identities can connect but nothing flows to or from it;
 - every identity may do everything on every key, except
 - publishing (put/delete) actuators (``autopilot/*/actuators``, the one actuator route) unless
-  it is an autopilot, and
-  publishing the world (``sim/tick``, ``sim/clock``, ``vehicle/*/state``) unless it is physics,
-  and
+  it is an autopilot,
+- publishing the world (``sim/tick``, ``sim/sensor``, ``sim/clock``, ``vehicle/*/state``)
+  unless it is physics, and
 - publishing the plume's data (``field/sample``, the sensors' values, and ``field/state``)
   unless it is the plume (roles configurable in ``[acl]``).
 
@@ -133,7 +133,10 @@ def access_control(dep: Deployment, keys: Keys) -> dict[str, Any]:
             [keys.all_autopilot_actuators()],
             dep.acl.actuators,
         ),
-        "world": ([keys.tick(), keys.clock(), keys.all_vehicle_states()], dep.acl.world),
+        "world": (
+            [keys.tick(), keys.sensor_tick(), keys.clock(), keys.all_vehicle_states()],
+            dep.acl.world,
+        ),
         "field": ([keys.plume_sample(), keys.plume_state()], dep.acl.field),
     }
     for plane, (key_exprs, roles) in planes.items():

@@ -1,10 +1,11 @@
 """``plumeswarm node plume``: the concentration field served on the bus.
 
-The sensors' values: the service is a lockstep participant of the sensor ticks. It reads
-``sim/tick``, and on every sensor tick (``sensor.period_ticks``) publishes the concentration at
-the position of every state of that tick, at its sim time, as a ``FieldSample`` on
-``field/sample``; the physics waits for it as it waits for the autopilots' commands and carries
-it to the autopilots in the next tick (a tick published again gets the same answer again).
+The sensors' values: the service is a lockstep participant of the sensor ticks. It reads them on
+``sim/sensor`` (where the physics publishes each sensor tick of ``sim/tick`` again) and answers
+each with the concentration at the position of every state of that tick, at its sim time, as a
+``FieldSample`` on ``field/sample``; the physics waits for it as it waits for the autopilots'
+commands and carries it to the autopilots in the next tick (a tick published again gets the same
+answer again).
 
 Three queryables for everyone else: ``plume/concentration`` (a batch of points → values in
 one reply, at the query's ``sim_time_s`` for the time-dependent filament and puff models),
@@ -57,7 +58,7 @@ from swarmbus.options import OptionError, RoleOptions, parse_options
 from swarmbus.reqrep import Incoming, serve, serve_later
 from swarmbus.scenario import Scenario
 from swarmbus.session import SINGLE_THREAD_RUNTIME
-from swarmbus.views import TickView, state_head_decoder, tick_number_decoder
+from swarmbus.views import TickView, state_head_decoder
 
 log = logging.getLogger(__name__)
 
@@ -268,30 +269,20 @@ class StatePublisher:
 
 
 class SensorAnswers:
-    """The service's part of the lockstep: answers each sensor tick of ``sim/tick`` with a
+    """The service's part of the lockstep: answers each sensor tick (``sim/sensor``) with a
     :class:`FieldSample` through ``put`` (see the module doc)."""
 
-    def __init__(
-        self, service: PlumeService, period_ticks: int, put: Callable[[bytes], object]
-    ) -> None:
+    def __init__(self, service: PlumeService, put: Callable[[bytes], object]) -> None:
         self.service = service
-        self.period_ticks = period_ticks
         self._put = put
         self._last: tuple[int, bytes] | None = None  # the last answer: tick, payload
         self._lock = threading.Lock()
 
     def on_tick(self, data: bytes) -> None:
         try:
-            if tick_number_decoder.decode(data).tick % self.period_ticks:
-                return  # most ticks: decoded no further
-        except msgspec.DecodeError:
-            pass  # named below
-        try:
             view = decode(data, TickView)
         except MessageError as exc:
-            log.warning("plume: ignoring a tick: %s", exc)
-            return
-        if view.tick % self.period_ticks:
+            log.warning("plume: ignoring a sensor tick: %s", exc)
             return
         with self._lock:
             last = self._last
@@ -384,17 +375,15 @@ def main(ctx: NodeContext) -> int:
         return 2
     service = PlumeService(field_from_scenario(ctx.scenario), ctx.scenario)
     states = StatePublisher(service.field, ctx.scenario.plume.state_period_s)
-    # It reads every tick: one Zenoh thread, no hand-over per sample (as the autopilot); an
-    # operator's own ZENOH_RUNTIME wins.
+    # One Zenoh thread: a sensor tick is received, sampled and answered with no hand-over
+    # between threads (as the autopilot's ticks); an operator's own ZENOH_RUNTIME wins.
     os.environ.setdefault("ZENOH_RUNTIME", SINGLE_THREAD_RUNTIME)
     with NodeRuntime(ctx, role="plume") as rt:
         queryables, mesh_worker = serve_queries(rt.session, rt.keys, service, rt.stop)
         sample_pub = rt.session.declare_publisher(rt.keys.plume_sample())
-        answers = SensorAnswers(
-            service, ctx.scenario.sensor.resolved().period_ticks, sample_pub.put
-        )
+        answers = SensorAnswers(service, sample_pub.put)
         tick_sub = rt.session.declare_subscriber(
-            rt.keys.tick(), lambda sample: answers.on_tick(sample.payload.to_bytes())
+            rt.keys.sensor_tick(), lambda sample: answers.on_tick(sample.payload.to_bytes())
         )
         state_feed = _start_state_publisher(rt, states) if states.active else None
         rt.ready()

@@ -13,14 +13,15 @@ steps ``scenario.substeps`` physics steps and publishes tick ``k + 1``.
 second.
 
 The sensor's plume values: the plume service is a lockstep participant of the sensor ticks
-(``sensor.period_ticks``). It reads each sensor tick from ``sim/tick`` like the autopilots and
-answers with a ``FieldSample`` on ``field/sample`` (every vehicle's concentration at that tick's
-positions); the tick is complete when the autopilots' commands and the plume's sample are in,
-and the next tick carries the sample (``SimTick.plume_values``), from which the autopilots build
-their readings. The physics asks nothing: it waits for the plume as it waits for an autopilot
-(:class:`~sim_world.lockstep.Lockstep`, a periodic participant), and holds the clock for a
-plume service the launcher restarts as it does for an autopilot. ``SimTick.plume_queried``
-says whether the tick waits for the plume (a plume service is taking part).
+(``sensor.period_ticks``). The physics publishes each sensor tick on ``sim/sensor`` too (the
+same bytes; the plume reads that key, so the other ticks do not wake it); the plume answers with
+a ``FieldSample`` on ``field/sample`` (every vehicle's concentration at that tick's positions);
+the tick is complete when the autopilots' commands and the plume's sample are in, and the next
+tick carries the sample (``SimTick.plume_values``), from which the autopilots build their
+readings. The physics asks nothing: it waits for the plume as it waits for an autopilot
+(:class:`~sim_world.lockstep.Lockstep`, a periodic participant), and holds the clock for a plume
+service the launcher restarts as it does for an autopilot. ``SimTick.plume_queried`` says
+whether the tick waits for the plume (a plume service is taking part).
 
 With a ``checkpoint`` path it saves the world there every ``checkpoint_period_s`` of sim time
 (:mod:`sim_world.checkpoint`) and, when that file exists at start, resumes from it instead of
@@ -149,6 +150,7 @@ class PhysicsNode:
         self._resume_note = ""
         session = rt.session
         self._tick_pub = session.declare_publisher(self.keys.tick())
+        self._sensor_pub = session.declare_publisher(self.keys.sensor_tick())
         self._clock_pub = session.declare_publisher(self.keys.clock())
         self._state_pubs = [
             _StatePublisher(session, self.keys.vehicle_state(v)) for v in world.vehicle_ids
@@ -440,7 +442,7 @@ class PhysicsNode:
                     return False
                 self._cond.wait(min(HANDSHAKE_REPUBLISH_S, self.barrier.remaining_s()))
                 if not self.barrier.complete():
-                    self._tick_pub.put(self._last_tick_msg)
+                    self._put_tick()
         log.info("tick %d handshake done with %d participants", self.tick, len(self.barrier.active))
         return True
 
@@ -609,7 +611,7 @@ class PhysicsNode:
         now = time.monotonic()
         if now - self._held_republish >= HANDSHAKE_REPUBLISH_S:
             self._held_republish = now
-            self._tick_pub.put(self._last_tick_msg)
+            self._put_tick()
 
     def _wait_for_recorder(self) -> None:
         """The recorder left (lockstep): hold the next tick until a recorder is back — up to
@@ -685,13 +687,19 @@ class PhysicsNode:
         self._plume_values = None
         self._last_tick_msg = encode(msg)
         self._last_tick_states = len(states)
-        self._tick_pub.put(self._last_tick_msg)
+        self._put_tick()
         if self._marker is not None:
             self._marker.mark(self.tick)
         for pub, state in zip(self._state_pubs, states, strict=True):
             if pub.matching:  # nobody listens: the state is in the tick already
                 pub.put(encode(state))
                 self.states_sent += 1
+
+    def _put_tick(self) -> None:
+        """The current tick on ``sim/tick``, and on ``sim/sensor`` if it is a sensor tick."""
+        self._tick_pub.put(self._last_tick_msg)
+        if self.tick % self._sensor_period == 0:
+            self._sensor_pub.put(self._last_tick_msg)
 
     def _take_sample(self) -> PlumeSample | None:
         """What the next tick carries of the plume: its sample of this tick if the tick waited

@@ -64,6 +64,11 @@ class Keys:
     def tick(self) -> str:
         return f"{self.prefix}/sim/tick"
 
+    def sensor_tick(self) -> str:
+        """The sensor ticks of ``sim/tick`` again, the same bytes: for the plume service, which
+        answers those alone (reading ``sim/tick`` would wake it on every tick)."""
+        return f"{self.prefix}/sim/sensor"
+
     # -- stepped clock (control plane: a queryable of the physics) -------------
     def clock_step(self) -> str:
         """``StepRequest`` → ``StepReply``: the stepped clock's grants."""

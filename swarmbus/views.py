@@ -26,15 +26,6 @@ STATE_TAG = str(VehicleState.__struct_config__.tag)
 BATCH_TAG = str(ActuatorBatch.__struct_config__.tag)
 
 
-class TickNumber(msgspec.Struct, frozen=True, tag_field="schema", tag=TICK_TAG):
-    """Which tick a ``SimTick`` is (a reader that answers only some ticks: the plume's)."""
-
-    tick: Tick
-
-
-tick_number_decoder = msgspec.msgpack.Decoder(TickNumber)
-
-
 class TickView(msgspec.Struct, frozen=True, tag_field="schema", tag=TICK_TAG):
     """A ``SimTick`` whose states stay undecoded (a reader decodes only the states it needs)."""
 

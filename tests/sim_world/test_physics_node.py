@@ -508,7 +508,8 @@ def test_the_plume_service_samples_each_sensor_tick_and_the_next_tick_carries_it
 
 class StandInPlume:
     """Plays the plume service on the test's session: its token, and on every tick of
-    ``sim/tick`` (a sensor tick each, in this scenario) a ``FieldSample`` of made-up values —
+    ``sim/sensor`` (every tick is a sensor tick in this scenario) a ``FieldSample`` of made-up
+    values —
     after ``DELAY_S`` before the ticks in ``silent``, none for those, at once after them;
     counts queries on plume/concentration (the physics must send none) and notes the newest
     tick seen when each answer went out."""
@@ -523,7 +524,7 @@ class StandInPlume:
         self.seen_when_answered: dict[int, int] = {}
         self._pub = session.declare_publisher(KEYS.plume_sample())
         self._token = session.liveliness().declare_token(KEYS.node_health("plume"))
-        self._sub = session.declare_subscriber(KEYS.tick(), self._on_tick)
+        self._sub = session.declare_subscriber(KEYS.sensor_tick(), self._on_tick)
         self._q = session.declare_queryable(KEYS.plume_concentration(), self._on_query)
 
     @staticmethod

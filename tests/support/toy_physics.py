@@ -205,10 +205,10 @@ class BusToyPhysics:
 
     Publishes ``SimTick`` k (and each ``VehicleState``), waits for every participant's
     ``ActuatorCommand`` for tick k (re-publishing tick 0 until all answered: the start
-    handshake) and, with ``plume``, on a sensor tick for the plume service's ``FieldSample`` of
-    tick k, which goes into tick k + 1 (as the physics does); steps the toy vehicles, repeats.
-    Without ``plume`` no tick waits for a plume (its readings are unavailable). Runs on its own
-    thread until ``stop``.
+    handshake) and, with ``plume``, on a sensor tick (put on ``sim/sensor`` too) for the plume
+    service's ``FieldSample`` of tick k, which goes into tick k + 1 (as the physics does); steps
+    the toy vehicles, repeats. Without ``plume`` no tick waits for a plume (its readings are
+    unavailable). Runs on its own thread until ``stop``.
     """
 
     def __init__(
@@ -257,6 +257,7 @@ class BusToyPhysics:
             session.declare_subscriber(self.keys.plume_sample(), self._on_sample),
         ]
         self._pub = session.declare_publisher(self.keys.tick())
+        self._sensor_pub = session.declare_publisher(self.keys.sensor_tick())
         self._state_pubs = {
             vid: session.declare_publisher(self.keys.vehicle_state(vid)) for vid in self.vehicles
         }
@@ -323,6 +324,8 @@ class BusToyPhysics:
                 self._state_pubs[s.vehicle_id].put(encode(s))
             deadline = time.monotonic() + self.timeout_s
             self._pub.put(payload)
+            if queried:
+                self._sensor_pub.put(payload)
             republish = time.monotonic() + 0.05
             with self._cond:
                 while not self._answered(k, queried):
@@ -337,6 +340,8 @@ class BusToyPhysics:
                         return
                     if k == 0 and now > republish:  # start-up handshake
                         self._pub.put(payload)
+                        if queried:
+                            self._sensor_pub.put(payload)
                         republish = now + 0.05
                     self._cond.wait(0.05)
                 commands = {v: self._commands[v][1] for v in self.participants}

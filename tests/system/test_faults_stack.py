@@ -225,6 +225,7 @@ def fuzz_targets(
     key with the type it decodes."""
     topics: list[tuple[str, type[Message] | None]] = [
         (keys.tick(), SimTick),
+        (keys.sensor_tick(), SimTick),
         (keys.clock(), Clock),
         (keys.node_health("physics"), NodeHealth),
         (keys.plume_info(), None),
