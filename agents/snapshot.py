@@ -20,7 +20,7 @@ generator is saved separately. A
 behaviour whose state cannot be saved makes :func:`capture` raise :class:`SnapshotError`.
 
 :class:`SnapshotSlots` keeps the latest two records of a process in two files written in turn
-(one ``pwrite`` each, a CRC-32 over the record): a process killed in the middle of a write
+(one ``pwritev`` each, a CRC-32 over the record): a process killed in the middle of a write
 leaves the other file intact, and a reader takes the newest valid one. Nothing is pickled.
 """
 
@@ -29,6 +29,7 @@ from __future__ import annotations
 import os
 import struct
 import zlib
+from collections import OrderedDict
 from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -160,20 +161,30 @@ class VehicleSnapshot(msgspec.Struct, frozen=True, kw_only=True):
 # ---------------------------------------------------------------------------- capture
 # A mission (up to 1000 items) is saved with every tick's snapshot but changes only when one is
 # uploaded, which replaces the list (the lists are never changed in place): each list is encoded
-# once. Holding the list keeps its id from being reused while it is cached.
-_ITEMS_CACHE: dict[int, tuple[list[MissionItem], msgspec.Raw]] = {}
-_ITEMS_CACHE_SIZE = 64
+# once. Holding the list keeps its id from being reused while it is cached. Least recently used
+# first out: the lists a process's vehicles fly are asked for every tick and stay; a replaced one
+# is never asked for again and goes first. The bound is far above the lists in use at once (one
+# uploaded mission per served vehicle): a first-in-first-out cache of 64 re-encoded every
+# mission on every tick once a process served more than 32 vehicles flying missions.
+_ITEMS_CACHE: OrderedDict[int, tuple[list[MissionItem], msgspec.Raw]] = OrderedDict()
+_ITEMS_CACHE_SIZE = 1024
+_NO_ITEMS = msgspec.Raw(msgspec.msgpack.encode([]))
 _items_decoder = msgspec.msgpack.Decoder(list[MissionItem])
 
 
 def _items_raw(items: list[MissionItem]) -> msgspec.Raw:
-    hit = _ITEMS_CACHE.get(id(items))
+    if not items:
+        return _NO_ITEMS  # no mission: nothing to cache (an empty list per vehicle)
+    key = id(items)
+    hit = _ITEMS_CACHE.get(key)
     if hit is not None and hit[0] is items:
+        _ITEMS_CACHE.move_to_end(key)
         return hit[1]
     raw = msgspec.Raw(msgspec.msgpack.encode(items))
-    if len(_ITEMS_CACHE) >= _ITEMS_CACHE_SIZE:
-        _ITEMS_CACHE.pop(next(iter(_ITEMS_CACHE)))
-    _ITEMS_CACHE[id(items)] = (items, raw)
+    _ITEMS_CACHE[key] = (items, raw)
+    _ITEMS_CACHE.move_to_end(key)
+    if len(_ITEMS_CACHE) > _ITEMS_CACHE_SIZE:
+        _ITEMS_CACHE.popitem(last=False)
     return raw
 
 
@@ -392,7 +403,7 @@ _MAGIC = b"APS1"
 class SnapshotSlots:
     """The latest two records of one writer, in ``<path>.0`` and ``<path>.1`` in turn.
 
-    A record is ``(sequence, payload)``; each write is one ``pwrite`` of a header (with a
+    A record is ``(sequence, payload)``; each write is one ``pwritev`` of a header (with a
     CRC-32 of the payload) and the payload at offset 0 of the older file. The file's pages
     survive a SIGKILL of the writer (they are the kernel's); a torn record fails its CRC and
     the other file still holds the previous one.
@@ -422,7 +433,7 @@ class SnapshotSlots:
     def write(self, payload: bytes) -> None:
         self._seq += 1
         head = _HEAD.pack(_MAGIC, zlib.crc32(payload), len(payload), self._seq)
-        os.pwrite(self._fds[self._seq % 2], head + payload, 0)
+        os.pwritev(self._fds[self._seq % 2], [head, payload], 0)  # one call, no joined copy
 
     def read_all(self) -> list[tuple[int, bytes]]:
         """The valid records, newest first."""

@@ -304,3 +304,18 @@ def test_saved_state_comes_back_with_the_same_types_and_bits() -> None:
     assert b.gen.random(5).tobytes() == a.gen.random(5).tobytes()
     with pytest.raises(ValueError, match="'grid'"):
         Holder(0, 1.0).restore({k: v for k, v in data.items() if k != "grid"})
+
+
+def test_each_mission_is_encoded_once_however_many_vehicles_a_process_serves() -> None:
+    """Every tick's snapshot holds each served vehicle's mission; a mission list (replaced on
+    upload, never changed in place) is encoded once while it is in use — here 300 vehicles'
+    missions asked for in turn, tick after tick, each answered with its first encoding."""
+    from agents.snapshot import _items_raw
+
+    missions = [[MissionItem(x=float(v), y=float(i), z=10.0) for i in range(5)] for v in range(300)]
+    first = [_items_raw(items) for items in missions]
+    for _ in range(3):
+        assert all(_items_raw(items) is raw for items, raw in zip(missions, first, strict=True))
+    decoded = [msgspec.msgpack.decode(raw, type=list[MissionItem]) for raw in first]
+    assert decoded == missions
+    assert msgspec.msgpack.decode(_items_raw([]), type=list[MissionItem]) == []
