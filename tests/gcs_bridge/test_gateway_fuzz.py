@@ -94,6 +94,9 @@ def test_gateway_survives_100k_hostile_frames(tmp_path: Path) -> None:
         watch = BusWatch(router, ["uav1", "uav2"])
         for s in (1, 2):
             gcs.wait_standby(s)
+            # and ticking: standby comes from the autopilots' statuses, which they publish
+            # before the physics' first tick; an Arm before it is refused (no vehicle state yet)
+            gcs.wait_type("GLOBAL_POSITION_INT", s)
         # uav1 takes off (MAVProxy's way: relative altitude, lat/lon 0) and holds at 10 m
         assert gcs.command(1, 22, 0, 0, 0, NAN, 0, 0, 10) == ACCEPTED
         assert gcs.command(1, 400, 1) == ACCEPTED
