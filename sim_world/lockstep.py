@@ -51,8 +51,7 @@ class Lockstep:
         if any(p < 1 for p in self._periods.values()) or self._periods.keys() & set(vehicle_ids):
             raise ValueError(f"bad periodic participants {self._periods}")
         self._order = (*self.vehicle_ids, *self._periods)
-        self._known = frozenset(self._order)
-        self.participants = self._known  # vehicles and periodic participants
+        self.participants = frozenset(self._order)  # vehicles and periodic participants
         self.timeout_s = timeout_s
         self._clock = clock
         self._present: set[str] = set()
@@ -70,7 +69,7 @@ class Lockstep:
     # ------------------------------------------------------------------ presence
     def joined(self, vehicle_id: str) -> bool:
         """A participant's token appeared; returns whether it is one of ours."""
-        if vehicle_id not in self._known:
+        if vehicle_id not in self.participants:
             return False
         if vehicle_id not in self._present:
             self._present.add(vehicle_id)
@@ -79,7 +78,7 @@ class Lockstep:
 
     def left(self, vehicle_id: str) -> bool:
         """A participant's token disappeared: stop waiting for it at once."""
-        if vehicle_id not in self._known:
+        if vehicle_id not in self.participants:
             return False
         self._present.discard(vehicle_id)
         self._active.discard(vehicle_id)
@@ -178,7 +177,7 @@ class Lockstep:
     def held_leave(self, vehicle_id: str) -> bool:
         """A participant's token disappeared and its process may be restarted: hold it (see
         the module doc) instead of :meth:`left`; returns whether it is one of ours."""
-        if vehicle_id not in self._known:
+        if vehicle_id not in self.participants:
             return False
         self._present.discard(vehicle_id)
         if vehicle_id in self._active:

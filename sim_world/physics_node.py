@@ -674,7 +674,6 @@ class PhysicsNode:
         """Tick k out (the barrier has begun it): its states and the plume's values of the
         last sensor tick; whether it waits for the plume's sample of its own positions."""
         with self._cond:
-            self._sample = None
             queried = self._queried = self.barrier.waits(PLUME)
         msg = SimTick(
             tick=self.tick,
@@ -703,11 +702,12 @@ class PhysicsNode:
 
     def _take_sample(self) -> PlumeSample | None:
         """What the next tick carries of the plume: its sample of this tick if the tick waited
-        for one (values None if it did not come or does not fit the tick's states)."""
+        for one (values None if it did not come or does not fit the tick's states). Taken every
+        tick: a sample that came for a tick that did not wait for it is dropped here."""
         with self._cond:
+            answer, self._sample = self._sample, None
             if not self._queried:
                 return None
-            answer, self._sample = self._sample, None
         values = answer.values_g_m3 if answer is not None else None
         if values is not None and len(values) != self._last_tick_states:
             log.warning(
