@@ -24,8 +24,8 @@ from typing import Any
 import msgspec
 import psutil
 
+from bench.scale import prepare
 from deploy.launcher import Launcher, LaunchOptions
-from deploy.scale_bench import prepare
 from deploy.scaling import write_scenario
 from gcs_bridge.dialect import new_mav
 from swarmbus.scenario import Scenario, load_scenario, resolve_scenario_path

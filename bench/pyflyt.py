@@ -25,7 +25,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from deploy.scale_bench import ScaleError, ScaleOptions, run_case
+from bench.scale import ScaleError, ScaleOptions, run_case
 from swarmbus.scenario import load_scenario, resolve_scenario_path
 
 HERE = Path(__file__).resolve().parent

@@ -64,7 +64,7 @@ def state(vehicle: int, tick: int) -> VehicleState:
 
 def stream(vehicles: int, ticks: int) -> list[tuple[str, bytes]]:
     return [
-        (f"plumeswarm/default/vehicle/uav{v + 1}/state", encode(state(v, k)))
+        (Keys("default").vehicle_state(f"uav{v + 1}"), encode(state(v, k)))
         for k in range(ticks)
         for v in range(vehicles)
     ]

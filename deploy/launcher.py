@@ -104,7 +104,7 @@ class LaunchOptions:
     node_args: tuple[str, ...] = ()  # for every node (e.g. --hosts/--host: its TLS identity)
     client_network: NetworkConfig | None = None  # the launcher's own session (e.g. with TLS)
     # role → the ``node`` role that runs in its place, under the same process name (the bench's
-    # ceiling stand-ins, deploy.ceiling); default: each role runs itself
+    # ceiling stand-ins, bench.ceiling); default: each role runs itself
     stand_ins: dict[str, str] = field(default_factory=dict)
 
 

@@ -15,7 +15,7 @@ from typing import Any
 import msgspec
 import tomli_w
 
-from swarmbus.messages import MissionFrame
+from swarmbus.messages import MissionCommand, MissionFrame, MissionItem
 from swarmbus.scenario import Scenario, Vehicle, parse_scenario
 
 
@@ -85,3 +85,29 @@ def write_scenario(scenario: Scenario, path: Path) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(text)
     return path
+
+
+ALTITUDE_M = 10.0
+LAYER_M = 1.5  # vehicles on one spawn grid fly at different heights, one layer per row
+SQUARE_M = 3.0  # half side of each vehicle's looping square
+LAPS = 200
+
+
+def flight_altitude(sc: Scenario, index: int) -> float:
+    """Vehicles in one spawn row share a layer; rows stack up so squares never meet."""
+    return ALTITUDE_M + (index % 8) * LAYER_M
+
+
+def loop_mission(sc: Scenario, index: int) -> list[MissionItem]:
+    """A square of side ``2·SQUARE_M`` around the spawn point, ``LAPS`` times (no landing)."""
+    v = sc.vehicles[index]
+    x0, y0, z0 = v.spawn_enu_m
+    z = z0 + flight_altitude(sc, index)
+    items = [MissionItem(command=MissionCommand.TAKEOFF, x=x0, y=y0, z=z)]
+    corners = [(1, 1), (-1, 1), (-1, -1), (1, -1)]
+    for _ in range(LAPS):
+        items += [
+            MissionItem(x=x0 + dx * SQUARE_M, y=y0 + dy * SQUARE_M, z=z, acceptance_radius_m=1.0)
+            for dx, dy in corners
+        ]
+    return items[:1000]

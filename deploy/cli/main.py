@@ -311,8 +311,8 @@ def demo(
 ) -> None:
     """Fly the default scenario end to end, headless, and print the accuracy table."""
     from deploy.console import Console
-    from deploy.demo import DemoOptions, run_demo
     from deploy.launcher import default_run_dir
+    from experiments.demo import DemoOptions, run_demo
 
     path = resolve_scenario_path(scenario)
     sc = scenario_from(str(path))
@@ -493,7 +493,7 @@ def bench_scale(
     """Real-time factor, CPU and memory of the whole stack against the number of vehicles."""
     import time
 
-    from deploy.scale_bench import ScaleError, ScaleOptions, run_scale
+    from bench.scale import ScaleError, ScaleOptions, run_scale
 
     opts = ScaleOptions(
         scenario=scenario_from(scenario),
@@ -561,7 +561,7 @@ def bench_envs(
     import time
 
     sc = scenario_from(scenario)
-    from deploy.env_bench import EnvBenchOptions, run_env_bench
+    from bench.envs import EnvBenchOptions, run_env_bench
 
     opts = EnvBenchOptions(
         scenario=sc,
@@ -652,7 +652,7 @@ def bench_gsl(
 
     from tqdm import tqdm
 
-    from deploy.gsl_bench import (
+    from experiments.gsl_bench import (
         GslError,
         availability_lines,
         make_options,

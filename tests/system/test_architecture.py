@@ -12,11 +12,46 @@ import pytest
 from tests.support.procs import REPO, run_cli
 
 PROCESS_PACKAGES = ["sim_world", "agents", "plume_service", "gcs_bridge", "recorder"]
-# The composition layer: it may import the process packages (launcher, CLI, fused runner).
+# Layers, lowest first (docs/architecture.md, "Layers"): a module imports only from its own
+# layer or below, and a role never imports another role. The CLI (``deploy.cli``, started by
+# ``python -m deploy``) is the top layer although it sits inside ``deploy``.
+LAYERS: list[tuple[str, list[str]]] = [
+    ("contract", ["swarmbus"]),
+    ("roles", PROCESS_PACKAGES),
+    ("orchestration", ["deploy"]),
+    ("experiments", ["experiments"]),
+    ("benchmarks", ["bench"]),
+    ("cli", ["deploy.cli", "deploy.__main__"]),
+]
 COMPOSITION = "deploy"
-PACKAGES = ["swarmbus", *PROCESS_PACKAGES, COMPOSITION]
-# Ours too, but never imported by the packages: the benchmark scripts and the tests.
-TOOLS = ["bench", "tests"]
+PACKAGES = ["swarmbus", *PROCESS_PACKAGES, COMPOSITION, "experiments", "bench"]
+# Ours too, but never imported by the packages: the tests.
+TOOLS = ["tests"]
+
+
+def layer_of(module: str) -> int:
+    """The index in :data:`LAYERS` of ``module`` (the most specific prefix wins)."""
+    best, best_len = -1, -1
+    for index, (_, prefixes) in enumerate(LAYERS):
+        for prefix in prefixes:
+            if (module == prefix or module.startswith(prefix + ".")) and len(prefix) > best_len:
+                best, best_len = index, len(prefix)
+    if best < 0:
+        raise ValueError(f"{module} is in no layer")
+    return best
+
+
+def layer_violations(graph: Mapping[str, set[str]]) -> list[str]:
+    """Each import of ``graph`` that goes up a layer, or from one role to another."""
+    bad = []
+    for name, targets in sorted(graph.items()):
+        for target in sorted(targets):
+            up = layer_of(target) > layer_of(name)
+            top, other = name.split(".")[0], target.split(".")[0]
+            across = top != other and top in PROCESS_PACKAGES and other in PROCESS_PACKAGES
+            if up or across:
+                bad.append(f"{name} ({LAYERS[layer_of(name)][0]}) imports {target}")
+    return bad
 
 
 def _imports(path: Path) -> set[str]:
@@ -43,9 +78,41 @@ def test_every_package_is_covered() -> None:
     assert set(project["tool"]["mypy"]["packages"]) >= set(PACKAGES)
 
 
+def test_layer_violations_sees_an_upward_import_and_a_role_importing_a_role() -> None:
+    assert layer_violations({"deploy.launcher": {"swarmbus.keys", "sim_world.world"}}) == []
+    assert layer_violations({"deploy.cli.main": {"bench.scale", "experiments.demo"}}) == []
+    assert layer_violations({"deploy.launcher": {"experiments.demo"}}) == [
+        "deploy.launcher (orchestration) imports experiments.demo"
+    ]
+    assert layer_violations({"experiments.fused": {"bench.scale"}}) == [
+        "experiments.fused (experiments) imports bench.scale"
+    ]
+    assert layer_violations({"agents.swarm": {"sim_world.world"}}) == [
+        "agents.swarm (roles) imports sim_world.world"
+    ]
+    assert layer_violations({"swarmbus.wind": {"agents.sensor"}}) == [
+        "swarmbus.wind (contract) imports agents.sensor"
+    ]
+
+
+def test_no_module_imports_a_higher_layer_or_another_role() -> None:
+    """Every import of every module of ours, also inside functions, by the layers above."""
+    graph = import_graph(PACKAGES)
+    assert len(graph) > 100
+    assert layer_violations(graph) == []
+
+
+@pytest.mark.parametrize(
+    "name", ["fused", "envs", "gsl_episode", "gsl_bench", "gsl_figure", "demo", "scale_bench"]
+)
+def test_deploy_holds_no_experiment_or_benchmark(name: str) -> None:
+    assert not (REPO / "deploy" / f"{name}.py").exists()
+    assert not (REPO / "deploy" / name).exists()
+
+
 @pytest.mark.parametrize("package", PROCESS_PACKAGES)
 def test_process_packages_do_not_import_each_other(package: str) -> None:
-    others = {*PROCESS_PACKAGES, COMPOSITION} - {package}
+    others = {*PROCESS_PACKAGES, COMPOSITION, "experiments", "bench"} - {package}
     bad = []
     for path in sorted((REPO / package).rglob("*.py")):
         hits = _imports(path) & others
@@ -60,7 +127,7 @@ def test_swarmbus_imports_no_process_package() -> None:
 
 
 @pytest.mark.parametrize("package", PACKAGES)
-def test_packages_do_not_import_the_tests_or_the_benches(package: str) -> None:
+def test_packages_do_not_import_the_tests(package: str) -> None:
     bad = [
         str(path.relative_to(REPO))
         for path in sorted((REPO / package).rglob("*.py"))
@@ -81,14 +148,13 @@ def _uses_of(path: Path, tool: str) -> list[str]:
     return hits
 
 
-@pytest.mark.parametrize(("tool", "other"), [("bench", "tests"), ("tests", "bench")])
-def test_the_benches_and_the_tests_do_not_use_each_other(tool: str, other: str) -> None:
-    """The benches measure the stack with their own code and the tests check it with theirs:
-    neither imports the other or starts the other's modules (``python -m tests.…``)."""
+def test_the_benches_do_not_use_the_tests() -> None:
+    """The benches measure the stack with their own code: they neither import the tests nor
+    start their modules (``python -m tests.…``)."""
     bad = [
         f"{path.relative_to(REPO)}: {hits}"
-        for path in sorted((REPO / tool).rglob("*.py"))
-        if (hits := _uses_of(path, other))
+        for path in sorted((REPO / "bench").rglob("*.py"))
+        if (hits := _uses_of(path, "tests"))
     ]
     assert not bad, bad
 
@@ -180,7 +246,7 @@ def test_import_graph_sees_each_kind_of_import() -> None:
 
 
 def test_the_import_graph_has_no_cycle() -> None:
-    graph = import_graph([*PACKAGES, "bench"])
+    graph = import_graph(PACKAGES)
     assert len(graph) > 100
     assert find_cycle(graph) == []
 
@@ -188,7 +254,7 @@ def test_the_import_graph_has_no_cycle() -> None:
 def test_only_the_cli_parses_arguments_and_nothing_calls_back_into_it() -> None:
     """Tools (demo, benches, status, the recorder's commands) are library functions the CLI
     calls: only ``deploy.cli`` uses click, and only ``python -m deploy`` imports the CLI."""
-    graph = import_graph([*PACKAGES, "bench"])
+    graph = import_graph(PACKAGES)
     callers = sorted(
         name
         for name, targets in graph.items()
@@ -197,7 +263,7 @@ def test_only_the_cli_parses_arguments_and_nothing_calls_back_into_it() -> None:
     assert callers == ["deploy.__main__"]
     clicks = sorted(
         str(path.relative_to(REPO))
-        for package in [*PACKAGES, "bench"]
+        for package in PACKAGES
         for path in (REPO / package).rglob("*.py")
         if "click" in _imports(path)
     )

@@ -21,8 +21,7 @@ import zenoh
 
 from agents import VehicleCommander
 from deploy.busview import BusView
-from deploy.scale_bench import loop_mission
-from deploy.scaling import write_scenario
+from deploy.scaling import loop_mission, write_scenario
 from gcs_bridge.dialect import mavlink
 from gcs_bridge.modes import Px4AutoSub, Px4Main
 from recorder.reader import Recording, segment_end

@@ -23,8 +23,7 @@ import pytest
 import zenoh
 
 from agents import VehicleCommander
-from deploy.scale_bench import loop_mission
-from deploy.scaling import scale_scenario, write_scenario
+from deploy.scaling import loop_mission, scale_scenario, write_scenario
 from swarmbus.codec import MessageError, decode
 from swarmbus.keys import Keys
 from swarmbus.messages import (

@@ -4,7 +4,7 @@ Both backends offer the same small surface: start a world for a scenario, hand c
 autopilots (they take effect on the next tick), advance k control ticks, and read the agents'
 latest states and readings.
 
-- :class:`FusedBackend`: a :class:`~deploy.fused.FusedRunner` (no bus, no processes).
+- :class:`FusedBackend`: a :class:`~experiments.fused.FusedRunner` (no bus, no processes).
 - :class:`BusBackend`: the distributed stack. Started by the backend (router, plume, physics and
   one autopilot process per ``vehicles_per_process`` vehicles, on a free loopback port; a new
   stack per episode, since the spawns change) on the stepped clock (``time.mode = "stepped"``),
@@ -29,9 +29,9 @@ import msgspec
 import zenoh
 
 from agents import ClockError, Swarm
-from deploy.fused import FusedRunner
 from deploy.launcher import Launcher, LaunchOptions
 from deploy.scaling import write_scenario
+from experiments.fused import FusedRunner
 from swarmbus.codec import MessageError, decode
 from swarmbus.keys import Keys
 from swarmbus.messages import (

@@ -1,6 +1,6 @@
 """``plumeswarm bench envs``: how fast the environments step, fused and on the bus, side by side.
 
-For every backend and vehicle count N: a :class:`~deploy.envs.swarm.PlumeSwarmEnv` on the
+For every backend and vehicle count N: a :class:`~experiments.envs.swarm.PlumeSwarmEnv` on the
 scenario scaled to N vehicles, ``reset(seed=0)`` (start-up and take-off, timed apart), then
 ``steps`` steps in which every agent holds still (zero velocity, zero yaw rate: the autopilots
 and the physics do their full work). Per row: steps per second and the real-time factor (sim
@@ -24,8 +24,8 @@ from typing import Any
 
 import numpy as np
 
-from deploy.envs.backends import Backend, BusBackend, FusedBackend
-from deploy.envs.swarm import PlumeSwarmEnv
+from experiments.envs.backends import Backend, BusBackend, FusedBackend
+from experiments.envs.swarm import PlumeSwarmEnv
 from swarmbus.scenario import Scenario
 
 BACKENDS = ("fused", "bus")

@@ -1,6 +1,6 @@
 """The Gymnasium single-agent environment ``plumeswarm/PlumeSource-v0``: one vehicle, one source.
 
-The scenario's first vehicle alone, through :class:`~deploy.envs.swarm.PlumeSwarmEnv`: the same
+The scenario's first vehicle alone, through :class:`~experiments.envs.swarm.PlumeSwarmEnv`: the same
 start, action, reward and termination; the observation is that agent's without peers.
 """
 
@@ -13,8 +13,8 @@ import gymnasium
 import msgspec
 import numpy as np
 
-from deploy.envs.backends import Backend
-from deploy.envs.swarm import (
+from experiments.envs.backends import Backend
+from experiments.envs.swarm import (
     RENDER_MODES,
     Action,
     Obs,
@@ -23,8 +23,8 @@ from deploy.envs.swarm import (
     TerminationFn,
     env_scenario,
 )
-from deploy.envs.swarm import default_reward as _default_reward
-from deploy.envs.swarm import default_termination as _default_termination
+from experiments.envs.swarm import default_reward as _default_reward
+from experiments.envs.swarm import default_termination as _default_termination
 from swarmbus.scenario import Scenario
 
 

@@ -111,7 +111,7 @@ class Renderer:
             warnings.simplefilter("ignore", DeprecationWarning)
             import meshcat
 
-            from deploy.envs.meshcat_window import Window as _Window
+            from experiments.envs.meshcat_window import Window as _Window
             from sim_world.viewer import MeshcatServer, Scene, ViewerOptions
             from swarmbus.view_feed import default_levels, scene_bounds
 

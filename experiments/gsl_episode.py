@@ -10,7 +10,7 @@ concentration field and its wind), one sensor model, one seeded start — all of
   not a controller's, make the result. The field is sampled at every vehicle's position every
   ``sensor_period_ticks``; each vehicle's reading goes through its sensor model and carries the
   field's values at its peers' positions, as on the bus, and reaches the behaviour that tick.
-- ``full`` (:func:`fused_episode`): the scenario on the fused runner (:mod:`deploy.fused`) —
+- ``full`` (:func:`fused_episode`): the scenario on the fused runner (:mod:`experiments.fused`) —
   the distributed stack's physics, autopilots, sensors and plume, the same bits; a take-off
   and an offboard switch at recorded tick boundaries (:class:`Schedule`), so the same episode
   can be flown on the distributed stack.
@@ -34,7 +34,7 @@ from agents.autopilot_node import behavior_rng
 from agents.behavior import Behavior, BehaviorContext, load_behavior
 from agents.behaviors.search import PLUME_THRESHOLD_G_M3, SourceEstimate
 from agents.sensor import ConcentrationSensor
-from deploy.fused import FusedRunner, StatesObserver
+from experiments.fused import FusedRunner, StatesObserver
 from plume_service.from_scenario import field_from_scenario
 from swarmbus.messages import (
     Arm,
@@ -460,7 +460,7 @@ class Schedule:
 
 
 class FusedEpisode:
-    """A full-dynamics episode on the fused runner (:class:`deploy.fused.FusedRunner`: the
+    """A full-dynamics episode on the fused runner (:class:`experiments.fused.FusedRunner`: the
     distributed stack's world, autopilots, sensors and plume in one process, the same bits).
 
     Each vehicle is armed on the ground at its start and takes off to the start altitude;

@@ -18,8 +18,8 @@ import pytest
 import zenoh
 
 from agents import CommandRejected, CommandTimeout, Swarm, VehicleCommander
-from deploy.demo import StateDigest
-from deploy.fused import FusedRunner
+from experiments.demo import StateDigest
+from experiments.fused import FusedRunner
 from swarmbus.codec import decode, encode
 from swarmbus.keys import Keys
 from swarmbus.messages import (

@@ -24,9 +24,9 @@ from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
 from agents.anemometer import Anemometer
-from deploy.envs.backends import Backend, BackendError, BusBackend, FusedBackend
-from deploy.envs.render import Renderer
 from deploy.scaling import scale_scenario
+from experiments.envs.backends import Backend, BackendError, BusBackend, FusedBackend
+from experiments.envs.render import Renderer
 from swarmbus.messages import (
     Arm,
     Command,

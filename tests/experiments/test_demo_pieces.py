@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from deploy.busview import Snapshot, VehicleView
-from deploy.demo import (
+from deploy.scaling import scale_scenario, scenario_toml, write_scenario
+from experiments.demo import (
     StateDigest,
     VehicleRecord,
     accuracy_table,
@@ -17,7 +18,6 @@ from deploy.demo import (
     pick_samples,
     vehicle_summary,
 )
-from deploy.scaling import scale_scenario, scenario_toml, write_scenario
 from swarmbus.codec import encode
 from swarmbus.messages import (
     ConcentrationReading,

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from deploy.gsl_bench import make_options, rows_of, run_all, wilson_interval, write_outputs
-from deploy.gsl_episode import (
+from experiments.gsl_bench import make_options, rows_of, run_all, wilson_interval, write_outputs
+from experiments.gsl_episode import (
     ALGORITHMS,
     START_ACROSS_M,
     START_ALONG_M,

@@ -5,9 +5,9 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from bench.scale import CEILING, markdown
 from deploy.launcher import LaunchOptions, plan
-from deploy.scale_bench import CEILING, loop_mission, markdown
-from deploy.scaling import scale_scenario
+from deploy.scaling import loop_mission, scale_scenario
 from swarmbus.scenario import load_scenario, resolve_scenario_path
 from tests.support.procs import run_cli
 

@@ -8,16 +8,18 @@ from __future__ import annotations
 import gymnasium
 from gymnasium.envs.registration import get_env_id, namespace
 
-from deploy.envs.backends import BusBackend, FusedBackend
-from deploy.envs.source import PlumeSourceEnv
-from deploy.envs.swarm import AgentStep, PlumeSwarmEnv, default_reward, default_termination
+from experiments.envs.backends import BusBackend, FusedBackend
+from experiments.envs.source import PlumeSourceEnv
+from experiments.envs.swarm import AgentStep, PlumeSwarmEnv, default_reward, default_termination
 
 NAMESPACE = "plumeswarm"
 ENV_ID = get_env_id(NAMESPACE, "PlumeSource", 0)  # Gymnasium's spelling: namespace/name-vN
 
 if ENV_ID not in gymnasium.registry:
     with namespace(NAMESPACE):
-        gymnasium.register(id="PlumeSource-v0", entry_point="deploy.envs.source:PlumeSourceEnv")
+        gymnasium.register(
+            id="PlumeSource-v0", entry_point="experiments.envs.source:PlumeSourceEnv"
+        )
 
 
 def parallel_env(**kwargs: object) -> PlumeSwarmEnv:

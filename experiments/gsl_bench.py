@@ -1,6 +1,6 @@
 """``plumeswarm bench gsl``: source-seeking algorithms × environments × sensors, N seeded runs.
 
-Every cell runs the same N starts (:func:`deploy.gsl_episode.start_point`), spread over the
+Every cell runs the same N starts (:func:`experiments.gsl_episode.start_point`), spread over the
 worker processes; the episodes are independent and seeded from (seed, run, vehicle), so the
 table and ``gsl.json`` are the same bytes for the same arguments whatever the number of
 workers. Columns (docs/gsl.md): success % with its Wilson 95 % interval, median
@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from deploy.gsl_episode import (
+from experiments.gsl_episode import (
     ALGORITHMS,
     ENVIRONMENTS,
     SENSORS,
@@ -253,7 +253,7 @@ def write_outputs(
     js = out / "gsl.json"
     js.write_text(json.dumps(list(rows), indent=1, ensure_ascii=False) + "\n")
     written = [md, js]
-    from deploy.gsl_figure import plot_trajectories  # matplotlib only when writing figures
+    from experiments.gsl_figure import plot_trajectories  # matplotlib only when writing figures
 
     for env in opts.environments:
         samples = [o for o in outcomes if o.spec.environment == env and o.trajectories]

@@ -23,8 +23,8 @@ import pytest
 
 from agents import Swarm
 from agents.swarm import CommandRejected, CommandTimeout
-from deploy.gsl_episode import EpisodeSpec, Outcome, Schedule, fused_episode
 from deploy.scaling import write_scenario
+from experiments.gsl_episode import EpisodeSpec, Outcome, Schedule, fused_episode
 from swarmbus.codec import encode
 from swarmbus.keys import Keys
 from swarmbus.messages import Command, PlumeQuery, PlumeValues, VehicleState

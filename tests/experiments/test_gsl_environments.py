@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from agents.behaviors.search import PLUME_THRESHOLD_G_M3
-from deploy.gsl_episode import (
+from experiments.gsl_episode import (
     FIELD_WARMUP_S,
     START_ALONG_M,
     START_ALTITUDE_M,

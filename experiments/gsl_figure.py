@@ -10,7 +10,7 @@ from matplotlib import colormaps
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from deploy.gsl_episode import (
+from experiments.gsl_episode import (
     ENVIRONMENTS,
     FIELD_WARMUP_S,
     START_ALTITUDE_M,

@@ -19,9 +19,9 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 from pettingzoo.test import parallel_api_test
 
-from deploy.envs import ENV_ID, AgentStep, PlumeSourceEnv, PlumeSwarmEnv
 from deploy.launcher import Launcher, LaunchOptions
 from deploy.scaling import write_scenario
+from experiments.envs import ENV_ID, AgentStep, PlumeSourceEnv, PlumeSwarmEnv
 from swarmbus.scenario import ScenarioError, WindMeander, load_scenario, parse_scenario
 from swarmbus.session import free_tcp_port
 from swarmbus.wind import wind_from_scenario
