@@ -56,6 +56,8 @@ def convert_fence(wire: list[WireItem], here: Place) -> list[FenceZone]:
             vertices = [_horizontal(v, here) for v in run]
             zones.append(FenceZone(inclusion=w.command in _INCLUSION, polygon_enu_m=vertices))
             i += n
+        elif w.command in _CIRCLE and w.param1 == 0.0:
+            i += 1  # kept for download and ignored, as PX4 does: MAVSDK's "polygons only"
         elif w.command in _CIRCLE:
             if not (math.isfinite(w.param1) and 0.0 < w.param1 <= 1e6):
                 raise MissionError(Result.INVALID_PARAM1, w.seq, f"circle radius {w.param1}")

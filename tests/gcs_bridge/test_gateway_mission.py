@@ -199,7 +199,28 @@ def test_fence_polygons_and_circles_become_enu_zones() -> None:
     with pytest.raises(ms.MissionError) as bad_radius:
         plans.convert_fence([fence_item(0, 0.0, 0.0, exc, -1.0)], HOME)
     assert bad_radius.value.result == ms.Result.INVALID_PARAM1
+    # A circle of radius 0 is how MAVSDK sends "polygons only"; PX4 keeps it and ignores it.
+    empty_circle = fence_item(4, 50.0, 50.0, plans.CMD_CIRCLE_INCLUSION, 0.0)
+    assert plans.convert_fence([*wire[:4], empty_circle], HOME) == zones[:1]
     (rally,) = plans.convert_rally([wp(0, 30.0, -20.0, 5.0, plans.CMD_RALLY_POINT)], HOME)
     assert rally == pytest.approx((30.0, -20.0, 5.0), abs=0.05)
     up = ms.Uploader()
     assert up.on_count(QGC, 5, FENCE, 0.0) == [ms.Request(QGC, 0, FENCE)]
+
+
+def test_the_px4_scenario_carries_px4_sitls_defaults() -> None:
+    """PX4 SITL's published defaults (PX4 user guide, parameter reference): home 47.397742 N,
+    8.545594 E, 488 m; MIS_TAKEOFF_ALT 2.5 m; GF_MAX_HOR_DIST and GF_MAX_VER_DIST 0 (off);
+    RTL_RETURN_ALT 60 m; NAV_DLL_ACT 0 (none); COM_OF_LOSS_T 1 s; MAVSDK's port 14540."""
+    from swarmbus.scenario import load_scenario, resolve_scenario_path
+
+    sc = load_scenario(resolve_scenario_path("px4"))
+    assert [v.sysid for v in sc.vehicles] == [1]
+    origin = sc.world.origin
+    assert (origin.lat_deg, origin.lon_deg, origin.alt_m) == (47.397742, 8.545594, 488.0)
+    fs = sc.failsafe
+    assert fs.takeoff_altitude_m == 2.5 and fs.rtl_altitude_m == 60.0
+    assert fs.geofence_max_distance_m == 0.0 and fs.geofence_max_alt_m == 0.0
+    assert fs.datalink_loss_action == "none" and fs.offboard_timeout_s == 1.0
+    assert sc.gateway.api_port_base == 14540 and sc.gateway.gcs_port == 14550
+    assert sc.time.mode == "realtime"

@@ -240,7 +240,14 @@ async def fence_stops_goto_and_rtl_lands_at_rally(system: Any) -> None:
     corners = [(e0 - 30, n0 - 30), (e0 + 30, n0 - 30), (e0 + 30, n0 + 30), (e0 - 30, n0 + 30)]
     square = Polygon([Point(*latlon(e, n)) for e, n in corners], FenceType.INCLUSION)
     await fence.upload_geofence(GeofenceData(polygons=[square], circles=[]))
-    assert len(await raw.download_geofence()) == 4
+    polygon = await raw.download_geofence()
+    assert len(polygon) == 4
+    # The same polygon with an empty circle (radius 0), as clients send "polygons only": PX4
+    # keeps it and ignores it; as an inclusion zone it would forbid every go-to, inside too.
+    c = polygon[0]
+    empty = RawItem(4, c.frame, 5003, 0, 1, 0.0, 0, 0, 0, c.x, c.y, 0.0, 1)
+    await raw.upload_geofence([*polygon, empty])
+    assert len(await raw.download_geofence()) == 5
     here = await first(tel.subscribe_position(), lambda p: True, "a position")
     with pytest.raises(ActionError) as refused:
         await act.goto_location(*latlon(e0 + 45.0, n0), here.absolute_altitude_m, math.nan)
