@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint typecheck unit bench clean test-prereqs
+.PHONY: demo test lint typecheck unit bench clean test-prereqs docs
 
 $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -35,7 +35,12 @@ test-prereqs:
 	else echo "not root: not installing$$missing; their tests will skip"; fi
 
 # The 10-minute sim-time soak (tests/system/test_soak.py, marker soak) runs as its own, slower step.
-test: $(STAMP) lint typecheck test-prereqs
+# The documentation site (mkdocs-material): site/; strict, so a broken link or a page missing from
+# the navigation fails the build.
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
+
+test: $(STAMP) lint typecheck docs test-prereqs
 	$(BIN)/python -m pytest -m "not soak"
 	$(BIN)/python -m pytest -m soak -s
 
@@ -43,4 +48,4 @@ bench: $(STAMP)
 	$(BIN)/python -m bench
 
 clean:
-	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache
+	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache site
