@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from experiments.envs.backends import Backend, BusBackend, FusedBackend
+from experiments.driver import Driver, open_driver
 from experiments.envs.swarm import PlumeSwarmEnv
 from swarmbus.scenario import Scenario
 
@@ -42,10 +42,8 @@ class EnvBenchOptions:
     vehicles_per_process: int = 1
 
 
-def _backend(name: str, opts: EnvBenchOptions) -> Backend:
-    if name == "fused":
-        return FusedBackend()
-    return BusBackend(vehicles_per_process=opts.vehicles_per_process)
+def _backend(name: str, opts: EnvBenchOptions) -> Driver:
+    return open_driver(name, vehicles_per_process=opts.vehicles_per_process)
 
 
 def measure(opts: EnvBenchOptions, backend: str, vehicles: int) -> dict[str, Any]:

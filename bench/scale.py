@@ -38,7 +38,12 @@ import zenoh
 
 from agents import SwarmError, VehicleCommander
 from deploy.launcher import Launcher, LaunchError, LaunchOptions
-from deploy.scaling import flight_altitude, loop_mission, scale_scenario, write_scenario
+from deploy.scaling import (
+    flight_altitude,
+    local_stack_scenario,
+    loop_mission,
+    scale_scenario,
+)
 from deploy.up import stop_on_signals
 from swarmbus.codec import MessageError, decode
 from swarmbus.keys import KeyNameError, Keys
@@ -52,7 +57,6 @@ from swarmbus.messages import (
     VehicleStatus,
 )
 from swarmbus.scenario import Scenario
-from swarmbus.session import free_tcp_port
 
 log = logging.getLogger(__name__)
 
@@ -101,18 +105,7 @@ def prepare(
     if sensor_period_ticks is not None:
         sensor = msgspec.structs.replace(sc.sensor, period_ticks=sensor_period_ticks)
         sc = msgspec.structs.replace(sc, sensor=sensor)
-    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
-    sc = msgspec.structs.replace(
-        sc,
-        network=msgspec.structs.replace(sc.network, connect=[endpoint]),
-        time=msgspec.structs.replace(
-            sc.time,
-            mode="lockstep",
-            duration_s=0.0,
-            startup_timeout_s=max(sc.time.startup_timeout_s, 120.0),
-        ),
-    )
-    return sc, write_scenario(sc, run_dir / "scenario.toml")
+    return local_stack_scenario(sc, run_dir, "lockstep", startup_timeout_s=120.0)
 
 
 # ---------------------------------------------------------------------------- observation

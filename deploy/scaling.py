@@ -17,6 +17,7 @@ import tomli_w
 
 from swarmbus.messages import MissionCommand, MissionFrame, MissionItem
 from swarmbus.scenario import Scenario, Vehicle, parse_scenario
+from swarmbus.session import free_tcp_port
 
 
 def scale_scenario(
@@ -85,6 +86,26 @@ def write_scenario(scenario: Scenario, path: Path) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(text)
     return path
+
+
+def local_stack_scenario(
+    sc: Scenario, run_dir: Path, mode: str, startup_timeout_s: float = 0.0
+) -> tuple[Scenario, Path]:
+    """``sc`` as a stack on this host runs it — its router on a free loopback port, the clock in
+    ``mode``, no duration limit, at least ``startup_timeout_s`` to start — written into
+    ``run_dir``: the one way the demo, the bus driver and ``bench scale`` start their stacks."""
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    sc = msgspec.structs.replace(
+        sc,
+        network=msgspec.structs.replace(sc.network, connect=[endpoint]),
+        time=msgspec.structs.replace(
+            sc.time,
+            mode=mode,
+            duration_s=0.0,
+            startup_timeout_s=max(sc.time.startup_timeout_s, startup_timeout_s),
+        ),
+    )
+    return sc, write_scenario(sc, run_dir / "scenario.toml")
 
 
 ALTITUDE_M = 10.0

@@ -35,7 +35,7 @@ from agents.swarm import Subscription
 from deploy.busview import BusView, Snapshot, status_line
 from deploy.console import Console
 from deploy.launcher import Launcher, LaunchError, LaunchOptions, missing_roles
-from deploy.scaling import scale_scenario, write_scenario
+from deploy.scaling import local_stack_scenario, scale_scenario, write_scenario
 from swarmbus.codec import encode
 from swarmbus.keys import Keys, autopilot_node
 from swarmbus.messages import (
@@ -48,7 +48,7 @@ from swarmbus.messages import (
     VehicleStatus,
 )
 from swarmbus.scenario import Scenario
-from swarmbus.session import NetworkConfig, free_tcp_port, open_session
+from swarmbus.session import NetworkConfig, open_session
 from swarmbus.views import state_key_decoder
 
 log = logging.getLogger(__name__)
@@ -398,13 +398,7 @@ def prepare(opts: DemoOptions) -> tuple[Scenario, Path]:
         sc = scale_scenario(sc, opts.vehicles)
     if opts.attach:
         return sc, write_scenario(sc, opts.out / "scenario.toml")
-    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
-    sc = msgspec.structs.replace(
-        sc,
-        network=msgspec.structs.replace(sc.network, connect=[endpoint]),
-        time=msgspec.structs.replace(sc.time, mode=opts.clock or "stepped", duration_s=0.0),
-    )
-    return sc, write_scenario(sc, opts.out / "scenario.toml")
+    return local_stack_scenario(sc, opts.out, opts.clock or "stepped")
 
 
 def clock_mode(view: BusView, deadline: float) -> str:

@@ -8,7 +8,7 @@ from __future__ import annotations
 import gymnasium
 from gymnasium.envs.registration import get_env_id, namespace
 
-from experiments.envs.backends import BusBackend, FusedBackend
+from experiments.driver import BusDriver, InProcessDriver
 from experiments.envs.source import PlumeSourceEnv
 from experiments.envs.swarm import AgentStep, PlumeSwarmEnv, default_reward, default_termination
 
@@ -30,8 +30,8 @@ def parallel_env(**kwargs: object) -> PlumeSwarmEnv:
 __all__ = [
     "ENV_ID",
     "AgentStep",
-    "BusBackend",
-    "FusedBackend",
+    "BusDriver",
+    "InProcessDriver",
     "PlumeSourceEnv",
     "PlumeSwarmEnv",
     "default_reward",

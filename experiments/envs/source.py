@@ -13,7 +13,7 @@ import gymnasium
 import msgspec
 import numpy as np
 
-from experiments.envs.backends import Backend
+from experiments.driver import Driver
 from experiments.envs.swarm import (
     RENDER_MODES,
     Action,
@@ -35,7 +35,7 @@ class PlumeSourceEnv(gymnasium.Env[Obs, Action]):
         self,
         scenario: Scenario | str | Path | None = None,
         *,
-        backend: str | Backend = "fused",
+        backend: str | Driver = "fused",
         attach: str | None = None,
         ticks_per_step: int = 12,
         max_speed_xy_m_s: float = 5.0,

@@ -25,7 +25,7 @@ from pettingzoo import ParallelEnv
 
 from agents.anemometer import Anemometer
 from deploy.scaling import scale_scenario
-from experiments.envs.backends import Backend, BackendError, BusBackend, FusedBackend
+from experiments.driver import DRIVERS, BusDriver, Driver, DriverError, open_driver
 from experiments.envs.render import Renderer
 from swarmbus.messages import (
     Arm,
@@ -110,14 +110,13 @@ def env_scenario(scenario: Scenario | str | Path | None) -> Scenario:
     return load_scenario(resolve_scenario_path(None if scenario is None else str(scenario)))
 
 
-def make_backend(backend: str | Backend, attach: str | None) -> Backend:
+def make_driver(backend: str | Driver, attach: str | None) -> Driver:
+    """``backend``: ``"fused"``, ``"bus"`` or a :class:`~experiments.driver.Driver` of one's own."""
     if not isinstance(backend, str):
         return backend
-    if backend == "fused":
-        return FusedBackend()
-    if backend == "bus":
-        return BusBackend(attach=attach)
-    raise ValueError(f"backend: expected 'fused' or 'bus', got {backend!r}")
+    if backend not in DRIVERS:
+        raise ValueError(f"backend: expected 'fused' or 'bus', got {backend!r}")
+    return open_driver(backend, attach=attach)
 
 
 class PlumeSwarmEnv(ParallelEnv[str, Obs, Action]):  # type: ignore[misc]
@@ -134,7 +133,7 @@ class PlumeSwarmEnv(ParallelEnv[str, Obs, Action]):  # type: ignore[misc]
         scenario: Scenario | str | Path | None = None,
         *,
         vehicles: int | None = None,
-        backend: str | Backend = "fused",
+        backend: str | Driver = "fused",
         attach: str | None = None,
         ticks_per_step: int = 12,
         k_peers: int = 2,
@@ -179,7 +178,7 @@ class PlumeSwarmEnv(ParallelEnv[str, Obs, Action]):  # type: ignore[misc]
         self.reward_fn = reward_fn
         self.termination_fn = termination_fn
         self.render_mode = render_mode
-        self.backend = make_backend(backend, attach)
+        self.backend = make_driver(backend, attach)
         self.possible_agents = [v.id for v in self.scenario.vehicles]
         self.agents: list[str] = []
         # Each vehicle's anemometer, as its autopilot and its behaviours read it: the scenario's
@@ -258,7 +257,7 @@ class PlumeSwarmEnv(ParallelEnv[str, Obs, Action]):  # type: ignore[misc]
     @property
     def backend_respawns(self) -> bool:
         """False for a stack this environment attached to (its vehicles may already fly)."""
-        return not (isinstance(self.backend, BusBackend) and self.backend.attach is not None)
+        return not (isinstance(self.backend, BusDriver) and self.backend.attach is not None)
 
     def _episode_scenario(self, rng: np.random.Generator) -> Scenario:
         env = self.scenario.env
@@ -285,7 +284,7 @@ class PlumeSwarmEnv(ParallelEnv[str, Obs, Action]):  # type: ignore[misc]
     def _command(self, commands: list[tuple[str, Command]], strict: bool) -> None:
         for (vid, cmd), reply in zip(commands, self.backend.command(commands), strict=True):
             if strict and not reply.accepted:
-                raise BackendError(f"{vid} refused {type(cmd).__name__}: {reply.reason}")
+                raise DriverError(f"{vid} refused {type(cmd).__name__}: {reply.reason}")
 
     def _take_off(self, targets: dict[str, float]) -> None:
         backend = self.backend
@@ -300,7 +299,7 @@ class PlumeSwarmEnv(ParallelEnv[str, Obs, Action]):  # type: ignore[misc]
                 return
             if backend.tick >= deadline_tick:
                 low = [v for v, z in targets.items() if states[v].position_enu_m[2] < z - 1.0]
-                raise BackendError(
+                raise DriverError(
                     f"take-off not done after {TAKEOFF_TIMEOUT_S:.0f} s sim: {', '.join(low)}"
                 )
             backend.step(TAKEOFF_CHECK_TICKS)

@@ -1,15 +1,15 @@
-"""Where an environment's world runs: in this process (fused) or on the bus.
+"""One way to drive a world, wherever it runs: the :class:`Driver` protocol (start a world for a
+scenario, hand commands to autopilots — they take effect on the next tick —, advance k control
+ticks, read the vehicles' latest states and readings, close) and its two implementations,
+chosen by :func:`open_driver` (docs/architecture.md, "Layers"). The environments, the
+source-seeking benchmark, the demo and ``bench scale`` drive their worlds through it.
 
-Both backends offer the same small surface: start a world for a scenario, hand commands to
-autopilots (they take effect on the next tick), advance k control ticks, and read the agents'
-latest states and readings.
-
-- :class:`FusedBackend`: a :class:`~experiments.fused.FusedRunner` (no bus, no processes).
-- :class:`BusBackend`: the distributed stack. Started by the backend (router, plume, physics and
+- :class:`InProcessDriver`: a :class:`~experiments.fused.FusedRunner` (no bus, no processes).
+- :class:`BusDriver`: the distributed stack. Started by the driver (router, plume, physics and
   one autopilot process per ``vehicles_per_process`` vehicles, on a free loopback port; a new
   stack per episode, since the spawns change) on the stepped clock (``time.mode = "stepped"``),
   which an :class:`agents.Swarm` client steps k ticks at a time: commands land on known ticks
-  and the stack gives the same states as the fused backend. Attached to a running stack
+  and the stack gives the same states as the in-process driver. Attached to a running stack
   (``attach=ENDPOINT``) it never respawns; it steps a stepped world's clock if it can have it,
   and otherwise lets the world run at its own pace (a step waits until k more ticks were
   published; such runs do not repeat).
@@ -25,12 +25,11 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Protocol
 
-import msgspec
 import zenoh
 
 from agents import ClockError, Swarm
 from deploy.launcher import Launcher, LaunchOptions
-from deploy.scaling import write_scenario
+from deploy.scaling import local_stack_scenario
 from experiments.fused import FusedRunner
 from swarmbus.codec import MessageError, decode
 from swarmbus.keys import Keys
@@ -43,7 +42,6 @@ from swarmbus.messages import (
 )
 from swarmbus.reqrep import ask, command_reply
 from swarmbus.scenario import Scenario
-from swarmbus.session import free_tcp_port
 
 log = logging.getLogger(__name__)
 
@@ -52,11 +50,11 @@ CLOCK_POLL_S = 0.02
 BUS_ROLES = ("router", "plume", "physics", "autopilot")
 
 
-class BackendError(RuntimeError):
+class DriverError(RuntimeError):
     pass
 
 
-class Backend(Protocol):
+class Driver(Protocol):
     def start(self, scenario: Scenario) -> None:
         """A world at tick 0 for ``scenario`` (the previous one, if any, is gone)."""
 
@@ -78,14 +76,14 @@ class Backend(Protocol):
     def close(self) -> None: ...
 
 
-class FusedBackend:
+class InProcessDriver:
     def __init__(self) -> None:
         self._runner: FusedRunner | None = None
 
     @property
     def runner(self) -> FusedRunner:
         if self._runner is None:
-            raise BackendError("the environment has no world before reset()")
+            raise DriverError("the environment has no world before reset()")
         return self._runner
 
     def start(self, scenario: Scenario) -> None:
@@ -139,7 +137,7 @@ class _Ticks:
             while self.latest is None or self.latest.tick < tick:
                 remaining = deadline - time.monotonic()
                 if remaining <= 0.0:
-                    raise BackendError(f"no tick {tick} on the bus within {timeout_s:.0f} s")
+                    raise DriverError(f"no tick {tick} on the bus within {timeout_s:.0f} s")
                 self._cond.wait(remaining)
             return self.latest
 
@@ -147,7 +145,7 @@ class _Ticks:
         self._sub.undeclare()
 
 
-class BusBackend:
+class BusDriver:
     """The distributed stack (see the module doc); ``attach``: a running stack's router."""
 
     def __init__(
@@ -167,7 +165,7 @@ class BusBackend:
         self._ticks: _Ticks | None = None
         self._keys = Keys()
         self._agents: tuple[str, ...] = ()
-        self._stepped = False  # this backend holds a stepped world's clock
+        self._stepped = False  # this driver holds a stepped world's clock
         self._tick = 0
         self._states: dict[str, VehicleState] = {}
 
@@ -199,19 +197,10 @@ class BusBackend:
         if self.run_dir is None:
             self._tmp = tempfile.TemporaryDirectory(prefix="plumeswarm-env-")
         run_dir = self.run_dir or Path(self._tmp.name if self._tmp else ".")
-        endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
-        sc = msgspec.structs.replace(
-            scenario,
-            network=msgspec.structs.replace(scenario.network, connect=[endpoint]),
-            time=msgspec.structs.replace(
-                scenario.time,
-                mode="stepped",
-                duration_s=0.0,
-                startup_timeout_s=max(scenario.time.startup_timeout_s, self.startup_timeout_s),
-            ),
-        )
+        sc, path = local_stack_scenario(scenario, run_dir, "stepped", self.startup_timeout_s)
+        endpoint = sc.network.connect[0]
         opts = LaunchOptions(
-            scenario_path=write_scenario(sc, run_dir / "scenario.toml"),
+            scenario_path=path,
             headless=True,
             run_dir=run_dir,
             roles=BUS_ROLES,
@@ -234,7 +223,7 @@ class BusBackend:
         deadline = time.monotonic() + self.startup_timeout_s
         while not _has_clock(self._swarm):
             if time.monotonic() > deadline:
-                raise BackendError(
+                raise DriverError(
                     f"the world's start handshake did not finish in {self.startup_timeout_s} s"
                 )
             time.sleep(CLOCK_POLL_S)
@@ -262,13 +251,13 @@ class BusBackend:
     def step(self, ticks: int) -> None:
         sw, seen = self._swarm, self._ticks
         if sw is None or seen is None:
-            raise BackendError("the environment has no world before reset()")
+            raise DriverError("the environment has no world before reset()")
         if self._stepped:
             try:
                 reply = sw.step(ticks)
             except ClockError as exc:
                 if self._launcher is not None or "stepped" not in str(exc):
-                    raise BackendError(str(exc)) from None
+                    raise DriverError(str(exc)) from None
                 self._stepped = False  # an attached world that runs on its own
             else:
                 tick = seen.wait_past(reply.tick, self.startup_timeout_s)
@@ -294,13 +283,26 @@ class BusBackend:
     def command(self, commands: Sequence[tuple[str, Command]]) -> list[CommandReply]:
         """All queries first, then all replies: one round trip for the lot, not one each."""
         if self._swarm is None:
-            raise BackendError("the environment has no world before reset()")
+            raise DriverError("the environment has no world before reset()")
         session = self._swarm.session
         pending = [
             (vid, ask(session, self._keys.vehicle_cmd(vid), cmd, CommandReply, COMMAND_TIMEOUT_S))
             for vid, cmd in commands
         ]
         return [command_reply(vid, p.outcome()) for vid, p in pending]
+
+
+DRIVERS = ("fused", "bus")
+
+
+def open_driver(kind: str, attach: str | None = None, vehicles_per_process: int = 1) -> Driver:
+    """The driver of ``kind``: ``"fused"`` (in this process) or ``"bus"`` (a stack this driver
+    starts per world, or the running one at ``attach``)."""
+    if kind == "fused":
+        return InProcessDriver()
+    if kind == "bus":
+        return BusDriver(attach=attach, vehicles_per_process=vehicles_per_process)
+    raise ValueError(f"driver: expected 'fused' or 'bus', got {kind!r}")
 
 
 def _has_clock(sw: Swarm) -> bool:
