@@ -4,7 +4,9 @@ With ``--set checkpoint=PATH`` (what ``plumeswarm up`` passes: ``<run dir>/<node
 process saves a :class:`~agents.snapshot.ProcessSnapshot` after every tick it answers (before
 the answer goes out) and after every command it handles, in ``PATH.0`` / ``PATH.1`` in turn;
 on the physics' checkpoint ticks (multiples of ``time.checkpoint_period_s``) it also keeps the
-snapshot of the tick before in ``PATH.ckpt.0`` / ``PATH.ckpt.1`` and in memory.
+snapshot of the tick before in ``PATH.ckpt.0`` / ``PATH.ckpt.1`` and in memory. The mission
+and fence lists those snapshots refer to are in ``PATH.blobs``, each appended once when it is
+first saved (:class:`~agents.snapshot.BlobLog`), so a tick's snapshot does not grow with them.
 
 Which snapshot a tick ``k`` resumes from:
 
@@ -26,18 +28,29 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-from agents.snapshot import ProcessSnapshot, SnapshotError, SnapshotSlots, decode_process
+from agents.snapshot import (
+    BlobLog,
+    ProcessSnapshot,
+    SnapshotError,
+    SnapshotSlots,
+    decode_process,
+    missing_lists,
+)
 
 log = logging.getLogger(__name__)
 
 
 def snapshot_paths(path: Path) -> list[Path]:
     """Every file a keeper at ``path`` writes (the launcher removes them for a fresh run)."""
-    return [*SnapshotSlots(path).paths(), *SnapshotSlots(_ckpt(path)).paths()]
+    return [*SnapshotSlots(path).paths(), *SnapshotSlots(_ckpt(path)).paths(), _blobs(path)]
 
 
 def _ckpt(path: Path) -> Path:
     return path.with_name(path.name + ".ckpt")
+
+
+def _blobs(path: Path) -> Path:
+    return path.with_name(path.name + ".blobs")
 
 
 class StateKeeper:
@@ -48,6 +61,7 @@ class StateKeeper:
         self.period_ticks = period_ticks
         self._slots = SnapshotSlots(path)
         self._ckpt = SnapshotSlots(_ckpt(path))
+        self._blobs = BlobLog(_blobs(path))
         self._found: list[ProcessSnapshot] = []  # what a killed predecessor left
         self._last = b""  # the latest snapshot (not necessarily written yet)
         self._at_checkpoint: dict[int, bytes] = {}  # tick → snapshot, the latest two
@@ -55,6 +69,7 @@ class StateKeeper:
     def open(self, initial: bytes) -> None:
         """Read what a predecessor left, then open the files; ``initial`` is the fresh
         process's own snapshot (tick -1: the state before tick 0)."""
+        self._blobs.open()  # the lists the snapshots found refer to
         for slots in (self._slots, self._ckpt):
             for _, payload in slots.read_all():
                 try:
@@ -70,15 +85,18 @@ class StateKeeper:
     def close(self) -> None:
         self._slots.close()
         self._ckpt.close()
+        self._blobs.close()
 
     def save(self, payload: bytes) -> None:
         """The process's state now (after a tick's answer was computed, or a command)."""
         self._last = payload
+        self._blobs.flush()  # the lists it refers to, before it
         self._slots.write(payload)
 
     def before_tick(self, tick: int) -> None:
         """Tick ``tick`` is about to be handled: on a checkpoint tick keep the state before it."""
         if self.period_ticks and tick % self.period_ticks == 0 and self._last:
+            self._blobs.flush()
             self._ckpt.write(self._last)
             self._at_checkpoint[tick] = self._last
             for old in sorted(self._at_checkpoint)[:-2]:
@@ -91,7 +109,7 @@ class StateKeeper:
         for want in (tick - 1, tick):
             match = next((s for s in found if s.tick == want), None)
             if match is not None:
-                return match
+                return _complete(match)
         if found:
             log.warning(
                 "no snapshot for tick %d (found ticks %s): not restored",
@@ -104,5 +122,20 @@ class StateKeeper:
         """The tick went back to ``tick`` (a physics checkpoint): the state before it."""
         payload = self._at_checkpoint.get(tick)
         if payload is not None:
-            return decode_process(payload)
-        return next((s for s in self._found if s.tick == tick - 1), None)
+            return _complete(decode_process(payload))
+        match = next((s for s in self._found if s.tick == tick - 1), None)
+        return None if match is None else _complete(match)
+
+
+def _complete(snap: ProcessSnapshot) -> ProcessSnapshot | None:
+    """``snap``, or None when a list it refers to is missing (it cannot be restored)."""
+    missing = missing_lists(snap)
+    if missing:
+        log.warning(
+            "snapshot of tick %d refers to %d missing mission/fence lists (%s): not restored",
+            snap.tick,
+            len(missing),
+            missing[0],
+        )
+        return None
+    return snap

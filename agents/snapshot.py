@@ -22,10 +22,18 @@ behaviour whose state cannot be saved makes :func:`capture` raise :class:`Snapsh
 :class:`SnapshotSlots` keeps the latest two records of a process in two files written in turn
 (one ``pwritev`` each, a CRC-32 over the record): a process killed in the middle of a write
 leaves the other file intact, and a reader takes the newest valid one. Nothing is pickled.
+
+Mission item lists and fence zone lists change only on an upload, which replaces the list (they
+are never changed in place), but a process saves a snapshot every tick. So a snapshot holds
+them by reference: each list is encoded once, named by a digest of its encoding and kept in
+:data:`BLOBS`; :class:`BlobLog` appends each new one to a log file once (before the first
+snapshot that refers to it is written) and gives them back to a restarted process. A tick's
+record is therefore the same size whatever the missions' lengths.
 """
 
 from __future__ import annotations
 
+import hashlib
 import os
 import struct
 import zlib
@@ -46,7 +54,7 @@ if TYPE_CHECKING:
     from agents.autopilot import Autopilot
     from agents.sensor import ConcentrationSensor
 
-FORMAT = "autopilot_snapshot/v2"
+FORMAT = "autopilot_snapshot/v3"
 Vec3 = tuple[float, float, float]
 
 
@@ -89,7 +97,7 @@ class ControllerSnapshot(msgspec.Struct, frozen=True, kw_only=True):
 
 
 class MissionSnapshot(msgspec.Struct, frozen=True, kw_only=True):
-    items: msgspec.Raw  # list[MissionItem], encoded once per uploaded list (_items_raw)
+    items: str  # list[MissionItem], by reference (BLOBS)
     index: int
     items_reached: int
     finished: bool
@@ -112,7 +120,7 @@ class ModesSnapshot(msgspec.Struct, frozen=True, kw_only=True):
     item_seen: int
     land_descending: bool
     mission: MissionSnapshot
-    fence_zones: list[FenceZone]
+    fence_zones: str  # list[FenceZone], by reference (BLOBS)
     rally_points: list[Vec3]
     rtl_dest: Vec3
     offboard_tick_s: float
@@ -147,7 +155,7 @@ class VehicleSnapshot(msgspec.Struct, frozen=True, kw_only=True):
     now_s: float
     state: VehicleState | None
     estimate: Estimate | None
-    scenario_mission: msgspec.Raw  # list[MissionItem] (_items_raw)
+    scenario_mission: str  # list[MissionItem], by reference (BLOBS)
     behavior_error: str
     sensor_health: str
     modes: ModesSnapshot
@@ -159,40 +167,80 @@ class VehicleSnapshot(msgspec.Struct, frozen=True, kw_only=True):
 
 
 # ---------------------------------------------------------------------------- capture
-# A mission (up to 1000 items) is saved with every tick's snapshot but changes only when one is
-# uploaded, which replaces the list (the lists are never changed in place): each list is encoded
-# once. Holding the list keeps its id from being reused while it is cached. Least recently used
-# first out: the lists a process's vehicles fly are asked for every tick and stay; a replaced one
-# is never asked for again and goes first. The bound is far above the lists in use at once (one
-# uploaded mission per served vehicle): a first-in-first-out cache of 64 re-encoded every
-# mission on every tick once a process served more than 32 vehicles flying missions.
-_ITEMS_CACHE: OrderedDict[int, tuple[list[MissionItem], msgspec.Raw]] = OrderedDict()
-_ITEMS_CACHE_SIZE = 1024
+class Blobs:
+    """Encoded lists (missions, fence zones) by the digest of their encoding, in the order they
+    were first seen. A list is replaced on upload, never changed in place, so it is encoded
+    once while it is in use: a cache by the list's identity (holding the list keeps its id from
+    being reused while it is cached) answers every later tick. Least recently used first out:
+    the lists a process's vehicles fly are asked for every tick and stay; a replaced one is
+    never asked for again and goes first. The encodings themselves stay (a snapshot kept for a
+    rewind may still refer to one); they grow with uploads only."""
+
+    def __init__(self, cache_size: int = 1024) -> None:
+        self.by_key: dict[str, msgspec.Raw] = {}
+        self.order: list[str] = []  # keys in the order they were first seen
+        self._cache: OrderedDict[int, tuple[list[Any], msgspec.Raw, str]] = OrderedDict()
+        self._cache_size = cache_size
+
+    def add(self, raw: msgspec.Raw | bytes) -> str:
+        """The key of an encoding (kept if new)."""
+        key = hashlib.blake2b(bytes(raw), digest_size=16).hexdigest()
+        if key not in self.by_key:
+            self.by_key[key] = msgspec.Raw(bytes(raw))
+            self.order.append(key)
+        return key
+
+    def encoded(self, items: list[Any]) -> tuple[msgspec.Raw, str]:
+        """``items`` encoded, and its key: once per list."""
+        ident = id(items)
+        hit = self._cache.get(ident)
+        if hit is not None and hit[0] is items:
+            self._cache.move_to_end(ident)
+            return hit[1], hit[2]
+        raw = msgspec.Raw(msgspec.msgpack.encode(items))
+        key = self.add(raw)
+        self._cache[ident] = (items, raw, key)
+        self._cache.move_to_end(ident)
+        if len(self._cache) > self._cache_size:
+            self._cache.popitem(last=False)
+        return raw, key
+
+    def get(self, key: str, what: str) -> msgspec.Raw:
+        raw = self.by_key.get(key)
+        if raw is None:
+            raise SnapshotError(f"{what}: the saved list {key} is missing") from None
+        return raw
+
+
+#: Every encoded mission and fence list of this process (see :class:`Blobs`).
+BLOBS = Blobs()
 _NO_ITEMS = msgspec.Raw(msgspec.msgpack.encode([]))
+_NO_ITEMS_KEY = BLOBS.add(_NO_ITEMS)
 _items_decoder = msgspec.msgpack.Decoder(list[MissionItem])
+_zones_decoder = msgspec.msgpack.Decoder(list[FenceZone])
 
 
 def _items_raw(items: list[MissionItem]) -> msgspec.Raw:
-    if not items:
-        return _NO_ITEMS  # no mission: nothing to cache (an empty list per vehicle)
-    key = id(items)
-    hit = _ITEMS_CACHE.get(key)
-    if hit is not None and hit[0] is items:
-        _ITEMS_CACHE.move_to_end(key)
-        return hit[1]
-    raw = msgspec.Raw(msgspec.msgpack.encode(items))
-    _ITEMS_CACHE[key] = (items, raw)
-    _ITEMS_CACHE.move_to_end(key)
-    if len(_ITEMS_CACHE) > _ITEMS_CACHE_SIZE:
-        _ITEMS_CACHE.popitem(last=False)
-    return raw
+    """``items`` encoded, once per list (an empty list: one shared encoding)."""
+    return _NO_ITEMS if not items else BLOBS.encoded(items)[0]
 
 
-def _items_of(raw: msgspec.Raw) -> list[MissionItem]:
+def _ref(items: list[Any]) -> str:
+    return _NO_ITEMS_KEY if not items else BLOBS.encoded(items)[1]
+
+
+def _items_of(key: str) -> list[MissionItem]:
     try:
-        return _items_decoder.decode(raw)
+        return _items_decoder.decode(BLOBS.get(key, "mission items"))
     except (msgspec.ValidationError, msgspec.DecodeError) as exc:
         raise SnapshotError(f"mission items: {exc}") from None
+
+
+def _zones_of(key: str) -> list[FenceZone]:
+    try:
+        return _zones_decoder.decode(BLOBS.get(key, "fence zones"))
+    except (msgspec.ValidationError, msgspec.DecodeError) as exc:
+        raise SnapshotError(f"fence zones: {exc}") from None
 
 
 def capture(
@@ -208,7 +256,7 @@ def capture(
         now_s=ap.now,
         state=ap.state,
         estimate=ap.est,
-        scenario_mission=_items_raw(ap._scenario_mission),
+        scenario_mission=_ref(ap._scenario_mission),
         behavior_error=ap.behavior_error,
         sensor_health=ap.sensor_health,
         modes=ModesSnapshot(
@@ -227,13 +275,13 @@ def capture(
             item_seen=m._item_seen,
             land_descending=m._land_descending,
             mission=MissionSnapshot(
-                items=_items_raw(mission.items),
+                items=_ref(mission.items),
                 index=mission.index,
                 items_reached=mission.items_reached,
                 finished=mission.finished,
                 hold_started_s=mission._hold_started_s,
             ),
-            fence_zones=list(m.fence_zones),
+            fence_zones=_ref(m.fence_zones),
             rally_points=list(m.rally_points),
             rtl_dest=m._rtl_dest,
             offboard_tick_s=m._offboard_tick_s,
@@ -371,7 +419,7 @@ def _restore_modes(ap: Autopilot, s: ModesSnapshot) -> None:
     m._setpoint_time_s = s.setpoint_time_s
     m._item_seen = s.item_seen
     m._land_descending = s.land_descending
-    m.fence_zones = list(s.fence_zones)
+    m.fence_zones = _zones_of(s.fence_zones)
     m.rally_points = list(s.rally_points)
     m._rtl_dest = s.rtl_dest
     m._offboard_tick_s = s.offboard_tick_s
@@ -462,6 +510,79 @@ class SnapshotSlots:
             p.unlink(missing_ok=True)
 
 
+_BLOB_HEAD = struct.Struct("<4sI16s")  # magic, payload length, blake2b-128 of the payload
+_BLOB_MAGIC = b"APB1"
+
+
+class BlobLog:
+    """The encoded lists of :data:`BLOBS` (missions, fence zones) on disk: each appended once,
+    in one write, before a snapshot that refers to it is written (:meth:`flush`). A record
+    whose digest does not match (a write cut short by a kill) ends the log: it is cut off
+    there when the log is opened again."""
+
+    def __init__(self, path: Path, blobs: Blobs = BLOBS) -> None:
+        self.path = path
+        self.blobs = blobs
+        self._fd = -1
+        self._written: set[str] = set()
+        self._next = 0  # blobs.order[:_next] are written (or were already on disk)
+
+    def open(self) -> None:
+        """Give the lists already in the log to :data:`BLOBS`, then append after them."""
+        end = 0
+        try:
+            data = self.path.read_bytes()
+        except FileNotFoundError:
+            data = b""
+        except OSError as exc:
+            raise SnapshotError(f"cannot read {self.path}: {exc.strerror or exc}") from None
+        for key, payload, after in _blob_records(data):
+            self.blobs.add(payload)
+            self._written.add(key)
+            end = after
+        try:
+            self._fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            os.ftruncate(self._fd, end)  # a torn last record
+            os.lseek(self._fd, end, os.SEEK_SET)
+        except OSError as exc:
+            raise SnapshotError(f"cannot write {self.path}: {exc.strerror or exc}") from None
+        self._next = 0
+
+    def flush(self) -> None:
+        """Append the lists first seen since the last call (nothing, almost every tick)."""
+        order = self.blobs.order
+        if self._next == len(order) or self._fd < 0:
+            return
+        for key in order[self._next :]:
+            if key in self._written:
+                continue
+            payload = bytes(self.blobs.by_key[key])
+            head = _BLOB_HEAD.pack(_BLOB_MAGIC, len(payload), bytes.fromhex(key))
+            os.writev(self._fd, [head, payload])
+            self._written.add(key)
+        self._next = len(order)
+
+    def close(self) -> None:
+        if self._fd >= 0:
+            os.close(self._fd)
+        self._fd = -1
+
+
+def _blob_records(data: bytes) -> Iterator[tuple[str, bytes, int]]:
+    """(key, payload, offset after it) of the valid records at the start of ``data``."""
+    at = 0
+    while at + _BLOB_HEAD.size <= len(data):
+        magic, length, digest = _BLOB_HEAD.unpack_from(data, at)
+        start = at + _BLOB_HEAD.size
+        payload = data[start : start + length]
+        if magic != _BLOB_MAGIC or len(payload) != length:
+            return
+        if hashlib.blake2b(payload, digest_size=16).digest() != digest:
+            return
+        at = start + length
+        yield digest.hex(), payload, at
+
+
 # ---------------------------------------------------------------------------- a process
 class PendingSnapshot(msgspec.Struct, frozen=True, kw_only=True):
     """The sensor tick whose plume values a process awaits (they come in a later tick;
@@ -487,6 +608,16 @@ class ProcessSnapshot(msgspec.Struct, frozen=True, kw_only=True):
 
 
 _process_decoder = msgspec.msgpack.Decoder(ProcessSnapshot)
+
+
+def missing_lists(snap: ProcessSnapshot) -> list[str]:
+    """The mission and fence lists ``snap`` refers to that :data:`BLOBS` does not hold."""
+    keys = [
+        key
+        for v in snap.vehicles
+        for key in (v.scenario_mission, v.modes.mission.items, v.modes.fence_zones)
+    ]
+    return sorted({k for k in keys if k not in BLOBS.by_key})
 
 
 def decode_process(payload: bytes) -> ProcessSnapshot:

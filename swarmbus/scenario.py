@@ -10,12 +10,12 @@ import re
 import tomllib
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Literal, NamedTuple
 
 import msgspec
 
 from swarmbus.codec import split_validation_error
-from swarmbus.gases import FORMULAS
+from swarmbus.gases import FORMULAS, ppm_per_g_m3
 from swarmbus.messages import MissionItem
 from swarmbus.session import NetworkConfig
 from swarmbus.vehicle_types import VehicleTypeError, load_vehicle_type
@@ -151,28 +151,69 @@ class Plume(_Section, frozen=True, kw_only=True):
 
 class Mox(_Section, frozen=True, kw_only=True):
     """A metal-oxide transducer: RS/R0 = coefficient · ppm^exponent, capped at the clean-air
-    ratio; defaults: GADEN's Figaro TGS2620 curve for ethanol (R0 3 kΩ, clean air 21)."""
+    ratio; defaults: GADEN's Figaro TGS2620 curve for ethanol (R0 3 kΩ, clean air 21).
+    ``rs_noise_rel``: std of the measured resistance per sample, relative to it;
+    ``r0_drift_rel_per_h``: std of each sensor's baseline (R0) drift rate, relative per hour."""
 
     rs_r0_coefficient: Annotated[float, msgspec.Meta(gt=0.0, le=1e6)] = 62.32
     rs_r0_exponent: Annotated[float, msgspec.Meta(ge=-10.0, le=-0.001)] = -0.7155
     clean_air_rs_r0: Annotated[float, msgspec.Meta(gt=0.0, le=100.0)] = 21.0
     r0_ohm: Annotated[float, msgspec.Meta(gt=0.0, le=1e7)] = 3000.0
+    rs_noise_rel: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)] = 0.0
+    r0_drift_rel_per_h: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)] = 0.0
 
 
-_SensorPreset = tuple[float, float, str, Mox | None]  # rise s, decay s, gas, transducer
-SENSOR_PRESETS: dict[str, _SensorPreset] = {
-    # GADEN's TGS2620 (rise 2.96 s, decay 15.71 s; its ethanol curve)
-    "mox-tgs2620": (2.96, 15.71, "ethanol", Mox()),
-    # a PID (ION Science MiniPID, T90 < 3 s → τ = 3 s / ln 10), isobutylene-calibrated, linear
-    "pid": (1.30, 1.30, "isobutylene", None),
+class SensorPreset(NamedTuple):
+    """What a sensor preset fills: time constants, gas, transducer, and the datasheet's
+    detection limit and noise (ppm of ``gas`` at 298.15 K and 1 atm, turned into g/m³)."""
+
+    rise_s: float
+    decay_s: float
+    gas: str
+    mox: Mox | None
+    detection_limit_g_m3: float = 0.0
+    noise_std_g_m3: float = 0.0
+
+
+def _ppm_to_g_m3(ppm: float, gas: str) -> float:
+    """ppm of ``gas`` at 298.15 K and 1 atm in g/m³."""
+    return ppm / ppm_per_g_m3(gas, 298.15, 101_325.0)
+
+
+SENSOR_PRESETS: dict[str, SensorPreset] = {
+    # GADEN's TGS2620 (rise 2.96 s, decay 15.71 s; its ethanol curve); its floor is the
+    # clean-air ratio of the curve (agents.sensor), no added noise
+    "mox-tgs2620": SensorPreset(2.96, 15.71, "ethanol", Mox()),
+    # ION Science MiniPID 2, 0-4000 ppm range (datasheet: T90 < 3 s → τ = 3 s / ln 10,
+    # minimum detection level 0.1 ppm isobutylene, taken as 3 × the noise std)
+    "pid": SensorPreset(
+        1.30,
+        1.30,
+        "isobutylene",
+        None,
+        _ppm_to_g_m3(0.1, "isobutylene"),
+        _ppm_to_g_m3(0.1 / 3.0, "isobutylene"),
+    ),
+    # a fast PID for plume-structure work (Aurora Scientific 200B miniPID class: 10-90 % rise
+    # well under 1 ms → τ 0.3 ms, far below any sensor period: it follows the field sample by
+    # sample); detection limit and noise as the MiniPID above
+    "pid-fast": SensorPreset(
+        0.0003,
+        0.0003,
+        "isobutylene",
+        None,
+        _ppm_to_g_m3(0.1, "isobutylene"),
+        _ppm_to_g_m3(0.1 / 3.0, "isobutylene"),
+    ),
 }
 
 
 class Sensor(_Section, frozen=True, kw_only=True):
     """Concentration sensor model. ``preset = "novak2018"`` is the seed's [0.01, 0.2] window;
-    ``mox-tgs2620`` and ``pid`` fill the fields left unset (rise, decay, gas, mox)."""
+    ``mox-tgs2620``, ``pid`` and ``pid-fast`` fill the fields left unset (rise, decay, gas,
+    mox) and those left at 0 (detection limit, noise std)."""
 
-    preset: Literal["novak2018", "ideal", "mox-tgs2620", "pid"] | None = None
+    preset: Literal["novak2018", "ideal", "mox-tgs2620", "pid", "pid-fast"] | None = None
     detection_limit_g_m3: NonNeg = 0.0  # below → 0
     saturation_g_m3: Pos | None = None  # above → saturation
     noise_std_g_m3: NonNeg = 0.0
@@ -184,7 +225,7 @@ class Sensor(_Section, frozen=True, kw_only=True):
     resolution_g_m3: NonNeg = 0.0  # quantisation step of the output; 0: none
     noise_rel: Annotated[float, msgspec.Meta(ge=0.0, le=10.0)] = 0.0  # std / lagged value
     gas: Name | None = None  # also report ppm of this gas (swarmbus.gases)
-    mox: Mox | None = None  # a metal-oxide transducer between the lag and the output
+    mox: Mox | None = None  # a metal-oxide transducer: the lag acts on its RS/R0 (with gas)
 
     def resolved(self) -> Sensor:
         if self.preset == "novak2018":
@@ -196,14 +237,16 @@ class Sensor(_Section, frozen=True, kw_only=True):
                 self, preset=None, detection_limit_g_m3=0.0, saturation_g_m3=None
             )
         if self.preset is not None:
-            rise, decay, gas, mox = SENSOR_PRESETS[self.preset]
+            p = SENSOR_PRESETS[self.preset]
             return msgspec.structs.replace(
                 self,
                 preset=None,
-                rise_time_constant_s=_or(self.rise_time_constant_s, rise),
-                decay_time_constant_s=_or(self.decay_time_constant_s, decay),
-                gas=self.gas or gas,
-                mox=self.mox or mox,
+                rise_time_constant_s=_or(self.rise_time_constant_s, p.rise_s),
+                decay_time_constant_s=_or(self.decay_time_constant_s, p.decay_s),
+                gas=self.gas or p.gas,
+                mox=self.mox or p.mox,
+                detection_limit_g_m3=self.detection_limit_g_m3 or p.detection_limit_g_m3,
+                noise_std_g_m3=self.noise_std_g_m3 or p.noise_std_g_m3,
             )
         return self
 

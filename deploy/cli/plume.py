@@ -244,3 +244,94 @@ def series(
     click.echo(f"{'t (s)':>10}{header}")
     for t, values in zip(times, rows, strict=True):
         click.echo(f"{t:10.3f}" + "".join(f"{v:22.6g}" for v in values))
+
+
+SENSOR_NAMES = ("ideal", "novak2018", "mox-tgs2620", "pid", "pid-fast")
+
+
+def _distance(value: float) -> str:
+    return "unbounded" if math.isinf(value) else f"{value:.1f} m"
+
+
+@plume.command()
+@click.argument("scenario_name", metavar="SCENARIO")
+@click.option(
+    "--sensor",
+    "sensor_name",
+    type=click.Choice(SENSOR_NAMES),
+    default=None,
+    help="A sensor preset (default: the scenario's own sensor).",
+)
+@click.option(
+    "--altitude", type=float, default=None, help="Flight altitude (m; default: [env] start box)."
+)
+@click.option(
+    "--at",
+    "distances",
+    type=float,
+    multiple=True,
+    metavar="X",
+    help="Downwind distance (m) for a crosswind half-width (repeat; default 30, 50, 80).",
+)
+@click.option("--margin", type=float, default=1.0, show_default=True, help="Mean ≥ margin × floor.")
+@click.option("--format", "fmt", type=click.Choice(["table", "json"]), default="table")
+def visibility(
+    scenario_name: str,
+    sensor_name: str | None,
+    altitude: float | None,
+    distances: tuple[float, ...],
+    margin: float,
+    fmt: str,
+) -> None:
+    """Where a sensor can see the scenario's plume: the region where the time-averaged field
+    (the steady Gaussian of the scenario's atmosphere) is at least --margin × the sensor's
+    detection floor, at one altitude: how far downwind on the axis, and how wide across."""
+    from deploy.cli.common import fail, scenario_from
+    from deploy.visibility import DEFAULT_DISTANCES_M
+    from deploy.visibility import visibility as compute
+    from swarmbus.scenario import Sensor
+
+    scenario = scenario_from(scenario_name)
+    sensor = None if sensor_name is None else Sensor(preset=sensor_name)  # type: ignore[arg-type]
+    try:
+        v = compute(scenario, sensor, altitude, distances or DEFAULT_DISTANCES_M, margin)
+    except ValueError as exc:
+        fail(str(exc))
+    name = sensor_name or "the scenario's"
+    if fmt == "json":
+        out = {
+            "sensor": name,
+            "floor_g_m3": v.floor_g_m3,
+            "noise_std_g_m3": v.noise_std_g_m3,
+            "level_g_m3": v.level_g_m3,
+            "altitude_m": v.altitude_m,
+            "nearest_m": v.nearest_m,
+            "farthest_m": None
+            if v.farthest_m is None or math.isinf(v.farthest_m)
+            else v.farthest_m,
+            "unbounded": v.farthest_m is not None and math.isinf(v.farthest_m),
+            "at": [
+                {
+                    "downwind_m": d,
+                    "centreline_g_m3": v.centreline_g_m3[d],
+                    "half_width_m": None if math.isinf(w) else w,
+                }
+                for d, w in v.half_width_m.items()
+            ],
+        }
+        click.echo(json.dumps(out, indent=2))
+        return
+    click.echo(
+        f"sensor {name}: floor {v.floor_g_m3:.4g} g/m³, noise std {v.noise_std_g_m3:.3g} g/m³; "
+        f"mean ≥ {v.level_g_m3:.4g} g/m³ at {v.altitude_m:g} m"
+    )
+    if v.nearest_m is None or v.farthest_m is None:
+        click.echo("on the axis: never (the mean stays below the level)")
+    else:
+        click.echo(
+            f"on the axis: from {_distance(v.nearest_m)} to {_distance(v.farthest_m)} downwind"
+        )
+    click.echo(f"{'downwind (m)':>14} {'mean on axis (g/m³)':>20} {'half-width (m)':>16}")
+    for d, w in v.half_width_m.items():
+        width = "unbounded" if math.isinf(w) else f"{w:.1f}"
+        click.echo(f"{d:14g} {v.centreline_g_m3[d]:20.4g} {width:>16}")

@@ -1,10 +1,10 @@
 """The concentration sensor model: thresholds, saturation, lag, seeded noise, unavailability,
-rise/decay time constants, quantisation, ppm, the MOX and PID presets."""
+rise/decay time constants, quantisation, ppm, the MOX (GADEN's order: the filter acts on
+RS/R0, checked against its closed form) and PID presets."""
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -79,25 +79,138 @@ ETHANOL_G_MOL = 2 * 12.011 + 6 * 1.008 + 15.999  # C2H5OH, IUPAC conventional at
 MOLAR_VOLUME_M3 = 8.314462618 * 298.15 / 101325.0  # ideal gas at 298.15 K, 1 atm
 
 
-def _crossing(times: list[float], values: list[float], test: Callable[[float], bool]) -> float:
-    return next(t for t, v in zip(times, values, strict=True) if test(v))
+# GADEN's TGS2620, by hand: RS/R0 = 62.32·ppm^-0.7155 capped at the clean-air 21, R0 3 kΩ,
+# rise τ 2.96 s while RS/R0 falls, decay τ 15.71 s while it rises; ethanol at 298.15 K, 1 atm
+PPM_PER_G_M3 = MOLAR_VOLUME_M3 / ETHANOL_G_MOL * 1e6  # ≈ 531 ppm per g/m³
+RISE_S, DECAY_S, CLEAN_RS_R0 = 2.96, 15.71, 21.0
 
 
-def test_mox_preset_rises_in_2_96_s_and_decays_in_15_71_s() -> None:
-    """GADEN's TGS2620 time constants: 63.2 % of a step after the rise time constant, 36.8 %
-    left after the decay time constant; sampled at 20 Hz, so within one sample (0.05 s)."""
-    dt, step_g_m3, off_at_s = 0.05, 1.0, 100.0
+def _gaden_rs_r0(g_m3: float) -> float:
+    ppm = g_m3 * PPM_PER_G_M3
+    return CLEAN_RS_R0 if ppm <= 0.0 else min(62.32 * ppm**-0.7155, CLEAN_RS_R0)
+
+
+def _calibrated_g_m3(rs_r0: float) -> float:
+    return 0.0 if rs_r0 >= CLEAN_RS_R0 else (rs_r0 / 62.32) ** (1.0 / -0.7155) / PPM_PER_G_M3
+
+
+def test_mox_step_up_moves_rs_r0_with_the_rise_time_constant() -> None:
+    """From clean air, a held 1 g/m³: RS/R0(t) = r + (21 − r)·exp(−t/2.96), r the curve's
+    value; the reading is that RS/R0 read back through the curve."""
+    step_g_m3, dt = 1.0, 0.05
+    target = _gaden_rs_r0(step_g_m3)
     s = ConcentrationSensor(MOX, 0, 0)
-    times = [round(k * dt, 10) for k in range(int(200.0 / dt))]
-    values = [s.sample(step_g_m3 if t < off_at_s else 0.0, t) for t in times]
-    assert values[0] == 0.0  # switched on in clean air
-    rise = _crossing(times, values, lambda v: v >= 0.632 * step_g_m3)
-    assert rise == pytest.approx(2.96, abs=dt)
-    plateau = values[times.index(off_at_s) - 1]
-    assert plateau == pytest.approx(step_g_m3, rel=1e-9)
-    after = [t for t in times if t >= off_at_s]
-    fall = _crossing(after, values[-len(after) :], lambda v: v <= 0.368 * plateau)
-    assert fall - off_at_s == pytest.approx(15.71, abs=dt)
+    assert s.sample(0.0, 0.0) == 0.0  # switched on in clean air
+    for k in range(1, 400):
+        t = round(k * dt, 10)
+        m = s.measure(step_g_m3, t)
+        expected = target + (CLEAN_RS_R0 - target) * math.exp(-t / RISE_S)
+        assert m.resistance_ohm == pytest.approx(expected * 3000.0, rel=1e-9)
+        assert m.reported_g_m3 == pytest.approx(_calibrated_g_m3(expected), rel=1e-9)
+    # one rise time constant covers 63.2 % of the way in RS/R0
+    one = ConcentrationSensor(MOX, 0, 0)
+    one.sample(0.0, 0.0)
+    r = one.measure(step_g_m3, RISE_S).resistance_ohm
+    assert r is not None
+    assert (CLEAN_RS_R0 - r / 3000.0) / (CLEAN_RS_R0 - target) == pytest.approx(1 - math.exp(-1))
+
+
+def test_mox_step_down_moves_rs_r0_with_the_decay_time_constant() -> None:
+    """After a settled 1 g/m³, clean air: RS/R0(t) = 21 + (r − 21)·exp(−t/15.71)."""
+    step_g_m3, dt, off_s = 1.0, 0.05, 100.0
+    target = _gaden_rs_r0(step_g_m3)
+    s = ConcentrationSensor(MOX, 0, 0)
+    s.sample(0.0, 0.0)
+    settled = s.measure(step_g_m3, off_s).resistance_ohm
+    assert settled is not None
+    assert settled / 3000.0 == pytest.approx(target, rel=1e-12)
+    for k in range(1, 2000):
+        t = round(off_s + k * dt, 10)
+        m = s.measure(0.0, t)
+        expected = CLEAN_RS_R0 + (target - CLEAN_RS_R0) * math.exp(-(t - off_s) / DECAY_S)
+        assert m.resistance_ohm == pytest.approx(expected * 3000.0, rel=1e-9)
+        assert m.reported_g_m3 == pytest.approx(_calibrated_g_m3(expected), rel=1e-9)
+    left = s.measure(0.0, off_s + 100.0 + DECAY_S).resistance_ohm
+    assert left is not None  # 36.8 % of the way left after one decay time constant
+    lagged = CLEAN_RS_R0 + (target - CLEAN_RS_R0) * math.exp(-100.0 / DECAY_S)
+    assert (CLEAN_RS_R0 - left / 3000.0) / (CLEAN_RS_R0 - lagged) == pytest.approx(math.exp(-1))
+
+
+def test_one_short_strong_hit_reads_just_above_the_floor() -> None:
+    """0.1 s at 65 g/m³: RS/R0 = 21 + (r − 21)(1 − exp(−0.1/2.96)) ≈ 20.30, which reads
+    ≈ 4.79 ppm ≈ 0.009 g/m³ of ethanol — just above the 4.57 ppm floor. (Filtering the
+    concentration before the curve instead read 2.16 g/m³.)"""
+    rs_r0 = CLEAN_RS_R0 + (_gaden_rs_r0(65.0) - CLEAN_RS_R0) * (1.0 - math.exp(-0.1 / RISE_S))
+    peak = _calibrated_g_m3(rs_r0)
+    assert peak == pytest.approx(0.009, abs=0.0005)
+    s = ConcentrationSensor(MOX, 0, 0)
+    s.sample(0.0, 0.0)
+    assert s.sample(65.0, 0.1) == pytest.approx(peak, rel=1e-9)
+    after = [s.measure(0.0, round(0.1 + 0.1 * k, 10)) for k in range(1, 600)]
+    for k, m in enumerate(after, start=1):
+        expected = CLEAN_RS_R0 + (rs_r0 - CLEAN_RS_R0) * math.exp(-0.1 * k / DECAY_S)
+        assert m.resistance_ohm == pytest.approx(expected * 3000.0, rel=1e-9)
+        assert m.reported_g_m3 <= peak
+        assert m.reported_g_m3 == 0.0 or m.reported_g_m3 >= s.floor_g_m3
+
+
+def test_mox_floor_is_the_clean_air_value_and_nothing_reads_below_it() -> None:
+    floor_ppm = (62.32 / 21.0) ** (1.0 / 0.7155)  # the curve at RS/R0 = 21
+    assert floor_ppm == pytest.approx(4.57, abs=0.005)
+    s = ConcentrationSensor(MOX, 0, 0)
+    assert s.floor_g_m3 == pytest.approx(floor_ppm / PPM_PER_G_M3, rel=1e-12)
+    assert s.floor_g_m3 == pytest.approx(0.0086, abs=0.00005)
+    assert s.noise_std_g_m3 == 0.0  # the preset adds no noise
+    settle = 1000.0
+    for true in (0.5, 0.99, 1.01, 2.0, 100.0):
+        t = ConcentrationSensor(MOX, 0, 0)
+        t.sample(true * s.floor_g_m3, 0.0)
+        value = t.sample(true * s.floor_g_m3, settle)
+        assert value == (0.0 if true < 1.0 else pytest.approx(true * s.floor_g_m3, rel=1e-9))
+
+
+def test_mox_resistance_noise_is_relative_and_seeded() -> None:
+    """RS noise σ (relative) gives the calibrated value a relative std σ/0.7155 (d ln ppm =
+    d ln RS / b), and noise_std_g_m3 reports that at the floor."""
+    sigma = 0.01
+    cfg = Sensor(preset="mox-tgs2620", mox=Mox(rs_noise_rel=sigma))
+    s = ConcentrationSensor(cfg, 4, 1)
+    level = 0.5
+    s.sample(level, 0.0)
+    measured = [s.measure(level, 1000.0 + 0.1 * k) for k in range(6000)]
+    values = np.array([m.reported_g_m3 for m in measured])
+    rs = np.array([m.resistance_ohm for m in measured], dtype=np.float64)
+    assert np.std(rs) / np.mean(rs) == pytest.approx(sigma, rel=0.05)
+    assert np.std(values) / np.mean(values) == pytest.approx(sigma / 0.7155, rel=0.05)
+    assert s.noise_std_g_m3 == pytest.approx(sigma / 0.7155 * s.floor_g_m3, rel=1e-12)
+    again = ConcentrationSensor(cfg, 4, 1)
+    again.sample(level, 0.0)
+    assert again.sample(level, 1000.0) == values[0]
+    other = ConcentrationSensor(cfg, 4, 2)
+    other.sample(level, 0.0)
+    assert other.sample(level, 1000.0) != values[0]
+
+
+def test_mox_baseline_drift_is_linear_in_time_and_drawn_per_vehicle() -> None:
+    """R0 drifts at a constant rate per vehicle (std r0_drift_rel_per_h per hour): the
+    settled resistance is RS/R0 · R0 · (1 + rate · t)."""
+    cfg = Sensor(preset="mox-tgs2620", mox=Mox(r0_drift_rel_per_h=0.02))
+    level = 0.5
+    ideal_ohm = _gaden_rs_r0(level) * 3000.0
+    rates = []
+    for index in range(400):
+        s = ConcentrationSensor(cfg, 9, index)
+        s.sample(level, 0.0)
+        drift = [
+            (s.measure(level, t).resistance_ohm or 0.0) / ideal_ohm - 1.0
+            for t in (600.0, 1800.0, 3600.0)
+        ]
+        assert drift[1] == pytest.approx(3.0 * drift[0], rel=1e-6, abs=1e-15)
+        assert drift[2] == pytest.approx(6.0 * drift[0], rel=1e-6, abs=1e-15)
+        rates.append(drift[2])  # per hour
+    assert len(set(rates)) == len(rates)
+    assert float(np.std(rates)) == pytest.approx(0.02, rel=0.1)
+    assert abs(float(np.mean(rates))) < 4 * 0.02 / math.sqrt(len(rates))
 
 
 def test_rise_and_decay_time_constants_are_separate() -> None:
@@ -206,6 +319,28 @@ def test_pid_preset_is_fast_and_reports_isobutylene_ppm() -> None:
     assert r.resistance_ohm is None
 
 
+def test_pid_presets_floor_is_the_datasheet_detection_level_and_noise_a_third_of_it() -> None:
+    """MiniPID 2 (0-4000 ppm): minimum detection level 0.1 ppm isobutylene, read as 3σ."""
+    isobutylene_g_mol = 4 * 12.011 + 8 * 1.008
+    mdl_g_m3 = 0.1e-6 * isobutylene_g_mol / MOLAR_VOLUME_M3
+    for name in ("pid", "pid-fast"):
+        s = ConcentrationSensor(Sensor(preset=name), 0, 0)
+        assert s.floor_g_m3 == pytest.approx(mdl_g_m3, rel=1e-4)
+        assert s.noise_std_g_m3 == pytest.approx(mdl_g_m3 / 3.0, rel=1e-4)
+        assert s.sample(0.0, 0.0) == 0.0  # clean air + noise below the floor → 0
+
+
+def test_fast_pid_follows_a_step_within_one_sample() -> None:
+    """τ 0.3 ms: after one 0.05 s sample the step is reached to exp(−0.05/0.0003) ≈ 0."""
+    cfg = Sensor(preset="pid-fast").resolved()
+    assert cfg.rise_s == cfg.decay_s == pytest.approx(0.0003)
+    s = ConcentrationSensor(Sensor(preset="pid-fast", noise_std_g_m3=1e-12), 0, 0)
+    s.sample(0.0, 0.0)
+    assert s.sample(1.0, 0.05) == pytest.approx(1.0, abs=1e-9)
+    assert s.sample(0.0, 0.10) == 0.0
+    assert s.sample(0.3, 0.15) == pytest.approx(0.3, abs=1e-9)
+
+
 def test_preset_fills_only_what_is_unset() -> None:
     cfg = Sensor(preset="mox-tgs2620", decay_time_constant_s=5.0, noise_rel=0.2).resolved()
     assert (cfg.rise_s, cfg.decay_s, cfg.noise_rel, cfg.gas) == (2.96, 5.0, 0.2, "ethanol")
@@ -215,7 +350,8 @@ def test_preset_fills_only_what_is_unset() -> None:
 def test_time_going_back_replays_the_same_readings() -> None:
     """Physics resumed from a checkpoint: the sensor resumes from its state before that time,
     so the readings from there on equal those of a run without the restart."""
-    cfg = Sensor(preset="mox-tgs2620", noise_rel=0.05)
+    mox = Mox(rs_noise_rel=0.02, r0_drift_rel_per_h=0.05)
+    cfg = Sensor(preset="mox-tgs2620", noise_rel=0.05, mox=mox)
     truth = [0.0 if k < 10 or 60 < k < 80 else 0.5 for k in range(120)]
     times = [0.1 * k for k in range(120)]
     straight = ConcentrationSensor(cfg, 3, 0)

@@ -319,3 +319,112 @@ def test_each_mission_is_encoded_once_however_many_vehicles_a_process_serves() -
     decoded = [msgspec.msgpack.decode(raw, type=list[MissionItem]) for raw in first]
     assert decoded == missions
     assert msgspec.msgpack.decode(_items_raw([]), type=list[MissionItem]) == []
+
+
+def _uploaded(items: int, vertices: int) -> Autopilot:
+    sc = load_scenario()
+    ap = build_autopilot(sc, "uav1", NodeOptions())
+    mission = [MissionItem(x=float(i % 50), y=float(i // 50), z=10.0) for i in range(items)]
+    assert ap.handle(MissionUpload(items=mission)).accepted
+    ring = [
+        (200.0 * math.cos(2 * math.pi * k / vertices), 200.0 * math.sin(2 * math.pi * k / vertices))
+        for k in range(vertices)
+    ]
+    assert ap.handle(GeofenceUpload(zones=[FenceZone(polygon_enu_m=ring)])).accepted
+    return ap
+
+
+def test_a_ticks_snapshot_does_not_grow_with_the_mission_or_the_fence() -> None:
+    """Missions and fences are saved by reference: a vehicle's snapshot with 1000 mission
+    items and a 200-vertex fence is as long as one with 2 items and a triangle (it was
+    ≈ 60 kB longer when the lists were in every tick's record)."""
+    sc = load_scenario()
+    small, large = _uploaded(2, 3), _uploaded(1000, 200)
+    size = [
+        len(msgspec.msgpack.encode(capture(ap, ConcentrationSensor(sc.sensor, 0, 0))))
+        for ap in (small, large)
+    ]
+    assert size[1] == size[0]
+    back = msgspec.msgpack.decode(
+        msgspec.msgpack.encode(capture(large, ConcentrationSensor(sc.sensor, 0, 0))),
+        type=VehicleSnapshot,
+    )
+    fresh = build_autopilot(sc, "uav1", NodeOptions())
+    restore(fresh, ConcentrationSensor(sc.sensor, 0, 0), back)
+    assert fresh.modes.mission.items == large.modes.mission.items
+    assert len(fresh.modes.mission.items) == 1000
+    assert fresh.modes.fence_zones == large.modes.fence_zones
+
+
+def test_the_blob_log_gives_a_restarted_process_its_lists_and_survives_a_torn_append(
+    tmp_path: Path,
+) -> None:
+    """A new process (its own Blobs) reads the lists back by their keys; an append cut short
+    by a kill is cut off, and what is appended after it reads back."""
+    from agents.snapshot import BlobLog, Blobs
+
+    path = tmp_path / "ap.state.blobs"
+    first = Blobs()
+    log = BlobLog(path, first)
+    log.open()
+    lists = [[MissionItem(x=float(v), y=float(i), z=5.0) for i in range(v + 1)] for v in range(4)]
+    keys = [first.encoded(items)[1] for items in lists]
+    log.flush()
+    size = path.stat().st_size
+    log.flush()  # nothing new: nothing written
+    assert path.stat().st_size == size
+    first.encoded([MissionItem(x=9.0, y=9.0, z=9.0)])
+    log.flush()
+    log.close()
+    data = path.read_bytes()
+    path.write_bytes(data[:-5])  # the last append cut short
+
+    second = Blobs()
+    again = BlobLog(path, second)
+    again.open()
+    assert set(second.by_key) == set(keys)
+    for key, items in zip(keys, lists, strict=True):
+        assert msgspec.msgpack.decode(second.by_key[key], type=list[MissionItem]) == items
+    assert path.stat().st_size == size  # the torn record is cut off
+    late = second.encoded([MissionItem(x=1.0, y=2.0, z=3.0)])[1]
+    again.flush()
+    again.close()
+    third = Blobs()
+    last = BlobLog(path, third)
+    last.open()
+    last.close()
+    assert set(third.by_key) == {*keys, late}
+
+
+def test_a_restarted_keeper_restores_only_snapshots_whose_lists_it_has(tmp_path: Path) -> None:
+    from agents.resume import StateKeeper
+    from agents.snapshot import ProcessSnapshot
+
+    sc = load_scenario()
+    v = capture(_uploaded(300, 12), ConcentrationSensor(sc.sensor, 0, 0))
+    lost = msgspec.structs.replace(v, scenario_mission="0" * 32)  # a list never saved
+
+    def record(tick: int, vehicle: VehicleSnapshot) -> bytes:
+        snap = ProcessSnapshot(
+            node="ap",
+            tick=tick,
+            vehicles=[vehicle],
+            commands=[b""],
+            status_times_s=[0.0],
+            pending=None,
+        )
+        return msgspec.msgpack.encode(snap)
+
+    keeper = StateKeeper(tmp_path / "ap.state", 0)
+    keeper.open(record(-1, v))
+    keeper.save(record(4, v))
+    keeper.save(record(5, lost))
+    keeper.close()
+    again = StateKeeper(tmp_path / "ap.state", 0)
+    again.open(record(-1, v))
+    restored = again.for_restart(5)
+    assert restored is not None and restored.tick == 4
+    assert restored.vehicles[0].modes.mission.items == v.modes.mission.items
+    assert again.for_restart(6) is None  # tick 5 refers to a missing list
+    again.close()
+    assert (tmp_path / "ap.state.blobs").stat().st_size > 300 * 20  # the mission, once
