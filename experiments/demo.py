@@ -28,16 +28,16 @@ from typing import Any
 import msgspec
 import numpy as np
 import numpy.typing as npt
-import zenoh
 
 from agents import Swarm, SwarmError
 from agents.swarm import Subscription
 from deploy.busview import BusView, Snapshot, status_line
 from deploy.console import Console
-from deploy.launcher import Launcher, LaunchError, LaunchOptions, missing_roles
+from deploy.launcher import LaunchError, missing_roles
 from deploy.scaling import local_stack_scenario, scale_scenario, write_scenario
+from experiments.driver import BusDriver, DriverError
 from swarmbus.codec import encode
-from swarmbus.keys import Keys, autopilot_node
+from swarmbus.keys import Keys
 from swarmbus.messages import (
     Arm,
     Command,
@@ -48,7 +48,7 @@ from swarmbus.messages import (
     VehicleStatus,
 )
 from swarmbus.scenario import Scenario
-from swarmbus.session import NetworkConfig, open_session
+from swarmbus.session import NetworkConfig
 from swarmbus.views import state_key_decoder
 
 log = logging.getLogger(__name__)
@@ -349,48 +349,6 @@ class DemoOptions:
     clock: str | None = None
 
 
-class AttachedStack:
-    """A stack someone else started (on this host or others): we only join its bus."""
-
-    def __init__(
-        self, scenario: Scenario, connect: Sequence[str], net: NetworkConfig | None = None
-    ) -> None:
-        self.scenario = scenario
-        self.net = msgspec.structs.replace(net or NetworkConfig(), connect=list(connect), listen=[])
-        self.keys = Keys(scenario.world.name)
-        self.specs: Sequence[object] = ()
-        self._session: zenoh.Session | None = None
-        self.view: BusView | None = None
-
-    @property
-    def session(self) -> zenoh.Session:
-        assert self._session is not None
-        return self._session
-
-    def start(self, on_bus: Callable[[zenoh.Session], None] | None = None) -> None:
-        self._session = open_session(self.net)
-        self.view = BusView(self._session, self.keys)
-        if on_bus is not None:
-            on_bus(self._session)
-        wanted = {autopilot_node(v.id) for v in self.scenario.vehicles} | {"physics", "plume"}
-        timeout = self.scenario.time.startup_timeout_s
-        if not self.view.presence.wait_for(lambda alive: wanted <= alive, timeout):
-            missing = ", ".join(sorted(wanted - self.view.presence.alive))
-            raise LaunchError(f"not on the bus within {timeout:.0f} s: {missing}")
-        self.specs = sorted(self.view.presence.alive)
-
-    def supervise_once(self) -> None:
-        pass
-
-    def stop(self) -> None:
-        if self.view is not None:
-            self.view.close()
-            self.view = None
-        if self._session is not None:
-            self._session.close()
-            self._session = None
-
-
 def prepare(opts: DemoOptions) -> tuple[Scenario, Path]:
     """The scenario to fly (scaled, with a free router port) written into the run directory."""
     sc = opts.scenario
@@ -410,16 +368,16 @@ def clock_mode(view: BusView, deadline: float) -> str:
     return str(snap.clock.mode)
 
 
-def start_stepped(sw: Swarm, sc: Scenario, deadline: float) -> Callable[[], None]:
+def start_stepped(driver: BusDriver, sc: Scenario, deadline: float) -> Callable[[], None]:
     """Start the missions on a stepped clock; returns how to advance the world: every command
     lands on a known tick, and the run ends on the first check (every ``STEP_S`` of sim time)
     that finds every vehicle done, so two runs give the same state stream."""
-    sw.step(1)  # past the start handshake: every autopilot has its first state
-    start_missions(sw, sc, deadline)  # paused at tick 1: they take effect in tick 2
+    driver.step(1)  # past the start handshake: every autopilot has its first state
+    start_missions(driver.swarm, sc, deadline)  # paused at tick 1: they take effect in tick 2
     ticks = max(1, round(STEP_S * sc.time.control_hz))
 
     def advance() -> None:
-        sw.step(ticks)
+        driver.step(ticks)
 
     return advance
 
@@ -453,80 +411,73 @@ def run_demo(opts: DemoOptions, console: Console) -> int:
     sc, path = prepare(opts)
     record = opts.record and not opts.attach and not missing_roles(["recorder"])
     console.line(f"plumeswarm demo: {len(sc.vehicles)} vehicle(s), run directory {opts.out}")
-    flight = fly(opts, sc, stack_for(opts, sc, path, record), console)
+    flight = fly(opts, sc, record, console)
     if flight is None:
         return 1
     return finish(opts, sc, path, flight, record, console)
 
 
-def stack_for(
-    opts: DemoOptions, sc: Scenario, path: Path, record: bool
-) -> Launcher | AttachedStack:
-    """The stack to fly: our own (what flying needs; no gateway: nobody speaks MAVLink here;
-    the recorder when it is installed), or the attached one."""
-    if opts.attach:
-        return AttachedStack(sc, opts.attach, opts.network)
-    roles = DEMO_ROLES + (("recorder",) if record else ())
-    launch = LaunchOptions(
-        scenario_path=path, headless=True, record=record, run_dir=opts.out, roles=roles
-    )
-    return Launcher(sc, launch)
+def fly(opts: DemoOptions, sc: Scenario, record: bool, console: Console) -> Flight | None:
+    """Start the world (our own stack: what flying needs, no gateway since nobody speaks
+    MAVLink here, the recorder when it is installed; or the attached one) through a
+    :class:`~experiments.driver.BusDriver`, fly every mission to its end (or the deadline),
+    stop; None when it never reached the bus."""
+    flight = Flight(Collector([v.id for v in sc.vehicles]), mode=opts.clock or sc.time.mode)
+    views: list[BusView] = []
 
-
-def fly(
-    opts: DemoOptions, sc: Scenario, launcher: Launcher | AttachedStack, console: Console
-) -> Flight | None:
-    """Start the stack, fly every mission to its end (or the deadline) through one
-    :class:`~agents.Swarm` client, stop the stack; None when it never reached the bus."""
-    flight = Flight(Collector([v.id for v in sc.vehicles]), mode=sc.time.mode)
-    swarms: list[Swarm] = []
-
-    def on_bus(session: zenoh.Session) -> None:  # before the world starts: states from tick 0
-        sw = Swarm(session, Keys(sc.world.name), COMMAND_TIMEOUT_S, own_session=False)
+    def on_join(sw: Swarm) -> None:  # before the world starts: states from tick 0
         flight.collector.attach(sw)
-        swarms.append(sw)
+        views.append(BusView(sw.session, Keys(sc.world.name)))
 
+    driver = BusDriver(
+        attach=opts.attach or None,
+        run_dir=opts.out,
+        startup_timeout_s=sc.time.startup_timeout_s,
+        mode=opts.clock or "stepped",
+        roles=DEMO_ROLES + (("recorder",) if record else ()),
+        record=record,
+        network=opts.network,
+        on_join=on_join,
+    )
     deadline = time.monotonic() + opts.timeout_s
     try:
-        launcher.start(on_bus=on_bus)
-        fly_missions(opts, sc, launcher, swarms[0], flight, console, deadline)
-    except (LaunchError, DemoError, SwarmError) as exc:
+        driver.start(sc)
+        fly_missions(opts, sc, driver, views[0], flight, console, deadline)
+    except (LaunchError, DriverError, DemoError, SwarmError) as exc:
         console.line(f"plumeswarm demo: {exc}")
     finally:
         flight.wall_s = time.monotonic() - flight.wall0
-        for sw in swarms:
-            sw.close()
-        launcher.stop()
+        for view in views:
+            view.close()
+        driver.close()
         flight.collector.close()
-    return flight if swarms else None
+    return flight if views else None
 
 
 def fly_missions(
     opts: DemoOptions,
     sc: Scenario,
-    launcher: Launcher | AttachedStack,
-    sw: Swarm,
+    driver: BusDriver,
+    view: BusView,
     flight: Flight,
     console: Console,
     deadline: float,
 ) -> None:
     """Start the missions on the world's clock and advance it until every vehicle is done."""
-    view = launcher.view
-    assert view is not None
-    console.line(f"plumeswarm demo: {len(launcher.specs)} processes ready")
+    console.line(f"plumeswarm demo: {len(view.presence.alive)} processes ready")
     if opts.attach:
         flight.mode = opts.clock or clock_mode(view, deadline)
     console.line(f"plumeswarm demo: {flight.mode} clock; starting missions")
     if flight.mode == "stepped":
-        advance = start_stepped(sw, sc, deadline)
+        advance = start_stepped(driver, sc, deadline)
     else:
-        advance = start_free(view, sw, sc, deadline)
+        advance = start_free(view, driver.swarm, sc, deadline)
     flight.wall0 = time.monotonic()
     flight.snap = view.snapshot()
     flight.sim0 = flight.snap.clock.sim_time_s if flight.snap.clock else None
     show = table_shower(opts, console, view, flight.collector)
     while not flight.collector.all_done():
-        launcher.supervise_once()
+        driver.supervise_once()
         if time.monotonic() > deadline:
             break
         show()

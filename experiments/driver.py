@@ -21,7 +21,7 @@ import logging
 import tempfile
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Protocol
 
@@ -42,6 +42,7 @@ from swarmbus.messages import (
 )
 from swarmbus.reqrep import ask, command_reply
 from swarmbus.scenario import Scenario
+from swarmbus.session import NetworkConfig
 
 log = logging.getLogger(__name__)
 
@@ -146,19 +147,36 @@ class _Ticks:
 
 
 class BusDriver:
-    """The distributed stack (see the module doc); ``attach``: a running stack's router."""
+    """The distributed stack (see the module doc). ``attach``: a running stack's router
+    endpoint(s); otherwise the driver starts a stack of ``roles`` on this host for each world,
+    its clock in ``mode`` (``"stepped"``: this driver holds it; ``"lockstep"`` or
+    ``"realtime"``: the world runs on its own and a step waits for the ticks). ``on_join`` is
+    called with the driver's :class:`~agents.Swarm` client before the world's first tick."""
 
     def __init__(
         self,
-        attach: str | None = None,
+        attach: str | Sequence[str] | None = None,
         vehicles_per_process: int = 1,
         run_dir: Path | None = None,
         startup_timeout_s: float = 120.0,
+        *,
+        mode: str = "stepped",
+        roles: Sequence[str] = BUS_ROLES,
+        record: bool = False,
+        stand_ins: Mapping[str, str] | None = None,
+        network: NetworkConfig | None = None,
+        on_join: Callable[[Swarm], None] | None = None,
     ) -> None:
         self.attach = attach
         self.vehicles_per_process = vehicles_per_process
         self.run_dir = run_dir
         self.startup_timeout_s = startup_timeout_s
+        self.mode = mode
+        self.roles = tuple(roles)
+        self.record = record
+        self.stand_ins = dict(stand_ins or {})
+        self.network = network
+        self.on_join = on_join
         self._tmp: tempfile.TemporaryDirectory[str] | None = None
         self._launcher: Launcher | None = None
         self._swarm: Swarm | None = None
@@ -170,6 +188,23 @@ class BusDriver:
         self._states: dict[str, VehicleState] = {}
 
     # ------------------------------------------------------------------ lifecycle
+    @property
+    def swarm(self) -> Swarm:
+        """The driver's client of the world (commands, subscriptions, the clock)."""
+        if self._swarm is None:
+            raise DriverError("the driver has no world before start()")
+        return self._swarm
+
+    @property
+    def launcher(self) -> Launcher | None:
+        """The stack this driver started (None when attached)."""
+        return self._launcher
+
+    def supervise_once(self) -> None:
+        """Restart what died in the stack this driver started (its supervisor's policy)."""
+        if self._launcher is not None:
+            self._launcher.supervise_once()
+
     def start(self, scenario: Scenario) -> None:
         self._agents = tuple(v.id for v in scenario.vehicles)
         self._keys = Keys(scenario.world.name)
@@ -178,14 +213,19 @@ class BusDriver:
         else:
             self._launch(scenario)
 
-    def _join(self, world: str, endpoint: str) -> None:
+    def _join(self, world: str, endpoints: Sequence[str]) -> None:
         """Our client and tick subscriber, before the world publishes its first tick."""
-        sw = self._swarm = Swarm.connect(world, [endpoint], command_timeout_s=COMMAND_TIMEOUT_S)
+        sw = self._swarm = Swarm.connect(
+            world, list(endpoints), network=self.network, command_timeout_s=COMMAND_TIMEOUT_S
+        )
         self._ticks = _Ticks(sw.session, self._keys)
+        if self.on_join is not None:
+            self.on_join(sw)
 
     def _attach(self, scenario: Scenario) -> None:
         if self._swarm is None:
-            self._join(scenario.world.name, self.attach or "")
+            attach = self.attach or ""
+            self._join(scenario.world.name, [attach] if isinstance(attach, str) else attach)
             self._stepped = True  # until the world says otherwise (first step)
         assert self._ticks is not None
         self._wait_handshake()
@@ -197,24 +237,25 @@ class BusDriver:
         if self.run_dir is None:
             self._tmp = tempfile.TemporaryDirectory(prefix="plumeswarm-env-")
         run_dir = self.run_dir or Path(self._tmp.name if self._tmp else ".")
-        sc, path = local_stack_scenario(scenario, run_dir, "stepped", self.startup_timeout_s)
-        endpoint = sc.network.connect[0]
+        sc, path = local_stack_scenario(scenario, run_dir, self.mode, self.startup_timeout_s)
         opts = LaunchOptions(
             scenario_path=path,
             headless=True,
+            record=self.record,
             run_dir=run_dir,
-            roles=BUS_ROLES,
+            roles=self.roles,
             vehicles_per_process=self.vehicles_per_process,
             verbose=0,
+            stand_ins=self.stand_ins,
         )
         launcher = self._launcher = Launcher(sc, opts)
         # The client joins once the router is up and before the physics starts: it sees tick 0.
-        launcher.start(lambda _session: self._join(sc.world.name, endpoint))
-        self._stepped = True
+        launcher.start(lambda _session: self._join(sc.world.name, sc.network.connect))
+        self._stepped = self.mode == "stepped"
         assert self._ticks is not None and self._swarm is not None
         tick0 = self._ticks.wait_past(0, self.startup_timeout_s)
-        self._wait_handshake()  # from then on the world is paused at tick 0
-        self._take(0, tick0.states)
+        self._wait_handshake()  # stepped: from then on the world is paused at tick 0
+        self._take(tick0.tick, tick0.states)
 
     def _wait_handshake(self) -> None:
         """The physics publishes its clock once every autopilot answered the first tick (the
@@ -301,7 +342,7 @@ def open_driver(kind: str, attach: str | None = None, vehicles_per_process: int 
     if kind == "fused":
         return InProcessDriver()
     if kind == "bus":
-        return BusDriver(attach=attach, vehicles_per_process=vehicles_per_process)
+        return BusDriver(attach, vehicles_per_process)
     raise ValueError(f"driver: expected 'fused' or 'bus', got {kind!r}")
 
 
