@@ -522,6 +522,14 @@ def _int_list(ctx: click.Context, param: click.Parameter, value: str) -> tuple[i
     is_flag=True,
     help="Also measure each row's ceiling: the same processes doing no work but the lockstep.",
 )
+@click.option(
+    "--ros2",
+    type=click.Choice(["off", "idle", "subscribed"]),
+    default="off",
+    show_default=True,
+    help="Also run the ROS 2 bridge: with no ROS 2 subscriber (idle) or with one subscribed to "
+    "every topic it publishes (subscribed).",
+)
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=None)
 def bench_scale(
     scenario: str | None,
@@ -532,6 +540,7 @@ def bench_scale(
     no_gateway: bool,
     sensor_period_ticks: int | None,
     baseline: bool,
+    ros2: str,
     out: Path | None,
 ) -> None:
     """Real-time factor, CPU and memory of the whole stack against the number of vehicles."""
@@ -549,6 +558,7 @@ def bench_scale(
         gateway=not no_gateway,
         sensor_period_ticks=sensor_period_ticks,
         baseline=baseline,
+        ros2=ros2,
     )
     try:
         rows = run_scale(opts, click.echo)
