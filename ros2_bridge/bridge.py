@@ -39,6 +39,7 @@ from swarmbus.codec import MessageError, decode
 from swarmbus.keys import Keys
 from swarmbus.messages import (
     AnemometerReading,
+    Clock,
     CommandReply,
     ConcentrationReading,
     PlumeMesh,
@@ -221,10 +222,14 @@ class CmdVel:
             twist = wire.decode(payload, cv.TWIST)
             if len(wire.encode(twist, cv.TWIST)) != len(payload):
                 raise wire.WireError(f"{len(payload)} bytes, a Twist is 52")
-            setpoint = cv.setpoint_of(twist, self._state_of(vehicle_id))
+            state = self._state_of(vehicle_id)
+            setpoint = cv.setpoint_of(twist, state) if state is not None else None
         except (wire.WireError, ValueError) as exc:
             self.rejected += 1
             log.warning("ros2: /%s/cmd_vel: rejected payload: %s", vehicle_id, exc)
+            return
+        if setpoint is None:  # the first after a pause: the vehicle's heading comes with a tick
+            log.debug("ros2: /%s/cmd_vel: no state yet, setpoint dropped", vehicle_id)
             return
         self._senders[vehicle_id].send(setpoint)
 
@@ -254,6 +259,7 @@ class Bridge:
         }
         keys = rt.keys
         self.ticks = Latest(session, keys.tick())
+        self.clock = Latest(session, keys.clock())  # the markers' stamps, when ticks are off
         self.readings = Latest(session, keys.all_vehicle_concentration())
         self.winds = Latest(session, keys.all_vehicle_wind())
         self.plume_state = Latest(session, keys.plume_state())
@@ -280,10 +286,16 @@ class Bridge:
         """Subscribe each bus stream while a ROS 2 subscriber wants something made of it."""
         steering = time.monotonic() - self.cmd_vel.last_s < STEER_HOLD_S
         tick_topics = ["/clock", "/tf", *self._per_vehicle("odom"), *self._per_vehicle("fix")]
-        self.ticks.want(steering or self._wanted(*tick_topics))
+        ticks = steering or self._wanted(*tick_topics)
+        self.ticks.want(ticks)
+        if not ticks:  # a heading of long ago must not turn the next cmd_vel
+            with self._states_lock:
+                self._states.clear()
         self.readings.want(self._wanted(*self._per_vehicle("gas")))
         self.winds.want(self._wanted(*self._per_vehicle("wind")))
-        self.plume_state.want(self._wanted("/plume/markers"))
+        markers = self._wanted("/plume/markers")
+        self.plume_state.want(markers)
+        self.clock.want(markers)
 
     def publish_tick(self) -> None:
         raw = self.ticks.take().get(self.rt.keys.tick())
@@ -322,6 +334,10 @@ class Bridge:
         pub = self.pubs["/plume/markers"]
         if not pub.wanted:
             return
+        raw_clock = self.clock.take().get(self.rt.keys.clock())
+        clock = None if raw_clock is None else _decoded(raw_clock, Clock, "clock")
+        if clock is not None:
+            self._sim_time_s = max(self._sim_time_s, clock.sim_time_s)
         if self._meshes is None:  # asked once somebody wants the markers
             queries = isosurface_queries(self.scenario)
             self._meshes = MeshFetcher(self.rt.session, self.rt.keys, queries)
@@ -341,7 +357,7 @@ class Bridge:
         )
 
     def close(self) -> None:
-        for stream in (self.ticks, self.readings, self.winds, self.plume_state):
+        for stream in (self.ticks, self.clock, self.readings, self.winds, self.plume_state):
             stream.close()
         if self._meshes is not None:
             self._meshes.close()

@@ -301,12 +301,12 @@ def vehicle_colour(index: int) -> int:
     return PALETTE[index % len(PALETTE)]
 
 
-def setpoint_of(twist: Any, state: VehicleState | None) -> Setpoint:
+def setpoint_of(twist: Any, state: VehicleState) -> Setpoint:
     """A ``cmd_vel`` Twist in the vehicle's body frame (FLU; REP-103 ``base_link``) → an
     offboard velocity setpoint in ENU: the horizontal part turned by the vehicle's heading (the
     body's roll and pitch are ignored, as for a ground-referenced velocity), ``linear.z`` up,
     ``angular.z`` the yaw rate (counter-clockwise positive, in both frames)."""
-    heading = yaw_rad(state.attitude_xyzw) if state is not None else 0.0
+    heading = yaw_rad(state.attitude_xyzw)
     c, s = math.cos(heading), math.sin(heading)
     vx, vy, vz = float(twist.linear.x), float(twist.linear.y), float(twist.linear.z)
     values = (vx, vy, vz, float(twist.angular.z))

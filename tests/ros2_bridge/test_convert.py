@@ -1,0 +1,68 @@
+"""The conversions in closed form: a cmd_vel Twist turned by the heading, sim-time stamps, an
+unavailable gas reading."""
+
+from __future__ import annotations
+
+import math
+
+import msgspec
+import pytest
+
+from ros2_bridge import convert as cv
+from ros2_bridge import wire
+from swarmbus.messages import ConcentrationReading
+from tests.support.messages_samples import STATE
+from tests.support.ros2_probe import twist_cdr
+
+
+def facing(yaw_deg: float) -> tuple[float, float, float, float]:
+    """A level body turned ``yaw_deg`` counter-clockwise from east: (x, y, z, w)."""
+    half = math.radians(yaw_deg) / 2
+    return (0.0, 0.0, math.sin(half), math.cos(half))
+
+
+@pytest.mark.parametrize(
+    ("yaw_deg", "body", "enu"),
+    [
+        (0.0, (1.0, 0.0, 0.0), (1.0, 0.0, 0.0)),  # facing east, forward: east
+        (90.0, (1.0, 0.0, 0.0), (0.0, 1.0, 0.0)),  # facing north, forward: north
+        (90.0, (0.0, 1.0, 0.5), (-1.0, 0.0, 0.5)),  # facing north, left: west; up stays up
+        (180.0, (2.0, 0.0, 0.0), (-2.0, 0.0, 0.0)),
+    ],
+)
+def test_cmd_vel_is_turned_by_the_heading(yaw_deg, body, enu) -> None:
+    state = msgspec.structs.replace(STATE, attitude_xyzw=facing(yaw_deg))
+    twist = wire.decode(twist_cdr(*body, 0.0, 0.0, 0.3), cv.TWIST)
+    sp = cv.setpoint_of(twist, state)
+    assert sp.velocity_enu_m_s == pytest.approx(enu, abs=1e-12)
+    assert sp.yaw_rate_deg_s == pytest.approx(math.degrees(0.3))
+
+
+def test_a_non_finite_twist_is_refused() -> None:
+    twist = wire.decode(twist_cdr(math.nan, 0, 0, 0, 0, 0), cv.TWIST)
+    with pytest.raises(ValueError, match="finite"):
+        cv.setpoint_of(twist, STATE)
+
+
+def test_stamps_split_sim_time_into_seconds_and_nanoseconds() -> None:
+    t = cv.stamp(12.345678901)
+    assert (t.sec, t.nanosec) == (12, 345678901)
+
+
+def test_an_unavailable_reading_is_nan_in_every_channel() -> None:
+    r = ConcentrationReading(
+        vehicle_id="uav1",
+        sim_time_s=1.0,
+        position_enu_m=(0.0, 0.0, 0.0),
+        available=False,
+        reported_g_m3=None,
+        true_g_m3=None,
+    )
+    cloud = wire.decode(wire.encode(cv.gas(r), cv.GAS), cv.GAS)
+    assert [c.name for c in cloud.channels] == list(cv.GAS_CHANNELS)
+    assert all(math.isnan(float(c.values[0])) for c in cloud.channels)
+
+
+def test_a_truncated_payload_is_a_wire_error() -> None:
+    with pytest.raises(wire.WireError):
+        wire.decode(twist_cdr(1, 0, 0, 0, 0, 0)[:20], cv.TWIST)
