@@ -32,7 +32,8 @@ def facing(yaw_deg: float) -> tuple[float, float, float, float]:
 )
 def test_cmd_vel_is_turned_by_the_heading(yaw_deg, body, enu) -> None:
     state = msgspec.structs.replace(STATE, attitude_xyzw=facing(yaw_deg))
-    twist = wire.decode(twist_cdr(*body, 0.0, 0.0, 0.3), cv.TWIST)
+    vx, vy, vz = body
+    twist = wire.decode(twist_cdr(vx, vy, vz, 0.0, 0.0, 0.3), cv.TWIST)
     sp = cv.setpoint_of(twist, state)
     assert sp.velocity_enu_m_s == pytest.approx(enu, abs=1e-12)
     assert sp.yaw_rate_deg_s == pytest.approx(math.degrees(0.3))
