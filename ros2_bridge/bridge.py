@@ -99,11 +99,13 @@ class RosPublisher:
         status: object = self._pub.matching_status  # a MatchingStatus (the stubs say bool)
         return bool(getattr(status, "matching", status))
 
-    def publish(self, message: Any, stamp_ns: int) -> None:
+    def publish(self, message: Any) -> None:
+        """Sequence numbers start at 1; the source timestamp is the wall clock's, as
+        rmw_zenoh's (the messages' own stamps are sim time)."""
         self._sequence += 1
         self._pub.put(
             wire.encode(message, self.msgtype),
-            attachment=wire.attachment(self._sequence, stamp_ns, self._gid),
+            attachment=wire.attachment(self._sequence, time.time_ns(), self._gid),
         )
         self.sent += 1
 
@@ -307,28 +309,27 @@ class Bridge:
         with self._states_lock:
             self._states.update({s.vehicle_id: s for s in tick.states})
         self._sim_time_s = tick.sim_time_s
-        t_ns = cv.stamp_ns(tick.sim_time_s)
-        self._put("/clock", partial(cv.clock, tick.sim_time_s), t_ns)
-        self._put("/tf", partial(cv.tf, tick.states), t_ns)
+        self._put("/clock", partial(cv.clock, tick.sim_time_s))
+        self._put("/tf", partial(cv.tf, tick.states))
         for s in tick.states:
             if s.vehicle_id in self.vehicle_ids:
-                self._put(f"/{s.vehicle_id}/odom", partial(cv.odometry, s), t_ns)
-                self._put(f"/{s.vehicle_id}/fix", partial(cv.nav_sat_fix, s), t_ns)
+                self._put(f"/{s.vehicle_id}/odom", partial(cv.odometry, s))
+                self._put(f"/{s.vehicle_id}/fix", partial(cv.nav_sat_fix, s))
 
-    def _put(self, topic: str, make: Callable[[], Any], stamp_ns: int) -> None:
+    def _put(self, topic: str, make: Callable[[], Any]) -> None:
         pub = self.pubs[topic]
         if pub.wanted:
-            pub.publish(make(), stamp_ns)
+            pub.publish(make())
 
     def publish_readings(self) -> None:
         for key, raw in self.readings.take().items():
             r = _decoded(raw, ConcentrationReading, key)
             if r is not None and r.vehicle_id in self.vehicle_ids:
-                self._put(f"/{r.vehicle_id}/gas", partial(cv.gas, r), cv.stamp_ns(r.sim_time_s))
+                self._put(f"/{r.vehicle_id}/gas", partial(cv.gas, r))
         for key, raw in self.winds.take().items():
             w = _decoded(raw, AnemometerReading, key)
             if w is not None and w.vehicle_id in self.vehicle_ids:
-                self._put(f"/{w.vehicle_id}/wind", partial(cv.wind, w), cv.stamp_ns(w.sim_time_s))
+                self._put(f"/{w.vehicle_id}/wind", partial(cv.wind, w))
 
     def publish_markers(self) -> None:
         pub = self.pubs["/plume/markers"]
@@ -347,7 +348,7 @@ class Bridge:
             self._newest_state = _decoded(raw, PlumeState, "plume state") or self._newest_state
         meshes = [self._mesh_list[i] for i in sorted(self._mesh_list)]
         msg = cv.markers(self.scenario, self._sim_time_s, meshes, self._newest_state)
-        pub.publish(msg, cv.stamp_ns(self._sim_time_s))
+        pub.publish(msg)
 
     def detail(self) -> str:
         sent = sum(p.sent for p in self.pubs.values())

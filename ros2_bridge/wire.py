@@ -1,14 +1,15 @@
-"""rmw_zenoh's wire format (ROS 2 Kilted, rmw_zenoh_cpp 0.6): what a ROS 2 node on Zenoh sees.
+"""rmw_zenoh's wire format (ROS 2 Kilted, rmw_zenoh_cpp 0.6; the same in Jazzy's since 0.2.4):
+what a ROS 2 node on Zenoh sees.
 
 - A topic ``/uav1/odom`` of type ``nav_msgs/msg/Odometry`` in ROS domain ``D`` is the key
   expression ``D/uav1/odom/nav_msgs::msg::dds_::Odometry_/RIHS01_<sha256>``: the name without its
   leading slash, the DDS type name, the type's RIHS01 hash (REP-2011).
 - Payloads are CDR (little-endian, with its 4-byte encapsulation header), serialised by
   ``rosbags`` from the distribution's own message definitions.
-- Every publication carries an attachment: its sequence number (int64), the source timestamp
-  in ns (int64) and the publisher's 16-byte GID, in zenoh-ext's serialisation (two 8-byte
-  little-endian integers, then the GID as a length-prefixed byte sequence) — the layout
-  rmw_zenoh uses since 0.6.0 (Kilted).
+- Every publication carries an attachment: its sequence number (int64, from 1), the source
+  timestamp in ns (int64, wall clock) and the publisher's 16-byte GID, in zenoh-ext's
+  serialisation (two 8-byte little-endian integers, then the GID as a length-prefixed byte
+  sequence) — the layout rmw_zenoh uses since 0.6.0 (Kilted; backported to Jazzy's 0.2.4).
 - The graph is a set of liveliness tokens under ``@ros2_lv/D/``: one per node
   (``@ros2_lv/D/<zid>/<nid>/<nid>/NN/<enclave>/<namespace>/<name>``) and one per publisher,
   subscription, service or client (``.../<nid>/<id>/MP|MS|SS|SC/<enclave>/<namespace>/<name>/

@@ -128,6 +128,7 @@ class Run:
     clock_after_restart: list[Any] = field(default_factory=list)
     recording: Path = Path()
     log: str = ""
+    wall_ns: tuple[int, int] = (0, 0)  # the live part's wall-clock span
 
 
 def bridge_scenario(tmp: Path) -> Path:
@@ -250,6 +251,7 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Run]:
                 session.declare_subscriber(keys.node_health("ros2"), out.bus.on_health),
             ]
             probe = Ros2Probe(session, DOMAIN)
+            started_ns = time.time_ns()
             try:
                 subscribe_all(probe, ids)
                 out.graph = list(probe.entities.values())
@@ -268,6 +270,7 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Run]:
                 kill_bridge(out, up, probe)
                 out.received = {t: [r for r in v] for t, v in probe.received.items()}
                 out.probe_errors = list(probe.errors)
+                out.wall_ns = (started_ns, time.time_ns())
             finally:
                 probe.close()
                 for sub in subs:
@@ -299,7 +302,13 @@ def test_graph_shows_the_node_its_publishers_and_subscriptions(run: Run) -> None
 def test_every_sample_has_an_attachment_and_a_cdr_payload_of_its_type(run: Run) -> None:
     assert run.probe_errors == []
     for topic in ("/clock", "/tf", "/uav1/odom", "/uav1/gas"):
-        assert len(run.received.get(topic, [])) > 10, topic
+        got = run.received.get(topic, [])
+        assert len(got) > 10, topic
+        # nothing was published before this subscriber came: its first sample is the first
+        assert got[0].sequence == 1, (topic, got[0].sequence)
+        # the source timestamp is the wall clock (rmw_zenoh's), within the live part
+        assert all(run.wall_ns[0] <= r.source_timestamp_ns <= run.wall_ns[1] for r in got)
+        assert len({r.gid for r in got[:5]}) == 1
 
 
 def test_clock_advances_with_sim_time(run: Run) -> None:
