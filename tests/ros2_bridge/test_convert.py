@@ -6,11 +6,13 @@ from __future__ import annotations
 import math
 
 import msgspec
+import numpy as np
 import pytest
 
 from ros2_bridge import convert as cv
 from ros2_bridge import wire
-from swarmbus.messages import ConcentrationReading
+from swarmbus.messages import ConcentrationReading, PlumeState
+from swarmbus.scenario import load_scenario, resolve_scenario_path
 from tests.support.messages_samples import STATE
 from tests.support.ros2_probe import twist_cdr
 
@@ -67,3 +69,22 @@ def test_an_unavailable_reading_is_nan_in_every_channel() -> None:
 def test_a_truncated_payload_is_a_wire_error() -> None:
     with pytest.raises(wire.WireError):
         wire.decode(twist_cdr(1, 0, 0, 0, 0, 0)[:20], cv.TWIST)
+
+
+def test_a_filament_state_is_one_sphere_list_at_the_centres() -> None:
+    centres = np.array([[1.0, 2.0, 3.0], [4.5, -1.0, 2.0]], dtype="<f4")
+    radii = np.array([0.5, 1.5], dtype="<f4")
+    state = PlumeState(
+        sim_time_s=3.0,
+        model="filament",
+        count=2,
+        centres_f32=centres.tobytes(),
+        radii_f32=radii.tobytes(),
+    )
+    sc = load_scenario(resolve_scenario_path("filament"))
+    msg = wire.decode(wire.encode(cv.markers(sc, 3.0, (), state), cv.MARKERS), cv.MARKERS)
+    (spheres,) = [m for m in msg.markers if m.ns == "plume_state"]
+    assert spheres.type == 7  # SPHERE_LIST
+    assert [(p.x, p.y, p.z) for p in spheres.points] == [tuple(c) for c in centres.tolist()]
+    assert spheres.scale.x == pytest.approx(2.0)  # twice the mean radius
+    assert (spheres.header.stamp.sec, spheres.header.frame_id) == (3, "map")
