@@ -83,21 +83,33 @@ def domain_id(opts: BridgeOptions) -> int:
 
 
 class RosPublisher:
-    """One ROS 2 publisher: its token, its Zenoh publisher, its sequence numbers."""
+    """One ROS 2 publisher: its token, its Zenoh publisher, its sequence numbers. Whether a
+    subscriber is there is kept up to date by Zenoh's matching listener, which also sets
+    ``changed`` (the loop sleeps on it while nobody listens)."""
 
-    def __init__(self, session: zenoh.Session, graph: wire.Graph, topic: str, msgtype: str):
+    def __init__(
+        self,
+        session: zenoh.Session,
+        graph: wire.Graph,
+        topic: str,
+        msgtype: str,
+        changed: threading.Event,
+    ):
         self.topic = topic
         self.msgtype = msgtype
         self._pub = session.declare_publisher(wire.topic_key(graph.node.domain_id, topic, msgtype))
         self._gid = graph.declare_entity("MP", topic, msgtype)
         self._sequence = 0
+        self._changed = changed
+        self.wanted = False  # a ROS 2 subscriber (or any Zenoh subscriber of its key) is there
+        self._listener = self._pub.declare_matching_listener(self._on_matching)
+        status: object = self._pub.matching_status  # a subscriber already there (the stubs: bool)
+        self.wanted = self.wanted or bool(getattr(status, "matching", status))
         self.sent = 0
 
-    @property
-    def wanted(self) -> bool:
-        """A ROS 2 subscriber (or any Zenoh subscriber of its key) is there."""
-        status: object = self._pub.matching_status  # a MatchingStatus (the stubs say bool)
-        return bool(getattr(status, "matching", status))
+    def _on_matching(self, status: zenoh.MatchingStatus) -> None:
+        self.wanted = bool(status.matching)
+        self._changed.set()
 
     def publish(self, message: Any) -> None:
         """Sequence numbers start at 1; the source timestamp is the wall clock's, as
@@ -110,6 +122,7 @@ class RosPublisher:
         self.sent += 1
 
     def close(self) -> None:
+        self._listener.undeclare()
         self._pub.undeclare()
 
 
@@ -205,8 +218,10 @@ class CmdVel:
         keys: Keys,
         vehicle_ids: list[str],
         state_of: Callable[[str], VehicleState | None],
+        arrived: threading.Event,
     ) -> None:
         self._state_of = state_of
+        self._arrived = arrived
         self._senders = {vid: SetpointSender(session, keys, vid) for vid in vehicle_ids}
         self._subs: list[zenoh.Subscriber[None]] = []
         self.last_s = -1e9
@@ -219,6 +234,7 @@ class CmdVel:
 
     def _on_twist(self, vehicle_id: str, sample: zenoh.Sample) -> None:
         self.last_s = time.monotonic()
+        self._arrived.set()
         payload = sample.payload.to_bytes()
         try:
             twist = wire.decode(payload, cv.TWIST)
@@ -255,8 +271,9 @@ class Bridge:
         self.vehicle_ids = [v.id for v in sc.vehicles]
         node = wire.NodeName(domain, str(session.info.zid()), 0, opts.node_name)
         self.graph = wire.Graph(session, node)
+        self.changed = threading.Event()  # a subscriber came or went, or a cmd_vel arrived
         self.pubs = {
-            topic: RosPublisher(session, self.graph, topic, msgtype)
+            topic: RosPublisher(session, self.graph, topic, msgtype, self.changed)
             for topic, msgtype in cv.topics(self.vehicle_ids).items()
         }
         keys = rt.keys
@@ -267,7 +284,9 @@ class Bridge:
         self.plume_state = Latest(session, keys.plume_state())
         self._states: dict[str, VehicleState] = {}
         self._states_lock = threading.Lock()
-        self.cmd_vel = CmdVel(session, self.graph, keys, self.vehicle_ids, self.state_of)
+        self.cmd_vel = CmdVel(
+            session, self.graph, keys, self.vehicle_ids, self.state_of, self.changed
+        )
         self._meshes: MeshFetcher | None = None
         self._mesh_list: dict[int, PlumeMesh] = {}
         self._newest_state: PlumeState | None = None
@@ -284,8 +303,9 @@ class Bridge:
     def _per_vehicle(self, leaf: str) -> list[str]:
         return [f"/{vid}/{leaf}" for vid in self.vehicle_ids]
 
-    def gate(self) -> None:
-        """Subscribe each bus stream while a ROS 2 subscriber wants something made of it."""
+    def gate(self) -> bool:
+        """Subscribe each bus stream while a ROS 2 subscriber wants something made of it;
+        whether anything is wanted."""
         steering = time.monotonic() - self.cmd_vel.last_s < STEER_HOLD_S
         tick_topics = ["/clock", "/tf", *self._per_vehicle("odom"), *self._per_vehicle("fix")]
         ticks = steering or self._wanted(*tick_topics)
@@ -298,6 +318,7 @@ class Bridge:
         markers = self._wanted("/plume/markers")
         self.plume_state.want(markers)
         self.clock.want(markers)
+        return steering or self._wanted(*self.pubs)
 
     def publish_tick(self) -> None:
         raw = self.ticks.take().get(self.rt.keys.tick())
@@ -369,21 +390,28 @@ class Bridge:
 
 
 def run(bridge: Bridge) -> None:
+    """Convert and publish at most ``rate_hz`` times a second while anything is wanted; while
+    nothing is, sleep until a subscriber or a cmd_vel comes (or the health beat)."""
     rt, opts = bridge.rt, bridge.opts
     period = 1.0 / opts.rate_hz
     next_health = next_markers = time.monotonic()
     while not rt.stop.is_set():
         t0 = time.monotonic()
-        bridge.gate()
-        bridge.publish_tick()
-        bridge.publish_readings()
-        if t0 >= next_markers:
-            next_markers = t0 + opts.markers_period_s
-            bridge.publish_markers()
+        bridge.changed.clear()
+        busy = bridge.gate()
+        if busy:
+            bridge.publish_tick()
+            bridge.publish_readings()
+            if t0 >= next_markers:
+                next_markers = t0 + opts.markers_period_s
+                bridge.publish_markers()
         if t0 >= next_health:
             next_health = t0 + HEALTH_PERIOD_S
             rt.publish_health(sim_time_s=bridge._sim_time_s, detail=bridge.detail())
-        rt.stop.wait(max(0.0, period - (time.monotonic() - t0)))
+        if busy:
+            rt.stop.wait(max(0.0, period - (time.monotonic() - t0)))
+        else:
+            bridge.changed.wait(max(0.0, next_health - time.monotonic()))
 
 
 def main(ctx: NodeContext) -> int:
