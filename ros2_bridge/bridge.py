@@ -4,11 +4,11 @@ its publishers and subscriptions in ``ros2 node list`` and ``ros2 topic list``.
 
 A passive client of the bus, like the viewers: it takes part in no lockstep. Each bus stream it
 reads (``sim/tick``, the readings, the anemometers, ``field/state``) is subscribed only while a
-ROS 2 subscriber matches one of the topics made from it (Zenoh's matching status of the ROS
-publishers), so with no ROS 2 subscriber Zenoh sends it nothing and nothing is encoded. Zenoh
-callbacks only keep the newest payload; a loop converts and publishes at most ``rate_hz`` times
-a second (``/clock``, ``/tf``, odometry, fixes; the newest reading of each vehicle) and the
-plume markers every ``markers_period_s``.
+ROS 2 subscriber matches one of the topics made from it (Zenoh's matching listeners of the ROS
+publishers), so with no ROS 2 subscriber Zenoh sends it nothing, nothing is encoded and the loop
+sleeps. Zenoh callbacks only keep the newest payload; the loop converts and publishes at most
+``rate_hz`` times a second (``/clock``, ``/tf``, odometry, fixes; the newest reading of each
+vehicle) and the plume markers every ``markers_period_s``.
 
 ``/<vehicle>/cmd_vel`` (geometry_msgs/Twist in the vehicle's body frame) becomes the vehicle's
 offboard velocity ``Setpoint``, sent as a bus command (``vehicle/<id>/cmd``), one at a time per
