@@ -84,6 +84,9 @@ class ScaleOptions:
     startup_timeout_s: float = 120.0
     sensor_period_ticks: int | None = None  # None: the scenario's own sensor rate
     baseline: bool = False  # also measure each row's ceiling (bench.ceiling), back to back
+    # the ROS 2 bridge: "off", "idle" (no ROS 2 subscriber) or "subscribed" (one subscriber,
+    # of the bench's own, to every topic it publishes on ROS domain 0)
+    ros2: str = "off"
 
 
 # The roles whose processes the ceiling replaces with stand-ins doing no work (the router stays).
@@ -228,6 +231,21 @@ def drive(launcher: Launcher, sc: Scenario, state: str, deadline: float) -> None
             uav.send(command, retry_until=deadline)
 
 
+def _roles(opts: ScaleOptions, ceiling: bool) -> tuple[str, ...]:
+    roles = tuple(r for r in ROLES if r != "gateway" or opts.gateway)
+    return (*roles, "ros2") if opts.ros2 != "off" and not ceiling else roles
+
+
+def _ros2_subscriber(
+    opts: ScaleOptions, launcher: Launcher, ceiling: bool
+) -> zenoh.Subscriber[None] | None:
+    """With ``--ros2 subscribed``: a ROS 2 subscriber of every topic on ROS domain 0 (the
+    samples are dropped)."""
+    if opts.ros2 != "subscribed" or ceiling:
+        return None
+    return launcher.session.declare_subscriber("0/**", lambda _: None)
+
+
 def run_case(
     opts: ScaleOptions,
     n: int,
@@ -240,12 +258,11 @@ def run_case(
     run_dir = opts.out / (f"ceiling-{n}" if ceiling else f"{state}-{n}")
     sc, path = prepare(opts.scenario, n, run_dir, opts.sensor_period_ticks)
     ids = [v.id for v in sc.vehicles]
-    roles = tuple(r for r in ROLES if r != "gateway" or opts.gateway)
     launch = LaunchOptions(
         scenario_path=path,
         headless=True,
         run_dir=run_dir,
-        roles=roles,
+        roles=_roles(opts, ceiling),
         vehicles_per_process=opts.vehicles_per_process,
         verbose=0,
         stand_ins=CEILING if ceiling else {},
@@ -253,6 +270,7 @@ def run_case(
     launcher = Launcher(sc, launch)
     deadline = time.monotonic() + opts.startup_timeout_s
     watch: Watch | None = None
+    ros2_subscriber: zenoh.Subscriber[None] | None = None
     keys = Keys(sc.world.name)
     try:
         launcher.start()
@@ -261,6 +279,7 @@ def run_case(
             launcher.view.close()
             launcher.view = None
         watch = Watch(launcher.session, keys)
+        ros2_subscriber = _ros2_subscriber(opts, launcher, ceiling)
         watch.wait(lambda w: len(w.status) >= len(ids), deadline, "every vehicle's status")
         watch.next_clock(time.monotonic(), deadline)
         if not ceiling:
@@ -309,15 +328,18 @@ def run_case(
             "load1": round(load1, 2),
             "peak_rss_mb_by_role": {r: round(v, 1) for r, v in usage.peak_rss.items()},
             "wall_s": round(wall, 2),
+            "ros2": opts.ros2,
         }
     finally:
+        if ros2_subscriber is not None:
+            ros2_subscriber.undeclare()
         if watch is not None:
             watch.close()
         launcher.stop()
 
 
 # ---------------------------------------------------------------------------- output
-TABLE_CPU = ("physics", "autopilot", "plume", "gateway", "router")
+TABLE_CPU = ("physics", "autopilot", "plume", "gateway", "router", "ros2")
 
 
 def markdown(rows: Sequence[dict[str, Any]]) -> str:

@@ -56,6 +56,7 @@ ALL_ROLES = (
     "gateway",
     "viewer",
     "foxglove",
+    "ros2",
 )
 # Stop order: the world and its edges first (so no autopilot is "dropped" from a lockstep that
 # is still running), then the autopilots and the plume, then the recorder, the router last.
@@ -63,6 +64,7 @@ STOP_STAGE = {
     "gateway": 0,
     "viewer": 0,
     "foxglove": 0,
+    "ros2": 0,
     "physics": 0,
     "autopilot": 1,
     "plume": 1,
@@ -78,8 +80,9 @@ RESTART = {
     "gateway": RestartPolicy(RestartMode.ON_FAILURE, max_restarts=3),
     "viewer": RestartPolicy(RestartMode.ON_FAILURE, max_restarts=2),
     "foxglove": RestartPolicy(RestartMode.ON_FAILURE, max_restarts=2),
+    "ros2": RestartPolicy(RestartMode.ON_FAILURE, max_restarts=3),
 }
-NOT_CRITICAL = {"viewer", "foxglove"}
+NOT_CRITICAL = {"viewer", "foxglove", "ros2"}
 
 
 class LaunchError(RuntimeError):
@@ -92,6 +95,7 @@ class LaunchOptions:
     headless: bool = False
     record: bool = False
     foxglove: bool = False  # also the live Foxglove WebSocket server (role ``foxglove``)
+    ros2: bool = False  # also the ROS 2 bridge (role ``ros2``)
     run_dir: Path = Path("runs")
     connect: tuple[str, ...] = ()  # the router endpoint(s); default: the scenario's
     listen: tuple[str, ...] = ()  # what each node listens on; default: loopback, any port
@@ -123,6 +127,8 @@ def selected_roles(opts: LaunchOptions) -> list[str]:
         roles.remove("recorder")
     if not opts.foxglove and "foxglove" in roles and opts.roles is None:
         roles.remove("foxglove")
+    if not opts.ros2 and "ros2" in roles and opts.roles is None:
+        roles.remove("ros2")
     if not opts.router and "router" in roles:
         roles.remove("router")
     return [r for r in ALL_ROLES if r in roles]

@@ -22,6 +22,7 @@ ROLES: dict[str, str] = {
     "viewer": "sim_world.viewer:main",
     "recorder": "recorder.node:run",
     "foxglove": "recorder.foxglove.live:main",
+    "ros2": "ros2_bridge.bridge:main",
 }
 
 

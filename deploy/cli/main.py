@@ -191,6 +191,18 @@ def node(
     default=None,
     help="Port of the live Foxglove server (implies --foxglove; default 8765, 0: any free).",
 )
+@click.option(
+    "--ros2",
+    "ros2_bridge",
+    is_flag=True,
+    help="Also run the ROS 2 bridge: the run as ROS 2 topics for rmw_zenoh (docs/ros2.md).",
+)
+@click.option(
+    "--ros2-domain",
+    type=click.IntRange(0, 232),
+    default=None,
+    help="ROS domain id of the bridge (implies --ros2; default: ROS_DOMAIN_ID, else 0).",
+)
 @click.option("--out", type=click.Path(path_type=Path), default=None, help="Run directory.")
 @click.option("--connect", multiple=True, help="Router endpoint (default: the scenario's).")
 @click.option("--listen", multiple=True, help="Endpoint every node listens on.")
@@ -217,6 +229,8 @@ def up(
     record: bool,
     foxglove_live: bool,
     foxglove_port: int | None,
+    ros2_bridge: bool,
+    ros2_domain: int | None,
     out: Path | None,
     connect: tuple[str, ...],
     listen: tuple[str, ...],
@@ -263,7 +277,8 @@ def up(
         router=not no_router,
         vehicles_per_process=vehicles_per_process,
         foxglove=foxglove_live or foxglove_port is not None,
-        node_options={"foxglove": (f"port={foxglove_port}",)} if foxglove_port is not None else {},
+        ros2=ros2_bridge or ros2_domain is not None,
+        node_options=_up_node_options(foxglove_port, ros2_domain),
     )
     if deployment is not None or host_name is not None:
         try:
@@ -277,6 +292,17 @@ def up(
         sys.exit(run_up(sc, opts, Console()))
     except LaunchError as exc:
         fail(str(exc), code=1)
+
+
+def _up_node_options(
+    foxglove_port: int | None, ros2_domain: int | None
+) -> dict[str, tuple[str, ...]]:
+    out: dict[str, tuple[str, ...]] = {}
+    if foxglove_port is not None:
+        out["foxglove"] = (f"port={foxglove_port}",)
+    if ros2_domain is not None:
+        out["ros2"] = (f"domain_id={ros2_domain}",)
+    return out
 
 
 @cli.command()
@@ -445,6 +471,24 @@ def export_foxglove(src: str, dst: Path, layout_file: Path | None) -> None:
     )
 
 
+@export.command("ros2")
+@click.argument("src", metavar="IN")
+@click.argument("dst", metavar="OUT_DIR", type=click.Path(path_type=Path))
+def export_ros2(src: str, dst: Path) -> None:
+    """Write OUT_DIR: recording IN as a rosbag2 (MCAP storage) with the ROS 2 bridge's topics,
+    stamped in sim time (docs/ros2.md)."""
+    from deploy.ros2_export import ExportError
+    from deploy.ros2_export import export_ros2 as run_export
+    from recorder.reader import RecordingError
+
+    try:
+        done = run_export(src, dst)
+    except (RecordingError, ExportError) as exc:
+        fail(str(exc))
+    cut = " (IN was cut short: read to its last complete chunk)" if done.truncated else ""
+    click.echo(f"wrote {dst}: {done.written} ROS 2 messages on {done.topics} topics{cut}", err=True)
+
+
 @cli.group()
 def bench() -> None:
     """Benchmarks of the full stack."""
@@ -478,6 +522,14 @@ def _int_list(ctx: click.Context, param: click.Parameter, value: str) -> tuple[i
     is_flag=True,
     help="Also measure each row's ceiling: the same processes doing no work but the lockstep.",
 )
+@click.option(
+    "--ros2",
+    type=click.Choice(["off", "idle", "subscribed"]),
+    default="off",
+    show_default=True,
+    help="Also run the ROS 2 bridge: with no ROS 2 subscriber (idle) or with one subscribed to "
+    "every topic it publishes (subscribed).",
+)
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=None)
 def bench_scale(
     scenario: str | None,
@@ -488,6 +540,7 @@ def bench_scale(
     no_gateway: bool,
     sensor_period_ticks: int | None,
     baseline: bool,
+    ros2: str,
     out: Path | None,
 ) -> None:
     """Real-time factor, CPU and memory of the whole stack against the number of vehicles."""
@@ -505,6 +558,7 @@ def bench_scale(
         gateway=not no_gateway,
         sensor_period_ticks=sensor_period_ticks,
         baseline=baseline,
+        ros2=ros2,
     )
     try:
         rows = run_scale(opts, click.echo)

@@ -11,7 +11,14 @@ import pytest
 
 from tests.support.procs import REPO, run_cli
 
-PROCESS_PACKAGES = ["sim_world", "agents", "plume_service", "gcs_bridge", "recorder"]
+PROCESS_PACKAGES = [
+    "sim_world",
+    "agents",
+    "plume_service",
+    "gcs_bridge",
+    "recorder",
+    "ros2_bridge",
+]
 # Layers, lowest first (docs/architecture.md, "Layers"): a module imports only from its own
 # layer or below, and a role never imports another role. The CLI (``deploy.cli``, started by
 # ``python -m deploy``) is the top layer although it sits inside ``deploy``.
@@ -323,4 +330,5 @@ def test_node_roles_are_the_designed_ones() -> None:
         "viewer",
         "recorder",
         "foxglove",
+        "ros2",
     }

@@ -1,6 +1,6 @@
-"""Every listener of the stack binds loopback by default: ``plumeswarm up`` (with the viewer and
-the live Foxglove server) is started with the bundled scenario's defaults and every LISTEN TCP
-socket and every bound UDP socket of its processes is checked with psutil."""
+"""Every listener of the stack binds loopback by default: ``plumeswarm up`` (with the viewer, the
+live Foxglove server and the ROS 2 bridge) is started with the bundled scenario's defaults and
+every LISTEN TCP socket and every bound UDP socket of its processes is checked with psutil."""
 
 from __future__ import annotations
 
@@ -34,7 +34,7 @@ def listeners(procs: list[psutil.Process]) -> list[tuple[str, str, str, int]]:
 
 def test_every_listener_of_up_is_on_loopback(tmp_path: Path) -> None:
     fox_port = free_tcp_port()
-    with plumeswarm_up(None, tmp_path, "--foxglove-port", str(fox_port)) as up:
+    with plumeswarm_up(None, tmp_path, "--foxglove-port", str(fox_port), "--ros2") as up:
         family = [
             psutil.Process(up.proc.pid),
             *psutil.Process(up.proc.pid).children(recursive=True),
