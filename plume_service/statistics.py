@@ -15,6 +15,10 @@ from typing import Any
 import numpy as np
 
 from plume_service.field import ConcentrationField, FloatArray
+from plume_service.from_scenario import field_from_scenario
+from swarmbus.dispersion import dispersion_curves
+from swarmbus.scenario import Scenario
+from swarmbus.wind import wind_vector_enu
 
 #: The default hit threshold: an ideal sensor's level, g/m³ (the behaviours' detection level).
 HIT_THRESHOLD_G_M3 = 0.001
@@ -104,12 +108,13 @@ def _runs(hits: np.ndarray[Any, np.dtype[np.bool_]]) -> tuple[list[int], list[in
 
 def _summary(lengths: list[int], period_s: float) -> dict[str, float | int | None]:
     if not lengths:
-        return {"count": 0, "median_s": None, "p90_s": None}
+        return {"count": 0, "median_s": None, "p90_s": None, "p99_s": None}
     d = np.asarray(lengths, dtype=np.float64) * period_s
     return {
         "count": len(lengths),
         "median_s": float(np.median(d)),
         "p90_s": float(np.percentile(d, 90)),
+        "p99_s": float(np.percentile(d, 99)),
     }
 
 
@@ -127,8 +132,8 @@ def intermittency(
 ) -> list[dict[str, Any]]:
     """Per (x, y) point at ``height_m``: the field sampled every ``period_s`` over sim time
     [start_s, start_s + seconds); a hit is a sample ≥ ``threshold_g_m3``. Returns, per point,
-    ``hit_fraction``; ``whiff`` and ``blank`` (complete runs of hits / non-hits: count, median
-    and 90th percentile duration in s); ``p_hit_1s``, the fraction of consecutive 1 s windows
+    ``hit_fraction``; ``whiff`` and ``blank`` (complete runs of hits / non-hits: count, median,
+    90th and 99th percentile duration in s); ``p_hit_1s``, the fraction of consecutive 1 s windows
     with at least one hit; and ``mean_g_m3``."""
     along, cross = np.meshgrid(np.asarray(x_m), np.asarray(cross_m), indexing="ij")
     points = plume_frame_points(source_m, downwind, along, cross, np.asarray(height_m))
@@ -156,4 +161,66 @@ def intermittency(
                 "mean_g_m3": float(values[:, j].mean()),
             }
         )
+    return out
+
+
+#: The benchmark's start distances (m downwind) and the crosswind offsets (m) the statistics
+#: are published at.
+START_DISTANCES_M: tuple[float, ...] = (30.0, 50.0, 80.0)
+CROSS_OFFSETS_M: tuple[float, ...] = (0.0, 2.0, 5.0, 10.0, 20.0)
+#: A time-dependent field is measured after at least this much release (s), and at least
+#: until its gas has travelled 1.5 times the farthest distance.
+MIN_WARMUP_S = 60.0
+
+
+def warmup_s(scenario: Scenario, x_m: tuple[float, ...] = START_DISTANCES_M) -> float:
+    """Sim time before the field at ``x_m`` is in its statistically steady state."""
+    return max(MIN_WARMUP_S, 1.5 * max(x_m) / scenario.wind.speed_m_s)
+
+
+def scenario_statistics(
+    scenario: Scenario,
+    threshold_g_m3: float = HIT_THRESHOLD_G_M3,
+    seconds: float = 600.0,
+    x_m: tuple[float, ...] = START_DISTANCES_M,
+    cross_m: tuple[float, ...] = CROSS_OFFSETS_M,
+    height_m: float | None = None,
+    widths_seconds: float = 0.0,
+) -> dict[str, Any]:
+    """The intermittency at ``x_m`` × ``cross_m`` (plume frame of the first source, at
+    ``height_m``, default its release height) over ``seconds`` after :func:`warmup_s`; with
+    ``widths_seconds`` > 0 also the time-averaged σy, σz (a sample a second over that long)
+    next to the steady Gaussian's of the scenario's stability and family."""
+    field = field_from_scenario(scenario)
+    src = scenario.plume.sources[0]
+    source = (src.x_m, src.y_m, src.release_height_m)
+    ux, uy, _ = wind_vector_enu(1.0, scenario.wind.from_deg)
+    height = src.release_height_m if height_m is None else height_m
+    start = warmup_s(scenario, x_m)
+    out: dict[str, Any] = {
+        "name": scenario.world.name,
+        "threshold_g_m3": threshold_g_m3,
+        "seconds": seconds,
+        "start_s": start,
+        "sample_period_s": SAMPLE_PERIOD_S,
+        "points": intermittency(
+            field, source, (ux, uy), x_m, cross_m, height, start, seconds, threshold_g_m3
+        ),
+    }
+    if widths_seconds > 0.0:
+        curves = dispersion_curves(scenario.plume.coefficients, scenario.plume.stability)
+        gy, gz = curves.sigmas(np.asarray(x_m, dtype=np.float64))
+        measured = time_averaged_widths(
+            field, source, (ux, uy), x_m, start, widths_seconds, every_s=1.0
+        )
+        out["widths"] = [
+            {
+                "x_m": w.x_m,
+                "sigma_y_m": w.sigma_y_m,
+                "sigma_z_m": w.sigma_z_m,
+                "gaussian_sigma_y_m": float(sy),
+                "gaussian_sigma_z_m": float(sz),
+            }
+            for w, sy, sz in zip(measured, gy, gz, strict=True)
+        ]
     return out

@@ -24,6 +24,11 @@ and the spread of the instantaneous plume about its centreline (relative dispers
   after an age a is S_y(a) = σy²(u a) − σm²(a) − R²(a) horizontally and S_z(a) = σz²(u a) −
   R²(a) vertically — an age-dependent diffusivity K(a) = ½ dS/da, as relative dispersion
   accelerates with the size of the cloud (Richardson's law). Increments are clipped at 0.
+* **Filaments.** Farrell et al.'s (2002) filaments, published for a 1 m/s wind, scaled to the
+  wind speed u at constant turbulence intensity: every diffusivity, the radius growth γ
+  included, scales with u (γ = 0.001 m²/s · u/(1 m/s)), and the release rate with u (10
+  filaments per metre of wind run), so a filament at a given distance downwind has the size
+  and spacing it has in their plume.
 
 The σ curves are the plume's own family and class (``swarmbus.dispersion``), used as in the
 Gaussian plume: above 1 m as published, although they are fitted from 100 m (below 100 m they
@@ -46,6 +51,10 @@ FloatArray = npt.NDArray[np.float64]
 KARMAN = 0.4
 #: σw / u* in the neutral surface layer (Hanna 1982).
 SIGMA_W_PER_USTAR = 1.3
+#: Farrell et al. (2002): radius growth γ (m²/s) and release rate (/s) at their 1 m/s wind.
+FARRELL_GROWTH_M2_S = 0.001
+FARRELL_RELEASE_RATE_HZ = 10.0
+FARRELL_WIND_M_S = 1.0
 #: Downwind distances (m) the meander share is fitted at: the benchmark's start distances.
 REFERENCE_DISTANCES_M: tuple[float, ...] = (30.0, 50.0, 80.0)
 
@@ -74,6 +83,16 @@ class AtmosphereCalibration:
     meander_share: float
     sigma_v_m_s: float
     timescale_s: float
+
+    @property
+    def growth_m2_s(self) -> float:
+        """Filament radius growth γ: Farrell's, scaled with the wind speed."""
+        return FARRELL_GROWTH_M2_S * self.wind_speed_m_s / FARRELL_WIND_M_S
+
+    @property
+    def release_rate_hz(self) -> float:
+        """Filaments per second: Farrell's spacing along the wind."""
+        return FARRELL_RELEASE_RATE_HZ * self.wind_speed_m_s / FARRELL_WIND_M_S
 
     def target_sigmas(self, x_m: FloatArray | float) -> tuple[FloatArray, FloatArray]:
         """The steady plume's σy, σz (m) at downwind distances x (m)."""
@@ -106,6 +125,8 @@ class AtmosphereCalibration:
             "meander_share": self.meander_share,
             "sigma_v_m_s": self.sigma_v_m_s,
             "timescale_s": self.timescale_s,
+            "growth_m2_s": self.growth_m2_s,
+            "release_rate_hz": self.release_rate_hz,
             "reference_m": x.tolist(),
             "target_sigma_y_m": sy.tolist(),
             "target_sigma_z_m": sz.tolist(),

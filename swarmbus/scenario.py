@@ -23,6 +23,8 @@ from swarmbus.vehicle_types import VehicleTypeError, load_vehicle_type
 
 SCENARIOS_DIR = Path(__file__).resolve().parent.parent / "deploy" / "scenarios"
 DEFAULT_SCENARIO = SCENARIOS_DIR / "novak2018.toml"
+#: The gas-source-localisation benchmark's environments, one scenario file each.
+GSL_ENVIRONMENTS_DIR = SCENARIOS_DIR / "gsl"
 MAVLINK_MAX_SYSID = 254  # MAVLink systems are 1–254 (0 is broadcast, 255 ground stations)
 MAX_VEHICLES = 1024  # per scenario; past MAVLINK_MAX_SYSID vehicles are on the bus only
 
@@ -528,9 +530,10 @@ def scenario_calibration(scenario: Scenario) -> AtmosphereCalibration | None:
 
 
 def calibrate_scenario(scenario: Scenario, source: str = "<scenario>") -> Scenario:
-    """``scenario`` with the wind its ``[plume.calibration]`` derives: ``model = "meander"``
-    with an Ornstein–Uhlenbeck ``[wind.meander]`` of the derived std and timescale (``steady``
-    for a zero meander share); unchanged without a calibration. Idempotent."""
+    """``scenario`` with what its ``[plume.calibration]`` derives: the wind ``model =
+    "meander"`` with an Ornstein–Uhlenbeck ``[wind.meander]`` of the derived std and timescale
+    (``steady`` for a zero meander share), and ``[plume.filament]``'s ``growth_m2_s`` and
+    ``release_rate_hz``; unchanged without a calibration. Idempotent."""
     try:
         derived = scenario_calibration(scenario)
     except ValueError as exc:
@@ -553,7 +556,13 @@ def calibrate_scenario(scenario: Scenario, source: str = "<scenario>") -> Scenar
             timescale_s=derived.timescale_s,
         )
         wind = msgspec.structs.replace(wind, model="meander", meander=meander)
-    return msgspec.structs.replace(scenario, wind=wind)
+    filament = msgspec.structs.replace(
+        scenario.plume.filament,
+        growth_m2_s=derived.growth_m2_s,
+        release_rate_hz=derived.release_rate_hz,
+    )
+    plume = msgspec.structs.replace(scenario.plume, filament=filament)
+    return msgspec.structs.replace(scenario, wind=wind, plume=plume)
 
 
 def _value_at(raw: object, field: str) -> tuple[bool, object]:
@@ -584,10 +593,12 @@ def load_scenario(path: str | Path | None = None) -> Scenario:
 
 
 def resolve_scenario_path(name_or_path: str | None) -> Path:
-    """A scenario path, or the name of a bundled scenario (``novak2018``)."""
+    """A scenario path, or the name of a bundled scenario (``novak2018``, or a benchmark
+    environment such as ``gsl/meander_high``)."""
     if name_or_path is None:
         return DEFAULT_SCENARIO
     p = Path(name_or_path)
-    if p.exists() or p.suffix == ".toml" or "/" in name_or_path:
+    bundled = SCENARIOS_DIR / f"{name_or_path}.toml"
+    if p.exists() or p.suffix == ".toml" or ("/" in name_or_path and not bundled.exists()):
         return p
-    return SCENARIOS_DIR / f"{name_or_path}.toml"
+    return bundled
