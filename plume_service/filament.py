@@ -88,7 +88,9 @@ def filament_concentration(
         for j in range(points.shape[0]):
             x, y, z = points[j]
             dxy2 = (cx - x) ** 2 + (cy - y) ** 2
-            for zz in (z, -z):  # the filament, then its ground image (mirror the point)
+            # the filament, then its ground image (mirror the point): centres are at z ≥ 0, so
+            # the mirrored point is at least z from all of them and out of reach when z ≥ reach
+            for zz in (z, -z) if z < reach else (z,):
                 d2 = dxy2 + (cz - zz) ** 2
                 hit = np.flatnonzero(d2 < cut2)
                 if hit.size:

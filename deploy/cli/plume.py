@@ -407,8 +407,8 @@ def intermittency_command(
     if not (math.isfinite(widths_seconds) and 0.0 <= widths_seconds <= 86_400.0):
         fail(f"--widths must be between 0 and 86400, got {widths_seconds}")
     results: dict[str, Any] = {}
-    for name in scenarios:
-        scenario = scenario_from(name)
+    loaded = [scenario_from(name) for name in scenarios]  # every file checked before any work
+    for scenario in loaded:
         stats = scenario_statistics(scenario, threshold, seconds, widths_seconds=widths_seconds)
         results[scenario.world.name] = stats
         if not as_json:

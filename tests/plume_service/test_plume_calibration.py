@@ -29,6 +29,7 @@ from swarmbus.scenario import (
     parse_scenario,
 )
 from swarmbus.wind import ColouredNoise
+from tests.support.procs import run_cli
 
 # McMullen (1975), JAPCA 25(10):1057, class D: σ = exp(I + J ln x + K (ln x)²), x in m.
 _MCMULLEN_D = {"y": (-2.555, 1.0423, -0.0087), "z": (-3.186, 1.1737, -0.0316)}
@@ -259,3 +260,22 @@ def test_published_intermittency_holds_on_a_fresh_realisation(name: str) -> None
         batches = windows.reshape(10, 30).mean(axis=1)
         se = float(batches.std(ddof=1)) / math.sqrt(10.0) * math.sqrt(1.5)
         assert abs(windows.mean() - doc["p_hit_1s"]) < 4.0 * se + 0.02, (x, doc)
+
+
+def test_the_intermittency_command_prints_every_start_point_as_json() -> None:
+    res = run_cli(["plume", "intermittency", "gsl/puff_meander", "--seconds", "5", "--json"])
+    assert res.returncode == 0, res.stderr
+    out = json.loads(res.stdout)["puff_meander"]
+    assert out["threshold_g_m3"] == 0.001 and out["start_s"] == 60.0
+    grid = {(p["x_m"], p["y_m"]) for p in out["points"]}
+    assert grid == {(x, y) for x in (30.0, 50.0, 80.0) for y in (0.0, 2.0, 5.0, 10.0, 20.0)}
+    assert all(0.0 <= p["hit_fraction"] <= 1.0 for p in out["points"])
+
+
+@pytest.mark.parametrize(
+    "extra", [["--threshold", "0"], ["--seconds", "nan"], ["--widths", "-1"], ["nosuch"]]
+)
+def test_a_bad_intermittency_option_is_one_line(extra: list[str]) -> None:
+    res = run_cli(["plume", "intermittency", "gsl/meander_low", "--seconds", "1", *extra])
+    assert res.returncode != 0
+    assert res.stderr.startswith("plumeswarm: error:") and res.stderr.count("\n") == 1
