@@ -19,7 +19,9 @@ Models (``[wind] model``):
     stationary std of x is ``G √T_F √(ω/4ζ)`` (small: 0.47 m/s, large: 1.41 m/s). The SDE is
     integrated exactly over each internal step (Van Loan's matrix exponential), so its
     statistics do not depend on ``step_s``; between steps the value is interpolated linearly.
-    The process starts in its stationary distribution at t = 0.
+    The process starts in its stationary distribution at t = 0. ``process = "ou"`` uses an
+    Ornstein–Uhlenbeck process instead (std ``std_m_s``, timescale ``timescale_s``, exact
+    steps): the meander a calibrated plume derives (:mod:`swarmbus.calibration`).
 ``field``
     A 2-D grid (``spacing_m``, over ``[−extent_m, extent_m]²``): the meander noise drives the
     four corners, the edges interpolate them linearly and the interior follows the linear

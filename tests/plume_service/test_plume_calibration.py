@@ -182,10 +182,12 @@ def test_each_environment_is_a_commented_scenario_with_the_benchmark_geometry(na
 
 @pytest.mark.parametrize("name", CALIBRATED)
 def test_calibrated_time_average_has_the_class_d_gaussian_widths(name: str) -> None:
+    # 300 s sampled every 2 s (the meander decorrelates over T_L ≈ 7 s, so a denser sampling
+    # adds little): the second moments of the time average within the brief's 20 %
     scenario = _env(name)
     field = field_from_scenario(scenario)
     widths = time_averaged_widths(
-        field, (0.0, 0.0, 10.0), (1.0, 0.0), (30.0, 50.0, 80.0), 60.0, 300.0, every_s=1.0
+        field, (0.0, 0.0, 10.0), (1.0, 0.0), (30.0, 50.0, 80.0), 60.0, 300.0, every_s=2.0
     )
     for w in widths:
         assert w.sigma_y_m == pytest.approx(mcmullen_d("y", w.x_m), rel=0.2), (name, w)
