@@ -38,7 +38,8 @@ def _field(scenario: str | None, preset: str | None) -> ConcentrationField:
 
 def state_bounds(field: ConcentrationField, t: float) -> Bounds | None:
     """None for a field without filaments or puffs; else the box (m) around its live filaments
-    (±4R) and puffs (±3σ) at sim time t, from the ground up. ValueError when there are none."""
+    (± their cut-off, 4R by default) and puffs (±3σ) at sim time t, from the ground up.
+    ValueError when there are none."""
     dynamic = [f for f in source_fields(field) if isinstance(f, FilamentPlume | PuffPlume)]
     if not dynamic:
         return None
@@ -46,7 +47,7 @@ def state_bounds(field: ConcentrationField, t: float) -> Bounds | None:
     for source in dynamic:
         if isinstance(source, FilamentPlume):
             centres, radii = source.filaments(t)
-            pad = np.repeat(4.0 * radii[:, None], 3, axis=1)
+            pad = np.repeat(source.params.truncate_radii * radii[:, None], 3, axis=1)
         else:
             centres, sigma_y, sigma_z = source.puffs(t)
             pad = 3.0 * np.column_stack([sigma_y, sigma_y, sigma_z])
