@@ -168,7 +168,9 @@ class FilamentPlume(TimeSteppedField[Filaments]):
         h = self.step_s
         p = state.positions
         born = state.birth_step
-        moved = p + self.wind.velocity(p, k * h) * h
+        uniform = self.wind.uniform_at(k * h)  # the same wind everywhere: no per-filament lookup
+        wind = self.wind.velocity(p, k * h) if uniform is None else np.asarray(uniform)
+        moved = p + wind * h
         noise = self._noise[np.minimum(k - born, self._noise.shape[0] - 1)]
         moved += noise * rng.standard_normal(p.shape)
         np.abs(moved[:, 2], out=moved[:, 2])
