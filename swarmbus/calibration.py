@@ -10,14 +10,16 @@ and the spread of the instantaneous plume about its centreline (relative dispers
 
 * **Meander.** Each horizontal wind component gets an Ornstein–Uhlenbeck perturbation of std
   σv and Lagrangian timescale T_L (autocorrelation e^(−τ/T_L)). A filament's displacement after
-  t is the integral of the wind over its life, whose variance is Taylor's (1921) result
+  t is the integral of the wind over its life, whose variance is Taylor's (1921, "Diffusion by
+  continuous movements", Proc. London Math. Soc. s2-20:196) result
 
       σm²(t) = 2 σv² T_L [t − T_L (1 − e^(−t/T_L))]
 
   T_L comes from Hanna (1982, "Applications in air pollution modeling", in Nieuwstadt & van
   Dop (eds), *Atmospheric Turbulence and Air Pollution Modelling*, Reidel, ch. 7) for the
   neutral surface layer, T_L = 0.5·z/σw with σw = 1.3 u*, u* = κ u / ln(z/z0) (κ = 0.4, z the
-  release height, z0 the roughness length); σv is the least-squares fit (relative, at the
+  release height, z0 the roughness length; its Coriolis terms, of order f·z/u* ≈ 2·10⁻⁴ at
+  10 m, dropped); σv is the least-squares fit (relative, at the
   reference distances) of σm² = share·σy².
 * **Relative dispersion.** The rest of the variance, σy² − σm², is the instantaneous plume's:
   the filament's own radius R² = R0² + γ·age plus a random walk of its centre whose variance
