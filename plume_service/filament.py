@@ -15,7 +15,10 @@ normalised 3-D Gaussian plus its ground image,
 
 truncated at 4R, where P₄ = P(|N₃| < 4) = erf(2√2) − 8·e^−8/√(2π) ≈ 0.99888 renormalises the
 truncated kernel so each filament (with its image, over the half-space) carries exactly M.
-Filaments older than ``max_age_s`` are dropped. Without meander the long-time average is the
+Filaments older than ``max_age_s`` are dropped. The cut-off is ``truncate_radii`` R (default 4)
+with the matching renormaliser. With a calibration (:mod:`swarmbus.calibration`) the centre's
+step from age a to a + h has per-axis variance S(a + h) − S(a), the calibrated relative
+variances S_y (x, y) and S_z (z), instead of 2K·h. Without meander the long-time average is the
 Gaussian plume ``Q/(2πu s²)·exp(−y²/2s²)·[exp(−(z−H)²/2s²) + exp(−(z+H)²/2s²)]`` with
 ``s² = R0² + (2K + γ)·x/u``.
 """
@@ -30,22 +33,29 @@ import numpy as np
 
 from plume_service.field import FloatArray
 from plume_service.timestepped import TimeSteppedField
+from swarmbus.calibration import AtmosphereCalibration
 from swarmbus.scenario import PlumeFilament
 from swarmbus.wind import WindModel
 
 if TYPE_CHECKING:
     from scipy.spatial import cKDTree
 
-#: Filaments are cut off at this many radii.
+#: Filaments are cut off at this many radii by default (``truncate_radii``).
 TRUNCATE_RADII = 4.0
 #: Up to this many points are evaluated against every filament directly; more go through a
 #: k-d tree of the filaments (building it costs about as much as 16 direct points).
 BRUTE_FORCE_POINTS = 16
 #: Probability mass of a 3-D standard normal inside radius 4 (the truncation's renormaliser).
-INSIDE_4R = math.erf(TRUNCATE_RADII / math.sqrt(2.0)) - (
-    math.sqrt(2.0 / math.pi) * TRUNCATE_RADII * math.exp(-(TRUNCATE_RADII**2) / 2.0)
-)
-_NORM = 1.0 / ((2.0 * math.pi) ** 1.5 * INSIDE_4R)
+
+
+def inside_radii(radii: float) -> float:
+    """P(|N₃| < r): the probability mass of a 3-D standard normal inside radius r."""
+    return math.erf(radii / math.sqrt(2.0)) - (
+        math.sqrt(2.0 / math.pi) * radii * math.exp(-(radii**2) / 2.0)
+    )
+
+
+INSIDE_4R = inside_radii(TRUNCATE_RADII)
 
 
 @dataclass(frozen=True, slots=True)
@@ -62,23 +72,28 @@ def filament_concentration(
     radii: FloatArray,
     masses: FloatArray,
     tree: cKDTree | None = None,
+    truncate_radii: float = TRUNCATE_RADII,
 ) -> FloatArray:
-    """Σ over filaments of the truncated, renormalised Gaussian plus its ground image (g/m³)
-    at (n, 3) points; exactly 0 below ground. ``tree``: a k-d tree of ``centres`` to reuse."""
+    """Σ over filaments of the Gaussian cut at ``truncate_radii`` R and renormalised, plus its
+    ground image (g/m³) at (n, 3) points; exactly 0 below ground. ``tree``: a k-d tree of
+    ``centres`` to reuse."""
     out = np.zeros(points.shape[0])
     if centres.shape[0] == 0 or points.shape[0] == 0:
         return out
-    reach = TRUNCATE_RADII * float(radii.max())
-    amplitude = masses * _NORM / radii**3
+    reach = truncate_radii * float(radii.max())
+    norm = 1.0 / ((2.0 * math.pi) ** 1.5 * inside_radii(truncate_radii))
+    amplitude = masses * norm / radii**3
     inv_two_r2 = 0.5 / radii**2
-    cut2 = (TRUNCATE_RADII * radii) ** 2
+    cut2 = (truncate_radii * radii) ** 2
     above = points[:, 2] >= 0.0
     if points.shape[0] <= BRUTE_FORCE_POINTS:
         cx, cy, cz = centres[:, 0], centres[:, 1], centres[:, 2]
         for j in range(points.shape[0]):
             x, y, z = points[j]
             dxy2 = (cx - x) ** 2 + (cy - y) ** 2
-            for zz in (z, -z):  # the filament, then its ground image (mirror the point)
+            # the filament, then its ground image (mirror the point): centres are at z ≥ 0, so
+            # the mirrored point is at least z from all of them and out of reach when z ≥ reach
+            for zz in (z, -z) if z < reach else (z,):
                 d2 = dxy2 + (cz - zz) ** 2
                 hit = np.flatnonzero(d2 < cut2)
                 if hit.size:
@@ -114,13 +129,34 @@ class FilamentPlume(TimeSteppedField[Filaments]):
         wind: WindModel,
         seed: int,
         stream: int = 0,
+        calibration: AtmosphereCalibration | None = None,
     ) -> None:
         self.params = params
+        self.calibration = calibration
         self.mass_g = release_rate_g_s / params.release_rate_hz
-        self._noise = math.sqrt(2.0 * params.centerline_diffusivity_m2_s * params.step_s)
         self._max_age_steps = math.floor(params.max_age_s / params.step_s + 1e-9)
+        self._noise = self._noise_by_age(params, calibration)
         self._tree: tuple[Filaments, cKDTree, FloatArray] | None = None
         super().__init__(source_m, release_rate_g_s, wind, params.step_s, seed, stream)
+
+    def _noise_by_age(
+        self, params: PlumeFilament, calibration: AtmosphereCalibration | None
+    ) -> FloatArray:
+        """(ages, 3): the std of a filament centre's step from age step j to j + 1, per axis
+        (x, y, z); √(2K·h) everywhere without a calibration, else the increments of the
+        calibrated relative variances S_y (x and y) and S_z (z)."""
+        ages = self._max_age_steps + 2
+        h = params.step_s
+        if calibration is None:
+            std = math.sqrt(2.0 * params.centerline_diffusivity_m2_s * h)
+            return np.full((ages, 3), std)
+        age_s = np.arange(ages + 1, dtype=np.float64) * h
+        radius2: FloatArray = params.initial_radius_m**2 + params.growth_m2_s * age_s
+        s_y, s_z = calibration.relative_variances(age_s, radius2)
+        table = np.empty((ages, 3))
+        table[:, 0] = table[:, 1] = np.sqrt(np.diff(s_y))
+        table[:, 2] = np.sqrt(np.diff(s_z))
+        return table
 
     def initial_state(self) -> Filaments:
         return Filaments(np.empty((0, 3)), np.empty(0, dtype=np.int64))
@@ -131,10 +167,13 @@ class FilamentPlume(TimeSteppedField[Filaments]):
     def advance(self, state: Filaments, k: int, rng: np.random.Generator) -> Filaments:
         h = self.step_s
         p = state.positions
-        moved = p + self.wind.velocity(p, k * h) * h
-        moved += self._noise * rng.standard_normal(p.shape)
-        np.abs(moved[:, 2], out=moved[:, 2])
         born = state.birth_step
+        uniform = self.wind.uniform_at(k * h)  # the same wind everywhere: no per-filament lookup
+        wind = self.wind.velocity(p, k * h) if uniform is None else np.asarray(uniform)
+        moved = p + wind * h
+        noise = self._noise[np.minimum(k - born, self._noise.shape[0] - 1)]
+        moved += noise * rng.standard_normal(p.shape)
+        np.abs(moved[:, 2], out=moved[:, 2])
         alive = (k + 1 - born) <= self._max_age_steps
         new = int(rng.poisson(self.params.release_rate_hz * h))
         positions = np.concatenate([moved[alive], np.tile(self.source_m, (new, 1))])
@@ -155,9 +194,10 @@ class FilamentPlume(TimeSteppedField[Filaments]):
     def _evaluate(self, points: FloatArray, t: float | None, out: FloatArray) -> None:
         k, state = self.state_at(0.0 if t is None else t)
         masses = np.full(state.birth_step.shape[0], self.mass_g)
+        cut = self.params.truncate_radii
         if points.shape[0] <= BRUTE_FORCE_POINTS:
             radii = self.radii(state, k)
-            out[:] = filament_concentration(points, state.positions, radii, masses)
+            out[:] = filament_concentration(points, state.positions, radii, masses, None, cut)
             return
         from scipy.spatial import cKDTree  # ≈ 30 MB: loaded by the filament model only
 
@@ -166,7 +206,7 @@ class FilamentPlume(TimeSteppedField[Filaments]):
                 # one k-d tree per state, shared by every query of the same step
                 self._tree = (state, cKDTree(state.positions), self.radii(state, k))
             _, tree, radii = self._tree
-        out[:] = filament_concentration(points, state.positions, radii, masses, tree)
+        out[:] = filament_concentration(points, state.positions, radii, masses, tree, cut)
 
     def info(self) -> dict[str, Any]:
         p = self.params
@@ -181,6 +221,8 @@ class FilamentPlume(TimeSteppedField[Filaments]):
             "growth_m2_s": p.growth_m2_s,
             "centerline_diffusivity_m2_s": p.centerline_diffusivity_m2_s,
             "max_age_s": p.max_age_s,
+            "truncate_radii": p.truncate_radii,
+            "calibration": None if self.calibration is None else self.calibration.describe(),
             "wind": self.wind.info(),
             **self.time_info(),
         }

@@ -6,7 +6,7 @@ from plume_service.field import ConcentrationField, PlumeField
 from plume_service.filament import FilamentPlume
 from plume_service.gaussian import GaussianPlume
 from plume_service.puff import PuffPlume
-from swarmbus.scenario import Scenario, Source
+from swarmbus.scenario import Scenario, Source, scenario_calibration
 from swarmbus.wind import WindModel, wind_from_scenario
 
 
@@ -30,12 +30,22 @@ def _source_field(
     model = src.model or plume.model
     source = (src.x_m, src.y_m, src.release_height_m)
     rate, seed = src.release_rate_g_s, scenario.world.seed
+    calibration = scenario_calibration(scenario)
     if model == "filament":
-        return FilamentPlume(source, rate, plume.filament, wind, seed, stream=index)
+        return FilamentPlume(source, rate, plume.filament, wind, seed, index, calibration)
     if model == "puff":
         lid = plume.mixing_height_m
         return PuffPlume(
-            source, rate, plume.puff, wind, plume.stability, plume.coefficients, lid, seed, index
+            source,
+            rate,
+            plume.puff,
+            wind,
+            plume.stability,
+            plume.coefficients,
+            lid,
+            seed,
+            index,
+            calibration,
         )
     return GaussianPlume(
         release_rate=src.release_rate_g_s,

@@ -26,6 +26,7 @@ import numpy as np
 
 from plume_service.field import FloatArray
 from plume_service.timestepped import TimeSteppedField
+from swarmbus.calibration import AtmosphereCalibration
 from swarmbus.dispersion import DispersionCurves, dispersion_curves
 from swarmbus.scenario import PlumePuff
 from swarmbus.wind import WindModel
@@ -58,9 +59,11 @@ class PuffPlume(TimeSteppedField[Puffs]):
         mixing_height: float | None = None,
         seed: int = 0,
         stream: int = 0,
+        calibration: AtmosphereCalibration | None = None,
     ) -> None:
         self.params = params
         self.dispersion: DispersionCurves = dispersion_curves(coefficients, stability)
+        self.calibration = calibration
         self.mixing_height_m = mixing_height
         if mixing_height is not None and mixing_height <= source_m[2]:
             raise ValueError(
@@ -107,6 +110,10 @@ class PuffPlume(TimeSteppedField[Puffs]):
         _, state = self.state_at(t)
         travel = np.maximum(state.travel_m, 1e-9)
         sigma_y, sigma_z = self.dispersion.sigmas(travel)
+        if self.calibration is not None:
+            # the meander carries the puffs: their own σy is the rest of the plume's
+            meander = self.calibration.meander_variance(travel / self.calibration.wind_speed_m_s)
+            sigma_y = np.sqrt(np.maximum(sigma_y**2 - meander, 1e-4 * sigma_y**2))
         height = np.full((state.centres.shape[0], 1), self.source_m[2])
         return np.hstack([state.centres, height]), sigma_y, sigma_z
 
@@ -162,6 +169,7 @@ class PuffPlume(TimeSteppedField[Puffs]):
             "coefficients": self.dispersion.family,
             "mixing_height_m": self.mixing_height_m,
             "dispersion": self.dispersion.describe(),
+            "calibration": None if self.calibration is None else self.calibration.describe(),
             "wind": self.wind.info(),
             **self.time_info(),
         }

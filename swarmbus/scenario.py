@@ -14,6 +14,7 @@ from typing import Annotated, Literal, NamedTuple
 
 import msgspec
 
+from swarmbus.calibration import AtmosphereCalibration, derive_calibration
 from swarmbus.codec import split_validation_error
 from swarmbus.gases import FORMULAS, ppm_per_g_m3
 from swarmbus.messages import MissionItem
@@ -22,6 +23,8 @@ from swarmbus.vehicle_types import VehicleTypeError, load_vehicle_type
 
 SCENARIOS_DIR = Path(__file__).resolve().parent.parent / "deploy" / "scenarios"
 DEFAULT_SCENARIO = SCENARIOS_DIR / "novak2018.toml"
+#: The gas-source-localisation benchmark's environments, one scenario file each.
+GSL_ENVIRONMENTS_DIR = SCENARIOS_DIR / "gsl"
 MAVLINK_MAX_SYSID = 254  # MAVLink systems are 1–254 (0 is broadcast, 255 ground stations)
 MAX_VEHICLES = 1024  # per scenario; past MAVLINK_MAX_SYSID vehicles are on the bus only
 
@@ -67,12 +70,17 @@ class Time(_Section, frozen=True, kw_only=True):
 
 
 class WindMeander(_Section, frozen=True, kw_only=True):
-    """Farrell et al. (2002) coloured noise on the wind; ``preset`` fills the three numbers."""
+    """Coloured noise on the wind: Farrell et al.'s (2002) 2nd-order process (``preset`` fills
+    its three numbers), or an Ornstein–Uhlenbeck process of std ``std_m_s`` and Lagrangian
+    timescale ``timescale_s`` (``process = "ou"``; what ``[plume.calibration]`` derives)."""
 
     preset: Literal["small", "large"] | None = None
+    process: Literal["farrell", "ou"] = "farrell"
     gain: NonNeg = 3.0  # Farrell's G (see docs/plume.md for its SDE form)
     damping: Pos = 0.071  # ζ
     bandwidth_rad_s: Pos = 0.71  # ω
+    std_m_s: NonNeg = 0.5  # ou: stationary std of each horizontal component
+    timescale_s: Annotated[float, msgspec.Meta(ge=1e-3, le=1e6)] = 10.0  # ou: T_L
     step_s: Annotated[float, msgspec.Meta(ge=1e-3, le=10.0)] = 0.05  # internal step, sim s
 
     def resolved(self) -> WindMeander:
@@ -125,6 +133,7 @@ class PlumeFilament(_Section, frozen=True, kw_only=True):
     centerline_diffusivity_m2_s: NonNeg = 0.02
     step_s: Annotated[float, msgspec.Meta(ge=1e-3, le=10.0)] = 0.05
     max_age_s: Pos = 120.0  # filaments older than this are dropped
+    truncate_radii: Annotated[float, msgspec.Meta(ge=1.0, le=20.0)] = 4.0  # kernel cut-off, R
 
 
 class PlumePuff(_Section, frozen=True, kw_only=True):
@@ -133,6 +142,17 @@ class PlumePuff(_Section, frozen=True, kw_only=True):
     release_period_s: Annotated[float, msgspec.Meta(ge=1e-3, le=600.0)] = 0.5
     step_s: Annotated[float, msgspec.Meta(ge=1e-3, le=10.0)] = 0.1  # advection step
     max_age_s: Pos = 600.0
+
+
+class PlumeCalibration(_Section, frozen=True, kw_only=True):
+    """Calibrate a filament or puff plume to the atmosphere (``swarmbus.calibration``): the
+    wind's meander (an Ornstein–Uhlenbeck process) and the filaments' relative dispersion are
+    derived from ``stability``/``coefficients``, the wind speed and the release height so that
+    the time-averaged field has the steady Gaussian plume's σy and σz; ``meander_share`` of
+    the crosswind variance (at 30, 50, 80 m) is the centreline's meander."""
+
+    meander_share: Annotated[float, msgspec.Meta(ge=0.0, le=0.85)] = 0.5
+    roughness_m: Annotated[float, msgspec.Meta(ge=1e-4, le=2.0)] = 0.1  # z0, sets T_L
 
 
 class Plume(_Section, frozen=True, kw_only=True):
@@ -147,6 +167,7 @@ class Plume(_Section, frozen=True, kw_only=True):
     coefficients: Literal["mcmullen", "briggs-rural", "briggs-urban", "novak2018"] = "mcmullen"
     mixing_height_m: Pos | None = None
     sources: list[Source] = msgspec.field(default_factory=lambda: [Source()])
+    calibration: PlumeCalibration | None = None  # present: calibrated to the atmosphere
 
 
 class Mox(_Section, frozen=True, kw_only=True):
@@ -488,7 +509,60 @@ def parse_scenario(text: str, source: str = "<scenario>") -> Scenario:
             reason = f"{reason}, got {value!r}"
         raise ScenarioError(source, field, reason) from None
     _check(scenario, source)
-    return scenario
+    return calibrate_scenario(scenario, source)
+
+
+def scenario_calibration(scenario: Scenario) -> AtmosphereCalibration | None:
+    """The derived calibration of a scenario with ``[plume.calibration]``, else None; the wind
+    speed and the first source's release height set it. Raises ValueError."""
+    cal = scenario.plume.calibration
+    if cal is None:
+        return None
+    plume = scenario.plume
+    return derive_calibration(
+        plume.stability,
+        plume.coefficients,
+        scenario.wind.speed_m_s,
+        plume.sources[0].release_height_m,
+        cal.meander_share,
+        cal.roughness_m,
+    )
+
+
+def calibrate_scenario(scenario: Scenario, source: str = "<scenario>") -> Scenario:
+    """``scenario`` with what its ``[plume.calibration]`` derives: the wind ``model =
+    "meander"`` with an Ornstein–Uhlenbeck ``[wind.meander]`` of the derived std and timescale
+    (``steady`` for a zero meander share), and ``[plume.filament]``'s ``growth_m2_s`` and
+    ``release_rate_hz``; unchanged without a calibration. Idempotent."""
+    try:
+        derived = scenario_calibration(scenario)
+    except ValueError as exc:
+        raise ScenarioError(source, "plume.calibration", str(exc)) from None
+    if derived is None:
+        return scenario
+    wind = scenario.wind
+    if wind.model == "field":
+        raise ScenarioError(
+            source, "wind.model", "a calibrated plume derives a uniform meander: use 'meander'"
+        )
+    if derived.sigma_v_m_s == 0.0:
+        wind = msgspec.structs.replace(wind, model="steady")
+    else:
+        meander = msgspec.structs.replace(
+            wind.meander,
+            preset=None,
+            process="ou",
+            std_m_s=derived.sigma_v_m_s,
+            timescale_s=derived.timescale_s,
+        )
+        wind = msgspec.structs.replace(wind, model="meander", meander=meander)
+    filament = msgspec.structs.replace(
+        scenario.plume.filament,
+        growth_m2_s=derived.growth_m2_s,
+        release_rate_hz=derived.release_rate_hz,
+    )
+    plume = msgspec.structs.replace(scenario.plume, filament=filament)
+    return msgspec.structs.replace(scenario, wind=wind, plume=plume)
 
 
 def _value_at(raw: object, field: str) -> tuple[bool, object]:
@@ -519,10 +593,12 @@ def load_scenario(path: str | Path | None = None) -> Scenario:
 
 
 def resolve_scenario_path(name_or_path: str | None) -> Path:
-    """A scenario path, or the name of a bundled scenario (``novak2018``)."""
+    """A scenario path, or the name of a bundled scenario (``novak2018``, or a benchmark
+    environment such as ``gsl/meander_high``)."""
     if name_or_path is None:
         return DEFAULT_SCENARIO
     p = Path(name_or_path)
-    if p.exists() or p.suffix == ".toml" or "/" in name_or_path:
+    bundled = SCENARIOS_DIR / f"{name_or_path}.toml"
+    if p.exists() or p.suffix == ".toml" or ("/" in name_or_path and not bundled.exists()):
         return p
-    return SCENARIOS_DIR / f"{name_or_path}.toml"
+    return bundled

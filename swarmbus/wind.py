@@ -19,7 +19,9 @@ Models (``[wind] model``):
     stationary std of x is ``G √T_F √(ω/4ζ)`` (small: 0.47 m/s, large: 1.41 m/s). The SDE is
     integrated exactly over each internal step (Van Loan's matrix exponential), so its
     statistics do not depend on ``step_s``; between steps the value is interpolated linearly.
-    The process starts in its stationary distribution at t = 0.
+    The process starts in its stationary distribution at t = 0. ``process = "ou"`` uses an
+    Ornstein–Uhlenbeck process instead (std ``std_m_s``, timescale ``timescale_s``, exact
+    steps): the meander a calibrated plume derives (:mod:`swarmbus.calibration`).
 ``field``
     A 2-D grid (``spacing_m``, over ``[−extent_m, extent_m]²``): the meander noise drives the
     four corners, the edges interpolate them linearly and the interior follows the linear
@@ -136,6 +138,11 @@ class ColouredNoise:
         self.copies = copies
         self._seed = seed
         self._stream = stream
+        self._blocks: list[FloatArray] = []
+        self._state = np.zeros((2, copies))
+        if cfg.process == "ou":
+            self._ornstein_uhlenbeck(cfg.std_m_s, cfg.timescale_s)
+            return
         omega, zeta = cfg.bandwidth_rad_s, cfg.damping
         self.sigma = cfg.gain * omega**2 * math.sqrt(FARRELL_STEP_S)
         a = np.array([[0.0, 1.0], [-(omega**2), -2.0 * zeta * omega]])
@@ -156,8 +163,18 @@ class ColouredNoise:
         #: Stationary std of x (m/s): σ/√(4ζω³) = G √T_F √(ω/4ζ).
         self.stationary_std = self.sigma / math.sqrt(4.0 * zeta * omega**3)
         self._stationary_v_std = self.sigma / math.sqrt(4.0 * zeta * omega)
-        self._blocks: list[FloatArray] = []
-        self._state = np.zeros((2, copies))
+
+    def _ornstein_uhlenbeck(self, std: float, timescale: float) -> None:
+        """x_{k+1} = a·x_k + std·√(1 − a²)·N(0, 1), a = e^(−h/T_L): exact for any step; the
+        second state is unused (kept at 0)."""
+        a = math.exp(-self.step_s / timescale)
+        self.sigma = std * math.sqrt(2.0 / timescale)
+        self._f = np.array([[a, 0.0], [0.0, 0.0]])
+        self._l = np.array(
+            [[std * math.sqrt(-math.expm1(-2.0 * self.step_s / timescale)), 0.0], [0.0, 0.0]]
+        )
+        self.stationary_std = std
+        self._stationary_v_std = 0.0
 
     def _rng(self, block: int) -> np.random.Generator:
         seq = np.random.SeedSequence([self._seed, _WIND_STREAM, self._stream, block])
@@ -232,6 +249,8 @@ class MeanderWind(WindModel):
         return {
             "model": "meander",
             "mean_enu_m_s": list(self.mean_enu_m_s),
+            "process": self.config.process,
+            "timescale_s": self.config.timescale_s,
             "gain": self.config.gain,
             "damping": self.config.damping,
             "bandwidth_rad_s": self.config.bandwidth_rad_s,
