@@ -219,8 +219,8 @@ class ConcentrationSensor:
         else:
             state, dt = clean, 0.0  # switched on in clean air
         tau = self._rise_s if rising(state) else self._decay_s
-        gain = 1.0 if tau <= 0.0 else 1.0 - math.exp(-dt / tau)
-        filtered = state + gain * (target - state)
+        # No lag: the value itself, since state + 1·(target − state) may round off by an ulp.
+        filtered = target if tau <= 0.0 else state + (1.0 - math.exp(-dt / tau)) * (target - state)
         history.append((sim_time_s, filtered))
         return filtered
 
