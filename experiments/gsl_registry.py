@@ -257,20 +257,22 @@ def _description(text: str) -> str:
     return first.lstrip("#").strip() if first.startswith("#") else ""
 
 
-@functools.cache
 def load_environment(name_or_path: str, overrides: tuple[tuple[str, Any], ...] = ()) -> Environment:
     """The environment ``name_or_path`` (a file needs no ``[[vehicles]]``: the bench adds
     them) with ``overrides`` applied; :class:`GslError` says what is wrong with it."""
     path = environment_path(name_or_path)
-    data = path.read_bytes()
+    return _environment(path, path.read_bytes(), overrides)
+
+
+@functools.cache
+def _environment(path: Path, data: bytes, overrides: tuple[tuple[str, Any], ...]) -> Environment:
     text = data.decode()
-    raw = tomllib.loads(text) if text.strip() else {}
-    if "vehicles" not in raw:  # a placeholder the bench replaces
+    if "vehicles" not in tomllib.loads(text):  # a placeholder the bench replaces
         text += '\n[[vehicles]]\nid = "uav1"\n'
     try:
         scenario = parse_scenario(text, str(path))
     except ScenarioError as exc:
-        raise GslError(f"--environments {name_or_path!r}: {exc}") from None
+        raise GslError(f"--environments {str(path)!r}: {exc}") from None
     return Environment(
         name=path.stem,
         path=path,
