@@ -28,6 +28,7 @@ from experiments.gsl_registry import (
     GslError,
     environment_names,
     load_environment,
+    registered_algorithms,
     resolve_algorithm,
 )
 from experiments.gsl_stats import Z_95, mcnemar_exact, summarise, wilson_interval
@@ -59,12 +60,10 @@ class GslOptions:
 
 
 def _algorithms(asked: Sequence[str]) -> tuple[tuple[str, ...], tuple[Algorithm, ...]]:
-    texts = [] if not asked or list(asked) == ["all"] else list(asked)
-    resolved = dict(resolve_algorithm(t) for t in texts) if texts else {}
-    if not texts:  # every built-in and registered one
-        from experiments.gsl_registry import registered_algorithms
-
-        resolved = dict(resolve_algorithm(name) for name in registered_algorithms())
+    """The asked algorithms (none or "all": every registered one), with the floor first and
+    the ceiling last."""
+    texts = [t for t in asked if t != "all"] or list(registered_algorithms())
+    resolved = dict(resolve_algorithm(t) for t in texts)
     for name in (FLOOR, CEILING):
         resolved.setdefault(name, resolve_algorithm(name)[1])
     middle = [n for n in resolved if n not in (FLOOR, CEILING)]
