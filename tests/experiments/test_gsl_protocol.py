@@ -35,7 +35,7 @@ from experiments.gsl_registry import (
 )
 from experiments.gsl_stats import mcnemar_exact, summarise
 from experiments.gsl_sweep import SweepParam, run_sweep, seed_warning, write_sweep
-from tests.support.procs import REPO
+from tests.support.procs import REPO, run_cli
 
 # A behaviour from outside the package: two vehicles fly upwind (−x in every environment
 # here) at 3 m/s and declare where they are after 5 s.
@@ -258,3 +258,11 @@ def test_the_sensor_column_has_the_pid() -> None:
     opts = make_options(["casting"], ["steady_gaussian"], ["pid"], runs=1, time_limit_s=20.0)
     outcomes = run_all(opts)
     assert row_of(outcomes[1:2])["sensor"] == "pid"
+
+
+def test_the_command_line_refuses_a_sweep_on_test_seeds_and_a_bad_parameter() -> None:
+    res = run_cli(["bench", "gsl", "sweep", "behavior.lost_s=0.5,1", "--seed", "0"])
+    assert res.returncode == 2 and "seeds >= 1000" in res.stderr
+    res = run_cli(["bench", "gsl", "sweep", "plume.nope=1", "--runs", "1"])
+    assert res.returncode == 2 and "no 'nope' there" in res.stderr
+    assert "Traceback" not in res.stderr
