@@ -35,7 +35,7 @@ import msgspec
 
 from swarmbus.codec import split_validation_error
 from swarmbus.scenario import (
-    SCENARIOS_DIR,
+    GSL_ENVIRONMENTS_DIR,
     SENSOR_PRESETS,
     Scenario,
     ScenarioError,
@@ -46,7 +46,7 @@ from swarmbus.scenario import (
 log = logging.getLogger(__name__)
 
 ENTRY_POINT_GROUP = "plumeswarm.behaviors"
-ENVIRONMENTS_DIR = SCENARIOS_DIR / "gsl"
+ENVIRONMENTS_DIR = GSL_ENVIRONMENTS_DIR
 TUNED_MODULE = "experiments.gsl_tuned"
 
 
