@@ -337,8 +337,9 @@ def protocol_line(opts: GslOptions) -> str:
         f"{opts.runs} runs per cell, seed {opts.seed}, dynamics {opts.dynamics} "
         f"(control {opts.control_hz} Hz, sensor every {opts.sensor_period_ticks} ticks), "
         f"limit {opts.time_limit_s:g} s, starts 30–80 m downwind and ±20 m crosswind at 10 m "
-        "(run k: the same start for every algorithm), a time-dependent release 60 s old at the "
-        "start; success: a declaration within 2 m of the source."
+        "(run k: the same start for every algorithm), a time-dependent release running "
+        "max(60 s, 1.5 × 80 m / wind speed) before; success: a declaration within 2 m of the "
+        "source."
     )
 
 

@@ -45,6 +45,7 @@ from experiments.gsl_registry import (
     time_dependent,
 )
 from plume_service.from_scenario import field_from_scenario
+from plume_service.statistics import warmup_s
 from swarmbus.messages import (
     Arm,
     Command,
@@ -74,8 +75,8 @@ START_ALTITUDE_M = 10.0
 TRAJECTORY_EVERY_S = 0.5  # trajectory samples kept for the figure
 
 
-#: Sim time the release runs before an episode starts in a time-dependent environment: the
-#: filaments reach beyond the farthest start (80 m at the novak2018 wind of 6 m/s in 14 s).
+#: The shortest time the release runs before an episode starts in a time-dependent
+#: environment (:func:`start_s`; longer in a wind under 2 m/s).
 FIELD_WARMUP_S = 60.0
 
 
@@ -340,7 +341,7 @@ def kinematic_episode(spec: EpisodeSpec, environment: Scenario | None = None) ->
     scenario = episode_scenario(spec, environment)
     concentration, _ = environment_field(scenario)
     dt = 1.0 / spec.control_hz
-    start_tick = round(start_s(scenario) / dt)
+    start_tick = round(start_s(scenario, spec.start_along_m) / dt)
     ids = [v.id for v in scenario.vehicles]
     behaviors = episode_behaviors(spec, scenario)
     sensors = [ConcentrationSensor.for_vehicle(scenario, i) for i in range(len(ids))]
@@ -398,10 +399,14 @@ def _sample(
     return readings
 
 
-def start_s(scenario: Scenario) -> float:
-    """When the episode starts: after ``FIELD_WARMUP_S`` of release in a time-dependent
-    environment, at once in a steady one."""
-    return FIELD_WARMUP_S if time_dependent(scenario) else 0.0
+def start_s(scenario: Scenario, along_m: tuple[float, float] = START_ALONG_M) -> float:
+    """When the episode starts: in a time-dependent environment once its field is in its
+    statistically steady state out to the farthest start — max(``FIELD_WARMUP_S``, 1.5 ×
+    farthest start / mean wind speed) of release (:func:`plume_service.statistics.warmup_s`),
+    60 s at 6 m/s, 120 s at 1 m/s — at once in a steady one."""
+    if not time_dependent(scenario):
+        return 0.0
+    return max(FIELD_WARMUP_S, warmup_s(scenario, (along_m[1],)))
 
 
 #: Commands given at tick boundaries: {tick: [(vehicle, command)]}; given when the runner
@@ -482,7 +487,7 @@ def fused_episode(
     episode = FusedEpisode(scenario, on_states)
     try:
         run = episode.runner
-        episode.take_off(START_ALTITUDE_M, start_s(scenario))
+        episode.take_off(START_ALTITUDE_M, start_s(scenario, spec.start_along_m))
         behaviors = [ap.behavior for ap in episode.autopilots]
         dt = run.control_dt_s
         run.step()  # the first tick the behaviours fly

@@ -266,3 +266,20 @@ def test_the_command_line_refuses_a_sweep_on_test_seeds_and_a_bad_parameter() ->
     res = run_cli(["bench", "gsl", "sweep", "plume.nope=1", "--runs", "1"])
     assert res.returncode == 2 and "no 'nope' there" in res.stderr
     assert "Traceback" not in res.stderr
+
+
+@pytest.mark.parametrize(
+    ("environment", "along_m", "expected_s"),
+    [
+        ("steady_gaussian", (30.0, 80.0), 0.0),  # nothing to wait for
+        ("meander_small", (30.0, 80.0), 60.0),  # 1.5 × 80 m / 6 m/s = 20 s < 60 s
+        ("meander_small", (300.0, 300.0), 75.0),  # 1.5 × 300 m / 6 m/s
+        ("farrell2002_reference", (30.0, 80.0), 120.0),  # 1.5 × 80 m / 1 m/s
+    ],
+)
+def test_the_warm_up_lets_the_release_reach_past_the_farthest_start(
+    environment: str, along_m: tuple[float, float], expected_s: float
+) -> None:
+    from experiments.gsl_episode import start_s
+
+    assert start_s(load_environment(environment).scenario, along_m) == pytest.approx(expected_s)
