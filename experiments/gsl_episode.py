@@ -15,9 +15,9 @@ concentration field and its wind), one sensor model, one seeded start — all of
   and an offboard switch at recorded tick boundaries (:class:`Schedule`), so the same episode
   can be flown on the distributed stack.
 
-Registries (:data:`ALGORITHMS`, :data:`ENVIRONMENTS`, :data:`SENSORS`) are plain dicts: add an
-entry to add a row. An environment or sensor whose model this build lacks is listed with what
-is missing, so the bench can say which cells it could not run.
+What an episode flies — the algorithm, the environment file, the sensor — comes from
+:mod:`experiments.gsl_registry`; where it starts, how long it may fly, the warm-up of a
+time-dependent release and what counts as finding the source are the protocol's, here.
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import msgspec
 import numpy as np
@@ -35,7 +36,16 @@ from agents.behavior import Behavior, BehaviorContext, load_behavior
 from agents.behaviors.search import PLUME_THRESHOLD_G_M3, SourceEstimate
 from agents.sensor import ConcentrationSensor
 from experiments.fused import FusedRunner, StatesObserver
+from experiments.gsl_registry import (
+    SENSORS,
+    Algorithm,
+    Environment,
+    load_environment,
+    resolve_algorithm,
+    time_dependent,
+)
 from plume_service.from_scenario import field_from_scenario
+from plume_service.statistics import warmup_s
 from swarmbus.messages import (
     Arm,
     Command,
@@ -48,7 +58,7 @@ from swarmbus.messages import (
     VehicleState,
 )
 from swarmbus.plume_formula import downwind_unit
-from swarmbus.scenario import Scenario, Sensor, Vehicle, load_scenario
+from swarmbus.scenario import Scenario, Vehicle
 from swarmbus.wind import WindModel, wind_from_scenario
 
 FloatArray = npt.NDArray[np.float64]
@@ -58,85 +68,21 @@ Point = tuple[float, float]
 MAX_SPEED_M_S = 5.0
 POSITION_GAIN_HZ = 1.0
 SUCCESS_RADIUS_M = 2.0
+RADII_M = (2.0, 5.0)  # "reached within r" and "declared within r"
 START_ALONG_M = (30.0, 80.0)  # downwind of the source
 START_ACROSS_M = (-20.0, 20.0)
 START_ALTITUDE_M = 10.0
 TRAJECTORY_EVERY_S = 0.5  # trajectory samples kept for the figure
 
 
-@dataclass(frozen=True)
-class Algorithm:
-    behavior: str  # "module:Class"
-    vehicles: int = 1
-    source: str = ""  # the publication it follows
-
-
-ALGORITHMS: dict[str, Algorithm] = {
-    "random_walk": Algorithm(
-        "agents.behaviors.random_walk:RandomWalk", 1, "Codling et al. 2008 (baseline)"
-    ),
-    "casting": Algorithm("agents.behaviors.casting:Casting", 1, "Kennedy & Marsh 1974"),
-    "surge_cast": Algorithm(
-        "agents.behaviors.surge_cast:SurgeCast", 1, "Lochmatter & Martinoli 2008"
-    ),
-    "gradient_swarm": Algorithm(
-        "agents.behaviors.gradient_swarm:GradientSwarm", 3, "Ögren, Fiorelli & Leonard 2004"
-    ),
-    "infotaxis": Algorithm(
-        "agents.behaviors.infotaxis:Infotaxis", 1, "Vergassola, Villermaux & Shraiman 2007"
-    ),
-    "particle_filter": Algorithm(
-        "agents.behaviors.particle_filter:ParticleFilter", 1, "Hutchinson, Oh & Chen 2017"
-    ),
-}
-
-
-@dataclass(frozen=True)
-class Environment:
-    """A plume condition: the scenario's plume model and wind model for the episode.
-
-    ``plume = "gaussian"`` is the scenario's steady plume, its behaviours read the scenario's
-    wind. Any other model is time-dependent: its field and wind are deterministic functions of
-    (scenario, seed, t), every episode starts ``FIELD_WARMUP_S`` of sim time after the release
-    began, and the behaviours read the wind from their anemometer
-    (:class:`agents.anemometer.Anemometer`, the same wind, the scenario's noise)."""
-
-    description: str
-    plume: str = "gaussian"  # [plume] model
-    meander: str | None = None  # [wind.meander] preset; None: the scenario's steady wind
-    missing: str | None = None
-
-    @property
-    def time_dependent(self) -> bool:
-        return self.plume != "gaussian"
-
-
-#: Sim time the release runs before an episode starts in a time-dependent environment: the
-#: filaments reach beyond the farthest start (80 m at the novak2018 wind of 6 m/s in 14 s).
+#: The shortest time the release runs before an episode starts in a time-dependent
+#: environment (:func:`start_s`; longer in a wind under 2 m/s).
 FIELD_WARMUP_S = 60.0
 
-ENVIRONMENTS: dict[str, Environment] = {
-    "steady_gaussian": Environment("steady Gaussian plume (the scenario's)"),
-    "filaments": Environment("filament plume in a steady wind", "filament"),
-    "meander_small": Environment("filament plume, small wind meander", "filament", "small"),
-    "meander_large": Environment("filament plume, large wind meander", "filament", "large"),
-}
 
-
-def environment_scenario(scenario: Scenario, environment: str) -> Scenario:
-    """``scenario`` with the environment's plume and wind models."""
-    env = ENVIRONMENTS[environment]
-    if not env.time_dependent:
-        return scenario
-    wind = scenario.wind
-    if env.meander is not None:
-        meander = msgspec.structs.replace(wind.meander, preset=env.meander).resolved()
-        wind = msgspec.structs.replace(wind, model="meander", meander=meander)
-    else:
-        wind = msgspec.structs.replace(wind, model="steady")
-    sources = [msgspec.structs.replace(s, model=None) for s in scenario.plume.sources]
-    plume = msgspec.structs.replace(scenario.plume, model=env.plume, sources=sources)
-    return msgspec.structs.replace(scenario, wind=wind, plume=plume)
+def environment_of(spec: EpisodeSpec) -> Environment:
+    """The spec's environment file, loaded with its overrides."""
+    return load_environment(spec.environment, spec.overrides)
 
 
 def environment_field(scenario: Scenario) -> tuple[Field, WindModel]:
@@ -144,22 +90,6 @@ def environment_field(scenario: Scenario) -> tuple[Field, WindModel]:
     wind = wind_from_scenario(scenario)
     plume = field_from_scenario(scenario, wind)
     return (lambda points, t: plume.concentration(points, t)), wind
-
-
-@dataclass(frozen=True)
-class SensorModel:
-    description: str
-    config: Sensor | None = None
-    missing: str | None = None
-
-
-SENSORS: dict[str, SensorModel] = {
-    "ideal": SensorModel("the field's value, no lag, noise or limits", Sensor(preset="ideal")),
-    "mox": SensorModel(
-        "metal-oxide sensor, Figaro TGS2620 (rise 2.96 s, decay 15.71 s)",
-        Sensor(preset="mox-tgs2620"),
-    ),
-}
 
 
 @dataclass(frozen=True)
@@ -174,10 +104,24 @@ class EpisodeSpec:
     sensor_period_ticks: int = 2
     keep_trajectory: bool = False
     dynamics: str = "kinematic"  # or "full"
+    behavior: str = ""  # "module:Class" to fly; "": the registered algorithm's
+    vehicles: int = 0  # how many fly it; 0: the algorithm's
+    overrides: tuple[tuple[str, Any], ...] = ()  # "section.key" of the environment's scenario
+    start_along_m: tuple[float, float] = START_ALONG_M
+
+    def algorithm_config(self) -> Algorithm:
+        if self.behavior:
+            return Algorithm(self.behavior, self.vehicles or 1)
+        return resolve_algorithm(self.algorithm)[1]
 
 
 @dataclass
 class Outcome:
+    """One episode. ``success``: a declaration within ``SUCCESS_RADIUS_M`` of the source;
+    ``time_to_success_s`` its time from the episode's start. ``final_error_m``: the
+    declaration's distance from the source, or (none) where the vehicles (their centroid)
+    end. ``first_within_s[i]``: when the centroid first came within ``RADII_M[i]``."""
+
     spec: EpisodeSpec
     success: bool
     time_to_success_s: float | None
@@ -188,13 +132,20 @@ class Outcome:
     declared: bool
     estimate_xy: tuple[float, float]
     trajectories: list[list[tuple[float, float]]] = field(default_factory=list)
+    start_xy: tuple[float, float] = (0.0, 0.0)
+    min_distance_m: float = math.inf
+    first_within_s: tuple[float | None, ...] = ()
+    declared_s: float | None = None
 
 
-def start_point(scenario: Scenario, seed: int, run: int) -> tuple[float, float]:
-    """Run ``run``'s start (ENU): uniform 30–80 m downwind and ±20 m crosswind of the source.
-    The same for every algorithm, so that cells are compared on the same starts."""
+def start_point(
+    scenario: Scenario, seed: int, run: int, along_m: tuple[float, float] = START_ALONG_M
+) -> tuple[float, float]:
+    """Run ``run``'s start (ENU): uniform 30–80 m (``along_m``) downwind and ±20 m crosswind
+    of the source. The same for every algorithm, so that cells are compared on the same
+    starts."""
     rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence([seed, run, 0x57A7])))
-    along = float(rng.uniform(*START_ALONG_M))
+    along = float(rng.uniform(*along_m))
     across = float(rng.uniform(*START_ACROSS_M))
     src = scenario.plume.sources[0]
     dw = downwind_unit(scenario.wind.from_deg)
@@ -205,7 +156,7 @@ def start_point(scenario: Scenario, seed: int, run: int) -> tuple[float, float]:
 def episode_starts(scenario: Scenario, spec: EpisodeSpec, count: int) -> list[list[float]]:
     """Where each vehicle starts (ENU, at ``START_ALTITUDE_M``): run ``spec.run``'s start; a
     swarm on a circle of 2 m around it."""
-    sx, sy = start_point(scenario, spec.seed, spec.run)
+    sx, sy = start_point(scenario, spec.seed, spec.run, spec.start_along_m)
     starts = [[sx, sy, START_ALTITUDE_M] for _ in range(count)]
     if count > 1:
         for i, p in enumerate(starts):
@@ -215,15 +166,17 @@ def episode_starts(scenario: Scenario, spec: EpisodeSpec, count: int) -> list[li
     return starts
 
 
-def episode_scenario(base: Scenario, spec: EpisodeSpec) -> Scenario:
-    """The episode as a scenario: the algorithm's behaviour on each vehicle, spawned on the
-    ground under its start, the sensor, the environment's models, and the run's own seed
-    (seed × 100003 + run: the sensors' noise, the anemometers, the behaviours' generators and a
-    time-dependent field's realisation). Any runner of the scenario flies the same episode."""
-    algo = ALGORITHMS[spec.algorithm]
-    sensor = SENSORS[spec.sensor].config
-    assert sensor is not None
-    sensor = msgspec.structs.replace(sensor, period_ticks=spec.sensor_period_ticks)
+def episode_scenario(spec: EpisodeSpec, environment: Scenario | None = None) -> Scenario:
+    """The episode as a scenario: the environment's (``environment``, default the spec's
+    file with its overrides) with the algorithm's behaviour on each vehicle, spawned on the
+    ground under its start, the sensor, and the run's own seed (seed × 100003 + run: the
+    sensors' noise, the anemometers, the behaviours' generators and a time-dependent field's
+    realisation). Any runner of the scenario flies the same episode."""
+    base = environment if environment is not None else environment_of(spec).scenario
+    algo = spec.algorithm_config()
+    sensor = msgspec.structs.replace(
+        SENSORS[spec.sensor].config, period_ticks=spec.sensor_period_ticks
+    )
     starts = episode_starts(base, spec, algo.vehicles)
     vehicles = [
         Vehicle(id=f"uav{i + 1}", behavior=algo.behavior, mission=[], spawn_enu_m=(p[0], p[1], 0.0))
@@ -231,10 +184,10 @@ def episode_scenario(base: Scenario, spec: EpisodeSpec) -> Scenario:
     ]
     world = msgspec.structs.replace(base.world, seed=spec.seed * 100_003 + spec.run)
     time = msgspec.structs.replace(base.time, control_hz=spec.control_hz)
-    scenario = msgspec.structs.replace(
-        base, world=world, time=time, sensor=sensor, vehicles=vehicles
+    wind = msgspec.structs.replace(base.wind, meander=base.wind.meander.resolved())
+    return msgspec.structs.replace(
+        base, world=world, time=time, wind=wind, sensor=sensor, vehicles=vehicles
     )
-    return environment_scenario(scenario, spec.environment)
 
 
 def _follow(setpoint: Setpoint | None, p: list[float]) -> tuple[float, float, float]:
@@ -300,7 +253,8 @@ class Tally:
         self.start, self.source = start, source
         self.path = [0.0] * n
         self.detections = 0
-        self.first_inside_s: float | None = None
+        self.first_within_s: list[float | None] = [None] * len(RADII_M)
+        self.min_distance_m = math.inf
         self.keep_every = max(1, round(TRAJECTORY_EVERY_S / dt))
         self.tracks: list[list[tuple[float, float]]] = [[] for _ in range(n)]
         self.previous: list[tuple[float, float, float]] | None = None
@@ -318,8 +272,11 @@ class Tally:
         self.count += 1
         cx = sum(p[0] for p in positions) / self.n
         cy = sum(p[1] for p in positions) / self.n
-        if self.first_inside_s is None and math.dist((cx, cy), self.source) <= SUCCESS_RADIUS_M:
-            self.first_inside_s = t - self.t0
+        distance = math.dist((cx, cy), self.source)
+        self.min_distance_m = min(self.min_distance_m, distance)
+        for i, r in enumerate(RADII_M):
+            if self.first_within_s[i] is None and distance <= r:
+                self.first_within_s[i] = t - self.t0
 
     def reading(self, reading: ConcentrationReading) -> None:
         value = reading.reported_g_m3
@@ -338,14 +295,12 @@ class Tally:
                 sum(p[1] for p in final) / self.n,
             )
         error = math.dist(estimate, self.source)
-        success = error <= SUCCESS_RADIUS_M
-        time_s: float | None = None
-        if success:
-            time_s = declared.sim_time_s - self.t0 if declared else self.first_inside_s
+        declared_s = None if declared is None else declared.sim_time_s - self.t0
+        success = declared is not None and error <= SUCCESS_RADIUS_M
         return Outcome(
             spec=self.spec,
             success=success,
-            time_to_success_s=time_s,
+            time_to_success_s=declared_s if success else None,
             path_length_m=sum(self.path) / self.n,
             initial_distance_m=math.dist(self.start, self.source),
             final_error_m=error,
@@ -353,14 +308,19 @@ class Tally:
             declared=declared is not None,
             estimate_xy=estimate,
             trajectories=self.tracks if self.spec.keep_trajectory else [],
+            start_xy=self.start,
+            min_distance_m=self.min_distance_m,
+            first_within_s=tuple(self.first_within_s),
+            declared_s=declared_s,
         )
 
 
-def run_episode(spec: EpisodeSpec, base: Scenario | None = None) -> Outcome:
-    """Fly one episode to its declaration or its time limit; deterministic in ``spec``."""
+def run_episode(spec: EpisodeSpec, environment: Scenario | None = None) -> Outcome:
+    """Fly one episode to its declaration or its time limit; deterministic in ``spec``
+    (``environment``: the scenario to fly in instead of the spec's environment file)."""
     if spec.dynamics == "full":
-        return fused_episode(spec, base)[0]
-    return kinematic_episode(spec, base)
+        return fused_episode(spec, environment)[0]
+    return kinematic_episode(spec, environment)
 
 
 def _tally(spec: EpisodeSpec, scenario: Scenario, dt: float, t0: float) -> Tally:
@@ -370,23 +330,22 @@ def _tally(spec: EpisodeSpec, scenario: Scenario, dt: float, t0: float) -> Tally
         len(scenario.vehicles),
         dt,
         t0,
-        start_point(scenario, spec.seed, spec.run),
+        start_point(scenario, spec.seed, spec.run, spec.start_along_m),
         (src.x_m, src.y_m),
     )
 
 
-def kinematic_episode(spec: EpisodeSpec, base: Scenario | None = None) -> Outcome:
+def kinematic_episode(spec: EpisodeSpec, environment: Scenario | None = None) -> Outcome:
     """The episode with point masses; the field sampled here, each reading handed to its
     behaviour on the tick it is sampled."""
-    base = base if base is not None else load_scenario()
-    scenario = episode_scenario(base, spec)
+    scenario = episode_scenario(spec, environment)
     concentration, _ = environment_field(scenario)
     dt = 1.0 / spec.control_hz
-    start_tick = round(_start_s(spec) / dt)
+    start_tick = round(start_s(scenario, spec.start_along_m) / dt)
     ids = [v.id for v in scenario.vehicles]
     behaviors = episode_behaviors(spec, scenario)
     sensors = [ConcentrationSensor.for_vehicle(scenario, i) for i in range(len(ids))]
-    positions = episode_starts(base, spec, len(ids))
+    positions = episode_starts(scenario, spec, len(ids))
     velocities = [(0.0, 0.0, 0.0)] * len(ids)
     tally = _tally(spec, scenario, dt, start_tick * dt)
     period = scenario.sensor.period_ticks
@@ -440,8 +399,14 @@ def _sample(
     return readings
 
 
-def _start_s(spec: EpisodeSpec) -> float:
-    return FIELD_WARMUP_S if ENVIRONMENTS[spec.environment].time_dependent else 0.0
+def start_s(scenario: Scenario, along_m: tuple[float, float] = START_ALONG_M) -> float:
+    """When the episode starts: in a time-dependent environment once its field is in its
+    statistically steady state out to the farthest start — max(``FIELD_WARMUP_S``, 1.5 ×
+    farthest start / mean wind speed) of release (:func:`plume_service.statistics.warmup_s`),
+    60 s at 6 m/s, 120 s at 1 m/s — at once in a steady one."""
+    if not time_dependent(scenario):
+        return 0.0
+    return max(FIELD_WARMUP_S, warmup_s(scenario, (along_m[1],)))
 
 
 #: Commands given at tick boundaries: {tick: [(vehicle, command)]}; given when the runner
@@ -512,16 +477,17 @@ class FusedEpisode:
 
 
 def fused_episode(
-    spec: EpisodeSpec, base: Scenario | None = None, on_states: StatesObserver | None = None
+    spec: EpisodeSpec,
+    environment: Scenario | None = None,
+    on_states: StatesObserver | None = None,
 ) -> tuple[Outcome, Schedule]:
     """The episode with the real vehicles on the fused runner; its outcome and schedule
     (``on_states`` sees every tick's states from tick 0)."""
-    base = base if base is not None else load_scenario()
-    scenario = episode_scenario(base, spec)
+    scenario = episode_scenario(spec, environment)
     episode = FusedEpisode(scenario, on_states)
     try:
         run = episode.runner
-        episode.take_off(START_ALTITUDE_M, _start_s(spec))
+        episode.take_off(START_ALTITUDE_M, start_s(scenario, spec.start_along_m))
         behaviors = [ap.behavior for ap in episode.autopilots]
         dt = run.control_dt_s
         run.step()  # the first tick the behaviours fly

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import logging
 import sys
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -637,98 +639,112 @@ def _names(value: str) -> tuple[str, ...]:
     return tuple(v.strip() for v in value.split(",") if v.strip())
 
 
-@bench.command("gsl")
-@click.option("--algorithms", default="all", show_default=True, help="Comma-separated, or 'all'.")
-@click.option(
-    "--environments",
-    default="all",
-    show_default=True,
-    help="Comma-separated, or 'all' (every environment this build can simulate).",
-)
-@click.option(
-    "--sensors", default="all", show_default=True, help="Comma-separated, or 'all' available."
-)
-@click.option("--runs", type=click.IntRange(min=1), default=30, show_default=True)
-@click.option("--seed", type=click.IntRange(min=0, max=2**31 - 1), default=0, show_default=True)
-@click.option(
-    "--time-limit",
-    "time_limit_s",
-    type=click.FloatRange(min=1.0),
-    default=300.0,
-    show_default=True,
-    help="Seconds of simulated time per run.",
-)
-@click.option(
-    "--dynamics",
-    type=click.Choice(["kinematic", "full"]),
-    default="kinematic",
-    show_default=True,
-    help="kinematic: point masses following the setpoint; full: pybullet vehicles and autopilots.",
-)
-@click.option(
-    "--control-hz",
-    type=click.IntRange(min=1, max=1000),
-    default=20,
-    show_default=True,
-    help="Behaviour rate with kinematic dynamics (full uses the scenario's).",
-)
-@click.option(
-    "--sensor-period-ticks",
-    type=click.IntRange(min=1),
-    default=2,
-    show_default=True,
-    help="A reading every N control ticks (kinematic; full uses the scenario's).",
-)
-@click.option(
-    "--jobs", type=click.IntRange(min=1), default=2, show_default=True, help="Worker processes."
-)
-@click.option(
-    "--out",
-    type=click.Path(file_okay=False, path_type=Path),
-    default=None,
-    help="Directory for gsl.md, gsl.json and the figures (default runs/bench-gsl-…).",
-)
-def bench_gsl(
-    algorithms: str,
-    environments: str,
-    sensors: str,
-    runs: int,
-    seed: int,
-    time_limit_s: float,
-    dynamics: str,
-    control_hz: int,
-    sensor_period_ticks: int,
-    jobs: int,
-    out: Path | None,
+def _gsl_options(seed_default: int) -> Callable[[Callable[..., None]], Callable[..., None]]:
+    """The options ``bench gsl`` and ``bench gsl sweep`` share."""
+    options = [
+        click.option(
+            "--algorithms",
+            default="all",
+            show_default=True,
+            help="Comma-separated names, name=module:Class, or 'all'; random_walk and oracle "
+            "always run.",
+        ),
+        click.option(
+            "--environments",
+            default="all",
+            show_default=True,
+            help="Comma-separated names (deploy/scenarios/gsl) or scenario paths, or 'all'.",
+        ),
+        click.option(
+            "--sensors",
+            default="all",
+            show_default=True,
+            help="Comma-separated, or 'all' available.",
+        ),
+        click.option("--runs", type=click.IntRange(min=1), default=30, show_default=True),
+        click.option(
+            "--seed",
+            type=click.IntRange(min=0, max=2**31 - 1),
+            default=seed_default,
+            show_default=True,
+            help="Published tables: 0; tuning: >= 1000.",
+        ),
+        click.option(
+            "--time-limit",
+            "time_limit_s",
+            type=click.FloatRange(min=1.0),
+            default=300.0,
+            show_default=True,
+            help="Seconds of simulated time per run.",
+        ),
+        click.option(
+            "--dynamics",
+            type=click.Choice(["kinematic", "full"]),
+            default="kinematic",
+            show_default=True,
+            help="kinematic: point masses following the setpoint; full: pybullet vehicles and "
+            "autopilots.",
+        ),
+        click.option(
+            "--control-hz",
+            type=click.IntRange(min=1, max=1000),
+            default=20,
+            show_default=True,
+            help="Behaviour rate with kinematic dynamics (full uses the scenario's).",
+        ),
+        click.option(
+            "--sensor-period-ticks",
+            type=click.IntRange(min=1),
+            default=2,
+            show_default=True,
+            help="A reading every N control ticks (kinematic; full: 10 Hz).",
+        ),
+        click.option(
+            "--jobs",
+            type=click.IntRange(min=1),
+            default=2,
+            show_default=True,
+            help="Worker processes.",
+        ),
+        click.option(
+            "--out",
+            type=click.Path(file_okay=False, path_type=Path),
+            default=None,
+            help="Output directory (default runs/bench-gsl-…).",
+        ),
+    ]
+
+    def apply(f: Callable[..., None]) -> Callable[..., None]:
+        for option in reversed(options):
+            f = option(f)
+        return f
+
+    return apply
+
+
+def _gsl_run(
+    kwargs: dict[str, Any],
+    run: Callable[[Any, Path, Any], list[Path]],
+    check: Callable[[Any], None] | None = None,
 ) -> None:
-    """Source seeking: algorithms × environments × sensors, N seeded runs per cell."""
+    """Validate the options, run with a progress bar, write, and say what was written."""
     import time
 
     from tqdm import tqdm
 
-    from experiments.gsl_bench import (
-        GslError,
-        availability_lines,
-        make_options,
-        report_text,
-        rows_of,
-        run_all,
-        write_outputs,
-    )
+    from experiments.gsl_bench import GslError, availability_lines, make_options
 
+    out = kwargs.pop("out")
+    jobs = kwargs["jobs"]
     try:
         opts = make_options(
-            _names(algorithms),
-            _names(environments),
-            _names(sensors),
-            runs=runs,
-            seed=seed,
-            time_limit_s=time_limit_s,
-            dynamics=dynamics,
-            control_hz=control_hz,
-            sensor_period_ticks=sensor_period_ticks,
-            jobs=jobs,
+            _names(kwargs.pop("algorithms")),
+            _names(kwargs.pop("environments")),
+            _names(kwargs.pop("sensors")),
+            **kwargs,
         )
+        if check is not None:
+            check(opts)
     except GslError as exc:
         fail(str(exc))
     for line in availability_lines():
@@ -740,15 +756,70 @@ def bench_gsl(
             bar.total = total
             bar.update(done - bar.n)
 
-        outcomes = run_all(opts, progress)
-    rows = rows_of(opts, outcomes)
-    wall_s = time.monotonic() - started
-    directory = out or Path("runs") / time.strftime("bench-gsl-%Y%m%d-%H%M%S")
-    written = write_outputs(directory, opts, rows, outcomes)
-    click.echo(report_text(opts, rows))
-    click.echo(f"wall time {wall_s:.0f} s on {jobs} worker process(es)")
+        directory = out or Path("runs") / time.strftime("bench-gsl-%Y%m%d-%H%M%S")
+        try:
+            written = run(opts, directory, progress)
+        except GslError as exc:
+            fail(str(exc))
+    click.echo(written[0].read_text())
+    click.echo(f"wall time {time.monotonic() - started:.0f} s on {jobs} worker process(es)")
     for path in written:
         click.echo(f"wrote {path}")
+
+
+@bench.group("gsl", invoke_without_command=True)
+@_gsl_options(seed_default=0)
+@click.pass_context
+def bench_gsl(ctx: click.Context, /, **kwargs: Any) -> None:
+    """Source seeking: algorithms × environments × sensors, N seeded runs per cell."""
+    if ctx.invoked_subcommand is not None:
+        return
+    from experiments.gsl_bench import rows_of, run_all, write_outputs
+
+    def run(opts: Any, directory: Path, progress: Any) -> list[Path]:
+        outcomes = run_all(opts, progress)
+        return write_outputs(directory, opts, rows_of(opts, outcomes), outcomes)
+
+    _gsl_run(kwargs, run)
+
+
+@bench_gsl.command("sweep")
+@click.argument("params", nargs=-1, required=True)
+@click.option(
+    "--allow-test-seeds",
+    is_flag=True,
+    help="Sweep seeds < 1000 anyway (the output then says so).",
+)
+@_gsl_options(seed_default=1000)
+def bench_gsl_sweep(params: tuple[str, ...], allow_test_seeds: bool, **kwargs: Any) -> None:
+    """One table per PARAM=v1,v2,… (behavior.NAME, start.along_m or a scenario section.key)."""
+    from experiments.gsl_bench import GslError
+    from experiments.gsl_sweep import (
+        parse_sweep,
+        run_sweep,
+        seed_warning,
+        value_specs,
+        write_sweep,
+    )
+
+    try:
+        parsed = [parse_sweep(p) for p in params]
+    except GslError as exc:
+        fail(str(exc))
+
+    def check(opts: Any) -> None:
+        warning = seed_warning(opts, allow_test_seeds)
+        if warning:
+            click.echo(warning, err=True)
+        for param in parsed:  # every value valid before any episode flies
+            for value in param.values:
+                value_specs(opts, param.name, value)
+
+    def run(opts: Any, directory: Path, progress: Any) -> list[Path]:
+        tables = run_sweep(opts, parsed, progress)
+        return write_sweep(directory, opts, parsed, tables, seed_warning(opts, allow_test_seeds))
+
+    _gsl_run(kwargs, run, check)
 
 
 def _register_groups() -> None:

@@ -2,15 +2,15 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 from pathlib import Path
 
 import pytest
 
-from experiments.gsl_bench import make_options, rows_of, run_all, wilson_interval, write_outputs
+from experiments.gsl_bench import make_options, rows_of, run_all, write_outputs
 from experiments.gsl_episode import (
-    ALGORITHMS,
     START_ACROSS_M,
     START_ALONG_M,
     EpisodeSpec,
@@ -18,7 +18,8 @@ from experiments.gsl_episode import (
     run_episode,
     start_point,
 )
-from swarmbus.scenario import load_scenario
+from experiments.gsl_registry import BUILTIN_ALGORITHMS, ENVIRONMENTS_DIR, load_environment
+from experiments.gsl_stats import wilson_interval
 from tests.support.procs import run_cli
 
 
@@ -38,7 +39,7 @@ def test_wilson_interval_matches_newcombe(successes: int, runs: int, low: float,
 
 
 def test_starts_are_inside_the_protocol_box() -> None:
-    sc = load_scenario()  # source at the origin, wind toward +x
+    sc = load_environment("steady_gaussian").scenario  # source at the origin, wind toward +x
     for run in range(200):
         x, y = start_point(sc, 7, run)
         assert START_ALONG_M[0] <= x <= START_ALONG_M[1]
@@ -46,7 +47,7 @@ def test_starts_are_inside_the_protocol_box() -> None:
 
 
 def test_same_seed_same_table_byte_for_byte(tmp_path: Path) -> None:
-    def once(jobs: int, out: Path) -> tuple[bytes, bytes]:
+    def once(jobs: int, out: Path) -> tuple[bytes, ...]:
         opts = make_options(
             ["random_walk", "casting"],
             ["steady_gaussian"],
@@ -58,13 +59,15 @@ def test_same_seed_same_table_byte_for_byte(tmp_path: Path) -> None:
         )
         outcomes = run_all(opts)
         write_outputs(out, opts, rows_of(opts, outcomes), outcomes)
-        return (out / "gsl.md").read_bytes(), (out / "gsl.json").read_bytes()
+        names = ("gsl.md", "gsl.json", "paired.json", "runs.csv")
+        return tuple((out / name).read_bytes() for name in names)
 
     first = once(1, tmp_path / "a")
     second = once(2, tmp_path / "b")
     assert first == second
     rows = json.loads(first[1])
-    assert [r["algorithm"] for r in rows] == ["random_walk", "casting"]
+    # the floor and the ceiling run in every cell
+    assert [r["algorithm"] for r in rows] == ["random_walk", "casting", "oracle"]
     for row in rows:
         assert {
             "algorithm",
@@ -78,7 +81,13 @@ def test_same_seed_same_table_byte_for_byte(tmp_path: Path) -> None:
             "final_error_m",
         } <= set(row)
         assert row["runs"] == 2 and row["environment"] == "steady_gaussian"
-    assert (tmp_path / "a" / "trajectories_steady_gaussian.png").stat().st_size > 10_000
+        assert row["time_dependent"] is False
+        file = ENVIRONMENTS_DIR / "steady_gaussian.toml"
+        assert row["scenario_sha256"] == hashlib.sha256(file.read_bytes()).hexdigest()
+    # 3 algorithms × 2 runs, one line each under the header
+    assert len(first[3].decode().splitlines()) == 1 + 3 * 2
+    for name in ("trajectories_steady_gaussian", "success", "final_error"):
+        assert (tmp_path / "a" / f"{name}.png").stat().st_size > 10_000
 
 
 def test_same_seed_same_filament_cell_byte_for_byte(tmp_path: Path) -> None:
@@ -94,8 +103,9 @@ def test_same_seed_same_filament_cell_byte_for_byte(tmp_path: Path) -> None:
 
     first = once(1, tmp_path / "a")
     assert first == once(2, tmp_path / "b")
-    (row,) = json.loads(first[1])
+    _, row, _ = json.loads(first[1])
     assert (row["environment"], row["sensor"], row["runs"]) == ("meander_small", "mox", 2)
+    assert row["time_dependent"] is True
 
 
 def test_missing_environments_and_unknown_algorithms_are_refused_clearly() -> None:
@@ -114,12 +124,13 @@ def test_full_dynamics_takes_off_and_casting_climbs_the_plume() -> None:
     outcome = run_episode(spec)
     track = outcome.trajectories[0]
     # It starts hovering over its start point (taken off there) and surges upwind (−x).
-    assert math.dist(track[0], start_point(load_scenario(), 0, 1)) < 1.0
+    start = start_point(load_environment("steady_gaussian").scenario, 0, 1)
+    assert math.dist(track[0], start) < 1.0
     assert track[-1][0] < track[0][0] - 20.0
     assert outcome.final_error_m < outcome.initial_distance_m - 20.0
 
 
-@pytest.mark.parametrize("algorithm", sorted(ALGORITHMS))
+@pytest.mark.parametrize("algorithm", sorted(BUILTIN_ALGORITHMS))
 def test_every_registered_algorithm_flies_an_episode(algorithm: str) -> None:
     outcome = run_episode(EpisodeSpec(algorithm, "steady_gaussian", "ideal", 0, 0, 5.0))
     assert outcome.path_length_m > 1.0  # it moved

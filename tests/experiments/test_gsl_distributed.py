@@ -25,17 +25,18 @@ from agents import Swarm
 from agents.swarm import CommandRejected, CommandTimeout
 from deploy.scaling import write_scenario
 from experiments.gsl_episode import EpisodeSpec, Outcome, Schedule, fused_episode
+from experiments.gsl_registry import load_environment
 from swarmbus.codec import encode
 from swarmbus.keys import Keys
 from swarmbus.messages import Command, PlumeQuery, PlumeValues, VehicleState
-from swarmbus.scenario import Scenario, load_scenario
+from swarmbus.scenario import Scenario
 from tests.support.procs import NodeProcs, wait_for_queryable, wait_until, zenoh_network
 
 States = dict[tuple[int, str], bytes]
 
 
 def stepped_base() -> Scenario:
-    base = load_scenario()
+    base = load_environment("steady_gaussian").scenario
     return msgspec.structs.replace(base, time=msgspec.structs.replace(base.time, mode="stepped"))
 
 
@@ -119,11 +120,11 @@ def _path_and_centroid(
 
 
 # (algorithm, run, time limit s, declares): surge-cast's run 4 declares within 2 m of the
-# source (a success after ≈ 43 s), casting's run 3 declares ≈ 10 m off (a failure after
-# ≈ 35 s), the three-vehicle gradient swarm is cut off by the limit after 12 s.
+# source (a success after ≈ 43 s), casting's run 4 declares ≈ 17 m off (a false declaration
+# after ≈ 34 s), the three-vehicle gradient swarm is cut off by the limit after 12 s.
 CELLS = [
     ("surge_cast", 4, 45.0, True),
-    ("casting", 3, 45.0, True),
+    ("casting", 4, 45.0, True),
     ("gradient_swarm", 1, 12.0, False),
 ]
 
@@ -166,4 +167,4 @@ def test_full_dynamics_cells_give_the_same_outcome_on_the_distributed_stack(
         src = schedule.scenario.plume.sources[0]
         error = math.dist(centroid, (src.x_m, src.y_m))
         assert error == pytest.approx(outcome.final_error_m, rel=1e-12)
-        assert (error <= 2.0) == outcome.success
+        assert not outcome.success  # success is a declaration within 2 m

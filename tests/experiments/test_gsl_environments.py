@@ -18,7 +18,6 @@ from experiments.gsl_episode import (
     episode_behaviors,
     episode_scenario,
 )
-from swarmbus.scenario import load_scenario
 
 
 @pytest.mark.parametrize("along_m", [START_ALONG_M[0], 55.0, START_ALONG_M[1]])
@@ -30,7 +29,7 @@ def test_a_vehicle_hovering_on_the_centreline_sees_bursts_and_silences(along_m: 
     the wind at any moment, a sensor hovering on the axis is in the plume well under 60 % of
     the time (a steady plume: 100 %), and in more than 5 % of its samples."""
     spec = EpisodeSpec("casting", "filaments", "ideal", 0, 0)
-    scenario = episode_scenario(load_scenario(), spec)
+    scenario = episode_scenario(spec)
     field, _ = environment_field(scenario)
     src = scenario.plume.sources[0]
     assert src.release_height_m == START_ALTITUDE_M  # the axis is at the flight altitude
@@ -44,13 +43,12 @@ def test_a_vehicle_hovering_on_the_centreline_sees_bursts_and_silences(along_m: 
 
 
 def test_the_filament_field_is_the_same_whoever_asks_and_differs_between_runs() -> None:
-    base = load_scenario()
     point = np.array([[50.0, 0.0, START_ALTITUDE_M]])
     times = FIELD_WARMUP_S + np.arange(0.0, 10.0, 0.1)
 
     def series(run: int, order: slice) -> dict[float, float]:
         field, _ = environment_field(
-            episode_scenario(base, EpisodeSpec("casting", "meander_small", "ideal", run, 3))
+            episode_scenario(EpisodeSpec("casting", "meander_small", "ideal", run, 3))
         )
         return {float(t): float(field(point, float(t))[0]) for t in times[order]}
 
@@ -69,7 +67,7 @@ def test_behaviours_read_their_anemometer_in_a_meandering_wind(algorithm: str) -
     meander (the true wind at its position and time, plus 0.1 m/s anemometer noise), not the
     scenario's mean wind of 6 m/s toward +x."""
     spec = EpisodeSpec(algorithm, "meander_large", "ideal", 0, 0)
-    scenario = episode_scenario(load_scenario(), spec)
+    scenario = episode_scenario(spec)
     _, wind = environment_field(scenario)
     behavior = episode_behaviors(spec, scenario)[0]
     read, true = [], []
