@@ -3,7 +3,13 @@
 Importing this module registers ``plumeswarm/PlumeSource-v0`` with Gymnasium.
 """
 
+# ruff: noqa: E402 - the extra is checked before its modules are imported
+
 from __future__ import annotations
+
+from swarmbus.extras import require
+
+require("the environments", "gymnasium", "pettingzoo", "matplotlib")
 
 import gymnasium
 from gymnasium.envs.registration import get_env_id, namespace
