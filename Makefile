@@ -36,6 +36,7 @@ lint: $(STAMP)
 
 typecheck: $(STAMP)
 	$(BIN)/mypy
+	$(BIN)/mypy examples
 
 # Debian's chromium (browser test) and iproute2 (network-namespace test): installed only when
 # missing and when root; otherwise those tests skip and say why.

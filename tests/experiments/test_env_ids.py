@@ -11,6 +11,7 @@ import os
 import subprocess
 import sys
 import tomllib
+from typing import Any
 
 import gymnasium
 import numpy as np
@@ -19,7 +20,7 @@ from gymnasium.utils import seeding
 from gymnasium.wrappers import FrameStackObservation, RecordEpisodeStatistics
 from pettingzoo.test import api_test, parallel_api_test
 
-from experiments.envs import ENV_IDS, PlumeSwarmEnv
+from experiments.envs import ENV_IDS, PlumeSourceEnv, PlumeSwarmEnv
 from experiments.envs.pettingzoo import plume_swarm_v0
 from swarmbus.scenario import SCENARIOS_DIR, ScenarioError
 from tests.support.procs import REPO
@@ -100,6 +101,7 @@ def test_the_swarm_task_is_the_pettingzoo_env_concatenated_and_summed() -> None:
 
 def test_scenario_overrides_reach_the_env_and_a_bad_key_is_one_line() -> None:
     env = gymnasium.make("plumeswarm/PlumeSource-v0", scenario_overrides=["wind.speed_m_s=4.5"])
+    assert isinstance(env.unwrapped, PlumeSourceEnv)
     assert env.unwrapped.swarm.scenario.wind.speed_m_s == 4.5
     env.close()
     with pytest.raises(ScenarioError) as err:
@@ -110,7 +112,7 @@ def test_scenario_overrides_reach_the_env_and_a_bad_key_is_one_line() -> None:
 def test_make_vec_steps_two_copies_with_their_own_seeds() -> None:
     envs = gymnasium.make_vec("plumeswarm/PlumeSource-v0", num_envs=2, vectorization_mode="sync")
     try:
-        obs, _ = envs.reset(seed=[1, 2])
+        obs, _ = envs.reset(seed=[1, 2])  # type: ignore[arg-type]  # Gymnasium takes a list
         assert obs.shape == (2, 11)
         assert not np.array_equal(obs[0], obs[1])  # different seeds, different starts
         for _ in range(3):
@@ -120,7 +122,7 @@ def test_make_vec_steps_two_copies_with_their_own_seeds() -> None:
         first, _ = one.reset(seed=1)
         one.close()
         envs2 = gymnasium.make_vec("plumeswarm/PlumeSource-v0", num_envs=2)
-        again, _ = envs2.reset(seed=[1, 2])
+        again, _ = envs2.reset(seed=[1, 2])  # type: ignore[arg-type]
         envs2.close()
         np.testing.assert_array_equal(again[0], first)  # copy 0 with seed 1 is the env with seed 1
     finally:
@@ -136,7 +138,7 @@ def test_frame_stack_and_episode_statistics() -> None:
     for frame in obs[:3]:  # Gymnasium pads with the reset observation by default
         np.testing.assert_array_equal(frame, obs[3])
     first = obs[3]
-    steps, total, done, info = 0, 0.0, False, {}
+    steps, total, done, info = 0, 0.0, False, dict[str, Any]()
     while not done:
         obs, reward, terminated, truncated, info = env.step(np.zeros(4, dtype=np.float32))
         if steps == 0:  # the oldest frames shift out, the newest is the step's
