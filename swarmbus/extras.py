@@ -13,6 +13,7 @@ EXTRA_OF_MODULE: dict[str, str] = {
     "gymnasium": "rl",
     "pettingzoo": "rl",
     "matplotlib": "report",
+    "rosbags": "ros2",
     "stable_baselines3": "train",
 }
 

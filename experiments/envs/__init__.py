@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from swarmbus.extras import require
 
-require("the environments", "gymnasium", "pettingzoo", "matplotlib")
+require("experiments.envs", "gymnasium", "pettingzoo", "matplotlib")
 
 import gymnasium
 from gymnasium.envs.registration import get_env_id, namespace

@@ -10,7 +10,16 @@ import sys
 
 from tests.support.procs import REPO
 
-PACKAGES = ["swarmbus", "sim_world", "agents", "plume_service", "gcs_bridge", "recorder", "deploy"]
+PACKAGES = [
+    "swarmbus",
+    "sim_world",
+    "agents",
+    "plume_service",
+    "gcs_bridge",
+    "recorder",
+    "ros2_bridge",
+    "deploy",
+]
 
 
 def test_importing_the_world_prints_nothing() -> None:

@@ -26,6 +26,7 @@ CORE_PACKAGES = [
     "plume_service",
     "gcs_bridge",
     "recorder",
+    "ros2_bridge",
     "deploy",
 ]
 OURS = {
@@ -35,6 +36,7 @@ OURS = {
     "plume_service",
     "gcs_bridge",
     "recorder",
+    "ros2_bridge",
     "deploy",
     "experiments",
     "bench",
@@ -117,6 +119,6 @@ def test_the_environments_without_the_rl_extra_name_it() -> None:
     assert res.returncode == 1
     last = res.stderr.strip().splitlines()[-1]
     assert last == (
-        "swarmbus.extras.MissingExtra: the environments needs gymnasium, from the 'rl' extra: "
+        "swarmbus.extras.MissingExtra: experiments.envs needs gymnasium, from the 'rl' extra: "
         "pip install 'plumeswarm[rl]'"
     )
