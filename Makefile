@@ -2,18 +2,33 @@
 PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
-STAMP := $(VENV)/.installed
+# One venv, two stamps: `make demo` installs the core only (the simulator, its CLI, recordings);
+# `make test` adds the dev tools and every extra (environments, figures) to the same venv.
+CORE := $(VENV)/.installed-core
+DEV := $(VENV)/.installed-dev
+STAMP := $(DEV)
 
-.PHONY: demo test lint typecheck unit bench clean test-prereqs docs
+.PHONY: demo test lint typecheck unit bench clean test-prereqs docs dist
 
-$(STAMP): pyproject.toml
+$(CORE): pyproject.toml
 	$(PY) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
-	$(BIN)/pip install -q -e '.[dev]'
-	touch $(STAMP)
+	$(BIN)/pip install -q -e .
+	touch $(CORE)
 
-demo: $(STAMP)
+$(DEV): $(CORE)
+	$(BIN)/pip install -q -e '.[dev]'
+	touch $(DEV)
+
+demo: $(CORE)
 	$(BIN)/plumeswarm demo
+
+# A wheel and an sdist in dist/, checked by twine.
+dist: $(DEV)
+	rm -rf dist
+	$(BIN)/python -m build --outdir dist . >/dev/null
+	$(BIN)/twine check --strict dist/*
+	@ls -l dist
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
@@ -21,6 +36,7 @@ lint: $(STAMP)
 
 typecheck: $(STAMP)
 	$(BIN)/mypy
+	$(BIN)/mypy examples
 
 # Debian's chromium (browser test) and iproute2 (network-namespace test): installed only when
 # missing and when root; otherwise those tests skip and say why.
@@ -48,4 +64,4 @@ bench: $(STAMP)
 	$(BIN)/python -m bench
 
 clean:
-	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache site
+	rm -rf $(VENV) dist build .pytest_cache .mypy_cache .ruff_cache site

@@ -25,10 +25,9 @@ from collections.abc import Mapping, Sequence
 from types import TracebackType
 from typing import Any
 
-import pybullet as pb
-
 from sim_world.checkpoint import CheckpointError, VehicleCheckpoint, WorldCheckpoint, scratch_file
 from sim_world.geodesy import EnuToGeodetic
+from sim_world.pybullet_quiet import pb
 from swarmbus.messages import VehicleState
 from swarmbus.scenario import Scenario
 from swarmbus.scenario import Vehicle as VehicleSpec

@@ -478,11 +478,44 @@ def _check_sensor(sensor: Sensor, source: str) -> None:
         )
 
 
-def parse_scenario(text: str, source: str = "<scenario>") -> Scenario:
+def parse_override_value(text: str) -> object:
+    """A ``--set`` value: a TOML value (``3``, ``2.5``, ``true``, ``[1, 2]``, ``"x"``), else the
+    text itself as a string (``--set sensor.preset=pid``)."""
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text
+
+
+def apply_overrides(raw: dict[str, object], overrides: Iterable[str], source: str) -> None:
+    """Set each ``section.key=value`` (dotted: ``plume.filament.count=50``) in the raw TOML
+    table ``raw``; the result is validated with the rest of the file."""
+    for item in overrides:
+        key, eq, value = item.partition("=")
+        key = key.strip()
+        if not eq or not re.fullmatch(r"[A-Za-z0-9_]+(\.[A-Za-z0-9_]+)+", key):
+            raise ScenarioError(source, key or item, f"expected section.key=value (--set {item!r})")
+        *sections, name = key.split(".")
+        table: dict[str, object] = raw
+        for i, section in enumerate(sections):
+            sub = table.setdefault(section, {})
+            if not isinstance(sub, dict):
+                where = ".".join(sections[: i + 1])
+                raise ScenarioError(source, key, f"{where} is not a table, cannot set {name}")
+            table = sub
+        table[name] = parse_override_value(value.strip())
+
+
+def parse_scenario(
+    text: str, source: str = "<scenario>", overrides: Iterable[str] = ()
+) -> Scenario:
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(source, "", f"not valid TOML: {exc}") from None
+    overrides = tuple(overrides)
+    if overrides:
+        apply_overrides(raw, overrides, source)
     if raw.get("plume", {}).get("preset") == "novak2018":
         plume = raw.setdefault("plume", {})
         plume.setdefault("coefficients", "novak2018")
@@ -578,18 +611,28 @@ def _value_at(raw: object, field: str) -> tuple[bool, object]:
     return bool(field), node
 
 
-def load_scenario(path: str | Path | None = None) -> Scenario:
-    """Load and validate a scenario file (default: ``deploy/scenarios/novak2018.toml``)."""
+def bundled_scenarios() -> list[str]:
+    """The names of the scenarios that ship with plumeswarm (``deploy/scenarios/*.toml``)."""
+    return sorted(p.stem for p in SCENARIOS_DIR.glob("*.toml"))
+
+
+def load_scenario(path: str | Path | None = None, overrides: Iterable[str] = ()) -> Scenario:
+    """Load and validate a scenario file (default: ``deploy/scenarios/novak2018.toml``), with
+    ``section.key=value`` overrides applied before validation."""
     p = Path(path) if path is not None else DEFAULT_SCENARIO
     try:
         text = p.read_text()
     except FileNotFoundError:
-        raise ScenarioError(str(p), "", "no such file") from None
+        bundled = ", ".join(bundled_scenarios())
+        if p.parent == SCENARIOS_DIR:  # a name, not a path: no site-packages path in the message
+            raise ScenarioError(p.stem, "", f"no such scenario; bundled: {bundled}") from None
+        raise ScenarioError(str(p), "", f"no such file (bundled scenarios: {bundled})") from None
     except IsADirectoryError:
         raise ScenarioError(str(p), "", "is a directory, not a scenario file") from None
     except (PermissionError, UnicodeDecodeError, OSError) as exc:
         raise ScenarioError(str(p), "", f"cannot read: {exc}") from None
-    return parse_scenario(text, str(p))
+    source = p.stem if p.parent == SCENARIOS_DIR else str(p)  # a bundled one by its name
+    return parse_scenario(text, source, overrides)
 
 
 def resolve_scenario_path(name_or_path: str | None) -> Path:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 from typing import NoReturn
 
 import click
@@ -16,8 +17,32 @@ def fail(message: str, code: int = 2) -> NoReturn:
     sys.exit(code)
 
 
-def scenario_from(name_or_path: str | None) -> Scenario:
+SET_OPT = click.option(
+    "--set",
+    "scenario_overrides",
+    multiple=True,
+    metavar="SECTION.KEY=VALUE",
+    help="Override one scenario value (repeatable), e.g. --set sensor.preset=pid "
+    "--set wind.speed_m_s=4 (a TOML value; text is taken as a string).",
+)
+
+
+def scenario_from(name_or_path: str | None, overrides: tuple[str, ...] = ()) -> Scenario:
     try:
-        return load_scenario(resolve_scenario_path(name_or_path))
+        return load_scenario(resolve_scenario_path(name_or_path), overrides)
     except ScenarioError as exc:
         fail(str(exc))
+
+
+def scenario_file(
+    name_or_path: str | None, overrides: tuple[str, ...], run_dir: Path
+) -> tuple[Scenario, Path]:
+    """The scenario and the file every process of a run reads: the named file itself, or, with
+    overrides, the overridden scenario written to ``run_dir/scenario.toml``."""
+    path = resolve_scenario_path(name_or_path)
+    sc = scenario_from(str(path), overrides)
+    if overrides:
+        from deploy.scaling import write_scenario
+
+        path = write_scenario(sc, run_dir / "scenario.toml")
+    return sc, path

@@ -10,9 +10,10 @@ from typing import Any
 
 import click
 
-from deploy.cli.common import fail, scenario_from
+from deploy.cli.common import SET_OPT, fail, scenario_file, scenario_from
 from deploy.roles import BENCH_ROLES, ROLES, RoleUnavailable, role_entry
-from swarmbus.scenario import Scenario, resolve_scenario_path
+from swarmbus.extras import missing_extra_message
+from swarmbus.scenario import Scenario
 from swarmbus.session import NetworkConfig
 
 log = logging.getLogger(__name__)
@@ -107,15 +108,57 @@ def scenario() -> None:
 
 
 @scenario.command("check")
-@click.argument("file", type=click.Path(dir_okay=True, path_type=Path))
-def scenario_check(file: Path) -> None:
-    """Validate FILE; print a one-line summary, or one line naming the bad field."""
-    sc = scenario_from(str(file))
+@click.argument("file", metavar="FILE|NAME", type=click.Path(dir_okay=True, path_type=Path))
+@SET_OPT
+def scenario_check(file: Path, scenario_overrides: tuple[str, ...]) -> None:
+    """Validate FILE (or a bundled scenario's NAME); print a one-line summary, or one line
+    naming the bad field."""
+    sc = scenario_from(str(file), scenario_overrides)
     click.echo(
         f"{file}: ok — world {sc.world.name!r}, {len(sc.vehicles)} vehicle(s), "
         f"physics {sc.time.physics_hz} Hz / control {sc.time.control_hz} Hz, "
         f"{sc.time.mode}"
     )
+
+
+@scenario.command("list")
+@click.option(
+    "--dir",
+    "directory",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="List the scenario files (*.toml) of this directory instead of the bundled ones.",
+)
+def scenario_list(directory: Path | None) -> None:
+    """The bundled scenarios (or DIR's), one a line: name, vehicles, plume, first comment line."""
+    from deploy.scenario_catalog import catalog
+
+    try:
+        lines = catalog(directory)
+    except ValueError as exc:
+        fail(str(exc))
+    for line in lines:
+        click.echo(line)
+
+
+@scenario.command("show")
+@click.argument("name", metavar="NAME|FILE")
+@SET_OPT
+def scenario_show(name: str, scenario_overrides: tuple[str, ...]) -> None:
+    """The scenario as plumeswarm reads it, every default filled in, as TOML."""
+    from deploy.scaling import scenario_toml
+
+    click.echo(scenario_toml(scenario_from(name, scenario_overrides)), nl=False)
+
+
+@scenario.command("schema")
+def scenario_schema() -> None:
+    """The JSON Schema of a scenario file (its sections, fields, types and bounds)."""
+    import json
+
+    import msgspec
+
+    click.echo(json.dumps(msgspec.json.schema(Scenario), indent=2))
 
 
 # ---------------------------------------------------------------------------- node
@@ -224,6 +267,7 @@ def node(
     is_flag=True,
     help="Stepped clock: the world advances only when one client steps it (Swarm.step).",
 )
+@SET_OPT
 def up(
     scenario_arg: str | None,
     scenario: str | None,
@@ -242,6 +286,7 @@ def up(
     host_name: str | None,
     vehicles_per_process: int,
     stepped: bool,
+    scenario_overrides: tuple[str, ...],
 ) -> None:
     """Start the whole swarm (plume, physics, autopilots, gateway, viewer) and supervise it."""
     from deploy.console import Console
@@ -255,12 +300,13 @@ def up(
         deployment = load_deployment(hosts_file) if hosts_file is not None else None
     except HostsError as exc:
         fail(str(exc))
-    path = resolve_scenario_path(
-        scenario_arg or scenario or (deployment.scenario if deployment else None)
-    )
-    sc = scenario_from(str(path))
-    secured(sc, sc.network, None, None, "operator")  # its TLS files, if any, are readable
     run_dir = out or default_run_dir()
+    sc, path = scenario_file(
+        scenario_arg or scenario or (deployment.scenario if deployment else None),
+        scenario_overrides,
+        run_dir,
+    )
+    secured(sc, sc.network, None, None, "operator")  # its TLS files, if any, are readable
     if stepped:  # every process reads the mode from the scenario: fly a stepped copy of it
         import msgspec
 
@@ -326,6 +372,7 @@ def _up_node_options(
 )
 @HOSTS_FILE_OPT
 @HOST_OPT
+@SET_OPT
 def demo(
     scenario: str | None,
     vehicles: int | None,
@@ -336,21 +383,22 @@ def demo(
     clock: str | None,
     hosts_file: Path | None,
     host_name: str | None,
+    scenario_overrides: tuple[str, ...],
 ) -> None:
     """Fly the default scenario end to end, headless, and print the accuracy table."""
     from deploy.console import Console
     from deploy.launcher import default_run_dir
     from experiments.demo import DemoOptions, run_demo
 
-    path = resolve_scenario_path(scenario)
-    sc = scenario_from(str(path))
+    run_dir = out or default_run_dir()
+    sc, path = scenario_file(scenario, scenario_overrides, run_dir)
     if (hosts_file or host_name) and not attach:
         fail("--hosts/--host go with --attach (the demo joins that deployment as its operator)")
     net = secured(sc, sc.network, hosts_file, host_name, "operator")
     opts = DemoOptions(
         sc,
         path,
-        out or default_run_dir(),
+        run_dir,
         vehicles,
         timeout_s,
         attach=attach,
@@ -533,6 +581,7 @@ def _int_list(ctx: click.Context, param: click.Parameter, value: str) -> tuple[i
     "every topic it publishes (subscribed).",
 )
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=None)
+@SET_OPT
 def bench_scale(
     scenario: str | None,
     vehicles: tuple[int, ...],
@@ -544,6 +593,7 @@ def bench_scale(
     baseline: bool,
     ros2: str,
     out: Path | None,
+    scenario_overrides: tuple[str, ...],
 ) -> None:
     """Real-time factor, CPU and memory of the whole stack against the number of vehicles."""
     import time
@@ -551,7 +601,7 @@ def bench_scale(
     from bench.scale import ScaleError, ScaleOptions, run_scale
 
     opts = ScaleOptions(
-        scenario=scenario_from(scenario),
+        scenario=scenario_from(scenario, scenario_overrides),
         out=out or Path("runs") / time.strftime("bench-scale-%Y%m%d-%H%M%S"),
         vehicles=vehicles,
         states=tuple(s.strip() for s in states.split(",") if s.strip()),
@@ -834,7 +884,13 @@ _register_groups()
 
 
 def main() -> None:
-    cli(prog_name="plumeswarm")
+    try:
+        cli(prog_name="plumeswarm")
+    except ModuleNotFoundError as exc:  # an optional extra's module: one line naming the extra
+        message = missing_extra_message(exc.name or "")
+        if message is None:
+            raise
+        fail(message)
 
 
 if __name__ == "__main__":

@@ -6,6 +6,7 @@ start, action, reward and termination; the observation is that agent's without p
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -35,6 +36,7 @@ class PlumeSourceEnv(gymnasium.Env[Obs, Action]):
         self,
         scenario: Scenario | str | Path | None = None,
         *,
+        scenario_overrides: Sequence[str] = (),
         backend: str | Driver = "fused",
         attach: str | None = None,
         ticks_per_step: int = 12,
@@ -45,7 +47,7 @@ class PlumeSourceEnv(gymnasium.Env[Obs, Action]):
         termination_fn: TerminationFn = _default_termination,
         render_mode: str | None = None,
     ) -> None:
-        base = env_scenario(scenario)
+        base = env_scenario(scenario, scenario_overrides)
         one = msgspec.structs.replace(base, vehicles=base.vehicles[:1])
         self.swarm = PlumeSwarmEnv(
             one,

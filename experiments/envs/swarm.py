@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar
@@ -24,7 +24,7 @@ from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
 from agents.anemometer import Anemometer
-from deploy.scaling import scale_scenario
+from deploy.scaling import scale_scenario, scenario_toml
 from experiments.driver import DRIVERS, BusDriver, Driver, DriverError, open_driver
 from experiments.envs.render import Renderer
 from swarmbus.messages import (
@@ -38,7 +38,7 @@ from swarmbus.messages import (
     Takeoff,
     VehicleState,
 )
-from swarmbus.scenario import Scenario, load_scenario, resolve_scenario_path
+from swarmbus.scenario import Scenario, load_scenario, parse_scenario, resolve_scenario_path
 from swarmbus.wind import wind_from_scenario
 
 Obs = npt.NDArray[np.float32]
@@ -103,11 +103,16 @@ def wrap_deg(angle: float) -> float:
     return (angle + 180.0) % 360.0 - 180.0
 
 
-def env_scenario(scenario: Scenario | str | Path | None) -> Scenario:
-    """A scenario, or one loaded from a path or a bundled name (None: the default)."""
+def env_scenario(scenario: Scenario | str | Path | None, overrides: Sequence[str] = ()) -> Scenario:
+    """A scenario, or one loaded from a path or a bundled name (None: the default), with
+    ``section.key=value`` overrides (as ``plumeswarm --set``); a bad one raises
+    :class:`~swarmbus.scenario.ScenarioError` (a ``ValueError``), one line naming the key."""
     if isinstance(scenario, Scenario):
-        return scenario
-    return load_scenario(resolve_scenario_path(None if scenario is None else str(scenario)))
+        if not overrides:
+            return scenario
+        return parse_scenario(scenario_toml(scenario), "scenario", overrides)
+    path = resolve_scenario_path(None if scenario is None else str(scenario))
+    return load_scenario(path, overrides)
 
 
 def make_driver(backend: str | Driver, attach: str | None) -> Driver:
@@ -132,6 +137,7 @@ class PlumeSwarmEnv(ParallelEnv[str, Obs, Action]):  # type: ignore[misc]
         self,
         scenario: Scenario | str | Path | None = None,
         *,
+        scenario_overrides: Sequence[str] = (),
         vehicles: int | None = None,
         backend: str | Driver = "fused",
         attach: str | None = None,
@@ -144,7 +150,7 @@ class PlumeSwarmEnv(ParallelEnv[str, Obs, Action]):  # type: ignore[misc]
         termination_fn: TerminationFn = default_termination,
         render_mode: str | None = None,
     ) -> None:
-        base = env_scenario(scenario)
+        base = env_scenario(scenario, scenario_overrides)
         if vehicles is not None:
             base = scale_scenario(base, vehicles)
         self.scenario = msgspec.structs.replace(

@@ -1,0 +1,122 @@
+"""Every script in examples/ runs, and what it prints means what it says.
+
+Each runs as a user runs it (``python examples/X.py`` in a fresh interpreter), bounded; the
+expected values come from the scenario file (tomllib), from the reward's closed form, or from
+what the test itself published, never from the code under test.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from swarmbus.scenario import SCENARIOS_DIR
+from tests.recorder.test_recorder import run_publisher, start_recorder
+from tests.support.procs import REPO, NodeProcs, zenoh_network
+from tests.support.upstack import plumeswarm_up
+
+EXAMPLES = REPO / "examples"
+NOVAK = tomllib.loads((SCENARIOS_DIR / "novak2018.toml").read_text())
+NUM = r"(-?[0-9.]+)"
+
+
+def run_example(name: str, *args: str, cwd: Path, timeout_s: float = 300.0) -> str:
+    res = subprocess.run(
+        [sys.executable, str(EXAMPLES / name), *args],
+        cwd=cwd,
+        env=dict(os.environ, PYTHONPATH=str(REPO)),
+        capture_output=True,
+        text=True,
+        timeout=timeout_s,
+    )
+    assert res.returncode == 0, f"stdout: {res.stdout}\nstderr: {res.stderr[-3000:]}"
+    assert res.stderr == "", res.stderr  # quiet: no banner, no warning
+    return res.stdout
+
+
+def window(model_g_m3: float) -> float:
+    """The novak2018 sensor (no noise, no lag): 0 below the detection limit, capped above."""
+    if model_g_m3 < 0.01:
+        return 0.0
+    return min(model_g_m3, 0.2)
+
+
+def test_swarm_script_reads_the_plume_model_at_its_targets(tmp_path: Path) -> None:
+    roles = "router,plume,physics,autopilot"
+    with plumeswarm_up(None, tmp_path, "--headless", "--stepped", "--roles", roles) as up:
+        out = run_example("swarm_script.py", "--connect", up.endpoint, cwd=tmp_path)
+    pattern = rf"(uav\d) at \({NUM}, {NUM}, {NUM}\) m reads {NUM} g/m3, the plume model there {NUM}"
+    rows = {m[0]: [float(v) for v in m[1:]] for m in re.findall(pattern, out)}
+    targets = {"uav1": (40.0, -4.0, 10.0), "uav2": (40.0, 0.0, 10.0), "uav3": (40.0, 4.0, 10.0)}
+    assert set(rows) == set(targets), out
+    for vid, (x, y, z, reading, model) in rows.items():
+        assert max(abs(a - b) for a, b in zip((x, y, z), targets[vid], strict=True)) <= 0.6
+        assert reading == pytest.approx(window(model), abs=1.5e-4), out  # printed to 4 places
+    # wind from 270 deg: the centreline is y = 0, the Gaussian symmetric about it
+    assert rows["uav2"][4] > rows["uav1"][4] > 0.0 and rows["uav2"][4] > rows["uav3"][4] > 0.0
+    assert rows["uav1"][4] == pytest.approx(rows["uav3"][4], rel=0.1)
+
+
+def test_gymnasium_policy_finds_the_source(tmp_path: Path) -> None:
+    out = run_example("gymnasium_policy.py", cwd=tmp_path)
+    m = re.fullmatch(rf"found the source at t = {NUM} s, {NUM} m away, return {NUM}\n", out)
+    assert m, out
+    t_s, distance_m, _ = (float(v) for v in m.groups())
+    assert distance_m <= NOVAK["env"]["success_radius_m"]
+    assert t_s <= 40.0 + NOVAK["env"]["time_limit_s"]  # take-off (at most 40 s) + the episode
+
+
+def test_pettingzoo_swarm_returns_telescope(tmp_path: Path) -> None:
+    out = run_example("pettingzoo_swarm.py", cwd=tmp_path)
+    pattern = (
+        rf"(uav\d): start {NUM} m, end {NUM} m, found (True|False), crashed (True|False), "
+        rf"return {NUM}"
+    )
+    rows = re.findall(pattern, out)
+    assert [r[0] for r in rows] == [v["id"] for v in NOVAK["vehicles"]], out
+    for _, start, end, found, crashed, ret in rows:
+        # default reward: progress toward the source, +10 on finding it, -10 on a crash
+        expected = float(start) - float(end) + 10.0 * (found == "True") - 10.0 * (crashed == "True")
+        assert float(ret) == pytest.approx(expected, abs=0.02), out
+        if found == "True":
+            assert float(end) <= NOVAK["env"]["success_radius_m"]
+    assert any(found == "True" for _, _, _, found, _, _ in rows), out
+
+
+def test_read_recording_counts_what_was_published(tmp_path: Path) -> None:
+    recording = tmp_path / "flight.mcap"
+    with zenoh_network() as (net, _), NodeProcs(net, log_dir=tmp_path) as procs:
+        start_recorder(procs, recording)
+        run_publisher(
+            net, tmp_path / "pub.json", "--vehicles", "uav1,uav2", "--steps", "120", "--every", "4"
+        )
+        procs.stop_all()
+    out = run_example("read_recording.py", str(recording), cwd=tmp_path)
+    pattern = (
+        rf"(uav\d): (\d+) states over {NUM} s, flew {NUM} m, max altitude {NUM} m, (\d+) reading"
+    )
+    rows = {m[0]: m for m in re.findall(pattern, out)}
+    assert set(rows) == {"uav1", "uav2"}, out
+    for vid, states, _, _, _, readings in rows.values():
+        assert (int(states), int(readings)) == (120, 30), vid  # 120 steps, a reading every 4th
+    try:
+        import pandas  # noqa: F401
+    except ImportError:
+        assert "pandas:" not in out
+    else:
+        assert "pandas: 240 rows" in out
+
+
+def test_train_sb3_runs_a_few_updates(tmp_path: Path) -> None:
+    pytest.importorskip(
+        "stable_baselines3",
+        reason="the train extra (stable-baselines3, PyTorch) is not installed; CI skips it",
+    )
+    out = run_example("train_sb3.py", "--timesteps", "512", "--episodes", "1", cwd=tmp_path)
+    assert re.fullmatch(rf"after 512 timesteps: mean return {NUM} \(random actions {NUM}\)\n", out)

@@ -1,0 +1,124 @@
+"""What a ``pip install plumeswarm`` gets: the core dependencies cover every module the core
+imports, each optional module is in the extra its error names, and a missing extra is one line.
+
+(The wheel itself, installed into a clean venv, ran ``plumeswarm demo`` by hand: building it
+needs PyPI for the build backend, which a test does not reach.)
+"""
+
+from __future__ import annotations
+
+import ast
+import os
+import re
+import subprocess
+import sys
+import tomllib
+from importlib.metadata import packages_distributions
+
+from swarmbus.extras import EXTRA_OF_MODULE
+from tests.support.procs import REPO
+
+PROJECT = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]
+CORE_PACKAGES = [
+    "swarmbus",
+    "sim_world",
+    "agents",
+    "plume_service",
+    "gcs_bridge",
+    "recorder",
+    "ros2_bridge",
+    "deploy",
+]
+OURS = {
+    "swarmbus",
+    "sim_world",
+    "agents",
+    "plume_service",
+    "gcs_bridge",
+    "recorder",
+    "ros2_bridge",
+    "deploy",
+    "experiments",
+    "bench",
+    "tests",
+}
+
+
+def names(requirements: list[str]) -> set[str]:
+    return {
+        re.split(r"[<>=!\[; ]", r, maxsplit=1)[0].lower().replace("_", "-") for r in requirements
+    }
+
+
+def imported_modules(package: str) -> set[str]:
+    found: set[str] = set()
+    for path in (REPO / package).rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                found |= {a.name.partition(".")[0] for a in node.names}
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                found.add(node.module.partition(".")[0])
+    return found - OURS - set(sys.stdlib_module_names) - {"__future__"}
+
+
+def distributions_of(module: str) -> set[str]:
+    return {d.lower().replace("_", "-") for d in packages_distributions().get(module, [])}
+
+
+def test_every_module_the_core_imports_is_a_core_dependency_or_a_named_extra() -> None:
+    core = names(PROJECT["dependencies"])
+    extras = {k: names(v) for k, v in PROJECT["optional-dependencies"].items()}
+    missing = []
+    for package in CORE_PACKAGES:
+        for module in sorted(imported_modules(package)):
+            dists = distributions_of(module)
+            assert dists, f"{package} imports {module}, which no installed distribution provides"
+            if dists & core:
+                continue
+            extra = EXTRA_OF_MODULE.get(module)
+            if extra is None or not dists & extras[extra]:
+                missing.append(f"{package}: {module} ({', '.join(sorted(dists))})")
+    assert missing == []
+
+
+def test_each_optional_module_is_in_the_extra_its_message_names() -> None:
+    extras = {k: names(v) for k, v in PROJECT["optional-dependencies"].items()}
+    for module, extra in EXTRA_OF_MODULE.items():
+        dists = distributions_of(module) or {module.replace("_", "-")}
+        assert dists & extras[extra], (module, extra)
+        assert not dists & names(PROJECT["dependencies"]), f"{module} is core, not optional"
+
+
+def run_without(module: str, code: str) -> subprocess.CompletedProcess[str]:
+    """``code`` in a fresh interpreter where ``import module`` fails as if not installed."""
+    return subprocess.run(
+        [sys.executable, "-c", f"import sys; sys.modules[{module!r}] = None\n{code}"],
+        cwd=REPO,
+        env=dict(os.environ, PYTHONPATH=str(REPO)),
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+
+
+def test_a_cli_command_without_its_extra_is_one_line_naming_it() -> None:
+    res = run_without(
+        "matplotlib",
+        "from deploy.cli.main import main\n"
+        "sys.argv = ['plumeswarm', 'report', 'missing.mcap', '--out', 'r']\nmain()",
+    )
+    assert res.returncode == 2 and res.stdout == ""
+    assert res.stderr.strip() == (
+        "plumeswarm: error: this needs matplotlib, from the 'report' extra: "
+        "pip install 'plumeswarm[report]'"
+    )
+
+
+def test_the_environments_without_the_rl_extra_name_it() -> None:
+    res = run_without("gymnasium", "import experiments.envs")
+    assert res.returncode == 1
+    last = res.stderr.strip().splitlines()[-1]
+    assert last == (
+        "swarmbus.extras.MissingExtra: experiments.envs needs gymnasium, from the 'rl' extra: "
+        "pip install 'plumeswarm[rl]'"
+    )
