@@ -50,12 +50,12 @@ test-prereqs:
 			|| echo "could not install$$missing: their tests will skip"; \
 	else echo "not root: not installing$$missing; their tests will skip"; fi
 
-# The 10-minute sim-time soak (tests/system/test_soak.py, marker soak) runs as its own, slower step.
 # The documentation site (mkdocs-material): site/; strict, so a broken link or a page missing from
 # the navigation fails the build.
 docs: $(STAMP)
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
 
+# The 10-minute sim-time soak (tests/system/test_soak.py, marker soak) runs as its own, slower step.
 test: $(STAMP) lint typecheck docs test-prereqs
 	$(BIN)/python -m pytest -m "not soak"
 	$(BIN)/python -m pytest -m soak -s
