@@ -86,6 +86,7 @@ STOP_POLL_S = 0.2  # longest wait between checks of the stop signal
 HEALTH_PERIOD_S = 1.0
 PLUME = "plume"  # the plume service's participant in the lockstep (any node named plume[-*])
 RECORDER = "recorder"  # the recorder's node name: the clock waits for its restart too
+ROUTER = "router"  # the router's node name: while it is away, every departure is held
 
 
 class PhysicsOptions(RoleOptions, frozen=True, kw_only=True):
@@ -137,6 +138,7 @@ class PhysicsNode:
         )
         self.tick = 0
         self._last_tick_msg = b""
+        self._last_states: list[VehicleState] = []
         # Checkpoints every `_checkpoint_ticks` ticks; the loop's per-tick cost is one
         # comparison with `_next_checkpoint`. The marker notes each published tick.
         self._checkpoint_ticks = 0
@@ -185,6 +187,10 @@ class PhysicsNode:
         self._recorder_arrivals = 0
         self._recorder_lost = False  # the recorder's token went: hold before the next tick
         self._recorder_until = 0.0  # it is being restarted: hold until it is back, or this
+        # The router left (lockstep): until this wall time every participant whose token goes
+        # is held for the grace (its process is most likely alive, cut off with the router).
+        self._router_until = 0.0
+        self._router_outage_tick = -1  # the tick that was current when the router went
         self._restart_sub = session.declare_subscriber(
             self.keys.all_node_restart(), self._on_restart_notice
         )
@@ -216,6 +222,9 @@ class PhysicsNode:
         if name == PLUME or name.startswith(PLUME + "-"):
             self._on_plume_presence(name, alive)
             return
+        if name == ROUTER and self._restart_grace_s > 0.0:
+            self._on_router_presence(alive)
+            return
         if name == RECORDER and self._restart_grace_s > 0.0:
             with self._cond:
                 self._recorder_arrivals += alive
@@ -232,6 +241,31 @@ class PhysicsNode:
         with self._cond:
             self._participant(vid, alive)
         log.info("autopilot of %s %s", vid, "arrived" if alive else "left")
+
+    def _on_router_presence(self, alive: bool) -> None:
+        """The router went (lockstep): whoever leaves with it is held for the grace, the
+        recorder's hold too; its return ends the outage (held participants stay held until
+        they answer, as after a restart)."""
+        with self._cond:
+            was_away = self._router_until > 0.0
+            if alive:
+                self._router_until = 0.0
+            else:
+                self._router_until = time.monotonic() + self._restart_grace_s
+                self._router_outage_tick = self.tick
+                for participant in self.barrier.held:
+                    self.barrier.restarting(participant, self._restart_grace_s)
+                self._recorder_until = max(self._recorder_until, self._router_until)
+            self._cond.notify_all()
+        if alive and was_away:
+            log.warning("tick %d: the router is back", self.tick)
+        elif not alive:
+            log.warning(
+                "tick %d: the router left: holding the clock for whoever leaves with it "
+                "(grace %.1f s)",
+                self.tick,
+                self._restart_grace_s,
+            )
 
     def _on_plume_presence(self, name: str, alive: bool) -> None:
         """Plume services are one participant: present while any of them is."""
@@ -251,6 +285,9 @@ class PhysicsNode:
             self.barrier.joined(participant)
         elif self._restart_grace_s > 0.0:
             self.barrier.held_leave(participant)  # the launcher may be restarting it
+            until = self._router_until - time.monotonic()
+            if until > 0.0:  # cut off with the router: it comes back when the router does
+                self.barrier.restarting(participant, until)
         else:
             self.barrier.left(participant)
         self._cond.notify_all()
@@ -612,6 +649,8 @@ class PhysicsNode:
         if now - self._held_republish >= HANDSHAKE_REPUBLISH_S:
             self._held_republish = now
             self._put_tick()
+            if self._router_outage_tick == self.tick:
+                self._put_states()  # subscribers cut off with the router missed them
 
     def _wait_for_recorder(self) -> None:
         """The recorder left (lockstep): hold the next tick until a recorder is back — up to
@@ -686,10 +725,15 @@ class PhysicsNode:
         self._plume_values = None
         self._last_tick_msg = encode(msg)
         self._last_tick_states = len(states)
+        self._last_states = states
         self._put_tick()
         if self._marker is not None:
             self._marker.mark(self.tick)
-        for pub, state in zip(self._state_pubs, states, strict=True):
+        self._put_states()
+
+    def _put_states(self) -> None:
+        """The current tick's states on ``vehicle/<id>/state`` (to those who listen)."""
+        for pub, state in zip(self._state_pubs, self._last_states, strict=True):
             if pub.matching:  # nobody listens: the state is in the tick already
                 pub.put(encode(state))
                 self.states_sent += 1
