@@ -46,6 +46,7 @@ import logging
 import sys
 import threading
 import time
+from collections import deque
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Annotated, Any
@@ -84,6 +85,7 @@ log = logging.getLogger(__name__)
 HANDSHAKE_REPUBLISH_S = 0.1  # tick 0 is re-sent until every participant has answered it
 STOP_POLL_S = 0.2  # longest wait between checks of the stop signal
 HEALTH_PERIOD_S = 1.0
+BACKFILL_TICKS = 256  # the recent ticks re-sent to a restarted recorder (sim/backfill)
 PLUME = "plume"  # the plume service's participant in the lockstep (any node named plume[-*])
 RECORDER = "recorder"  # the recorder's node name: the clock waits for its restart too
 ROUTER = "router"  # the router's node name: while it is away, every departure is held
@@ -139,6 +141,8 @@ class PhysicsNode:
         self.tick = 0
         self._last_tick_msg = b""
         self._last_states: list[VehicleState] = []
+        # The last BACKFILL_TICKS ticks as published: (key, payload) of the tick and its states.
+        self._recent: deque[list[tuple[str, bytes]]] = deque(maxlen=BACKFILL_TICKS)
         # Checkpoints every `_checkpoint_ticks` ticks; the loop's per-tick cost is one
         # comparison with `_next_checkpoint`. The marker notes each published tick.
         self._checkpoint_ticks = 0
@@ -668,12 +672,23 @@ class PhysicsNode:
             back = self._recorder_arrivals != seen
             self._recorder_lost = False
             self._recorder_until = 0.0
+        if back:
+            self._backfill()
         log.warning(
             "tick %d: held the clock %.2f s for the recorder: %s",
             self.tick,
             time.monotonic() - t0,
             "it is back" if back else "it did not come back",
         )
+
+    def _backfill(self) -> None:
+        """Re-send the recent ticks and states on ``sim/backfill/<key>`` for the new recorder:
+        those published after the old one died and before its token's departure reached us
+        never reached it (the recorder keeps those it has not got, by key and tick)."""
+        for entries in self._recent:
+            for key, payload in entries:
+                self.rt.session.put(self.keys.backfill_of(key), payload)
+        log.info("re-sent the last %d ticks to the new recorder", len(self._recent))
 
     def _report_dropped(self, held: frozenset[str], dropped: list[str]) -> None:
         self.dropped_total += len(dropped)
@@ -729,14 +744,20 @@ class PhysicsNode:
         self._put_tick()
         if self._marker is not None:
             self._marker.mark(self.tick)
-        self._put_states()
+        sent = self._put_states()
+        if self._restart_grace_s > 0.0:
+            self._recent.append([(self.keys.tick(), self._last_tick_msg), *sent])
 
-    def _put_states(self) -> None:
+    def _put_states(self) -> list[tuple[str, bytes]]:
         """The current tick's states on ``vehicle/<id>/state`` (to those who listen)."""
+        sent = []
         for pub, state in zip(self._state_pubs, self._last_states, strict=True):
             if pub.matching:  # nobody listens: the state is in the tick already
-                pub.put(encode(state))
+                payload = encode(state)
+                pub.put(payload)
+                sent.append((pub.key, payload))
                 self.states_sent += 1
+        return sent
 
     def _put_tick(self) -> None:
         """The current tick on ``sim/tick``, and on ``sim/sensor`` if it is a sensor tick."""
@@ -820,6 +841,7 @@ class _StatePublisher:
     reach it anyway (both follow the same subscription declarations), so it misses nothing."""
 
     def __init__(self, session: zenoh.Session, key: str) -> None:
+        self.key = key
         self._pub = session.declare_publisher(key)
         self.matching = False
         self._listener = self._pub.declare_matching_listener(self._on_matching)
