@@ -228,6 +228,7 @@ PUBLIC_COMMANDS = {
     "bench",
     "certs",
     "export",
+    "chaos",
 }
 
 

@@ -27,6 +27,7 @@ from typing import TypeVar
 import pytest
 import zenoh
 
+from deploy.chaos import keep_state
 from deploy.launcher import Launcher, LaunchOptions
 from swarmbus.codec import decode
 from swarmbus.messages import (
@@ -40,7 +41,6 @@ from swarmbus.messages import (
 from swarmbus.reqrep import request
 from swarmbus.scenario import load_scenario
 from swarmbus.session import free_tcp_port
-from swarmbus.views import state_key_decoder
 from tests.support.mavclient import write_scenario
 from tests.support.procs import REPO, keys_for, wait_until
 
@@ -71,12 +71,8 @@ class Flight:
                 self.conflicts.append((r.vehicle_id, -1))
 
     def on_state(self, sample: zenoh.Sample) -> None:
-        payload = sample.payload.to_bytes()
-        k = state_key_decoder.decode(payload)
         with self.lock:
-            old = self.states.setdefault(k.vehicle_id, {}).setdefault(k.tick, payload)
-            if old != payload:
-                self.conflicts.append((k.vehicle_id, k.tick))
+            keep_state(self.states, self.conflicts, sample.payload.to_bytes())
 
     def on_status(self, sample: zenoh.Sample) -> None:
         s = decode(sample.payload.to_bytes(), VehicleStatus)
