@@ -195,6 +195,13 @@ class PhysicsNode:
         # is held for the grace (its process is most likely alive, cut off with the router).
         self._router_until = 0.0
         self._router_outage_tick = -1  # the tick that was current when the router went
+        # Unreachable participants (lockstep): a tick that missed its deadline waits up to
+        # this in all before dropping (the tick it did so for, and since when).
+        self._unreachable_grace_s = (
+            self.scenario.time.unreachable_grace_s if options.mode == SpeedMode.LOCKSTEP else 0.0
+        )
+        self._silent_tick = -1
+        self._silent_since = 0.0
         self._restart_sub = session.declare_subscriber(
             self.keys.all_node_restart(), self._on_restart_notice
         )
@@ -560,15 +567,32 @@ class PhysicsNode:
                 if self.rt.stop.is_set():
                     return None
                 remaining = barrier.remaining_s()
+                if remaining <= 0.0 and self._hold_silent():
+                    continue
                 if remaining <= 0.0:
                     held = barrier.held
                     dropped = barrier.expire()
                     self._report_dropped(held, dropped)
+                    self._silent_tick = -1  # the drop is the report
                     break
                 self._cond.wait(min(remaining, STOP_POLL_S))
-                if barrier.held:
+                if barrier.held or self._silent_tick == self.tick:
                     self._republish_held_tick()
+            self._report_back()
             return barrier.commands()  # a new dict of the decoded (never mutated) lists
+
+    def _report_back(self) -> None:
+        """Log who answered again: a dropped participant back, a silent hold that ended."""
+        for participant, tick in self.barrier.rejoined:
+            log.warning("%s answered tick %d: back in the lockstep", participant, tick)
+        self.barrier.rejoined.clear()
+        if self._silent_tick == self.tick:
+            log.warning(
+                "tick %d: every participant answered after %.2f s: the run goes on",
+                self.tick,
+                time.monotonic() - self._silent_since,
+            )
+            self._silent_tick = -1
 
     # ------------------------------------------------------------------ stepped clock
     def _on_step(self, incoming: Incoming[StepRequest]) -> None:
@@ -689,6 +713,26 @@ class PhysicsNode:
             for key, payload in entries:
                 self.rt.session.put(self.keys.backfill_of(key), payload)
         log.info("re-sent the last %d ticks to the new recorder", len(self._recent))
+
+    def _hold_silent(self) -> bool:
+        """The tick's deadline passed without some answers (the caller holds the lock): with an
+        ``unreachable_grace_s``, wait for them up to it once (re-sending the tick meanwhile);
+        whether the tick now waits longer."""
+        if self._unreachable_grace_s <= 0.0 or self._silent_tick == self.tick:
+            return False
+        now = time.monotonic()
+        self._silent_tick, self._silent_since = self.tick, now
+        timeout = self.barrier.timeout_s
+        self.barrier.extend(now + max(0.0, self._unreachable_grace_s - timeout))
+        log.warning(
+            "tick %d: no answer from %s for %.2f s: holding the clock up to %.1f s in all "
+            "(unreachable grace)",
+            self.tick,
+            ", ".join(self.barrier.missing()),
+            timeout,
+            self._unreachable_grace_s,
+        )
+        return True
 
     def _report_dropped(self, held: frozenset[str], dropped: list[str]) -> None:
         self.dropped_total += len(dropped)
