@@ -737,19 +737,22 @@ class PhysicsNode:
     def _report_dropped(self, held: frozenset[str], dropped: list[str]) -> None:
         self.dropped_total += len(dropped)
         vehicles = [v for v in dropped if v != PLUME]
+        waited_s = self.barrier.timeout_s
+        if self._silent_tick == self.tick:  # held for the unreachable grace
+            waited_s = max(waited_s, self._unreachable_grace_s)
         if vehicles:
             log.warning(
                 "tick %d: dropped %s after %.2f s without actuators (motors off)",
                 self.tick,
                 ", ".join(vehicles),
-                self.barrier.timeout_s,
+                waited_s,
             )
         if PLUME in dropped:
             log.warning(
                 "tick %d: no plume sample after %.2f s: this sensor tick's readings are "
                 "unavailable; the plume service takes part again once it answers a sensor tick",
                 self.tick,
-                self.barrier.timeout_s,
+                waited_s,
             )
         self._report_expired_holds(held, dropped)
 
