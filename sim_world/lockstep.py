@@ -65,6 +65,8 @@ class Lockstep:
         # Held participants (token gone, restart possible): wall time until which the tick
         # waits for each; None until the launcher's notice (the tick's own deadline applies).
         self._held: dict[str, float | None] = {}
+        # Participants that became active again by answering (participant, tick), for the log.
+        self.rejoined: list[tuple[str, int]] = []
 
     # ------------------------------------------------------------------ presence
     def joined(self, vehicle_id: str) -> bool:
@@ -121,6 +123,7 @@ class Lockstep:
             if tick < self._rejoin_from.get(vehicle_id, 0):
                 return False  # sent before it was dropped
             self._active.add(vehicle_id)
+            self.rejoined.append((vehicle_id, tick))
             if self.waits_for(vehicle_id, self.tick):
                 self._waiting.add(vehicle_id)
         if tick != self.tick:
@@ -166,6 +169,10 @@ class Lockstep:
             self._rejoin_from[vid] = self.tick
             self._held.pop(vid, None)
         return dropped
+
+    def extend(self, until_s: float) -> None:
+        """The current tick waits for its missing participants until ``until_s`` (clock time)."""
+        self._deadline = max(self._deadline, until_s)
 
     def commands(self) -> dict[str, Sequence[float]]:
         """The current tick's commands of active vehicles (others get zero motors)."""

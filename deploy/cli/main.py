@@ -874,6 +874,9 @@ def bench_gsl_sweep(params: tuple[str, ...], allow_test_seeds: bool, **kwargs: A
 
 def _register_groups() -> None:
     from deploy.cli.certs import certs
+    from deploy.cli.chaos import chaos
+
+    cli.add_command(chaos)
     from deploy.cli.plume import plume
 
     cli.add_command(plume)

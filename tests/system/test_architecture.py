@@ -301,6 +301,7 @@ PUBLIC_COMMANDS = {
     "bench",
     "certs",
     "export",
+    "chaos",
 }
 
 
