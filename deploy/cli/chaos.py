@@ -1,6 +1,6 @@
 """``plumeswarm chaos SCENARIO --seconds S --seed N``: processes killed at random (seeded)
 moments of a stepped run, every vehicle's state stream compared with a fault-free run
-(:mod:`deploy.chaos`, docs/reliability.md "Chaos")."""
+(:mod:`experiments.chaos`, docs/reliability.md "Chaos")."""
 
 from __future__ import annotations
 
@@ -31,7 +31,7 @@ def chaos(scenario: str | None, seconds: float, seed: int, faults: int, out: Pat
     """Kill processes at seeded moments of a run; compare the vehicles with a fault-free run."""
     import time
 
-    from deploy.chaos import ChaosOptions, run_chaos
+    from experiments.chaos import ChaosOptions, run_chaos
     from swarmbus.scenario import resolve_scenario_path
 
     if seconds <= 0.0:

@@ -27,8 +27,8 @@ from typing import TypeVar
 import pytest
 import zenoh
 
-from deploy.chaos import keep_state
 from deploy.launcher import Launcher, LaunchOptions
+from experiments.chaos import keep_state
 from swarmbus.codec import decode
 from swarmbus.messages import (
     Arm,

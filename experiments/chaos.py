@@ -29,16 +29,14 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-import msgspec
 import zenoh
 
 from agents.swarm import Swarm, SwarmError
-from deploy.demo import DemoError, start_missions
 from deploy.launcher import Launcher, LaunchError, LaunchOptions
-from deploy.scaling import write_scenario
+from deploy.scaling import local_stack_scenario
+from experiments.demo import DemoError, start_missions
 from swarmbus.keys import Keys
 from swarmbus.scenario import Scenario
-from swarmbus.session import free_tcp_port
 from swarmbus.views import state_key_decoder
 
 log = logging.getLogger(__name__)
@@ -101,10 +99,8 @@ def fault_plan(seed: int, count: int, first_tick: int, last_tick: int) -> list[i
 
 
 def _stepped(opts: ChaosOptions, run_dir: Path) -> tuple[Scenario, Path]:
-    sc = opts.scenario
-    sc = msgspec.structs.replace(sc, time=msgspec.structs.replace(sc.time, mode="stepped"))
     run_dir.mkdir(parents=True, exist_ok=True)
-    return sc, write_scenario(sc, run_dir / "scenario-stepped.toml")
+    return local_stack_scenario(opts.scenario, run_dir, "stepped")
 
 
 def fly(
@@ -117,7 +113,6 @@ def fly(
         headless=True,
         record=True,
         run_dir=run_dir,
-        connect=(f"tcp/127.0.0.1:{free_tcp_port()}",),
         roles=ROLES,
     )
     flight = Flight()

@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from deploy.chaos import Flight, compare, fault_plan
+from experiments.chaos import Flight, compare, fault_plan
 from tests.support.mavclient import write_scenario
 from tests.support.procs import run_cli
 
