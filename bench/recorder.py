@@ -32,6 +32,7 @@ import psutil
 from recorder.handshake import wait_until_recorded
 from recorder.reader import Recording
 from recorder.sink import McapSink
+from recorder.spool import Spool
 from swarmbus.codec import encode
 from swarmbus.keys import Keys
 from swarmbus.messages import NodeState, VehicleState
@@ -121,7 +122,20 @@ def publish(args: argparse.Namespace) -> int:
     return 0
 
 
-def through_bus(vehicles: int, ticks: int, paced: bool) -> dict[str, Any]:
+def spool_alone(messages: int = 120_000, vehicles: int = 8) -> float:
+    """Microseconds per message appended to the write-ahead spool (recorder.spool)."""
+    items = stream(vehicles, max(1, messages // vehicles))
+    with tempfile.TemporaryDirectory() as tmp:
+        spool = Spool(Path(tmp) / "s.mcap")
+        t0 = time.perf_counter()
+        for k, (key, payload) in enumerate(items):
+            spool.append((key, payload, k, k, False))
+        dt = time.perf_counter() - t0
+        spool.close(remove=True)
+    return 1e6 * dt / len(items)
+
+
+def through_bus(vehicles: int, ticks: int, paced: bool, spool: bool = True) -> dict[str, Any]:
     port = free_tcp_port()
     endpoint = f"tcp/127.0.0.1:{port}"
     router = NetworkConfig(mode="router", connect=[], listen=[endpoint])
@@ -130,7 +144,8 @@ def through_bus(vehicles: int, ticks: int, paced: bool) -> dict[str, Any]:
         out = Path(tmp) / "bus.mcap"
         rec = subprocess.Popen(
             [sys.executable, "-m", "deploy", "node", "recorder", "--connect", endpoint,
-             "--set", f"out={out}", "--set", "query_plume_info=false"],
+             "--set", f"out={out}", "--set", "query_plume_info=false",
+             "--set", f"spool={str(spool).lower()}"],
             cwd=REPO, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
             start_new_session=True,
         )  # fmt: skip
@@ -183,9 +198,18 @@ def main() -> None:
     p.add_argument("--paced", action="store_true")
     p.add_argument("--quick", action="store_true", help="shorter runs")
     p.add_argument("--steps", type=int, nargs="*", default=[8, 64, 128, 256, 512])
+    p.add_argument(
+        "--spool",
+        action="store_true",
+        help="only the write-ahead spool's cost: alone, and the "
+        "recorder's CPU with and without it (--steps vehicles, paced)",
+    )
     args = p.parse_args()
     if args.publish:
         sys.exit(publish(args))
+    if args.spool:
+        spool_cost(args)
+        return
 
     scale = 0.25 if args.quick else 1.0
     rate, per_vm = writer_alone(int(120_000 * scale))
@@ -211,6 +235,22 @@ def main() -> None:
             f"{r['behind']} |",
             flush=True,
         )
+
+
+def spool_cost(args: argparse.Namespace) -> None:
+    scale = 0.25 if args.quick else 1.0
+    print(f"spool alone: {spool_alone(int(120_000 * scale)):.2f} µs per message appended")
+    print("| offered | spool | recorded / sent | recorder CPU |")
+    print("|---|---|---|---|")
+    for vehicles in args.steps:
+        for spool in (False, True, False, True):
+            r = through_bus(vehicles, int(STATE_HZ * 3.0 * scale), paced=True, spool=spool)
+            cpu = 100 * r["cpu_s"] / r["sent_s"]
+            print(
+                f"| {vehicles} × {STATE_HZ} Hz | {'on' if spool else 'off'} | "
+                f"{r['recorded']:,} / {r['count']:,} | {cpu:.0f} % of a core |",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":

@@ -72,7 +72,8 @@ STOP_STAGE = {
     "router": 3,
 }
 RESTART = {
-    "router": RestartPolicy(),
+    # on the same endpoints: every session reconnects to it (swarmbus.session.CONNECT_RETRY)
+    "router": RestartPolicy(RestartMode.ON_FAILURE, max_restarts=3),
     "physics": RestartPolicy(RestartMode.ON_FAILURE, max_restarts=3),  # from its checkpoint
     "recorder": RestartPolicy(RestartMode.ON_FAILURE, max_restarts=3),  # in a new segment
     "plume": RestartPolicy(RestartMode.ON_FAILURE, max_restarts=3),

@@ -134,7 +134,13 @@ def access_control(dep: Deployment, keys: Keys) -> dict[str, Any]:
             dep.acl.actuators,
         ),
         "world": (
-            [keys.tick(), keys.sensor_tick(), keys.clock(), keys.all_vehicle_states()],
+            [
+                keys.tick(),
+                keys.sensor_tick(),
+                keys.clock(),
+                keys.all_vehicle_states(),
+                keys.backfill(),
+            ],
             dep.acl.world,
         ),
         "field": ([keys.plume_sample(), keys.plume_state()], dep.acl.field),

@@ -36,6 +36,7 @@ from recorder.foxglove.scene import FoxgloveScene
 from recorder.reader import RecordingError, SegmentEnd, segment_end
 from recorder.segments import next_segment
 from recorder.sink import DEFAULT_CHUNK_BYTES, DEFAULT_CHUNK_INTERVAL_S, McapSink
+from recorder.spool import Spool, read_durable, read_spool, remove_spool
 from swarmbus.codec import encode
 from swarmbus.keys import Keys
 from swarmbus.messages import NodeHealth, PlumeInfo, PlumeInfoQuery, SimTick, VehicleState
@@ -60,6 +61,7 @@ class RecorderSettings(RoleOptions, frozen=True, kw_only=True):
     query_plume_info: bool = True
     resume: bool = False
     foxglove: bool = True
+    spool: bool = True
 
 
 @dataclass(frozen=True)
@@ -74,6 +76,7 @@ class RecorderOptions:
     query_plume_info: bool = True
     resume: bool = False  # ``out`` exists (a killed predecessor's): continue in its next segment
     foxglove: bool = True  # also write the Foxglove channels (recorder.foxglove.scene)
+    spool: bool = True  # write-ahead spool (recorder.spool): a kill loses nothing received
 
     @classmethod
     def from_ctx(cls, ctx: NodeContext) -> RecorderOptions:
@@ -86,6 +89,20 @@ class RecorderOptions:
 
 # key, payload, receive time (ns), publish time (ns, the sample's timestamp), is a query reply
 Item = tuple[str, bytes, int, int | None, bool]
+
+
+class _Ticked(msgspec.Struct):
+    tick: int
+
+
+_TICK = msgspec.msgpack.Decoder(_Ticked)  # the tick of a SimTick or VehicleState payload
+
+
+def _tick_of(payload: bytes) -> int | None:
+    try:
+        return _TICK.decode(payload).tick
+    except msgspec.DecodeError:
+        return None
 
 
 def publish_time_ns(sample: zenoh.Sample) -> int | None:
@@ -108,8 +125,18 @@ class Recorder:
         publish_health: HealthPublisher,
         previous_segment: Path | None = None,
         scenario: Scenario | None = None,
+        spool: Spool | None = None,
     ) -> None:
         self._session = session
+        self._spool = spool
+        self._last_log_ns = 0  # receive times are made strictly increasing (queue order)
+        self._written_ns = -1  # receive time of the last message written
+        self.recovered = 0  # messages recovered from the previous segment's spool
+        self.backfilled = 0  # ticks and states the physics re-sent that we had not got
+        # (key, tick) of the per-tick streams the killed recorder received (its spool) and of
+        # the physics's re-sent ones taken: a re-sent one is recorded only if it is not here
+        self._have: set[tuple[str, int]] = set()
+        self._have_max: dict[str, int] = {}  # the newest tick of each key in that spool
         self._scenario = scenario
         # Foxglove's channels, converted on the writer thread from the messages it decodes
         # anyway; decimated in simulation time, so their cost does not grow with the tick rate.
@@ -155,6 +182,10 @@ class Recorder:
     def _on_sample(self, sample: zenoh.Sample) -> None:
         now = time.time_ns()
         key = str(sample.key_expr)
+        original = self._keys.backfilled(key)
+        if original is not None:
+            self._on_backfill(original, sample, now)
+            return
         with self._lock:
             if self._received_total - self._taken_total >= self._opts.max_backlog:
                 self.dropped[key] += 1
@@ -162,13 +193,70 @@ class Recorder:
                 return
             self.received[key] += 1
             self._received_total += 1
-        self._queue.put((key, sample.payload.to_bytes(), now, publish_time_ns(sample), False))
+            self._enqueue(key, sample.payload.to_bytes(), now, publish_time_ns(sample), False)
+
+    def _enqueue(
+        self, key: str, payload: bytes, now_ns: int, publish_ns: int | None, is_reply: bool
+    ) -> None:
+        """Stamp, spool and queue one message (the caller holds the lock: one order for all)."""
+        self._last_log_ns = now_ns = max(now_ns, self._last_log_ns + 1)
+        item = (key, payload, now_ns, publish_ns, is_reply)
+        if self._spool is not None:
+            self._spool.append(item)
+        self._queue.put(item)
+
+    def _on_backfill(self, key: str, sample: zenoh.Sample, now: int) -> None:
+        """A tick or state the physics re-sent after our restart: recorded under its own key
+        if the killed recorder never received it (published after it died)."""
+        payload = sample.payload.to_bytes()
+        tick = _tick_of(payload)
+        if self._previous is None or tick is None:
+            return
+        with self._lock:
+            if (key, tick) in self._have or tick <= self._have_max.get(key, -1):
+                return
+            self._have.add((key, tick))
+            self.backfilled += 1
+            self.received[key] += 1
+            self._received_total += 1
+            self._enqueue(key, payload, now, publish_time_ns(sample), False)
+
+    def _put_reply(self, key: str, payload: bytes) -> None:
+        with self._lock:
+            self._enqueue(key, payload, time.time_ns(), None, True)
+
+    def _recover(self) -> None:
+        """Queue, first, what the previous segment's spool holds that its file does not (the
+        killed recorder's queue and open chunk), stamped now; its spool is then ours."""
+        previous = self._previous
+        if previous is None:
+            return
+        durable_ns = read_durable(previous)
+        with self._lock:
+            for key, payload, log_ns, publish_ns, is_reply in read_spool(previous):
+                tick = _tick_of(payload) if not is_reply else None
+                if tick is not None:
+                    self._have_max[key] = max(tick, self._have_max.get(key, -1))
+                if log_ns > durable_ns:
+                    self._enqueue(key, payload, time.time_ns(), publish_ns, is_reply)
+                    self.recovered += 1
+                    if not is_reply:
+                        self.received[key] += 1
+                        self._received_total += 1
+        remove_spool(previous)
+        if self.recovered:
+            log.warning(
+                "recovered %d messages from %s's spool (received, not yet written)",
+                self.recovered,
+                previous.name,
+            )
 
     # -- lifecycle -----------------------------------------------------------------------------
     def start(self) -> None:
         self._sink.write_event(sch.RecorderEvent(kind=sch.EventKind.STARTED, detail=self._name))
         if self._gap_pending:
             self._scan_thread.start()
+        self._recover()
         self._thread.start()
         self._sub = self._session.declare_subscriber(self._keys.everything(), self._on_sample)
         if self._opts.query_plume_info:
@@ -192,6 +280,8 @@ class Recorder:
             self._write_segment_gap(force=True)
         self._sink.write_event(self._event(sch.EventKind.STOPPED))
         self._sink.close(self.summary())
+        if self._spool is not None:
+            self._spool.close(remove=not self._thread.is_alive())  # all of it is in the file
         log.info("recording closed: %s (%d messages)", self._sink.path, self.written_total)
 
     @property
@@ -247,6 +337,7 @@ class Recorder:
 
     def _write(self, item: Item) -> None:
         key, payload, log_time_ns, publish_ns, is_reply = item
+        self._written_ns = log_time_ns
         if is_reply:
             reply = sch.decode_bus(payload)
             self._sink.write_reply(key, reply, log_time_ns)
@@ -279,7 +370,9 @@ class Recorder:
     def _housekeeping(self, age_s: float = 0.0) -> None:
         if self._gap_pending:
             self._write_segment_gap()
-        self._sink.maybe_close_chunk()
+        if self._sink.maybe_close_chunk() and self._spool is not None:
+            with self._lock:
+                self._spool.rotate(self._written_ns)
         self._watch_backlog(age_s)
         self._report_drops()
         now = time.monotonic()
@@ -377,6 +470,7 @@ class Recorder:
             + (f"{gap_s:.2f} s" if gap_s is not None else "unknown time")
             + " not recorded"
             + (f", ticks {end.last_tick} → {first.tick}" if missing is not None and first else "")
+            + (f"; {self.recovered} messages recovered from its spool" if self.recovered else "")
         )
         log.warning("RECORDER RESUMED: %s", detail)
         self._sink.write_event(self._event(sch.EventKind.RESUMED, detail))
@@ -392,7 +486,7 @@ class Recorder:
                 log.info("plume info not recorded yet: %s", exc)
                 self._stopping.wait(2.0)
                 continue
-            self._queue.put((key, encode(info), time.time_ns(), None, True))
+            self._put_reply(key, encode(info))
             log.info("recorded the plume's info")
             if self._foxglove is not None and self._scenario is not None:
                 self._query_plume_meshes(self._scenario)
@@ -407,7 +501,7 @@ class Recorder:
             for query in list(pending):
                 mesh = fetch_mesh(self._session, self._keys, query)
                 if mesh is not None:
-                    self._queue.put((key, encode(mesh), time.time_ns(), None, True))
+                    self._put_reply(key, encode(mesh))
                     pending.remove(query)
             self._stopping.wait(2.0 if pending else 0.0)
 
@@ -461,6 +555,7 @@ def run(ctx: NodeContext) -> int:
             lambda d: rt.publish_health(detail=d),
             previous_segment=previous,
             scenario=ctx.scenario,
+            spool=Spool(out) if opts.spool else None,
         )
         recorder.start()
         log.info("recording %s to %s", rt.keys.everything(), out)

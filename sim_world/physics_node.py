@@ -46,6 +46,7 @@ import logging
 import sys
 import threading
 import time
+from collections import deque
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Annotated, Any
@@ -84,8 +85,10 @@ log = logging.getLogger(__name__)
 HANDSHAKE_REPUBLISH_S = 0.1  # tick 0 is re-sent until every participant has answered it
 STOP_POLL_S = 0.2  # longest wait between checks of the stop signal
 HEALTH_PERIOD_S = 1.0
+BACKFILL_TICKS = 256  # the recent ticks re-sent to a restarted recorder (sim/backfill)
 PLUME = "plume"  # the plume service's participant in the lockstep (any node named plume[-*])
 RECORDER = "recorder"  # the recorder's node name: the clock waits for its restart too
+ROUTER = "router"  # the router's node name: while it is away, every departure is held
 
 
 class PhysicsOptions(RoleOptions, frozen=True, kw_only=True):
@@ -137,6 +140,9 @@ class PhysicsNode:
         )
         self.tick = 0
         self._last_tick_msg = b""
+        self._last_states: list[VehicleState] = []
+        # The last BACKFILL_TICKS ticks as published: (key, payload) of the tick and its states.
+        self._recent: deque[list[tuple[str, bytes]]] = deque(maxlen=BACKFILL_TICKS)
         # Checkpoints every `_checkpoint_ticks` ticks; the loop's per-tick cost is one
         # comparison with `_next_checkpoint`. The marker notes each published tick.
         self._checkpoint_ticks = 0
@@ -185,6 +191,10 @@ class PhysicsNode:
         self._recorder_arrivals = 0
         self._recorder_lost = False  # the recorder's token went: hold before the next tick
         self._recorder_until = 0.0  # it is being restarted: hold until it is back, or this
+        # The router left (lockstep): until this wall time every participant whose token goes
+        # is held for the grace (its process is most likely alive, cut off with the router).
+        self._router_until = 0.0
+        self._router_outage_tick = -1  # the tick that was current when the router went
         self._restart_sub = session.declare_subscriber(
             self.keys.all_node_restart(), self._on_restart_notice
         )
@@ -216,6 +226,9 @@ class PhysicsNode:
         if name == PLUME or name.startswith(PLUME + "-"):
             self._on_plume_presence(name, alive)
             return
+        if name == ROUTER and self._restart_grace_s > 0.0:
+            self._on_router_presence(alive)
+            return
         if name == RECORDER and self._restart_grace_s > 0.0:
             with self._cond:
                 self._recorder_arrivals += alive
@@ -232,6 +245,31 @@ class PhysicsNode:
         with self._cond:
             self._participant(vid, alive)
         log.info("autopilot of %s %s", vid, "arrived" if alive else "left")
+
+    def _on_router_presence(self, alive: bool) -> None:
+        """The router went (lockstep): whoever leaves with it is held for the grace, the
+        recorder's hold too; its return ends the outage (held participants stay held until
+        they answer, as after a restart)."""
+        with self._cond:
+            was_away = self._router_until > 0.0
+            if alive:
+                self._router_until = 0.0
+            else:
+                self._router_until = time.monotonic() + self._restart_grace_s
+                self._router_outage_tick = self.tick
+                for participant in self.barrier.held:
+                    self.barrier.restarting(participant, self._restart_grace_s)
+                self._recorder_until = max(self._recorder_until, self._router_until)
+            self._cond.notify_all()
+        if alive and was_away:
+            log.warning("tick %d: the router is back", self.tick)
+        elif not alive:
+            log.warning(
+                "tick %d: the router left: holding the clock for whoever leaves with it "
+                "(grace %.1f s)",
+                self.tick,
+                self._restart_grace_s,
+            )
 
     def _on_plume_presence(self, name: str, alive: bool) -> None:
         """Plume services are one participant: present while any of them is."""
@@ -251,6 +289,9 @@ class PhysicsNode:
             self.barrier.joined(participant)
         elif self._restart_grace_s > 0.0:
             self.barrier.held_leave(participant)  # the launcher may be restarting it
+            until = self._router_until - time.monotonic()
+            if until > 0.0:  # cut off with the router: it comes back when the router does
+                self.barrier.restarting(participant, until)
         else:
             self.barrier.left(participant)
         self._cond.notify_all()
@@ -612,6 +653,8 @@ class PhysicsNode:
         if now - self._held_republish >= HANDSHAKE_REPUBLISH_S:
             self._held_republish = now
             self._put_tick()
+            if self._router_outage_tick == self.tick:
+                self._put_states()  # subscribers cut off with the router missed them
 
     def _wait_for_recorder(self) -> None:
         """The recorder left (lockstep): hold the next tick until a recorder is back — up to
@@ -629,12 +672,23 @@ class PhysicsNode:
             back = self._recorder_arrivals != seen
             self._recorder_lost = False
             self._recorder_until = 0.0
+        if back:
+            self._backfill()
         log.warning(
             "tick %d: held the clock %.2f s for the recorder: %s",
             self.tick,
             time.monotonic() - t0,
             "it is back" if back else "it did not come back",
         )
+
+    def _backfill(self) -> None:
+        """Re-send the recent ticks and states on ``sim/backfill/<key>`` for the new recorder:
+        those published after the old one died and before its token's departure reached us
+        never reached it (the recorder keeps those it has not got, by key and tick)."""
+        for entries in self._recent:
+            for key, payload in entries:
+                self.rt.session.put(self.keys.backfill_of(key), payload)
+        log.info("re-sent the last %d ticks to the new recorder", len(self._recent))
 
     def _report_dropped(self, held: frozenset[str], dropped: list[str]) -> None:
         self.dropped_total += len(dropped)
@@ -686,13 +740,24 @@ class PhysicsNode:
         self._plume_values = None
         self._last_tick_msg = encode(msg)
         self._last_tick_states = len(states)
+        self._last_states = states
         self._put_tick()
         if self._marker is not None:
             self._marker.mark(self.tick)
-        for pub, state in zip(self._state_pubs, states, strict=True):
+        sent = self._put_states()
+        if self._restart_grace_s > 0.0:
+            self._recent.append([(self.keys.tick(), self._last_tick_msg), *sent])
+
+    def _put_states(self) -> list[tuple[str, bytes]]:
+        """The current tick's states on ``vehicle/<id>/state`` (to those who listen)."""
+        sent = []
+        for pub, state in zip(self._state_pubs, self._last_states, strict=True):
             if pub.matching:  # nobody listens: the state is in the tick already
-                pub.put(encode(state))
+                payload = encode(state)
+                pub.put(payload)
+                sent.append((pub.key, payload))
                 self.states_sent += 1
+        return sent
 
     def _put_tick(self) -> None:
         """The current tick on ``sim/tick``, and on ``sim/sensor`` if it is a sensor tick."""
@@ -776,6 +841,7 @@ class _StatePublisher:
     reach it anyway (both follow the same subscription declarations), so it misses nothing."""
 
     def __init__(self, session: zenoh.Session, key: str) -> None:
+        self.key = key
         self._pub = session.declare_publisher(key)
         self.matching = False
         self._listener = self._pub.declare_matching_listener(self._on_matching)

@@ -69,6 +69,20 @@ class Keys:
         answers those alone (reading ``sim/tick`` would wake it on every tick)."""
         return f"{self.prefix}/sim/sensor"
 
+    def backfill(self) -> str:
+        """The physics's recent ticks and states again, for a restarted recorder: the ones
+        published between the old recorder's death and the physics's noticing it."""
+        return f"{self.prefix}/sim/backfill/**"
+
+    def backfill_of(self, key: str) -> str:
+        """``key`` (of this world) as re-sent on :meth:`backfill`."""
+        return f"{self.prefix}/sim/backfill/{key.removeprefix(self.prefix + '/')}"
+
+    def backfilled(self, key: str) -> str | None:
+        """The original key of a :meth:`backfill` key, None for any other key."""
+        head = f"{self.prefix}/sim/backfill/"
+        return f"{self.prefix}/{key.removeprefix(head)}" if key.startswith(head) else None
+
     # -- stepped clock (control plane: a queryable of the physics) -------------
     def clock_step(self) -> str:
         """``StepRequest`` → ``StepReply``: the stepped clock's grants."""

@@ -32,6 +32,11 @@ SINGLE_THREAD_RUNTIME = (
     "(app: (worker_threads: 1), acc: (handover: app), tx: (handover: app),"
     " rx: (handover: app), net: (handover: app))"
 )
+# Reconnection (Zenoh's own): a session whose link to its router (or a peer it was told to
+# connect to) breaks tries again every 100 ms, doubling up to 1 s, for ever; when it is back,
+# Zenoh declares its subscribers, queryables and liveliness tokens again on the new link. A
+# killed router restarted on the same endpoints is rejoined within about a second of its start.
+CONNECT_RETRY = {"period_init_ms": 100, "period_max_ms": 1000, "period_increase_factor": 2.0}
 Endpoint = Annotated[str, msgspec.Meta(pattern=r"^(tcp|udp|tls|quic|unixsock-stream)/.+$")]
 
 
@@ -86,6 +91,11 @@ def zenoh_config(net: NetworkConfig) -> zenoh.Config:
     conf.insert_json5("mode", json.dumps(net.mode))
     conf.insert_json5("connect/endpoints", json.dumps(list(net.connect)))
     conf.insert_json5("listen/endpoints", json.dumps(list(net.listen)))
+    conf.insert_json5("connect/retry", json.dumps(CONNECT_RETRY))
+    # A peer opens even when its router is not up yet and joins it once it is; a client must
+    # reach its router at open (one clear error, e.g. a refused TLS certificate), and after
+    # that reconnects like a peer. Neither gives up on a lost link.
+    conf.insert_json5("connect/exit_on_failure", json.dumps(net.mode == "client"))
     conf.insert_json5("scouting/multicast/enabled", json.dumps(net.multicast_scouting))
     # Every sample carries its publisher's (HLC) time: recordings keep when a message was
     # published, not only when the recorder got it, and replay reproduces that timing.

@@ -116,10 +116,12 @@ class Flight:
 
 
 @contextmanager
-def flight(tmp: Path, per_process: int = 1) -> Iterator[Flight]:
+def flight(tmp: Path, per_process: int = 1, network_mode: str | None = None) -> Iterator[Flight]:
     """The stack flying the three missions from tick START_TICK + 1 on (``per_process``
-    vehicles per autopilot process)."""
+    vehicles per autopilot process; every node in ``network_mode``, default the scenario's)."""
     path, _, _ = write_scenario(tmp / "scenario.toml", len(VEHICLES) + 1)
+    if network_mode is not None:
+        path.write_text(path.read_text() + f'\n[network]\nmode = "{network_mode}"\n')
     scenario = load_scenario(path)
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     opts = LaunchOptions(
@@ -175,14 +177,19 @@ def flight(tmp: Path, per_process: int = 1) -> Iterator[Flight]:
         launcher.stop()
 
 
-@pytest.fixture(scope="module")
-def baseline(tmp_path_factory: pytest.TempPathFactory) -> Flight:
+def fly_baseline(tmp: Path) -> Flight:
     """The flight without any kill."""
-    with flight(tmp_path_factory.mktemp("baseline")) as f:
+    with flight(tmp) as f:
         f.wait(f.done, 300.0, "every mission finished and landed")
         f.launcher.supervise_once()
         time.sleep(0.5)  # a few more ticks on the ground
     return f
+
+
+@pytest.fixture(scope="module")
+def baseline(tmp_path_factory: pytest.TempPathFactory) -> Flight:
+    """The flight without any kill."""
+    return fly_baseline(tmp_path_factory.mktemp("baseline"))
 
 
 def kill(f: Flight, *names: str) -> None:
@@ -191,10 +198,12 @@ def kill(f: Flight, *names: str) -> None:
         os.killpg(pids[name], signal.SIGKILL)
 
 
-def fly_with_kill(tmp: Path, *names: str, per_process: int = 1) -> tuple[Flight, int]:
+def fly_with_kill(
+    tmp: Path, *names: str, per_process: int = 1, network_mode: str | None = None
+) -> tuple[Flight, int]:
     """Fly the missions, SIGKILL ``names`` while uav1 flies its first leg at 10 m; the flight
     and the last tick of uav1 seen before the kill."""
-    with flight(tmp, per_process) as f:
+    with flight(tmp, per_process, network_mode) as f:
         f.wait(
             lambda: (s := f.status.get(KILLED)) is not None and s.mission_index >= 1,
             300.0,
