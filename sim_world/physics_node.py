@@ -56,17 +56,15 @@ import zenoh
 
 from sim_world import checkpoint
 from sim_world.checkpoint import CheckpointError, CheckpointWriter, ProgressMarker
+from sim_world.intake import ActuatorIntake
 from sim_world.lockstep import Lockstep, participant_of
+from sim_world.plume_part import PLUME, PlumeParticipation, decode_answer, is_plume
 from sim_world.stepping import SteppedClock, StepRefused
 from sim_world.world import World
 from swarmbus.codec import MessageError, decode, encode
-from swarmbus.keys import KeyNameError, autopilot_node, vehicle_of_autopilot
+from swarmbus.keys import autopilot_node
 from swarmbus.messages import (
-    ActuatorBatch,
-    ActuatorCommand,
     Clock,
-    FieldSample,
-    PlumeSample,
     RestartNotice,
     SimTick,
     SpeedMode,
@@ -78,7 +76,6 @@ from swarmbus.node import NodeContext, NodeRuntime
 from swarmbus.options import OptionError, RoleOptions, parse_options
 from swarmbus.reqrep import Incoming, serve_later
 from swarmbus.session import Presence
-from swarmbus.views import BatchView
 
 log = logging.getLogger(__name__)
 
@@ -86,7 +83,6 @@ HANDSHAKE_REPUBLISH_S = 0.1  # tick 0 is re-sent until every participant has ans
 STOP_POLL_S = 0.2  # longest wait between checks of the stop signal
 HEALTH_PERIOD_S = 1.0
 BACKFILL_TICKS = 256  # the recent ticks re-sent to a restarted recorder (sim/backfill)
-PLUME = "plume"  # the plume service's participant in the lockstep (any node named plume[-*])
 RECORDER = "recorder"  # the recorder's node name: the clock waits for its restart too
 ROUTER = "router"  # the router's node name: while it is away, every departure is held
 
@@ -165,15 +161,8 @@ class PhysicsNode:
         self._actuator_sub = session.declare_subscriber(
             self.keys.all_autopilot_actuators(), self._on_batch
         )
-        self._known = frozenset(world.vehicle_ids)
-        self.foreign_dropped = 0  # commands for another vehicle on a one-vehicle node's key
-        self._foreign_logged: set[str] = set()  # the keys that sent them (logged once each)
-        # The plume's part of the sensor ticks (see the module doc).
-        self._plume_nodes: set[str] = set()  # live plume services (one participant)
-        self._sample: FieldSample | None = None  # the plume's answer to the current tick
-        self._plume_values: PlumeSample | None = None  # what the next tick carries
-        self._queried = False  # the current tick waits for the plume's sample
-        self._last_tick_states = 0  # how many states the current tick has
+        self.intake = ActuatorIntake(world.vehicle_ids, self.keys.autopilot_node_of)
+        self.plume = PlumeParticipation()  # the plume's part of the sensor ticks
         self._sample_sub = session.declare_subscriber(
             self.keys.plume_sample(), self._on_field_sample
         )
@@ -223,7 +212,7 @@ class PhysicsNode:
 
     # ------------------------------------------------------------------ bus callbacks
     def _on_presence(self, name: str, alive: bool) -> None:
-        if name == PLUME or name.startswith(PLUME + "-"):
+        if is_plume(name):
             self._on_plume_presence(name, alive)
             return
         if name == ROUTER and self._restart_grace_s > 0.0:
@@ -274,12 +263,7 @@ class PhysicsNode:
     def _on_plume_presence(self, name: str, alive: bool) -> None:
         """Plume services are one participant: present while any of them is."""
         with self._cond:
-            was = bool(self._plume_nodes)
-            if alive:
-                self._plume_nodes.add(name)
-            else:
-                self._plume_nodes.discard(name)
-            if was != bool(self._plume_nodes):
+            if self.plume.presence(name, alive):
                 self._participant(PLUME, alive)
         log.info("plume service %s %s", name, "arrived" if alive else "left")
 
@@ -298,90 +282,27 @@ class PhysicsNode:
 
     def _on_field_sample(self, sample: zenoh.Sample) -> None:
         """The plume's answer to a sensor tick: counts like an autopilot's command."""
-        try:
-            answer = decode(sample.payload.to_bytes(), FieldSample)
-        except MessageError as exc:
-            log.warning("ignoring plume sample on %s: %s", sample.key_expr, exc)
+        answer = decode_answer(sample.payload.to_bytes(), sample.key_expr)
+        if answer is None:
             return
         with self._cond:
             if self.barrier.receive(PLUME, answer.tick, ()):
-                self._sample = answer
+                self.plume.answered(answer)
                 if self.barrier.complete():
                     self._cond.notify_all()
 
     def _on_batch(self, sample: zenoh.Sample) -> None:
-        data = sample.payload.to_bytes()
-        try:
-            batch = decode(data, ActuatorBatch)
-            tick, commands = batch.tick, batch.commands
-        except MessageError as exc:
-            salvaged = self._salvage(sample.key_expr, data, exc)
-            if salvaged is None:
-                return
-            tick, commands = salvaged
-        key = str(sample.key_expr)
-        only = self._sender_vehicle(key)
-        counted = False
+        tick, entries = self.intake.entries(str(sample.key_expr), sample.payload.to_bytes())
+        if not entries:
+            return
         with self._cond:
             barrier = self.barrier
-            for cmd in commands:
-                vid = cmd.vehicle_id
-                if only is not None and vid != only:
-                    self._drop_foreign(key, vid)
-                    continue
-                if cmd.tick != tick or vid not in self._known:
-                    log.warning(
-                        "ignoring actuators for %s of tick %d in the batch of tick %d on %s",
-                        vid,
-                        cmd.tick,
-                        tick,
-                        sample.key_expr,
-                    )
-                    continue
-                counted = barrier.receive(vid, tick, cmd.rotor_commands) or counted
+            counted = False
+            for vid, rotor_commands in entries:
+                counted = barrier.receive(vid, tick, rotor_commands) or counted
             # Wake the loop once per tick, not once per command.
             if counted and barrier.complete():
                 self._cond.notify_all()
-
-    def _sender_vehicle(self, key: str) -> str | None:
-        """The one vehicle a batch on ``key`` may command: ``<id>`` on a one-vehicle node's
-        key (``autopilot/autopilot-<id>/actuators``, the only key a per-vehicle identity may
-        put on), None on any other node's key (a process serving several vehicles)."""
-        try:
-            vid = vehicle_of_autopilot(self.keys.autopilot_node_of(key))
-        except KeyNameError:
-            return None
-        return vid if vid in self._known else None
-
-    def _drop_foreign(self, key: str, vehicle_id: str) -> None:
-        """Count a command for ``vehicle_id`` on another vehicle's key (logged once a key)."""
-        self.foreign_dropped += 1
-        if key not in self._foreign_logged:
-            self._foreign_logged.add(key)
-            log.warning(
-                "ignoring actuators for %s on %s: a one-vehicle node commands only its own "
-                "vehicle (further ones from this key are counted in the health detail)",
-                vehicle_id,
-                key,
-            )
-
-    @staticmethod
-    def _salvage(
-        key: object, data: bytes, exc: MessageError
-    ) -> tuple[int, list[ActuatorCommand]] | None:
-        """The good entries of a batch that failed to decode (each bad one is logged)."""
-        try:
-            view = decode(data, BatchView)
-        except MessageError:
-            log.warning("ignoring actuator batch on %s: %s", key, exc)
-            return None
-        good = []
-        for k, raw in enumerate(view.commands):
-            try:
-                good.append(decode(raw, ActuatorCommand))
-            except MessageError as bad:
-                log.warning("ignoring entry %d of the actuator batch on %s: %s", k, key, bad)
-        return view.tick, good
 
     # ------------------------------------------------------------------ phases
     def run(self) -> int:
@@ -414,7 +335,7 @@ class PhysicsNode:
             cp = checkpoint.load(path)
             self.world.restore(cp)
             self.tick = cp.tick
-            self._plume_values = cp.plume_sample
+            self.plume.carried = cp.plume_sample
             self._resume_note = (
                 f"resumed from checkpoint at tick {cp.tick} (sim t={cp.sim_time_s:.3f} s)"
             )
@@ -442,8 +363,8 @@ class PhysicsNode:
         if self.tick >= self._due_checkpoint:
             t0 = time.monotonic()
             cp = self.world.checkpoint(self.tick)
-            if self._plume_values is not None:  # the values this tick carries
-                cp = msgspec.structs.replace(cp, plume_sample=self._plume_values)
+            if self.plume.carried is not None:  # the values this tick carries
+                cp = msgspec.structs.replace(cp, plume_sample=self.plume.carried)
             writer.submit(cp)
             self._capture_s += time.monotonic() - t0
             self._due_checkpoint = self.tick + self._checkpoint_ticks
@@ -494,7 +415,8 @@ class PhysicsNode:
             commands = self._await_commands()
             if commands is None or not self._may_step():
                 break
-            self._plume_values = self._take_sample()
+            with self._cond:
+                self.plume.take(self.tick)
             self._apply(commands)
             self.world.step(self.substeps)
             self.tick += 1
@@ -728,18 +650,17 @@ class PhysicsNode:
         """Tick k out (the barrier has begun it): its states and the plume's values of the
         last sensor tick; whether it waits for the plume's sample of its own positions."""
         with self._cond:
-            queried = self._queried = self.barrier.waits(PLUME)
+            queried = self.barrier.waits(PLUME)
+            carried = self.plume.published(queried, len(states))
         msg = SimTick(
             tick=self.tick,
             sim_time_s=self.world.sim_time_s,
             control_dt_s=self.control_dt_s,
             states=states,
             plume_queried=queried,
-            plume_values=self._plume_values,
+            plume_values=carried,
         )
-        self._plume_values = None
         self._last_tick_msg = encode(msg)
-        self._last_tick_states = len(states)
         self._last_states = states
         self._put_tick()
         if self._marker is not None:
@@ -764,25 +685,6 @@ class PhysicsNode:
         self._tick_pub.put(self._last_tick_msg)
         if self.tick % self._sensor_period == 0:
             self._sensor_pub.put(self._last_tick_msg)
-
-    def _take_sample(self) -> PlumeSample | None:
-        """What the next tick carries of the plume: its sample of this tick if the tick waited
-        for one (values None if it did not come or does not fit the tick's states). Taken every
-        tick: a sample that came for a tick that did not wait for it is dropped here."""
-        with self._cond:
-            answer, self._sample = self._sample, None
-            if not self._queried:
-                return None
-        values = answer.values_g_m3 if answer is not None else None
-        if values is not None and len(values) != self._last_tick_states:
-            log.warning(
-                "tick %d: plume sampled %d points of %d states",
-                self.tick,
-                len(values),
-                self._last_tick_states,
-            )
-            values = None
-        return PlumeSample(tick=self.tick, values_g_m3=values)
 
     def _pace(self, sim_time_s: float) -> None:
         """Realtime mode: hold tick ``k`` until the wall clock reaches its sim time / factor."""
@@ -827,8 +729,8 @@ class PhysicsNode:
         if force or now - self._health_wall >= HEALTH_PERIOD_S:
             self._health_wall = now
             detail = f"tick {self.tick} dropped {self.dropped_total} states {self.states_sent}"
-            if self.foreign_dropped:
-                detail += f" foreign commands {self.foreign_dropped}"
+            if self.intake.foreign_dropped:
+                detail += f" foreign commands {self.intake.foreign_dropped}"
             if self._resume_note:
                 detail += f"; {self._resume_note}"
             self.rt.publish_health(sim_time_s=sim_time_s, detail=detail)
