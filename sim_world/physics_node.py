@@ -46,7 +46,6 @@ import logging
 import sys
 import threading
 import time
-from collections import deque
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Annotated, Any
@@ -56,6 +55,7 @@ import zenoh
 
 from sim_world import checkpoint
 from sim_world.checkpoint import CheckpointError, CheckpointWriter, ProgressMarker
+from sim_world.holds import RECORDER, ROUTER, Holds
 from sim_world.intake import ActuatorIntake
 from sim_world.lockstep import Lockstep, participant_of
 from sim_world.plume_part import PLUME, PlumeParticipation, decode_answer, is_plume
@@ -82,9 +82,6 @@ log = logging.getLogger(__name__)
 HANDSHAKE_REPUBLISH_S = 0.1  # tick 0 is re-sent until every participant has answered it
 STOP_POLL_S = 0.2  # longest wait between checks of the stop signal
 HEALTH_PERIOD_S = 1.0
-BACKFILL_TICKS = 256  # the recent ticks re-sent to a restarted recorder (sim/backfill)
-RECORDER = "recorder"  # the recorder's node name: the clock waits for its restart too
-ROUTER = "router"  # the router's node name: while it is away, every departure is held
 
 
 class PhysicsOptions(RoleOptions, frozen=True, kw_only=True):
@@ -137,8 +134,6 @@ class PhysicsNode:
         self.tick = 0
         self._last_tick_msg = b""
         self._last_states: list[VehicleState] = []
-        # The last BACKFILL_TICKS ticks as published: (key, payload) of the tick and its states.
-        self._recent: deque[list[tuple[str, bytes]]] = deque(maxlen=BACKFILL_TICKS)
         # Checkpoints every `_checkpoint_ticks` ticks; the loop's per-tick cost is one
         # comparison with `_next_checkpoint`. The marker notes each published tick.
         self._checkpoint_ticks = 0
@@ -172,18 +167,10 @@ class PhysicsNode:
         self._step_queryable = serve_later(
             session, self.keys.clock_step(), StepRequest, self._on_step
         )
-        # Restarts (lockstep): hold the tick for an autopilot the launcher is restarting.
-        self._restart_grace_s = (
-            self.scenario.time.restart_grace_s if options.mode != SpeedMode.REALTIME else 0.0
-        )
-        self._held_republish = 0.0  # wall time of the last re-publication during a hold
-        self._recorder_arrivals = 0
-        self._recorder_lost = False  # the recorder's token went: hold before the next tick
-        self._recorder_until = 0.0  # it is being restarted: hold until it is back, or this
-        # The router left (lockstep): until this wall time every participant whose token goes
-        # is held for the grace (its process is most likely alive, cut off with the router).
-        self._router_until = 0.0
-        self._router_outage_tick = -1  # the tick that was current when the router went
+        # Restarts (lockstep): hold the tick for a process the launcher is restarting.
+        grace_s = self.scenario.time.restart_grace_s if options.mode != SpeedMode.REALTIME else 0.0
+        word_s = self.scenario.time.participant_timeout_s
+        self.holds = Holds(grace_s, word_s, time.monotonic, HANDSHAKE_REPUBLISH_S)
         self._restart_sub = session.declare_subscriber(
             self.keys.all_node_restart(), self._on_restart_notice
         )
@@ -215,13 +202,12 @@ class PhysicsNode:
         if is_plume(name):
             self._on_plume_presence(name, alive)
             return
-        if name == ROUTER and self._restart_grace_s > 0.0:
+        if name == ROUTER and self.holds.enabled:
             self._on_router_presence(alive)
             return
-        if name == RECORDER and self._restart_grace_s > 0.0:
+        if name == RECORDER and self.holds.enabled:
             with self._cond:
-                self._recorder_arrivals += alive
-                self._recorder_lost = not alive  # wait for its word before the next tick
+                self.holds.recorder_presence(alive)  # gone: wait for its word before the next tick
                 self._cond.notify_all()
             return
         vid = participant_of(name, self.world.vehicle_ids)
@@ -240,15 +226,7 @@ class PhysicsNode:
         recorder's hold too; its return ends the outage (held participants stay held until
         they answer, as after a restart)."""
         with self._cond:
-            was_away = self._router_until > 0.0
-            if alive:
-                self._router_until = 0.0
-            else:
-                self._router_until = time.monotonic() + self._restart_grace_s
-                self._router_outage_tick = self.tick
-                for participant in self.barrier.held:
-                    self.barrier.restarting(participant, self._restart_grace_s)
-                self._recorder_until = max(self._recorder_until, self._router_until)
+            was_away = self.holds.router(self.barrier, alive, self.tick)
             self._cond.notify_all()
         if alive and was_away:
             log.warning("tick %d: the router is back", self.tick)
@@ -257,7 +235,7 @@ class PhysicsNode:
                 "tick %d: the router left: holding the clock for whoever leaves with it "
                 "(grace %.1f s)",
                 self.tick,
-                self._restart_grace_s,
+                self.holds.grace_s,
             )
 
     def _on_plume_presence(self, name: str, alive: bool) -> None:
@@ -271,13 +249,8 @@ class PhysicsNode:
         """A participant's token came or went (the caller holds the lock)."""
         if alive:
             self.barrier.joined(participant)
-        elif self._restart_grace_s > 0.0:
-            self.barrier.held_leave(participant)  # the launcher may be restarting it
-            until = self._router_until - time.monotonic()
-            if until > 0.0:  # cut off with the router: it comes back when the router does
-                self.barrier.restarting(participant, until)
         else:
-            self.barrier.left(participant)
+            self.holds.leave(self.barrier, participant)
         self._cond.notify_all()
 
     def _on_field_sample(self, sample: zenoh.Sample) -> None:
@@ -426,7 +399,7 @@ class PhysicsNode:
             if paced:
                 self._pace(sim_time)
             states = self.world.states(self.tick, sim_time)
-            if self._recorder_lost:
+            if self.holds.recorder_lost:
                 self._wait_for_recorder()
             with self._cond:
                 self.barrier.begin(self.tick)
@@ -539,23 +512,18 @@ class PhysicsNode:
         except MessageError as exc:
             log.warning("ignoring restart notice on %s: %s", sample.key_expr, exc)
             return
-        if notice.role == RECORDER and self._restart_grace_s > 0.0:
+        holds = self.holds
+        if notice.role == RECORDER and holds.enabled:
             with self._cond:
-                grace = notice.delay_s + self._restart_grace_s
-                self._recorder_until = time.monotonic() + grace if notice.restarting else 0.0
-                self._recorder_lost = self._recorder_lost and notice.restarting
+                holds.recorder_notice(notice.restarting, notice.delay_s)
                 self._cond.notify_all()
             return
         known = [PLUME] if notice.role == PLUME else notice.vehicles
         vids = [v for v in known if v in self.barrier.participants]
-        if not vids or self._restart_grace_s <= 0.0:
+        if not vids or not holds.enabled:
             return
         with self._cond:
-            if notice.restarting:
-                grace = notice.delay_s + self._restart_grace_s
-                held = [v for v in vids if self.barrier.restarting(v, grace)]
-            else:
-                held = [v for v in vids if self.barrier.gone(v)]
+            held = holds.restart_notice(self.barrier, vids, notice.restarting, notice.delay_s)
             self._cond.notify_all()
         if held and notice.restarting:
             log.warning(
@@ -563,7 +531,7 @@ class PhysicsNode:
                 self.tick,
                 ", ".join(held),
                 notice.node,
-                grace,
+                notice.delay_s + holds.grace_s,
             )
         elif held:
             log.warning("%s will not be restarted: %s dropped", notice.node, ", ".join(held))
@@ -571,29 +539,24 @@ class PhysicsNode:
     def _republish_held_tick(self) -> None:
         """During a hold, re-send the held tick (as in the start-up handshake) so the new
         process receives it; the others answer a repeated tick with the same command."""
-        now = time.monotonic()
-        if now - self._held_republish >= HANDSHAKE_REPUBLISH_S:
-            self._held_republish = now
+        if self.holds.republish_due():
             self._put_tick()
-            if self._router_outage_tick == self.tick:
-                self._put_states()  # subscribers cut off with the router missed them
+            if self.holds.resend_states(self.tick):
+                self._put_states()
 
     def _wait_for_recorder(self) -> None:
         """The recorder left (lockstep): hold the next tick until a recorder is back — up to
         the participant timeout for the launcher's word, up to the grace if it restarts it —
         so that the new recorder records every tick from the first one it missed."""
         t0 = time.monotonic()
-        word = t0 + self.scenario.time.participant_timeout_s
         with self._cond:
-            seen = self._recorder_arrivals
-            while self._recorder_arrivals == seen and not self.rt.stop.is_set():
-                remaining = max(word, self._recorder_until) - time.monotonic()
-                if remaining <= 0.0:
+            self.holds.begin_recorder_wait()
+            while not self.rt.stop.is_set():
+                remaining = self.holds.recorder_wait_s()
+                if remaining is None or remaining <= 0.0:
                     break
                 self._cond.wait(min(remaining, STOP_POLL_S))
-            back = self._recorder_arrivals != seen
-            self._recorder_lost = False
-            self._recorder_until = 0.0
+            back = self.holds.end_recorder_wait()
         if back:
             self._backfill()
         log.warning(
@@ -607,10 +570,10 @@ class PhysicsNode:
         """Re-send the recent ticks and states on ``sim/backfill/<key>`` for the new recorder:
         those published after the old one died and before its token's departure reached us
         never reached it (the recorder keeps those it has not got, by key and tick)."""
-        for entries in self._recent:
+        for entries in self.holds.recent:
             for key, payload in entries:
                 self.rt.session.put(self.keys.backfill_of(key), payload)
-        log.info("re-sent the last %d ticks to the new recorder", len(self._recent))
+        log.info("re-sent the last %d ticks to the new recorder", len(self.holds.recent))
 
     def _report_dropped(self, held: frozenset[str], dropped: list[str]) -> None:
         self.dropped_total += len(dropped)
@@ -637,7 +600,7 @@ class PhysicsNode:
             log.warning(
                 "tick %d: restart grace of %.1f s passed: %s dropped (motors off, failsafe)",
                 self.tick,
-                self._restart_grace_s,
+                self.holds.grace_s,
                 ", ".join(expired),
             )
 
@@ -666,8 +629,7 @@ class PhysicsNode:
         if self._marker is not None:
             self._marker.mark(self.tick)
         sent = self._put_states()
-        if self._restart_grace_s > 0.0:
-            self._recent.append([(self.keys.tick(), self._last_tick_msg), *sent])
+        self.holds.remember([(self.keys.tick(), self._last_tick_msg), *sent])
 
     def _put_states(self) -> list[tuple[str, bytes]]:
         """The current tick's states on ``vehicle/<id>/state`` (to those who listen)."""
