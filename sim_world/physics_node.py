@@ -58,6 +58,7 @@ from sim_world.checkpoint import CheckpointError, CheckpointWriter, ProgressMark
 from sim_world.holds import RECORDER, ROUTER, Holds
 from sim_world.intake import ActuatorIntake
 from sim_world.lockstep import Lockstep, participant_of
+from sim_world.pacing import Pacer
 from sim_world.plume_part import PLUME, PlumeParticipation, decode_answer, is_plume
 from sim_world.stepping import SteppedClock, StepRefused
 from sim_world.world import World
@@ -81,7 +82,6 @@ log = logging.getLogger(__name__)
 
 HANDSHAKE_REPUBLISH_S = 0.1  # tick 0 is re-sent until every participant has answered it
 STOP_POLL_S = 0.2  # longest wait between checks of the stop signal
-HEALTH_PERIOD_S = 1.0
 
 
 class PhysicsOptions(RoleOptions, frozen=True, kw_only=True):
@@ -175,13 +175,7 @@ class PhysicsNode:
             self.keys.all_node_restart(), self._on_restart_notice
         )
         self._presence = Presence(session, self.keys, self._on_presence)
-        # Clock bookkeeping (wall clock only measures; it never drives the physics).
-        self._wall_start = time.monotonic()
-        self._sim_start = 0.0
-        self._clock_wall = self._wall_start
-        self._clock_sim = 0.0
-        self._health_wall = self._wall_start
-        self.real_time_factor = 0.0
+        self.pacer = Pacer(time.monotonic, options.speed_factor, options.clock_period_s)
         self.dropped_total = 0  # participants dropped for a missed deadline (health detail)
 
     def close(self) -> None:
@@ -295,7 +289,8 @@ class PhysicsNode:
         if last_run is not None and self._resume_note:
             self._resume_note += f", ticks stopped for {time.monotonic() - last_run:.2f} s wall"
             log.warning("%s", self._resume_note)
-        self._reset_clock()
+        self.pacer.reset(self.world.sim_time_s)
+        self._publish_clock(self.world.sim_time_s, force=True)
         return self._loop()
 
     # ------------------------------------------------------------------ checkpoints
@@ -396,8 +391,8 @@ class PhysicsNode:
             if self.tick >= self._next_checkpoint:
                 self._checkpoint()
             sim_time = self.world.sim_time_s
-            if paced:
-                self._pace(sim_time)
+            if paced and (delay_s := self.pacer.delay_s(sim_time)) > 0.0:
+                self.rt.stop.wait(delay_s)
             states = self.world.states(self.tick, sim_time)
             if self.holds.recorder_lost:
                 self._wait_for_recorder()
@@ -426,7 +421,7 @@ class PhysicsNode:
             abandoned = self.clock_gate.abandon()
         if abandoned is not None:
             abandoned.refuse("ticks", f"the world stopped at tick {self.tick}")
-        wall = time.monotonic() - self._wall_start
+        wall = self.pacer.elapsed_s()
         log.info(
             "physics stopped at tick %d, sim %.3f s after %.3f s wall (%.0f ticks/s)",
             self.tick,
@@ -648,32 +643,14 @@ class PhysicsNode:
         if self.tick % self._sensor_period == 0:
             self._sensor_pub.put(self._last_tick_msg)
 
-    def _pace(self, sim_time_s: float) -> None:
-        """Realtime mode: hold tick ``k`` until the wall clock reaches its sim time / factor."""
-        target = self._wall_start + (sim_time_s - self._sim_start) / self.options.speed_factor
-        delay = target - time.monotonic()
-        if delay > 0.0:
-            self.rt.stop.wait(delay)
-
-    def _reset_clock(self) -> None:
-        self._wall_start = time.monotonic()
-        self._sim_start = self.world.sim_time_s
-        self._clock_wall = self._wall_start
-        self._clock_sim = self._sim_start
-        self._publish_clock(self._sim_start, force=True)
-
     def _maybe_publish_clock(self, sim_time_s: float) -> None:
-        now = time.monotonic()
-        if now - self._clock_wall >= self.options.clock_period_s:
+        now = self.pacer.clock_due()
+        if now is not None:
             self._publish_clock(sim_time_s, now=now)
 
     def _publish_clock(self, sim_time_s: float, force: bool = False, now: float = 0.0) -> None:
         now = now or time.monotonic()
-        wall = now - self._clock_wall
-        if wall > 0.0 and sim_time_s > self._clock_sim:
-            self.real_time_factor = (sim_time_s - self._clock_sim) / wall
-        self._clock_wall = now
-        self._clock_sim = sim_time_s
+        real_time_factor = self.pacer.measure(sim_time_s, now)
         with self._cond:
             participants = sorted(self.barrier.active)
         self._clock_pub.put(
@@ -683,13 +660,12 @@ class PhysicsNode:
                     sim_time_s=sim_time_s,
                     mode=self.options.mode,
                     speed_factor=self.options.speed_factor,
-                    real_time_factor=min(self.real_time_factor, 1e9),
+                    real_time_factor=min(real_time_factor, 1e9),
                     participants=participants,
                 )
             )
         )
-        if force or now - self._health_wall >= HEALTH_PERIOD_S:
-            self._health_wall = now
+        if self.pacer.health_due(now, force):
             detail = f"tick {self.tick} dropped {self.dropped_total} states {self.states_sent}"
             if self.intake.foreign_dropped:
                 detail += f" foreign commands {self.intake.foreign_dropped}"
