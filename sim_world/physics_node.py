@@ -43,7 +43,6 @@ other modes ``clock/step`` answers with an error naming the mode.
 from __future__ import annotations
 
 import logging
-import sys
 import threading
 import time
 from collections.abc import Mapping, Sequence
@@ -53,8 +52,8 @@ from typing import Annotated, Any
 import msgspec
 import zenoh
 
-from sim_world import checkpoint
-from sim_world.checkpoint import CheckpointError, CheckpointWriter, ProgressMarker
+from sim_world.checkpoint import CheckpointError
+from sim_world.checkpointer import Checkpointer
 from sim_world.holds import RECORDER, ROUTER, Holds
 from sim_world.intake import ActuatorIntake
 from sim_world.lockstep import Lockstep, participant_of
@@ -134,17 +133,9 @@ class PhysicsNode:
         self.tick = 0
         self._last_tick_msg = b""
         self._last_states: list[VehicleState] = []
-        # Checkpoints every `_checkpoint_ticks` ticks; the loop's per-tick cost is one
-        # comparison with `_next_checkpoint`. The marker notes each published tick.
-        self._checkpoint_ticks = 0
-        if options.checkpoint_path is not None and options.checkpoint_period_s > 0.0:
-            period = options.checkpoint_period_s * self.scenario.time.control_hz
-            self._checkpoint_ticks = max(1, round(period))
-        self._next_checkpoint = self._due_checkpoint = sys.maxsize
-        self._writer: CheckpointWriter | None = None
-        self._capture_s = 0.0
-        self._marker: ProgressMarker | None = None
-        self._resume_note = ""
+        self.checkpoints = Checkpointer(
+            options.checkpoint_path, options.checkpoint_period_s, self.scenario.time.control_hz
+        )
         session = rt.session
         self._tick_pub = session.declare_publisher(self.keys.tick())
         self._sensor_pub = session.declare_publisher(self.keys.sensor_tick())
@@ -186,10 +177,7 @@ class PhysicsNode:
         self._sample_sub.undeclare()
         for pub in self._state_pubs:
             pub.close()
-        if self._writer is not None:
-            self._writer.close()
-        if self._marker is not None:
-            self._marker.close()
+        self.checkpoints.close()
 
     # ------------------------------------------------------------------ bus callbacks
     def _on_presence(self, name: str, alive: bool) -> None:
@@ -273,7 +261,11 @@ class PhysicsNode:
 
     # ------------------------------------------------------------------ phases
     def run(self) -> int:
-        last_run = self._resume() if self.options.checkpoint_path is not None else None
+        resumed = self.checkpoints.resume(self.world)
+        if resumed is not None:
+            self.tick = resumed.tick
+            self.plume.carried = resumed.plume_sample
+        self.checkpoints.start(self.world, self.tick, self.plume.carried)
         self.rt.ready()
         deadline = time.monotonic() + self.scenario.time.startup_timeout_s
         if self.options.wait_for_autopilots and not self._wait_for_tokens(deadline):
@@ -286,57 +278,10 @@ class PhysicsNode:
         self._publish_tick(self.world.states(self.tick, self.world.sim_time_s))
         if not self._handshake():
             return 0 if self.rt.stop.is_set() else 1
-        if last_run is not None and self._resume_note:
-            self._resume_note += f", ticks stopped for {time.monotonic() - last_run:.2f} s wall"
-            log.warning("%s", self._resume_note)
+        self.checkpoints.started()
         self.pacer.reset(self.world.sim_time_s)
         self._publish_clock(self.world.sim_time_s, force=True)
         return self._loop()
-
-    # ------------------------------------------------------------------ checkpoints
-    def _resume(self) -> float | None:
-        """Restore the checkpoint if there is one; the last run's last tick's wall time."""
-        path = self.options.checkpoint_path
-        assert path is not None
-        last = ProgressMarker.read(checkpoint.marker_path(path))
-        if path.exists():
-            cp = checkpoint.load(path)
-            self.world.restore(cp)
-            self.tick = cp.tick
-            self.plume.carried = cp.plume_sample
-            self._resume_note = (
-                f"resumed from checkpoint at tick {cp.tick} (sim t={cp.sim_time_s:.3f} s)"
-            )
-            if last is not None and last[0] >= cp.tick:
-                replayed_s = (last[0] - cp.tick) / self.scenario.time.control_hz
-                self._resume_note += f", replayed {replayed_s:.3f} s (ticks {cp.tick}..{last[0]})"
-            log.warning("%s", self._resume_note)
-        else:
-            last = None
-        if self._checkpoint_ticks:
-            self._marker = ProgressMarker(checkpoint.marker_path(path))
-            self._writer = CheckpointWriter(path)
-            # tick 0 too: a kill before the first period resumes from the spawn state
-            self._due_checkpoint = self.tick + (self._checkpoint_ticks if self._resume_note else 0)
-            self._checkpoint()
-        return last[1] if last is not None else None
-
-    def _checkpoint(self) -> None:
-        """Capture the world of a due tick before it is published; the writer saves it while
-        the tick's round trip runs, and the next tick waits until it is on disk, so the file
-        is never more than one period behind a published tick (the most a restart replays)."""
-        writer = self._writer
-        assert writer is not None
-        writer.wait()
-        if self.tick >= self._due_checkpoint:
-            t0 = time.monotonic()
-            cp = self.world.checkpoint(self.tick)
-            if self.plume.carried is not None:  # the values this tick carries
-                cp = msgspec.structs.replace(cp, plume_sample=self.plume.carried)
-            writer.submit(cp)
-            self._capture_s += time.monotonic() - t0
-            self._due_checkpoint = self.tick + self._checkpoint_ticks
-        self._next_checkpoint = self.tick + 1 if writer.pending else self._due_checkpoint
 
     def _wait_for_tokens(self, deadline: float) -> bool:
         with self._cond:
@@ -388,8 +333,8 @@ class PhysicsNode:
             self._apply(commands)
             self.world.step(self.substeps)
             self.tick += 1
-            if self.tick >= self._next_checkpoint:
-                self._checkpoint()
+            if self.tick >= self.checkpoints.next_tick:
+                self.checkpoints.save(self.world, self.tick, self.plume.carried)
             sim_time = self.world.sim_time_s
             if paced and (delay_s := self.pacer.delay_s(sim_time)) > 0.0:
                 self.rt.stop.wait(delay_s)
@@ -429,18 +374,7 @@ class PhysicsNode:
             wall,
             self.tick / wall if wall > 0 else 0.0,
         )
-        if self._writer is not None:
-            self._writer.wait()
-            w = self._writer
-            log.info(
-                "%d checkpoints: capture %.2f ms, write %.2f ms (longest %.2f ms) on average; "
-                "the loop waited %.1f ms for writes in all",
-                w.written,
-                1e3 * self._capture_s / max(1, w.written),
-                1e3 * w.write_s / max(1, w.written),
-                1e3 * w.longest_write_s,
-                1e3 * w.waited_s,
-            )
+        self.checkpoints.finish()
 
     def _await_commands(self) -> dict[str, Sequence[float]] | None:
         """Block until the current tick is complete or its deadline passed (then drop)."""
@@ -621,8 +555,7 @@ class PhysicsNode:
         self._last_tick_msg = encode(msg)
         self._last_states = states
         self._put_tick()
-        if self._marker is not None:
-            self._marker.mark(self.tick)
+        self.checkpoints.mark(self.tick)
         sent = self._put_states()
         self.holds.remember([(self.keys.tick(), self._last_tick_msg), *sent])
 
@@ -669,8 +602,8 @@ class PhysicsNode:
             detail = f"tick {self.tick} dropped {self.dropped_total} states {self.states_sent}"
             if self.intake.foreign_dropped:
                 detail += f" foreign commands {self.intake.foreign_dropped}"
-            if self._resume_note:
-                detail += f"; {self._resume_note}"
+            if self.checkpoints.note:
+                detail += f"; {self.checkpoints.note}"
             self.rt.publish_health(sim_time_s=sim_time_s, detail=detail)
 
 
