@@ -47,7 +47,7 @@ import threading
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated
 
 import msgspec
 import zenoh
@@ -60,6 +60,7 @@ from sim_world.lockstep import Lockstep, participant_of
 from sim_world.pacing import Pacer
 from sim_world.plume_part import PLUME, PlumeParticipation, decode_answer, is_plume
 from sim_world.stepping import SteppedClock, StepRefused
+from sim_world.tick_out import TickOutput
 from sim_world.world import World
 from swarmbus.codec import MessageError, decode, encode
 from swarmbus.keys import autopilot_node
@@ -123,27 +124,20 @@ class PhysicsNode:
         self.control_dt_s = 1.0 / self.scenario.time.control_hz
         self.substeps = self.scenario.substeps
         self._cond = threading.Condition()
-        self._sensor_period = self.scenario.sensor.resolved().period_ticks
+        sensor_period = self.scenario.sensor.resolved().period_ticks
         self.barrier = Lockstep(
             world.vehicle_ids,
             self.scenario.time.participant_timeout_s,
             time.monotonic,
-            periodic={PLUME: self._sensor_period},
+            periodic={PLUME: sensor_period},
         )
         self.tick = 0
-        self._last_tick_msg = b""
-        self._last_states: list[VehicleState] = []
         self.checkpoints = Checkpointer(
             options.checkpoint_path, options.checkpoint_period_s, self.scenario.time.control_hz
         )
         session = rt.session
-        self._tick_pub = session.declare_publisher(self.keys.tick())
-        self._sensor_pub = session.declare_publisher(self.keys.sensor_tick())
+        self.out = TickOutput(session, self.keys, world.vehicle_ids, sensor_period)
         self._clock_pub = session.declare_publisher(self.keys.clock())
-        self._state_pubs = [
-            _StatePublisher(session, self.keys.vehicle_state(v)) for v in world.vehicle_ids
-        ]
-        self.states_sent = 0  # per-vehicle state puts (health detail)
         self._actuator_sub = session.declare_subscriber(
             self.keys.all_autopilot_actuators(), self._on_batch
         )
@@ -175,8 +169,7 @@ class PhysicsNode:
         self._restart_sub.undeclare()
         self._actuator_sub.undeclare()
         self._sample_sub.undeclare()
-        for pub in self._state_pubs:
-            pub.close()
+        self.out.close()
         self.checkpoints.close()
 
     # ------------------------------------------------------------------ bus callbacks
@@ -317,7 +310,7 @@ class PhysicsNode:
                     return False
                 self._cond.wait(min(HANDSHAKE_REPUBLISH_S, self.barrier.remaining_s()))
                 if not self.barrier.complete():
-                    self._put_tick()
+                    self.out.put_tick()
         log.info("tick %d handshake done with %d participants", self.tick, len(self.barrier.active))
         return True
 
@@ -469,9 +462,9 @@ class PhysicsNode:
         """During a hold, re-send the held tick (as in the start-up handshake) so the new
         process receives it; the others answer a repeated tick with the same command."""
         if self.holds.republish_due():
-            self._put_tick()
+            self.out.put_tick()
             if self.holds.resend_states(self.tick):
-                self._put_states()
+                self.out.put_states()
 
     def _wait_for_recorder(self) -> None:
         """The recorder left (lockstep): hold the next tick until a recorder is back — up to
@@ -499,9 +492,7 @@ class PhysicsNode:
         """Re-send the recent ticks and states on ``sim/backfill/<key>`` for the new recorder:
         those published after the old one died and before its token's departure reached us
         never reached it (the recorder keeps those it has not got, by key and tick)."""
-        for entries in self.holds.recent:
-            for key, payload in entries:
-                self.rt.session.put(self.keys.backfill_of(key), payload)
+        self.out.backfill(self.holds.recent)
         log.info("re-sent the last %d ticks to the new recorder", len(self.holds.recent))
 
     def _report_dropped(self, held: frozenset[str], dropped: list[str]) -> None:
@@ -552,29 +543,11 @@ class PhysicsNode:
             plume_queried=queried,
             plume_values=carried,
         )
-        self._last_tick_msg = encode(msg)
-        self._last_states = states
-        self._put_tick()
+        self.out.set(self.tick, encode(msg), states)
+        self.out.put_tick()
         self.checkpoints.mark(self.tick)
-        sent = self._put_states()
-        self.holds.remember([(self.keys.tick(), self._last_tick_msg), *sent])
-
-    def _put_states(self) -> list[tuple[str, bytes]]:
-        """The current tick's states on ``vehicle/<id>/state`` (to those who listen)."""
-        sent = []
-        for pub, state in zip(self._state_pubs, self._last_states, strict=True):
-            if pub.matching:  # nobody listens: the state is in the tick already
-                payload = encode(state)
-                pub.put(payload)
-                sent.append((pub.key, payload))
-                self.states_sent += 1
-        return sent
-
-    def _put_tick(self) -> None:
-        """The current tick on ``sim/tick``, and on ``sim/sensor`` if it is a sensor tick."""
-        self._tick_pub.put(self._last_tick_msg)
-        if self.tick % self._sensor_period == 0:
-            self._sensor_pub.put(self._last_tick_msg)
+        sent = self.out.put_states()
+        self.holds.remember([(self.keys.tick(), self.out.payload), *sent])
 
     def _maybe_publish_clock(self, sim_time_s: float) -> None:
         now = self.pacer.clock_due()
@@ -599,37 +572,12 @@ class PhysicsNode:
             )
         )
         if self.pacer.health_due(now, force):
-            detail = f"tick {self.tick} dropped {self.dropped_total} states {self.states_sent}"
+            detail = f"tick {self.tick} dropped {self.dropped_total} states {self.out.states_sent}"
             if self.intake.foreign_dropped:
                 detail += f" foreign commands {self.intake.foreign_dropped}"
             if self.checkpoints.note:
                 detail += f"; {self.checkpoints.note}"
             self.rt.publish_health(sim_time_s=sim_time_s, detail=detail)
-
-
-class _StatePublisher:
-    """A ``vehicle/<id>/state`` publisher that knows whether anyone subscribes (Zenoh's
-    matching status, kept up to date by a listener): the physics skips encoding and putting a
-    state nobody would receive. A subscriber declared later is matched before a put could
-    reach it anyway (both follow the same subscription declarations), so it misses nothing."""
-
-    def __init__(self, session: zenoh.Session, key: str) -> None:
-        self.key = key
-        self._pub = session.declare_publisher(key)
-        self.matching = False
-        self._listener = self._pub.declare_matching_listener(self._on_matching)
-        status: Any = self._pub.matching_status  # a MatchingStatus (the stub says bool)
-        self.matching = bool(status.matching)
-
-    def _on_matching(self, status: zenoh.MatchingStatus) -> None:
-        self.matching = status.matching
-
-    def put(self, payload: bytes) -> None:
-        self._pub.put(payload)
-
-    def close(self) -> None:
-        self._listener.undeclare()
-        self._pub.undeclare()
 
 
 def main(ctx: NodeContext) -> int:
