@@ -1,94 +1,45 @@
 """The physics process (``plumeswarm node physics``): owner of simulated time and the lockstep.
 
-Each control tick ``k`` it publishes all vehicle states in one ``SimTick`` on ``sim/tick`` and
-each state on ``vehicle/<id>/state`` (only while a subscriber matches that key: most readers
-take the tick, and N puts per tick that nobody receives cost real time), waits for every live
-autopilot's ``ActuatorCommand`` for tick ``k`` (:class:`~sim_world.lockstep.Lockstep`) as an
-entry of an autopilot process's ``ActuatorBatch`` on ``autopilot/<node>/actuators`` (one message
-for the K vehicles it serves, K = 1 included; each entry counts as that vehicle's command, a bad
-entry is dropped with a log line; on a one-vehicle node's key, ``autopilot-<id>``, an entry for
-another vehicle is dropped, counted in the health detail and logged once per key) — applies them,
-steps ``scenario.substeps`` physics steps and publishes tick ``k + 1``.
-``sim/clock`` carries sim time and the achieved real-time factor about ten times a wall-clock
-second.
-
-The sensor's plume values: the plume service is a lockstep participant of the sensor ticks
-(``sensor.period_ticks``). The physics publishes each sensor tick on ``sim/sensor`` too (the
-same bytes; the plume reads that key, so the other ticks do not wake it); the plume answers with
-a ``FieldSample`` on ``field/sample`` (every vehicle's concentration at that tick's positions);
-the tick is complete when the autopilots' commands and the plume's sample are in, and the next
-tick carries the sample (``SimTick.plume_values``), from which the autopilots build their
-readings. The physics asks nothing: it waits for the plume as it waits for an autopilot
-(:class:`~sim_world.lockstep.Lockstep`, a periodic participant), and holds the clock for a plume
-service the launcher restarts as it does for an autopilot. ``SimTick.plume_queried`` says
-whether the tick waits for the plume (a plume service is taking part).
-
-With a ``checkpoint`` path it saves the world there every ``checkpoint_period_s`` of sim time
-(:mod:`sim_world.checkpoint`) and, when that file exists at start, resumes from it instead of
-the spawn: the lockstep handshake then runs on the checkpoint's tick, and the autopilots answer
-it like any tick (sim time goes back by the replayed span; autopilots with snapshots restore
-their state of the tick before and replay the same bits).
-
-Options (``--set KEY=VALUE``): ``max_ticks`` (stop once this tick is published and answered),
-``mode`` (lockstep|realtime|stepped), ``speed_factor``, ``wait_for_autopilots`` (true|false: start
-without waiting for the configured autopilots), ``clock_period_s``, ``checkpoint`` (a file
-path; empty: none), ``checkpoint_period_s`` (default ``time.checkpoint_period_s``; 0: never).
-
-Stepped mode (``mode = stepped``): after each tick is published and answered the physics waits
-for the clock holder's grant (``clock/step``, :mod:`sim_world.stepping`) before it applies the
-tick's commands; it answers the grant once the granted tick is published and answered. In the
-other modes ``clock/step`` answers with an error naming the mode.
+Tick after tick it waits for every live participant's answer (:mod:`sim_world.inputs`), applies
+the commands, steps the world and publishes the next tick (:mod:`sim_world.tick_out`), holding,
+pacing, stepping and checkpointing on the way. See docs/physics.md ("Lockstep" and the sections
+after it) and docs/architecture.md ("How a tick flows").
 """
 
 from __future__ import annotations
 
 import logging
-import sys
-import threading
 import time
-from collections import deque
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated
 
 import msgspec
-import zenoh
 
-from sim_world import checkpoint
-from sim_world.checkpoint import CheckpointError, CheckpointWriter, ProgressMarker
-from sim_world.lockstep import Lockstep, participant_of
-from sim_world.stepping import SteppedClock, StepRefused
+from sim_world.checkpoint import CheckpointError
+from sim_world.checkpointer import Checkpointer
+from sim_world.drops import report_dropped
+from sim_world.holds import Holds, UnreachableGrace
+from sim_world.inputs import STOP_POLL_S, LockstepInputs
+from sim_world.lockstep import Lockstep
+from sim_world.pacing import Pacer
+from sim_world.plume_part import PLUME
+from sim_world.tick_out import TickOutput
 from sim_world.world import World
-from swarmbus.codec import MessageError, decode, encode
-from swarmbus.keys import KeyNameError, autopilot_node, vehicle_of_autopilot
+from swarmbus.codec import encode
 from swarmbus.messages import (
-    ActuatorBatch,
-    ActuatorCommand,
     Clock,
-    FieldSample,
-    PlumeSample,
-    RestartNotice,
     SimTick,
     SpeedMode,
     StepReply,
-    StepRequest,
     VehicleState,
 )
 from swarmbus.node import NodeContext, NodeRuntime
 from swarmbus.options import OptionError, RoleOptions, parse_options
-from swarmbus.reqrep import Incoming, serve_later
-from swarmbus.session import Presence
-from swarmbus.views import BatchView
 
 log = logging.getLogger(__name__)
 
 HANDSHAKE_REPUBLISH_S = 0.1  # tick 0 is re-sent until every participant has answered it
-STOP_POLL_S = 0.2  # longest wait between checks of the stop signal
-HEALTH_PERIOD_S = 1.0
-BACKFILL_TICKS = 256  # the recent ticks re-sent to a restarted recorder (sim/backfill)
-PLUME = "plume"  # the plume service's participant in the lockstep (any node named plume[-*])
-RECORDER = "recorder"  # the recorder's node name: the clock waits for its restart too
-ROUTER = "router"  # the router's node name: while it is away, every departure is held
 
 
 class PhysicsOptions(RoleOptions, frozen=True, kw_only=True):
@@ -130,349 +81,75 @@ class PhysicsNode:
         self.keys = rt.keys
         self.control_dt_s = 1.0 / self.scenario.time.control_hz
         self.substeps = self.scenario.substeps
-        self._cond = threading.Condition()
-        self._sensor_period = self.scenario.sensor.resolved().period_ticks
-        self.barrier = Lockstep(
-            world.vehicle_ids,
-            self.scenario.time.participant_timeout_s,
-            time.monotonic,
-            periodic={PLUME: self._sensor_period},
+        sensor_period = self.scenario.sensor.resolved().period_ticks
+        timeout_s = self.scenario.time.participant_timeout_s
+        barrier = Lockstep(
+            world.vehicle_ids, timeout_s, time.monotonic, periodic={PLUME: sensor_period}
         )
+        # Restarts (lockstep): hold the tick for a process the launcher is restarting.
+        grace_s = self.scenario.time.restart_grace_s if options.mode != SpeedMode.REALTIME else 0.0
+        self.holds = Holds(grace_s, timeout_s, time.monotonic, HANDSHAKE_REPUBLISH_S)
         self.tick = 0
-        self._last_tick_msg = b""
-        self._last_states: list[VehicleState] = []
-        # The last BACKFILL_TICKS ticks as published: (key, payload) of the tick and its states.
-        self._recent: deque[list[tuple[str, bytes]]] = deque(maxlen=BACKFILL_TICKS)
-        # Checkpoints every `_checkpoint_ticks` ticks; the loop's per-tick cost is one
-        # comparison with `_next_checkpoint`. The marker notes each published tick.
-        self._checkpoint_ticks = 0
-        if options.checkpoint_path is not None and options.checkpoint_period_s > 0.0:
-            period = options.checkpoint_period_s * self.scenario.time.control_hz
-            self._checkpoint_ticks = max(1, round(period))
-        self._next_checkpoint = self._due_checkpoint = sys.maxsize
-        self._writer: CheckpointWriter | None = None
-        self._capture_s = 0.0
-        self._marker: ProgressMarker | None = None
-        self._resume_note = ""
-        session = rt.session
-        self._tick_pub = session.declare_publisher(self.keys.tick())
-        self._sensor_pub = session.declare_publisher(self.keys.sensor_tick())
-        self._clock_pub = session.declare_publisher(self.keys.clock())
-        self._state_pubs = [
-            _StatePublisher(session, self.keys.vehicle_state(v)) for v in world.vehicle_ids
-        ]
-        self.states_sent = 0  # per-vehicle state puts (health detail)
-        self._actuator_sub = session.declare_subscriber(
-            self.keys.all_autopilot_actuators(), self._on_batch
+        self.checkpoints = Checkpointer(
+            options.checkpoint_path, options.checkpoint_period_s, self.scenario.time.control_hz
         )
-        self._known = frozenset(world.vehicle_ids)
-        self.foreign_dropped = 0  # commands for another vehicle on a one-vehicle node's key
-        self._foreign_logged: set[str] = set()  # the keys that sent them (logged once each)
-        # The plume's part of the sensor ticks (see the module doc).
-        self._plume_nodes: set[str] = set()  # live plume services (one participant)
-        self._sample: FieldSample | None = None  # the plume's answer to the current tick
-        self._plume_values: PlumeSample | None = None  # what the next tick carries
-        self._queried = False  # the current tick waits for the plume's sample
-        self._last_tick_states = 0  # how many states the current tick has
-        self._sample_sub = session.declare_subscriber(
-            self.keys.plume_sample(), self._on_field_sample
-        )
-        # The stepped clock (served in every mode: the others answer with an error).
         self._stepped = options.mode == SpeedMode.STEPPED
-        self.clock_gate: SteppedClock[Incoming[StepRequest]] = SteppedClock()
-        self._step_queryable = serve_later(
-            session, self.keys.clock_step(), StepRequest, self._on_step
+        session = rt.session
+        self.out = TickOutput(session, self.keys, world.vehicle_ids, sensor_period)
+        self._clock_pub = session.declare_publisher(self.keys.clock())
+        self.inputs = LockstepInputs(
+            session, self.keys, barrier, self.holds, lambda: self.tick, self._step_refusal()
         )
-        # Restarts (lockstep): hold the tick for an autopilot the launcher is restarting.
-        self._restart_grace_s = (
-            self.scenario.time.restart_grace_s if options.mode != SpeedMode.REALTIME else 0.0
+        self._cond = self.inputs.cond  # the loop waits on what the inputs change
+        self.barrier = barrier
+        self.plume = self.inputs.plume
+        self.clock_gate = self.inputs.clock_gate
+        self.pacer = Pacer(time.monotonic, options.speed_factor, options.clock_period_s)
+        self.silent = UnreachableGrace(
+            self.scenario.time.unreachable_grace_s if options.mode == SpeedMode.LOCKSTEP else 0.0,
+            time.monotonic,
         )
-        self._held_republish = 0.0  # wall time of the last re-publication during a hold
-        self._recorder_arrivals = 0
-        self._recorder_lost = False  # the recorder's token went: hold before the next tick
-        self._recorder_until = 0.0  # it is being restarted: hold until it is back, or this
-        # The router left (lockstep): until this wall time every participant whose token goes
-        # is held for the grace (its process is most likely alive, cut off with the router).
-        self._router_until = 0.0
-        self._router_outage_tick = -1  # the tick that was current when the router went
-        # Unreachable participants (lockstep): a tick that missed its deadline waits up to
-        # this in all before dropping (the tick it did so for, and since when).
-        self._unreachable_grace_s = (
-            self.scenario.time.unreachable_grace_s if options.mode == SpeedMode.LOCKSTEP else 0.0
-        )
-        self._silent_tick = -1
-        self._silent_since = 0.0
-        self._restart_sub = session.declare_subscriber(
-            self.keys.all_node_restart(), self._on_restart_notice
-        )
-        self._presence = Presence(session, self.keys, self._on_presence)
-        # Clock bookkeeping (wall clock only measures; it never drives the physics).
-        self._wall_start = time.monotonic()
-        self._sim_start = 0.0
-        self._clock_wall = self._wall_start
-        self._clock_sim = 0.0
-        self._health_wall = self._wall_start
-        self.real_time_factor = 0.0
         self.dropped_total = 0  # participants dropped for a missed deadline (health detail)
 
+    def _step_refusal(self) -> str | None:
+        """Why ``clock/step`` is refused in this mode (None: stepped)."""
+        if self._stepped:
+            return None
+        return (
+            f"world {self.keys.world!r} runs in {self.options.mode} mode, not stepped "
+            '(time.mode = "stepped" in the scenario, or plumeswarm up --stepped)'
+        )
+
     def close(self) -> None:
-        self._presence.close()
-        self._step_queryable.undeclare()
-        self._restart_sub.undeclare()
-        self._actuator_sub.undeclare()
-        self._sample_sub.undeclare()
-        for pub in self._state_pubs:
-            pub.close()
-        if self._writer is not None:
-            self._writer.close()
-        if self._marker is not None:
-            self._marker.close()
-
-    # ------------------------------------------------------------------ bus callbacks
-    def _on_presence(self, name: str, alive: bool) -> None:
-        if name == PLUME or name.startswith(PLUME + "-"):
-            self._on_plume_presence(name, alive)
-            return
-        if name == ROUTER and self._restart_grace_s > 0.0:
-            self._on_router_presence(alive)
-            return
-        if name == RECORDER and self._restart_grace_s > 0.0:
-            with self._cond:
-                self._recorder_arrivals += alive
-                self._recorder_lost = not alive  # wait for its word before the next tick
-                self._cond.notify_all()
-            return
-        vid = participant_of(name, self.world.vehicle_ids)
-        if vid is None:
-            if not alive:
-                with self._cond:
-                    if self.clock_gate.released(name):
-                        log.info("the stepped clock's holder %s left: the clock is free", name)
-            return
-        with self._cond:
-            self._participant(vid, alive)
-        log.info("autopilot of %s %s", vid, "arrived" if alive else "left")
-
-    def _on_router_presence(self, alive: bool) -> None:
-        """The router went (lockstep): whoever leaves with it is held for the grace, the
-        recorder's hold too; its return ends the outage (held participants stay held until
-        they answer, as after a restart)."""
-        with self._cond:
-            was_away = self._router_until > 0.0
-            if alive:
-                self._router_until = 0.0
-            else:
-                self._router_until = time.monotonic() + self._restart_grace_s
-                self._router_outage_tick = self.tick
-                for participant in self.barrier.held:
-                    self.barrier.restarting(participant, self._restart_grace_s)
-                self._recorder_until = max(self._recorder_until, self._router_until)
-            self._cond.notify_all()
-        if alive and was_away:
-            log.warning("tick %d: the router is back", self.tick)
-        elif not alive:
-            log.warning(
-                "tick %d: the router left: holding the clock for whoever leaves with it "
-                "(grace %.1f s)",
-                self.tick,
-                self._restart_grace_s,
-            )
-
-    def _on_plume_presence(self, name: str, alive: bool) -> None:
-        """Plume services are one participant: present while any of them is."""
-        with self._cond:
-            was = bool(self._plume_nodes)
-            if alive:
-                self._plume_nodes.add(name)
-            else:
-                self._plume_nodes.discard(name)
-            if was != bool(self._plume_nodes):
-                self._participant(PLUME, alive)
-        log.info("plume service %s %s", name, "arrived" if alive else "left")
-
-    def _participant(self, participant: str, alive: bool) -> None:
-        """A participant's token came or went (the caller holds the lock)."""
-        if alive:
-            self.barrier.joined(participant)
-        elif self._restart_grace_s > 0.0:
-            self.barrier.held_leave(participant)  # the launcher may be restarting it
-            until = self._router_until - time.monotonic()
-            if until > 0.0:  # cut off with the router: it comes back when the router does
-                self.barrier.restarting(participant, until)
-        else:
-            self.barrier.left(participant)
-        self._cond.notify_all()
-
-    def _on_field_sample(self, sample: zenoh.Sample) -> None:
-        """The plume's answer to a sensor tick: counts like an autopilot's command."""
-        try:
-            answer = decode(sample.payload.to_bytes(), FieldSample)
-        except MessageError as exc:
-            log.warning("ignoring plume sample on %s: %s", sample.key_expr, exc)
-            return
-        with self._cond:
-            if self.barrier.receive(PLUME, answer.tick, ()):
-                self._sample = answer
-                if self.barrier.complete():
-                    self._cond.notify_all()
-
-    def _on_batch(self, sample: zenoh.Sample) -> None:
-        data = sample.payload.to_bytes()
-        try:
-            batch = decode(data, ActuatorBatch)
-            tick, commands = batch.tick, batch.commands
-        except MessageError as exc:
-            salvaged = self._salvage(sample.key_expr, data, exc)
-            if salvaged is None:
-                return
-            tick, commands = salvaged
-        key = str(sample.key_expr)
-        only = self._sender_vehicle(key)
-        counted = False
-        with self._cond:
-            barrier = self.barrier
-            for cmd in commands:
-                vid = cmd.vehicle_id
-                if only is not None and vid != only:
-                    self._drop_foreign(key, vid)
-                    continue
-                if cmd.tick != tick or vid not in self._known:
-                    log.warning(
-                        "ignoring actuators for %s of tick %d in the batch of tick %d on %s",
-                        vid,
-                        cmd.tick,
-                        tick,
-                        sample.key_expr,
-                    )
-                    continue
-                counted = barrier.receive(vid, tick, cmd.rotor_commands) or counted
-            # Wake the loop once per tick, not once per command.
-            if counted and barrier.complete():
-                self._cond.notify_all()
-
-    def _sender_vehicle(self, key: str) -> str | None:
-        """The one vehicle a batch on ``key`` may command: ``<id>`` on a one-vehicle node's
-        key (``autopilot/autopilot-<id>/actuators``, the only key a per-vehicle identity may
-        put on), None on any other node's key (a process serving several vehicles)."""
-        try:
-            vid = vehicle_of_autopilot(self.keys.autopilot_node_of(key))
-        except KeyNameError:
-            return None
-        return vid if vid in self._known else None
-
-    def _drop_foreign(self, key: str, vehicle_id: str) -> None:
-        """Count a command for ``vehicle_id`` on another vehicle's key (logged once a key)."""
-        self.foreign_dropped += 1
-        if key not in self._foreign_logged:
-            self._foreign_logged.add(key)
-            log.warning(
-                "ignoring actuators for %s on %s: a one-vehicle node commands only its own "
-                "vehicle (further ones from this key are counted in the health detail)",
-                vehicle_id,
-                key,
-            )
-
-    @staticmethod
-    def _salvage(
-        key: object, data: bytes, exc: MessageError
-    ) -> tuple[int, list[ActuatorCommand]] | None:
-        """The good entries of a batch that failed to decode (each bad one is logged)."""
-        try:
-            view = decode(data, BatchView)
-        except MessageError:
-            log.warning("ignoring actuator batch on %s: %s", key, exc)
-            return None
-        good = []
-        for k, raw in enumerate(view.commands):
-            try:
-                good.append(decode(raw, ActuatorCommand))
-            except MessageError as bad:
-                log.warning("ignoring entry %d of the actuator batch on %s: %s", k, key, bad)
-        return view.tick, good
+        self.inputs.close()
+        self.out.close()
+        self.checkpoints.close()
 
     # ------------------------------------------------------------------ phases
     def run(self) -> int:
-        last_run = self._resume() if self.options.checkpoint_path is not None else None
+        resumed = self.checkpoints.resume(self.world)
+        if resumed is not None:
+            self.tick = resumed.tick
+            self.plume.carried = resumed.plume_sample
+        self.checkpoints.start(self.world, self.tick, self.plume.carried)
         self.rt.ready()
-        deadline = time.monotonic() + self.scenario.time.startup_timeout_s
-        if self.options.wait_for_autopilots and not self._wait_for_tokens(deadline):
+        startup_s = self.scenario.time.startup_timeout_s
+        deadline = time.monotonic() + startup_s
+        wait = self.options.wait_for_autopilots
+        if wait and not self.inputs.wait_for_tokens(deadline, startup_s, self.rt.stop):
             return 0 if self.rt.stop.is_set() else 1  # a stop signal is not a failure
         # Who is alive now (the plume, for tick 0's sensor values), not when history arrives.
-        self._presence.sync(timeout_s=min(2.0, max(0.1, deadline - time.monotonic())))
+        self.inputs.presence.sync(timeout_s=min(2.0, max(0.1, deadline - time.monotonic())))
         with self._cond:
             self.barrier.start()
             self.barrier.begin(self.tick, timeout_s=max(0.0, deadline - time.monotonic()))
         self._publish_tick(self.world.states(self.tick, self.world.sim_time_s))
         if not self._handshake():
             return 0 if self.rt.stop.is_set() else 1
-        if last_run is not None and self._resume_note:
-            self._resume_note += f", ticks stopped for {time.monotonic() - last_run:.2f} s wall"
-            log.warning("%s", self._resume_note)
-        self._reset_clock()
+        self.checkpoints.started()
+        self.pacer.reset(self.world.sim_time_s)
+        self._publish_clock(self.world.sim_time_s, force=True)
         return self._loop()
-
-    # ------------------------------------------------------------------ checkpoints
-    def _resume(self) -> float | None:
-        """Restore the checkpoint if there is one; the last run's last tick's wall time."""
-        path = self.options.checkpoint_path
-        assert path is not None
-        last = ProgressMarker.read(checkpoint.marker_path(path))
-        if path.exists():
-            cp = checkpoint.load(path)
-            self.world.restore(cp)
-            self.tick = cp.tick
-            self._plume_values = cp.plume_sample
-            self._resume_note = (
-                f"resumed from checkpoint at tick {cp.tick} (sim t={cp.sim_time_s:.3f} s)"
-            )
-            if last is not None and last[0] >= cp.tick:
-                replayed_s = (last[0] - cp.tick) / self.scenario.time.control_hz
-                self._resume_note += f", replayed {replayed_s:.3f} s (ticks {cp.tick}..{last[0]})"
-            log.warning("%s", self._resume_note)
-        else:
-            last = None
-        if self._checkpoint_ticks:
-            self._marker = ProgressMarker(checkpoint.marker_path(path))
-            self._writer = CheckpointWriter(path)
-            # tick 0 too: a kill before the first period resumes from the spawn state
-            self._due_checkpoint = self.tick + (self._checkpoint_ticks if self._resume_note else 0)
-            self._checkpoint()
-        return last[1] if last is not None else None
-
-    def _checkpoint(self) -> None:
-        """Capture the world of a due tick before it is published; the writer saves it while
-        the tick's round trip runs, and the next tick waits until it is on disk, so the file
-        is never more than one period behind a published tick (the most a restart replays)."""
-        writer = self._writer
-        assert writer is not None
-        writer.wait()
-        if self.tick >= self._due_checkpoint:
-            t0 = time.monotonic()
-            cp = self.world.checkpoint(self.tick)
-            if self._plume_values is not None:  # the values this tick carries
-                cp = msgspec.structs.replace(cp, plume_sample=self._plume_values)
-            writer.submit(cp)
-            self._capture_s += time.monotonic() - t0
-            self._due_checkpoint = self.tick + self._checkpoint_ticks
-        self._next_checkpoint = self.tick + 1 if writer.pending else self._due_checkpoint
-
-    def _wait_for_tokens(self, deadline: float) -> bool:
-        with self._cond:
-            while missing := self.barrier.missing_tokens():
-                remaining = deadline - time.monotonic()
-                if self.rt.stop.is_set():
-                    return False
-                if remaining <= 0.0:
-                    log.error(
-                        "autopilots missing after %.1f s: %s (no liveliness token %s)",
-                        self.scenario.time.startup_timeout_s,
-                        ", ".join(missing),
-                        ", ".join(autopilot_node(v) for v in missing),
-                    )
-                    return False
-                self._cond.wait(min(remaining, STOP_POLL_S))
-        log.info("all %d autopilots present", len(self.world.vehicle_ids))
-        return True
 
     def _handshake(self) -> bool:
         """Re-publish the first tick (0, or the checkpoint's) until every participant answered
@@ -490,7 +167,7 @@ class PhysicsNode:
                     return False
                 self._cond.wait(min(HANDSHAKE_REPUBLISH_S, self.barrier.remaining_s()))
                 if not self.barrier.complete():
-                    self._put_tick()
+                    self.out.put_tick()
         log.info("tick %d handshake done with %d participants", self.tick, len(self.barrier.active))
         return True
 
@@ -501,17 +178,18 @@ class PhysicsNode:
             commands = self._await_commands()
             if commands is None or not self._may_step():
                 break
-            self._plume_values = self._take_sample()
+            with self._cond:
+                self.plume.take(self.tick)
             self._apply(commands)
             self.world.step(self.substeps)
             self.tick += 1
-            if self.tick >= self._next_checkpoint:
-                self._checkpoint()
+            if self.tick >= self.checkpoints.next_tick:
+                self.checkpoints.save(self.world, self.tick, self.plume.carried)
             sim_time = self.world.sim_time_s
-            if paced:
-                self._pace(sim_time)
+            if paced and (delay_s := self.pacer.delay_s(sim_time)) > 0.0:
+                self.rt.stop.wait(delay_s)
             states = self.world.states(self.tick, sim_time)
-            if self._recorder_lost:
+            if self.holds.recorder_lost:
                 self._wait_for_recorder()
             with self._cond:
                 self.barrier.begin(self.tick)
@@ -538,7 +216,7 @@ class PhysicsNode:
             abandoned = self.clock_gate.abandon()
         if abandoned is not None:
             abandoned.refuse("ticks", f"the world stopped at tick {self.tick}")
-        wall = time.monotonic() - self._wall_start
+        wall = self.pacer.elapsed_s()
         log.info(
             "physics stopped at tick %d, sim %.3f s after %.3f s wall (%.0f ticks/s)",
             self.tick,
@@ -546,18 +224,7 @@ class PhysicsNode:
             wall,
             self.tick / wall if wall > 0 else 0.0,
         )
-        if self._writer is not None:
-            self._writer.wait()
-            w = self._writer
-            log.info(
-                "%d checkpoints: capture %.2f ms, write %.2f ms (longest %.2f ms) on average; "
-                "the loop waited %.1f ms for writes in all",
-                w.written,
-                1e3 * self._capture_s / max(1, w.written),
-                1e3 * w.write_s / max(1, w.written),
-                1e3 * w.longest_write_s,
-                1e3 * w.waited_s,
-            )
+        self.checkpoints.finish()
 
     def _await_commands(self) -> dict[str, Sequence[float]] | None:
         """Block until the current tick is complete or its deadline passed (then drop)."""
@@ -567,56 +234,23 @@ class PhysicsNode:
                 if self.rt.stop.is_set():
                     return None
                 remaining = barrier.remaining_s()
-                if remaining <= 0.0 and self._hold_silent():
+                if remaining <= 0.0 and self.silent.hold(barrier, self.tick):
                     continue
                 if remaining <= 0.0:
                     held = barrier.held
                     dropped = barrier.expire()
-                    self._report_dropped(held, dropped)
-                    self._silent_tick = -1  # the drop is the report
+                    self.dropped_total += len(dropped)
+                    waited_s = self.silent.waited_s(self.tick, barrier.timeout_s)
+                    report_dropped(self.tick, dropped, held, waited_s, self.holds.grace_s)
+                    self.silent.dropped()
                     break
                 self._cond.wait(min(remaining, STOP_POLL_S))
-                if barrier.held or self._silent_tick == self.tick:
+                if barrier.held or self.silent.holding(self.tick):
                     self._republish_held_tick()
-            self._report_back()
+            self.silent.report_back(barrier, self.tick)
             return barrier.commands()  # a new dict of the decoded (never mutated) lists
 
-    def _report_back(self) -> None:
-        """Log who answered again: a dropped participant back, a silent hold that ended."""
-        for participant, tick in self.barrier.rejoined:
-            log.warning("%s answered tick %d: back in the lockstep", participant, tick)
-        self.barrier.rejoined.clear()
-        if self._silent_tick == self.tick:
-            log.warning(
-                "tick %d: every participant answered after %.2f s: the run goes on",
-                self.tick,
-                time.monotonic() - self._silent_since,
-            )
-            self._silent_tick = -1
-
     # ------------------------------------------------------------------ stepped clock
-    def _on_step(self, incoming: Incoming[StepRequest]) -> None:
-        request = incoming.request
-        if not self._stepped:
-            incoming.refuse(
-                "mode",
-                f"world {self.keys.world!r} runs in {self.options.mode} mode, not stepped "
-                '(time.mode = "stepped" in the scenario, or plumeswarm up --stepped)',
-            )
-            return
-        with self._cond:
-            try:
-                target = self.clock_gate.request(request.client, request.ticks, self.tick, incoming)
-            except StepRefused as exc:
-                refusal: StepRefused | None = exc
-            else:
-                refusal = None
-                self._cond.notify_all()
-        if refusal is not None:
-            incoming.refuse(refusal.field, refusal.reason)
-        else:
-            log.debug("%s: step to tick %d", request.client, target)
-
     def _await_grant(self) -> bool:
         """Stepped mode, the current tick published and answered: answer the grant that ends
         here, then wait for the next one. False when stopped."""
@@ -633,69 +267,19 @@ class PhysicsNode:
             self._maybe_publish_clock(self.world.sim_time_s)  # clock and health while paused
         return False
 
-    # ------------------------------------------------------------------ restarts
-    def _on_restart_notice(self, sample: zenoh.Sample) -> None:
-        """The launcher's word on a process that ended: hold or drop its vehicles."""
-        try:
-            notice = decode(sample.payload.to_bytes(), RestartNotice)
-        except MessageError as exc:
-            log.warning("ignoring restart notice on %s: %s", sample.key_expr, exc)
-            return
-        if notice.role == RECORDER and self._restart_grace_s > 0.0:
-            with self._cond:
-                grace = notice.delay_s + self._restart_grace_s
-                self._recorder_until = time.monotonic() + grace if notice.restarting else 0.0
-                self._recorder_lost = self._recorder_lost and notice.restarting
-                self._cond.notify_all()
-            return
-        known = [PLUME] if notice.role == PLUME else notice.vehicles
-        vids = [v for v in known if v in self.barrier.participants]
-        if not vids or self._restart_grace_s <= 0.0:
-            return
-        with self._cond:
-            if notice.restarting:
-                grace = notice.delay_s + self._restart_grace_s
-                held = [v for v in vids if self.barrier.restarting(v, grace)]
-            else:
-                held = [v for v in vids if self.barrier.gone(v)]
-            self._cond.notify_all()
-        if held and notice.restarting:
-            log.warning(
-                "tick %d: holding the clock for %s: %s is being restarted (grace %.1f s)",
-                self.tick,
-                ", ".join(held),
-                notice.node,
-                grace,
-            )
-        elif held:
-            log.warning("%s will not be restarted: %s dropped", notice.node, ", ".join(held))
-
     def _republish_held_tick(self) -> None:
         """During a hold, re-send the held tick (as in the start-up handshake) so the new
         process receives it; the others answer a repeated tick with the same command."""
-        now = time.monotonic()
-        if now - self._held_republish >= HANDSHAKE_REPUBLISH_S:
-            self._held_republish = now
-            self._put_tick()
-            if self._router_outage_tick == self.tick:
-                self._put_states()  # subscribers cut off with the router missed them
+        if self.holds.republish_due():
+            self.out.put_tick()
+            if self.holds.resend_states(self.tick):
+                self.out.put_states()
 
     def _wait_for_recorder(self) -> None:
-        """The recorder left (lockstep): hold the next tick until a recorder is back — up to
-        the participant timeout for the launcher's word, up to the grace if it restarts it —
-        so that the new recorder records every tick from the first one it missed."""
+        """The recorder left (lockstep): hold the next tick until a recorder is back, and
+        backfill it (docs/physics.md, "Restarts: the clock waits")."""
         t0 = time.monotonic()
-        word = t0 + self.scenario.time.participant_timeout_s
-        with self._cond:
-            seen = self._recorder_arrivals
-            while self._recorder_arrivals == seen and not self.rt.stop.is_set():
-                remaining = max(word, self._recorder_until) - time.monotonic()
-                if remaining <= 0.0:
-                    break
-                self._cond.wait(min(remaining, STOP_POLL_S))
-            back = self._recorder_arrivals != seen
-            self._recorder_lost = False
-            self._recorder_until = 0.0
+        back = self.inputs.wait_for_recorder(self.rt.stop)
         if back:
             self._backfill()
         log.warning(
@@ -709,62 +293,8 @@ class PhysicsNode:
         """Re-send the recent ticks and states on ``sim/backfill/<key>`` for the new recorder:
         those published after the old one died and before its token's departure reached us
         never reached it (the recorder keeps those it has not got, by key and tick)."""
-        for entries in self._recent:
-            for key, payload in entries:
-                self.rt.session.put(self.keys.backfill_of(key), payload)
-        log.info("re-sent the last %d ticks to the new recorder", len(self._recent))
-
-    def _hold_silent(self) -> bool:
-        """The tick's deadline passed without some answers (the caller holds the lock): with an
-        ``unreachable_grace_s``, wait for them up to it once (re-sending the tick meanwhile);
-        whether the tick now waits longer."""
-        if self._unreachable_grace_s <= 0.0 or self._silent_tick == self.tick:
-            return False
-        now = time.monotonic()
-        self._silent_tick, self._silent_since = self.tick, now
-        timeout = self.barrier.timeout_s
-        self.barrier.extend(now + max(0.0, self._unreachable_grace_s - timeout))
-        log.warning(
-            "tick %d: no answer from %s for %.2f s: holding the clock up to %.1f s in all "
-            "(unreachable grace)",
-            self.tick,
-            ", ".join(self.barrier.missing()),
-            timeout,
-            self._unreachable_grace_s,
-        )
-        return True
-
-    def _report_dropped(self, held: frozenset[str], dropped: list[str]) -> None:
-        self.dropped_total += len(dropped)
-        vehicles = [v for v in dropped if v != PLUME]
-        waited_s = self.barrier.timeout_s
-        if self._silent_tick == self.tick:  # held for the unreachable grace
-            waited_s = max(waited_s, self._unreachable_grace_s)
-        if vehicles:
-            log.warning(
-                "tick %d: dropped %s after %.2f s without actuators (motors off)",
-                self.tick,
-                ", ".join(vehicles),
-                waited_s,
-            )
-        if PLUME in dropped:
-            log.warning(
-                "tick %d: no plume sample after %.2f s: this sensor tick's readings are "
-                "unavailable; the plume service takes part again once it answers a sensor tick",
-                self.tick,
-                waited_s,
-            )
-        self._report_expired_holds(held, dropped)
-
-    def _report_expired_holds(self, held: frozenset[str], dropped: list[str]) -> None:
-        expired = [v for v in dropped if v in held and v != PLUME]
-        if expired:
-            log.warning(
-                "tick %d: restart grace of %.1f s passed: %s dropped (motors off, failsafe)",
-                self.tick,
-                self._restart_grace_s,
-                ", ".join(expired),
-            )
+        self.out.backfill(self.holds.recent)
+        log.info("re-sent the last %d ticks to the new recorder", len(self.holds.recent))
 
     def _apply(self, commands: Mapping[str, Sequence[float]]) -> None:
         for bad in self.world.apply_tick(commands):
@@ -775,88 +305,30 @@ class PhysicsNode:
         """Tick k out (the barrier has begun it): its states and the plume's values of the
         last sensor tick; whether it waits for the plume's sample of its own positions."""
         with self._cond:
-            queried = self._queried = self.barrier.waits(PLUME)
+            queried = self.barrier.waits(PLUME)
+            carried = self.plume.published(queried, len(states))
         msg = SimTick(
             tick=self.tick,
             sim_time_s=self.world.sim_time_s,
             control_dt_s=self.control_dt_s,
             states=states,
             plume_queried=queried,
-            plume_values=self._plume_values,
+            plume_values=carried,
         )
-        self._plume_values = None
-        self._last_tick_msg = encode(msg)
-        self._last_tick_states = len(states)
-        self._last_states = states
-        self._put_tick()
-        if self._marker is not None:
-            self._marker.mark(self.tick)
-        sent = self._put_states()
-        if self._restart_grace_s > 0.0:
-            self._recent.append([(self.keys.tick(), self._last_tick_msg), *sent])
-
-    def _put_states(self) -> list[tuple[str, bytes]]:
-        """The current tick's states on ``vehicle/<id>/state`` (to those who listen)."""
-        sent = []
-        for pub, state in zip(self._state_pubs, self._last_states, strict=True):
-            if pub.matching:  # nobody listens: the state is in the tick already
-                payload = encode(state)
-                pub.put(payload)
-                sent.append((pub.key, payload))
-                self.states_sent += 1
-        return sent
-
-    def _put_tick(self) -> None:
-        """The current tick on ``sim/tick``, and on ``sim/sensor`` if it is a sensor tick."""
-        self._tick_pub.put(self._last_tick_msg)
-        if self.tick % self._sensor_period == 0:
-            self._sensor_pub.put(self._last_tick_msg)
-
-    def _take_sample(self) -> PlumeSample | None:
-        """What the next tick carries of the plume: its sample of this tick if the tick waited
-        for one (values None if it did not come or does not fit the tick's states). Taken every
-        tick: a sample that came for a tick that did not wait for it is dropped here."""
-        with self._cond:
-            answer, self._sample = self._sample, None
-            if not self._queried:
-                return None
-        values = answer.values_g_m3 if answer is not None else None
-        if values is not None and len(values) != self._last_tick_states:
-            log.warning(
-                "tick %d: plume sampled %d points of %d states",
-                self.tick,
-                len(values),
-                self._last_tick_states,
-            )
-            values = None
-        return PlumeSample(tick=self.tick, values_g_m3=values)
-
-    def _pace(self, sim_time_s: float) -> None:
-        """Realtime mode: hold tick ``k`` until the wall clock reaches its sim time / factor."""
-        target = self._wall_start + (sim_time_s - self._sim_start) / self.options.speed_factor
-        delay = target - time.monotonic()
-        if delay > 0.0:
-            self.rt.stop.wait(delay)
-
-    def _reset_clock(self) -> None:
-        self._wall_start = time.monotonic()
-        self._sim_start = self.world.sim_time_s
-        self._clock_wall = self._wall_start
-        self._clock_sim = self._sim_start
-        self._publish_clock(self._sim_start, force=True)
+        self.out.set(self.tick, encode(msg), states)
+        self.out.put_tick()
+        self.checkpoints.mark(self.tick)
+        sent = self.out.put_states()
+        self.holds.remember([(self.keys.tick(), self.out.payload), *sent])
 
     def _maybe_publish_clock(self, sim_time_s: float) -> None:
-        now = time.monotonic()
-        if now - self._clock_wall >= self.options.clock_period_s:
+        now = self.pacer.clock_due()
+        if now is not None:
             self._publish_clock(sim_time_s, now=now)
 
     def _publish_clock(self, sim_time_s: float, force: bool = False, now: float = 0.0) -> None:
         now = now or time.monotonic()
-        wall = now - self._clock_wall
-        if wall > 0.0 and sim_time_s > self._clock_sim:
-            self.real_time_factor = (sim_time_s - self._clock_sim) / wall
-        self._clock_wall = now
-        self._clock_sim = sim_time_s
+        real_time_factor = self.pacer.measure(sim_time_s, now)
         with self._cond:
             participants = sorted(self.barrier.active)
         self._clock_pub.put(
@@ -866,44 +338,18 @@ class PhysicsNode:
                     sim_time_s=sim_time_s,
                     mode=self.options.mode,
                     speed_factor=self.options.speed_factor,
-                    real_time_factor=min(self.real_time_factor, 1e9),
+                    real_time_factor=min(real_time_factor, 1e9),
                     participants=participants,
                 )
             )
         )
-        if force or now - self._health_wall >= HEALTH_PERIOD_S:
-            self._health_wall = now
-            detail = f"tick {self.tick} dropped {self.dropped_total} states {self.states_sent}"
-            if self.foreign_dropped:
-                detail += f" foreign commands {self.foreign_dropped}"
-            if self._resume_note:
-                detail += f"; {self._resume_note}"
+        if self.pacer.health_due(now, force):
+            detail = f"tick {self.tick} dropped {self.dropped_total} states {self.out.states_sent}"
+            if self.inputs.intake.foreign_dropped:
+                detail += f" foreign commands {self.inputs.intake.foreign_dropped}"
+            if self.checkpoints.note:
+                detail += f"; {self.checkpoints.note}"
             self.rt.publish_health(sim_time_s=sim_time_s, detail=detail)
-
-
-class _StatePublisher:
-    """A ``vehicle/<id>/state`` publisher that knows whether anyone subscribes (Zenoh's
-    matching status, kept up to date by a listener): the physics skips encoding and putting a
-    state nobody would receive. A subscriber declared later is matched before a put could
-    reach it anyway (both follow the same subscription declarations), so it misses nothing."""
-
-    def __init__(self, session: zenoh.Session, key: str) -> None:
-        self.key = key
-        self._pub = session.declare_publisher(key)
-        self.matching = False
-        self._listener = self._pub.declare_matching_listener(self._on_matching)
-        status: Any = self._pub.matching_status  # a MatchingStatus (the stub says bool)
-        self.matching = bool(status.matching)
-
-    def _on_matching(self, status: zenoh.MatchingStatus) -> None:
-        self.matching = status.matching
-
-    def put(self, payload: bytes) -> None:
-        self._pub.put(payload)
-
-    def close(self) -> None:
-        self._listener.undeclare()
-        self._pub.undeclare()
 
 
 def main(ctx: NodeContext) -> int:

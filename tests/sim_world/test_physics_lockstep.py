@@ -3,14 +3,7 @@
 from __future__ import annotations
 
 from sim_world.lockstep import Lockstep, participant_of
-
-
-class FakeClock:
-    def __init__(self) -> None:
-        self.now = 100.0
-
-    def __call__(self) -> float:
-        return self.now
+from tests.support.fake_clock import FakeClock
 
 
 def barrier(*present: str) -> tuple[Lockstep, FakeClock]:
