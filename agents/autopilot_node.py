@@ -1,30 +1,7 @@
-"""The autopilot process: ``plumeswarm node autopilot --vehicle ID [--vehicle ID2 …]``.
-
-One process serves one vehicle or K of them: it declares one liveliness token
-``node/autopilot-<id>/health`` per vehicle (the lockstep's participant list), answers every
-``sim/tick`` with one ``ActuatorBatch`` of its vehicles' commands on ``autopilot/<node>/actuators``,
-serves ``vehicle/<id>/cmd``, publishes ``vehicle/<id>/status`` (on change and every
-``status_period_s`` of sim time) and the sensor's ``vehicle/<id>/concentration``.
-
-One loop over typed events (:meth:`AutopilotNode.run`): the bus callbacks only put a
-``TickArrived`` or a ``CommandArrived`` into the :class:`Inbox` (on zenoh-python's callback
-thread); the loop handles them one at a time in arrival order (of ticks that piled up, the
-newest; a repeated tick, the start handshake's, gets the same answer again), and publishes
-statuses while no tick arrives. Zenoh runs on ONE runtime thread (``ZENOH_RUNTIME``, set in
-:func:`main` unless the environment sets it): fewer thread hand-overs and wake-ups per tick
-(docs/agents.md).
-
-The sensor: the plume service samples every vehicle's position of a sensor tick
-(``SimTick.plume_queried``: the tick waits for its sample) and the physics puts the sample into
-a later tick (``SimTick.plume_values``); the node turns it into readings before that tick's
-control, so a behaviour sees the reading of the previous sensor tick, the same run after run. A
-sensor tick no plume service took part in gives unavailable readings.
-
-Options (``--set key=value``): ``status_period_s`` (0.5; a stepped world gets a status every
-tick), ``position_noise_m`` / ``velocity_noise_m_s`` (0: the estimate is the physics' truth),
-``checkpoint`` (a file path; empty: none): keep snapshots of the process's state there, so a
-restarted process, or a physics resumed from its checkpoint, carries on with the same bits
-(:mod:`agents.resume`).
+"""The autopilot process (``plumeswarm node autopilot --vehicle ID [--vehicle ID2 …]``): one
+loop over typed events serving one vehicle or K of them; options in
+:class:`agents.build.AutopilotOptions`. See docs/agents.md and docs/architecture.md ("How a
+tick flows").
 """
 
 from __future__ import annotations
@@ -38,19 +15,16 @@ from collections.abc import Callable, Iterator
 from contextlib import suppress
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Any
 
 import msgspec
-import numpy as np
 import zenoh
 
 from agents.anemometer import Anemometer
-from agents.autopilot import Autopilot
-from agents.behavior import BehaviorContext, BehaviorError, load_behavior
-from agents.estimator import Estimator
-from agents.flight import Flight, take_readings
+from agents.behavior import BehaviorError
+from agents.build import AutopilotOptions, build_flight, vehicle_index
+from agents.flight import take_readings
 from agents.resume import StateKeeper
-from agents.sensor import ConcentrationSensor
 from agents.snapshot import PendingSnapshot, ProcessSnapshot, SnapshotError, capture, restore
 from swarmbus.codec import MessageError, decode, encode
 from swarmbus.keys import Keys, autopilot_node
@@ -65,7 +39,7 @@ from swarmbus.messages import (
     VehicleStatus,
 )
 from swarmbus.node import NodeContext, NodeRuntime
-from swarmbus.options import OptionError, RoleOptions, parse_options
+from swarmbus.options import OptionError, parse_options
 from swarmbus.reqrep import Incoming, serve_later
 from swarmbus.scenario import Scenario
 from swarmbus.session import SINGLE_THREAD_RUNTIME
@@ -80,66 +54,6 @@ IDLE_STATUS_PERIOD_S = 1.0  # wall clock: status while no ticks arrive (physics 
 EVENT_POLL_S = 0.25
 
 
-NonNegative = Annotated[float, msgspec.Meta(ge=0.0, le=1e9)]
-
-
-class NodeOptions(RoleOptions, frozen=True, kw_only=True):
-    """The autopilot role's options (``--set KEY=VALUE``)."""
-
-    status_period_s: NonNegative = 0.5
-    position_noise_m: NonNegative = 0.0
-    velocity_noise_m_s: NonNegative = 0.0
-    checkpoint: str = ""  # snapshots of the process's state (agents.resume); empty: none
-
-
-def behavior_rng(scenario: Scenario, vehicle_id: str) -> np.random.Generator:
-    """The generator a vehicle's behaviour gets in its context."""
-    index = [v.id for v in scenario.vehicles].index(vehicle_id)
-    seed = scenario.world.seed
-    return np.random.Generator(np.random.PCG64(np.random.SeedSequence([seed, index, 0xBE4])))
-
-
-def build_autopilot(
-    scenario: Scenario,
-    vehicle_id: str,
-    options: NodeOptions,
-    rng: np.random.Generator | None = None,
-) -> Autopilot:
-    """``rng``: the behaviour's generator (default: :func:`behavior_rng`)."""
-    index = [v.id for v in scenario.vehicles].index(vehicle_id)
-    seed = scenario.world.seed
-    estimator = Estimator(
-        options.position_noise_m,
-        options.velocity_noise_m_s,
-        np.random.SeedSequence([seed, index, 0xE57]),
-    )
-    spec = scenario.vehicle(vehicle_id).behavior
-    behavior = None
-    if spec is not None:
-        ctx = BehaviorContext(
-            vehicle_id=vehicle_id,
-            vehicle_index=index,
-            scenario=scenario,
-            control_dt_s=1.0 / scenario.time.control_hz,
-            rng=rng if rng is not None else behavior_rng(scenario, vehicle_id),
-        )
-        behavior = load_behavior(spec, ctx)
-    return Autopilot(scenario, vehicle_id, estimator=estimator, behavior=behavior)
-
-
-def build_flight(
-    scenario: Scenario,
-    vehicle_id: str,
-    options: NodeOptions,
-    rng: np.random.Generator | None = None,
-) -> Flight:
-    """A vehicle's autopilot and sensor, seeded from the scenario and the vehicle's index
-    (``rng``: the behaviour's generator, default :func:`behavior_rng`)."""
-    index = [v.id for v in scenario.vehicles].index(vehicle_id)
-    sensor = ConcentrationSensor.for_vehicle(scenario, index)
-    return Flight(build_autopilot(scenario, vehicle_id, options, rng), sensor)
-
-
 class _Served:
     """One served vehicle: its autopilot, sensor and publishers."""
 
@@ -149,14 +63,13 @@ class _Served:
         keys: Keys,
         scenario: Scenario,
         vehicle_id: str,
-        options: NodeOptions,
+        options: AutopilotOptions,
         wind: WindModel,
     ) -> None:
         self.vehicle_id = vehicle_id
         # Where the physics puts this vehicle's state in a tick (checked on every use).
-        self.index = [v.id for v in scenario.vehicles].index(vehicle_id)
-        self.behavior_rng = behavior_rng(scenario, vehicle_id)
-        self.flight = build_flight(scenario, vehicle_id, options, self.behavior_rng)
+        self.index = vehicle_index(scenario, vehicle_id)
+        self.flight = build_flight(scenario, vehicle_id, options)
         self.autopilot = self.flight.autopilot
         self.sensor = self.flight.sensor
         self.anemometer = Anemometer(scenario.anemometer, wind, scenario.world.seed, self.index)
@@ -348,7 +261,7 @@ def _newest_tick(arrived: list[Event], ticks: list[int]) -> int:
 class AutopilotNode:
     """One autopilot process: one loop over its events (:meth:`run`)."""
 
-    def __init__(self, session: zenoh.Session, ctx: NodeContext, options: NodeOptions) -> None:
+    def __init__(self, session: zenoh.Session, ctx: NodeContext, options: AutopilotOptions) -> None:
         self.session = session
         self.keys = ctx.keys
         self.options = options
@@ -546,7 +459,7 @@ class AutopilotNode:
         snap = ProcessSnapshot(
             node=self.node_name,
             tick=self._snap_tick,
-            vehicles=[capture(s.autopilot, s.sensor, s.behavior_rng) for s in served],
+            vehicles=[capture(s.autopilot, s.sensor, s.flight.behavior_rng) for s in served],
             commands=[b"" for _ in served],
             batch=self.last_batch,
             status_times_s=[s.last_status_time_s for s in served],
@@ -596,7 +509,7 @@ class AutopilotNode:
             log.error("snapshot of %s, not of this process's vehicles: not restored", snap.node)
             return
         for s, v, when in zip(served, snap.vehicles, snap.status_times_s, strict=True):
-            restore(s.autopilot, s.sensor, v, s.behavior_rng)
+            restore(s.autopilot, s.sensor, v, s.flight.behavior_rng)
             s.last_status_time_s = when
             s.flight.new_readings = []
         self.last_batch = snap.batch
@@ -643,7 +556,7 @@ def main(ctx: NodeContext) -> int:
         log.error("autopilot: no vehicle to serve (--vehicle ID)")
         return 2
     try:
-        options = parse_options(NodeOptions, ctx.options)
+        options = parse_options(AutopilotOptions, ctx.options)
         for vid in ctx.vehicle_ids:  # fail fast on a bad behaviour before joining the bus
             ctx.scenario.vehicle(vid)
     except (OptionError, KeyError) as exc:

@@ -15,6 +15,8 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from typing import Protocol
 
+import numpy as np
+
 from agents.autopilot import Autopilot
 from agents.sensor import ConcentrationSensor
 from swarmbus.messages import ConcentrationReading, PeerReading, VehicleState
@@ -31,12 +33,19 @@ class Located(Protocol):
 
 
 class Flight:
-    """One vehicle's autopilot and sensor, and the readings its next step will see."""
+    """One vehicle's autopilot and sensor, and the readings its next step will see
+    (``behavior_rng``: the generator its behaviour draws from, kept for snapshots)."""
 
-    def __init__(self, autopilot: Autopilot, sensor: ConcentrationSensor) -> None:
+    def __init__(
+        self,
+        autopilot: Autopilot,
+        sensor: ConcentrationSensor,
+        behavior_rng: np.random.Generator | None = None,
+    ) -> None:
         self.vehicle_id = autopilot.vehicle_id
         self.autopilot = autopilot
         self.sensor = sensor
+        self.behavior_rng = behavior_rng
         self.new_readings: list[ConcentrationReading] = []
 
     def step(self, state: VehicleState, peers: Sequence[VehicleState]) -> list[float]:

@@ -24,7 +24,7 @@ import logging
 from collections.abc import Callable, Sequence
 from types import TracebackType
 
-from agents.autopilot_node import NodeOptions, build_flight
+from agents.build import AutopilotOptions, build_flight
 from agents.flight import Flight, take_readings
 from plume_service.from_scenario import field_from_scenario
 from plume_service.service import PlumeService
@@ -47,7 +47,7 @@ class FusedRunner:
     def __init__(
         self,
         scenario: Scenario,
-        options: NodeOptions | None = None,
+        options: AutopilotOptions | None = None,
         *,
         plume: bool = True,
         on_states: StatesObserver | None = None,
@@ -55,7 +55,7 @@ class FusedRunner:
         self.scenario = scenario
         self.world = World(scenario)
         try:
-            opts = options or NodeOptions()
+            opts = options or AutopilotOptions()
             self.flights: dict[str, Flight] = {
                 vid: build_flight(scenario, vid, opts) for vid in self.world.vehicle_ids
             }

@@ -31,9 +31,9 @@ import msgspec
 import numpy as np
 import numpy.typing as npt
 
-from agents.autopilot_node import behavior_rng
 from agents.behavior import Behavior, BehaviorContext, load_behavior
 from agents.behaviors.search import PLUME_THRESHOLD_G_M3, SourceEstimate
+from agents.build import behavior_rng
 from agents.sensor import ConcentrationSensor
 from experiments.fused import FusedRunner, StatesObserver
 from experiments.gsl_registry import (

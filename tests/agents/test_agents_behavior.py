@@ -8,8 +8,8 @@ import msgspec
 import pytest
 
 from agents.autopilot import Autopilot
-from agents.autopilot_node import NodeOptions, build_autopilot
 from agents.behavior import BehaviorError
+from agents.build import AutopilotOptions, build_autopilot
 from plume_service import GaussianPlume
 from swarmbus.messages import Arm, FlightMode, SetMode, Takeoff
 from swarmbus.scenario import Scenario, load_scenario
@@ -27,7 +27,7 @@ def casting_scenario(spawn: tuple[float, float, float]) -> Scenario:
 
 def test_casting_ends_closer_to_the_source_than_it_started() -> None:
     sc = casting_scenario((45.0, 6.0, 0.0))
-    ap = build_autopilot(sc, "uav1", NodeOptions())
+    ap = build_autopilot(sc, "uav1", AutopilotOptions())
     w = ToyWorld(sc, {"uav1": ap}, field=GaussianPlume.preset("novak2018").concentration)
     w.run(0.05)
     for cmd in (Arm(), Takeoff(altitude_m=10.0)):
@@ -48,7 +48,7 @@ def test_bad_behaviour_spec_is_a_clear_error() -> None:
     bad = msgspec.structs.replace(sc.vehicles[0], behavior="agents.behaviors.casting:Nope")
     sc = msgspec.structs.replace(sc, vehicles=[bad])
     with pytest.raises(BehaviorError, match="Nope"):
-        build_autopilot(sc, "uav1", NodeOptions())
+        build_autopilot(sc, "uav1", AutopilotOptions())
 
 
 class Exploding:

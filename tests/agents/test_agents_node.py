@@ -16,7 +16,8 @@ import pytest
 import zenoh
 
 from agents import CommandRejected, Swarm, WaitTimeout
-from agents.autopilot_node import AutopilotNode, Inbox, NodeOptions, TickArrived
+from agents.autopilot_node import AutopilotNode, Inbox, TickArrived
+from agents.build import AutopilotOptions
 from plume_service import GaussianPlume
 from swarmbus.codec import MessageError, decode, encode
 from swarmbus.messages import (
@@ -213,7 +214,7 @@ def test_a_tick_going_back_counts_only_if_it_is_a_whole_sim_tick(tmp_path: Path)
         return msgspec.msgpack.encode(fields)
 
     with open_session(ctx.network) as session:
-        node = AutopilotNode(session, ctx, NodeOptions())
+        node = AutopilotNode(session, ctx, AutopilotOptions())
         try:
             node._on_tick_data(tick_bytes(100, 1 / 120))
             assert node.last_tick == 100

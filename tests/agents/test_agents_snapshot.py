@@ -21,7 +21,7 @@ import pytest
 
 import agents.behaviors
 from agents.autopilot import Autopilot
-from agents.autopilot_node import NodeOptions, behavior_rng, build_autopilot
+from agents.build import AutopilotOptions, behavior_rng, build_autopilot
 from agents.sensor import ConcentrationSensor
 from agents.snapshot import SnapshotError, SnapshotSlots, VehicleSnapshot, capture, restore
 from plume_service import GaussianPlume
@@ -45,7 +45,7 @@ from swarmbus.messages import (
 from swarmbus.scenario import Scenario, load_scenario
 from tests.support.toy_physics import ToyWorld
 
-NOISY = NodeOptions(position_noise_m=0.05, velocity_noise_m_s=0.02)
+NOISY = AutopilotOptions(position_noise_m=0.05, velocity_noise_m_s=0.02)
 
 
 def state_of(obj: Any, seen: set[int] | None = None) -> Any:
@@ -76,7 +76,7 @@ def state_of(obj: Any, seen: set[int] | None = None) -> Any:
     return {n: state_of(getattr(obj, n), seen) for n in names if not callable(getattr(obj, n))}
 
 
-def fly(sc: Scenario, options: NodeOptions, flight: str) -> tuple[ToyWorld, Autopilot]:
+def fly(sc: Scenario, options: AutopilotOptions, flight: str) -> tuple[ToyWorld, Autopilot]:
     ap = build_autopilot(sc, "uav1", options, behavior_rng(sc, "uav1"))
     field = GaussianPlume.preset("novak2018").concentration
     w = ToyWorld(sc, {"uav1": ap}, field=field)
@@ -237,11 +237,11 @@ class HoldsAFunction:
 
 def test_a_behaviour_whose_state_cannot_be_saved_is_named() -> None:
     sc = casting_scenario()
-    ap = build_autopilot(sc, "uav1", NodeOptions())
+    ap = build_autopilot(sc, "uav1", AutopilotOptions())
     ap.behavior = HoldsAFunction()
     with pytest.raises(SnapshotError, match=r"HoldsAFunction.*snapshot\(\) and restore"):
         capture(ap, ConcentrationSensor(sc.sensor, 0, 0))
-    ap.behavior = build_autopilot(sc, "uav1", NodeOptions()).behavior
+    ap.behavior = build_autopilot(sc, "uav1", AutopilotOptions()).behavior
     ap.behavior.opaque = object()
     with pytest.raises(SnapshotError, match=r"Casting.*snapshot\(\) and restore"):
         ap.behavior.state_attributes = ("opaque",)
@@ -323,7 +323,7 @@ def test_each_mission_is_encoded_once_however_many_vehicles_a_process_serves() -
 
 def _uploaded(items: int, vertices: int) -> Autopilot:
     sc = load_scenario()
-    ap = build_autopilot(sc, "uav1", NodeOptions())
+    ap = build_autopilot(sc, "uav1", AutopilotOptions())
     mission = [MissionItem(x=float(i % 50), y=float(i // 50), z=10.0) for i in range(items)]
     assert ap.handle(MissionUpload(items=mission)).accepted
     ring = [
@@ -349,7 +349,7 @@ def test_a_ticks_snapshot_does_not_grow_with_the_mission_or_the_fence() -> None:
         msgspec.msgpack.encode(capture(large, ConcentrationSensor(sc.sensor, 0, 0))),
         type=VehicleSnapshot,
     )
-    fresh = build_autopilot(sc, "uav1", NodeOptions())
+    fresh = build_autopilot(sc, "uav1", AutopilotOptions())
     restore(fresh, ConcentrationSensor(sc.sensor, 0, 0), back)
     assert fresh.modes.mission.items == large.modes.mission.items
     assert len(fresh.modes.mission.items) == 1000
