@@ -39,7 +39,7 @@ from swarmbus.messages import (
     VehicleStatus,
 )
 from swarmbus.node import NodeContext, NodeRuntime
-from swarmbus.options import OptionError, parse_options
+from swarmbus.options import OptionError, role_options
 from swarmbus.reqrep import Incoming, serve_later
 from swarmbus.scenario import Scenario
 from swarmbus.session import SINGLE_THREAD_RUNTIME
@@ -556,7 +556,7 @@ def main(ctx: NodeContext) -> int:
         log.error("autopilot: no vehicle to serve (--vehicle ID)")
         return 2
     try:
-        options = parse_options(AutopilotOptions, ctx.options)
+        options = role_options(AutopilotOptions, ctx)
         for vid in ctx.vehicle_ids:  # fail fast on a bad behaviour before joining the bus
             ctx.scenario.vehicle(vid)
     except (OptionError, KeyError) as exc:

@@ -20,7 +20,7 @@ ROLES: dict[str, str] = {
     "autopilot": "agents.autopilot_node:main",
     "gateway": "gcs_bridge.gateway:main",
     "viewer": "sim_world.viewer:main",
-    "recorder": "recorder.node:run",
+    "recorder": "recorder.node:main",
     "foxglove": "recorder.foxglove.live:main",
     "ros2": "ros2_bridge.bridge:main",
 }

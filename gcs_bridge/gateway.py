@@ -47,34 +47,38 @@ from gcs_bridge.handle_missions import MissionHandlers
 from gcs_bridge.handle_offboard import OffboardHandlers
 from gcs_bridge.handle_params import ParamHandlers
 from gcs_bridge.links import Link, LinkSet
-from gcs_bridge.options import GatewayOptions, gateway_options
+from gcs_bridge.options import GatewayOptions, signing_key
 from gcs_bridge.telemetry import wind_enu
 from gcs_bridge.vehicle import Vehicle
 from swarmbus.codec import MessageError, decode
 from swarmbus.keys import Keys
 from swarmbus.messages import VehicleStatus
 from swarmbus.node import NodeContext, NodeRuntime
-from swarmbus.options import OptionError
+from swarmbus.options import OptionError, role_options
+from swarmbus.scenario import Gateway as GatewaySection
 from swarmbus.scenario import Scenario, not_on_mavlink_note
 from swarmbus.views import TickView
 
 log = logging.getLogger(__name__)
 
 TICK_S = 0.1  # wall-clock housekeeping: heartbeats, transfer timeouts, parameter sync
+HEARTBEAT_PERIOD_S = 1.0  # MAVLink's 1 Hz heartbeat
 
 
-def open_links(options: GatewayOptions, vehicles: list[Vehicle]) -> LinkSet:
-    """The shared GCS link (every vehicle) and, unless turned off, each vehicle's API link."""
-    o = options
-    links = LinkSet(o.rates_hz, [v.sysid for v in vehicles])
+def open_links(section: GatewaySection, o: GatewayOptions, vehicles: list[Vehicle]) -> LinkSet:
+    """The shared GCS link (every vehicle) and, unless turned off, each vehicle's API link;
+    :class:`OptionError` for a bad option or key file."""
+    key = signing_key(section)
+    bind_host = o.bind_host_for(section)
+    links = LinkSet(o.rates_hz(), [v.sysid for v in vehicles])
     try:
         links.add(
             Link(
                 "gcs",
-                (o.bind_host, o.gcs_bind_port),
-                (o.host, o.gcs_port),
+                (bind_host, o.gcs_bind_port),
+                (section.host, section.gcs_port),
                 [v.sysid for v in vehicles],
-                o.signing_key_for("gcs"),
+                key if o.signs("gcs") else None,
                 link_id=0,
             )
         )
@@ -84,10 +88,10 @@ def open_links(options: GatewayOptions, vehicles: list[Vehicle]) -> LinkSet:
             bind_port = o.api_bind_port_base + v.index if o.api_bind_port_base else 0
             link = Link(
                 f"api-{v.id}",
-                (o.bind_host, bind_port),
-                (o.host, o.api_port_base + v.index),
+                (bind_host, bind_port),
+                (section.host, section.api_port_base + v.index),
                 [v.sysid],
-                o.signing_key_for("api"),
+                key if o.signs("api") else None,
                 link_id=(v.index + 1) % 256,
             )
             links.add(link)
@@ -121,7 +125,7 @@ class Gateway:
         }
         self.by_sysid = {v.sysid: v for v in self.vehicles.values()}
         vehicles = list(self.vehicles.values())
-        self.links = open_links(options, vehicles)
+        self.links = open_links(scenario.gateway, options, vehicles)
         self.waker = Waker()
         self.inbox = Inbox(self.waker)
         self.out = Outbox(self.links)
@@ -255,7 +259,7 @@ class Gateway:
     def _tick(self, now: float) -> None:
         """Wall-clock housekeeping: heartbeats, upload timeouts, parameter sync."""
         if now >= self._next_heartbeat_s:
-            period = self.options.heartbeat_period_s
+            period = HEARTBEAT_PERIOD_S
             late = now - self._next_heartbeat_s > period
             self._next_heartbeat_s = now + period if late else self._next_heartbeat_s + period
             self.feed.beat(now)
@@ -318,7 +322,8 @@ class Gateway:
 def main(ctx: NodeContext) -> int:
     """Run the gateway for ``ctx.vehicle_ids`` (default: every vehicle of the scenario)."""
     try:
-        options = gateway_options(ctx.scenario.gateway, ctx.options)
+        options = role_options(GatewayOptions, ctx)
+        options.rates_hz(), signing_key(ctx.scenario.gateway)  # refused before joining the bus
     except OptionError as exc:
         log.error("gateway: %s", exc)
         return 2

@@ -1,23 +1,6 @@
-"""The gateway's configuration: the scenario's ``[gateway]`` section plus ``--set`` options.
-
-Options (``plumeswarm node gateway --set KEY=VALUE``):
-
-- ``telemetry_hz``: default rate of the fast telemetry streams (per sim second);
-- ``rate.<MESSAGE>``: default rate of one stream, e.g. ``rate.ATTITUDE=10`` (0 turns it off);
-- ``bind_host``: address the UDP sockets bind (default: 127.0.0.1 when the GCS host is on
-  loopback, else 0.0.0.0);
-- ``gcs_bind_port``: local port of the shared GCS link (default 0: any free port; PX4 SITL uses
-  18570) — set it when a remote GCS should connect to the gateway;
-- ``api_bind_port_base``: local port of vehicle i's API link is this + i (default 0: any);
-- ``api_links``: ``on`` / ``off`` (default on): the per-vehicle API ports 14540 + i;
-- ``signed_links``: which links require MAVLink 2 signing when the scenario has a key:
-  ``all`` (default), ``gcs``, ``api`` or ``none``;
-- ``cmd_timeout_s``: how long a command waits for the autopilot's reply (default 1.5; MAVSDK
-  gives up after 3 × 0.5 s, QGC after about 3 s).
-
-The MAVLink 2 signing key comes from the scenario: ``[gateway] signing_key_file`` (a file
-holding 64 hex digits, readable by its owner only — the gateway refuses a key file that group
-or others may read or write) or, for tests, ``signing_key_hex`` inline.
+"""The gateway's options (``plumeswarm node gateway --set KEY=VALUE``, :class:`GatewayOptions`)
+over the scenario's ``[gateway]`` section, and its MAVLink 2 signing key. See
+docs/qgroundcontrol.md.
 """
 
 from __future__ import annotations
@@ -26,76 +9,58 @@ import ipaddress
 import re
 import stat
 from collections.abc import Mapping
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Literal, Self
 
 import msgspec
 
 from gcs_bridge.dialect import mavlink
 from gcs_bridge.telemetry import default_rates
-from swarmbus.options import OptionError, RoleOptions, parse_options
-from swarmbus.scenario import Gateway
+from swarmbus.options import OptionError, RoleOptions
+from swarmbus.scenario import Gateway, Scenario
 
 Port = Annotated[int, msgspec.Meta(ge=0, le=65535)]
 
 
-class GatewaySettings(RoleOptions, frozen=True, kw_only=True):
-    """The gateway role's options as given (``--set KEY=VALUE``); see the module docstring."""
+class GatewayOptions(RoleOptions, frozen=True, kw_only=True):
+    """The gateway role's options; the scenario's ``[gateway]`` gives the links' addresses."""
 
-    telemetry_hz: Annotated[float, msgspec.Meta(ge=0.01, le=1000.0)] = 4.0  # [gateway]'s
+    telemetry_hz: Annotated[float, msgspec.Meta(ge=0.01, le=1000.0)] = 4.0
+    """Default rate of the fast telemetry streams (per sim second; default: ``[gateway]``'s)."""
     rate: dict[str, Annotated[float, msgspec.Meta(ge=0.0, le=1000.0)]] = msgspec.field(
         default_factory=dict
     )
-    bind_host: str = ""  # empty: from the GCS host (loopback or not)
+    """One stream's rate, ``rate.<MESSAGE>=HZ`` (e.g. ``rate.ATTITUDE=10``; 0 turns it off)."""
+    bind_host: str = ""
+    """Address the UDP sockets bind (empty: 127.0.0.1 when the GCS host is on loopback, else
+    0.0.0.0)."""
     gcs_bind_port: Port = 0
+    """Local port of the shared GCS link (0: any free port; PX4 SITL uses 18570): set it when a
+    remote GCS should connect to the gateway."""
     api_bind_port_base: Port = 0
+    """Local port of vehicle i's API link is this + i (0: any)."""
     api_links: bool = True
+    """The per-vehicle API links (ports ``[gateway] api_port_base`` + i)."""
     signed_links: Literal["all", "gcs", "api", "none"] = "all"
+    """Which links require MAVLink 2 signing when the scenario has a key."""
     cmd_timeout_s: Annotated[float, msgspec.Meta(ge=0.01, le=60.0)] = 1.5
+    """How long a command waits for the autopilot's reply (MAVSDK gives up after 3 x 0.5 s,
+    QGC after about 3 s)."""
 
+    @classmethod
+    def defaults(cls, scenario: Scenario) -> Self:
+        return cls(telemetry_hz=scenario.gateway.telemetry_hz)
 
-_SIGNED = {"all": {"gcs", "api"}, "gcs": {"gcs"}, "api": {"api"}, "none": set[str]()}
+    def rates_hz(self) -> dict[int, float]:
+        """Every telemetry stream's rate, or :class:`OptionError` for a bad ``rate.<MESSAGE>``."""
+        return stream_rates(self.telemetry_hz, self.rate)
 
+    def bind_host_for(self, section: Gateway) -> str:
+        return self.bind_host or ("127.0.0.1" if _is_loopback(section.host) else "0.0.0.0")
 
-@dataclass(frozen=True)
-class GatewayOptions:
-    host: str
-    gcs_port: int
-    api_port_base: int
-    bind_host: str
-    gcs_bind_port: int = 0
-    api_bind_port_base: int = 0
-    api_links: bool = True
-    signing_key: bytes | None = None
-    signed_links: frozenset[str] = frozenset({"gcs", "api"})
-    cmd_timeout_s: float = 1.5
-    rates_hz: dict[int, float] = field(default_factory=dict)
-    heartbeat_period_s: float = 1.0
-
-    def signing_key_for(self, link_kind: str) -> bytes | None:
-        return self.signing_key if link_kind in self.signed_links else None
-
-
-def gateway_options(section: Gateway, settings: Mapping[str, str]) -> GatewayOptions:
-    """The scenario's ``[gateway]`` with ``settings`` over it, or :class:`OptionError`."""
-    given = parse_options(
-        GatewaySettings, settings, GatewaySettings(telemetry_hz=section.telemetry_hz)
-    )
-    default_bind = "127.0.0.1" if _is_loopback(section.host) else "0.0.0.0"
-    return GatewayOptions(
-        host=section.host,
-        gcs_port=section.gcs_port,
-        api_port_base=section.api_port_base,
-        bind_host=given.bind_host or default_bind,
-        gcs_bind_port=given.gcs_bind_port,
-        api_bind_port_base=given.api_bind_port_base,
-        api_links=given.api_links,
-        signing_key=signing_key(section),
-        signed_links=frozenset(_SIGNED[given.signed_links]),
-        cmd_timeout_s=given.cmd_timeout_s,
-        rates_hz=stream_rates(given.telemetry_hz, given.rate),
-    )
+    def signs(self, link_kind: str) -> bool:
+        """Whether a link of ``link_kind`` (``gcs``, ``api``) requires signing given a key."""
+        return self.signed_links in ("all", link_kind)
 
 
 def stream_rates(telemetry_hz: float, overrides: Mapping[str, float]) -> dict[int, float]:

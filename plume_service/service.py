@@ -54,7 +54,7 @@ from swarmbus.messages import (
     Vec3,
 )
 from swarmbus.node import NodeContext, NodeRuntime
-from swarmbus.options import OptionError, RoleOptions, parse_options
+from swarmbus.options import OptionError, RoleOptions, role_options
 from swarmbus.reqrep import Incoming, serve, serve_later
 from swarmbus.scenario import Scenario
 from swarmbus.session import SINGLE_THREAD_RUNTIME
@@ -369,7 +369,7 @@ def _start_state_publisher(
 def main(ctx: NodeContext) -> int:
     """Serve the scenario's plume until stopped."""
     try:
-        parse_options(PlumeOptions, ctx.options)
+        role_options(PlumeOptions, ctx)
     except OptionError as exc:
         log.error("plume: %s", exc)
         return 2

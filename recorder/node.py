@@ -23,10 +23,9 @@ import threading
 import time
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Self
 
 import msgspec
 import zenoh
@@ -41,7 +40,7 @@ from swarmbus.codec import encode
 from swarmbus.keys import Keys
 from swarmbus.messages import NodeHealth, PlumeInfo, PlumeInfoQuery, SimTick, VehicleState
 from swarmbus.node import NodeContext, NodeRuntime, package_version
-from swarmbus.options import OptionError, RoleOptions, parse_options
+from swarmbus.options import OptionError, RoleOptions, role_options
 from swarmbus.reqrep import RequestError, request
 from swarmbus.scenario import Scenario
 from swarmbus.view_feed import fetch_mesh, isosurface_queries
@@ -51,40 +50,32 @@ log = logging.getLogger(__name__)
 HealthPublisher = Callable[[str], None]
 
 
-class RecorderSettings(RoleOptions, frozen=True, kw_only=True):
+class RecorderOptions(RoleOptions, frozen=True, kw_only=True):
     """The recorder role's options (``--set KEY=VALUE``)."""
 
-    out: str = ""  # empty: plumeswarm-<world>-<UTC time>.mcap
+    out: Annotated[str, msgspec.Meta(min_length=1)] = "recording.mcap"
+    """The recording (default: ``plumeswarm-<world>-<UTC time>.mcap``, :meth:`defaults`)."""
     chunk_interval_s: Annotated[float, msgspec.Meta(gt=0.0, le=3600.0)] = DEFAULT_CHUNK_INTERVAL_S
     chunk_bytes: Annotated[int, msgspec.Meta(ge=1, le=2**31)] = DEFAULT_CHUNK_BYTES
     max_backlog: Annotated[int, msgspec.Meta(ge=1, le=10**9)] = 2_000_000
+    """Hard limit of queued messages (memory), then drop and count."""
+    behind_backlog: Annotated[int, msgspec.Meta(ge=1, le=10**9)] = 50_000
+    """Falling behind above this many queued messages …"""
+    behind_age_s: Annotated[float, msgspec.Meta(gt=0.0, le=3600.0)] = 2.0
+    """… or when the oldest written message waited this long."""
+    health_period_s: Annotated[float, msgspec.Meta(gt=0.0, le=3600.0)] = 1.0
     query_plume_info: bool = True
     resume: bool = False
+    """``out`` exists (a killed predecessor's): continue in its next segment."""
     foxglove: bool = True
+    """Also write the Foxglove channels (recorder.foxglove.scene)."""
     spool: bool = True
-
-
-@dataclass(frozen=True)
-class RecorderOptions:
-    out: Path
-    chunk_interval_s: float = DEFAULT_CHUNK_INTERVAL_S
-    chunk_bytes: int = DEFAULT_CHUNK_BYTES
-    max_backlog: int = 2_000_000  # hard limit of queued messages (memory), then drop + count
-    behind_backlog: int = 50_000  # "falling behind" above this many queued messages ...
-    behind_age_s: float = 2.0  # ... or when the oldest written message waited this long
-    health_period_s: float = 1.0
-    query_plume_info: bool = True
-    resume: bool = False  # ``out`` exists (a killed predecessor's): continue in its next segment
-    foxglove: bool = True  # also write the Foxglove channels (recorder.foxglove.scene)
-    spool: bool = True  # write-ahead spool (recorder.spool): a kill loses nothing received
+    """Write-ahead spool (recorder.spool): a kill loses nothing received."""
 
     @classmethod
-    def from_ctx(cls, ctx: NodeContext) -> RecorderOptions:
-        """``ctx.options`` resolved, or :class:`OptionError` naming the bad one."""
-        given = msgspec.structs.asdict(parse_options(RecorderSettings, ctx.options))
+    def defaults(cls, scenario: Scenario) -> Self:
         stamp = datetime.now(UTC).strftime("%Y%m%d-%H%M%S")
-        out = Path(given.pop("out") or f"plumeswarm-{ctx.scenario.world.name}-{stamp}.mcap")
-        return cls(out=out, **given)
+        return cls(out=f"plumeswarm-{scenario.world.name}-{stamp}.mcap")
 
 
 # key, payload, receive time (ns), publish time (ns, the sample's timestamp), is a query reply
@@ -514,10 +505,10 @@ GAP_TICK_WAIT_S = 10.0  # wall: a lockstep that does not tick (paused, gone) get
 GAP_SCAN_TIMEOUT_S = 60.0
 
 
-def run(ctx: NodeContext) -> int:
+def main(ctx: NodeContext) -> int:
     """Record until SIGINT/SIGTERM; returns the process exit code."""
     try:
-        opts = RecorderOptions.from_ctx(ctx)
+        opts = role_options(RecorderOptions, ctx)
     except OptionError as exc:
         log.error("recorder: %s", exc)
         return 2
@@ -529,13 +520,13 @@ def run(ctx: NodeContext) -> int:
         "started_utc": datetime.now(UTC).isoformat(),
         "scenario": msgspec.json.encode(ctx.scenario).decode(),
     }
-    out, previous = opts.out, None
+    out, previous = Path(opts.out), None
     if opts.resume:
-        previous, out = next_segment(opts.out)
+        previous, out = next_segment(out)
     if previous is not None:
         log.warning("%s exists (recorder restarted): continuing in %s", previous, out.name)
     try:
-        opts.out.parent.mkdir(parents=True, exist_ok=True)
+        out.parent.mkdir(parents=True, exist_ok=True)
         sink = McapSink(
             out,
             chunk_interval_s=opts.chunk_interval_s,

@@ -12,7 +12,7 @@ import logging
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Self
 
 import msgspec
 
@@ -35,7 +35,8 @@ from swarmbus.messages import (
     VehicleState,
 )
 from swarmbus.node import NodeContext, NodeRuntime
-from swarmbus.options import OptionError, RoleOptions, parse_options
+from swarmbus.options import OptionError, RoleOptions, role_options
+from swarmbus.scenario import Scenario
 
 log = logging.getLogger(__name__)
 
@@ -44,7 +45,7 @@ HANDSHAKE_REPUBLISH_S = 0.1  # tick 0 is re-sent until every participant has ans
 
 class PhysicsOptions(RoleOptions, frozen=True, kw_only=True):
     """The physics role's options (``--set KEY=VALUE``); mode, speed factor and checkpoint
-    period default to the scenario's ``[time]`` (:meth:`from_context`)."""
+    period default to the scenario's ``[time]`` (:meth:`defaults`)."""
 
     mode: SpeedMode = SpeedMode.LOCKSTEP
     speed_factor: Annotated[float, msgspec.Meta(gt=0.0, le=1e6)] = 1.0
@@ -59,15 +60,14 @@ class PhysicsOptions(RoleOptions, frozen=True, kw_only=True):
         return Path(self.checkpoint) if self.checkpoint.strip() else None
 
     @classmethod
-    def from_context(cls, ctx: NodeContext) -> PhysicsOptions:
-        """``ctx.options`` over the scenario's defaults, or :class:`OptionError`."""
-        time_ = ctx.scenario.time
-        defaults = cls(
+    def defaults(cls, scenario: Scenario) -> Self:
+        """The scenario's ``[time]`` settings."""
+        time_ = scenario.time
+        return cls(
             mode=SpeedMode(time_.mode),
             speed_factor=time_.speed_factor,
             checkpoint_period_s=time_.checkpoint_period_s,
         )
-        return parse_options(cls, ctx.options, defaults)
 
 
 class PhysicsNode:
@@ -355,7 +355,7 @@ class PhysicsNode:
 def main(ctx: NodeContext) -> int:
     """Entry point of the ``physics`` role."""
     try:
-        options = PhysicsOptions.from_context(ctx)
+        options = role_options(PhysicsOptions, ctx)
     except OptionError as exc:
         log.error("physics: %s", exc)
         return 2

@@ -46,7 +46,7 @@ from swarmbus.messages import (
     VehicleState,
 )
 from swarmbus.node import NodeContext, NodeRuntime
-from swarmbus.options import OptionError, RoleOptions, parse_options
+from swarmbus.options import OptionError, RoleOptions, role_options
 from swarmbus.scenario import Scenario
 from swarmbus.session import free_tcp_port
 from swarmbus.vehicle_types import load_vehicle_type
@@ -387,7 +387,7 @@ def render(scene: Scene, feed: Feed, meshes: MeshFetcher) -> int:
 
 def main(ctx: NodeContext) -> int:
     try:
-        opts = parse_options(ViewerOptions, ctx.options)
+        opts = role_options(ViewerOptions, ctx)
     except OptionError as exc:
         log.error("viewer: %s", exc)
         return 2

@@ -1,13 +1,14 @@
 """Role options: the ``--set KEY=VALUE`` settings the launcher and the CLI give a role process.
 
-A role declares its options as a :class:`RoleOptions` struct: names, types, defaults, and
-ranges as ``msgspec.Meta`` constraints. :func:`parse_options` turns the settings into that
-struct, or raises :class:`OptionError` naming the option and the bad value::
+A role declares its options as one :class:`RoleOptions` struct: names, types, defaults, and
+ranges as ``msgspec.Meta`` constraints, each field documented where it is declared (a role whose
+defaults come from the scenario overrides :meth:`RoleOptions.defaults`). Its ``main`` reads them
+with :func:`role_options`, which raises :class:`OptionError` naming the option and the bad value::
 
     class ViewerOptions(RoleOptions, frozen=True, kw_only=True):
         rate_hz: Annotated[float, msgspec.Meta(gt=0.0, le=25.0)] = 25.0
 
-    opts = parse_options(ViewerOptions, ["rate_hz=10"])
+    opts = role_options(ViewerOptions, ctx)  # ctx.options == {"rate_hz": "10"}
 
 Values are read as msgspec reads text in lax mode (``"1.5"`` a float, ``"3"`` an int); a
 ``bool`` also takes on/off and yes/no; a tuple or list takes comma-separated items; a ``dict``
@@ -18,10 +19,14 @@ list of the known ones.
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, Self, TypeVar
 
 import msgspec
 from msgspec import inspect as mi
+
+if TYPE_CHECKING:  # the node runtime opens Zenoh; a role's options need not
+    from swarmbus.node import NodeContext
+    from swarmbus.scenario import Scenario
 
 _TRUE = ("true", "on", "yes", "1")
 _FALSE = ("false", "off", "no", "0")
@@ -34,8 +39,21 @@ class OptionError(ValueError):
 class RoleOptions(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """Base of every role's options; each field needs a default."""
 
+    @classmethod
+    def defaults(cls, scenario: Scenario) -> Self:
+        """The options before any ``--set``: the declared defaults (a role whose defaults come
+        from ``scenario`` overrides this)."""
+        del scenario
+        return cls()
+
 
 T = TypeVar("T", bound=RoleOptions)
+
+
+def role_options(spec: type[T], ctx: NodeContext) -> T:
+    """A role's options: ``ctx.options`` over ``spec.defaults(ctx.scenario)``, or
+    :class:`OptionError`."""
+    return parse_options(spec, ctx.options, spec.defaults(ctx.scenario))
 
 
 def split_settings(items: Iterable[str]) -> dict[str, str]:

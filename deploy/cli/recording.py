@@ -11,6 +11,7 @@ from pathlib import Path
 import click
 
 from swarmbus.node import NodeContext
+from swarmbus.options import role_options
 from swarmbus.scenario import Scenario
 
 
@@ -23,17 +24,17 @@ def _context(
 
 def record(scenario: Scenario, connect: list[str], out: Path | None) -> int:
     """Run the recorder in the foreground until Ctrl-C / SIGTERM."""
-    from recorder.node import RecorderOptions, run
+    from recorder.node import RecorderOptions, main
 
     ctx = _context(scenario, connect, "recorder", {"out": str(out)} if out else {})
-    target = RecorderOptions.from_ctx(ctx).out
+    target = Path(role_options(RecorderOptions, ctx).out)
     ctx = _context(scenario, connect, "recorder", {"out": str(target)})
     problem = _unwritable(target)
     if problem:
         click.echo(f"plumeswarm: error: cannot record to {target}: {problem}", err=True)
         return 2
     click.echo(f"recording world {scenario.world.name!r} to {target} (Ctrl-C to stop)", err=True)
-    code = run(ctx)
+    code = main(ctx)
     if code == 0:
         click.echo(f"recorded {target}", err=True)
     else:

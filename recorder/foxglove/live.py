@@ -27,7 +27,7 @@ from recorder.foxglove.scene import FoxgloveScene, Out, channel_schema, encode
 from swarmbus.codec import MessageError, decode
 from swarmbus.messages import ConcentrationReading, PlumeState, SimTick
 from swarmbus.node import NodeContext, NodeRuntime
-from swarmbus.options import OptionError, RoleOptions, parse_options
+from swarmbus.options import OptionError, RoleOptions, role_options
 from swarmbus.view_feed import Feed, MeshFetcher, isosurface_queries
 
 log = logging.getLogger(__name__)
@@ -102,7 +102,7 @@ def convert(scene: FoxgloveScene, feed: Feed, meshes: MeshFetcher, channels: Liv
 
 def main(ctx: NodeContext) -> int:
     try:
-        opts = parse_options(LiveOptions, ctx.options)
+        opts = role_options(LiveOptions, ctx)
     except OptionError as exc:
         log.error("foxglove: %s", exc)
         return 2

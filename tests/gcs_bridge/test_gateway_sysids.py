@@ -12,7 +12,7 @@ import zenoh
 
 from deploy.scaling import scale_scenario
 from gcs_bridge.gateway import Gateway
-from gcs_bridge.options import gateway_options
+from gcs_bridge.options import GatewayOptions
 from swarmbus.keys import Keys
 from swarmbus.scenario import load_scenario
 from swarmbus.session import free_udp_block, open_session
@@ -33,7 +33,7 @@ def test_only_vehicles_with_a_sysid_are_served_and_beat(
         base, gateway=msgspec.structs.replace(base.gateway, gcs_port=gcs_port)
     )
     keys = Keys(scenario.world.name)
-    options = gateway_options(scenario.gateway, {"api_links": "off"})
+    options = GatewayOptions(telemetry_hz=scenario.gateway.telemetry_hz, api_links=False)
     ids = [v.id for v in scenario.vehicles]
     tokens = [session.liveliness().declare_token(keys.node_health(f"autopilot-{v}")) for v in ALIVE]
     caplog.set_level(logging.INFO, logger="gcs_bridge")

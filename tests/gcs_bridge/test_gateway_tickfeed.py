@@ -17,7 +17,7 @@ import zenoh
 
 from gcs_bridge.dialect import mavlink
 from gcs_bridge.gateway import Gateway
-from gcs_bridge.options import gateway_options
+from gcs_bridge.options import GatewayOptions
 from gcs_bridge.telemetry import StreamSchedule
 from swarmbus.codec import encode
 from swarmbus.keys import Keys
@@ -85,7 +85,7 @@ def test_states_come_from_ticks_only(
     path, gcs_port, _ = write_scenario(tmp_path / "sc.toml", len(IDS), telemetry_hz=10.0)
     scenario = load_scenario(path)
     keys = Keys(scenario.world.name)
-    options = gateway_options(scenario.gateway, {"api_links": "off"})
+    options = GatewayOptions(telemetry_hz=scenario.gateway.telemetry_hz, api_links=False)
     tokens = [session.liveliness().declare_token(keys.node_health(f"autopilot-{v}")) for v in IDS]
     pub = session.declare_publisher(keys.tick())
     with (
@@ -156,7 +156,7 @@ def test_a_ground_station_that_comes_late_gets_the_newest_telemetry(
     path, gcs_port, _ = write_scenario(tmp_path / "sc.toml", len(IDS), telemetry_hz=10.0)
     scenario = load_scenario(path)
     keys = Keys(scenario.world.name)
-    options = gateway_options(scenario.gateway, {"api_links": "off"})
+    options = GatewayOptions(telemetry_hz=scenario.gateway.telemetry_hz, api_links=False)
     tokens = [session.liveliness().declare_token(keys.node_health(f"autopilot-{v}")) for v in IDS]
     pub = session.declare_publisher(keys.tick())
     reading_pub = session.declare_publisher(keys.vehicle_concentration("uav1"))

@@ -7,10 +7,10 @@ import pytest
 from gcs_bridge import mission as ms
 from gcs_bridge.dialect import mavlink
 from gcs_bridge.modes import decode_custom_mode
-from gcs_bridge.options import gateway_options
+from gcs_bridge.options import GatewayOptions
 from gcs_bridge.vehicle import ArmIntent, Vehicle
 from swarmbus.messages import FlightMode, MissionItem, VehicleStatus
-from swarmbus.options import OptionError
+from swarmbus.options import OptionError, parse_options
 from swarmbus.scenario import Gateway, load_scenario
 
 SCENARIO = load_scenario()
@@ -72,13 +72,12 @@ def test_armable_says_why_not() -> None:
 
 
 def test_options_are_checked_and_rates_configurable() -> None:
-    o = gateway_options(
-        Gateway(), {"rate.ATTITUDE": "10", "signed_links": "gcs", "api_links": "off"}
-    )
-    assert o.rates_hz[mavlink.MAVLINK_MSG_ID_ATTITUDE] == 10.0
-    assert o.signed_links == frozenset({"gcs"}) and not o.api_links
-    assert o.bind_host == "127.0.0.1"
-    assert gateway_options(Gateway(host="192.0.2.7"), {}).bind_host == "0.0.0.0"
+    given = {"rate.ATTITUDE": "10", "signed_links": "gcs", "api_links": "off"}
+    o = parse_options(GatewayOptions, given)
+    assert o.rates_hz()[mavlink.MAVLINK_MSG_ID_ATTITUDE] == 10.0
+    assert o.signs("gcs") and not o.signs("api") and not o.api_links
+    assert o.bind_host_for(Gateway()) == "127.0.0.1"
+    assert GatewayOptions().bind_host_for(Gateway(host="192.0.2.7")) == "0.0.0.0"
     for bad in (
         {"nope": "1"},
         {"rate.NOT_A_MESSAGE": "1"},
@@ -88,4 +87,4 @@ def test_options_are_checked_and_rates_configurable() -> None:
         {"api_links": "maybe"},
     ):
         with pytest.raises(OptionError):
-            gateway_options(Gateway(), bad)
+            parse_options(GatewayOptions, bad).rates_hz()
