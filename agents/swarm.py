@@ -46,6 +46,7 @@ import numpy as np
 import numpy.typing as npt
 import zenoh
 
+from swarmbus.closeable import Closeable
 from swarmbus.codec import MessageError, decode
 from swarmbus.keys import AUTOPILOT_PREFIX, Keys, vehicle_of_autopilot
 from swarmbus.messages import (
@@ -300,7 +301,7 @@ class Subscription:
         self._swarm._unsubscribe(self._entry)
 
 
-class Swarm:
+class Swarm(Closeable):
     """A connection to one world's swarm. Use :meth:`connect` as a context manager."""
 
     def __init__(
@@ -363,12 +364,6 @@ class Swarm:
         except Exception:
             session.close()
             raise
-
-    def __enter__(self) -> Swarm:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
     def close(self) -> None:
         """Leave the bus (and free the clock, when this client held it); idempotent."""

@@ -22,13 +22,13 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Sequence
-from types import TracebackType
 
 from agents.build import AutopilotOptions, build_flight
 from agents.flight import Flight, take_readings
 from plume_service.from_scenario import field_from_scenario
 from plume_service.service import PlumeService
 from sim_world.world import World
+from swarmbus.closeable import Closeable
 from swarmbus.messages import CommandReply, ConcentrationReading, VehicleState
 from swarmbus.scenario import Scenario
 
@@ -37,7 +37,7 @@ log = logging.getLogger(__name__)
 StatesObserver = Callable[[Sequence[VehicleState]], None]
 
 
-class FusedRunner:
+class FusedRunner(Closeable):
     """A scenario's world, autopilots, sensors and plume in one process; a context manager.
 
     ``on_states`` sees every tick's states (tick 0 at construction). ``plume=False`` runs
@@ -80,17 +80,6 @@ class FusedRunner:
     # ------------------------------------------------------------------ lifecycle
     def close(self) -> None:
         self.world.close()
-
-    def __enter__(self) -> FusedRunner:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
     # ------------------------------------------------------------------ the client's side
     @property

@@ -23,7 +23,6 @@ import logging
 import select
 import threading
 import time
-from types import TracebackType
 from typing import Any
 
 import zenoh
@@ -50,6 +49,7 @@ from gcs_bridge.links import Link, LinkSet
 from gcs_bridge.options import GatewayOptions, signing_key
 from gcs_bridge.telemetry import wind_enu
 from gcs_bridge.vehicle import Vehicle
+from swarmbus.closeable import Closeable
 from swarmbus.codec import MessageError, decode
 from swarmbus.keys import Keys
 from swarmbus.messages import VehicleStatus
@@ -101,7 +101,7 @@ def open_links(section: GatewaySection, o: GatewayOptions, vehicles: list[Vehicl
     return links
 
 
-class Gateway:
+class Gateway(Closeable):
     """All vehicles' MAVLink systems, their links, and the bus plumbing behind them."""
 
     def __init__(
@@ -164,17 +164,6 @@ class Gateway:
         self.autopilots.close()
         self.links.close()
         self.waker.close()
-
-    def __enter__(self) -> Gateway:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
     # ------------------------------------------------------------------ the loop
     def run(self, stop: threading.Event) -> None:

@@ -27,10 +27,10 @@ import tempfile
 import time
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
-from types import TracebackType
 
 import msgspec
 
+from swarmbus.closeable import Closeable
 from swarmbus.messages import PlumeSample
 
 log = logging.getLogger(__name__)
@@ -172,7 +172,7 @@ def marker_path(checkpoint_path: Path) -> Path:
     return checkpoint_path.with_name(checkpoint_path.name + ".progress")
 
 
-class ProgressMarker:
+class ProgressMarker(Closeable):
     """The last published tick and its wall time, in a memory-mapped file (survives SIGKILL)."""
 
     def __init__(self, path: Path) -> None:
@@ -209,14 +209,3 @@ class ProgressMarker:
     def close(self) -> None:
         self._view.release()
         self._map.close()
-
-    def __enter__(self) -> ProgressMarker:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()

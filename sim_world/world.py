@@ -22,12 +22,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from types import TracebackType
 from typing import Any
 
 from sim_world.checkpoint import CheckpointError, VehicleCheckpoint, WorldCheckpoint, scratch_file
 from sim_world.geodesy import EnuToGeodetic
 from sim_world.pybullet_quiet import pb
+from swarmbus.closeable import Closeable
 from swarmbus.messages import VehicleState
 from swarmbus.scenario import Scenario
 from swarmbus.scenario import Vehicle as VehicleSpec
@@ -153,7 +153,7 @@ def _spin_motors(v: _Vehicle) -> tuple[float, float, float, float]:
     return wrench
 
 
-class World:
+class World(Closeable):
     """All vehicles of a scenario in one pybullet DIRECT client; use as a context manager."""
 
     def __init__(
@@ -230,17 +230,6 @@ class World:
         if self._client >= 0:
             pb.disconnect(physicsClientId=self._client)
             self._client = -1
-
-    def __enter__(self) -> World:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
     # ------------------------------------------------------------------ inputs
     @property

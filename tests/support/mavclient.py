@@ -21,6 +21,7 @@ from typing import Any
 
 from gcs_bridge.dialect import mavlink, new_mav, pack
 from gcs_bridge.links import signing_timestamp_now
+from swarmbus.closeable import Closeable
 from swarmbus.session import free_udp_block
 from tests.support.procs import REPO
 
@@ -101,7 +102,7 @@ def heard_all(seen: set[int], n: int, msg: Msg) -> bool:
     return len(seen) == n
 
 
-class MavClient:
+class MavClient(Closeable):
     """A listening MAVLink 2 endpoint that talks to every vehicle it hears."""
 
     def __init__(
@@ -131,12 +132,6 @@ class MavClient:
 
     def close(self) -> None:
         self.sock.close()
-
-    def __enter__(self) -> MavClient:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
     # -- raw I/O -------------------------------------------------------------------
     def pump(self, timeout_s: float = 0.05) -> None:
