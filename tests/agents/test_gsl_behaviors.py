@@ -25,9 +25,11 @@ from agents.behaviors.surge_cast import SurgeCast
 from agents.sensor import ConcentrationSensor
 from plume_service import GaussianPlume
 from swarmbus.dispersion import dispersion_curves
-from swarmbus.messages import ConcentrationReading, PeerReading, Setpoint, VehicleState
+from swarmbus.messages import PeerReading, Setpoint, VehicleState
 from swarmbus.plume_formula import gaussian_plume_g_m3, plume_frame
 from swarmbus.scenario import Scenario, Sensor, load_scenario
+from tests.support.messages_samples import reading as noiseless_reading
+from tests.support.messages_samples import vehicle_state
 
 SCENARIO = load_scenario()  # novak2018: wind 6 m/s from 270° (toward +x), source at the origin
 
@@ -53,31 +55,11 @@ def ctx(
 
 
 def state(x: float, y: float, t: float, vid: str = "uav1", z: float = 10.0) -> VehicleState:
-    return VehicleState(
-        vehicle_id=vid,
-        tick=0,
-        sim_time_s=t,
-        position_enu_m=(x, y, z),
-        velocity_enu_m_s=(0.0, 0.0, 0.0),
-        attitude_xyzw=(0.0, 0.0, 0.0, 1.0),
-        body_rates_rad_s=(0.0, 0.0, 0.0),
-        lat_deg=0.0,
-        lon_deg=0.0,
-        alt_m=z,
-        on_ground=False,
-    )
+    return vehicle_state(vid, 0, (x, y, z), sim_time_s=t, lat_deg=0.0, lon_deg=0.0, alt_m=z)
 
 
 def reading(x: float, y: float, t: float, value: float, peers: list[PeerReading] | None = None):
-    return ConcentrationReading(
-        vehicle_id="uav1",
-        sim_time_s=t,
-        position_enu_m=(x, y, 10.0),
-        available=True,
-        reported_g_m3=value,
-        true_g_m3=value,
-        peers=peers or [],
-    )
+    return noiseless_reading("uav1", t, (x, y, 10.0), value, peers)
 
 
 # ---------------------------------------------------------------- shared forward model

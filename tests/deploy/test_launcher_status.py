@@ -13,7 +13,6 @@ import zenoh
 from swarmbus.codec import encode
 from swarmbus.messages import (
     Clock,
-    ConcentrationReading,
     FlightMode,
     SpeedMode,
     VehicleState,
@@ -21,23 +20,12 @@ from swarmbus.messages import (
 )
 from swarmbus.node import NodeContext, NodeRuntime
 from swarmbus.scenario import load_scenario
+from tests.support.messages_samples import reading, vehicle_state
 from tests.support.procs import Network, run_cli
 
 
 def state(vid: str, x: float) -> VehicleState:
-    return VehicleState(
-        vehicle_id=vid,
-        tick=240,
-        sim_time_s=2.0,
-        position_enu_m=(x, 1.0, 10.0),
-        velocity_enu_m_s=(0.0, 0.0, 0.0),
-        attitude_xyzw=(0.0, 0.0, 0.0, 1.0),
-        body_rates_rad_s=(0.0, 0.0, 0.0),
-        lat_deg=47.0,
-        lon_deg=8.0,
-        alt_m=500.0,
-        on_ground=False,
-    )
+    return vehicle_state(vid, 240, (x, 1.0, 10.0), sim_time_s=2.0)
 
 
 @contextmanager
@@ -91,16 +79,7 @@ def stand_ins(net: Network) -> Iterator[None]:
                 )
                 ap.session.put(
                     keys.vehicle_concentration("uav1"),
-                    encode(
-                        ConcentrationReading(
-                            vehicle_id="uav1",
-                            sim_time_s=2.0,
-                            position_enu_m=(20.0, 1.0, 10.0),
-                            available=True,
-                            reported_g_m3=0.05,
-                            true_g_m3=0.05,
-                        )
-                    ),
+                    encode(reading("uav1", 2.0, (20.0, 1.0, 10.0), 0.05)),
                 )
 
         t = threading.Thread(target=publish, daemon=True)

@@ -24,6 +24,7 @@ from deploy.security import access_control, host_identities, secure_network
 from swarmbus.keys import Keys
 from swarmbus.session import NetworkConfig, free_tcp_port, open_session
 from tests.deploy.test_faults_cli import assert_one_clear_line, bad_file
+from tests.support.hosts import write_hosts
 from tests.support.procs import run_cli
 from tests.support.tls_probe import (
     door,
@@ -33,22 +34,6 @@ from tests.support.tls_probe import (
 )
 
 KEYS = Keys("default")
-ROLES = {"sim": ["router", "physics", "plume"], "agents": ["autopilot"], "gcs": ["gateway"]}
-
-
-def write_tls_hosts(path: Path, router: str, addresses: dict[str, str], certs: str) -> Path:
-    lines = [f'router = "{router}"', "", "[tls]", f'certs = "{certs}"', ""]
-    for host, roles in ROLES.items():
-        lines += [
-            "[[hosts]]",
-            f'name = "{host}"',
-            f'address = "{addresses[host]}"',
-            "roles = [" + ", ".join(f'"{r}"' for r in roles) + "]",
-            f'listen = ["tls/{addresses[host]}:0"]',
-            "",
-        ]
-    path.write_text("\n".join(lines))
-    return path
 
 
 def generate(hosts_file: Path, *extra: str) -> None:
@@ -61,9 +46,7 @@ def certified(tmp_path_factory: pytest.TempPathFactory) -> tuple[Deployment, Pat
     """A loopback hosts file with its certificates (by the CLI) and another CA's."""
     tmp = tmp_path_factory.mktemp("tls")
     router = f"tls/127.0.0.1:{free_tcp_port()}"
-    hosts_file = write_tls_hosts(
-        tmp / "hosts.toml", router, dict.fromkeys(ROLES, "127.0.0.1"), "certs"
-    )
+    hosts_file = write_hosts(tmp / "hosts.toml", router, tls_certs="certs")
     generate(hosts_file)
     dep = load_deployment(hosts_file)
     certs.generate(host_identities(dep), tmp / "other-ca", days=1)
@@ -98,8 +81,8 @@ def test_generated_certificates_carry_the_identities(certified: tuple[Deployment
 
 
 def test_acl_names_who_may_publish_what(tmp_path: Path) -> None:
-    hosts_file = write_tls_hosts(
-        tmp_path / "hosts.toml", "tls/10.0.0.1:7447", dict.fromkeys(ROLES, "10.0.0.1"), "c"
+    hosts_file = write_hosts(
+        tmp_path / "hosts.toml", "tls/10.0.0.1:7447", addresses="10.0.0.1", tls_certs="c"
     )
     acl = access_control(load_deployment(hosts_file), KEYS)
     assert acl["default_permission"] == "deny"

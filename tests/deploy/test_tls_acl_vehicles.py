@@ -29,6 +29,7 @@ from swarmbus.messages import (
     VehicleStatus,
 )
 from swarmbus.session import NetworkConfig, free_tcp_port, open_session
+from tests.support import hosts
 from tests.support.procs import REPO, run_cli, wait_until
 from tests.support.tls_probe import forged_puts_seen
 
@@ -36,18 +37,10 @@ KEYS = Keys("default")
 
 
 def write_hosts(path: Path, router: str, per_vehicle: bool = True, vehicles: bool = True) -> Path:
-    lines = [f'router = "{router}"', "", "[tls]", 'certs = "certs"', ""]
-    if per_vehicle:
-        lines += ["[acl]", "per_vehicle = true", ""]
-    hosts = {"sim": ["router", "physics", "plume"], "agents": ["autopilot"], "gcs": ["gateway"]}
-    for host, roles in hosts.items():
-        lines += ["[[hosts]]", f'name = "{host}"', 'address = "127.0.0.1"']
-        lines += ["roles = [" + ", ".join(f'"{r}"' for r in roles) + "]"]
-        if host == "agents" and vehicles:
-            lines += ['vehicles = ["uav1", "uav2"]']
-        lines += ['listen = ["tls/127.0.0.1:0"]', ""]
-    path.write_text("\n".join(lines))
-    return path
+    served = {"agents": ["uav1", "uav2"]} if vehicles else None
+    return hosts.write_hosts(
+        path, router, tls_certs="certs", per_vehicle_acl=per_vehicle, vehicles=served
+    )
 
 
 @pytest.fixture(scope="module")

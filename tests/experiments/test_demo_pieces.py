@@ -26,34 +26,17 @@ from swarmbus.messages import (
     VehicleStatus,
 )
 from swarmbus.scenario import load_scenario, parse_scenario
+from tests.support.messages_samples import reading as noiseless_reading
+from tests.support.messages_samples import vehicle_state
 from tests.support.procs import run_cli
 
 
 def state(vid: str, tick: int, x: float = 0.0) -> VehicleState:
-    return VehicleState(
-        vehicle_id=vid,
-        tick=tick,
-        sim_time_s=tick / 120,
-        position_enu_m=(x, 0.0, 10.0),
-        velocity_enu_m_s=(0.0, 0.0, 0.0),
-        attitude_xyzw=(0.0, 0.0, 0.0, 1.0),
-        body_rates_rad_s=(0.0, 0.0, 0.0),
-        lat_deg=47.0,
-        lon_deg=8.0,
-        alt_m=500.0,
-        on_ground=False,
-    )
+    return vehicle_state(vid, tick, (x, 0.0, 10.0))
 
 
 def reading(t: float, pos: tuple[float, float, float], value: float | None) -> ConcentrationReading:
-    return ConcentrationReading(
-        vehicle_id="uav1",
-        sim_time_s=t,
-        position_enu_m=pos,
-        available=value is not None,
-        reported_g_m3=value,
-        true_g_m3=value,
-    )
+    return noiseless_reading("uav1", t, pos, value)
 
 
 def status(**kw: object) -> VehicleStatus:

@@ -21,10 +21,11 @@ from gcs_bridge.options import GatewayOptions
 from gcs_bridge.telemetry import StreamSchedule
 from swarmbus.codec import encode
 from swarmbus.keys import Keys
-from swarmbus.messages import ConcentrationReading, SimTick, VehicleState
+from swarmbus.messages import SimTick, VehicleState
 from swarmbus.scenario import load_scenario
 from swarmbus.session import open_session
 from tests.support.mavclient import MavClient, write_scenario
+from tests.support.messages_samples import reading, vehicle_state
 from tests.support.procs import Network
 
 DT = 1.0 / 120.0
@@ -52,19 +53,10 @@ def test_schedule_window_is_exactly_where_wants_is_false() -> None:
 
 
 def state(vid: str, k: int, lat: float = 47.4) -> VehicleState:
-    return VehicleState(
-        vehicle_id=vid,
-        tick=k,
-        sim_time_s=k * DT,
-        position_enu_m=(0.01 * k, 0.0, 1.0),
-        velocity_enu_m_s=(1.2, 0.0, 0.0),
-        attitude_xyzw=(0.0, 0.0, 0.0, 1.0),
-        body_rates_rad_s=(0.0, 0.0, 0.0),
-        lat_deg=lat,
-        lon_deg=8.5,
-        alt_m=500.0,
-        on_ground=False,
-    )
+    return vehicle_state(
+        vid, k, (0.01 * k, 0.0, 1.0), sim_time_s=k * DT, velocity_enu_m_s=(1.2, 0.0, 0.0),
+        lat_deg=lat, lon_deg=8.5,
+    )  # fmt: skip
 
 
 def wait_matched(pub: zenoh.Publisher, timeout_s: float) -> None:
@@ -210,21 +202,14 @@ def test_a_ground_station_that_comes_late_gets_the_newest_telemetry(
                 assert pos.lat == 474_000_000 and pos.lon == 85_000_000
 
             wait_matched(reading_pub, 30.0)  # the gateway takes readings again
-            reading = ConcentrationReading(
-                vehicle_id="uav1",
-                sim_time_s=k * DT,
-                position_enu_m=(0.0, 0.0, 1.0),
-                available=True,
-                reported_g_m3=0.125,
-                true_g_m3=0.125,
-            )
-            reading_pub.put(encode(reading))
+            sent = reading("uav1", k * DT, (0.0, 0.0, 1.0), 0.125)
+            reading_pub.put(encode(sent))
             deadline = time.monotonic() + 30.0
             while not got("NAMED_VALUE_FLOAT", 1):
                 assert time.monotonic() < deadline, "no reading for the late ground station"
                 step()
             value = got("NAMED_VALUE_FLOAT", 1)[0]
-            assert value.time_boot_ms == int(reading.sim_time_s * 1000.0)
+            assert value.time_boot_ms == int(sent.sim_time_s * 1000.0)
             assert abs(value.value - 0.125) < 1e-6
     for t in tokens:
         t.undeclare()

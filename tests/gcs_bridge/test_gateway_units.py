@@ -53,21 +53,13 @@ from swarmbus.messages import (
     RejectCode,
     SetMode,
     Takeoff,
-    VehicleStatus,
 )
 from swarmbus.scenario import Failsafe, Origin
 from swarmbus.vehicle_types import load_vehicle_type
+from tests.support.messages_samples import vehicle_status as status
 
 ORIGIN = Origin()
 S2 = math.sqrt(0.5)
-
-
-def status(**kw: object) -> VehicleStatus:
-    base: dict[str, object] = dict(
-        vehicle_id="uav1", sim_time_s=1.0, mode=FlightMode.DISARMED, armed=False, landed=True
-    )
-    base.update(kw)
-    return VehicleStatus(**base)  # type: ignore[arg-type]
 
 
 # ----------------------------------------------------------------------------- modes

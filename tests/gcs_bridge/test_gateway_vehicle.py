@@ -9,19 +9,12 @@ from gcs_bridge.dialect import mavlink
 from gcs_bridge.modes import decode_custom_mode
 from gcs_bridge.options import GatewayOptions
 from gcs_bridge.vehicle import ArmIntent, Vehicle
-from swarmbus.messages import FlightMode, MissionItem, VehicleStatus
+from swarmbus.messages import FlightMode, MissionItem
 from swarmbus.options import OptionError, parse_options
 from swarmbus.scenario import Gateway, load_scenario
+from tests.support.messages_samples import vehicle_status as status
 
 SCENARIO = load_scenario()
-
-
-def status(**kw: object) -> VehicleStatus:
-    base: dict[str, object] = dict(
-        vehicle_id="uav1", sim_time_s=1.0, mode=FlightMode.DISARMED, armed=False, landed=True
-    )
-    base.update(kw)
-    return VehicleStatus(**base)  # type: ignore[arg-type]
 
 
 def vehicle() -> Vehicle:

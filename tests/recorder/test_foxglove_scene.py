@@ -51,6 +51,8 @@ from swarmbus.scenario import load_scenario, resolve_scenario_path
 from swarmbus.session import NetworkConfig, free_tcp_port, open_session
 from swarmbus.view_feed import Feed, MeshFetcher
 from tests.support.foxglove_decode import ChannelDecoder, topic_messages
+from tests.support.messages_samples import reading as noiseless_reading
+from tests.support.messages_samples import vehicle_state
 from tests.support.procs import REPO
 
 CONTROL_HZ = 120
@@ -59,30 +61,14 @@ NORTH_XYZW = (0.0, 0.0, math.sin(math.pi / 4), math.cos(math.pi / 4))  # nose (x
 
 
 def state(vid: str, k: int, x: float, xyzw: tuple[float, float, float, float]) -> VehicleState:
-    return VehicleState(
-        vehicle_id=vid,
-        tick=k,
-        sim_time_s=k / CONTROL_HZ,
-        position_enu_m=(x, 2.0, 10.0),
-        velocity_enu_m_s=(1.0, 0.0, 0.0),
-        attitude_xyzw=xyzw,
-        body_rates_rad_s=(0.0, 0.0, 0.0),
-        lat_deg=47.5,
-        lon_deg=8.5,
-        alt_m=510.0,
-        on_ground=False,
-    )
+    return vehicle_state(
+        vid, k, (x, 2.0, 10.0), control_hz=CONTROL_HZ, velocity_enu_m_s=(1.0, 0.0, 0.0),
+        attitude_xyzw=xyzw, lat_deg=47.5, lon_deg=8.5, alt_m=510.0,
+    )  # fmt: skip
 
 
 def reading(vid: str, t: float, value: float | None) -> ConcentrationReading:
-    return ConcentrationReading(
-        vehicle_id=vid,
-        sim_time_s=t,
-        position_enu_m=(1.0, 2.0, 10.0),
-        available=value is not None,
-        reported_g_m3=value,
-        true_g_m3=value,
-    )
+    return noiseless_reading(vid, t, (1.0, 2.0, 10.0), value)
 
 
 _decoder = ChannelDecoder()

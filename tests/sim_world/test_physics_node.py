@@ -245,6 +245,15 @@ def test_late_joiner_is_admitted(setup: tuple[NodeProcs, Watch], tmp_path: Path)
     wait_until(lambda: watch.first_tick_after(joined_from, "b", True), 60.0, "b admitted")
 
 
+def ticks_digest(watch: Watch, ticks: int) -> tuple[str, SimTick]:
+    """The SHA-256 of the encoded ticks 0..``ticks`` seen, and the last one (waits for them)."""
+    wait_until(lambda: len(watch.raw) == ticks + 1, 10.0, f"ticks 0..{ticks} at the subscriber")
+    digest = hashlib.sha256()
+    for k in range(ticks + 1):
+        digest.update(watch.raw[k])
+    return digest.hexdigest(), decode(watch.raw[ticks], SimTick)
+
+
 def stream_hash(
     procs: NodeProcs, watch: Watch, sc: Path, ticks: int, label: str, *script_args: str
 ) -> str:
@@ -260,13 +269,9 @@ def stream_hash(
     )  # fmt: skip
     assert exit_code(physics, "physics") == 0
     assert exit_code(script, "participant") == 0
-    wait_until(lambda: len(watch.raw) == ticks + 1, 10.0, f"ticks 0..{ticks} at the subscriber")
-    last = decode(watch.raw[ticks], SimTick)
+    digest, last = ticks_digest(watch, ticks)
     assert all(s.position_enu_m[2] > 1.0 for s in last.states), "vehicles should have climbed"
-    digest = hashlib.sha256()
-    for k in range(ticks + 1):
-        digest.update(watch.raw[k])
-    return digest.hexdigest()
+    return digest
 
 
 def test_two_runs_of_the_same_scenario_give_identical_state_streams(
@@ -448,13 +453,9 @@ def packed_flight_hash(
     presence = Presence(watch.session, KEYS)
     assert presence.wait_for(lambda alive: not any(n.startswith("autopilot-") for n in alive), 30)
     presence.close()
-    wait_until(lambda: len(watch.raw) == ticks + 1, 10.0, f"ticks 0..{ticks} at the subscriber")
-    last = decode(watch.raw[ticks], SimTick)
+    digest, last = ticks_digest(watch, ticks)
     assert all(s.position_enu_m[2] > 1.0 for s in last.states if s.vehicle_id in PACKED)
-    digest = hashlib.sha256()
-    for k in range(ticks + 1):
-        digest.update(watch.raw[k])
-    return digest.hexdigest()
+    return digest
 
 
 def test_four_vehicles_fly_identically_packed_in_one_process_or_one_process_each(

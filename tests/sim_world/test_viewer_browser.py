@@ -22,31 +22,19 @@ import zenoh
 from deploy.busview import BusView
 from swarmbus.codec import encode
 from swarmbus.messages import (
-    ConcentrationReading,
     SimTick,
     VehicleState,
 )
 from swarmbus.scenario import load_scenario
 from tests.support.browser import NEEDS_CHROMIUM, chromium_page, wait_for_scene_nodes
+from tests.support.messages_samples import reading, vehicle_state
 from tests.support.procs import REPO, Network, NodeProcs, keys_for, wait_until
 
 pytestmark = NEEDS_CHROMIUM
 
 
 def state(vid: str, tick: int, pos: tuple[float, float, float]) -> VehicleState:
-    return VehicleState(
-        vehicle_id=vid,
-        tick=tick,
-        sim_time_s=tick / 120,
-        position_enu_m=pos,
-        velocity_enu_m_s=(0.0, 0.0, 0.0),
-        attitude_xyzw=(0.0, 0.0, math.sin(0.2), math.cos(0.2)),
-        body_rates_rad_s=(0.0, 0.0, 0.0),
-        lat_deg=47.0,
-        lon_deg=8.0,
-        alt_m=500.0,
-        on_ground=False,
-    )
+    return vehicle_state(vid, tick, pos, attitude_xyzw=(0.0, 0.0, math.sin(0.2), math.cos(0.2)))
 
 
 @contextmanager
@@ -65,15 +53,8 @@ def flying_stand_ins(session: zenoh.Session) -> Iterator[None]:
                 a = tick / 60 + i * 2.0
                 pos = (30.0 + 10 * math.cos(a), 6.0 * (i - 1) + 6 * math.sin(a), 10.0)
                 states.append(state(v.id, tick, pos))
-                reading = ConcentrationReading(
-                    vehicle_id=v.id,
-                    sim_time_s=tick / 120,
-                    position_enu_m=pos,
-                    available=True,
-                    reported_g_m3=0.05 * (i + 1),
-                    true_g_m3=0.05 * (i + 1),
-                )
-                session.put(keys.vehicle_concentration(v.id), encode(reading))
+                sample = reading(v.id, tick / 120, pos, 0.05 * (i + 1))
+                session.put(keys.vehicle_concentration(v.id), encode(sample))
             tick_msg = SimTick(
                 tick=tick, sim_time_s=tick / 120, control_dt_s=1 / 120, states=states
             )

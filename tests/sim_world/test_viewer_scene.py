@@ -22,9 +22,10 @@ with warnings.catch_warnings():
     )
     from swarmbus.view_feed import Feed, default_levels, reading_colour, scene_bounds
 from swarmbus.codec import encode
-from swarmbus.messages import ConcentrationReading, PlumeMesh, PlumeState, SimTick, VehicleState
+from swarmbus.messages import PlumeMesh, PlumeState, SimTick, VehicleState
 from swarmbus.scenario import load_scenario, resolve_scenario_path
 from swarmbus.vehicle_types import load_vehicle_type
+from tests.support.messages_samples import reading, vehicle_state
 from tests.support.procs import Network, keys_for, wait_until
 
 
@@ -56,19 +57,8 @@ class FakeVis:
 
 
 def state(vid: str, tick: int, pos: tuple[float, float, float]) -> VehicleState:
-    return VehicleState(
-        vehicle_id=vid,
-        tick=tick,
-        sim_time_s=tick / 120,
-        position_enu_m=pos,
-        velocity_enu_m_s=(0.0, 0.0, 0.0),
-        attitude_xyzw=(0.0, 0.0, math.sin(math.pi / 4), math.cos(math.pi / 4)),
-        body_rates_rad_s=(0.0, 0.0, 0.0),
-        lat_deg=47.0,
-        lon_deg=8.0,
-        alt_m=500.0,
-        on_ground=False,
-    )
+    quarter_turn = (0.0, 0.0, math.sin(math.pi / 4), math.cos(math.pi / 4))
+    return vehicle_state(vid, tick, pos, attitude_xyzw=quarter_turn)
 
 
 @pytest.fixture
@@ -110,25 +100,11 @@ def test_states_pose_vehicles_and_grow_trails(scene: tuple[Scene, FakeVis]) -> N
 def test_readings_become_coloured_sized_markers(scene: tuple[Scene, FakeVis]) -> None:
     sc, vis = scene
     sc.update_states([state("uav2", 1, (30.0, 0.0, 10.0))], now_s=0.0)
-    low = ConcentrationReading(
-        vehicle_id="uav2",
-        sim_time_s=0.0,
-        position_enu_m=(30.0, 0.0, 10.0),
-        available=True,
-        reported_g_m3=0.01,
-        true_g_m3=0.01,
-    )
+    low = reading("uav2", 0.0, (30.0, 0.0, 10.0), 0.01)
     sc.update_reading(low)
     colour_low = vis.objects["/world/readings/uav2"][1].color
     size_low = vis.transforms["/world/readings/uav2"][0, 0]
-    high = ConcentrationReading(
-        vehicle_id="uav2",
-        sim_time_s=0.1,
-        position_enu_m=(30.0, 0.0, 10.0),
-        available=True,
-        reported_g_m3=0.2,
-        true_g_m3=0.2,
-    )
+    high = reading("uav2", 0.1, (30.0, 0.0, 10.0), 0.2)
     sc.update_reading(high)
     assert vis.objects["/world/readings/uav2"][1].color != colour_low
     assert vis.transforms["/world/readings/uav2"][0, 0] > size_low

@@ -1,22 +1,74 @@
-"""One valid example of every bus message, for round-trip and fuzz tests."""
+"""One valid example of every bus message (round-trip and fuzz tests), and the builders of a
+vehicle's state, status and reading for tests (:func:`vehicle_state`, :func:`vehicle_status`,
+:func:`reading`)."""
 
 from __future__ import annotations
 
+from bench.codec import STATE
 from swarmbus import messages as m
 
-STATE = m.VehicleState(
-    vehicle_id="uav1",
-    tick=42,
-    sim_time_s=0.35,
-    position_enu_m=(20.0, -4.0, 10.0),
-    velocity_enu_m_s=(1.0, 0.0, -0.1),
-    attitude_xyzw=(0.0, 0.0, 0.0, 1.0),
-    body_rates_rad_s=(0.01, -0.02, 0.0),
-    lat_deg=47.397742,
-    lon_deg=8.545859,
-    alt_m=498.0,
-    on_ground=False,
-)
+Vec3 = tuple[float, float, float]
+LEVEL_XYZW = (0.0, 0.0, 0.0, 1.0)
+
+
+def vehicle_state(
+    vehicle_id: str = "uav1",
+    tick: int = 0,
+    position_enu_m: Vec3 = (0.0, 0.0, 10.0),
+    *,
+    sim_time_s: float | None = None,
+    control_hz: float = 120.0,
+    velocity_enu_m_s: Vec3 = (0.0, 0.0, 0.0),
+    attitude_xyzw: tuple[float, float, float, float] = LEVEL_XYZW,
+    lat_deg: float = 47.0,
+    lon_deg: float = 8.0,
+    alt_m: float = 500.0,
+    on_ground: bool = False,
+) -> m.VehicleState:
+    """A vehicle's state in the air, still and level unless told (``sim_time_s``: ``tick /
+    control_hz`` unless given)."""
+    return m.VehicleState(
+        vehicle_id=vehicle_id,
+        tick=tick,
+        sim_time_s=tick / control_hz if sim_time_s is None else sim_time_s,
+        position_enu_m=position_enu_m,
+        velocity_enu_m_s=velocity_enu_m_s,
+        attitude_xyzw=attitude_xyzw,
+        body_rates_rad_s=(0.0, 0.0, 0.0),
+        lat_deg=lat_deg,
+        lon_deg=lon_deg,
+        alt_m=alt_m,
+        on_ground=on_ground,
+    )
+
+
+def vehicle_status(**fields: object) -> m.VehicleStatus:
+    """uav1's status at 1 s, disarmed on the ground, with ``fields`` changed."""
+    base: dict[str, object] = dict(
+        vehicle_id="uav1", sim_time_s=1.0, mode=m.FlightMode.DISARMED, armed=False, landed=True
+    )
+    return m.VehicleStatus(**(base | fields))  # type: ignore[arg-type]
+
+
+def reading(
+    vehicle_id: str,
+    sim_time_s: float,
+    position_enu_m: Vec3,
+    g_m3: float | None,
+    peers: list[m.PeerReading] | None = None,
+) -> m.ConcentrationReading:
+    """A noiseless reading of ``g_m3`` (None: unavailable)."""
+    return m.ConcentrationReading(
+        vehicle_id=vehicle_id,
+        sim_time_s=sim_time_s,
+        position_enu_m=position_enu_m,
+        available=g_m3 is not None,
+        reported_g_m3=g_m3,
+        true_g_m3=g_m3,
+        peers=peers or [],
+    )
+
+
 ITEM = m.MissionItem(x=40.0, y=-4.0, z=10.0, acceptance_radius_m=1.0, hold_s=2.0)
 
 SAMPLES: dict[type[m.Message], m.Message] = {

@@ -136,6 +136,20 @@ class ToyVehicle:
         )
 
 
+def toy_vehicles(scenario: Scenario, types: dict[str, VehicleType]) -> dict[str, ToyVehicle]:
+    """The vehicles of ``types`` (id → type) at their spawn points, in the scenario's wind."""
+    speed = scenario.wind.speed_m_s
+    toward = math.radians(270.0 - scenario.wind.from_deg)  # ENU angle the air moves to
+    wind = (speed * math.cos(toward), speed * math.sin(toward), 0.0)
+    return {
+        v.id: ToyVehicle(
+            types[v.id], v.id, v.spawn_enu_m, v.spawn_yaw_deg, wind, scenario.time.physics_hz
+        )
+        for v in scenario.vehicles
+        if v.id in types
+    }
+
+
 class ToyWorld:
     """Lockstep loop of autopilots against toy vehicles, ticking like the physics would."""
 
@@ -155,21 +169,9 @@ class ToyWorld:
         self.readings: dict[str, list[ConcentrationReading]] = {v: [] for v in autopilots}
         self.scenario = scenario
         self.autopilots = autopilots
-        speed = scenario.wind.speed_m_s
-        toward = math.radians(270.0 - scenario.wind.from_deg)  # ENU angle the air moves to
-        wind = (speed * math.cos(toward), speed * math.sin(toward), 0.0)
-        self.vehicles = {
-            v.id: ToyVehicle(
-                autopilots[v.id].vehicle_type,
-                v.id,
-                v.spawn_enu_m,
-                v.spawn_yaw_deg,
-                wind,
-                scenario.time.physics_hz,
-            )
-            for v in scenario.vehicles
-            if v.id in autopilots
-        }
+        self.vehicles = toy_vehicles(
+            scenario, {vid: ap.vehicle_type for vid, ap in autopilots.items()}
+        )
         self.tick = 0
         self.dt = 1.0 / scenario.time.control_hz
 
@@ -231,20 +233,8 @@ class BusToyPhysics:
         self.timeout_s = timeout_s
         self.plume = plume
         self._sample: tuple[int, list[float] | None] | None = None  # the plume's: tick, values
-        speed = scenario.wind.speed_m_s
-        toward = math.radians(270.0 - scenario.wind.from_deg)
-        wind = (speed * math.cos(toward), speed * math.sin(toward), 0.0)
-        self.vehicles = {
-            v.id: ToyVehicle(
-                load_vehicle_type(v.type),
-                v.id,
-                v.spawn_enu_m,
-                v.spawn_yaw_deg,
-                wind,
-                scenario.time.physics_hz,
-            )
-            for v in scenario.vehicles
-        }
+        types = {v.id: load_vehicle_type(v.type) for v in scenario.vehicles}
+        self.vehicles = toy_vehicles(scenario, types)
         self.dt = 1.0 / scenario.time.control_hz
         self.tick = 0
         self.error: str | None = None

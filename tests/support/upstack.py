@@ -8,6 +8,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -37,6 +38,15 @@ class Up:
                 poll_s=0.05,
             )
         )
+
+    def kill(self, name: str) -> tuple[int, float, int]:
+        """SIGKILL ``name``'s process group: (new pid, wall seconds until the supervisor
+        restarted it, kill time in ns since the epoch)."""
+        old = self.pids()[name]
+        t0, t0_ns = time.monotonic(), time.time_ns()
+        os.killpg(old, signal.SIGKILL)
+        new = self.restarted(name, old)
+        return new, time.monotonic() - t0, t0_ns
 
 
 def spawn_up(args: Sequence[str], out: Path) -> subprocess.Popen[bytes]:

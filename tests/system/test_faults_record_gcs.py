@@ -6,8 +6,6 @@ times are printed (-s)."""
 
 from __future__ import annotations
 
-import os
-import signal
 import threading
 import time
 import urllib.request
@@ -59,14 +57,6 @@ class Stack:
     gcs_port: int
     lock: threading.Lock = field(default_factory=threading.Lock)
     link_lost: dict[str, VehicleStatus] = field(default_factory=dict)  # first status saying so
-
-    def kill(self, name: str) -> tuple[int, float, int]:
-        """SIGKILL ``name``'s process group: (new pid, seconds to restart, kill time in ns)."""
-        old = self.up.pids()[name]
-        t0, t0_ns = time.monotonic(), time.time_ns()
-        os.killpg(old, signal.SIGKILL)
-        new = self.up.restarted(name, old)
-        return new, time.monotonic() - t0, t0_ns
 
     def health(self, name: str) -> NodeHealth | None:
         return self.view.snapshot().health.get(name)
@@ -153,7 +143,7 @@ def test_viewer_killed_serves_its_page_and_scene_again(stack: Stack) -> None:
     tick0 = wait_until(lambda: _viewer_tick(stack.health("viewer"), pid), 60.0, "viewer drawing")
     health = stack.health("viewer")
     assert health is not None and _serves_page(health)
-    new, restart_s, _ = stack.kill("viewer")
+    new, restart_s, _ = stack.up.kill("viewer")
     t0 = time.monotonic()
     tick1 = wait_until(
         lambda: _viewer_tick(stack.health("viewer"), new), 90.0, "the new viewer drawing ticks"
@@ -193,7 +183,7 @@ def test_recorder_killed_continues_in_a_new_segment_with_the_gap(
         "ticks in the first segment",
         poll_s=1.0,
     )
-    _, restart_s, kill_ns = stack.kill("recorder")
+    _, restart_s, kill_ns = stack.up.kill("recorder")
     t0 = time.monotonic()
     found = wait_until(
         lambda: _gap_and_new_ticks(seg1), 90.0, "the gap and new ticks in recording.1.mcap", 1.0

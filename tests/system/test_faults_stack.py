@@ -7,9 +7,7 @@ clock waits for the restarted one, which carries on where it was. Recovery times
 from __future__ import annotations
 
 import itertools
-import os
 import random
-import signal
 import threading
 import time
 from collections.abc import Iterator
@@ -78,14 +76,6 @@ class Stack:
 
         return wait_until(ask_once, 30.0, f"a reply from {vid}")
 
-    def kill(self, name: str) -> tuple[int, float]:
-        """SIGKILL ``name``; (new pid, wall seconds until the supervisor restarted it)."""
-        old = self.pids()[name]
-        t0 = time.monotonic()
-        os.killpg(old, signal.SIGKILL)
-        new = self.up.restarted(name, old)
-        return new, time.monotonic() - t0
-
     def tick_of(self, vid: str) -> int:
         with self.lock:
             return self.states[vid].tick if vid in self.states else -1
@@ -152,7 +142,7 @@ def test_plume_killed_the_clock_waits_and_no_reading_is_lost(stack: Stack) -> No
     reading unavailable, none missing."""
     wait_until(lambda: any(r.available for r in stack.readings[-10:]), 60.0, "an available reading")
     start = len(stack.readings)
-    _, restart_s = stack.kill("plume")
+    _, restart_s, _ = stack.up.kill("plume")
     t0 = time.monotonic()
     wait_until(
         lambda: sum(r.available for r in stack.readings[start:]) > 60 * len(VEHICLES),
@@ -182,7 +172,7 @@ def test_gateway_killed_clients_see_every_vehicle_again(stack: Stack) -> None:
         for sysid in (1, 2, 3):
             gcs.wait_type("HEARTBEAT", sysid, timeout_s=60.0)
         ticks = {v: stack.tick_of(v) for v in VEHICLES}
-        _, restart_s = stack.kill("gateway")
+        _, restart_s, _ = stack.up.kill("gateway")
         t0 = time.monotonic()
         gcs.log.clear()
         for sysid in (1, 2, 3):
@@ -300,7 +290,7 @@ def test_autopilot_killed_midflight_the_clock_waits_and_it_flies_on(stack: Stack
     without it (the bit-for-bit comparison with a run without the kill is
     test_faults_resume.py)."""
     z0 = stack.states["uav1"].position_enu_m[2]
-    _, restart_s = stack.kill("autopilot-uav1")
+    _, restart_s, _ = stack.up.kill("autopilot-uav1")
     t0 = time.monotonic()
     ticks = {v: stack.tick_of(v) for v in VEHICLES}
     wait_until(

@@ -22,6 +22,7 @@ from typing import Any
 import psutil
 import pytest
 
+from tests.support.hosts import write_hosts as write_hosts_file
 from tests.support.procs import REPO, wait_until
 
 pytestmark = pytest.mark.netns
@@ -102,21 +103,8 @@ def three_namespaces() -> Iterator[dict[str, str]]:
 
 def write_hosts(path: Path, roles: dict[str, list[str]], tls_certs: str | None = None) -> Path:
     """A hosts file; with ``tls_certs`` (a directory) every endpoint is ``tls/``."""
-    scheme = "tls" if tls_certs else "tcp"
-    lines = [f'router = "{ROUTER.replace("tcp/", f"{scheme}/", 1)}"', ""]
-    if tls_certs:
-        lines += ["[tls]", f'certs = "{tls_certs}"', ""]
-    for host, rs in roles.items():
-        lines += [
-            "[[hosts]]",
-            f'name = "{host}"',
-            f'address = "{ADDRESSES[host]}"',
-            "roles = [" + ", ".join(f'"{r}"' for r in rs) + "]",
-            f'listen = ["{scheme}/{ADDRESSES[host]}:0"]',
-            "",
-        ]
-    path.write_text("\n".join(lines))
-    return path
+    router = ROUTER.replace("tcp/", "tls/", 1) if tls_certs else ROUTER
+    return write_hosts_file(path, router, roles, ADDRESSES, tls_certs=tls_certs)
 
 
 class Hosts:
