@@ -1,28 +1,6 @@
-"""The architecture's own ceiling: the processes of a run doing no work but the lockstep.
-
-``plumeswarm bench scale --baseline`` measures every row twice, back to back: once with the
-real roles and once with these stand-ins in the same process topology (router, one "physics",
-the same N/K "autopilot" processes with the same node names and liveliness tokens, "plume",
-"gateway"), on the same Zenoh configuration. The stand-ins exchange messages of the sizes the
-real roles exchange and nothing else:
-
-- ``ceiling-physics`` publishes one ``SimTick`` holding N vehicle states per tick (with the
-  plume values of the previous sensor tick, as the physics does), waits until every vehicle's
-  command for that tick has arrived — and on a sensor tick the plume's sample too, when a plume
-  stand-in was there at the start — then publishes the next; ``sim/clock`` every 0.1 s of
-  wall time, so the bench measures both runs the same way. No pybullet.
-- ``ceiling-autopilot`` (one process per K vehicles, one Zenoh runtime thread as the
-  autopilot) answers each tick with one ``ActuatorBatch`` of K commands, puts each vehicle's
-  reading (N - 1 peers) on sensor ticks and its status twice a second. No control, no decoding
-  beyond the tick number.
-- ``ceiling-plume`` reads the sensor ticks (``sim/sensor``, which the stand-in physics puts as
-  the physics does) and answers each with a sample of N values;
-  ``ceiling-gateway`` subscribes to the ticks, statuses and readings the gateway subscribes to
-  and drops them.
-
-Every message is built once at start-up but for its tick number; what is left is the cost of
-the handshake itself: Python wake-ups, Zenoh's transport and routing, one put and one receive
-per process per tick.
+"""The architecture's own ceiling: stand-ins for the roles (``ceiling-physics``,
+``ceiling-autopilot``, ``ceiling-plume``, ``ceiling-gateway``) that do no work but the lockstep
+handshake, with messages of the real sizes. See docs/performance.md ("The ceiling").
 """
 
 from __future__ import annotations
@@ -31,6 +9,7 @@ import logging
 import os
 import threading
 import time
+from collections.abc import Callable, Iterable, Mapping, Sequence
 
 import zenoh
 
@@ -59,6 +38,44 @@ log = logging.getLogger(__name__)
 CLOCK_PERIOD_S = 0.1
 STATUS_PERIOD_S = 0.5
 ROTORS = 4
+
+
+def answer_ticks(
+    session: zenoh.Session,
+    keys: Keys,
+    node_name: str,
+    rotors: Mapping[str, Sequence[float]],
+    then: Callable[[int], None] | None = None,
+) -> zenoh.Subscriber[None]:
+    """Answer every ``sim/tick`` (in the callback) with one batch of ``rotors`` (vehicle →
+    rotor commands) on ``node_name``'s actuator key, then call ``then(tick)``."""
+    pub = session.declare_publisher(keys.autopilot_actuators(node_name))
+
+    def on_tick(sample: zenoh.Sample) -> None:
+        try:
+            tick = decode(sample.payload.to_bytes(), TickView).tick
+        except MessageError:
+            return
+        commands = [
+            ActuatorCommand(vehicle_id=v, tick=tick, rotor_commands=list(u))
+            for v, u in rotors.items()
+        ]
+        pub.put(encode(ActuatorBatch(tick=tick, commands=commands)))
+        if then is not None:
+            then(tick)
+
+    return session.declare_subscriber(keys.tick(), on_tick)
+
+
+def participant_tokens(
+    session: zenoh.Session, keys: Keys, vehicle_ids: Iterable[str], node_name: str = ""
+) -> list[zenoh.LivelinessToken]:
+    """One lockstep participant token per vehicle (``node_name``'s own runtime declares its)."""
+    return [
+        session.liveliness().declare_token(keys.node_health(autopilot_node(v)))
+        for v in vehicle_ids
+        if autopilot_node(v) != node_name
+    ]
 
 
 def _state(vid: str) -> VehicleState:
@@ -239,30 +256,17 @@ def autopilot_main(ctx: NodeContext) -> int:
     }
     with NodeRuntime(ctx, role="autopilot") as rt:
         session = rt.session
-        batch_pub = session.declare_publisher(keys.autopilot_actuators(ctx.name))
         reading_pubs = {v: session.declare_publisher(keys.vehicle_concentration(v)) for v in served}
         status_pubs = {v: session.declare_publisher(keys.vehicle_status(v)) for v in served}
 
-        def on_tick(sample: zenoh.Sample) -> None:
-            try:
-                tick = decode(sample.payload.to_bytes(), TickView).tick
-            except MessageError:
-                return
-            commands = [
-                ActuatorCommand(vehicle_id=v, tick=tick, rotor_commands=[0.0] * ROTORS)
-                for v in served
-            ]
-            batch_pub.put(encode(ActuatorBatch(tick=tick, commands=commands)))
+        def after(tick: int) -> None:
             if tick % period == 0:
                 for vid, pub in reading_pubs.items():
                     pub.put(readings[vid])
 
-        sub = session.declare_subscriber(keys.tick(), on_tick)
-        tokens = [
-            session.liveliness().declare_token(keys.node_health(autopilot_node(v)))
-            for v in served
-            if autopilot_node(v) != ctx.name
-        ]
+        rotors = {v: [0.0] * ROTORS for v in served}
+        sub = answer_ticks(session, keys, ctx.name, rotors, after)
+        tokens = participant_tokens(session, keys, served, ctx.name)
         rt.ready()
         while not rt.stop.wait(STATUS_PERIOD_S):
             for vid, pub in status_pubs.items():

@@ -15,15 +15,11 @@ import signal
 import sys
 import threading
 
-import zenoh
-
-from swarmbus.codec import MessageError, decode, encode
-from swarmbus.keys import Keys, autopilot_node, process_node
-from swarmbus.messages import ActuatorBatch, ActuatorCommand
+from bench.ceiling import answer_ticks, participant_tokens
+from swarmbus.keys import Keys, process_node
 from swarmbus.scenario import load_scenario
 from swarmbus.session import NetworkConfig, open_session
 from swarmbus.vehicle_types import VehicleType, load_vehicle_type
-from swarmbus.views import TickView
 
 G = 9.81
 
@@ -53,25 +49,9 @@ def main(argv: list[str] | None = None) -> int:
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     net = NetworkConfig(connect=[a.connect], listen=["tcp/127.0.0.1:0"])
     with open_session(net) as session:
-        pub = session.declare_publisher(
-            keys.autopilot_actuators(process_node("autopilot", a.vehicle))
-        )
-
-        def on_tick(sample: zenoh.Sample) -> None:
-            try:
-                tick = decode(sample.payload.to_bytes(), TickView).tick
-            except MessageError:
-                return
-            commands = [
-                ActuatorCommand(vehicle_id=v, tick=tick, rotor_commands=u)
-                for v, u in rotors.items()
-            ]
-            pub.put(encode(ActuatorBatch(tick=tick, commands=commands)))
-
-        sub = session.declare_subscriber(keys.tick(), on_tick)
-        tokens = [
-            session.liveliness().declare_token(keys.node_health(autopilot_node(v))) for v in rotors
-        ]
+        name = process_node("autopilot", a.vehicle)
+        sub = answer_ticks(session, keys, name, rotors)
+        tokens = participant_tokens(session, keys, rotors)
         stop.wait()
         sub.undeclare()
         for token in tokens:
