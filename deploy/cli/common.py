@@ -1,10 +1,12 @@
-"""What every ``plumeswarm`` command module shares: one-line failures and loading a scenario."""
+"""What every ``plumeswarm`` command module shares: one-line failures, loading a scenario, and the
+options several commands take."""
 
 from __future__ import annotations
 
 import sys
+from collections.abc import Callable
 from pathlib import Path
-from typing import NoReturn
+from typing import Any, NoReturn
 
 import click
 
@@ -46,3 +48,21 @@ def scenario_file(
 
         path = write_scenario(sc, run_dir / "scenario.toml")
     return sc, path
+
+
+Decorator = Callable[[Callable[..., Any]], Callable[..., Any]]
+
+connect_option: Decorator = click.option(
+    "--connect", multiple=True, help="Zenoh endpoint to connect to (repeatable)."
+)
+
+
+def vehicles_per_process_option(help_text: str | None = None) -> Decorator:
+    """``--vehicles-per-process N`` (at least 1, default 1)."""
+    return click.option(
+        "--vehicles-per-process",
+        type=click.IntRange(min=1),
+        default=1,
+        show_default=True,
+        help=help_text,
+    )

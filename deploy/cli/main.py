@@ -10,7 +10,14 @@ from typing import Any
 
 import click
 
-from deploy.cli.common import SET_OPT, fail, scenario_file, scenario_from
+from deploy.cli.common import (
+    SET_OPT,
+    connect_option,
+    fail,
+    scenario_file,
+    scenario_from,
+    vehicles_per_process_option,
+)
 from deploy.roles import BENCH_ROLES, ROLES, RoleUnavailable, role_entry
 from swarmbus.extras import missing_extra_message
 from swarmbus.scenario import Scenario
@@ -167,7 +174,7 @@ def scenario_schema() -> None:
 @SCENARIO_OPT
 @click.option("--vehicle", "vehicles", multiple=True, help="Vehicle id(s) this node serves.")
 @click.option("--name", default=None, help="Node name on the bus (default: derived from role).")
-@click.option("--connect", multiple=True, help="Zenoh endpoint to connect to (repeatable).")
+@connect_option
 @click.option("--listen", multiple=True, help="Zenoh endpoint to listen on (repeatable).")
 @click.option("--mode", type=click.Choice(["peer", "client", "router"]), default=None)
 @click.option("--set", "options", multiple=True, metavar="KEY=VALUE", help="Role option.")
@@ -255,13 +262,7 @@ def node(
 @click.option("--no-router", is_flag=True, help="Do not start a router (another host runs it).")
 @click.option("--hosts", "hosts_file", type=click.Path(path_type=Path), default=None)
 @click.option("--host", "host_name", default=None, help="This host's entry in --hosts.")
-@click.option(
-    "--vehicles-per-process",
-    type=click.IntRange(min=1),
-    default=1,
-    show_default=True,
-    help="Vehicles each autopilot process serves.",
-)
+@vehicles_per_process_option("Vehicles each autopilot process serves.")
 @click.option(
     "--stepped",
     is_flag=True,
@@ -442,7 +443,7 @@ def status(
 
 @cli.command()
 @SCENARIO_OPT
-@click.option("--connect", multiple=True, help="Zenoh endpoint to connect to (repeatable).")
+@connect_option
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None)
 def record(scenario: str | None, connect: tuple[str, ...], out: Path | None) -> None:
     """Record everything on the bus to an MCAP file (until Ctrl-C)."""
@@ -455,7 +456,7 @@ def record(scenario: str | None, connect: tuple[str, ...], out: Path | None) -> 
 @click.argument("file")
 @click.option("--speed", type=float, default=1.0, show_default=True, help="Time scale factor.")
 @SCENARIO_OPT
-@click.option("--connect", multiple=True, help="Zenoh endpoint to connect to (repeatable).")
+@connect_option
 @click.option("--wait-for", multiple=True, metavar="NODE", help="Start once NODE is on the bus.")
 @click.option("--recorded-by", default=None, metavar="NODE", help="Recorder to hand-shake with.")
 def replay(
@@ -557,7 +558,7 @@ def _int_list(ctx: click.Context, param: click.Parameter, value: str) -> tuple[i
 @bench.command("scale")
 @SCENARIO_OPT
 @click.option("--vehicles", default="1,2,4,8,16,32,64", callback=_int_list, show_default=True)
-@click.option("--vehicles-per-process", type=click.IntRange(min=1), default=1, show_default=True)
+@vehicles_per_process_option()
 @click.option("--state", "states", default="grounded,hovering,flying", show_default=True)
 @click.option("--seconds", type=click.FloatRange(min=0.5), default=8.0, show_default=True)
 @click.option("--no-gateway", is_flag=True, help="Leave the MAVLink gateway out.")
@@ -641,13 +642,7 @@ def bench_scale(
     "--ticks-per-step", type=click.IntRange(min=1), default=12, show_default=True,
     help="Control ticks per environment step.",
 )  # fmt: skip
-@click.option(
-    "--vehicles-per-process",
-    type=click.IntRange(min=1),
-    default=1,
-    show_default=True,
-    help="Bus backend: autopilot processes serve this many vehicles each.",
-)
+@vehicles_per_process_option("Bus backend: autopilot processes serve this many vehicles each.")
 @click.option(
     "--out",
     type=click.Path(file_okay=False, path_type=Path),
