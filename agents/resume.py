@@ -1,26 +1,6 @@
-"""Where an autopilot process keeps its snapshots, and which one a tick resumes from.
-
-With ``--set checkpoint=PATH`` (what ``plumeswarm up`` passes: ``<run dir>/<node>.state``) the
-process saves a :class:`~agents.snapshot.ProcessSnapshot` after every tick it answers (before
-the answer goes out) and after every command it handles, in ``PATH.0`` / ``PATH.1`` in turn;
-on the physics' checkpoint ticks (multiples of ``time.checkpoint_period_s``) it also keeps the
-snapshot of the tick before in ``PATH.ckpt.0`` / ``PATH.ckpt.1`` and in memory. The mission
-and fence lists those snapshots refer to are in ``PATH.blobs``, each appended once when it is
-first saved (:class:`~agents.snapshot.BlobLog`), so a tick's snapshot does not grow with them.
-
-Which snapshot a tick ``k`` resumes from:
-
-* a restarted process (no tick handled yet) takes a saved snapshot of tick ``k - 1`` and
-  handles ``k`` as the killed one would have; one of tick ``k`` itself (it had answered ``k``)
-  is restored and its answer sent again. The physics holds ``k`` for it (lockstep restarts);
-  after a physics restart too, ``k`` is the physics' checkpoint tick, whose ``k - 1`` snapshot
-  is in ``PATH.ckpt.*``;
-* a running process that sees the tick go back (the physics resumed from its checkpoint at
-  ``k``) restores its own snapshot of ``k - 1`` from memory and flies the replayed ticks again,
-  the same bits as the first time.
-
-Without a matching snapshot the process carries on as before (a restarted one takes an
-airborne vehicle back in HOLD; a running one flies on from where it was).
+"""Where an autopilot process keeps its snapshots (``--set checkpoint=PATH``) and which one a tick
+resumes from (:class:`StateKeeper`). See docs/agents.md ("Restarts: the autopilot resumes where
+it was").
 """
 
 from __future__ import annotations

@@ -1,34 +1,7 @@
-"""Snapshots of an autopilot's state, so a restarted autopilot carries on exactly where it was.
-
-A :class:`VehicleSnapshot` holds everything of one vehicle's :class:`~agents.autopilot.Autopilot`
-that influences its future: mode, arming, home, targets, the mission and its current item (and
-the hold timer of that item, and the climb of a mission started on the ground), the offboard
-setpoint, its time and the last offboard tick (yaw-rate setpoints integrate over it), the RTL
-phase and destination, the uploaded geofence zones and rally points, the orbit, the failsafe
-configuration (parameters may have been set) and its timers, the controller's integrators and
-derivative memory, the last state and estimate, the estimator's and the sensor's random
-generators, the sensor's lag, and the behaviour plug-in's state with its generator. Restoring
-it into a freshly built autopilot of the same scenario makes the next tick's command the same
-bits as the killed process would have sent (``tests/agents/test_agents_snapshot.py`` checks every
-attribute and the commands).
-
-A behaviour is saved with its ``snapshot()`` / ``restore(data)`` methods when it has them
-(``snapshot`` returns msgpack-encodable data; the behaviours in :mod:`agents.behaviors` get
-them from :class:`agents.behaviors.search.SavesState`), otherwise as its attributes (numbers,
-strings, tuples, lists, dicts, ``None``), which covers plain-data behaviours; its context's
-generator is saved separately. A
-behaviour whose state cannot be saved makes :func:`capture` raise :class:`SnapshotError`.
-
-:class:`SnapshotSlots` keeps the latest two records of a process in two files written in turn
-(one ``pwritev`` each, a CRC-32 over the record): a process killed in the middle of a write
-leaves the other file intact, and a reader takes the newest valid one. Nothing is pickled.
-
-Mission item lists and fence zone lists change only on an upload, which replaces the list (they
-are never changed in place), but a process saves a snapshot every tick. So a snapshot holds
-them by reference: each list is encoded once, named by a digest of its encoding and kept in
-:data:`BLOBS`; :class:`BlobLog` appends each new one to a log file once (before the first
-snapshot that refers to it is written) and gives them back to a restarted process. A tick's
-record is therefore the same size whatever the missions' lengths.
+"""Snapshots of an autopilot process's state (:func:`capture`, :func:`restore`), their two-slot
+files (:class:`SnapshotSlots`) and the by-reference mission and fence lists (:data:`BLOBS`,
+:class:`BlobLog`), so a restarted autopilot carries on with the same bits. See docs/agents.md
+("Restarts: the autopilot resumes where it was").
 """
 
 from __future__ import annotations

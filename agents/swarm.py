@@ -1,34 +1,6 @@
-"""``from agents import Swarm``: a client for swarm-algorithm researchers.
-
-::
-
-    with Swarm.connect(world="default") as sw:
-        sw.wait_until(lambda: len(sw.vehicles) == 3, 10.0, "three vehicles")
-        uav = sw.command("uav1")
-        uav.arm()
-        uav.takeoff(10.0)
-        sw.wait_until(lambda: sw.status("uav1").mode == "hold", 30.0, "uav1 hovering")
-        print(sw.reading("uav1"), sw.plume.concentration([[30.0, 0.0, 10.0]]))
-
-Latest state, status and reading of every vehicle are cached from the bus; ``subscribe`` adds
-callbacks (called on Zenoh's thread: keep them short). Every command raises a typed error when
-the vehicle refuses (:class:`CommandRejected`, with ``.code`` and ``.reason``) or does not
-answer (:class:`CommandTimeout`); every wait has a deadline (:class:`WaitTimeout`).
-
-Offboard setpoints are timed in simulated time (``failsafe.offboard_timeout_s``): in lockstep
-mode faster than real time, stream them fast enough, or use a behaviour plug-in instead.
-
-A world started with ``time.mode = "stepped"`` (``plumeswarm up --stepped``) moves only when a
-client steps it; the first client to call :meth:`Swarm.step` holds its clock until it closes::
-
-    with Swarm.connect() as sw:
-        sw.step(1)                      # the world is paused at tick 1
-        sw.command("uav1").arm()        # takes effect in the autopilot's step of tick 2
-        sw.command("uav1").takeoff(10.0)
-        sw.step_until(lambda: sw.status("uav1").mode == "hold", 30.0, "uav1 hovering")
-
-A command answered between two steps always takes effect on the next tick (docs/deploy.md,
-"Clock modes"), so the same script gives the same state stream, run after run.
+"""``from agents import Swarm``: a client for swarm-algorithm researchers: cached states,
+statuses and readings, typed commands and errors, waits with deadlines, and the stepped clock
+(:meth:`Swarm.step`). See docs/agents.md ("Swarm client", "Stepping the clock").
 """
 
 from __future__ import annotations

@@ -1,23 +1,5 @@
-"""``plumeswarm bench scale``: real-time factor and cost of the full stack against vehicle count.
-
-For every vehicle count N and every state (``grounded``: nothing is commanded; ``hovering``:
-arm + take off, then measure; ``flying``: arm + a looping square mission, then measure) it starts
-the whole stack (router, plume, physics, N autopilots — K per process —, gateway; no viewer) in
-lockstep on a free loopback port with the scenario scaled to N vehicles
-(:func:`deploy.scaling.scale_scenario`), waits until the state is reached, then measures for
-``seconds`` of wall time:
-
-- real-time factor and ticks/s from two ``sim/clock`` messages (sim time and tick advance over
-  the wall time between their arrivals);
-- CPU % per role (psutil: user + system time of every process of the role, children included,
-  over the window; 100 % = one core);
-- the 1-minute load average at the end of the window (the machine may be shared);
-- peak RSS per role (the role's processes summed, sampled every 0.5 s);
-- CPU milliseconds per tick per role (CPU seconds over the window / ticks in it): what a tick
-  costs, much less sensitive to a shared machine's load than the real-time factor.
-
-Rows go to ``DIR/scale.json``, a table to ``DIR/scale.md`` and plots to ``DIR/rtf.png`` and
-``DIR/cpu.png``. The bench's own session subscribes only to the clock and the statuses.
+"""``plumeswarm bench scale``: real-time factor, CPU and memory of the full stack against vehicle
+count, grounded, hovering and flying. See docs/performance.md ("What the bench does").
 """
 
 from __future__ import annotations

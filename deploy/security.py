@@ -1,33 +1,6 @@
-"""Identities, TLS settings and the access-control list of a deployment (hosts file).
-
-Every process of a host runs as the identity ``<role>.<host>`` (the common name of its
-certificate); the operator's tools on a host (``up``'s own session, ``demo --attach``,
-``status``) as ``operator.<host>``. Every process, the router included, enforces the same
-Zenoh ``access_control`` on its own links, so a direct peer-to-peer link is guarded as well as a
-link to the router:
-
-- default deny: a certificate of the deployment's CA whose common name is not one of the
-  deployment's identities can connect but nothing flows to or from it;
-- every identity may do everything on every key, except
-- publishing (put/delete) actuators (``autopilot/*/actuators``, the one actuator route) unless
-  it is an autopilot,
-- publishing the world (``sim/tick``, ``sim/sensor``, ``sim/clock``, ``vehicle/*/state``)
-  unless it is physics, and
-- publishing the plume's data (``field/sample``, the sensors' values, and ``field/state``)
-  unless it is the plume (roles configurable in ``[acl]``).
-
-With ``[acl] per_vehicle = true`` each autopilot process (one vehicle each) runs as its own
-identity ``autopilot-<vehicle>.<host>`` (its node name and host), which is not one of the
-members above: it may publish only its own actuator batch (``autopilot/autopilot-<vehicle>/
-actuators``), its own vehicle's status and concentration readings and its own health, declare
-only its own liveliness token, serve and answer only its own vehicle's commands, and subscribe
-and query anywhere. A forged sample on another vehicle's key from it is dropped at the first
-process it reaches (the router, or a peer on a direct link); a command for another vehicle
-inside its own batch is dropped by the physics, which accepts on a one-vehicle node's key only
-that vehicle's commands.
-
-The router's identity is not denied: it forwards what others publish, and checked them when
-they arrived.
+"""Identities (``<role>.<host>``, ``operator.<host>``, per-vehicle ``autopilot-<id>.<host>``), TLS
+settings and the Zenoh access-control list of a deployment's hosts file. See docs/deploy.md
+("Over mutual TLS, with access control").
 """
 
 from __future__ import annotations

@@ -1,19 +1,6 @@
-"""``plumeswarm node gateway``: the MAVLink 2 gateway between ground stations and the bus.
-
-Every vehicle of the scenario that has a sysid is one MAVLink system (its sysid, component 1,
-PX4 conventions), reachable on the shared GCS link and on its own API link; MAVLink addresses
-systems 1–254 only, so a larger scenario's other vehicles are not served (one line says so).
-The gateway talks to autopilots only over the bus contract: it subscribes ``sim/tick`` (every
-vehicle's state) and ``vehicle/*/{status,concentration}`` and sends ``Command`` queries to
-``vehicle/<id>/cmd``, answering MAVLink with the autopilot's real result.
-
-One thread runs the loop (UDP sockets + a self-pipe woken by Zenoh callbacks), so MAVLink
-encoding, sequence numbers and per-vehicle protocol state never race. :class:`Gateway` is that
-loop and the wiring: it builds the links (:class:`~gcs_bridge.links.LinkSet`), the way out
-(:class:`~gcs_bridge.core.Outbox`), the autopilots' command queues
-(:class:`~gcs_bridge.core.Autopilots`), the telemetry feed (:mod:`gcs_bridge.feed`) and one
-handler object per MAVLink microservice (``handle_*.py``), each handed what it needs, and routes
-every MAVLink message to its handler.
+"""``plumeswarm node gateway``: the MAVLink 2 gateway between ground stations and the bus
+(:class:`Gateway`: the one loop and its wiring); options in
+:class:`~gcs_bridge.options.GatewayOptions`. See docs/qgroundcontrol.md ("Inside the gateway").
 """
 
 from __future__ import annotations

@@ -1,20 +1,7 @@
-"""``plumeswarm node plume``: the concentration field served on the bus.
-
-The sensors' values: the service is a lockstep participant of the sensor ticks. It reads them on
-``sim/sensor`` (where the physics publishes each sensor tick of ``sim/tick`` again) and answers
-each with the concentration at the position of every state of that tick, at its sim time, as a
-``FieldSample`` on ``field/sample``; the physics waits for it as it waits for the autopilots'
-commands and carries it to the autopilots in the next tick (a tick published again gets the same
-answer again).
-
-Three queryables for everyone else: ``plume/concentration`` (a batch of points → values in
-one reply, at the query's ``sim_time_s`` for the time-dependent filament and puff models),
-``plume/info`` (model, parameters, sources, wind, σ fits used outside their published range)
-and ``plume/mesh`` (isosurface at a level). For filaments and puffs it also follows the
-physics' ``sim/clock`` and publishes their state on ``field/state`` every
-``plume.state_period_s`` of sim time.
-A malformed query gets an :class:`~swarmbus.messages.ErrorReply` naming the bad field, and the
-service keeps serving.
+"""``plumeswarm node plume``: the concentration field on the bus: the sensors' values of every
+sensor tick (a lockstep participant, :class:`SensorAnswers`) and the ``plume/concentration``,
+``plume/info`` and ``plume/mesh`` queryables. See docs/plume.md and docs/architecture.md ("How a
+tick flows").
 """
 
 from __future__ import annotations

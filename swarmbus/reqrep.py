@@ -1,30 +1,7 @@
-"""Request/reply on the bus: one way to ask a queryable and one way to serve one.
-
-A request ends in exactly one of these outcomes:
-
-- **the reply**, decoded as the type the caller expects;
-- **a refusal** (:class:`Refused`): the server answered with an
-  :class:`~swarmbus.messages.ErrorReply` naming the field of the request that was wrong and why.
-  A server refuses a request it cannot take (undecodable, out of range, not now); a command the
-  autopilot takes but declines (not armable, no mission) is a reply,
-  ``CommandReply(accepted=False, code=…)``, not a refusal;
-- **no reply** (:class:`NoReply`): nobody answered within the timeout (nothing serves the key,
-  the server died or was too slow). Zenoh's own error replies, such as its ``Timeout``, are no
-  reply: only an ``ErrorReply`` is a refusal;
-- a reply that is not the expected type (:class:`BadReply`): a server of another version.
-
-Clients: :func:`request` blocks and returns the reply or raises. :func:`ask` does not block: it
-returns a :class:`Pending` whose outcome comes with the first reply (or the timeout), waited for
-with :meth:`Pending.outcome` or handed to ``on_done`` on Zenoh's thread; loops that must not
-block (the gateway's, the physics' clock) use it.
-
-Servers: :func:`serve` declares a queryable that decodes each request, calls the handler and
-replies with its encoded result. An undecodable request, or a ``ValueError`` raised by the
-handler (:class:`Refused` and :class:`~swarmbus.codec.MessageError` name their field; any
-other names none), is answered with an ``ErrorReply``: a refusal means the same everywhere.
-:func:`serve_later` is the same for a server that answers later or on another thread (a
-stepped clock's grant, a mesh computed by a worker): its callback gets an :class:`Incoming` to
-answer once.
+"""Request/reply on the bus: one way to ask a queryable (:func:`request`, :func:`ask`) and one way
+to serve one (:func:`serve`, :func:`serve_later`); a request ends in a reply, a refusal
+(:class:`Refused`), no reply (:class:`NoReply`) or a bad reply (:class:`BadReply`). See
+docs/bus.md ("Request and reply").
 """
 
 from __future__ import annotations
