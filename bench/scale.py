@@ -200,10 +200,12 @@ class RoleUsage:
 
 
 # ---------------------------------------------------------------------------- one case
-def drive(launcher: Launcher, sc: Scenario, state: str, deadline: float) -> None:
+def drive(session: zenoh.Session, sc: Scenario, state: str, deadline: float) -> None:
+    """Command every vehicle of ``sc`` into ``state`` (``grounded``: nothing; ``hovering``: arm and
+    take off; ``flying``: a looping square mission), each command retried until ``deadline``."""
     keys = Keys(sc.world.name)
     for k, v in enumerate(sc.vehicles):
-        uav = VehicleCommander(launcher.session, keys, v.id, COMMAND_TIMEOUT_S)
+        uav = VehicleCommander(session, keys, v.id, COMMAND_TIMEOUT_S)
         commands: list[Command] = []
         if state == "hovering":
             commands = [Arm(), Takeoff(altitude_m=flight_altitude(sc, k))]
@@ -265,7 +267,7 @@ def run_case(
         watch.wait(lambda w: len(w.status) >= len(ids), deadline, "every vehicle's status")
         watch.next_clock(time.monotonic(), deadline)
         if not ceiling:
-            drive(launcher, sc, state, deadline)
+            drive(launcher.session, sc, state, deadline)
         if state != "grounded" and not ceiling:
             watch.wait(_airborne(ids), deadline, "every vehicle airborne")
         time.sleep(WARMUP_S)

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import os
-import threading
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 
@@ -16,12 +15,11 @@ from swarmbus.messages import (
     FlightMode,
     SpeedMode,
     VehicleState,
-    VehicleStatus,
 )
 from swarmbus.node import NodeContext, NodeRuntime
 from swarmbus.scenario import load_scenario
-from tests.support.messages_samples import reading, vehicle_state
-from tests.support.procs import Network, run_cli
+from tests.support.messages_samples import reading, vehicle_state, vehicle_status
+from tests.support.procs import Network, repeating, run_cli
 
 
 def state(vid: str, x: float) -> VehicleState:
@@ -32,7 +30,6 @@ def state(vid: str, x: float) -> VehicleState:
 def stand_ins(net: Network) -> Iterator[None]:
     """A 'physics' and an 'autopilot-uav1' node publishing until the block ends."""
     sc = load_scenario()
-    stop = threading.Event()
     with ExitStack() as stack:
         phys = stack.enter_context(
             NodeRuntime(NodeContext(sc, net.client, "physics"), "physics", install_signals=False)
@@ -48,47 +45,27 @@ def stand_ins(net: Network) -> Iterator[None]:
         ap.ready()
         keys = phys.keys
 
-        def publish() -> None:
-            s: zenoh.Session = phys.session
-            while not stop.wait(0.05):
-                s.put(
-                    keys.clock(),
-                    encode(
-                        Clock(
-                            tick=240,
-                            sim_time_s=2.0,
-                            mode=SpeedMode.LOCKSTEP,
-                            speed_factor=1.0,
-                            real_time_factor=7.5,
-                        )
-                    ),
-                )
-                for i, vid in enumerate(v.id for v in sc.vehicles):
-                    s.put(keys.vehicle_state(vid), encode(state(vid, 20.0 + i)))
-                ap.session.put(
-                    keys.vehicle_status("uav1"),
-                    encode(
-                        VehicleStatus(
-                            vehicle_id="uav1",
-                            sim_time_s=2.0,
-                            mode=FlightMode.MISSION,
-                            armed=True,
-                            landed=False,
-                        )
-                    ),
-                )
-                ap.session.put(
-                    keys.vehicle_concentration("uav1"),
-                    encode(reading("uav1", 2.0, (20.0, 1.0, 10.0), 0.05)),
-                )
+        clock = Clock(
+            tick=240,
+            sim_time_s=2.0,
+            mode=SpeedMode.LOCKSTEP,
+            speed_factor=1.0,
+            real_time_factor=7.5,
+        )
+        status = vehicle_status(sim_time_s=2.0, mode=FlightMode.MISSION, armed=True, landed=False)
 
-        t = threading.Thread(target=publish, daemon=True)
-        t.start()
-        try:
-            yield
-        finally:
-            stop.set()
-            t.join(5)
+        def publish() -> None:
+            phys.session.put(keys.clock(), encode(clock))
+            for i, vid in enumerate(v.id for v in sc.vehicles):
+                phys.session.put(keys.vehicle_state(vid), encode(state(vid, 20.0 + i)))
+            ap.session.put(keys.vehicle_status("uav1"), encode(status))
+            ap.session.put(
+                keys.vehicle_concentration("uav1"),
+                encode(reading("uav1", 2.0, (20.0, 1.0, 10.0), 0.05)),
+            )
+
+        stack.enter_context(repeating(0.05, publish))
+        yield
 
 
 def test_status_json_has_the_documented_shape(network: tuple[Network, zenoh.Session]) -> None:

@@ -8,6 +8,8 @@ from __future__ import annotations
 import random
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -70,9 +72,13 @@ def wait_matched(pub: zenoh.Publisher, timeout_s: float) -> None:
         time.sleep(0.01)
 
 
-def test_states_come_from_ticks_only(
+@contextmanager
+def fed_by_ticks(
     network: tuple[Network, zenoh.Session], tmp_path: Path
-) -> None:
+) -> Iterator[tuple[Gateway, Keys, int, zenoh.Publisher]]:
+    """A gateway (no API links) whose vehicles' autopilots are alive (the test session's tokens)
+    and whose ticks come from the test's publisher, matched: the gateway, keys, GCS port and
+    publisher."""
     net, session = network
     path, gcs_port, _ = write_scenario(tmp_path / "sc.toml", len(IDS), telemetry_hz=10.0)
     scenario = load_scenario(path)
@@ -80,14 +86,27 @@ def test_states_come_from_ticks_only(
     options = GatewayOptions(telemetry_hz=scenario.gateway.telemetry_hz, api_links=False)
     tokens = [session.liveliness().declare_token(keys.node_health(f"autopilot-{v}")) for v in IDS]
     pub = session.declare_publisher(keys.tick())
+    try:
+        with (
+            open_session(net.client) as gw_session,
+            Gateway(scenario, options, IDS, gw_session, keys) as gw,
+        ):
+            assert gw._presence is not None
+            assert gw._presence.wait_for(lambda a: {f"autopilot-{v}" for v in IDS} <= a, 30.0)
+            wait_matched(pub, 30.0)  # the gateway's tick subscription reached the publisher
+            yield gw, keys, gcs_port, pub
+    finally:
+        for t in tokens:
+            t.undeclare()
+
+
+def test_states_come_from_ticks_only(
+    network: tuple[Network, zenoh.Session], tmp_path: Path
+) -> None:
     with (
-        open_session(net.client) as gw_session,
-        Gateway(scenario, options, IDS, gw_session, keys) as gw,
+        fed_by_ticks(network, tmp_path) as (gw, _, gcs_port, pub),
         MavClient(gcs_port) as client,
     ):
-        assert gw._presence is not None
-        assert gw._presence.wait_for(lambda a: {f"autopilot-{v}" for v in IDS} <= a, 30.0)
-        wait_matched(pub, 30.0)  # the gateway's tick subscription reached the publisher
 
         def run(ticks: range, broken: int) -> None:
             for k in ticks:
@@ -133,8 +152,6 @@ def test_states_come_from_ticks_only(
         run(range(0, 30), broken=-1)  # a new simulation: the streams start again
         again = [m.time_boot_ms for m in client.logged("GLOBAL_POSITION_INT", 1)]
         assert again[:3] == [0, 100, 200], again
-    for t in tokens:
-        t.undeclare()
 
 
 @pytest.mark.skipif(sys.platform != "linux", reason="refusals are read with Linux's IP_RECVERR")
@@ -144,22 +161,10 @@ def test_a_ground_station_that_comes_late_gets_the_newest_telemetry(
     """Nobody listens on the GCS port at first (the kernel refuses what the gateway sends), so
     the gateway builds no telemetry and takes no readings; a ground station that starts
     listening mid-run gets the newest state, and readings again."""
-    net, session = network
-    path, gcs_port, _ = write_scenario(tmp_path / "sc.toml", len(IDS), telemetry_hz=10.0)
-    scenario = load_scenario(path)
-    keys = Keys(scenario.world.name)
-    options = GatewayOptions(telemetry_hz=scenario.gateway.telemetry_hz, api_links=False)
-    tokens = [session.liveliness().declare_token(keys.node_health(f"autopilot-{v}")) for v in IDS]
-    pub = session.declare_publisher(keys.tick())
-    reading_pub = session.declare_publisher(keys.vehicle_concentration("uav1"))
+    _, session = network
     k = 0
-    with (
-        open_session(net.client) as gw_session,
-        Gateway(scenario, options, IDS, gw_session, keys) as gw,
-    ):
-        assert gw._presence is not None
-        assert gw._presence.wait_for(lambda a: {f"autopilot-{v}" for v in IDS} <= a, 30.0)
-        wait_matched(pub, 30.0)
+    with fed_by_ticks(network, tmp_path) as (gw, keys, gcs_port, pub):
+        reading_pub = session.declare_publisher(keys.vehicle_concentration("uav1"))
         wait_matched(reading_pub, 30.0)
 
         def step() -> None:
@@ -211,5 +216,3 @@ def test_a_ground_station_that_comes_late_gets_the_newest_telemetry(
             value = got("NAMED_VALUE_FLOAT", 1)[0]
             assert value.time_boot_ms == int(sent.sim_time_s * 1000.0)
             assert abs(value.value - 0.125) < 1e-6
-    for t in tokens:
-        t.undeclare()

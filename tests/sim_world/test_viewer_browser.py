@@ -7,10 +7,10 @@ PLUMESWARM_SAVE_SCREENSHOT=1.
 
 from __future__ import annotations
 
+import itertools
 import math
 import os
 import shutil
-import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -28,7 +28,7 @@ from swarmbus.messages import (
 from swarmbus.scenario import load_scenario
 from tests.support.browser import NEEDS_CHROMIUM, chromium_page, wait_for_scene_nodes
 from tests.support.messages_samples import reading, vehicle_state
-from tests.support.procs import REPO, Network, NodeProcs, keys_for, wait_until
+from tests.support.procs import REPO, Network, NodeProcs, keys_for, repeating, wait_until
 
 pytestmark = NEEDS_CHROMIUM
 
@@ -42,31 +42,22 @@ def flying_stand_ins(session: zenoh.Session) -> Iterator[None]:
     """Physics' ticks and the autopilots' readings: vehicles circling inside the plume."""
     keys = keys_for()
     sc = load_scenario()
-    stop = threading.Event()
+    ticks = itertools.count(1)
 
     def fly() -> None:
-        tick = 0
-        while not stop.wait(0.02):
-            tick += 1
-            states = []
-            for i, v in enumerate(sc.vehicles):
-                a = tick / 60 + i * 2.0
-                pos = (30.0 + 10 * math.cos(a), 6.0 * (i - 1) + 6 * math.sin(a), 10.0)
-                states.append(state(v.id, tick, pos))
-                sample = reading(v.id, tick / 120, pos, 0.05 * (i + 1))
-                session.put(keys.vehicle_concentration(v.id), encode(sample))
-            tick_msg = SimTick(
-                tick=tick, sim_time_s=tick / 120, control_dt_s=1 / 120, states=states
-            )
-            session.put(keys.tick(), encode(tick_msg))
+        tick = next(ticks)
+        states = []
+        for i, v in enumerate(sc.vehicles):
+            a = tick / 60 + i * 2.0
+            pos = (30.0 + 10 * math.cos(a), 6.0 * (i - 1) + 6 * math.sin(a), 10.0)
+            states.append(state(v.id, tick, pos))
+            sample = reading(v.id, tick / 120, pos, 0.05 * (i + 1))
+            session.put(keys.vehicle_concentration(v.id), encode(sample))
+        tick_msg = SimTick(tick=tick, sim_time_s=tick / 120, control_dt_s=1 / 120, states=states)
+        session.put(keys.tick(), encode(tick_msg))
 
-    t = threading.Thread(target=fly, daemon=True)
-    t.start()
-    try:
+    with repeating(0.02, fly):
         yield
-    finally:
-        stop.set()
-        t.join(5)
 
 
 SCENE_NAMES = ["vehicles", "plume", "level_0", "level_1", "trails", "readings", "source"]

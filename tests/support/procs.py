@@ -10,6 +10,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager, suppress
@@ -139,6 +140,24 @@ class NodeProcs:
 
     def __exit__(self, *exc: object) -> None:
         self.stop_all()
+
+
+@contextmanager
+def repeating(period_s: float, action: Callable[[], None]) -> Iterator[None]:
+    """``action()`` every ``period_s`` on a thread of its own until the block ends."""
+    stop = threading.Event()
+
+    def loop() -> None:
+        while not stop.wait(period_s):
+            action()
+
+    thread = threading.Thread(target=loop, daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        thread.join(5)
 
 
 def keys_for(world: str = "default") -> Keys:

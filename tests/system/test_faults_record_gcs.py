@@ -17,9 +17,9 @@ import msgspec
 import pytest
 import zenoh
 
-from agents import VehicleCommander
+from bench.scale import drive
 from deploy.busview import BusView
-from deploy.scaling import loop_mission, write_scenario
+from deploy.scaling import write_scenario
 from gcs_bridge.dialect import mavlink
 from gcs_bridge.modes import Px4AutoSub, Px4Main
 from recorder.reader import Recording, segment_end
@@ -27,10 +27,7 @@ from recorder.schema import SegmentGap
 from swarmbus.codec import decode
 from swarmbus.keys import Keys
 from swarmbus.messages import (
-    Arm,
     FlightMode,
-    MissionStart,
-    MissionUpload,
     NodeHealth,
     SimTick,
     VehicleStatus,
@@ -100,11 +97,8 @@ def stack(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Stack]:
 
         sub = session.declare_subscriber(keys.all_vehicle_status(), on_status)
         deadline = time.monotonic() + 120.0
-        for k, vid in enumerate(VEHICLES):
-            upload = MissionUpload(items=loop_mission(sc, k))
-            uav = VehicleCommander(session, keys, vid, 5.0)
-            for command in (upload, Arm(), MissionStart()):
-                uav.send(command, retry_until=deadline)
+        assert [v.id for v in sc.vehicles] == VEHICLES
+        drive(session, sc, "flying", deadline)
 
         def flying() -> bool:
             snap = st.view.snapshot().vehicles

@@ -22,16 +22,13 @@ import psutil
 import pytest
 import zenoh
 
-from agents import VehicleCommander
-from deploy.scaling import loop_mission, scale_scenario, write_scenario
+from bench.scale import drive
+from deploy.scaling import scale_scenario, write_scenario
 from swarmbus.codec import MessageError, decode
 from swarmbus.keys import Keys
 from swarmbus.messages import (
-    Arm,
     Clock,
     FlightMode,
-    MissionStart,
-    MissionUpload,
     NodeHealth,
     VehicleStatus,
 )
@@ -140,11 +137,7 @@ def test_soak_32_vehicles_ten_sim_minutes(tmp_path: Path) -> None:
         keys = Keys(sc.world.name)
         obs = Observer(session, keys)
         deadline = time.monotonic() + 300.0
-        for k, vid in enumerate(ids):
-            upload = MissionUpload(items=loop_mission(sc, k))
-            uav = VehicleCommander(session, keys, vid, 5.0)
-            for command in (upload, Arm(), MissionStart()):
-                uav.send(command, retry_until=deadline)
+        drive(session, sc, "flying", deadline)
         pids = up.pids()
         samples: list[tuple[float, dict[str, int]]] = []
         ready_wall = time.monotonic()
