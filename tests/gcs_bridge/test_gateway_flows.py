@@ -40,7 +40,13 @@ from swarmbus.scenario import Origin
 from swarmbus.session import open_session
 from tests.support.fake_autopilot import FakeAutopilot
 from tests.support.gateway_stack import gateway, vehicles
-from tests.support.mavclient import MavClient, mission_item, write_scenario
+from tests.support.mavclient import (
+    FAST_STREAMS,
+    SLOW_STREAMS_HZ,
+    MavClient,
+    mission_item,
+    write_scenario,
+)
 from tests.support.procs import Network, wait_until, zenoh_network
 
 ORIGIN = Origin()
@@ -198,19 +204,7 @@ def test_qgc_connect_sequence(swarm: FlowRig) -> None:
     assert all(i.frame == mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT for i in items)
     assert items[1].z == pytest.approx(10.0, abs=0.01)
     seen = {m.get_type() for m in c.collect(3.0) if m.get_srcSystem() == 1}
-    assert {
-        "SYS_STATUS",
-        "GPS_RAW_INT",
-        "GLOBAL_POSITION_INT",
-        "ATTITUDE",
-        "VFR_HUD",
-        "EXTENDED_SYS_STATE",
-        "HOME_POSITION",
-        "BATTERY_STATUS",
-        "NAMED_VALUE_FLOAT",
-        "MISSION_CURRENT",
-        "HEARTBEAT",
-    } <= seen
+    assert {*FAST_STREAMS, *SLOW_STREAMS_HZ, "HEARTBEAT"} <= seen
 
 
 def test_telemetry_content(swarm: FlowRig) -> None:

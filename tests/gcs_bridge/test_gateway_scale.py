@@ -9,21 +9,18 @@ from pathlib import Path
 
 from gcs_bridge.dialect import mavlink
 from tests.support.gateway_stack import gateway, vehicles
-from tests.support.mavclient import MavClient, heard_all, measure_rates, write_scenario
+from tests.support.mavclient import (
+    FAST_STREAMS,
+    SLOW_STREAMS_HZ,
+    MavClient,
+    heard_all,
+    measure_rates,
+    write_scenario,
+)
 from tests.support.procs import zenoh_network
 
 N = 16
 HZ = 4.0
-FAST = (
-    "SYS_STATUS",
-    "GPS_RAW_INT",
-    "GLOBAL_POSITION_INT",
-    "ATTITUDE",
-    "VFR_HUD",
-    "EXTENDED_SYS_STATE",
-    "NAMED_VALUE_FLOAT",
-)
-SLOW = {"BATTERY_STATUS": 1.0, "MISSION_CURRENT": 1.0, "HOME_POSITION": 0.5}
 
 
 def test_sixteen_vehicles_telemetry_rates(tmp_path: Path) -> None:
@@ -45,20 +42,19 @@ def test_sixteen_vehicles_telemetry_rates(tmp_path: Path) -> None:
         assert c.command(N, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 30, 1e6 / 10.0) == 0
         assert c.command(N - 1, mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, 74, -1) == 0
         rates, wall = measure_rates(c, sorted(sysids), sim_seconds=8.0, timeout_s=180.0)
-    lines = [f"{'sysid':>5} " + " ".join(f"{k[:10]:>10}" for k in (*FAST, *SLOW))]
+    streams = (*FAST_STREAMS, *SLOW_STREAMS_HZ)
+    lines = [f"{'sysid':>5} " + " ".join(f"{k[:10]:>10}" for k in streams)]
     for s in sorted(rates):
-        lines.append(
-            f"{s:>5} " + " ".join(f"{rates[s].get(k, 0.0):>10.2f}" for k in (*FAST, *SLOW))
-        )
+        lines.append(f"{s:>5} " + " ".join(f"{rates[s].get(k, 0.0):>10.2f}" for k in streams))
     (tmp_path / "rates.txt").write_text("\n".join(lines) + f"\nwall {wall:.1f} s\n")
     print("\n".join(lines))
     for s, r in rates.items():
-        for kind in FAST:
+        for kind in FAST_STREAMS:
             if (s, kind) == (N, "ATTITUDE"):
                 assert r[kind] >= 0.9 * 10.0, f"sysid {s} ATTITUDE at {r[kind]:.2f}/s, asked 10"
             elif (s, kind) == (N - 1, "VFR_HUD"):
                 assert r.get(kind, 0.0) == 0.0, "VFR_HUD was turned off"
             else:
                 assert r.get(kind, 0.0) >= 0.85 * HZ, f"sysid {s} {kind} at {r.get(kind)}/s"
-        for kind, hz in SLOW.items():
+        for kind, hz in SLOW_STREAMS_HZ.items():
             assert r.get(kind, 0.0) >= 0.7 * hz, f"sysid {s} {kind} at {r.get(kind)}/s"

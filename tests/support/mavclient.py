@@ -26,6 +26,19 @@ from swarmbus.session import free_udp_block
 from tests.support.procs import REPO
 
 Msg = Any
+# The telemetry a PX4-like vehicle streams (docs/qgroundcontrol.md, "Telemetry rates"): the fast
+# streams at [gateway] telemetry_hz, the slow ones at fixed rates (Hz of sim time).
+FAST_STREAMS = (
+    "SYS_STATUS",
+    "GPS_RAW_INT",
+    "GLOBAL_POSITION_INT",
+    "ATTITUDE",
+    "VFR_HUD",
+    "EXTENDED_SYS_STATE",
+    "NAMED_VALUE_FLOAT",
+)
+SLOW_STREAMS_HZ = {"BATTERY_STATUS": 1.0, "MISSION_CURRENT": 1.0, "HOME_POSITION": 0.5}
+
 GCS_SYSID = 255
 GCS_COMPID = 190
 

@@ -8,12 +8,17 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
+import zenoh
+
+from deploy.busview import BusView
+from swarmbus.keys import Keys
 from swarmbus.session import free_tcp_port
 from tests.support.procs import REPO, wait_until
 
@@ -47,6 +52,19 @@ class Up:
         os.killpg(old, signal.SIGKILL)
         new = self.restarted(name, old)
         return new, time.monotonic() - t0, t0_ns
+
+
+@dataclass
+class StackOnBus:
+    """A stack started by ``plumeswarm up`` and the test's session on it; a test's own stack
+    class adds what its callbacks collect (under ``lock``)."""
+
+    up: Up
+    session: zenoh.Session
+    keys: Keys
+    view: BusView
+    gcs_port: int
+    lock: threading.Lock = field(default_factory=threading.Lock)
 
 
 def spawn_up(args: Sequence[str], out: Path) -> subprocess.Popen[bytes]:

@@ -6,7 +6,6 @@ times are printed (-s)."""
 
 from __future__ import annotations
 
-import threading
 import time
 import urllib.request
 from collections.abc import Iterator
@@ -37,7 +36,7 @@ from swarmbus.session import NetworkConfig, open_session
 from tests.support.mavclient import MavClient
 from tests.support.mavclient import write_scenario as write_gcs_scenario
 from tests.support.procs import run_cli, wait_until
-from tests.support.upstack import Up, plumeswarm_up
+from tests.support.upstack import StackOnBus, plumeswarm_up
 
 VEHICLES = ["uav1", "uav2", "uav3"]
 # each vehicle's own data-link-loss failsafe (per-vehicle [vehicles.failsafe] sections)
@@ -46,13 +45,7 @@ DATALINK_LOST = "ground-control link lost"
 
 
 @dataclass
-class Stack:
-    up: Up
-    session: zenoh.Session
-    keys: Keys
-    view: BusView
-    gcs_port: int
-    lock: threading.Lock = field(default_factory=threading.Lock)
+class Stack(StackOnBus):
     link_lost: dict[str, VehicleStatus] = field(default_factory=dict)  # first status saying so
 
     def health(self, name: str) -> NodeHealth | None:

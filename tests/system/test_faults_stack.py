@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import itertools
 import random
-import threading
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -46,20 +45,14 @@ from swarmbus.session import NetworkConfig, open_session
 from tests.support.mavclient import MavClient, write_scenario
 from tests.support.messages_samples import SAMPLES
 from tests.support.procs import keys_for, wait_until
-from tests.support.upstack import Up, plumeswarm_up
+from tests.support.upstack import StackOnBus, plumeswarm_up
 
 VEHICLES = ["uav1", "uav2", "uav3"]
 ALTITUDE_M = 40.0
 
 
 @dataclass
-class Stack:
-    up: Up
-    session: zenoh.Session
-    keys: Keys
-    view: BusView
-    gcs_port: int
-    lock: threading.Lock = field(default_factory=threading.Lock)
+class Stack(StackOnBus):
     readings: list[ConcentrationReading] = field(default_factory=list)
     states: dict[str, VehicleState] = field(default_factory=dict)
     status: dict[str, VehicleStatus] = field(default_factory=dict)
