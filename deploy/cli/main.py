@@ -322,7 +322,7 @@ def up(
         run_dir=run_dir,
         connect=connect,
         listen=listen,
-        roles=tuple(r.strip() for r in roles.split(",") if r.strip()) if roles else None,
+        roles=_names(roles) if roles else None,
         router=not no_router,
         vehicles_per_process=vehicles_per_process,
         foxglove=foxglove_live or foxglove_port is not None,
@@ -545,6 +545,23 @@ def bench() -> None:
     """Benchmarks of the full stack."""
 
 
+def _names(value: str) -> tuple[str, ...]:
+    """A comma-separated list's items."""
+    return tuple(v.strip() for v in value.split(",") if v.strip())
+
+
+def _bench_dir(out: Path | None, bench_name: str) -> Path:
+    """``out``, or ``runs/bench-<name>-<local time>/``."""
+    import time
+
+    return out or Path("runs") / time.strftime(f"bench-{bench_name}-%Y%m%d-%H%M%S")
+
+
+def _exit_by_rows(rows: list[dict[str, object]]) -> None:
+    """Exit status 1 when a row holds an error, else 0."""
+    sys.exit(1 if any("error" in r for r in rows) else 0)
+
+
 def _int_list(ctx: click.Context, param: click.Parameter, value: str) -> tuple[int, ...]:
     try:
         out = tuple(int(v) for v in value.split(",") if v.strip())
@@ -597,15 +614,13 @@ def bench_scale(
     scenario_overrides: tuple[str, ...],
 ) -> None:
     """Real-time factor, CPU and memory of the whole stack against the number of vehicles."""
-    import time
-
     from bench.scale import ScaleError, ScaleOptions, run_scale
 
     opts = ScaleOptions(
         scenario=scenario_from(scenario, scenario_overrides),
-        out=out or Path("runs") / time.strftime("bench-scale-%Y%m%d-%H%M%S"),
+        out=_bench_dir(out, "scale"),
         vehicles=vehicles,
-        states=tuple(s.strip() for s in states.split(",") if s.strip()),
+        states=_names(states),
         seconds=seconds,
         vehicles_per_process=vehicles_per_process,
         gateway=not no_gateway,
@@ -617,7 +632,7 @@ def bench_scale(
         rows = run_scale(opts, click.echo)
     except ScaleError as exc:
         fail(str(exc))
-    sys.exit(1 if any("error" in r for r in rows) else 0)
+    _exit_by_rows(rows)
 
 
 @bench.command("envs")
@@ -659,16 +674,14 @@ def bench_envs(
     out: Path | None,
 ) -> None:
     """Steps per second and real-time factor of the environments, fused and bus side by side."""
-    import time
-
     sc = scenario_from(scenario)
     from bench.envs import EnvBenchOptions, run_env_bench
 
     opts = EnvBenchOptions(
         scenario=sc,
-        out=out or Path("runs") / time.strftime("bench-envs-%Y%m%d-%H%M%S"),
+        out=_bench_dir(out, "envs"),
         vehicles=vehicles,
-        backends=tuple(b.strip() for b in backends.split(",") if b.strip()),
+        backends=_names(backends),
         steps=steps,
         ticks_per_step=ticks_per_step,
         vehicles_per_process=vehicles_per_process,
@@ -677,11 +690,7 @@ def bench_envs(
         rows = run_env_bench(opts, click.echo)
     except ValueError as exc:
         fail(str(exc))
-    sys.exit(1 if any("error" in r for r in rows) else 0)
-
-
-def _names(value: str) -> tuple[str, ...]:
-    return tuple(v.strip() for v in value.split(",") if v.strip())
+    _exit_by_rows(rows)
 
 
 def _gsl_options(seed_default: int) -> Callable[[Callable[..., None]], Callable[..., None]]:
@@ -801,7 +810,7 @@ def _gsl_run(
             bar.total = total
             bar.update(done - bar.n)
 
-        directory = out or Path("runs") / time.strftime("bench-gsl-%Y%m%d-%H%M%S")
+        directory = _bench_dir(out, "gsl")
         try:
             written = run(opts, directory, progress)
         except GslError as exc:

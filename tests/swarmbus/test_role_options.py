@@ -7,12 +7,14 @@ import enum
 import os
 import subprocess
 import sys
-from typing import Annotated, Literal
+from typing import Annotated, Literal, Self
 
 import msgspec
 import pytest
 
-from swarmbus.options import OptionError, RoleOptions, parse_options, split_settings
+from swarmbus.node import NodeContext
+from swarmbus.options import OptionError, RoleOptions, parse_options, role_options, split_settings
+from swarmbus.scenario import Scenario, load_scenario
 from tests.support.procs import REPO
 
 
@@ -156,3 +158,27 @@ def test_a_role_process_refuses_a_bad_option_in_one_line(
     assert len(lines) == 1, proc.stderr
     assert named in lines[0], lines[0]
     assert "Traceback" not in proc.stderr + proc.stdout
+
+
+class FromScenario(RoleOptions, frozen=True, kw_only=True):
+    speed_factor: Annotated[float, msgspec.Meta(gt=0.0)] = 1.0
+    port: int = 0
+
+    @classmethod
+    def defaults(cls, scenario: Scenario) -> Self:
+        return cls(speed_factor=scenario.time.speed_factor)
+
+
+def test_role_options_are_the_settings_over_the_scenarios_defaults() -> None:
+    base = load_scenario()
+    sc = msgspec.structs.replace(base, time=msgspec.structs.replace(base.time, speed_factor=3.0))
+
+    def ctx(options: dict[str, str]) -> NodeContext:
+        return NodeContext(sc, sc.network, "x", (), options)
+
+    assert role_options(FromScenario, ctx({})) == FromScenario(speed_factor=3.0)
+    assert role_options(FromScenario, ctx({"port": "7"})) == FromScenario(speed_factor=3.0, port=7)
+    assert role_options(FromScenario, ctx({"speed_factor": "5"})).speed_factor == 5.0
+    assert role_options(Sample, ctx({"port": "7"})) == Sample(port=7)  # no override: declared
+    with pytest.raises(OptionError, match="speed_factor"):
+        role_options(FromScenario, ctx({"speed_factor": "0"}))
