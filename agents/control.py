@@ -1,17 +1,7 @@
-"""Cascaded multirotor control: position → velocity → attitude → body rate → (thrust, torques).
-
-Scalar maths (``math``) on tuples, not numpy: at 120 Hz in up to 64 processes the call overhead
-of numpy on 3-vectors would dominate (numpy's per-call cost is microseconds, the arithmetic
-nanoseconds). Units: world ENU, body FLU, metres, radians,
-newtons. Yaw is the ENU heading of the body x axis: 0 along +x (east), counter-clockwise positive.
-
-The loops (gains from ``VehicleType.gains``):
-
-* position P → velocity setpoint, clipped to the horizontal / up / down speed limits;
-* velocity PI(D) → acceleration → thrust vector ``m·(a + g)``, tilt-limited (vertical first);
-* thrust vector + yaw → desired attitude; quaternion error × ``att_p`` → body-rate setpoint,
-  clipped (yaw rate limit);
-* body-rate PID (N·m per rad/s) + gyroscopic feed-forward → torques.
+"""Cascaded multirotor control: position → velocity → attitude → body rate → (thrust, torques),
+gains from ``VehicleType.gains``. Scalar maths on tuples, not numpy: on 3-vectors numpy's
+per-call cost would dominate. World ENU, body FLU, SI units; yaw is the ENU heading of the body
+x axis (0 along +x, counter-clockwise positive). See docs/agents.md ("Control and tuning").
 """
 
 from __future__ import annotations

@@ -1,17 +1,7 @@
-"""The gateway's side of the bus: latest vehicle data in, commands out, one event loop.
-
-Zenoh callbacks never touch MAVLink: they leave the latest payload per (kind, vehicle) in an
-inbox and wake the gateway's loop (a self-pipe), which decodes and acts. Keeping only the latest
-payload bounds the work when the simulation runs much faster than the gateway can encode.
-Commands go out as asynchronous queries, one at a time per vehicle (order matters: upload a
-mission, then start it); their replies are posted back to the loop.
-
-States come in ``sim/tick`` (every vehicle's state in one message per control tick, rather than
-N per-vehicle ``vehicle/<id>/state`` puts, which the physics then need not send) and readings
-arrive for every vehicle: they are not handed to Python one by one but wait in Zenoh's
-Rust-side ring buffers (:class:`Streams`), which the loop empties every few milliseconds while
-they flow — no Python callback, lock or wake-up per sample. Statuses (rare, and ordered before
-command replies) keep their callback and wake the loop at once.
+"""The gateway's side of the bus: the latest payload per (kind, vehicle) in an inbox that wakes
+the loop (:class:`Inbox`), states and readings drained from Zenoh's ring buffers
+(:class:`Streams`), and one ordered command queue per vehicle (:class:`Commander`). See
+docs/qgroundcontrol.md ("Inside the gateway").
 """
 
 from __future__ import annotations

@@ -1,17 +1,7 @@
-"""UDP links: one socket each, the peers heard on it, MAVLink 2 framing and optional signing.
-
-A link sends every packet to its default peer (where PX4 SITL would send: the GCS port, or a
-vehicle's API port) and to every peer it heard from recently, and replies come back to the
-socket it sends from. Each datagram is parsed on its own (UDP keeps frames whole), so garbage in
-one datagram never corrupts the next. With signing on, incoming frames must carry a valid
-signature: checked here before the timestamp is recorded (pymavlink records it first, which
-lets a forged frame push a stream's timestamp forward).
-
-Who listens: on Linux a link asks for the ICMP errors of what it sends (``IP_RECVERR``); a
-destination that answered "port unreachable" within the last ``REFUSED_HOLD_S`` counts as
-absent until a heartbeat (1 Hz, always sent) stops being refused or it speaks itself, so
-telemetry is not built for a port where nobody listens. Where no ICMP comes back (another
-host's firewall), every destination counts as listening, as before.
+"""UDP links (:class:`Link`, :class:`LinkSet`): one socket each, the peers heard on it, MAVLink 2
+framing, signing (the signature is checked before a stream's timestamp is recorded, so a forged
+frame cannot push it forward) and who listens (``IP_RECVERR``). See docs/qgroundcontrol.md
+("Signing", "Telemetry rates").
 """
 
 from __future__ import annotations

@@ -1,19 +1,7 @@
-"""Every Zenoh key expression of plumeswarm, built in one place.
-
-All keys live under ``plumeswarm/<world>/``. Three planes are kept apart so that a
-wildcard never crosses them: ``sim/``, ``autopilot/*/actuators`` and
-``vehicle/*/{state,status,concentration,wind}`` carry data, ``vehicle/*/cmd``, ``plume/*``
-and ``clock/step`` are queryables (control), ``node/*`` is presence. No other module formats a
-key expression.
-
-The one key that is not per vehicle or per service, and the one actuator route:
-``autopilot/<node>/actuators`` carries an ``ActuatorBatch`` (the commands of every vehicle an
-autopilot process serves, one put per process per tick, for any K including 1), so the physics
-wakes once per process per tick, not once per vehicle. It is not per vehicle, so it cannot live
-under ``vehicle/<id>/``, and it is not the physics' ``sim/`` plane. ``<node>`` is the process's
-node name: ``autopilot-<id>`` for a process serving one vehicle, ``autopilot-<first id>-plus<n>``
-for more (:func:`process_node`). On a one-vehicle node's key the physics accepts commands for
-that vehicle only, so a per-vehicle identity (which may put only there) cannot move another.
+"""Every Zenoh key expression of plumeswarm, built in one place (:class:`Keys`) — no other module
+formats one — and the node names (:func:`autopilot_node`, :func:`process_node`). Data, control
+(queryables) and presence are separate planes under ``plumeswarm/<world>/``, so that no wildcard
+crosses them. See docs/bus.md ("Keys").
 """
 
 from __future__ import annotations
