@@ -173,6 +173,15 @@ class View:
     local_origin_enu: Vec3 = (0.0, 0.0, 0.0)  # where local NED starts: the spawn, as PX4
 
 
+def _needs_state(build: Callable[[View, VehicleState], Msg]) -> Callable[[View], Msg | None]:
+    """``build`` for a vehicle whose state is known; None before its first state."""
+
+    def builder(view: View) -> Msg | None:
+        return None if view.state is None else build(view, view.state)
+
+    return builder
+
+
 def _local(view: View, enu: Vec3) -> Vec3:
     o = view.local_origin_enu
     return enu_to_ned((enu[0] - o[0], enu[1] - o[1], enu[2] - o[2]))
@@ -208,10 +217,7 @@ def sys_status(view: View) -> Msg:
     )
 
 
-def gps_raw_int(view: View) -> Msg | None:
-    st = view.state
-    if st is None:
-        return None
+def gps_raw_int(view: View, st: VehicleState) -> Msg:
     v = st.velocity_enu_m_s
     ground = math.hypot(v[0], v[1])
     cog = _clamp_int(course_deg(v) * 100.0, 0, 35999) if ground > 0.1 else UINT16_MAX
@@ -229,10 +235,7 @@ def gps_raw_int(view: View) -> Msg | None:
     )
 
 
-def global_position_int(view: View) -> Msg | None:
-    st = view.state
-    if st is None:
-        return None
+def global_position_int(view: View, st: VehicleState) -> Msg:
     vn, ve, vd = enu_to_ned(st.velocity_enu_m_s)
     _, _, yaw = euler_ned_frd(st.attitude_xyzw)
     home_alt = view.home_geodetic[2] if view.home_geodetic is not None else st.alt_m
@@ -249,28 +252,19 @@ def global_position_int(view: View) -> Msg | None:
     )
 
 
-def local_position_ned(view: View) -> Msg | None:
-    st = view.state
-    if st is None:
-        return None
+def local_position_ned(view: View, st: VehicleState) -> Msg:
     x, y, z = _local(view, st.position_enu_m)
     vx, vy, vz = enu_to_ned(st.velocity_enu_m_s)
     return mavlink.MAVLink_local_position_ned_message(boot_ms(st.sim_time_s), x, y, z, vx, vy, vz)
 
 
-def attitude(view: View) -> Msg | None:
-    st = view.state
-    if st is None:
-        return None
+def attitude(view: View, st: VehicleState) -> Msg:
     roll, pitch, yaw = euler_ned_frd(st.attitude_xyzw)
     p, q, r = flu_to_frd(st.body_rates_rad_s)
     return mavlink.MAVLink_attitude_message(boot_ms(st.sim_time_s), roll, pitch, yaw, p, q, r)
 
 
-def vfr_hud(view: View) -> Msg | None:
-    st = view.state
-    if st is None:
-        return None
+def vfr_hud(view: View, st: VehicleState) -> Msg:
     v = st.velocity_enu_m_s
     w = view.wind_enu
     air = math.sqrt((v[0] - w[0]) ** 2 + (v[1] - w[1]) ** 2 + (v[2] - w[2]) ** 2)
@@ -339,11 +333,11 @@ def named_value_float(view: View) -> Msg | None:
 
 BUILDERS: dict[int, Callable[[View], Msg | None]] = {
     ID_SYS_STATUS: sys_status,
-    ID_GPS_RAW_INT: gps_raw_int,
-    ID_GLOBAL_POSITION_INT: global_position_int,
-    ID_LOCAL_POSITION_NED: local_position_ned,
-    ID_ATTITUDE: attitude,
-    ID_VFR_HUD: vfr_hud,
+    ID_GPS_RAW_INT: _needs_state(gps_raw_int),
+    ID_GLOBAL_POSITION_INT: _needs_state(global_position_int),
+    ID_LOCAL_POSITION_NED: _needs_state(local_position_ned),
+    ID_ATTITUDE: _needs_state(attitude),
+    ID_VFR_HUD: _needs_state(vfr_hud),
     ID_EXTENDED_SYS_STATE: extended_sys_state,
     ID_HOME_POSITION: home_position,
     ID_BATTERY_STATUS: battery_status,

@@ -105,15 +105,7 @@ def test_mavproxy_arms_takes_off_and_lands(tmp_path: Path) -> None:
             console.expect("COMPONENT_ARM_DISARM: ACCEPTED")
             console.type("takeoff 7")  # relative altitude, lat/lon 0
             console.expect("NAV_TAKEOFF: ACCEPTED")
-            watch.wait(
-                "uav1 at 7 m",
-                lambda m: (
-                    m.get_type() == "GLOBAL_POSITION_INT"
-                    and m.get_srcSystem() == 1
-                    and m.relative_alt > 6500
-                ),
-                120.0,
-            )
+            watch.wait_above(1, 6.5)  # at 7 m
             console.type("long MAV_CMD_NAV_LAND")  # `mode land` trips MAVProxy on PX4 modes
             console.expect("NAV_LAND: ACCEPTED")
             watch.wait_disarmed(1, 180.0)

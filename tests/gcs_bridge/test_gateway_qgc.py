@@ -22,15 +22,7 @@ ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
 
 
 def at_altitude(c: MavClient, sysid: int, metres: float) -> None:
-    c.wait(
-        f"{sysid} at {metres} m",
-        lambda m: (
-            m.get_type() == "GLOBAL_POSITION_INT"
-            and m.get_srcSystem() == sysid
-            and m.relative_alt > (metres - 0.5) * 1000
-        ),
-        120.0,
-    )
+    c.wait_above(sysid, metres - 0.5)
 
 
 def test_qgc_flows(tmp_path: Path) -> None:

@@ -66,14 +66,7 @@ def test_signed_gcs_link_refuses_unsigned_and_wrong_keys(tmp_path: Path) -> None
             intruder.pump(0.2)
             assert not [m for m in intruder.log if m.get_type() == "COMMAND_ACK"]
         assert signed.command(1, 400, 1) == mavlink.MAV_RESULT_ACCEPTED
-        signed.wait(
-            "armed",
-            lambda m: (
-                m.get_type() == "HEARTBEAT"
-                and m.get_srcSystem() == 1
-                and m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED
-            ),
-        )
+        signed.wait_armed(1)
         # the API link is unsigned here: an unsigned client is served there
         standby_or_armed = api_client.wait_type("HEARTBEAT", 1)
         assert not standby_or_armed.get_msgbuf()[2] & mavlink.MAVLINK_IFLAG_SIGNED
@@ -382,14 +375,7 @@ def test_mavproxy_is_ignored_until_it_has_the_passphrase(tmp_path: Path) -> None
             console.expect("NAV_TAKEOFF: ACCEPTED")
             console.type("arm throttle")
             console.expect("COMPONENT_ARM_DISARM: ACCEPTED")
-            watch.wait(
-                "uav1 armed",
-                lambda m: (
-                    m.get_type() == "HEARTBEAT"
-                    and m.get_srcSystem() == 1
-                    and m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED
-                ),
-            )
+            watch.wait_armed(1)
             acks = [
                 line
                 for line in console.lines

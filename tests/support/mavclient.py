@@ -300,13 +300,29 @@ class MavClient(Closeable):
             f"heartbeat of {sysid} in mode {main}/{sub} armed={armed}", match, timeout_s
         )
 
-    def wait_disarmed(self, sysid: int, timeout_s: float = 60.0) -> None:
+    def wait_armed(self, sysid: int, armed: bool = True, timeout_s: float = 60.0) -> None:
+        """Until a HEARTBEAT of ``sysid`` says it is armed (or, ``armed=False``, disarmed)."""
         self.wait(
-            f"sysid {sysid} disarmed",
+            f"sysid {sysid} {'armed' if armed else 'disarmed'}",
             lambda m: (
                 m.get_type() == "HEARTBEAT"
                 and m.get_srcSystem() == sysid
-                and not m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED
+                and bool(m.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED) == armed
+            ),
+            timeout_s,
+        )
+
+    def wait_disarmed(self, sysid: int, timeout_s: float = 60.0) -> None:
+        self.wait_armed(sysid, False, timeout_s)
+
+    def wait_above(self, sysid: int, metres: float, timeout_s: float = 120.0) -> None:
+        """Until ``sysid`` reports a relative altitude above ``metres``."""
+        self.wait(
+            f"sysid {sysid} above {metres} m",
+            lambda m: (
+                m.get_type() == "GLOBAL_POSITION_INT"
+                and m.get_srcSystem() == sysid
+                and m.relative_alt > metres * 1000
             ),
             timeout_s,
         )
