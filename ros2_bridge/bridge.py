@@ -49,7 +49,7 @@ from swarmbus.messages import (
     VehicleState,
 )
 from swarmbus.node import NodeContext, NodeRuntime
-from swarmbus.options import OptionError, RoleOptions, parse_options
+from swarmbus.options import OptionError, RoleOptions, role_options
 from swarmbus.reqrep import RequestError, ask
 from swarmbus.view_feed import MeshFetcher, isosurface_queries
 
@@ -416,7 +416,7 @@ def run(bridge: Bridge) -> None:
 
 def main(ctx: NodeContext) -> int:
     try:
-        opts = parse_options(BridgeOptions, ctx.options)
+        opts = role_options(BridgeOptions, ctx)
         domain = domain_id(opts)
     except OptionError as exc:
         log.error("ros2: %s", exc)
