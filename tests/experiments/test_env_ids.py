@@ -7,9 +7,6 @@ environment run alongside (a second path to the same numbers), or from counting 
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 import tomllib
 from typing import Any
 
@@ -23,7 +20,7 @@ from pettingzoo.test import api_test, parallel_api_test
 from experiments.envs import ENV_IDS, PlumeSourceEnv, PlumeSwarmEnv
 from experiments.envs.pettingzoo import plume_swarm_v0
 from swarmbus.scenario import SCENARIOS_DIR, ScenarioError
-from tests.support.procs import REPO
+from tests.support.procs import run_python
 
 PER_AGENT = 10 + 5 * 2 + 1  # own 10, two peers of 5, time since the last reading (docs/envs.md)
 
@@ -47,14 +44,7 @@ def test_every_id_makes_in_a_fresh_interpreter_with_no_prior_import() -> None:
         "    env.close()\n"
         "print(json.dumps(out))\n"
     )
-    res = subprocess.run(
-        [sys.executable, "-c", code],
-        cwd=REPO,
-        env=dict(os.environ, PYTHONPATH=str(REPO)),
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
+    res = run_python(code, 300.0)
     assert res.returncode == 0, res.stderr
     got = json.loads(res.stdout.strip().splitlines()[-1])
     n = len(bundled("novak2018")["vehicles"])  # type: ignore[arg-type]

@@ -3,38 +3,16 @@
 
 from __future__ import annotations
 
-import os
 import re
-import subprocess
-import sys
 
-from tests.support.procs import REPO
-
-PACKAGES = [
-    "swarmbus",
-    "sim_world",
-    "agents",
-    "plume_service",
-    "gcs_bridge",
-    "recorder",
-    "ros2_bridge",
-    "deploy",
-]
+from tests.support.procs import CORE_PACKAGES, REPO, run_python
 
 
 def test_importing_the_world_prints_nothing() -> None:
-    res = subprocess.run(
-        [
-            sys.executable,
-            "-c",
-            "import sim_world.world; from sim_world.pybullet_quiet import pb;"
-            " print(pb.getAPIVersion())",
-        ],
-        cwd=REPO,
-        env=dict(os.environ, PYTHONPATH=str(REPO)),
-        capture_output=True,
-        text=True,
-        timeout=60,
+    res = run_python(
+        "import sim_world.world; from sim_world.pybullet_quiet import pb;"
+        " print(pb.getAPIVersion())",
+        60.0,
     )
     assert res.returncode == 0, res.stderr
     assert res.stdout.strip().isdigit(), res.stdout  # only what the script printed
@@ -50,14 +28,7 @@ def test_an_environment_episode_step_prints_nothing_but_the_script() -> None:
         "env.close()\n"
         "print('ok')\n"
     )
-    res = subprocess.run(
-        [sys.executable, "-c", code],
-        cwd=REPO,
-        env=dict(os.environ, PYTHONPATH=str(REPO)),
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    res = run_python(code, 120.0)
     assert res.returncode == 0, res.stderr
     assert (res.stdout, res.stderr) == ("ok\n", "")
 
@@ -67,7 +38,7 @@ def test_pybullet_is_imported_only_through_the_quiet_helper() -> None:
     helper = REPO / "sim_world" / "pybullet_quiet.py"
     offenders = [
         str(path.relative_to(REPO))
-        for pkg in [*PACKAGES, "experiments", "bench"]
+        for pkg in [*CORE_PACKAGES, "experiments", "bench"]
         for path in (REPO / pkg).rglob("*.py")
         if path != helper and pattern.search(path.read_text())
     ]

@@ -164,6 +164,24 @@ def keys_for(world: str = "default") -> Keys:
     return Keys(world)
 
 
+# Our packages (docs/architecture.md, "Layers"): the process packages (roles) and the core the
+# distribution installs.
+PROCESS_PACKAGES = ["sim_world", "agents", "plume_service", "gcs_bridge", "recorder", "ros2_bridge"]
+CORE_PACKAGES = ["swarmbus", *PROCESS_PACKAGES, "deploy"]
+
+
+def run_python(code: str, timeout_s: float = 120.0) -> subprocess.CompletedProcess[str]:
+    """``python -c CODE`` in a fresh interpreter on this tree (bounded); its output as text."""
+    return subprocess.run(
+        [sys.executable, "-c", code],
+        cwd=REPO,
+        env=dict(os.environ, PYTHONPATH=str(REPO)),
+        capture_output=True,
+        text=True,
+        timeout=timeout_s,
+    )
+
+
 def run_cli(args: Sequence[str], timeout_s: float = 120.0) -> subprocess.CompletedProcess[str]:
     """Run ``python -m deploy ARGS`` to completion (bounded)."""
     env = dict(os.environ, PYTHONPATH=str(REPO))

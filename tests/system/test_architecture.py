@@ -9,16 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from tests.support.procs import REPO, run_cli
+from tests.support.procs import PROCESS_PACKAGES, REPO, run_cli
 
-PROCESS_PACKAGES = [
-    "sim_world",
-    "agents",
-    "plume_service",
-    "gcs_bridge",
-    "recorder",
-    "ros2_bridge",
-]
 # Layers, lowest first (docs/architecture.md, "Layers"): a module imports only from its own
 # layer or below, and a role never imports another role. The CLI (``deploy.cli``, started by
 # ``python -m deploy``) is the top layer although it sits inside ``deploy``.

@@ -8,7 +8,6 @@ needs PyPI for the build backend, which a test does not reach.)
 from __future__ import annotations
 
 import ast
-import os
 import re
 import subprocess
 import sys
@@ -16,32 +15,10 @@ import tomllib
 from importlib.metadata import packages_distributions
 
 from swarmbus.extras import EXTRA_OF_MODULE
-from tests.support.procs import REPO
+from tests.support.procs import CORE_PACKAGES, REPO, run_python
 
 PROJECT = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]
-CORE_PACKAGES = [
-    "swarmbus",
-    "sim_world",
-    "agents",
-    "plume_service",
-    "gcs_bridge",
-    "recorder",
-    "ros2_bridge",
-    "deploy",
-]
-OURS = {
-    "swarmbus",
-    "sim_world",
-    "agents",
-    "plume_service",
-    "gcs_bridge",
-    "recorder",
-    "ros2_bridge",
-    "deploy",
-    "experiments",
-    "bench",
-    "tests",
-}
+OURS = {*CORE_PACKAGES, "experiments", "bench", "tests"}
 
 
 def names(requirements: list[str]) -> set[str]:
@@ -91,14 +68,7 @@ def test_each_optional_module_is_in_the_extra_its_message_names() -> None:
 
 def run_without(module: str, code: str) -> subprocess.CompletedProcess[str]:
     """``code`` in a fresh interpreter where ``import module`` fails as if not installed."""
-    return subprocess.run(
-        [sys.executable, "-c", f"import sys; sys.modules[{module!r}] = None\n{code}"],
-        cwd=REPO,
-        env=dict(os.environ, PYTHONPATH=str(REPO)),
-        capture_output=True,
-        text=True,
-        timeout=60,
-    )
+    return run_python(f"import sys; sys.modules[{module!r}] = None\n{code}", 60.0)
 
 
 def test_a_cli_command_without_its_extra_is_one_line_naming_it() -> None:
