@@ -7,7 +7,7 @@ import logging
 import msgspec
 
 from swarmbus.node import NodeContext, NodeRuntime
-from swarmbus.options import OptionError, RoleOptions, parse_options
+from swarmbus.options import OptionError, RoleOptions, role_options
 
 log = logging.getLogger(__name__)
 
@@ -19,7 +19,7 @@ class RouterOptions(RoleOptions, frozen=True, kw_only=True):
 def main(ctx: NodeContext) -> int:
     """Run a router on ``ctx.network.listen`` (default: the scenario's first connect endpoint)."""
     try:
-        parse_options(RouterOptions, ctx.options)
+        role_options(RouterOptions, ctx)
     except OptionError as exc:
         log.error("router: %s", exc)
         return 2

@@ -89,7 +89,7 @@ def test_physics_killed_resumes_from_checkpoint_and_vehicles_fly_on(stack: Stack
         autopilots = {n: p for n, p in stack.pids().items() if n.startswith("autopilot-")}
         statuses.clear()
         ticks_at_kill = max(s.tick for _, s in states)
-        pid, restart_s = stack.kill("physics")
+        pid, restart_s, _ = stack.up.kill("physics")
         t_kill = time.monotonic() - restart_s
         end_tick = ticks_at_kill + 3 * period_ticks
         wait_until(lambda: all(stack.tick_of(v) > end_tick for v in VEHICLES), 120.0, "ticks go on")
