@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from swarmbus.messages import AnemometerReading
-from swarmbus.scenario import Anemometer as AnemometerConfig
+from swarmbus.scenario import AnemometerSpec
 from swarmbus.wind import WindModel
 
 Vec3 = tuple[float, float, float]
@@ -24,7 +24,7 @@ class Anemometer:
     """One vehicle's anemometer."""
 
     def __init__(
-        self, config: AnemometerConfig, wind: WindModel, scenario_seed: int, vehicle_index: int
+        self, config: AnemometerSpec, wind: WindModel, scenario_seed: int, vehicle_index: int
     ) -> None:
         self.config = config
         self.wind = wind

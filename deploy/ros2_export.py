@@ -22,7 +22,7 @@ from typing import Any, Final
 
 from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
 
-from recorder.flight import scenario_of
+from recorder.flight_log import scenario_of
 from recorder.reader import Recording
 from ros2_bridge import convert as cv
 from ros2_bridge import wire

@@ -16,7 +16,7 @@ import msgspec
 import tomli_w
 
 from swarmbus.messages import MissionCommand, MissionFrame, MissionItem
-from swarmbus.scenario import Scenario, Vehicle, parse_scenario
+from swarmbus.scenario import Scenario, VehicleSpec, parse_scenario
 from swarmbus.session import free_tcp_port
 
 
@@ -34,7 +34,7 @@ def scale_scenario(
     columns = math.ceil(math.sqrt(n))
     x0 = min(v.spawn_enu_m[0] for v in base)
     y_mid = sum(v.spawn_enu_m[1] for v in base) / len(base)
-    vehicles: list[Vehicle] = []
+    vehicles: list[VehicleSpec] = []
     for k in range(n):
         template = base[k % len(base)]
         copy = k // len(base)

@@ -8,7 +8,7 @@ import argparse
 
 import numpy as np
 
-from recorder.flight import load_flight
+from recorder.flight_log import load_flight
 from recorder.reader import Recording
 
 parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])

@@ -69,7 +69,7 @@ class Fault:
 
 
 @dataclass
-class Flight:
+class ChaosRun:
     states: dict[str, dict[int, bytes]] = field(default_factory=dict)
     conflicts: list[tuple[str, int]] = field(default_factory=list)
     faults: list[Fault] = field(default_factory=list)
@@ -105,7 +105,7 @@ def _stepped(opts: ChaosOptions, run_dir: Path) -> tuple[Scenario, Path]:
 
 def fly(
     opts: ChaosOptions, run_dir: Path, faults: list[int], console: Callable[[str], None]
-) -> Flight:
+) -> ChaosRun:
     """One run; SIGKILL a process at each tick of ``faults`` (see the module doc)."""
     sc, path = _stepped(opts, run_dir)
     launch = LaunchOptions(
@@ -115,7 +115,7 @@ def fly(
         run_dir=run_dir,
         roles=ROLES,
     )
-    flight = Flight()
+    flight = ChaosRun()
     keys = Keys(sc.world.name)
     subs: list[zenoh.Subscriber[None]] = []
 
@@ -187,7 +187,7 @@ def _kill_one(launcher: Launcher, rng: random.Random, tick: int) -> Fault:
     return Fault(tick=tick, process=name, back_s=time.monotonic() - t0)
 
 
-def compare(base: Flight, chaos: Flight) -> dict[str, object]:
+def compare(base: ChaosRun, chaos: ChaosRun) -> dict[str, object]:
     """Tick by tick, every vehicle's states: missing and differing ticks, replay conflicts."""
     out: dict[str, object] = {"conflicts": len(chaos.conflicts) + len(base.conflicts)}
     vehicles = {}

@@ -395,7 +395,7 @@ def start_free(view: BusView, sw: Swarm, sc: Scenario, deadline: float) -> Calla
 
 
 @dataclass
-class Flight:
+class DemoRun:
     """What a run saw: the collector's records, the clock's mode, the last snapshot of the bus,
     and the wall time (from the missions' start) and sim time it took."""
 
@@ -417,12 +417,12 @@ def run_demo(opts: DemoOptions, console: Console) -> int:
     return finish(opts, sc, path, flight, record, console)
 
 
-def fly(opts: DemoOptions, sc: Scenario, record: bool, console: Console) -> Flight | None:
+def fly(opts: DemoOptions, sc: Scenario, record: bool, console: Console) -> DemoRun | None:
     """Start the world (our own stack: what flying needs, no gateway since nobody speaks
     MAVLink here, the recorder when it is installed; or the attached one) through a
     :class:`~experiments.driver.BusDriver`, fly every mission to its end (or the deadline),
     stop; None when it never reached the bus."""
-    flight = Flight(Collector([v.id for v in sc.vehicles]), mode=opts.clock or sc.time.mode)
+    flight = DemoRun(Collector([v.id for v in sc.vehicles]), mode=opts.clock or sc.time.mode)
     views: list[BusView] = []
 
     def on_join(sw: Swarm) -> None:  # before the world starts: states from tick 0
@@ -459,7 +459,7 @@ def fly_missions(
     sc: Scenario,
     driver: BusDriver,
     view: BusView,
-    flight: Flight,
+    flight: DemoRun,
     console: Console,
     deadline: float,
 ) -> None:
@@ -502,7 +502,7 @@ def table_shower(
 
 
 def finish(
-    opts: DemoOptions, sc: Scenario, path: Path, flight: Flight, record: bool, console: Console
+    opts: DemoOptions, sc: Scenario, path: Path, flight: DemoRun, record: bool, console: Console
 ) -> int:
     """Write ``summary.json``, print the accuracy table and the verdict; the exit code."""
     collector = flight.collector

@@ -58,7 +58,7 @@ from swarmbus.messages import (
     VehicleState,
 )
 from swarmbus.plume_formula import downwind_unit
-from swarmbus.scenario import Scenario, Vehicle
+from swarmbus.scenario import Scenario, VehicleSpec
 from swarmbus.wind import WindModel, wind_from_scenario
 
 FloatArray = npt.NDArray[np.float64]
@@ -179,7 +179,9 @@ def episode_scenario(spec: EpisodeSpec, environment: Scenario | None = None) -> 
     )
     starts = episode_starts(base, spec, algo.vehicles)
     vehicles = [
-        Vehicle(id=f"uav{i + 1}", behavior=algo.behavior, mission=[], spawn_enu_m=(p[0], p[1], 0.0))
+        VehicleSpec(
+            id=f"uav{i + 1}", behavior=algo.behavior, mission=[], spawn_enu_m=(p[0], p[1], 0.0)
+        )
         for i, p in enumerate(starts)
     ]
     world = msgspec.structs.replace(base.world, seed=spec.seed * 100_003 + spec.run)

@@ -42,8 +42,7 @@ from swarmbus.keys import Keys
 from swarmbus.messages import VehicleStatus
 from swarmbus.node import NodeContext, NodeRuntime
 from swarmbus.options import OptionError, role_options
-from swarmbus.scenario import Gateway as GatewaySection
-from swarmbus.scenario import Scenario, not_on_mavlink_note
+from swarmbus.scenario import GatewaySpec, Scenario, not_on_mavlink_note
 from swarmbus.views import TickView
 
 log = logging.getLogger(__name__)
@@ -52,7 +51,7 @@ TICK_S = 0.1  # wall-clock housekeeping: heartbeats, transfer timeouts, paramete
 HEARTBEAT_PERIOD_S = 1.0  # MAVLink's 1 Hz heartbeat
 
 
-def open_links(section: GatewaySection, o: GatewayOptions, vehicles: list[Vehicle]) -> LinkSet:
+def open_links(section: GatewaySpec, o: GatewayOptions, vehicles: list[Vehicle]) -> LinkSet:
     """The shared GCS link (every vehicle) and, unless turned off, each vehicle's API link;
     :class:`OptionError` for a bad option or key file."""
     key = signing_key(section)

@@ -17,7 +17,7 @@ import msgspec
 from gcs_bridge.dialect import mavlink
 from gcs_bridge.telemetry import default_rates
 from swarmbus.options import OptionError, RoleOptions
-from swarmbus.scenario import Gateway, Scenario
+from swarmbus.scenario import GatewaySpec, Scenario
 
 Port = Annotated[int, msgspec.Meta(ge=0, le=65535)]
 
@@ -55,7 +55,7 @@ class GatewayOptions(RoleOptions, frozen=True, kw_only=True):
         """Every telemetry stream's rate, or :class:`OptionError` for a bad ``rate.<MESSAGE>``."""
         return stream_rates(self.telemetry_hz, self.rate)
 
-    def bind_host_for(self, section: Gateway) -> str:
+    def bind_host_for(self, section: GatewaySpec) -> str:
         return self.bind_host or ("127.0.0.1" if _is_loopback(section.host) else "0.0.0.0")
 
     def signs(self, link_kind: str) -> bool:
@@ -79,7 +79,7 @@ def stream_rates(telemetry_hz: float, overrides: Mapping[str, float]) -> dict[in
 _KEY_HEX = re.compile(r"[0-9a-fA-F]{64}")
 
 
-def signing_key(section: Gateway) -> bytes | None:
+def signing_key(section: GatewaySpec) -> bytes | None:
     """The 32-byte signing key of ``[gateway]`` (None: signing off), or :class:`OptionError`."""
     if section.signing_key_hex and section.signing_key_file:
         raise OptionError("[gateway]: give signing_key_file or signing_key_hex, not both")

@@ -11,7 +11,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import LogNorm
 from matplotlib.figure import Figure
 
-from recorder.flight import Flight, FloatArray
+from recorder.flight_log import FlightLog, FloatArray
 from recorder.plume_map import PlumeMap
 
 log = logging.getLogger(__name__)
@@ -27,7 +27,7 @@ def _figure(size: tuple[float, float], rows: int = 1) -> tuple[Figure, list[Axes
     return figure, [a for row in axes for a in row]
 
 
-def colour_of(flight: Flight, vehicle_id: str) -> str:
+def colour_of(flight: FlightLog, vehicle_id: str) -> str:
     return _COLOURS[flight.vehicles.index(vehicle_id) % len(_COLOURS)]
 
 
@@ -37,7 +37,7 @@ def save(figure: Figure, path: Path) -> Path:
     return path
 
 
-def top_view(flight: Flight, plume: PlumeMap | None) -> Figure:
+def top_view(flight: FlightLog, plume: PlumeMap | None) -> Figure:
     """Trajectories seen from above, over the concentration map at flight altitude if known."""
     figure, (axes,) = _figure((8, 6))
     if plume is not None:
@@ -83,7 +83,7 @@ def top_view(flight: Flight, plume: PlumeMap | None) -> Figure:
     return figure
 
 
-def altitude(flight: Flight) -> Figure:
+def altitude(flight: FlightLog) -> Figure:
     figure, (axes,) = _figure((8, 4))
     for vid, track in flight.tracks.items():
         axes.plot(track.t, track.columns["z_m"], color=colour_of(flight, vid), label=vid)
@@ -93,7 +93,7 @@ def altitude(flight: Flight) -> Figure:
     return figure
 
 
-def concentration(flight: Flight) -> Figure:
+def concentration(flight: FlightLog) -> Figure:
     """Reported (solid) and true (dashed) concentration, one panel per vehicle."""
     vehicles = sorted(flight.readings)
     rows = max(len(vehicles), 1)
@@ -111,7 +111,7 @@ def concentration(flight: Flight) -> Figure:
     return figure
 
 
-def reported_vs_model(flight: Flight) -> Figure:
+def reported_vs_model(flight: FlightLog) -> Figure:
     figure, (axes,) = _figure((6, 6))
     high = 0.0
     for vid, r in sorted(flight.readings.items()):

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from recorder.flight import Flight, FloatArray
+from recorder.flight_log import FlightLog, FloatArray
 from swarmbus.dispersion import DispersionCurves, dispersion_curves
 from swarmbus.plume_formula import gaussian_plume_g_m3, plume_frame
 
@@ -79,7 +79,7 @@ class SteadyPlume:
         return np.where((z >= 0.0) & (z <= lid), value, 0.0)
 
 
-def plume_field(flight: Flight) -> SteadyPlume | None:
+def plume_field(flight: FlightLog) -> SteadyPlume | None:
     """The steady plume of the recording, or None (time-dependent, unknown, or not usable)."""
     info, scenario = flight.plume_info, flight.scenario
     try:
@@ -107,7 +107,7 @@ def plume_field(flight: Flight) -> SteadyPlume | None:
     return None
 
 
-def _sources(flight: Flight) -> list[tuple[float, float]]:
+def _sources(flight: FlightLog) -> list[tuple[float, float]]:
     if flight.plume_info is not None:
         return [(s.x_m, s.y_m) for s in flight.plume_info.sources]
     if flight.scenario is not None:
@@ -115,14 +115,14 @@ def _sources(flight: Flight) -> list[tuple[float, float]]:
     return []
 
 
-def flight_altitude_m(flight: Flight) -> float:
+def flight_altitude_m(flight: FlightLog) -> float:
     """Median height of the airborne samples (the height the map is drawn at)."""
     heights = [t.columns["z_m"][t.columns["on_ground"] < 0.5] for t in flight.tracks.values()]
     airborne = np.concatenate(heights) if heights else np.empty(0)
     return float(np.median(airborne)) if airborne.size else 0.0
 
 
-def plume_map(flight: Flight) -> PlumeMap | None:
+def plume_map(flight: FlightLog) -> PlumeMap | None:
     """The map over the area the vehicles flew (and the sources), or None without a model."""
     field = plume_field(flight)
     if field is None:

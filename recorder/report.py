@@ -22,7 +22,7 @@ from matplotlib.figure import Figure
 from tqdm import tqdm
 
 from recorder import plots
-from recorder.flight import READING_FIELDS, TRACK_FIELDS, Flight, load_flight
+from recorder.flight_log import READING_FIELDS, TRACK_FIELDS, FlightLog, load_flight
 from recorder.plume_map import plume_map
 from recorder.reader import Recording
 from recorder.schema import EventKind
@@ -86,7 +86,7 @@ def accuracy(vehicle_id: str, reported: np.ndarray, true: np.ndarray) -> Accurac
     )
 
 
-def accuracy_table(flight: Flight) -> list[Accuracy]:
+def accuracy_table(flight: FlightLog) -> list[Accuracy]:
     rows = []
     all_rep, all_true = [], []
     for vid in sorted(flight.readings):
@@ -106,7 +106,7 @@ def _cell(name: str, value: float) -> str:
     return str(int(value)) if name in _INT_COLUMNS else repr(float(value))
 
 
-def _mode_at(flight: Flight, vid: str, times: np.ndarray) -> list[str]:
+def _mode_at(flight: FlightLog, vid: str, times: np.ndarray) -> list[str]:
     changes = flight.modes.get(vid, [])
     if not changes:
         return [""] * len(times)
@@ -115,7 +115,7 @@ def _mode_at(flight: Flight, vid: str, times: np.ndarray) -> list[str]:
     return [changes[i][1] if i >= 0 else "" for i in index]
 
 
-def write_csvs(flight: Flight, out: Path) -> list[Path]:
+def write_csvs(flight: FlightLog, out: Path) -> list[Path]:
     paths = []
     for vid, track in sorted(flight.tracks.items()):
         path = out / f"{vid}_track.csv"
@@ -141,7 +141,7 @@ def write_csvs(flight: Flight, out: Path) -> list[Path]:
 
 
 # ------------------------------------------------------------------------------------ page
-def _facts(flight: Flight, source: Path) -> list[tuple[str, str]]:
+def _facts(flight: FlightLog, source: Path) -> list[tuple[str, str]]:
     times = [t.t for t in flight.tracks.values() if len(t)] + [
         r.t for r in flight.readings.values() if len(r)
     ]
@@ -177,7 +177,7 @@ def _facts(flight: Flight, source: Path) -> list[tuple[str, str]]:
     ]
 
 
-def _segments(flight: Flight) -> str:
+def _segments(flight: FlightLog) -> str:
     """The files read and what was not recorded between them (restarted recorders)."""
     text = ", ".join(flight.segments) or "—"
     for g in flight.gaps:
@@ -191,7 +191,7 @@ def _segments(flight: Flight) -> str:
     return text
 
 
-FIGURES: dict[str, tuple[str, Callable[[Flight], Figure]]] = {
+FIGURES: dict[str, tuple[str, Callable[[FlightLog], Figure]]] = {
     "altitude.png": ("Altitude vs time", plots.altitude),
     "concentration.png": ("Concentration vs time (reported and true)", plots.concentration),
     "reported_vs_model.png": ("Reported vs model", plots.reported_vs_model),
@@ -258,7 +258,7 @@ def make_report(path: str | Path, out: Path, progress: bool | None = None) -> li
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise ReportError(f"cannot create {out}: {exc.strerror or exc}") from None
-    steps: list[tuple[str, str, Callable[[Flight], Figure]]] = [
+    steps: list[tuple[str, str, Callable[[FlightLog], Figure]]] = [
         ("top_view.png", "Trajectories (top view)", lambda f: plots.top_view(f, plume_map(f)))
     ] + [(name, title, draw) for name, (title, draw) in FIGURES.items()]
     written: list[Path] = []

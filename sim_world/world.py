@@ -29,8 +29,7 @@ from sim_world.geodesy import EnuToGeodetic
 from sim_world.pybullet_quiet import pb
 from swarmbus.closeable import Closeable
 from swarmbus.messages import VehicleState
-from swarmbus.scenario import Scenario
-from swarmbus.scenario import Vehicle as VehicleSpec
+from swarmbus.scenario import Scenario, VehicleSpec
 from swarmbus.vehicle_types import VehicleType, load_vehicle_type
 from swarmbus.wind import wind_from_scenario, wind_vector_enu
 

@@ -47,7 +47,7 @@ class Origin(_Section, frozen=True, kw_only=True):
     alt_m: Annotated[float, msgspec.Meta(ge=-500.0, le=9000.0)] = 488.0
 
 
-class World(_Section, frozen=True, kw_only=True):
+class WorldSpec(_Section, frozen=True, kw_only=True):
     name: Name = "default"
     seed: Annotated[int, msgspec.Meta(ge=0, le=2**63 - 1)] = 0
     origin: Origin = Origin()
@@ -287,7 +287,7 @@ def _or(value: float | None, default: float) -> float:
     return default if value is None else value
 
 
-class Anemometer(_Section, frozen=True, kw_only=True):
+class AnemometerSpec(_Section, frozen=True, kw_only=True):
     """Every vehicle's anemometer (agents.anemometer): the scenario's wind plus noise."""
 
     period_ticks: Annotated[int, msgspec.Meta(ge=0, le=100_000)] = 0  # 0: no anemometer
@@ -307,7 +307,7 @@ class Failsafe(_Section, frozen=True, kw_only=True):
     crash_speed_m_s: Pos = 3.0
 
 
-class Vehicle(_Section, frozen=True, kw_only=True):
+class VehicleSpec(_Section, frozen=True, kw_only=True):
     id: Name
     type: Name = "iris"
     # MAVLink system id for the gateway; default: index + 1 for the first 254 vehicles, none after
@@ -319,7 +319,7 @@ class Vehicle(_Section, frozen=True, kw_only=True):
     failsafe: Failsafe | None = None  # overrides the scenario's [failsafe]
 
 
-class Gateway(_Section, frozen=True, kw_only=True):
+class GatewaySpec(_Section, frozen=True, kw_only=True):
     host: str = "127.0.0.1"
     gcs_port: Annotated[int, msgspec.Meta(ge=1, le=65535)] = 14550
     api_port_base: Annotated[int, msgspec.Meta(ge=1, le=65535)] = 14540
@@ -341,19 +341,19 @@ class Env(_Section, frozen=True, kw_only=True):
 
 
 class Scenario(_Section, frozen=True, kw_only=True):
-    world: World = World()
+    world: WorldSpec = WorldSpec()
     time: Time = Time()
     network: NetworkConfig = NetworkConfig()
     wind: Wind = Wind()
     plume: Plume = Plume()
     sensor: Sensor = Sensor()
-    anemometer: Anemometer = Anemometer()
+    anemometer: AnemometerSpec = AnemometerSpec()
     failsafe: Failsafe = Failsafe()
-    gateway: Gateway = Gateway()
+    gateway: GatewaySpec = GatewaySpec()
     env: Env = Env()
-    vehicles: Annotated[list[Vehicle], msgspec.Meta(min_length=1, max_length=MAX_VEHICLES)]
+    vehicles: Annotated[list[VehicleSpec], msgspec.Meta(min_length=1, max_length=MAX_VEHICLES)]
 
-    def vehicle(self, vehicle_id: str) -> Vehicle:
+    def vehicle(self, vehicle_id: str) -> VehicleSpec:
         for v in self.vehicles:
             if v.id == vehicle_id:
                 return v
@@ -384,7 +384,7 @@ class Scenario(_Section, frozen=True, kw_only=True):
         return self.time.physics_hz // self.time.control_hz
 
 
-def _sysid_at(index: int, v: Vehicle) -> int | None:
+def _sysid_at(index: int, v: VehicleSpec) -> int | None:
     if v.sysid is not None:
         return v.sysid
     return index + 1 if index < MAVLINK_MAX_SYSID else None

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from recorder import schema as sch
-from recorder.flight import scenario_of
+from recorder.flight_log import scenario_of
 from recorder.foxglove.scene import FoxgloveScene
 from recorder.reader import Recording, RecordingError
 from recorder.sink import McapSink

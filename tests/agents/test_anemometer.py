@@ -10,8 +10,7 @@ import pytest
 
 from agents.anemometer import Anemometer
 from sim_world.world import GRAVITY_M_S2, World
-from swarmbus.scenario import Anemometer as AnemometerConfig
-from swarmbus.scenario import parse_scenario
+from swarmbus.scenario import AnemometerSpec, parse_scenario
 from swarmbus.vehicle_types import load_vehicle_type
 from swarmbus.wind import wind_from_scenario
 
@@ -62,7 +61,7 @@ def test_a_hovering_body_follows_the_meandering_wind_through_its_drag() -> None:
 def test_anemometer_noise_is_seeded_per_tick_with_its_configured_std() -> None:
     scenario = parse_scenario(MEANDER)
     wind = wind_from_scenario(scenario)
-    config = AnemometerConfig(period_ticks=1, noise_std_m_s=0.1)
+    config = AnemometerSpec(period_ticks=1, noise_std_m_s=0.1)
     one = Anemometer(config, wind, 4, 0)
     errors = []
     for tick in range(4000):
@@ -75,4 +74,4 @@ def test_anemometer_noise_is_seeded_per_tick_with_its_configured_std() -> None:
     assert again == one.read("a", 17, 17 / 120, (1.0, 2.0, 10.0))
     other = Anemometer(config, wind, 4, 1).read("b", 17, 17 / 120, (1.0, 2.0, 10.0))
     assert other.wind_enu_m_s != again.wind_enu_m_s
-    assert not Anemometer(AnemometerConfig(), wind, 4, 0).due(0)  # off by default
+    assert not Anemometer(AnemometerSpec(), wind, 4, 0).due(0)  # off by default

@@ -9,13 +9,13 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from experiments.chaos import Flight, compare, fault_plan
+from experiments.chaos import ChaosRun, compare, fault_plan
 from tests.support.mavclient import write_scenario
 from tests.support.procs import run_cli
 
 
-def flight(ticks: int, vehicles: tuple[str, ...] = ("uav1", "uav2")) -> Flight:
-    f = Flight(last_tick=ticks - 1)
+def flight(ticks: int, vehicles: tuple[str, ...] = ("uav1", "uav2")) -> ChaosRun:
+    f = ChaosRun(last_tick=ticks - 1)
     for vid in vehicles:
         f.states[vid] = {t: f"{vid}:{t}".encode() for t in range(ticks)}
     return f

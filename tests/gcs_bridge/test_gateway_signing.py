@@ -22,7 +22,7 @@ from gcs_bridge.links import signing_timestamp_now
 from gcs_bridge.options import signing_key
 from swarmbus.messages import FlightMode, VehicleStatus
 from swarmbus.options import OptionError
-from swarmbus.scenario import Gateway, load_scenario
+from swarmbus.scenario import GatewaySpec, load_scenario
 from tests.gcs_bridge.test_gateway_mavproxy import MAVPROXY, mavproxy_console
 from tests.support.buswatch import BusWatch
 from tests.support.gateway_stack import gateway, vehicles
@@ -74,8 +74,8 @@ def test_signed_gcs_link_refuses_unsigned_and_wrong_keys(tmp_path: Path) -> None
 
 
 # ----------------------------------------------------------------------------- the key file
-def gateway_section(**kw: str) -> Gateway:
-    return Gateway(**kw)  # type: ignore[arg-type]
+def gateway_section(**kw: str) -> GatewaySpec:
+    return GatewaySpec(**kw)  # type: ignore[arg-type]
 
 
 def test_the_key_file_is_read_only_when_private_to_its_owner(tmp_path: Path) -> None:

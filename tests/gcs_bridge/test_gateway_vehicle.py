@@ -11,7 +11,7 @@ from gcs_bridge.options import GatewayOptions
 from gcs_bridge.vehicle import ArmIntent, Vehicle
 from swarmbus.messages import FlightMode, MissionItem
 from swarmbus.options import OptionError, parse_options
-from swarmbus.scenario import Gateway, load_scenario
+from swarmbus.scenario import GatewaySpec, load_scenario
 from tests.support.messages_samples import vehicle_status as status
 
 SCENARIO = load_scenario()
@@ -69,8 +69,8 @@ def test_options_are_checked_and_rates_configurable() -> None:
     o = parse_options(GatewayOptions, given)
     assert o.rates_hz()[mavlink.MAVLINK_MSG_ID_ATTITUDE] == 10.0
     assert o.signs("gcs") and not o.signs("api") and not o.api_links
-    assert o.bind_host_for(Gateway()) == "127.0.0.1"
-    assert GatewayOptions().bind_host_for(Gateway(host="192.0.2.7")) == "0.0.0.0"
+    assert o.bind_host_for(GatewaySpec()) == "127.0.0.1"
+    assert GatewayOptions().bind_host_for(GatewaySpec(host="192.0.2.7")) == "0.0.0.0"
     for bad in (
         {"nope": "1"},
         {"rate.NOT_A_MESSAGE": "1"},

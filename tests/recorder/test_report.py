@@ -143,7 +143,7 @@ def test_map_field_is_the_plume_services_gaussian(lid_m: float | None) -> None:
 def test_map_only_for_a_steady_plume() -> None:
     """A Gaussian plume (from plume/info, else from the scenario) has a map; a filament plume's
     value changes with time and has none; without either there is none."""
-    from recorder.flight import Flight
+    from recorder.flight_log import FlightLog
     from recorder.plume_map import SteadyPlume, plume_field
     from swarmbus.messages import PlumeInfo
     from swarmbus.scenario import load_scenario, resolve_scenario_path
@@ -153,9 +153,9 @@ def test_map_only_for_a_steady_plume() -> None:
     assert isinstance(info, PlumeInfo) and info.model == "gaussian"
     steady = load_scenario(resolve_scenario_path("novak2018"))
     filament = load_scenario(resolve_scenario_path("filament"))
-    assert isinstance(plume_field(Flight("w", plume_info=info)), SteadyPlume)
-    assert isinstance(plume_field(Flight("w", scenario=steady)), SteadyPlume)
-    assert plume_field(Flight("w", scenario=filament)) is None
+    assert isinstance(plume_field(FlightLog("w", plume_info=info)), SteadyPlume)
+    assert isinstance(plume_field(FlightLog("w", scenario=steady)), SteadyPlume)
+    assert plume_field(FlightLog("w", scenario=filament)) is None
     moving = PlumeInfo(**{**msgspec.structs.asdict(info), "model": "filament"})
-    assert plume_field(Flight("w", plume_info=moving, scenario=steady)) is None
-    assert plume_field(Flight("w")) is None
+    assert plume_field(FlightLog("w", plume_info=moving, scenario=steady)) is None
+    assert plume_field(FlightLog("w")) is None

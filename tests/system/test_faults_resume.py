@@ -52,7 +52,7 @@ T = TypeVar("T")
 
 
 @dataclass
-class Flight:
+class ResumeRun:
     launcher: Launcher
     lock: threading.Lock = field(default_factory=threading.Lock)
     # every state payload by vehicle and tick (the first seen; a replay must repeat it)
@@ -112,7 +112,7 @@ class Flight:
 
 
 @contextmanager
-def flight(tmp: Path, per_process: int = 1, network_mode: str | None = None) -> Iterator[Flight]:
+def flight(tmp: Path, per_process: int = 1, network_mode: str | None = None) -> Iterator[ResumeRun]:
     """The stack flying the three missions from tick START_TICK + 1 on (``per_process``
     vehicles per autopilot process; every node in ``network_mode``, default the scenario's)."""
     path, _, _ = write_scenario(tmp / "scenario.toml", len(VEHICLES) + 1)
@@ -130,7 +130,7 @@ def flight(tmp: Path, per_process: int = 1, network_mode: str | None = None) -> 
         vehicles_per_process=per_process,
     )
     launcher = Launcher(scenario, opts)
-    f = Flight(launcher)
+    f = ResumeRun(launcher)
     subs: list[zenoh.Subscriber[None]] = []
     release = tmp / "release"
 
@@ -173,7 +173,7 @@ def flight(tmp: Path, per_process: int = 1, network_mode: str | None = None) -> 
         launcher.stop()
 
 
-def fly_baseline(tmp: Path) -> Flight:
+def fly_baseline(tmp: Path) -> ResumeRun:
     """The flight without any kill."""
     with flight(tmp) as f:
         f.wait(f.done, 300.0, "every mission finished and landed")
@@ -183,12 +183,12 @@ def fly_baseline(tmp: Path) -> Flight:
 
 
 @pytest.fixture(scope="module")
-def baseline(tmp_path_factory: pytest.TempPathFactory) -> Flight:
+def baseline(tmp_path_factory: pytest.TempPathFactory) -> ResumeRun:
     """The flight without any kill."""
     return fly_baseline(tmp_path_factory.mktemp("baseline"))
 
 
-def kill(f: Flight, *names: str) -> None:
+def kill(f: ResumeRun, *names: str) -> None:
     pids = f.launcher.supervisor.pids()
     for name in names:
         os.killpg(pids[name], signal.SIGKILL)
@@ -196,7 +196,7 @@ def kill(f: Flight, *names: str) -> None:
 
 def fly_with_kill(
     tmp: Path, *names: str, per_process: int = 1, network_mode: str | None = None
-) -> tuple[Flight, int]:
+) -> tuple[ResumeRun, int]:
     """Fly the missions, SIGKILL ``names`` while uav1 flies its first leg at 10 m; the flight
     and the last tick of uav1 seen before the kill."""
     with flight(tmp, per_process, network_mode) as f:
@@ -219,7 +219,7 @@ def fly_with_kill(
     return f, before
 
 
-def assert_nothing_lost(f: Flight, baseline: Flight, killed_at: int) -> None:
+def assert_nothing_lost(f: ResumeRun, baseline: ResumeRun, killed_at: int) -> None:
     assert not f.conflicts, f"replayed ticks differ: {f.conflicts[:5]}"
     # the killed vehicle was flying at the kill, and flew on as it did without the kill: no
     # tick of it lower by more than 1 m than in the run without the kill ...
@@ -248,7 +248,7 @@ def assert_nothing_lost(f: Flight, baseline: Flight, killed_at: int) -> None:
 
 
 def test_autopilot_killed_mid_mission_the_clock_waits_and_nothing_is_lost(
-    baseline: Flight, tmp_path: Path
+    baseline: ResumeRun, tmp_path: Path
 ) -> None:
     f, killed_at = fly_with_kill(tmp_path, f"autopilot-{KILLED}")
     assert_nothing_lost(f, baseline, killed_at)
@@ -258,7 +258,7 @@ def test_autopilot_killed_mid_mission_the_clock_waits_and_nothing_is_lost(
 
 
 def test_physics_and_autopilot_killed_at_once_nothing_is_lost(
-    baseline: Flight, tmp_path: Path
+    baseline: ResumeRun, tmp_path: Path
 ) -> None:
     f, killed_at = fly_with_kill(tmp_path, "physics", f"autopilot-{KILLED}")
     assert_nothing_lost(f, baseline, killed_at)
@@ -269,7 +269,7 @@ def test_physics_and_autopilot_killed_at_once_nothing_is_lost(
 
 
 def test_a_process_of_two_autopilots_killed_both_vehicles_resume(
-    baseline: Flight, tmp_path: Path
+    baseline: ResumeRun, tmp_path: Path
 ) -> None:
     """Two vehicles in one process (one ActuatorBatch per tick): the clock holds both, the new
     process restores both, and the streams are the bits of the run without the kill (flown one

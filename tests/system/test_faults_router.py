@@ -22,7 +22,7 @@ import pytest
 
 from tests.system.test_faults_resume import (
     KILLED,
-    Flight,
+    ResumeRun,
     assert_nothing_lost,
     flight,
     fly_baseline,
@@ -32,13 +32,13 @@ from tests.system.test_faults_resume import (
 
 
 @pytest.fixture(scope="module")
-def baseline(tmp_path_factory: pytest.TempPathFactory) -> Flight:
+def baseline(tmp_path_factory: pytest.TempPathFactory) -> ResumeRun:
     """The flight without any kill (every node a peer)."""
     return fly_baseline(tmp_path_factory.mktemp("baseline"))
 
 
 def test_router_killed_mid_mission_peers_the_run_goes_on_and_nothing_is_lost(
-    baseline: Flight, tmp_path: Path
+    baseline: ResumeRun, tmp_path: Path
 ) -> None:
     f, killed_at = fly_with_kill(tmp_path, "router")
     assert_nothing_lost(f, baseline, killed_at)
@@ -46,7 +46,7 @@ def test_router_killed_mid_mission_peers_the_run_goes_on_and_nothing_is_lost(
 
 
 def test_router_killed_twice_mid_mission_clients_the_clock_holds_and_nothing_is_lost(
-    baseline: Flight, tmp_path: Path
+    baseline: ResumeRun, tmp_path: Path
 ) -> None:
     with flight(tmp_path, network_mode="client") as f:
         f.wait(

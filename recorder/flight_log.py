@@ -69,7 +69,7 @@ class Readings:
 
 
 @dataclass
-class Flight:
+class FlightLog:
     world: str
     tracks: dict[str, Track] = field(default_factory=dict)
     readings: dict[str, Readings] = field(default_factory=dict)
@@ -235,8 +235,8 @@ def scenario_of(recording: Recording) -> Scenario | None:
         return None
 
 
-def load_flight(recording: Recording, progress: bool | None = None) -> Flight:
-    """Read ``recording`` into a :class:`Flight` (``progress``: None = only on a terminal)."""
+def load_flight(recording: Recording, progress: bool | None = None) -> FlightLog:
+    """Read ``recording`` into a :class:`FlightLog` (``progress``: None = only on a terminal)."""
     world = recording.metadata.get("plumeswarm", {}).get("world", "default")
     try:
         keys = Keys(world)
@@ -256,7 +256,7 @@ def load_flight(recording: Recording, progress: bool | None = None) -> Flight:
     for rec in bar:
         collector.add(rec)
         count += 1
-    flight = Flight(
+    flight = FlightLog(
         world=world,
         plume_info=collector.plume_info,
         scenario=scenario_of(recording),
