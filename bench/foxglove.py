@@ -19,8 +19,16 @@ from pathlib import Path
 from typing import Any
 
 from bench.recorder import STATE_HZ, state
-from recorder.foxglove.scene import TRAIL_MAX_POINTS, TRAILS_PERIOD_S, FoxgloveScene
-from recorder.foxglove.scene import encode as encode_message
+from recorder.foxglove.channels import (
+    TRAIL_MAX_POINTS,
+    TRAILS_PERIOD_S,
+)
+from recorder.foxglove.channels import (
+    encode as encode_message,
+)
+from recorder.foxglove.scene import (
+    FoxgloveScene,
+)
 from recorder.sink import McapSink
 from swarmbus.codec import encode
 from swarmbus.keys import Keys

@@ -31,7 +31,9 @@ import msgspec
 import zenoh
 
 from recorder import schema as sch
-from recorder.foxglove.scene import FoxgloveScene
+from recorder.foxglove.scene import (
+    FoxgloveScene,
+)
 from recorder.reader import RecordingError, SegmentEnd, segment_end
 from recorder.segments import next_segment
 from recorder.sink import DEFAULT_CHUNK_BYTES, DEFAULT_CHUNK_INTERVAL_S, McapSink

@@ -16,7 +16,11 @@ import msgspec
 from mcap.writer import CompressionType, Writer
 
 from recorder import schema as sch
-from recorder.foxglove.scene import Out, channel_schema, encode
+from recorder.foxglove.channels import (
+    Out,
+    channel_schema,
+    encode,
+)
 from recorder.reader import Recorded
 from swarmbus.node import package_version
 

@@ -16,7 +16,9 @@ from pathlib import Path
 
 from recorder import schema as sch
 from recorder.flight_log import scenario_of
-from recorder.foxglove.scene import FoxgloveScene
+from recorder.foxglove.scene import (
+    FoxgloveScene,
+)
 from recorder.reader import Recording, RecordingError
 from recorder.sink import McapSink
 

@@ -9,7 +9,7 @@ from collections.abc import Sequence
 
 import foxglove.layouts as fl
 
-from recorder.foxglove.scene import (
+from recorder.foxglove.channels import (
     PLUME_STATE_TOPIC,
     PLUME_TOPIC,
     READINGS_TOPIC,

@@ -23,7 +23,14 @@ from typing import Annotated, TypeVar
 import foxglove
 import msgspec
 
-from recorder.foxglove.scene import FoxgloveScene, Out, channel_schema, encode
+from recorder.foxglove.channels import (
+    Out,
+    channel_schema,
+    encode,
+)
+from recorder.foxglove.scene import (
+    FoxgloveScene,
+)
 from swarmbus.codec import MessageError, decode
 from swarmbus.messages import ConcentrationReading, PlumeState, SimTick
 from swarmbus.node import NodeContext, NodeRuntime

@@ -15,16 +15,47 @@ channels are the same whether it was converted live or afterwards.
 
 from __future__ import annotations
 
-import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable
 from dataclasses import dataclass, field
-from functools import cache
-from typing import Any, NamedTuple
+from typing import Any
 
-import msgspec
-import numpy as np
 from foxglove import messages as fm
 
+from recorder.foxglove.channels import (
+    DEFAULT_VEHICLE_TYPE,
+    LOCATION_PERIOD_S,
+    NO_READING_RGB,
+    PLUME_STATE_PERIOD_S,
+    PLUME_STATE_TOPIC,
+    PLUME_TOPIC,
+    READINGS_PERIOD_S,
+    READINGS_TOPIC,
+    RESTART_S,
+    SERIES_PERIOD_S,
+    TF_PERIOD_S,
+    TF_TOPIC,
+    TRAIL_MAX_POINTS,
+    TRAIL_POINT_PERIOD_S,
+    TRAILS_PERIOD_S,
+    TRAILS_TOPIC,
+    VEHICLES_TOPIC,
+    WORLD_FRAME,
+    ConcentrationSample,
+    Every,
+    Out,
+    colour,
+    concentration_topic,
+    heading_rad,
+    location_topic,
+    pose,
+    stamp,
+)
+from recorder.foxglove.entities import (
+    body_entity,
+    isosurface_entity,
+    plume_state_update,
+    vehicle_type,
+)
 from swarmbus.messages import (
     ConcentrationReading,
     PlumeMesh,
@@ -33,150 +64,11 @@ from swarmbus.messages import (
     VehicleState,
 )
 from swarmbus.scenario import Scenario
-from swarmbus.vehicle_types import VehicleType, VehicleTypeError, load_vehicle_type
 from swarmbus.view_feed import (
     PALETTE,
-    PLUME_COLOURS,
     default_levels,
-    plume_points,
     reading_colour,
 )
-
-WORLD_FRAME = "world"
-TF_TOPIC = "/tf"
-VEHICLES_TOPIC = "/scene/vehicles"
-TRAILS_TOPIC = "/scene/trails"
-READINGS_TOPIC = "/scene/readings"
-PLUME_TOPIC = "/scene/plume"
-PLUME_STATE_TOPIC = "/scene/plume_state"
-LOCATION_PREFIX = "/location/"
-CONCENTRATION_PREFIX = "/concentration/"
-
-# Rates, in simulation time (a channel gets at most one message per period).
-TF_PERIOD_S = 0.05  # 20 Hz: every vehicle's pose in one FrameTransforms
-LOCATION_PERIOD_S = 0.2  # 5 Hz per vehicle
-READINGS_PERIOD_S = 0.1  # 10 Hz: the newest reading of every vehicle
-SERIES_PERIOD_S = 0.05  # up to 20 Hz per vehicle (the sensor's own rate when lower)
-TRAILS_PERIOD_S = 2.0  # 0.5 Hz: every trail, whole (a seek shows the newest message only)
-TRAIL_POINT_PERIOD_S = 1.0  # a trail point per vehicle per sim second ...
-TRAIL_MAX_POINTS = 300  # ... the last 5 minutes of it (a full 32-vehicle update: 9600 points)
-PLUME_STATE_PERIOD_S = 0.5  # at most 2 Hz: the plume's default field/state period
-PLUME_STATE_MAX_SPHERES = 1000  # more filaments or puffs are thinned evenly to this many
-PLUME_STATE_MIN_DIAMETER_M = 0.2  # a fresh filament (R0 ≈ 3 cm) would be a pixel at 50 m
-PLUME_STATE_ALPHA = 0.5
-
-VEHICLE_SCALE = 4.0  # drawn size (as the meshcat viewer): a 0.5 m quadcopter vanishes at 60 m
-NO_READING_RGB = 0x9E9E9E
-DEFAULT_VEHICLE_TYPE = "iris"
-RESTART_S = 1.0  # sim time this far back is a new start (a replay, a restored checkpoint)
-_EPS_S = 1e-9
-
-
-def location_topic(vehicle_id: str) -> str:
-    return LOCATION_PREFIX + vehicle_id
-
-
-def concentration_topic(vehicle_id: str) -> str:
-    return CONCENTRATION_PREFIX + vehicle_id
-
-
-class ConcentrationSample(msgspec.Struct, frozen=True, kw_only=True):
-    """One point of a vehicle's concentration series (``/concentration/<id>``, JSON).
-    ``reported_g_m3`` / ``true_g_m3`` are null when the plume did not answer."""
-
-    vehicle_id: str
-    sim_time_s: float
-    available: bool
-    reported_g_m3: float | None
-    true_g_m3: float | None
-    x_m: float
-    y_m: float
-    z_m: float
-
-
-FoxgloveMessage = fm.FrameTransforms | fm.SceneUpdate | fm.LocationFix | ConcentrationSample
-
-
-class Out(NamedTuple):
-    """One message for a Foxglove channel; ``log_time_ns`` is the anchored simulation time."""
-
-    topic: str
-    message: FoxgloveMessage
-    log_time_ns: int
-
-
-class ChannelSchema(NamedTuple):
-    name: str
-    encoding: str  # "protobuf" or "jsonschema"
-    data: bytes
-    message_encoding: str  # "protobuf" or "json"
-
-
-_schemas: dict[type, ChannelSchema] = {}
-
-
-def channel_schema(type_: type) -> ChannelSchema:
-    """The schema a Foxglove channel carrying ``type_`` declares (the SDK's own for its
-    well-known messages)."""
-    cs = _schemas.get(type_)
-    if cs is None:
-        if type_ is ConcentrationSample:
-            data = msgspec.json.encode(msgspec.json.schema(ConcentrationSample))
-            cs = ChannelSchema("plumeswarm.ConcentrationSample", "jsonschema", data, "json")
-        else:
-            schema = type_.get_schema()  # type: ignore[attr-defined]
-            cs = ChannelSchema(schema.name, schema.encoding, bytes(schema.data), "protobuf")
-        _schemas[type_] = cs
-    return cs
-
-
-_json = msgspec.json.Encoder()
-
-
-def encode(message: FoxgloveMessage) -> bytes:
-    """``message`` in its channel's message encoding."""
-    if isinstance(message, ConcentrationSample):
-        return _json.encode(message)
-    return bytes(message.encode())
-
-
-# --------------------------------------------------------------------------- small builders
-def stamp(ns: int) -> fm.Timestamp:
-    return fm.Timestamp(sec=ns // 1_000_000_000, nsec=ns % 1_000_000_000)
-
-
-def colour(rgb: int, alpha: float = 1.0) -> fm.Color:
-    return fm.Color(
-        r=((rgb >> 16) & 0xFF) / 255, g=((rgb >> 8) & 0xFF) / 255, b=(rgb & 0xFF) / 255, a=alpha
-    )
-
-
-def pose(x: float = 0.0, y: float = 0.0, z: float = 0.0) -> fm.Pose:
-    return fm.Pose(
-        position=fm.Vector3(x=x, y=y, z=z), orientation=fm.Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)
-    )
-
-
-def heading_rad(xyzw: Sequence[float]) -> float:
-    """Heading clockwise from north of a body (FLU) whose attitude in ENU is ``xyzw``."""
-    x, y, z, w = xyzw
-    yaw_from_east = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-    return (math.pi / 2.0 - yaw_from_east) % (2.0 * math.pi)
-
-
-class _Every:
-    """Due once per ``period_s`` of simulation time; time going backwards (a replay, a restart
-    from a checkpoint) starts over."""
-
-    def __init__(self, period_s: float) -> None:
-        self.period_s = period_s
-        self.last_s: float | None = None
-
-    def due(self, t_s: float) -> bool:
-        if self.last_s is not None and self.last_s <= t_s < self.last_s + self.period_s - _EPS_S:
-            return False
-        self.last_s = t_s
-        return True
 
 
 @dataclass
@@ -186,7 +78,7 @@ class _Vehicle:
     state: VehicleState | None = None
     reading: ConcentrationReading | None = None
     trail: list[tuple[float, float, float, int]] = field(default_factory=list)  # x, y, z, rgb
-    series_every: _Every = field(default_factory=lambda: _Every(SERIES_PERIOD_S))
+    series_every: Every = field(default_factory=lambda: Every(SERIES_PERIOD_S))
 
     @property
     def rgb(self) -> int:
@@ -202,16 +94,16 @@ class FoxgloveScene:
         self._vehicles: dict[str, _Vehicle] = {}
         self._anchor_ns: int | None = None
         self._now_s = 0.0
-        self._tf = _Every(TF_PERIOD_S)
-        self._readings = _Every(READINGS_PERIOD_S)
-        self._trails = _Every(TRAILS_PERIOD_S)
-        self._trail_points = _Every(TRAIL_POINT_PERIOD_S)
-        self._locations = _Every(LOCATION_PERIOD_S)
+        self._tf = Every(TF_PERIOD_S)
+        self._readings = Every(READINGS_PERIOD_S)
+        self._trails = Every(TRAILS_PERIOD_S)
+        self._trail_points = Every(TRAIL_POINT_PERIOD_S)
+        self._locations = Every(LOCATION_PERIOD_S)
         self._has_state = False
         self._plume_meshes: dict[float, PlumeMesh] = {}
         self._plume_pending = False
         self._plume_state: PlumeState | None = None
-        self._plume_states = _Every(PLUME_STATE_PERIOD_S)
+        self._plume_states = Every(PLUME_STATE_PERIOD_S)
         self._vehicles_pending = False
         self.full_scale_g_m3 = 1.0
         if scenario is not None:
@@ -410,7 +302,7 @@ class FoxgloveScene:
         ts = stamp(now_ns)
         return fm.SceneUpdate(
             entities=[
-                _body_entity(vid, _vehicle_type(v.type_name), v.rgb, ts)
+                body_entity(vid, vehicle_type(v.type_name), v.rgb, ts)
                 for vid, v in self._vehicles.items()
             ]
         )
@@ -483,7 +375,7 @@ class FoxgloveScene:
         ts = stamp(now_ns)
         entities = list(self._source_entities(ts))
         for i, (level, mesh) in enumerate(sorted(self._plume_meshes.items())):
-            entity = _isosurface_entity(i, level, mesh, ts)
+            entity = isosurface_entity(i, level, mesh, ts)
             if entity is not None:
                 entities.append(entity)
         return fm.SceneUpdate(entities=entities)
@@ -518,119 +410,6 @@ class FoxgloveScene:
                     )
                 ],
             )
-
-
-def _isosurface_entity(
-    index: int, level: float, mesh: PlumeMesh, ts: fm.Timestamp
-) -> fm.SceneEntity | None:
-    vertices = np.frombuffer(mesh.vertices_f32, dtype="<f4").reshape(-1, 3).astype(float)
-    faces = np.frombuffer(mesh.faces_i32, dtype="<i4")
-    if faces.size == 0:
-        return None
-    triangles = fm.TriangleListPrimitive(
-        pose=pose(),
-        points=[fm.Point3(x=x, y=y, z=z) for x, y, z in vertices.tolist()],
-        color=colour(PLUME_COLOURS[index % len(PLUME_COLOURS)], alpha=0.18 + 0.12 * index),
-        indices=faces.tolist(),
-    )
-    return fm.SceneEntity(
-        timestamp=ts,
-        frame_id=WORLD_FRAME,
-        id=f"plume/level_{index}",
-        metadata=[fm.KeyValuePair(key="level_g_m3", value=f"{level:g}")],
-        triangles=[triangles],
-    )
-
-
-def plume_state_update(state: PlumeState, now_ns: int) -> fm.SceneUpdate:
-    """A time-dependent plume's filaments or puffs (``field/state``) as one entity of spheres,
-    each of diameter 2R (a filament's R, a puff's σy; at least
-    ``PLUME_STATE_MIN_DIAMETER_M``), coloured by its peak density (∝ R⁻³: the message carries
-    no masses, and one source's filaments or puffs all carry the same) on a log scale from the
-    frame's most diluted (blue) to its densest (red). One entity id, so each frame replaces
-    the last; above ``PLUME_STATE_MAX_SPHERES`` every k-th is drawn (they are in release
-    order)."""
-    centres, radii = plume_points(state)  # a garbled sample draws what is whole of it
-    stride = max(1, math.ceil(len(radii) / PLUME_STATE_MAX_SPHERES))
-    centres, radii = centres[::stride], radii[::stride]
-    diameters = np.maximum(2.0 * radii, PLUME_STATE_MIN_DIAMETER_M)
-    density = _log_relative_density(radii)
-    spheres = [
-        fm.SpherePrimitive(
-            pose=pose(x, y, z),
-            size=fm.Vector3(x=d, y=d, z=d),
-            color=colour(reading_colour(t, 1.0), alpha=PLUME_STATE_ALPHA),
-        )
-        for (x, y, z), d, t in zip(centres.tolist(), diameters.tolist(), density, strict=True)
-    ]
-    meta = {"model": state.model, "count": str(state.count), "drawn": str(len(spheres))}
-    entity = fm.SceneEntity(
-        timestamp=stamp(now_ns),
-        frame_id=WORLD_FRAME,
-        id="plume/state",
-        metadata=[fm.KeyValuePair(key=k, value=v) for k, v in meta.items()],
-        spheres=spheres,
-    )
-    return fm.SceneUpdate(entities=[entity])
-
-
-def _log_relative_density(radii: np.ndarray[Any, np.dtype[np.float64]]) -> list[float]:
-    """0 (the largest R) … 1 (the smallest) by log R: the log of R⁻³, rescaled."""
-    log_r = np.log(np.maximum(radii, 1e-9))
-    span = float(log_r.max() - log_r.min()) if radii.size else 0.0
-    if not span > 0.0:  # one size (or none, or NaN): all dense
-        return [1.0] * radii.size
-    out: list[float] = ((log_r.max() - log_r) / span).tolist()
-    return out
-
-
-@cache
-def _vehicle_type(name: str) -> VehicleType:
-    try:
-        return load_vehicle_type(name)
-    except VehicleTypeError:
-        return load_vehicle_type(DEFAULT_VEHICLE_TYPE)
-
-
-def _body_entity(vid: str, vt: VehicleType, rgb: int, ts: fm.Timestamp) -> fm.SceneEntity:
-    s = VEHICLE_SCALE
-    hx, hy, hz = vt.collision_half_extents_m
-    arm_r = max(math.hypot(r.position_m[0], r.position_m[1]) for r in vt.rotors)
-    disc_d = 2 * max(0.05, 0.45 * arm_r) * s
-    rotors = [
-        fm.CylinderPrimitive(
-            pose=pose(r.position_m[0] * s, r.position_m[1] * s, r.position_m[2] * s),
-            size=fm.Vector3(x=disc_d, y=disc_d, z=0.02 * s),
-            bottom_scale=1.0,
-            top_scale=1.0,
-            color=colour(rgb, alpha=0.6),
-        )
-        for r in vt.rotors
-    ]
-    return fm.SceneEntity(
-        timestamp=ts,
-        frame_id=vid,
-        id=f"vehicle/{vid}",
-        frame_locked=True,
-        cubes=[
-            fm.CubePrimitive(
-                pose=pose(),
-                size=fm.Vector3(x=2 * hx * s, y=2 * hy * s, z=2 * hz * s),
-                color=colour(rgb),
-            )
-        ],
-        cylinders=rotors,
-        texts=[
-            fm.TextPrimitive(
-                pose=pose(0.0, 0.0, 2.0 * s * max(hz, 0.1) + 1.0),
-                billboard=True,
-                font_size=14.0,
-                scale_invariant=True,
-                color=colour(rgb),
-                text=vid,
-            )
-        ],
-    )
 
 
 _HANDLERS: dict[type, Any] = {

@@ -9,7 +9,9 @@ from pathlib import Path
 
 from plume_service.from_scenario import field_from_scenario
 from plume_service.service import StatePublisher
-from recorder.foxglove.scene import PLUME_STATE_TOPIC
+from recorder.foxglove.channels import (
+    PLUME_STATE_TOPIC,
+)
 from recorder.reader import Recording
 from swarmbus.messages import AnemometerReading, ConcentrationReading, PlumeState
 from swarmbus.scenario import SCENARIOS_DIR, load_scenario

@@ -19,10 +19,7 @@ from mcap.reader import make_reader
 
 from plume_service.from_scenario import field_from_scenario
 from plume_service.service import StatePublisher
-from recorder.foxglove.export import ExportError, export_foxglove
-from recorder.foxglove.layout import layout_json
-from recorder.foxglove.live import LiveChannels, convert
-from recorder.foxglove.scene import (
+from recorder.foxglove.channels import (
     PLUME_STATE_MAX_SPHERES,
     PLUME_STATE_MIN_DIAMETER_M,
     PLUME_STATE_TOPIC,
@@ -30,12 +27,17 @@ from recorder.foxglove.scene import (
     TF_TOPIC,
     TRAILS_TOPIC,
     VEHICLES_TOPIC,
-    FoxgloveScene,
     Out,
     channel_schema,
     concentration_topic,
     encode,
     location_topic,
+)
+from recorder.foxglove.export import ExportError, export_foxglove
+from recorder.foxglove.layout import layout_json
+from recorder.foxglove.live import LiveChannels, convert
+from recorder.foxglove.scene import (
+    FoxgloveScene,
 )
 from recorder.sink import McapSink
 from swarmbus import codec
