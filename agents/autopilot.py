@@ -19,7 +19,8 @@ from agents.control import Controller, Estimate
 from agents.estimator import Estimator
 from agents.failsafe import FailsafeMonitor
 from agents.mixer import Mixer
-from agents.modes import FlightModes, Refusal, denied, invalid
+from agents.mode_table import Refusal, denied, invalid
+from agents.modes import FlightModes
 from swarmbus.messages import (
     ACTION_CODES_OF_PARAM,
     Arm,

@@ -12,7 +12,8 @@ command arrived), so a swarm run without a GCS never trips it; with
 from __future__ import annotations
 
 from agents.control import Estimate
-from agents.modes import AIRBORNE, FlightModes
+from agents.mode_table import AIRBORNE
+from agents.modes import FlightModes
 
 DATALINK_LOST = "ground-control link lost"
 

@@ -1,7 +1,5 @@
-"""Flight modes: an explicit state machine with a transition table, and per-mode guidance.
-
-``TRANSITIONS[action][from_mode] → to_mode`` lists every allowed transition; ``REFUSALS`` says
-why an action is refused in a mode the table does not list. Guards that depend on more than the
+"""Flight modes: an explicit state machine over a transition table (:mod:`agents.mode_table`),
+and per-mode guidance. Guards that depend on more than the
 mode (arming in the air, an empty mission, no setpoint stream, the geofence, …) are checked in
 the action methods. Guidance (``FlightModes.guidance``) turns the mode into a controller
 :class:`~agents.control.Target` every tick and makes the automatic transitions (take-off done →
@@ -10,14 +8,23 @@ hold, touchdown → disarmed, offboard stream lost → the configured action, �
 
 from __future__ import annotations
 
-import enum
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
 
 from agents.control import Estimate, Target, yaw_of
 from agents.geofence import zone_error, zones_violation
 from agents.mission import Mission, MissionError, ResolvedItem
+from agents.mode_table import (
+    AIRBORNE,
+    REFUSALS,
+    TRANSITIONS,
+    Action,
+    M,
+    Refusal,
+    RtlPhase,
+    denied,
+    invalid,
+)
 from swarmbus.messages import (
     FenceZone,
     FlightMode,
@@ -25,15 +32,9 @@ from swarmbus.messages import (
     MissionItem,
     Orbit,
     OrbitYaw,
-    RejectCode,
     Setpoint,
 )
 from swarmbus.scenario import Failsafe, Origin
-
-M = FlightMode
-AIRBORNE = frozenset(
-    {M.TAKEOFF, M.HOLD, M.MISSION, M.LAND, M.RTL, M.OFFBOARD, M.ORBIT, M.POSITION, M.FOLLOW}
-)
 
 TAKEOFF_DONE_M = 0.3  # altitude error at which take-off hands over to hold
 TOUCHDOWN_SPEED_M_S = 0.5
@@ -41,81 +42,6 @@ TOUCHDOWN_TIME_S = 0.5
 LAND_SLOW_BELOW_M = 4.0  # height above home under which the descent slows down
 LAND_SLOW_SPEED_M_S = 0.6
 RTL_HOME_RADIUS_M = 1.0
-
-
-class Action(enum.StrEnum):
-    ARM = "arm"
-    DISARM = "disarm"
-    TAKEOFF = "takeoff"
-    LAND = "land"
-    RTL = "rtl"
-    HOLD = "hold"
-    GOTO = "goto"
-    MISSION = "mission"
-    OFFBOARD = "offboard"
-    ORBIT = "orbit"
-    POSITION = "position"
-    FOLLOW = "follow"
-
-
-def _all_airborne(to: FlightMode) -> dict[FlightMode, FlightMode]:
-    return dict.fromkeys(AIRBORNE, to)
-
-
-TRANSITIONS: dict[Action, dict[FlightMode, FlightMode]] = {
-    Action.ARM: {M.DISARMED: M.ARMED},
-    Action.DISARM: {M.ARMED: M.DISARMED, **_all_airborne(M.DISARMED)},  # airborne: force
-    Action.TAKEOFF: {M.ARMED: M.TAKEOFF},
-    Action.LAND: _all_airborne(M.LAND),
-    Action.RTL: _all_airborne(M.RTL),
-    Action.HOLD: _all_airborne(M.HOLD),
-    Action.GOTO: _all_airborne(M.HOLD),
-    Action.MISSION: {M.ARMED: M.MISSION, **_all_airborne(M.MISSION)},
-    Action.OFFBOARD: {M.ARMED: M.OFFBOARD, **_all_airborne(M.OFFBOARD)},
-    Action.ORBIT: _all_airborne(M.ORBIT),
-    Action.POSITION: _all_airborne(M.POSITION),
-    Action.FOLLOW: _all_airborne(M.FOLLOW),
-}
-
-_NOT_FLYING = "disarmed: not flying"
-_ON_GROUND = "on the ground: take off first"
-REFUSALS: dict[Action, dict[FlightMode, str]] = {
-    Action.ARM: {M.ARMED: "already armed", **dict.fromkeys(AIRBORNE, "already armed and flying")},
-    Action.DISARM: {M.DISARMED: "already disarmed"},
-    Action.TAKEOFF: {
-        M.DISARMED: "disarmed: arm before taking off",
-        **dict.fromkeys(AIRBORNE, "already flying: use goto, hold or a mission"),
-    },
-    Action.LAND: {M.DISARMED: _NOT_FLYING, M.ARMED: "already on the ground"},
-    Action.RTL: {M.DISARMED: _NOT_FLYING, M.ARMED: _ON_GROUND},
-    Action.HOLD: {M.DISARMED: _NOT_FLYING, M.ARMED: _ON_GROUND},
-    Action.GOTO: {M.DISARMED: _NOT_FLYING, M.ARMED: _ON_GROUND},
-    Action.MISSION: {M.DISARMED: "disarmed: arm before starting a mission"},
-    Action.OFFBOARD: {M.DISARMED: "disarmed: arm before switching to offboard"},
-    Action.ORBIT: {M.DISARMED: _NOT_FLYING, M.ARMED: _ON_GROUND},
-    Action.POSITION: {M.DISARMED: _NOT_FLYING, M.ARMED: _ON_GROUND},
-    Action.FOLLOW: {M.DISARMED: _NOT_FLYING, M.ARMED: _ON_GROUND},
-}
-
-
-@dataclass(frozen=True, slots=True)
-class Refusal:
-    code: RejectCode
-    reason: str
-
-
-def denied(reason: str) -> Refusal:
-    return Refusal(RejectCode.DENIED, reason)
-
-
-def invalid(reason: str) -> Refusal:
-    return Refusal(RejectCode.INVALID, reason)
-
-
-class RtlPhase(enum.Enum):
-    CLIMB = "climb"
-    RETURN = "return"
-    DESCEND = "descend"
 
 
 class FlightModes:

@@ -19,7 +19,7 @@ import msgspec
 import numpy as np
 
 from agents.control import Estimate
-from agents.modes import RtlPhase
+from agents.mode_table import RtlPhase
 from swarmbus.messages import FenceZone, FlightMode, MissionItem, Orbit, Setpoint, VehicleState
 from swarmbus.scenario import Failsafe
 
