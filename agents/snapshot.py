@@ -14,7 +14,7 @@ attribute and the commands).
 
 A behaviour is saved with its ``snapshot()`` / ``restore(data)`` methods when it has them
 (``snapshot`` returns msgpack-encodable data; the behaviours in :mod:`agents.behaviors` get
-them from :class:`agents.behaviors.search.SavesState`), otherwise as its attributes (numbers,
+them from :class:`agents.behavior_state.SavesState`), otherwise as its attributes (numbers,
 strings, tuples, lists, dicts, ``None``), which covers plain-data behaviours; its context's
 generator is saved separately. A
 behaviour whose state cannot be saved makes :func:`capture` raise :class:`SnapshotError`.

@@ -32,8 +32,8 @@ import numpy as np
 import numpy.typing as npt
 
 from agents.autopilot_node import behavior_rng
-from agents.behavior import Behavior, BehaviorContext, load_behavior
-from agents.behaviors.search import PLUME_THRESHOLD_G_M3, SourceEstimate
+from agents.behavior import Behavior, BehaviorContext, SourceEstimate, load_behavior
+from agents.behaviors.detection import PLUME_THRESHOLD_G_M3
 from agents.sensor import ConcentrationSensor
 from experiments.fused import FusedRunner, StatesObserver
 from experiments.gsl_registry import (
