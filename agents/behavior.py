@@ -5,6 +5,10 @@ The class is built once with a :class:`BehaviorContext`; while its vehicle is in
 :class:`~swarmbus.messages.Setpoint` to fly (``None``: no new setpoint; the stream timeout
 then applies). ``readings`` are the vehicle's own concentration readings that arrived since the
 previous step (usually one per sensor period; a reading describes the previous sensor tick).
+
+A behaviour that decides where the source is sets its ``declaration`` attribute to a
+:class:`SourceEstimate` (once; it then holds position). Runners read it; the bench
+``plumeswarm bench gsl`` scores the declared position instead of where the vehicle ends.
 """
 
 from __future__ import annotations
@@ -18,6 +22,18 @@ import numpy as np
 
 from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
 from swarmbus.scenario import Scenario
+
+
+@dataclass(frozen=True)
+class SourceEstimate:
+    """Where a behaviour believes the source is: ENU metres, the release rate if it estimates
+    one, the 1-σ horizontal spread of its belief if it has one, and when it decided."""
+
+    x_m: float
+    y_m: float
+    sim_time_s: float
+    release_rate_g_s: float | None = None
+    spread_m: float | None = None
 
 
 @dataclass(frozen=True)

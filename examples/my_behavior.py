@@ -22,15 +22,10 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from agents.behavior import BehaviorContext
-from agents.behaviors.search import (
-    SourceEstimate,
-    anemometer_wind,
-    detector_for,
-    fly,
-    start_or_hold,
-    valid_values,
-)
+from agents.behavior import BehaviorContext, SourceEstimate
+from agents.behaviors.detection import detector_for, valid_values
+from agents.behaviors.steering import fly, start_or_hold
+from agents.behaviors.wind import anemometer_wind
 from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
 
 

@@ -31,8 +31,8 @@ import msgspec
 import numpy as np
 import numpy.typing as npt
 
-from agents.behavior import Behavior, BehaviorContext, load_behavior
-from agents.behaviors.search import PLUME_THRESHOLD_G_M3, SourceEstimate
+from agents.behavior import Behavior, BehaviorContext, SourceEstimate, load_behavior
+from agents.behaviors.detection import PLUME_THRESHOLD_G_M3
 from agents.build import behavior_rng
 from agents.sensor import ConcentrationSensor
 from experiments.fused import FusedRunner, StatesObserver

@@ -3,10 +3,13 @@ their own and their peers' readings and climb it in formation.
 
 The scheme of Ögren, Fiorelli & Leonard (2004), "Cooperative control of mobile sensor
 networks: adaptive gradient climbing in a distributed environment", IEEE TAC 49(8):1292, in its
-simplest form: every member fits a plane to ln(c + ε) over the swarm's simultaneous readings
-(least squares, :func:`log_gradient`), and the whole formation moves along the fitted gradient
-at ``climb_speed_m_s``. ln c turns the Gaussian plume's crosswind profile into a parabola, so
-the fitted direction points toward the plume's axis and up it to the source at any distance.
+simplest form: every member averages the swarm's readings (its own and each peer's, with their
+positions) over ``window_s`` (2 s), fits a plane to ln(mean + ``window_floor_g_m3``) over the
+members' means (least squares, :func:`log_gradient`; a single instantaneous reading of an
+intermittent plume says nothing about the mean, and one zero would weigh ln 10⁻¹² = −27.6),
+and the whole formation moves along the fitted gradient at ``climb_speed_m_s``. ln c turns
+the Gaussian plume's crosswind profile into a parabola, so the fitted direction points toward
+the plume's axis and up it to the source at any distance.
 
 The readings: a vehicle's own reading carries its peers' positions and the field's values there
 at the same sensor tick (``ConcentrationReading.peers``). The fit uses what each peer's sensor
@@ -24,7 +27,7 @@ When no member reads gas the swarm casts crosswind in formation (legs of growing
 drifting downwind). Stopping rule: once it has found gas and its centroid has moved less than
 ``stall_m`` over the last ``stall_s`` (climbing has stopped: at the source the fitted
 gradient flips back and forth), every member declares the source at the strongest reading
-the swarm took. Wind: the wind input (:mod:`agents.behaviors.search`).
+the swarm took. Wind: the wind input (:mod:`agents.behaviors.wind`).
 
 Use ``behavior = "agents.behaviors.gradient_swarm:GradientSwarm"`` on every member.
 """
@@ -39,18 +42,10 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from agents.behavior import BehaviorContext
-from agents.behaviors.search import (
-    CrosswindSweep,
-    SavesState,
-    SourceEstimate,
-    WindFrame,
-    WindReader,
-    anemometer_wind,
-    fly,
-    hold_at,
-    start_or_hold,
-)
+from agents.behavior import BehaviorContext, SourceEstimate
+from agents.behaviors.seeking import SeekingBehavior, Wind
+from agents.behaviors.steering import CrosswindSweep, fly
+from agents.behaviors.wind import WindFrame
 from agents.sensor import ConcentrationSensor
 from swarmbus.messages import ConcentrationReading, PeerReading, Setpoint, VehicleState
 
@@ -71,16 +66,16 @@ def log_gradient(
     return float(coef[1]), float(coef[2])
 
 
-class GradientSwarm(SavesState):
-    state_attributes = (
-        "altitude_m",
-        "declaration",
+class GradientSwarm(SeekingBehavior):
+    own_state = (
         "gradient",
         "best_g_m3",
         "best_xy",
         "centroids",
         "sweep",
         "peer_lags",
+        "window",
+        "window_start_s",
     )
     climb_speed_m_s = 2.0
     formation_radius_m = 2.0
@@ -91,20 +86,22 @@ class GradientSwarm(SavesState):
     cast_growth = 1.6
     stall_s = 10.0
     stall_m = 1.5
+    window_s = 2.0
+    window_floor_g_m3 = 1e-4
 
     def __init__(self, ctx: BehaviorContext) -> None:
+        super().__init__(ctx)
         self.vehicle_id = ctx.vehicle_id
         self.scenario = ctx.scenario
         # each peer's sensor model, and its lag history (the state a snapshot keeps)
         self.peer_sensors: dict[str, ConcentrationSensor] = {}
         self.peer_lags: dict[str, deque[tuple[float, float]]] = {}
-        self.read_wind: WindReader = anemometer_wind(ctx)
-        self.altitude_m: float | None = None
-        self.declaration: SourceEstimate | None = None
         self.gradient: tuple[float, float] | None = None
         self.best_g_m3 = 0.0
         self.best_xy: tuple[float, float] | None = None
         self.centroids: deque[tuple[float, float, float]] = deque()
+        self.window: dict[str, list[float]] = {}  # vehicle id: n, Σx, Σy, Σvalue
+        self.window_start_s: float | None = None
         self.sweep = CrosswindSweep(
             self.cast_speed_m_s, self.cast_drift_m_s, self.first_cast_half_width_m, self.cast_growth
         )
@@ -115,16 +112,36 @@ class GradientSwarm(SavesState):
                 continue
             pts = [(r.position_enu_m[0], r.position_enu_m[1])]
             vals = [r.reported_g_m3]
+            ids = [self.vehicle_id]
             for p in r.peers:
                 pts.append((p.position_enu_m[0], p.position_enu_m[1]))
                 vals.append(self.peer_output(p, r.sim_time_s))
-            for (x, y), v in zip(pts, vals, strict=True):
+                ids.append(p.vehicle_id)
+            for vid, (x, y), v in zip(ids, pts, vals, strict=True):
                 if v > self.best_g_m3:
                     self.best_g_m3, self.best_xy = v, (x, y)
-            if len(pts) >= 3 and max(vals) > 0.0:
-                self.gradient = log_gradient(pts, vals)
-            elif max(vals) <= 0.0:
-                self.gradient = None
+                acc = self.window.setdefault(vid, [0.0, 0.0, 0.0, 0.0])  # n, Σx, Σy, Σvalue
+                acc[0] += 1.0
+                acc[1] += x
+                acc[2] += y
+                acc[3] += v
+            if self.window_start_s is None:
+                self.window_start_s = r.sim_time_s
+            if r.sim_time_s - self.window_start_s >= self.window_s:
+                self._fit()
+
+    def _fit(self) -> None:
+        """The gradient of ln(mean + floor) over each member's mean reading and position in
+        the window; then a new window."""
+        means = [(sx / n, sy / n, sv / n) for n, sx, sy, sv in self.window.values() if n > 0]
+        self.window = {}
+        self.window_start_s = None
+        vals = [v for _, _, v in means]
+        if len(means) >= 3 and max(vals) > 0.0:
+            pts = [(x, y) for x, y, _ in means]
+            self.gradient = log_gradient(pts, vals, self.window_floor_g_m3)
+        elif max(vals, default=0.0) <= 0.0:
+            self.gradient = None
 
     def restore(self, data: dict[str, Any]) -> None:
         super().restore(data)
@@ -152,17 +169,15 @@ class GradientSwarm(SavesState):
         ids = sorted([own.vehicle_id, *(p.vehicle_id for p in peers)])
         return ids.index(own.vehicle_id)
 
-    def step(
+    def seek(
         self,
         own: VehicleState,
         peers: Sequence[VehicleState],
         readings: Sequence[ConcentrationReading],
+        wind: Wind,
     ) -> Setpoint | None:
         x, y, _ = own.position_enu_m
-        self.altitude_m, held = start_or_hold(own, self.altitude_m, self.declaration)
-        if held is not None:
-            return held
-        frame = WindFrame.of(self.read_wind(own))
+        frame = wind.frame
         self._observe(readings)
         members = [own, *peers]
         cx = sum(m.position_enu_m[0] for m in members) / len(members)
@@ -170,7 +185,7 @@ class GradientSwarm(SavesState):
         if self.best_xy is not None and self._stalled(own.sim_time_s, cx, cy):
             bx, by = self.best_xy
             self.declaration = SourceEstimate(x_m=bx, y_m=by, sim_time_s=own.sim_time_s)
-            return hold_at(bx, by, self.altitude_m)
+            return None
         climb = self._climb_velocity(frame, cx, cy)
         n = len(members)
         angle = 2.0 * math.pi * self._slot(own, peers) / n
@@ -181,7 +196,7 @@ class GradientSwarm(SavesState):
         k = self.formation_gain
         vx = climb[0] + k * (cx + ox - x)
         vy = climb[1] + k * (cy + oy - y)
-        return fly(own, (vx, vy), self.altitude_m)
+        return fly(own, (vx, vy), self.altitude)
 
     def _climb_velocity(self, frame: WindFrame, cx: float, cy: float) -> tuple[float, float]:
         if self.gradient is not None:

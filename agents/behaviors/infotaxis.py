@@ -12,8 +12,9 @@ eq. 1, in the wind frame with x downwind):
 with V the measured wind speed and D, τ, R, a the parameters below (they shape the modelled
 plume, not the simulated one). Observations are binary per decision step (the common variant
 of the paper's hit counts): a *hit* when any reading of the step is at least
-:data:`~agents.behaviors.search.PLUME_THRESHOLD_G_M3` (a slow-recovery sensor: rose by the
-equivalent, :func:`~agents.behaviors.search.detector_for`), with probability 1 − exp(−(R + r_bg)·Δt)
+:data:`~agents.behaviors.detection.PLUME_THRESHOLD_G_M3` (a slow-recovery sensor: rose by the
+equivalent, :func:`~agents.behaviors.detection.detector_for`), with probability
+1 − exp(−(R + r_bg)·Δt)
 (``background_rate_hz`` r_bg keeps a hit where the model says "no gas" from ruling a cell out
 for good). After each step Bayes' rule updates b; the next step (``step_m`` upwind, downwind,
 left, right, or stay) is the one with the lowest expected entropy of the updated belief,
@@ -34,20 +35,11 @@ import numpy as np
 import numpy.typing as npt
 from scipy.special import k0e
 
-from agents.behavior import BehaviorContext
-from agents.behaviors.search import (
-    PLUME_THRESHOLD_G_M3,
-    SavesState,
-    SourceEstimate,
-    WindFrame,
-    WindReader,
-    anemometer_wind,
-    detector_for,
-    fly,
-    hold_at,
-    start_or_hold,
-    toward,
-)
+from agents.behavior import BehaviorContext, SourceEstimate
+from agents.behaviors.detection import PLUME_THRESHOLD_G_M3, detector_for
+from agents.behaviors.seeking import SeekingBehavior, Wind
+from agents.behaviors.steering import fly, toward
+from agents.behaviors.wind import WindFrame
 from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
 
 FloatArray = npt.NDArray[np.float64]
@@ -86,13 +78,11 @@ def entropy(belief: FloatArray) -> float:
     return float(-(p * np.log(p)).sum())
 
 
-class Infotaxis(SavesState):
+class Infotaxis(SeekingBehavior):
     # ``cells_xy`` is rebuilt from ``grid_origin`` (where the grid was laid) on restore
-    state_attributes = (
+    own_state = (
         "detector",
         "grid_origin",
-        "altitude_m",
-        "declaration",
         "belief",
         "target_xy",
         "step_started_s",
@@ -114,10 +104,8 @@ class Infotaxis(SavesState):
     declare_mass = 0.9
 
     def __init__(self, ctx: BehaviorContext) -> None:
-        self.read_wind: WindReader = anemometer_wind(ctx)
-        self.altitude_m: float | None = None
+        super().__init__(ctx)
         self.detector = detector_for(ctx, self.threshold_g_m3)
-        self.declaration: SourceEstimate | None = None
         self.cells_xy: FloatArray | None = None  # (n, 2) ENU centres
         self.grid_origin: tuple[tuple[float, float], float, float] | None = None  # wind, x, y
         self.belief: FloatArray | None = None
@@ -211,19 +199,16 @@ class Infotaxis(SavesState):
         var = self.belief @ ((self.cells_xy - mean) ** 2)
         return float(mean[0]), float(mean[1]), float(math.sqrt(var.sum()))
 
-    def step(
+    def seek(
         self,
         own: VehicleState,
         peers: Sequence[VehicleState],
         readings: Sequence[ConcentrationReading],
+        wind_read: Wind,
     ) -> Setpoint | None:
         x, y, _ = own.position_enu_m
         now = own.sim_time_s
-        self.altitude_m, held = start_or_hold(own, self.altitude_m, self.declaration)
-        if held is not None:
-            return held
-        wind = self.read_wind(own)
-        frame = WindFrame.of(wind)
+        wind, frame = wind_read.vector_m_s, wind_read.frame
         if self.belief is None:
             self.grid_origin = (wind, x, y)
             self._build_grid(frame, x, y)
@@ -243,9 +228,9 @@ class Infotaxis(SavesState):
             mx, my, spread = self._belief_mean()
             if self._mass_near(mx, my, self.declare_radius_m) >= self.declare_mass:
                 self.declaration = SourceEstimate(x_m=mx, y_m=my, sim_time_s=now, spread_m=spread)
-                return hold_at(mx, my, self.altitude_m)
+                return None
             self.target_xy = self._decide(frame, x, y, step_dt)
-        return fly(own, toward(own, *self.target_xy, self.speed_m_s), self.altitude_m)
+        return fly(own, toward(own, *self.target_xy, self.speed_m_s), self.altitude)
 
 
 # (along, across) unit moves: upwind, downwind, left, right.

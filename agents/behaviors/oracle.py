@@ -1,9 +1,12 @@
-"""Oracle: the ceiling every source-seeking result is compared with.
+"""Oracle: flies straight to the true source and declares it — the ceiling of every table.
 
-It is told where the source is — the first release point of the scenario's plume
-(``[[plume.sources]]``), which no other behaviour reads — flies straight to it at
-``speed_m_s`` and declares it once within ``arrival_radius_m``. Its success rate, time and
-path bound what any strategy flying at the same speed can reach on the same starts.
+It knows what no searcher knows: the source's position, the scenario's first
+``[[plume.sources]]`` entry (``ctx.scenario.plume.sources[0]``), and ignores the sensor. It flies
+toward the source horizontally at ``speed_m_s`` (the searchers' surge speed) at the altitude it
+starts at and declares the source once within ``arrive_m`` of it, at the true position. Its
+time and path to the source are the shortest a searcher flying at that speed can have from the
+same start; its success rate is the ceiling (1 unless the time limit is too short for the
+distance).
 
 Use ``behavior = "agents.behaviors.oracle:Oracle"``.
 """
@@ -13,35 +16,34 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from agents.behavior import BehaviorContext
-from agents.behaviors.search import SavesState, SourceEstimate, fly, start_or_hold, toward
+from agents.behavior import BehaviorContext, SourceEstimate
+from agents.behaviors.seeking import SeekingBehavior, Wind
+from agents.behaviors.steering import fly, toward
 from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
 
 
-class Oracle(SavesState):
-    state_attributes = ("altitude_m", "declaration")
+class Oracle(SeekingBehavior):
+    own_state = ()
     vehicles = 1
     source = "knows the source (ceiling)"
     speed_m_s = 2.0
-    arrival_radius_m = 0.5
+    arrive_m = 0.5
 
     def __init__(self, ctx: BehaviorContext) -> None:
-        src = ctx.scenario.plume.sources[0]
-        self.source_xy = (src.x_m, src.y_m)
-        self.altitude_m: float | None = None
-        self.declaration: SourceEstimate | None = None
+        super().__init__(ctx)
+        source = ctx.scenario.plume.sources[0]
+        self.source_xy = (source.x_m, source.y_m)
 
-    def step(
+    def seek(
         self,
         own: VehicleState,
         peers: Sequence[VehicleState],
         readings: Sequence[ConcentrationReading],
+        wind: Wind,
     ) -> Setpoint | None:
-        self.altitude_m, hold = start_or_hold(own, self.altitude_m, self.declaration)
-        if hold is not None:
-            return hold
-        x, y = self.source_xy
-        if math.dist(own.position_enu_m[:2], (x, y)) <= self.arrival_radius_m:
-            self.declaration = SourceEstimate(x, y, own.sim_time_s)
-            return start_or_hold(own, self.altitude_m, self.declaration)[1]
-        return fly(own, toward(own, x, y, self.speed_m_s), self.altitude_m)
+        sx, sy = self.source_xy
+        x, y, _ = own.position_enu_m
+        if math.hypot(sx - x, sy - y) <= self.arrive_m:
+            self.declaration = SourceEstimate(x_m=sx, y_m=sy, sim_time_s=own.sim_time_s)
+            return None
+        return fly(own, toward(own, sx, sy, self.speed_m_s), self.altitude)

@@ -10,23 +10,27 @@ a source of hazardous substance dispersion using binary measurements", Atmos. En
   upwind, ``prior_downwind_m`` downwind, ±``prior_half_width_m`` crosswind), Q log-uniform on
   [``q_min_g_s``, ``q_max_g_s``].
 * Forward model: :func:`swarmbus.plume_formula.gaussian_plume_g_m3` with the measured wind
-  (the wind input, :mod:`agents.behaviors.search`). Assumed known, as in most STE work: the
+  (the wind input, :mod:`agents.behaviors.wind`). Assumed known, as in most STE work: the
   stability class, the σ family and the release height — taken from the scenario's
   ``[plume]`` (its first source's height).
-* Likelihood of a reading y against a prediction c: ln(y + ε) − ln(c + ε) ~ N(0, σ²) with
-  ε = ``floor_g_m3`` and σ = ``log_sigma`` — relative errors near the plume, insensitive to
-  the tails where the sensor reads ~0.
+* Readings: averaged over ``window_s`` (1 s); the filter updates once per window with the
+  window's mean reading against each particle's prediction averaged over the window's
+  reading positions, in the window's mean wind.
+* Likelihood: zero-inflated (Hutchinson et al.'s UAV source-term estimation,
+  :meth:`SourceTermFilter.log_likelihood`): a background (false-hit) probability, a miss
+  probability where the model predicts gas, the detection probability from the model mean,
+  and a log-normal magnitude term for a detection (``window_log_sigma``, floored at 3σ).
 * Resampling: systematic, when the effective sample size drops below half, followed by a
   regularisation jitter (Gaussian, ``jitter`` × the particles' spread, with a floor) so the
   cloud does not collapse onto a few values. When no particle explains a reading within 3σ,
   a fifth of the particles is redrawn from the prior (the cloud had settled on a wrong source).
-* Motion: until a reading has reached :data:`~agents.behaviors.search.PLUME_THRESHOLD_G_M3`
+* Motion: until a reading has reached :data:`~agents.behaviors.detection.PLUME_THRESHOLD_G_M3`
   and the estimate's spread is below ``approach_spread_m``, crosswind sweeps of growing width
   drifting upwind (crossing the plume); then toward points ``probe_downwind_m``
   downwind of the current mean estimate, ``probe_across_m`` to alternate sides — across the
   plume close to the source, where readings are the most informative.
 * Stopping rule: when the particles' horizontal spread (√(σx² + σy²)) is below
-  ``declare_spread_m`` while the vehicle is probing next to the estimate (so the estimate has
+  ``declare_spread_m`` (1 m) while the vehicle is probing next to the estimate (so the estimate has
   met the readings taken close to it), it declares the weighted mean (x₀, y₀, Q) with that
   spread and holds.
 
@@ -42,20 +46,12 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from agents.behavior import BehaviorContext
-from agents.behaviors.search import (
-    PLUME_THRESHOLD_G_M3,
-    CrosswindSweep,
-    SavesState,
-    SourceEstimate,
-    WindFrame,
-    WindReader,
-    anemometer_wind,
-    fly,
-    hold_at,
-    start_or_hold,
-    toward,
-)
+from agents.behavior import BehaviorContext, SourceEstimate
+from agents.behavior_state import SavesState
+from agents.behaviors.detection import PLUME_THRESHOLD_G_M3
+from agents.behaviors.seeking import SeekingBehavior, Wind
+from agents.behaviors.steering import CrosswindSweep, fly, toward
+from agents.behaviors.wind import WindFrame
 from swarmbus.dispersion import DispersionCurves, dispersion_curves
 from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
 from swarmbus.plume_formula import gaussian_plume_g_m3
@@ -81,6 +77,10 @@ class SourceTermFilter(SavesState):
         floor_g_m3: float = 1e-4,
         jitter: float = 0.1,
         prior: Callable[[int], FloatArray] | None = None,
+        detect_g_m3: float = PLUME_THRESHOLD_G_M3,
+        detect_scale_g_m3: float = PLUME_THRESHOLD_G_M3,
+        background_probability: float = 0.01,
+        miss_probability: float = 0.3,
     ) -> None:
         self.particles = np.array(particles, dtype=np.float64)  # (n, 3): x0, y0, Q
         self.weights = np.full(len(self.particles), 1.0 / len(self.particles))
@@ -91,6 +91,13 @@ class SourceTermFilter(SavesState):
         self.floor_g_m3 = floor_g_m3
         self.jitter = jitter
         self.prior = prior
+        self.detect_g_m3 = detect_g_m3
+        self.detect_scale_g_m3 = detect_scale_g_m3
+        self.background_probability = background_probability
+        self.miss_probability = miss_probability
+        # below this for every particle, a reading is unexplained: ln of the 3σ magnitude
+        # floor times a 2 % detection probability (twice the background)
+        self.redraw_log_likelihood = -4.5 + math.log(0.02)
 
     def predict(self, x_m: float, y_m: float, z_m: float, wind: tuple[float, float]) -> FloatArray:
         """Each particle's predicted concentration at (x, y, z) in the wind (east, north)."""
@@ -109,20 +116,67 @@ class SourceTermFilter(SavesState):
             self.curves,
         )
 
+    def log_likelihood(
+        self, predicted: FloatArray, value_g_m3: float, detected: bool | None = None
+    ) -> FloatArray:
+        """ln p(reading | each particle's predicted mean): zero-inflated (Hutchinson et al.).
+
+        The reading is a *detection* when ``detected`` says so (default: it is at least
+        ``detect_g_m3``; a window's mean is a detection when any of its samples was).
+        P(detection | c) =
+        p_bg + (1 − p_bg)(1 − exp(−c / ``detect_scale_g_m3``)), at most 1 − p_miss:
+        ``background_probability`` p_bg is a false hit where the model has no gas,
+        ``miss_probability`` p_miss a miss where the model has gas (an intermittent plume's
+        blanks). A non-detection has likelihood 1 − P(detection | c); a detection P(detection |
+        c) times the magnitude term exp(−r²/2σ²), r = ln(y + ε) − ln(c + ε), floored at r = 3σ
+        (a filament peak far above the mean is not evidence against the particle).
+        """
+        scale = self.detect_scale_g_m3
+        p_det = self.background_probability + (1.0 - self.background_probability) * (
+            -np.expm1(-predicted / scale)
+        )
+        p_det = np.minimum(p_det, 1.0 - self.miss_probability)
+        if not (value_g_m3 >= self.detect_g_m3 if detected is None else detected):
+            return np.asarray(np.log1p(-p_det))
+        eps = self.floor_g_m3
+        residual = np.log(value_g_m3 + eps) - np.log(predicted + eps)
+        magnitude = -0.5 * np.minimum((residual / self.log_sigma) ** 2, 9.0)
+        return np.asarray(np.log(p_det) + magnitude)
+
     def update(
         self, x_m: float, y_m: float, z_m: float, value_g_m3: float, wind: tuple[float, float]
     ) -> None:
-        predicted = self.predict(x_m, y_m, z_m, wind)
-        eps = self.floor_g_m3
-        residual = np.log(value_g_m3 + eps) - np.log(predicted + eps)
-        if self.prior is not None and np.abs(residual).min() > 3.0 * self.log_sigma:
+        """One reading at (x, y, z)."""
+        self.update_mean([(x_m, y_m, z_m)], value_g_m3, wind)
+
+    def predict_mean(
+        self, points: Sequence[tuple[float, float, float]], wind: tuple[float, float]
+    ) -> FloatArray:
+        """Each particle's predicted concentration averaged over ``points``."""
+        total = np.zeros(len(self.particles))
+        for x, y, z in points:
+            total += self.predict(x, y, z, wind)
+        return total / len(points)
+
+    def update_mean(
+        self,
+        points: Sequence[tuple[float, float, float]],
+        value_g_m3: float,
+        wind: tuple[float, float],
+        detected: bool | None = None,
+    ) -> None:
+        """The mean ``value_g_m3`` of readings taken at ``points`` (a window), against each
+        particle's prediction averaged over the same points."""
+        predicted = self.predict_mean(points, wind)
+        log_l = self.log_likelihood(predicted, value_g_m3, detected)
+        if self.prior is not None and log_l.max() < self.redraw_log_likelihood:
             # No particle explains this reading: the cloud has collapsed on a wrong source.
             # Redraw a fifth of it from the prior so the filter can recover.
             fresh = self.rng.random(len(self.particles)) < 0.2
             self.particles[fresh] = self.prior(int(fresh.sum()))
-            predicted[fresh] = self.predict(x_m, y_m, z_m, wind)[fresh]
-            residual = np.log(value_g_m3 + eps) - np.log(predicted + eps)
-        log_w = np.log(self.weights + 1e-300) - 0.5 * (residual / self.log_sigma) ** 2
+            predicted[fresh] = self.predict_mean(points, wind)[fresh]
+            log_l = self.log_likelihood(predicted, value_g_m3, detected)
+        log_w = np.log(self.weights + 1e-300) + log_l
         log_w -= log_w.max()
         w = np.exp(log_w)
         self.weights = w / w.sum()
@@ -149,13 +203,14 @@ class SourceTermFilter(SavesState):
         return float(mean[0]), float(mean[1]), float(mean[2]), float(math.sqrt(var.sum()))
 
 
-class ParticleFilter(SavesState):
+class ParticleFilter(SeekingBehavior):
     # ``filter`` is rebuilt from ``prior_origin`` (where its prior was drawn) on restore;
     # ``rng`` is the context's generator, which the autopilot saves on its own.
-    state_attributes = (
+    own_state = (
         "prior_origin",
-        "altitude_m",
-        "declaration",
+        "window",
+        "window_wind",
+        "window_start_s",
         "detected",
         "probe_side",
         "sweep",
@@ -171,23 +226,26 @@ class ParticleFilter(SavesState):
     sweep_drift_m_s = 0.5
     first_sweep_half_width_m = 5.0
     sweep_growth = 1.6
-    declare_spread_m = 0.5
+    declare_spread_m = 1.0
     probe_downwind_m = 4.0
     approach_spread_m = 5.0
     probe_across_m = 2.0
     threshold_g_m3 = PLUME_THRESHOLD_G_M3
+    window_s = 1.0
+    window_log_sigma = 1.0
 
     def __init__(self, ctx: BehaviorContext) -> None:
+        super().__init__(ctx)
         self.rng = ctx.rng
-        self.read_wind: WindReader = anemometer_wind(ctx)
         plume = ctx.scenario.plume
         self.curves = dispersion_curves(plume.coefficients, plume.stability)
         self.release_height_m = plume.sources[0].release_height_m
         self.filter: SourceTermFilter | None = None
         self.prior_origin: tuple[tuple[float, float], float, float] | None = None  # wind, x, y
-        self.altitude_m: float | None = None
-        self.declaration: SourceEstimate | None = None
         self.detected = False
+        self.window: list[tuple[float, float, float, float]] = []  # x, y, z, reading
+        self.window_wind: list[tuple[float, float]] = []
+        self.window_start_s: float | None = None
         self.probe_side = 1.0
         self.sweep = CrosswindSweep(
             self.sweep_speed_m_s,
@@ -246,36 +304,64 @@ class ParticleFilter(SavesState):
         """The filter whose prior is the box around (x, y); ``particles``: drawn from it."""
         draw = self._prior(frame, x, y)
         start = draw(self.particles) if particles is None else particles
-        return SourceTermFilter(start, self.curves, self.release_height_m, self.rng, prior=draw)
+        return SourceTermFilter(
+            start,
+            self.curves,
+            self.release_height_m,
+            self.rng,
+            log_sigma=self.window_log_sigma,
+            prior=draw,
+        )
 
-    def step(
+    def _average(
+        self, now_s: float, readings: Sequence[ConcentrationReading], wind: tuple[float, float]
+    ) -> None:
+        """Add the readings and the wind to the window; every ``window_s`` update the filter
+        once with the window's mean reading against the particles' predictions averaged over
+        the window's reading positions, in the window's mean wind (a detection if any of its
+        readings was at least the threshold)."""
+        if self.window_start_s is None:
+            self.window_start_s = now_s
+        self.window_wind.append(wind)
+        for r in readings:
+            if not r.available or r.reported_g_m3 is None:
+                continue
+            self.detected = self.detected or r.reported_g_m3 >= self.threshold_g_m3
+            self.window.append((*r.position_enu_m, r.reported_g_m3))
+        if now_s - self.window_start_s < self.window_s or not self.window:
+            return
+        assert self.filter is not None
+        points = [(x, y, z) for x, y, z, _ in self.window]
+        values = [v for *_, v in self.window]
+        n = len(self.window_wind)
+        mean_wind = (
+            sum(w[0] for w in self.window_wind) / n,
+            sum(w[1] for w in self.window_wind) / n,
+        )
+        detected = max(values) >= self.threshold_g_m3
+        self.filter.update_mean(points, sum(values) / len(values), mean_wind, detected)
+        self.window, self.window_wind, self.window_start_s = [], [], None
+
+    def seek(
         self,
         own: VehicleState,
         peers: Sequence[VehicleState],
         readings: Sequence[ConcentrationReading],
+        wind_read: Wind,
     ) -> Setpoint | None:
         x, y, _ = own.position_enu_m
-        self.altitude_m, held = start_or_hold(own, self.altitude_m, self.declaration)
-        if held is not None:
-            return held
-        wind = self.read_wind(own)
-        frame = WindFrame.of(wind)
+        wind, frame = wind_read.vector_m_s, wind_read.frame
         if self.filter is None:
             self.prior_origin = (wind, x, y)
             self.filter = self._new_filter(frame, x, y)
-        for r in readings:
-            if not r.available or r.reported_g_m3 is None:
-                continue
-            px, py, pz = r.position_enu_m
-            self.filter.update(px, py, pz, r.reported_g_m3, wind)
-            self.detected = self.detected or r.reported_g_m3 >= self.threshold_g_m3
+        self._average(own.sim_time_s, readings, wind)
         mx, my, q, spread = self.filter.estimate()
         near = math.hypot(mx - x, my - y) <= self.probe_downwind_m + self.probe_across_m + 1.0
         if self.detected and near and spread < self.declare_spread_m:
             self.declaration = SourceEstimate(
                 x_m=mx, y_m=my, sim_time_s=own.sim_time_s, release_rate_g_s=q, spread_m=spread
             )
-            return hold_at(mx, my, self.altitude_m)
+            return None
         if self.detected and spread < self.approach_spread_m:
-            return fly(own, self._probe_velocity(own, frame, mx, my), self.altitude_m)
-        return fly(own, self.sweep.velocity(frame, x, y), self.altitude_m)
+            return fly(own, self._probe_velocity(own, frame, mx, my), self.altitude)
+        return fly(own, self.sweep.velocity(frame, x, y), self.altitude)

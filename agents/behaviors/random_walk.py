@@ -17,8 +17,9 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from agents.behavior import BehaviorContext
-from agents.behaviors.search import SavesState, SourceEstimate, fly
+from agents.behavior import BehaviorContext, SourceEstimate
+from agents.behavior_state import SavesState
+from agents.behaviors.steering import fly
 from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
 
 

@@ -2,23 +2,28 @@
 
 Lochmatter, T. & Martinoli, A. (2008), "Tracking odor plumes in a laminar wind field with
 bio-inspired algorithms", *Experimental Robotics* (ISER 2008), Springer STAR 54:473–482; and
-Lochmatter's thesis (EPFL 2010). The sensor is read as binary: in the plume when the reading
-is at least :data:`~agents.behaviors.search.PLUME_THRESHOLD_G_M3` (with a slow-recovery sensor
-such as the metal-oxide preset: when it rose by the equivalent per sample,
-:func:`~agents.behaviors.search.detector_for`).
+Lochmatter's thesis (EPFL 2010); made for an intermittent plume as the moth does it (Kennedy &
+Marsh 1974): keep surging through blanks shorter than the plume's typical blank, cast without
+drifting downwind, and declare the source on evidence, never at the first strong whiff. The
+sensor is read as binary: a detection when the reading is at least
+:data:`~agents.behaviors.detection.PLUME_THRESHOLD_G_M3` (with a slow-recovery sensor such as
+the metal-oxide preset: when it rose by the equivalent per sample,
+:func:`~agents.behaviors.detection.detector_for`).
 
-States (``self.state``):
+States (``self.tracker.state``, :class:`~agents.behaviors.tracking.PlumeTracker`):
 
-* ``"search"`` — nothing detected yet: cast crosswind legs of growing width around the start;
-* ``"surge"`` — in the plume: fly straight upwind at ``surge_speed_m_s``;
-* ``"cast"`` — the plume was lost for ``lost_s``: crosswind legs of growing width (first
-  ``first_cast_half_width_m``, ×``cast_growth`` per leg) centred where it was lost, drifting
-  downwind at
-  ``cast_drift_m_s`` so that a searcher that overshot the source comes back into the plume;
-* ``"declared"`` — the stopping rule fired (:class:`~agents.behaviors.search.BestReadingDeclarer`):
-  the source is declared at the strongest reading and the vehicle holds over it.
+* ``"search"`` — nothing detected yet: crosswind legs of growing width around the start;
+* ``"surge"`` — a detection within the hit memory (2 s): fly straight upwind at
+  ``surge_speed_m_s`` in the frame of the wind averaged over the last 3 s;
+* ``"back"`` — the plume was lost: straight downwind to the cast line, 1.5 m upwind of the
+  most upwind detection (the frontier);
+* ``"cast"`` — crosswind legs of growing width (first ``first_cast_half_width_m``,
+  ×``cast_growth`` per leg, at most ``max_cast_half_width_m``) along the line, no drift.
 
-Use ``behavior = "agents.behaviors.surge_cast:SurgeCast"``; it holds the altitude it starts at.
+It declares the source between the frontier and the line once a cast of eight legs there has
+found nothing (:mod:`agents.behaviors.tracking` has the rule and where each number comes
+from) and holds over it. Use ``behavior = "agents.behaviors.surge_cast:SurgeCast"``; it holds
+the altitude it starts at.
 """
 
 from __future__ import annotations
@@ -26,100 +31,52 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from agents.behavior import BehaviorContext
-from agents.behaviors.search import (
-    PLUME_THRESHOLD_G_M3,
-    BestReadingDeclarer,
-    CrosswindSweep,
-    SavesState,
-    SourceEstimate,
-    WindFrame,
-    WindReader,
-    anemometer_wind,
-    detector_for,
-    fly,
-    hold_at,
-    start_or_hold,
-)
+from agents.behaviors.detection import PLUME_THRESHOLD_G_M3, detector_for
+from agents.behaviors.seeking import SeekingBehavior, Wind
+from agents.behaviors.steering import fly
+from agents.behaviors.tracking import PlumeTracker
 from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
 
 
-class SurgeCast(SavesState):
-    state_attributes = (
-        "detector",
-        "state",
-        "declarer",
-        "declaration",
-        "altitude_m",
-        "last_hit_s",
-        "search",
-        "cast",
-    )
+class SurgeCast(SeekingBehavior):
+    own_state = ("detector", "tracker")
     surge_speed_m_s = 2.0
     cast_speed_m_s = 2.5
-    cast_drift_m_s = 0.5
     first_cast_half_width_m = 3.0
     cast_growth = 1.6
-    max_cast_half_width_m = 40.0
-    lost_s = 0.5
+    max_cast_half_width_m = 20.0
     threshold_g_m3 = PLUME_THRESHOLD_G_M3
 
     def __init__(self, ctx: BehaviorContext) -> None:
-        self.read_wind: WindReader = anemometer_wind(ctx)
-        self.state = "search"
+        super().__init__(ctx)
         self.detector = detector_for(ctx, self.threshold_g_m3)
-        self.declarer = BestReadingDeclarer(detection_g_m3=self.threshold_g_m3)
-        self.declaration: SourceEstimate | None = None
-        self.altitude_m: float | None = None
-        self.last_hit_s: float | None = None
-        side = 1.0 if ctx.vehicle_index % 2 == 0 else -1.0
-        self.search = CrosswindSweep(
-            self.cast_speed_m_s, 0.0, self.first_cast_half_width_m, self.cast_growth, side=side
-        )
-        self.cast = CrosswindSweep(
+        self.tracker = PlumeTracker(
             self.cast_speed_m_s,
-            self.cast_drift_m_s,
             self.first_cast_half_width_m,
             self.cast_growth,
             self.max_cast_half_width_m,
+            side=1.0 if ctx.vehicle_index % 2 == 0 else -1.0,
         )
 
-    def _observe(self, readings: Sequence[ConcentrationReading]) -> None:
-        for r in readings:
-            if not r.available or r.reported_g_m3 is None:
-                continue
-            self.declarer.observe(r.position_enu_m[0], r.position_enu_m[1], r.reported_g_m3)
-            if self.detector.hit(r.reported_g_m3):
-                self.last_hit_s = r.sim_time_s
+    @property
+    def state(self) -> str:
+        return self.tracker.state
 
-    def _transition(self, now: float) -> None:
-        in_plume = self.last_hit_s is not None and now - self.last_hit_s <= self.lost_s
-        if in_plume:
-            self.state = "surge"
-            return
-        if self.state == "surge":  # just lost it: cast around here
-            self.declaration = self.declarer.lost(now)
-            if self.declaration is not None:
-                self.state = "declared"
-                return
-            self.state = "cast"
-            self.cast.restart()
-
-    def step(
+    def seek(
         self,
         own: VehicleState,
         peers: Sequence[VehicleState],
         readings: Sequence[ConcentrationReading],
+        wind: Wind,
     ) -> Setpoint | None:
         x, y, _ = own.position_enu_m
-        self.altitude_m, held = start_or_hold(own, self.altitude_m, self.declaration)
-        if held is not None:
-            return held
-        frame = WindFrame.of(self.read_wind(own))
-        self._observe(readings)
-        self._transition(own.sim_time_s)
-        if self.declaration is not None:
-            return hold_at(self.declaration.x_m, self.declaration.y_m, self.altitude_m)
-        if self.state == "surge":
-            return fly(own, frame.velocity(-self.surge_speed_m_s, 0.0), self.altitude_m)
-        sweep = self.cast if self.state == "cast" else self.search
-        return fly(own, sweep.velocity(frame, x, y), self.altitude_m)
+        tracker = self.tracker
+        tracker.observe_wind(wind.vector_m_s, own.sim_time_s)
+        for r in readings:
+            if r.available and r.reported_g_m3 is not None and self.detector.hit(r.reported_g_m3):
+                tracker.hit(r.position_enu_m[0], r.position_enu_m[1], r.sim_time_s)
+        self.declaration = tracker.advance(x, y, own.sim_time_s)
+        velocity = tracker.velocity(x, y)
+        if velocity is None:  # surging
+            velocity = tracker.wind.recent().velocity(-self.surge_speed_m_s, 0.0)
+        return fly(own, velocity, self.altitude)

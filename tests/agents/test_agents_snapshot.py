@@ -139,12 +139,18 @@ def casting_scenario(behavior: str = "agents.behaviors.casting:Casting") -> Scen
 
 
 def every_behavior() -> list[str]:
-    """``module:Class`` of every behaviour in agents/behaviors (a class with a step method)."""
+    """``module:Class`` of every behaviour in agents/behaviors (a concrete class with a step
+    method; an abstract base such as ``SeekingBehavior`` is none)."""
     specs = []
     for info in pkgutil.iter_modules(agents.behaviors.__path__):
         module = importlib.import_module(f"agents.behaviors.{info.name}")
         for name, cls in inspect.getmembers(module, inspect.isclass):
-            if cls.__module__ == module.__name__ and callable(getattr(cls, "step", None)):
+            concrete = not inspect.isabstract(cls)
+            if (
+                cls.__module__ == module.__name__
+                and concrete
+                and callable(getattr(cls, "step", None))
+            ):
                 specs.append(f"{module.__name__}:{name}")
     return sorted(specs)
 
@@ -270,7 +276,9 @@ def test_slots_keep_the_previous_record_when_the_newest_is_torn(tmp_path: Path) 
 def test_saved_state_comes_back_with_the_same_types_and_bits() -> None:
     """An own generator (mid-stream, with a cached 32-bit half), arrays, deques of tuples,
     an estimate and a nested helper survive msgpack; configuration is left as built."""
-    from agents.behaviors.search import CrosswindSweep, SavesState, SourceEstimate
+    from agents.behavior import SourceEstimate
+    from agents.behavior_state import SavesState
+    from agents.behaviors.steering import CrosswindSweep
 
     class Holder(SavesState):
         state_attributes = ("gen", "grid", "trail", "estimate", "sweep", "counts")

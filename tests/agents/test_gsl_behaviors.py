@@ -11,17 +11,15 @@ from scipy.special import k0
 
 from agents.behavior import BehaviorContext
 from agents.behaviors.casting import Casting
+from agents.behaviors.detection import PLUME_THRESHOLD_G_M3, PlumeDetector, detector_for
 from agents.behaviors.gradient_swarm import GradientSwarm, log_gradient
 from agents.behaviors.infotaxis import Infotaxis, bayes_update
+from agents.behaviors.oracle import Oracle
 from agents.behaviors.particle_filter import SourceTermFilter
 from agents.behaviors.random_walk import RandomWalk
-from agents.behaviors.search import (
-    PLUME_THRESHOLD_G_M3,
-    PlumeDetector,
-    WindFrame,
-    detector_for,
-)
 from agents.behaviors.surge_cast import SurgeCast
+from agents.behaviors.tracking import AveragedWind
+from agents.behaviors.wind import WindFrame
 from agents.sensor import ConcentrationSensor
 from plume_service import GaussianPlume
 from swarmbus.dispersion import dispersion_curves
@@ -134,6 +132,25 @@ def test_particle_filter_recovers_the_source_term_of_a_noiseless_plume() -> None
     assert spread < 1.0
 
 
+def test_the_particle_likelihood_is_zero_inflated() -> None:
+    """Hand-computed from the model: P(detection | c) = 0.01 + 0.99 (1 - exp(-c / 0.001)),
+    capped at 1 - 0.3; a zero has likelihood 1 - P, so a particle predicting gas loses a
+    factor 0.3 / 0.99 at most (not the 7-14 sigma of a log-normal on ln(0 + eps)); a filament
+    peak 100x the prediction costs at most the 3-sigma floor, exp(-4.5)."""
+    stf = SourceTermFilter(
+        np.zeros((1, 3)), dispersion_curves("novak2018", "D"), 10.0, np.random.default_rng(0)
+    )
+    predicted = np.array([0.0, 0.001, 1.0])
+    p_det = [0.01, min(0.01 + 0.99 * (1.0 - math.exp(-1.0)), 0.7), 0.7]
+    zero = stf.log_likelihood(predicted, 0.0)
+    assert zero == pytest.approx([math.log(1.0 - p) for p in p_det], rel=1e-12)
+    peak = stf.log_likelihood(np.array([0.001]), 0.1)  # ln(0.1001/0.0011) = 4.51 > 3 sigma
+    assert peak[0] == pytest.approx(math.log(p_det[1]) - 4.5, rel=1e-12)
+    window = stf.log_likelihood(np.array([0.001]), 0.0005, detected=True)  # a window's mean
+    residual = math.log(0.0006 / 0.0011)
+    assert window[0] == pytest.approx(math.log(p_det[1]) - 0.5 * (residual / 0.6) ** 2)
+
+
 # ---------------------------------------------------------------- gradient swarm
 def test_log_gradient_is_exact_for_an_exponential_field() -> None:
     pts = np.array([[1.0, 2.0], [3.0, -1.0], [-2.0, 0.5], [0.0, 4.0]])
@@ -186,11 +203,15 @@ def test_gradient_swarm_climbs_in_formation() -> None:
             for j in range(3)
             if j != i
         ]
-        sp = beh.step(
-            states[i],
-            states[:i] + states[i + 1 :],
-            [reading(*slots[i], 1.0, float(values[i]), peers)],
-        )
+        # hovering: a 2 s window of the same readings, then the fit of their means
+        for k in range(21):
+            t = 1.0 + 0.1 * k
+            sp = beh.step(
+                state(*slots[i], t, f"uav{i + 1}"),
+                states[:i] + states[i + 1 :],
+                [reading(*slots[i], t, float(values[i]), peers)],
+            )
+        assert beh.gradient is not None
         assert sp is not None and sp.velocity_enu_m_s is not None
         velocities.append(sp.velocity_enu_m_s[:2])
     # In formation every member flies the same climb velocity: toward the axis and upwind.
@@ -221,67 +242,112 @@ def test_the_swarm_fits_its_peers_sensor_outputs_not_their_true_values() -> None
 
 
 # ---------------------------------------------------------------- casting and surge-cast
-def test_surge_cast_state_machine() -> None:
+def fly_kinematic(beh, x: float, y: float, t: float, until_s: float, dt: float = 0.05):
+    """Follow the behaviour's velocity setpoints in clean air until it declares or ``until_s``."""
+    while t < until_s:
+        sp = beh.step(state(x, y, t), [], [reading(x, y, t, 0.0)])
+        if beh.declaration is not None:
+            break
+        vx, vy, _ = velocity(sp)
+        x, y, t = x + vx * dt, y + vy * dt, t + dt
+    return x, y, t
+
+
+def test_surge_cast_keeps_surging_through_blanks_shorter_than_the_hit_memory() -> None:
     beh = SurgeCast(ctx())
-    t = 0.0
-    sp = beh.step(state(50.0, 5.0, t), [], [])
+    sp = beh.step(state(50.0, 5.0, 0.0), [], [])
     assert beh.state == "search"
     vx, vy, _ = velocity(sp)
-    assert vx == pytest.approx(0.0) and abs(vy) == pytest.approx(2.5)  # crosswind
-    t = 1.0
-    sp = beh.step(state(50.0, 5.0, t), [], [reading(50.0, 5.0, t, 0.002)])
+    assert vx == pytest.approx(0.0, abs=1e-12) and abs(vy) == pytest.approx(2.5)  # crosswind
+    sp = beh.step(state(50.0, 5.0, 1.0), [], [reading(50.0, 5.0, 1.0, 0.002)])
     assert beh.state == "surge"
-    assert velocity(sp)[:2] == pytest.approx((-2.0, 0.0))  # straight upwind
-    # Still within lost_s of the hit: keeps surging on a sub-threshold reading.
-    t = 1.3
-    beh.step(state(49.4, 5.0, t), [], [reading(49.4, 5.0, t, 0.0005)])
-    assert beh.state == "surge"
-    t = 1.6
-    sp = beh.step(state(48.8, 5.0, t), [], [reading(48.8, 5.0, t, 0.0)])
-    assert beh.state == "cast"
-    vx, vy, _ = velocity(sp)
-    assert vx == pytest.approx(0.5) and abs(vy) == pytest.approx(2.5)  # drift down, cross
-    assert beh.declaration is None  # the strongest reading is only the first one
+    assert velocity(sp)[:2] == pytest.approx((-2.0, 0.0))  # straight upwind (wind toward +x)
+    for t in (1.5, 2.5, 2.95):  # a 1.95 s blank: within the 2 s hit memory
+        beh.step(state(50.0 - 2.0 * (t - 1.0), 5.0, t), [], [reading(0.0, 5.0, t, 0.0)])
+        assert beh.state == "surge"
+    sp = beh.step(state(45.8, 5.0, 3.1), [], [reading(45.8, 5.0, 3.1, 0.0)])
+    # lost: back downwind (no drift while casting) to the line 1.5 m upwind of the only hit
+    assert beh.state == "back"
+    assert velocity(sp)[:2] == pytest.approx((2.0, 0.0))
+    assert beh.declaration is None
 
 
-def test_surge_cast_declares_after_repeated_losses_at_a_peak() -> None:
+def test_a_first_strong_whiff_is_never_a_declaration() -> None:
+    """A filament peak 500x the threshold at first contact, then nothing: the old rule
+    (strongest reading, lost twice) would declare; the evidence rule needs 10 detections."""
+    for beh in (SurgeCast(ctx()), Casting(ctx())):
+        beh.step(state(40.0, 0.0, 0.0), [], [reading(40.0, 0.0, 0.0, 0.5)])
+        beh.step(state(39.9, 0.0, 0.05), [], [reading(39.9, 0.0, 0.05, 0.001)])
+        fly_kinematic(beh, 39.8, 0.0, 0.1, until_s=200.0)
+        assert beh.declaration is None, type(beh).__name__
+
+
+def test_surge_cast_declares_between_the_frontier_and_an_empty_cast_line() -> None:
+    """Hits every 0.1 s surging up the axis from x = 20 to x = 2 m (the frontier), then
+    nothing. Back downwind to the line x = 2 - 1.5 = 0.5 m, a cast of eight legs there
+    (half-widths 3, 4.8, 7.68, 12.288, 19.66, then the 20 m cap: 3 + 7.8 + 12.48 + 19.968 +
+    31.949 + 39.661 + 40 + 40 = 194.86 m at 2.5 m/s = 77.94 s) with no hit, then the source is
+    declared at the midpoint of the frontier and the line: (1.25, 0)."""
     beh = SurgeCast(ctx())
     t = 0.0
-    beh.step(state(30.0, 0.0, t), [], [reading(30.0, 0.0, t, 0.002)])
-    t = 0.1
-    beh.step(state(1.0, 0.2, t), [], [reading(1.0, 0.2, t, 0.5)])  # 250× the first: the peak
-    for k in range(2):  # lose it, find a weaker reading nearby, lose it again
-        t += 1.0
-        beh.step(state(-0.5, 0.2, t), [], [reading(-0.5, 0.2, t, 0.0)])
-        assert (beh.state == "cast") == (k == 0)
+    for k in range(10):
+        x = 20.0 - 2.0 * k
+        beh.step(state(x, 0.0, t), [], [reading(x, 0.0, t, 0.01)])
         t += 0.1
-        beh.step(state(1.5, 0.2, t), [], [reading(1.5, 0.2, t, 0.1)])
-    t += 1.0
-    sp = beh.step(state(-0.5, 0.2, t), [], [reading(-0.5, 0.2, t, 0.0)])
-    assert beh.state == "declared"
+    x = 2.0
+    while beh.state == "surge":  # the memory runs out 4 m upwind of the last hit
+        x -= 2.0 * 0.05
+        t += 0.05
+        beh.step(state(x, 0.0, t), [], [reading(x, 0.0, t, 0.0)])
+    assert beh.state == "back"
+    while beh.state == "back":
+        x += 2.0 * 0.05
+        t += 0.05
+        beh.step(state(x, 0.0, t), [], [reading(x, 0.0, t, 0.0)])
+    assert beh.state == "cast" and x == pytest.approx(0.5, abs=0.11)
+    cast_start = t
+    _, _, t_end = fly_kinematic(beh, x, 0.0, t, until_s=t + 120.0)
     assert beh.declaration is not None
-    assert (beh.declaration.x_m, beh.declaration.y_m) == (1.0, 0.2)
-    assert sp.position_enu_m == (1.0, 0.2, 10.0)
+    assert (beh.declaration.x_m, beh.declaration.y_m) == pytest.approx((1.25, 0.0), abs=1e-9)
+    # each of the eight turns comes up to one 0.05 s step (0.125 m) late: out and back 0.1 s
+    assert 194.86 / 2.5 <= t_end - cast_start + 0.05 <= 194.86 / 2.5 + 8 * 0.1 + 0.05
 
 
-def test_casting_surges_casts_and_declares() -> None:
+def test_casting_weaves_upwind_on_a_hit() -> None:
     beh = Casting(ctx())
-    t = 0.0
-    sp = beh.step(state(30.0, 0.0, t), [], [reading(30.0, 0.0, t, 0.01)])
-    assert velocity(sp)[0] == pytest.approx(-Casting.surge_speed_m_s)  # surging upwind
-    t = 0.1
-    beh.step(state(1.0, 0.0, t), [], [reading(1.0, 0.0, t, 1.0)])
-    t = 1.5  # gas lost for more than lost_s: cast, drifting downwind
-    sp = beh.step(state(-0.5, 0.0, t), [], [reading(-0.5, 0.0, t, 0.0)])
-    assert velocity(sp)[0] == pytest.approx(Casting.cast_drift_m_s)
-    assert beh.declaration is None
-    t = 1.6
-    beh.step(state(0.5, 0.0, t), [], [reading(0.5, 0.0, t, 0.2)])
-    t = 3.0
-    sp = beh.step(state(-0.5, 0.0, t), [], [reading(-0.5, 0.0, t, 0.0)])
+    sp = beh.step(state(30.0, 0.0, 0.0), [], [reading(30.0, 0.0, 0.0, 0.01)])
+    vx, vy, _ = velocity(sp)
+    assert vx == pytest.approx(-Casting.surge_speed_m_s)  # surging upwind
+    assert abs(vy) == pytest.approx(Casting.weave_speed_m_s)  # weaving across
+
+
+def test_the_averaged_wind_is_an_exponential_average() -> None:
+    """A step from calm to 6 m/s: after t the average is 6 (1 - exp(-t / 3 s))."""
+    avg = AveragedWind(3.0)
+    avg.add((0.0, 0.0), 0.0)
+    for k in range(1, 31):
+        avg.add((6.0, 0.0), 0.1 * k)
+    assert avg.average is not None
+    assert avg.average[0] == pytest.approx(6.0 * -math.expm1(-1.0), rel=1e-12)
+    assert avg.mean().speed_m_s == pytest.approx(6.0 * 30 / 31, rel=1e-12)
+
+
+# ---------------------------------------------------------------- oracle
+def test_the_oracle_flies_straight_to_the_true_source_and_declares_it() -> None:
+    beh = Oracle(ctx())  # novak2018: the source at the origin
+    x, y, t = 40.0, 9.0, 0.0
+    while t < 60.0:
+        sp = beh.step(state(x, y, t), [], [])
+        if beh.declaration is not None:
+            break
+        vx, vy, _ = velocity(sp)
+        assert vx * 9.0 - vy * 40.0 == pytest.approx(0.0, abs=1e-9)  # along the line to it
+        x, y, t = x + vx * 0.05, y + vy * 0.05, t + 0.05
     assert beh.declaration is not None
-    assert (beh.declaration.x_m, beh.declaration.y_m) == (1.0, 0.0)
-    assert sp.position_enu_m == (1.0, 0.0, 10.0)
+    assert (beh.declaration.x_m, beh.declaration.y_m) == (0.0, 0.0)
+    # speed min(2 m/s, distance per second): 2 m/s to the last 2 m, then an exponential
+    # approach with a 1 s time constant down to 0.5 m (ln 4 s)
+    assert t == pytest.approx((math.hypot(40.0, 9.0) - 2.0) / 2.0 + math.log(4.0), abs=0.1)
 
 
 # ---------------------------------------------------------------- random walk

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from agents.behaviors.search import PLUME_THRESHOLD_G_M3
+from agents.behaviors.detection import PLUME_THRESHOLD_G_M3
 from experiments.gsl_episode import (
     FIELD_WARMUP_S,
     START_ALONG_M,

@@ -40,7 +40,8 @@ from tests.support.procs import REPO, run_cli
 # A behaviour from outside the package: two vehicles fly upwind (−x in every environment
 # here) at 3 m/s and declare where they are after 5 s.
 OUTSIDE = """
-from agents.behaviors.search import SourceEstimate, fly, hold_at
+from agents.behavior import SourceEstimate
+from agents.behaviors.steering import fly, hold_at
 
 
 class Upwind:

@@ -1,0 +1,210 @@
+"""Tracking an intermittent plume upwind, and declaring its source on evidence.
+
+The common core of casting and surge-cast (:class:`PlumeTracker`), built for the signal a
+searcher meets in a real plume: short whiffs separated by blanks, the plume's centreline
+wandering with the wind.
+
+* **Hit memory** (``memory_s``): the searcher keeps surging through blanks shorter than this.
+  It is set above the blanks a searcher meets on the plume's axis, so that a blank between two
+  filaments is not taken for the plume's edge: 2.0 s, above the 95th percentile (1.7 s) and
+  near the 99th (2.4 s) of the blank durations at a fixed point on the axis of the ``filaments``
+  environment (30–80 m downwind at the flight altitude, 10 Hz, threshold 0.001 g/m³, tuning
+  seed 1000 runs 0–2, docs/gsl.md). Longer blanks (the plume swung away) are for casting.
+* **Averaged wind** (``wind_average_s``): surging and casting steer in the frame of the wind
+  averaged (exponentially, time constant 3 s) over the last seconds, not the instantaneous
+  anemometer reading; a cast keeps the frame of the averaged wind at the last hit.
+* **Casting without drift**: after a loss the searcher flies straight downwind (along the
+  mean wind) back to the *cast line*, ``line_ahead_m`` (1.5 m) upwind of the *frontier* — the
+  most upwind detection so far, along the wind averaged over the whole search — and casts
+  crosswind along it with legs of growing width, without drifting. A hit starts a new surge.
+* **Declaration by evidence**: the cast along the line is *empty* once it has flown
+  ``empty_legs`` legs (8, half-widths growing to the behaviour's cap of 20 m, wider than the
+  plume's swing near the frontier: a crossing of the filament thread at 2.5 m/s takes ≈ 3
+  samples at 10 Hz, each a hit with ≈ 17 % (the axis hit fraction of ``filaments``), so a
+  crossing misses with ≈ 0.57 and eight with ≈ 1 %; five legs declared falsely in 3 of 10
+  tuning runs of casting in ``filaments``), lasted ``blank_factor`` (1.5) times the longest
+  blank the searcher has met between two of its own detections (an online statistic of the
+  blank-duration distribution, so that a searcher in a strongly meandering plume waits
+  longer), and the search has made ``min_hits``
+  (10) detections. The source then lies between the frontier and the line: it is declared at
+  their midpoint along the mean wind (error ≤ 0.75 m along the wind if the source is in that
+  interval); crosswind, the median of the detections within ``cluster_m`` (3 m) of the
+  frontier. A first whiff or a strong filament is never a declaration.
+"""
+
+from __future__ import annotations
+
+import math
+import statistics
+
+from agents.behavior import SourceEstimate
+from agents.behavior_state import SavesState
+from agents.behaviors.steering import CrosswindSweep
+from agents.behaviors.wind import WindFrame
+
+
+class AveragedWind(SavesState):
+    """Exponential moving average of the wind vector (time constant ``time_constant_s``) and
+    the plain mean of every reading (the mean wind of the search)."""
+
+    state_attributes = ("average", "last_s", "total", "count")
+
+    def __init__(self, time_constant_s: float) -> None:
+        self.time_constant_s = time_constant_s
+        self.average: tuple[float, float] | None = None
+        self.last_s: float | None = None
+        self.total = (0.0, 0.0)
+        self.count = 0
+
+    def add(self, wind_m_s: tuple[float, float], sim_time_s: float) -> None:
+        self.total = (self.total[0] + wind_m_s[0], self.total[1] + wind_m_s[1])
+        self.count += 1
+        if self.average is None or self.last_s is None:
+            self.average = wind_m_s
+        else:
+            dt = max(sim_time_s - self.last_s, 0.0)
+            a = -math.expm1(-dt / self.time_constant_s) if self.time_constant_s > 0.0 else 1.0
+            self.average = (
+                self.average[0] + a * (wind_m_s[0] - self.average[0]),
+                self.average[1] + a * (wind_m_s[1] - self.average[1]),
+            )
+        self.last_s = sim_time_s
+
+    def recent(self) -> WindFrame:
+        assert self.average is not None
+        return WindFrame.of(self.average)
+
+    def mean(self) -> WindFrame:
+        n = max(self.count, 1)
+        return WindFrame.of((self.total[0] / n, self.total[1] / n))
+
+
+class PlumeTracker(SavesState):
+    """The surge / cast state machine and the evidence declaration.
+
+    States: ``search`` (no hit yet: crosswind sweep), ``surge`` (a hit within ``memory_s``),
+    ``cast`` (casting where the plume was lost). Call :meth:`observe_wind` and :meth:`hit`
+    (for every detection), then :meth:`advance` and :meth:`velocity` once per control step; the
+    behaviour decides how to surge.
+    """
+
+    state_attributes = (
+        "state",
+        "last_hit_s",
+        "longest_blank_s",
+        "hits",
+        "wind",
+        "cast_frame",
+        "cast",
+        "cast_line",
+    )
+
+    def __init__(
+        self,
+        cast_speed_m_s: float,
+        first_half_width_m: float,
+        growth: float,
+        max_half_width_m: float,
+        side: float,
+        memory_s: float = 2.0,
+        wind_average_s: float = 3.0,
+        empty_legs: int = 8,
+        min_hits: int = 10,
+        cluster_m: float = 3.0,
+        line_ahead_m: float = 1.5,
+        back_speed_m_s: float = 2.0,
+        blank_factor: float = 1.5,
+    ) -> None:
+        self.memory_s = memory_s
+        self.line_ahead_m = line_ahead_m
+        self.back_speed_m_s = back_speed_m_s
+        self.blank_factor = blank_factor
+        self.longest_blank_s = 0.0
+        self.empty_legs = empty_legs
+        self.min_hits = min_hits
+        self.cluster_m = cluster_m
+        self.state = "search"
+        self.last_hit_s: float | None = None
+        self.hits: list[tuple[float, float]] = []  # ENU positions of the detections
+        self.wind = AveragedWind(wind_average_s)
+        self.cast_frame: tuple[float, float] | None = None  # averaged wind at the last hit
+        self.cast = CrosswindSweep(
+            cast_speed_m_s, 0.0, first_half_width_m, growth, max_half_width_m, side=side
+        )
+        self.cast_line: tuple[int, float] | None = None  # legs flown before, along-wind m
+
+    def observe_wind(self, wind_m_s: tuple[float, float], sim_time_s: float) -> None:
+        self.wind.add(wind_m_s, sim_time_s)
+
+    def hit(self, x_m: float, y_m: float, sim_time_s: float) -> None:
+        if self.last_hit_s is not None:
+            self.longest_blank_s = max(self.longest_blank_s, sim_time_s - self.last_hit_s)
+        self.last_hit_s = sim_time_s
+        self.hits.append((x_m, y_m))
+        self.cast_frame = self.wind.average
+
+    def frontier(self) -> tuple[float, float] | None:
+        """(along, across) of the most upwind hit in the mean wind's frame; across: the median
+        of the hits within ``cluster_m`` (along) of it."""
+        if not self.hits:
+            return None
+        frame = self.wind.mean()
+        coords = [frame.coordinates(x, y) for x, y in self.hits]
+        along = min(a for a, _ in coords)
+        across = statistics.median(c for a, c in coords if a - along <= self.cluster_m)
+        return along, across
+
+    def surging(self, now_s: float) -> bool:
+        return self.last_hit_s is not None and now_s - self.last_hit_s <= self.memory_s
+
+    def advance(self, x_m: float, y_m: float, now_s: float) -> SourceEstimate | None:
+        """Advance the state machine; the declaration when the evidence is in."""
+        if self.surging(now_s):
+            self.state = "surge"
+            return None
+        if self.state == "surge":  # just lost: back to the line just upwind of the frontier
+            front = self.frontier()
+            assert front is not None
+            self.state = "back"
+            self.cast_line = (self.cast.legs, front[0] - self.line_ahead_m)
+        if self.state == "back" and self.cast_line is not None:
+            along, _ = self.wind.mean().coordinates(x_m, y_m)
+            if along >= self.cast_line[1]:  # on the line: cast along it
+                self.state = "cast"
+                self.cast.restart()
+                self.cast_line = (self.cast.legs, self.cast_line[1])
+        elif self.state == "cast" and self.cast_line is not None and self._empty(now_s):
+            return self._declare(self.cast_line[1], now_s)
+        return None
+
+    def _empty(self, now_s: float) -> bool:
+        """The cast on the line has flown ``empty_legs`` legs and lasted ``blank_factor`` times
+        the longest blank met so far, after ``min_hits`` detections."""
+        assert self.cast_line is not None and self.last_hit_s is not None
+        legs = self.cast.legs - self.cast_line[0]
+        blank = now_s - self.last_hit_s
+        return (
+            legs >= self.empty_legs
+            and blank >= self.blank_factor * self.longest_blank_s
+            and len(self.hits) >= self.min_hits
+        )
+
+    def _declare(self, cast_line_m: float, now_s: float) -> SourceEstimate:
+        """The source between the frontier and the empty cast line: their midpoint."""
+        front = self.frontier()
+        assert front is not None
+        along = 0.5 * (front[0] + min(cast_line_m, front[0]))
+        x, y = self.wind.mean().velocity(along, front[1])  # a point: the same linear map
+        return SourceEstimate(x_m=x, y_m=y, sim_time_s=now_s)
+
+    def velocity(self, x_m: float, y_m: float) -> tuple[float, float] | None:
+        """The velocity of the search and cast states (None while surging)."""
+        if self.state == "surge":
+            return None
+        if self.state == "back":  # straight downwind to the line
+            return self.wind.mean().velocity(self.back_speed_m_s, 0.0)
+        if self.state == "search" or self.cast_frame is None:
+            frame = self.wind.recent()
+        else:
+            frame = WindFrame.of(self.cast_frame)
+        return self.cast.velocity(frame, x_m, y_m)
