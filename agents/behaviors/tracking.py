@@ -6,10 +6,12 @@ wandering with the wind.
 
 * **Hit memory** (``memory_s``): the searcher keeps surging through blanks shorter than this.
   It is set above the blanks a searcher meets on the plume's axis, so that a blank between two
-  filaments is not taken for the plume's edge: 2.0 s, above the 95th percentile (1.7 s) and
-  near the 99th (2.4 s) of the blank durations at a fixed point on the axis of the ``filaments``
-  environment (30–80 m downwind at the flight altitude, 10 Hz, threshold 0.001 g/m³, tuning
-  seed 1000 runs 0–2, docs/gsl.md). Longer blanks (the plume swung away) are for casting.
+  filaments is not taken for the plume's edge: 2.0 s, above the 90th percentile (0.6–1.3 s)
+  and within the 99th (1.6–2.9 s) of ``meander_low``'s blank durations at a fixed point on the
+  axis, and above the 90th percentile of ``meander_high``'s (0.8–1.5 s) (30, 50, 80 m
+  downwind at the flight altitude, 10 Hz, threshold 0.001 g/m³, 600 s,
+  ``deploy/scenarios/gsl/statistics.json``, docs/plume.md). Longer blanks — ``meander_high``'s
+  99th percentile is 8.6–11.2 s — are the plume swinging away: for casting.
 * **Averaged wind** (``wind_average_s``): surging and casting steer in the frame of the wind
   averaged (exponentially, time constant 3 s) over the last seconds, not the instantaneous
   anemometer reading; a cast keeps the frame of the averaged wind at the last hit.
@@ -20,9 +22,11 @@ wandering with the wind.
 * **Declaration by evidence**: the cast along the line is *empty* once it has flown
   ``empty_legs`` legs (8, half-widths growing to the behaviour's cap of 20 m, wider than the
   plume's swing near the frontier: a crossing of the filament thread at 2.5 m/s takes ≈ 3
-  samples at 10 Hz, each a hit with ≈ 17 % (the axis hit fraction of ``filaments``), so a
-  crossing misses with ≈ 0.57 and eight with ≈ 1 %; five legs declared falsely in 3 of 10
-  tuning runs of casting in ``filaments``), lasted ``blank_factor`` (1.5) times the longest
+  samples at 10 Hz, each a hit with ≥ 22 % (the lowest axis hit fraction of the calibrated
+  filament environments, ``meander_high`` at 80 m; ``meander_low``: 24–42 %), so a crossing
+  misses with ≤ 0.48 and eight with ≤ 0.3 %; in the tuning, on Farrell's meander-free thread
+  (the ``lab_thread`` parameters), five legs declared falsely in 3 of 10 runs of casting),
+  lasted ``blank_factor`` (1.5) times the longest
   blank the searcher has met between two of its own detections (an online statistic of the
   blank-duration distribution, so that a searcher in a strongly meandering plume waits
   longer), and the search has made ``min_hits``

@@ -95,7 +95,7 @@ def test_same_seed_same_filament_cell_byte_for_byte(tmp_path: Path) -> None:
 
     def once(jobs: int, out: Path) -> tuple[bytes, bytes]:
         opts = make_options(
-            ["casting"], ["meander_small"], ["mox"], runs=2, seed=4, time_limit_s=20.0, jobs=jobs
+            ["casting"], ["meander_high"], ["mox"], runs=2, seed=4, time_limit_s=20.0, jobs=jobs
         )
         outcomes = run_all(opts)
         write_outputs(out, opts, rows_of(opts, outcomes), outcomes)
@@ -104,14 +104,14 @@ def test_same_seed_same_filament_cell_byte_for_byte(tmp_path: Path) -> None:
     first = once(1, tmp_path / "a")
     assert first == once(2, tmp_path / "b")
     _, row, _ = json.loads(first[1])
-    assert (row["environment"], row["sensor"], row["runs"]) == ("meander_small", "mox", 2)
+    assert (row["environment"], row["sensor"], row["runs"]) == ("meander_high", "mox", 2)
     assert row["time_dependent"] is True
 
 
 def test_missing_environments_and_unknown_algorithms_are_refused_clearly() -> None:
     res = run_cli(["bench", "gsl", "--environments", "filament", "--runs", "1"])
     assert res.returncode == 2
-    assert "'filament'" in res.stderr and "meander_large" in res.stderr
+    assert "'filament'" in res.stderr and "meander_high" in res.stderr
     assert "Traceback" not in res.stderr
     res = run_cli(["bench", "gsl", "--algorithms", "moth", "--runs", "1"])
     assert res.returncode == 2 and "'moth'" in res.stderr and "casting" in res.stderr
@@ -141,7 +141,7 @@ def test_full_dynamics_in_a_time_dependent_plume_hovers_until_the_release_has_sp
     """The vehicles take off and hold; the behaviours fly from 60 s of sim time on (the
     offboard switch at the boundary before tick 60 s × 120 Hz), and the episode's clock with
     them: a 5 s limit ends 5 s later."""
-    spec = EpisodeSpec("surge_cast", "meander_small", "mox", 0, 0, 5.0, 120, 12, False, "full")
+    spec = EpisodeSpec("surge_cast", "meander_low", "mox", 0, 0, 5.0, 120, 12, False, "full")
     outcome, schedule = fused_episode(spec)
     assert sorted(schedule.commands) == [0, 60 * 120 - 1]
     assert schedule.last_tick == 60 * 120 + 5 * 120

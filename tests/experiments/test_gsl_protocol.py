@@ -210,11 +210,11 @@ def test_scenario_overrides_change_the_field_as_the_physics_says() -> None:
     full, _ = environment_field(episode_scenario(spec))
     half, _ = environment_field(episode_scenario(halved))
     np.testing.assert_allclose(half(points, 0.0), 0.5 * full(points, 0.0), rtol=1e-12)
-    large = (("wind.meander.preset", "large"),)
-    spec = EpisodeSpec("casting", "meander_small", "ideal", 0, 0, overrides=large)
-    assert episode_scenario(spec).wind.meander.gain == 20.0  # Farrell's "large" G
+    small = (("wind.meander.preset", "small"),)
+    spec = EpisodeSpec("casting", "farrell2002_reference", "ideal", 0, 0, overrides=small)
+    assert episode_scenario(spec).wind.meander.gain == 3.0  # Farrell's "small" G (file: "large")
     with pytest.raises(GslError, match="no 'nope' there"):
-        apply_overrides(load_environment("meander_small").scenario, [("plume.nope", 1)])
+        apply_overrides(load_environment("meander_high").scenario, [("plume.nope", 1)])
 
 
 def test_behaviour_parameters_reach_the_loader_every_runner_uses() -> None:
@@ -273,8 +273,8 @@ def test_the_command_line_refuses_a_sweep_on_test_seeds_and_a_bad_parameter() ->
     ("environment", "along_m", "expected_s"),
     [
         ("steady_gaussian", (30.0, 80.0), 0.0),  # nothing to wait for
-        ("meander_small", (30.0, 80.0), 60.0),  # 1.5 × 80 m / 6 m/s = 20 s < 60 s
-        ("meander_small", (300.0, 300.0), 75.0),  # 1.5 × 300 m / 6 m/s
+        ("meander_low", (30.0, 80.0), 60.0),  # 1.5 × 80 m / 6 m/s = 20 s < 60 s
+        ("meander_high", (300.0, 300.0), 75.0),  # 1.5 × 300 m / 6 m/s
         ("farrell2002_reference", (30.0, 80.0), 120.0),  # 1.5 × 80 m / 1 m/s
     ],
 )
