@@ -12,6 +12,7 @@ from collections.abc import Sequence
 
 from agents.behavior import BehaviorContext
 from agents.behavior_state import SavesState
+from agents.sensor import ConcentrationSensor
 from swarmbus.messages import ConcentrationReading
 
 #: A reading at or above this (g/m³) counts as "in the plume" (a detection) for the strategies
@@ -32,6 +33,12 @@ def valid_values(readings: Sequence[ConcentrationReading]) -> list[tuple[float, 
 #: A sensor whose decay time constant is longer than this (s) recovers too slowly for a level
 #: threshold: after one burst its reading stays above the threshold for minutes.
 SLOW_DECAY_S = 5.0
+
+#: A detection level is at least this many noise standard deviations
+#: (:attr:`~agents.sensor.ConcentrationSensor.noise_std_g_m3`) above zero: clean air then reads
+#: as a hit with a one-sided Gaussian probability of 0.13 % per sample. 3 is also how the PID
+#: preset's datasheet detection limit relates to its noise (the limit taken as 3 × the std).
+NOISE_MULTIPLE = 3.0
 
 
 class PlumeDetector(SavesState):
@@ -63,14 +70,39 @@ class PlumeDetector(SavesState):
         return rise > 0.0 and rise >= self.threshold_g_m3
 
 
+def detection_level_g_m3(ctx: BehaviorContext, level_g_m3: float = PLUME_THRESHOLD_G_M3) -> float:
+    """The level a detector works at for the scenario's sensor: ``level_g_m3`` raised, where it
+    is lower, to the sensor's detection floor and to :data:`NOISE_MULTIPLE` × its noise std —
+    a threshold below the floor would claim readings the sensor never gives, one within the
+    noise would count noise as gas. The ideal sensor (no floor, no noise) keeps ``level_g_m3``."""
+    sensor = _sensor(ctx)
+    return max(level_g_m3, sensor.floor_g_m3, NOISE_MULTIPLE * sensor.noise_std_g_m3)
+
+
+def _sensor(ctx: BehaviorContext) -> ConcentrationSensor:
+    """The vehicle's sensor model (its documented floor and noise)."""
+    world = ctx.scenario.world
+    return ConcentrationSensor(
+        ctx.scenario.sensor, world.seed, ctx.vehicle_index, world.temperature_k, world.pressure_pa
+    )
+
+
 def detector_for(ctx: BehaviorContext, level_g_m3: float = PLUME_THRESHOLD_G_M3) -> PlumeDetector:
-    """The detector for the scenario's sensor: a level of ``level_g_m3`` for a fast sensor;
-    for a slow-recovery one (decay time constant > :data:`SLOW_DECAY_S`) a rise, per sample,
-    of what a sensor in clean air shows in one sample on meeting ``level_g_m3``:
-    ``level_g_m3`` × (1 − exp(−sample period / rise time constant))."""
+    """The detector for the scenario's sensor.
+
+    A fast sensor: a level of :func:`detection_level_g_m3` (``level_g_m3``, at least the
+    sensor's floor and :data:`NOISE_MULTIPLE` × its noise std). A slow-recovery one (decay time
+    constant > :data:`SLOW_DECAY_S`): a rise, per sample, of what a sensor in clean air shows in
+    one sample on meeting ``level_g_m3`` — ``level_g_m3`` × (1 − exp(−sample period / rise time
+    constant)) — and at least :data:`NOISE_MULTIPLE` × √2 × the noise std (the std of the
+    difference of two samples). The floor does not bound a rise: below it the output is 0, so
+    a rise is always to a reading at or above the floor."""
     sensor = ctx.scenario.sensor.resolved()
     if sensor.decay_s <= SLOW_DECAY_S:
-        return PlumeDetector("level", level_g_m3)
+        return PlumeDetector("level", detection_level_g_m3(ctx, level_g_m3))
+    noise_std_g_m3 = _sensor(ctx).noise_std_g_m3
     period_s = sensor.period_ticks / ctx.scenario.time.control_hz
     rise = -math.expm1(-period_s / sensor.rise_s) if sensor.rise_s > 0.0 else 1.0
-    return PlumeDetector("rise", level_g_m3 * rise)
+    return PlumeDetector(
+        "rise", max(level_g_m3 * rise, NOISE_MULTIPLE * math.sqrt(2.0) * noise_std_g_m3)
+    )

@@ -414,3 +414,57 @@ def test_source_seekers_use_the_rise_detector_with_the_mox_sensor() -> None:
     for cls in (Casting, SurgeCast, Infotaxis):
         assert cls(ctx(scenario=MOX)).detector.mode == "rise", cls
         assert cls(ctx()).detector.mode == "level", cls
+
+
+# ---------------------------------------------------------------- detection above the noise
+# The MiniPID's datasheet detection limit, 0.1 ppm of isobutylene (C4H8, 56.106 g/mol), in g/m³
+# at 298.15 K and 1 atm (molar volume 8.314462618 × 298.15 / 101325 m³/mol), and its noise std
+# (the limit taken as 3 × the std).
+PID_FLOOR_G_M3 = 0.1e-6 * 56.106 / (8.314462618 * 298.15 / 101_325.0)
+PID_NOISE_G_M3 = PID_FLOOR_G_M3 / 3.0
+
+
+@pytest.mark.parametrize(
+    ("preset", "floor_g_m3", "noise_g_m3"),
+    [("ideal", 0.0, 0.0), ("pid", PID_FLOOR_G_M3, PID_NOISE_G_M3), ("mox-tgs2620", None, 0.0)],
+)
+def test_every_presets_detector_sits_above_its_floor_and_noise(
+    preset: str, floor_g_m3: float | None, noise_g_m3: float
+) -> None:
+    """ideal: no floor, no noise — the level is 0.001 g/m³ exactly (the behaviours' bits do not
+    change). pid: floor 2.29·10⁻⁴ g/m³ and 3σ = the floor, both below 0.001: the level stays.
+    mox (rise detector; no additive noise): the rise equivalent of 0.001 g/m³ is above
+    3·√2·0 — and every rise is to a reading at or above the floor (below it the output is 0)."""
+    scenario = msgspec.structs.replace(IDEAL, sensor=Sensor(preset=preset, period_ticks=12))  # type: ignore[arg-type]
+    sensor = ConcentrationSensor.for_vehicle(scenario, 0)
+    if floor_g_m3 is not None:
+        assert sensor.floor_g_m3 == pytest.approx(floor_g_m3, rel=1e-3, abs=1e-15)
+    assert sensor.noise_std_g_m3 == pytest.approx(noise_g_m3, rel=1e-3, abs=1e-15)
+    detector = detector_for(ctx(scenario=scenario))
+    if detector.mode == "level":
+        assert detector.threshold_g_m3 >= max(sensor.floor_g_m3, 3.0 * sensor.noise_std_g_m3)
+        assert detector.threshold_g_m3 == PLUME_THRESHOLD_G_M3  # 0.001 is above both
+    else:
+        assert detector.threshold_g_m3 >= 3.0 * math.sqrt(2.0) * sensor.noise_std_g_m3
+        assert detector.threshold_g_m3 == pytest.approx(0.001 * (1 - math.exp(-0.1 / 2.96)))
+
+
+def test_a_noisy_sensor_raises_the_detection_level_above_its_noise() -> None:
+    """A PID with a noise std of 0.001 g/m³ (the level itself): clean air reads ≥ 0.001 g/m³ in
+    P(Z ≥ 1) ≈ 16 % of samples; the detector's level 3σ = 0.003 g/m³ lets noise through in
+    P(Z ≥ 3) ≈ 0.13 % (20 000 samples: ≈ 27, the bound 100). A detection limit above 3σ wins."""
+    noisy = msgspec.structs.replace(
+        IDEAL, sensor=Sensor(preset="pid", period_ticks=12, noise_std_g_m3=0.001)
+    )
+    detector = detector_for(ctx(scenario=noisy))
+    assert (detector.mode, detector.threshold_g_m3) == ("level", pytest.approx(0.003))
+    sensor = ConcentrationSensor.for_vehicle(noisy, 0)
+    readings = [sensor.sample(0.0, 0.1 * k) for k in range(20_000)]
+    naive = PlumeDetector("level", PLUME_THRESHOLD_G_M3)
+    assert sum(naive.hit(r) for r in readings) > 0.1 * len(readings)
+    assert sum(detector.hit(r) for r in readings) < 100
+    limited = msgspec.structs.replace(
+        noisy, sensor=Sensor(preset="pid", period_ticks=12, noise_std_g_m3=0.001,
+                             detection_limit_g_m3=0.005)
+    )  # fmt: skip
+    assert detector_for(ctx(scenario=limited)).threshold_g_m3 == pytest.approx(0.005)
