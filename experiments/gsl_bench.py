@@ -13,13 +13,22 @@ import csv
 import io
 import itertools
 import json
+import math
 import multiprocessing
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from experiments.gsl_episode import RADII_M, EpisodeSpec, Outcome, run_episode
+from deploy.visibility import floor_multiple
+from experiments.gsl_episode import (
+    RADII_M,
+    START_ALONG_M,
+    START_ALTITUDE_M,
+    EpisodeSpec,
+    Outcome,
+    run_episode,
+)
 from experiments.gsl_registry import (
     CEILING,
     FLOOR,
@@ -32,12 +41,20 @@ from experiments.gsl_registry import (
     resolve_algorithm,
 )
 from experiments.gsl_stats import Z_95, mcnemar_exact, summarise, wilson_interval
+from swarmbus.plume_formula import downwind_unit
 
 __all__ = ["Z_95", "GslError", "wilson_interval"]
 
 DYNAMICS = ("kinematic", "full")
 FULL_SENSOR_HZ = 10  # with full dynamics a reading every control_hz / 10 ticks
 TUNING_SEED_MIN = 1000  # tuning uses seeds >= this; the published tables seeds 0–99
+#: Below this mean-over-floor at the farthest start a cell is flagged: the sensor cannot see
+#: the plume there.
+VISIBLE_FLOOR_MULTIPLE = 3.0
+VISIBILITY_NOTE = (
+    "the sensor cannot see the plume at the farthest starts: the cell measures visibility, "
+    "not the algorithm"
+)
 
 
 @dataclass(frozen=True)
@@ -196,6 +213,22 @@ def cells_of(outcomes: Sequence[Outcome]) -> dict[Cell, list[Outcome]]:
     return cells
 
 
+def floor_multiple_at_farthest_start(
+    environment: str, sensor: str, overrides: tuple[tuple[str, Any], ...] = ()
+) -> float | None:
+    """The environment's mean concentration (its steady Gaussian plume: the time average of
+    the same atmosphere) at the farthest start — ``START_ALONG_M[1]`` downwind of the first
+    source, on its axis, at ``START_ALTITUDE_M`` — over ``sensor``'s detection floor, rounded
+    to 3 decimals; ``None`` for a sensor without a floor (it sees any gas)."""
+    scenario = load_environment(environment, overrides).scenario
+    source = scenario.plume.sources[0]
+    ux, uy = downwind_unit(scenario.wind.from_deg)
+    along = START_ALONG_M[1]
+    point = (source.x_m + along * ux, source.y_m + along * uy, START_ALTITUDE_M)
+    multiple = floor_multiple(scenario, SENSORS[sensor].config, point)
+    return None if math.isinf(multiple) else round(multiple, 3)
+
+
 def row_of(outcomes: Sequence[Outcome]) -> dict[str, Any]:
     """One table row: the cell's names, its environment's identity, its statistics."""
     spec = outcomes[0].spec
@@ -206,10 +239,31 @@ def row_of(outcomes: Sequence[Outcome]) -> dict[str, Any]:
         "time_dependent": env.time_dependent,
         "scenario_sha256": env.sha256,
         "sensor": spec.sensor,
+        "floor_multiple_at_farthest_start": floor_multiple_at_farthest_start(
+            spec.environment, spec.sensor, spec.overrides
+        ),
         "dynamics": spec.dynamics,
         "vehicles": spec.vehicles or spec.algorithm_config().vehicles,
         **summarise(outcomes),
     }
+
+
+def visibility_table(rows: Sequence[dict[str, Any]]) -> str:
+    """Per (environment, sensor): the mean at the farthest start over the sensor's floor, and
+    the flag where it is below :data:`VISIBLE_FLOOR_MULTIPLE`."""
+    head = (
+        f"| environment | sensor | mean at the farthest start ({START_ALONG_M[1]:g} m) / "
+        "sensor floor | |\n|---|---|---|---|\n"
+    )
+    seen: dict[tuple[str, str], float | None] = {}
+    for r in rows:
+        seen.setdefault((r["environment"], r["sensor"]), r["floor_multiple_at_farthest_start"])
+    lines = []
+    for (env, sensor), multiple in seen.items():
+        value = "no floor" if multiple is None else f"{multiple:.2f}"
+        flag = VISIBILITY_NOTE if multiple is not None and multiple < VISIBLE_FLOOR_MULTIPLE else ""
+        lines.append(f"| {env} | {sensor} | {value} | {flag} |")
+    return head + "\n".join(lines) + "\n"
 
 
 def rows_of(opts: GslOptions, outcomes: Sequence[Outcome]) -> list[dict[str, Any]]:
@@ -364,6 +418,9 @@ def report_text(
         f"```\n{command_line(opts)}\n```\n\n{protocol_line(opts)} {seed_note(opts)}\n\n"
         + "\n".join(environment_lines(opts))
         + f"\n{avail}\n\n{markdown_table(rows)}"
+        + "\nSensor visibility: the time-averaged plume at the farthest start in multiples of "
+        f"the sensor's detection floor; below {VISIBLE_FLOOR_MULTIPLE:g}, flagged.\n\n"
+        + visibility_table(rows)
     )
     if paired:
         text += (

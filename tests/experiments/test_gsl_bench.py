@@ -9,7 +9,13 @@ from pathlib import Path
 
 import pytest
 
-from experiments.gsl_bench import make_options, rows_of, run_all, write_outputs
+from experiments.gsl_bench import (
+    floor_multiple_at_farthest_start,
+    make_options,
+    rows_of,
+    run_all,
+    write_outputs,
+)
 from experiments.gsl_episode import (
     START_ACROSS_M,
     START_ALONG_M,
@@ -146,3 +152,57 @@ def test_full_dynamics_in_a_time_dependent_plume_hovers_until_the_release_has_sp
     assert sorted(schedule.commands) == [0, 60 * 120 - 1]
     assert schedule.last_tick == 60 * 120 + 5 * 120
     assert 5.0 < outcome.path_length_m < 5.0 * 5.0  # flew for 5 s, at most 5 m/s
+
+
+def _class_d_centreline_g_m3(x_m: float, q_g_s: float = 10.0, u_m_s: float = 6.0) -> float:
+    """The Gaussian plume on its axis at the release height H = 10 m, with ground reflection:
+    Q / (2π u σy σz) · (1 + e^(−2H²/σz²)), McMullen's (1975) class D σ = exp(I + J ln x +
+    K ln² x), x in km: σy (4.230, 0.9222, −0.0087), σz (3.414, 0.7371, −0.0316)."""
+    ln_km = math.log(x_m / 1000.0)
+    sigma_y = math.exp(4.230 + 0.9222 * ln_km - 0.0087 * ln_km**2)
+    sigma_z = math.exp(3.414 + 0.7371 * ln_km - 0.0316 * ln_km**2)
+    reflection = 1.0 + math.exp(-2.0 * 10.0**2 / sigma_z**2)
+    return q_g_s / (2.0 * math.pi * u_m_s * sigma_y * sigma_z) * reflection
+
+
+#: Detection floors (g/m³, 298.15 K, 1 atm: molar volume 0.0244654 m³/mol): the MiniPID's
+#: datasheet 0.1 ppm of isobutylene (56.106 g/mol); the TGS2620 curve's clean-air end, 4.57 ppm
+#: of ethanol (46.068 g/mol).
+_MOLAR_VOLUME_M3 = 8.314462618 * 298.15 / 101_325.0
+PID_FLOOR_G_M3 = 0.1e-6 * 56.106 / _MOLAR_VOLUME_M3
+MOX_FLOOR_G_M3 = 4.57e-6 * 46.068 / _MOLAR_VOLUME_M3
+
+
+def test_the_floor_multiple_at_the_farthest_start_is_the_gaussians_over_the_floor(
+    tmp_path: Path,
+) -> None:
+    """meander_high's time average is class D's Gaussian: at 80 m on the axis ≈ 0.0109 g/m³,
+    1.26 × the MOX floor (flagged: below 3) and 47 × the PID's; the ideal sensor has no floor.
+    Each gsl.json row carries it; gsl.md flags the MOX cell only."""
+    mean = _class_d_centreline_g_m3(START_ALONG_M[1])
+    expected = {"mox": mean / MOX_FLOOR_G_M3, "pid": mean / PID_FLOOR_G_M3}
+    assert expected["mox"] < 3.0 < expected["pid"]
+    for sensor, multiple in expected.items():
+        got = floor_multiple_at_farthest_start("meander_high", sensor)
+        assert got == pytest.approx(multiple, rel=2e-3), sensor
+    assert floor_multiple_at_farthest_start("meander_high", "ideal") is None
+    # A tenth of the release rate: a tenth of the mean (the Gaussian is linear in Q).
+    tenth = floor_multiple_at_farthest_start(
+        "meander_high", "pid", (("plume.sources.release_rate_g_s", 1.0),)
+    )
+    assert tenth == pytest.approx(expected["pid"] / 10.0, rel=2e-3)
+    opts = make_options(
+        ["oracle"], ["meander_high"], ["mox", "pid"], runs=1, time_limit_s=1.0, jobs=1
+    )
+    outcomes = run_all(opts)
+    write_outputs(tmp_path, opts, rows_of(opts, outcomes), outcomes)
+    rows = json.loads((tmp_path / "gsl.json").read_text())
+    for row in rows:
+        assert row["floor_multiple_at_farthest_start"] == pytest.approx(
+            expected[row["sensor"]], rel=2e-3
+        )
+    flagged = [
+        line for line in (tmp_path / "gsl.md").read_text().splitlines()
+        if "the sensor cannot see the plume at the farthest starts" in line
+    ]  # fmt: skip
+    assert len(flagged) == 1 and "| meander_high | mox |" in flagged[0]
