@@ -38,6 +38,7 @@ import numpy.typing as npt
 
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
+IntArray = npt.NDArray[np.intp]
 
 #: Below this a probability is zero (OTTO's EPSILON).
 EPSILON = 1e-10
@@ -143,10 +144,12 @@ def entropy_bits(belief: FloatArray) -> float:
 
 
 def _row_entropies_bits(joint: FloatArray, totals: FloatArray) -> FloatArray:
-    """Entropy of each row of ``joint`` normalised by its total: log₂ t − Σ j log₂ j / t."""
+    """Entropy (bits) of each row of ``joint`` (rows × cells) normalised by its total:
+    (Σ −j ln j)/t/ln 2 + log₂ t."""
+    from scipy.special import entr
+
     with np.errstate(divide="ignore", invalid="ignore"):
-        jlogj = np.where(joint > EPSILON, joint * np.log2(np.where(joint > 0, joint, 1.0)), 0.0)
-        out = np.log2(totals) - jlogj.sum(axis=1) / totals
+        out = entr(joint).sum(axis=1) / totals / math.log(2.0) + np.log2(totals)
     return np.where(totals > EPSILON, out, 0.0)
 
 
@@ -163,13 +166,17 @@ def hit_probabilities(
     return np.asarray(likelihoods.reshape(len(likelihoods), -1) @ b.ravel())
 
 
-def expected_entropy(belief: FloatArray, likelihoods: FloatArray, here: BoolArray | None) -> float:
+def expected_entropy(
+    belief: FloatArray, likelihoods: FloatArray, here: BoolArray | None, nuisance_axes: int = 0
+) -> float:
     """Expected entropy (bits) of the belief after moving to a place whose hit likelihoods are
-    ``likelihoods`` (shape ``(n_hits, cells)``) and whose cells are ``here``: with probability
-    ``p_end`` (the belief's mass in ``here``) the source is found (entropy 0), else a hit count
-    ``h`` comes with probability P(h) and leaves the posterior of :func:`bayes_update`."""
+    ``likelihoods`` (shape ``(n_hits, *belief.shape)``) and whose cells are ``here``: with
+    probability ``p_end`` (the belief's mass in ``here``) the source is found (entropy 0), else
+    a hit count ``h`` comes with probability P(h) and leaves the posterior of
+    :func:`bayes_update`. The first ``nuisance_axes`` axes of the belief are parameters of the
+    model, not the source's place: they are summed out before the entropy is taken."""
     b = belief.ravel()
-    mask = None if here is None else here.ravel()
+    mask = None if here is None else np.broadcast_to(here, belief.shape).ravel()
     p_end = float(b[mask].sum()) if mask is not None else 0.0
     if p_end > 1.0 - EPSILON:
         return -EPSILON
@@ -180,6 +187,9 @@ def expected_entropy(belief: FloatArray, likelihoods: FloatArray, here: BoolArra
     if total > EPSILON:
         rest /= total
     joint = likelihoods.reshape(len(likelihoods), -1) * rest
+    if nuisance_axes:
+        lead = int(np.prod(belief.shape[:nuisance_axes]))
+        joint = joint.reshape(len(likelihoods), lead, -1).sum(axis=1)
     p_h = joint.sum(axis=1)
     return (1.0 - p_end) * float((p_h * _row_entropies_bits(joint, p_h)).sum())
 
@@ -223,8 +233,56 @@ class PlumeEncounterModel:
         axis = self.axis_rate_hz * (np.maximum(safe, self.width_min_m) / self.axis_ref_m) ** (
             -self.axis_decay
         )
-        rate = np.where(downwind, axis * np.exp(-0.5 * (across_m / width) ** 2), 0.0)
+        u2 = (np.asarray(across_m) / width) ** 2
+        # beyond 6 widths the plume's share is < 2e-8 of the axis rate: the background's
+        rate = np.where(downwind & (u2 < 36.0), axis * np.exp(-0.5 * u2), 0.0)
         return np.asarray(rate + self.background_hz)
+
+    def plume_cells(self, along_m: FloatArray, across_m: FloatArray) -> BoolArray:
+        """Where the rate is more than the background (:meth:`rate_hz`'s support)."""
+        along = np.asarray(along_m, dtype=float)
+        safe = np.where(along > 0.0, along, 1.0)
+        width = np.maximum(self.width_min_m, self.width_slope * safe)
+        return np.asarray((along > 0.0) & ((np.asarray(across_m) / width) ** 2 < 36.0))
 
     def mean_hits(self, along_m: FloatArray, across_m: FloatArray, dt_s: float) -> FloatArray:
         return np.asarray(self.rate_hz(along_m, across_m) * dt_s)
+
+
+@dataclass(frozen=True)
+class PlumeHitStatistics:
+    """What a searcher meets in a plume, measured at distances downwind on its axis: P(at least
+    one hit within 1 s) there, and the crosswind standard deviation (m) of that probability."""
+
+    distances_m: tuple[float, ...]
+    axis_p_hit_1s: tuple[float, ...]
+    width_m: tuple[float, ...]
+
+
+def width_slope(distances_m: Sequence[float], widths_m: Sequence[float]) -> float:
+    """Least-squares k of width = k·distance (a line through the source)."""
+    x = np.asarray(distances_m, dtype=float)
+    w = np.asarray(widths_m, dtype=float)
+    return float((x * w).sum() / (x * x).sum())
+
+
+def model_from_statistics(
+    stats: PlumeHitStatistics, width_min_m: float, background_hz: float
+) -> PlumeEncounterModel:
+    """The encounter model that reproduces ``stats``: the axis rate r = −ln(1 − P) at the
+    nearest distance, its power-law decay fitted in log–log through every distance, the width
+    slope fitted through the source."""
+    x = np.asarray(stats.distances_m, dtype=float)
+    rates = -np.log1p(-np.clip(np.asarray(stats.axis_p_hit_1s, dtype=float), 0.0, 0.999))
+    if len(x) > 1:
+        slope = float(np.polyfit(np.log(x), np.log(np.maximum(rates, 1e-6)), 1)[0])
+    else:
+        slope = 0.0
+    return PlumeEncounterModel(
+        axis_rate_hz=float(rates[0]),
+        axis_ref_m=float(x[0]),
+        axis_decay=-slope,
+        width_slope=width_slope(stats.distances_m, stats.width_m),
+        width_min_m=width_min_m,
+        background_hz=background_hz,
+    )
