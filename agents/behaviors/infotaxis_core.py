@@ -209,7 +209,10 @@ class PlumeEncounterModel:
         w(along) = max(width_min_m, width_slope · along),
         r_axis(along) = axis_rate_hz · (along / axis_ref_m) ^ (−axis_decay)   (along > 0),
 
-    and no hits upwind of the source (along ≤ 0) but the background. The hit counts in a step
+    and no hits upwind of the source (along ≤ 0) but the background. Nearer than
+    ``near_source_m`` the axis rate grows as ``near_source_m / along``: there the centreline
+    has not wandered yet and the plume is continuous, so a searcher just downwind of the
+    source on its axis cannot miss it for long. The hit counts in a step
     of ``dt`` are Poisson with mean ``r·dt`` (:func:`hit_likelihoods`). Each parameter is a
     statistic a searcher measures in the plume: ``axis_rate_hz`` from P(a hit within 1 s)
     on the axis at ``axis_ref_m`` (r = −ln(1 − P)), ``width_slope`` from the crosswind
@@ -224,15 +227,17 @@ class PlumeEncounterModel:
     width_slope: float
     width_min_m: float
     background_hz: float
+    near_source_m: float = 0.0
 
     def rate_hz(self, along_m: FloatArray, across_m: FloatArray) -> FloatArray:
         along = np.asarray(along_m, dtype=float)
         downwind = along > 0.0
         safe = np.where(downwind, along, 1.0)
         width = np.maximum(self.width_min_m, self.width_slope * safe)
-        axis = self.axis_rate_hz * (np.maximum(safe, self.width_min_m) / self.axis_ref_m) ** (
-            -self.axis_decay
-        )
+        near = np.maximum(safe, self.width_min_m)
+        axis = self.axis_rate_hz * (near / self.axis_ref_m) ** (-self.axis_decay)
+        if self.near_source_m > 0.0:
+            axis = axis * np.maximum(1.0, self.near_source_m / near)
         u2 = (np.asarray(across_m) / width) ** 2
         # beyond 6 widths the plume's share is < 2e-8 of the axis rate: the background's
         rate = np.where(downwind & (u2 < 36.0), axis * np.exp(-0.5 * u2), 0.0)
@@ -267,7 +272,10 @@ def width_slope(distances_m: Sequence[float], widths_m: Sequence[float]) -> floa
 
 
 def model_from_statistics(
-    stats: PlumeHitStatistics, width_min_m: float, background_hz: float
+    stats: PlumeHitStatistics,
+    width_min_m: float,
+    background_hz: float,
+    near_source_m: float = 0.0,
 ) -> PlumeEncounterModel:
     """The encounter model that reproduces ``stats``: the axis rate r = −ln(1 − P) at the
     nearest distance, its power-law decay fitted in log–log through every distance, the width
@@ -285,4 +293,5 @@ def model_from_statistics(
         width_slope=width_slope(stats.distances_m, stats.width_m),
         width_min_m=width_min_m,
         background_hz=background_hz,
+        near_source_m=near_source_m,
     )

@@ -124,6 +124,10 @@ def test_the_plume_model_is_its_definition() -> None:
     assert got[4] == pytest.approx(1.4 * (5 / 30) ** -0.5 * math.exp(-0.125) + 0.02)
     assert got[5] == pytest.approx(0.02)  # 7 widths across: beyond the plume's support
     assert m.mean_hits(along, across, 2.0)[0] == pytest.approx(2 * 1.42)
+    near = PlumeEncounterModel(1.0, 30.0, 0.0, 0.08, 1.0, 0.0, near_source_m=10.0)
+    got = near.rate_hz(np.array([0.5, 2.0, 10.0, 40.0]), np.zeros(4))
+    # 10 m / along, along floored at the 1 m width floor; 1 from 10 m on
+    np.testing.assert_allclose(got, [10.0, 5.0, 1.0, 1.0])
 
 
 def test_a_model_from_statistics_reproduces_them() -> None:
