@@ -37,8 +37,9 @@ axis, ≈ 0 at 4 m):
 
 - ``cell_m`` 1 m: below half the narrowest σy searched (2.4 m at 30 m), so the belief
   resolves the plume's width where it starts.
-- ``step_m`` 2 m at ``speed_m_s`` 2 m/s: a 1 s step, the window of the measured "P(hit within
-  1 s)", so r = −ln(1 − P) needs no conversion.
+- ``step_m`` 2 m at ``speed_m_s`` 2 m/s: a step of about 1 s (1–1.4 s as the vehicle slows
+  into its target; the counts' mean uses the step's measured duration), the window of the
+  measured "P(hit within 1 s)", so r = −ln(1 − P) needs no conversion.
 - ``rearm_s`` 1 s: a detection lasting a whole window counts again in the next, as a window
   with gas would (in a steady plume the detector stays on).
 - ``n_hits`` 4 (counts 0, 1, 2, ≥ 3 in a step): Loisy & Eloy's cap ⌈μ + √μ⌉ + 1 for the
@@ -47,16 +48,18 @@ axis, ≈ 0 at 4 m):
   quarter of the time (1 − 0.75), so no model cell may predict a miss as less likely than that.
 - ``background_hz`` 0.02 /s: a hit where the model predicts none costs a cell a factor
   ≈ 0.02·Δt / (r·Δt), never 0 (a stray filament, a noisy sample).
-- ``axis_rates_hz`` 0.1, 0.3, 1, 3 /s: from about 1 % of samples on the axis with gas (the
-  large meander) to a detector that stays on (steady plume, rate 1 /s with ``rearm_s``).
-- ``width_factors`` 0.3, 1: the instantaneous filament plume without meander is ≈ 1 m wide at
-  the starts (a third of σy there), the calibrated meandering plume's hits spread as σy.
+- ``axis_rates_hz`` 0.3, 1, 3 /s (P(hit within 1 s) 0.26, 0.63, 0.95): from the sparse
+  bursts of a meandering plume (5–9 % of samples with gas on the axis of the small meander)
+  through a detector that stays on (1 /s with ``rearm_s``) and the filament plume's axis
+  (P = 0.75, 1.4 /s) to denser bursts.
+- ``width_factors`` 0.3, 1: the filament plume without meander is ≈ 1 m wide at the starts
+  (0.2–0.4 σy there); the calibrated meandering plume's hits spread as σy.
 - ``near_source_m`` 10 m: the meander moves the centreline by about σv·t, 0.5–1.4 m/s ×
   1.7 s ≤ 2.4 m over the first 10 m of a 6 m/s wind, no more than the plume's own width
   there: nearer than that the plume is continuous on its axis, so the axis rate grows as
   10 m / along (and P(no hit) reaches the floor). Without it a burst of hits is best
   explained by a source just upwind of where it came, whose narrow plume no miss beside it
-  contradicts (tuning seeds ≥ 1000, meander_small: median final error 38 m with it, 59 m
+  contradicts (tuning seeds ≥ 1000, meander_small: median final error 26 m with it, 50 m
   without).
 - ``declare_radius_m`` 2 m (the success radius), ``declare_mass`` 0.9 (0.6 declared in 5 of 6
   runs in the steady plume, none within 2 m; tuning seeds ≥ 1000); the box: 100 m
