@@ -114,8 +114,11 @@ def test_calibrated_infotaxis_predicts_the_measured_hit_statistics() -> None:
 def test_infotaxis_a_miss_on_the_axis_costs_the_true_cell_at_most_the_miss_floor() -> None:
     """With the plume's P(hit within 1 s) of 0.75 on its axis, a model without a floor would
     multiply the true cell by e^(-r·Δt) for a miss: 0.25 for 1 s, 0.004 for 4 s (the old
-    model: 1e-4–1e-2). The floor keeps any one miss from costing more than 0.25."""
+    model: 1e-4–1e-2). The floor keeps any one miss from costing more than 0.25, and each
+    step's evidence is weighed by ``evidence_weight`` w (the likelihood to the power w)."""
     beh = CalibratedInfotaxis(ctx())
+    w = beh.evidence_weight
+    assert 0.0 < w <= 1.0
     frame = _laid(beh)
     assert beh.belief is not None
     prior = beh.belief.copy()
@@ -123,7 +126,7 @@ def test_infotaxis_a_miss_on_the_axis_costs_the_true_cell_at_most_the_miss_floor
     beh.hits = 0
     beh._update(frame, 50.0, 0.0, 4.0)
     ratio = (beh.belief[0, true] / prior[0, true]) / (beh.belief[0, far] / prior[0, far])
-    assert ratio == pytest.approx(0.25 / math.exp(-0.02 * 4.0), rel=1e-6)
+    assert ratio == pytest.approx((0.25 / math.exp(-0.02 * 4.0)) ** w, rel=1e-6)
     # one hit in 1 s: a cell that sees only the background (0.02 /s) explains it with
     # 0.02·e^(-0.02), the true cell (r = -ln 0.25 + 0.02 there, P(0) raised to the floor
     # 0.25 and the rest scaled by 0.75/(1 - e^(-r))) with r·e^(-r)·0.75/(1 - e^(-r))
@@ -133,7 +136,7 @@ def test_infotaxis_a_miss_on_the_axis_costs_the_true_cell_at_most_the_miss_floor
     ratio = (beh.belief[0, far] / before[0, far]) / (beh.belief[0, true] / before[0, true])
     r = -math.log(0.25) + 0.02
     p1 = r * math.exp(-r) * 0.75 / -math.expm1(-r)
-    assert ratio == pytest.approx(0.02 * math.exp(-0.02) / p1, rel=1e-6)
+    assert ratio == pytest.approx((0.02 * math.exp(-0.02) / p1) ** w, rel=1e-6)
 
 
 def test_online_infotaxis_learns_the_rate_with_the_place() -> None:
