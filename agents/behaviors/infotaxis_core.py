@@ -295,3 +295,28 @@ def model_from_statistics(
         background_hz=background_hz,
         near_source_m=near_source_m,
     )
+
+
+def hit_statistics_from_points(
+    points: Sequence[tuple[float, float, float]], p_max: float = 0.999
+) -> PlumeHitStatistics:
+    """:class:`PlumeHitStatistics` from P(hit within 1 s) measured at (distance downwind,
+    offset across) points, as ``plumeswarm plume intermittency`` reports them: at each
+    distance the axis value (the smallest offset) and the width w of the hit rate
+    r = −ln(1 − P) across the wind, from its second moment over the offsets measured,
+    w² = ∫ r·y² dy / ∫ r dy (trapezoids; exactly w² for r ∝ exp(−y²/2w²) sampled finely).
+    P is clipped at ``p_max`` (a detector that never goes off has no finite rate)."""
+    by_distance: dict[float, list[tuple[float, float]]] = {}
+    for x, y, p in points:
+        by_distance.setdefault(float(x), []).append((abs(float(y)), float(p)))
+    distances, axis, widths = [], [], []
+    for x in sorted(by_distance):
+        ys, ps = (np.array(v) for v in zip(*sorted(by_distance[x]), strict=True))
+        rates = -np.log1p(-np.clip(ps, 0.0, p_max))
+        mass = float(np.trapezoid(rates, ys))
+        if mass <= 0.0:
+            continue
+        distances.append(x)
+        axis.append(float(ps[0]))
+        widths.append(math.sqrt(float(np.trapezoid(rates * ys * ys, ys)) / mass))
+    return PlumeHitStatistics(tuple(distances), tuple(axis), tuple(widths))

@@ -19,6 +19,7 @@ from agents.behaviors.infotaxis_core import (
     entropy_bits,
     expected_entropy,
     hit_likelihoods,
+    hit_statistics_from_points,
     isotropic_mean_hits,
     model_from_statistics,
     mu0_poisson,
@@ -140,3 +141,17 @@ def test_a_model_from_statistics_reproduces_them() -> None:
     assert m.width_slope == pytest.approx(
         (30 * 2.4 + 50 * 4.0 + 80 * 6.3) / (30**2 + 50**2 + 80**2)
     )
+
+
+def test_statistics_from_measured_points_recover_a_gaussian_rate_profile() -> None:
+    """P(hit within 1 s) = 1 − exp(−r0·exp(−y²/2w²)) sampled every 0.5 m to 6w: the axis
+    value is P at y = 0 and the width w (trapezoids: within 1 %)."""
+    points = []
+    for x, r0, w in ((30.0, 1.2, 2.4), (50.0, 0.9, 4.0)):
+        for y in np.arange(0.0, 6 * w, 0.5):
+            points.append((x, float(y), 1.0 - math.exp(-r0 * math.exp(-0.5 * (y / w) ** 2))))
+            points.append((x, -float(y), 1.0 - math.exp(-r0 * math.exp(-0.5 * (y / w) ** 2))))
+    stats = hit_statistics_from_points(points)
+    assert stats.distances_m == (30.0, 50.0)
+    np.testing.assert_allclose(stats.axis_p_hit_1s, [1 - math.exp(-1.2), 1 - math.exp(-0.9)])
+    np.testing.assert_allclose(stats.width_m, [2.4, 4.0], rtol=0.01)
