@@ -5,7 +5,7 @@ made from the plume's hit statistics.
 The algorithm is :mod:`agents.behaviors.infotaxis_core`'s (checked on its own model against
 Loisy & Eloy's OTTO by ``plumeswarm bench pomdp``); this class flies it. Every second (a step
 of ``step_m`` at ``speed_m_s``) the searcher counts its **hits** — a detection (a reading the
-scenario's :func:`~agents.behaviors.search.detector_for` accepts) that follows a reading
+scenario's :func:`~agents.behaviors.detection.detector_for` accepts) that follows a reading
 without one, or a detection that has lasted another ``rearm_s`` — and updates its belief over
 the source position with Bayes' rule, taking the counts as Poisson with mean r·Δt:
 
@@ -82,7 +82,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from agents.behavior import BehaviorContext
+from agents.behavior import BehaviorContext, SourceEstimate
+from agents.behaviors.detection import PLUME_THRESHOLD_G_M3, detector_for
 from agents.behaviors.infotaxis_core import (
     FloatArray,
     IntArray,
@@ -95,19 +96,9 @@ from agents.behaviors.infotaxis_core import (
     model_from_statistics,
     width_slope,
 )
-from agents.behaviors.search import (
-    PLUME_THRESHOLD_G_M3,
-    SavesState,
-    SourceEstimate,
-    WindFrame,
-    WindReader,
-    anemometer_wind,
-    detector_for,
-    fly,
-    hold_at,
-    start_or_hold,
-    toward,
-)
+from agents.behaviors.seeking import SeekingBehavior, Wind
+from agents.behaviors.steering import fly, toward
+from agents.behaviors.wind import WindFrame
 from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
 
 #: Cells whose belief is below this fraction of the largest are left out of the move choice.
@@ -162,7 +153,6 @@ class Infotaxis(SeekingBehavior):
         super().__init__(ctx)
         self.detector = detector_for(ctx, self.threshold_g_m3)
         self.models = self._models(ctx)
-        self.declaration: SourceEstimate | None = None
         self.cells_xy: FloatArray | None = None  # (n, 2) ENU centres
         self.grid_origin: tuple[tuple[float, float], float, float] | None = None  # wind, x, y
         self.belief: FloatArray | None = None  # (models, cells)
@@ -324,10 +314,7 @@ class Infotaxis(SeekingBehavior):
     ) -> Setpoint | None:
         x, y, _ = own.position_enu_m
         now = own.sim_time_s
-        self.altitude_m, held = start_or_hold(own, self.altitude_m, self.declaration)
-        if held is not None:
-            return held
-        wind = self.read_wind(own)
+        wind = wind_read.vector_m_s
         e, n, k = self.wind_sum
         self.wind_sum = (e + wind[0], n + wind[1], k + 1.0)
         frame = self.mean_wind()

@@ -14,6 +14,7 @@ from agents.behaviors.detection import PLUME_THRESHOLD_G_M3, PlumeDetector, dete
 from agents.behaviors.gradient_swarm import GradientSwarm, log_gradient
 from agents.behaviors.infotaxis import Infotaxis
 from agents.behaviors.infotaxis_core import PlumeHitStatistics
+from agents.behaviors.oracle import Oracle
 from agents.behaviors.particle_filter import SourceTermFilter
 from agents.behaviors.random_walk import RandomWalk
 from agents.behaviors.surge_cast import SurgeCast
