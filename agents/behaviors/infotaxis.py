@@ -1,81 +1,120 @@
-"""Infotaxis: move where the expected information about the source position is greatest.
+"""Infotaxis for an intermittent plume: move where the expected information about the source is
+greatest (Vergassola, Villermaux & Shraiman 2007, Nature 445:406), with an encounter model
+made from the plume's hit statistics.
 
-Vergassola, M., Villermaux, E. & Shraiman, B. I. (2007), "'Infotaxis' as a strategy for
-searching without gradients", Nature 445:406–409. The searcher keeps a belief b(r₀) over the
-source position on a grid of ``cell_m`` cells (a box around its start: ``prior_upwind_m``
-upwind, ``prior_downwind_m`` downwind, ±``prior_half_width_m`` crosswind, uniform prior).
-Encounters with gas are modelled by the paper's mean rate at r from a source at r₀ (its
-eq. 1, in the wind frame with x downwind):
+The algorithm is :mod:`agents.behaviors.infotaxis_core`'s (checked on its own model against
+Loisy & Eloy's OTTO by ``plumeswarm bench pomdp``); this class flies it. Every second (a step
+of ``step_m`` at ``speed_m_s``) the searcher counts its **hits** — a detection (a reading the
+scenario's :func:`~agents.behaviors.detection.detector_for` accepts) that follows a reading
+without one, or a detection that has lasted another ``rearm_s`` — and updates its belief over
+the source position with Bayes' rule, taking the counts as Poisson with mean r·Δt:
 
-    R(r|r₀) = R/ln(λ/a) · exp(V·(x − x₀)/2D) · K₀(|r − r₀|/λ),   λ = √(Dτ / (1 + V²τ/4D))
+    r(along, across) = r_axis · exp(−across² / (2 (f·σy(along))²)) + r_background
 
-with V the measured wind speed and D, τ, R, a the parameters below (they shape the modelled
-plume, not the simulated one). Observations are binary per decision step (the common variant
-of the paper's hit counts): a *hit* when any reading of the step is at least
-:data:`~agents.behaviors.detection.PLUME_THRESHOLD_G_M3` (a slow-recovery sensor: rose by the
-equivalent, :func:`~agents.behaviors.detection.detector_for`), with probability
-1 − exp(−(R + r_bg)·Δt)
-(``background_rate_hz`` r_bg keeps a hit where the model says "no gas" from ruling a cell out
-for good). After each step Bayes' rule updates b; the next step (``step_m`` upwind, downwind,
-left, right, or stay) is the one with the lowest expected entropy of the updated belief,
-including the chance of finding the source in the cell moved to (the paper's eq. 2).
+(:class:`~agents.behaviors.infotaxis_core.PlumeEncounterModel`, along = distance downwind of
+the candidate source in the mean wind, none upwind of it), the last of ``n_hits`` classes
+counting "≥ n_hits − 1", P(no hit) never below ``miss_floor``, and each step's evidence
+weighed by ``evidence_weight`` (the likelihood raised to that power). Then it moves (upwind,
+downwind, left, right by ``step_m``, or stays) to minimise the expected entropy.
 
-Stopping rule: when the belief mass within ``declare_radius_m`` of its mean reaches
-``declare_mass``, it declares the mean (spread: the belief's standard deviation) and holds
-there. Use ``behavior = "agents.behaviors.infotaxis:Infotaxis"``.
+**The encounter model's input.** ``hit_statistics`` (a
+:class:`~agents.behaviors.infotaxis_core.PlumeHitStatistics`: P(hit within 1 s) on the axis
+and its crosswind width at distances downwind, as measured in an environment) fixes the model
+(:func:`~agents.behaviors.infotaxis_core.model_from_statistics`); a subclass for a calibrated
+environment sets it. Without it the model is estimated online: the belief is over (source
+cell, hypothesis), the hypotheses being every pair of an axis rate in ``axis_rates_hz`` and a
+width factor f in ``width_factors`` applied to the scenario's plume σy (its dispersion family
+and stability class, fitted as σy = k·x at 30, 50 and 80 m), so the hits select the rate and
+the width along with the source.
+
+**Declaration by evidence**: when the belief's mass (over every hypothesis) within
+``declare_radius_m`` of its mean reaches ``declare_mass``, it declares the mean (spread: the
+belief's standard deviation) and holds there. Use
+``behavior = "agents.behaviors.infotaxis:Infotaxis"``.
+
+**The parameters and the plume statistic each comes from** (the calibrated plume: σy 2.4, 4.0,
+6.3 m at 30, 50, 80 m in a 6 m/s wind; the filament plume: P(hit within 1 s) ≈ 0.75 on its
+axis, ≈ 0 at 4 m):
+
+- ``cell_m`` 1 m: below half the narrowest σy searched (2.4 m at 30 m), so the belief
+  resolves the plume's width where it starts.
+- ``step_m`` 2 m at ``speed_m_s`` 2 m/s: a step of about 1 s (1–1.4 s as the vehicle slows
+  into its target; the counts' mean uses the step's measured duration), the window of the
+  measured "P(hit within 1 s)", so r = −ln(1 − P) needs no conversion.
+- ``rearm_s`` 1 s: a detection lasting a whole window counts again in the next, as a window
+  with gas would (in a steady plume the detector stays on).
+- ``n_hits`` 4 (counts 0, 1, 2, ≥ 3 in a step): Loisy & Eloy's cap ⌈μ + √μ⌉ + 1 for the
+  largest axis mean hits the model allows in a step, μ = 1.4 (r for P = 0.75).
+- ``miss_floor`` 0.25: the plume leaves a searcher on its axis without a hit in 1 s a
+  quarter of the time (1 − 0.75), so no model cell may predict a miss as less likely than that.
+- ``background_hz`` 0.02 /s: a hit where the model predicts none costs a cell a factor
+  ≈ 0.02·Δt / (r·Δt), never 0 (a stray filament, a noisy sample).
+- ``axis_rates_hz`` 0.3, 1, 3 /s (P(hit within 1 s) 0.26, 0.63, 0.95): from the sparse
+  bursts of a meandering plume (5–9 % of samples with gas on the axis of the small meander)
+  through a detector that stays on (1 /s with ``rearm_s``) and the filament plume's axis
+  (P = 0.75, 1.4 /s) to denser bursts.
+- ``width_factors`` 0.3, 1: the filament plume without meander is ≈ 1 m wide at the starts
+  (0.2–0.4 σy there); the calibrated meandering plume's hits spread as σy.
+- ``near_source_m`` 10 m: the meander moves the centreline by about σv·t, 0.5–1.4 m/s ×
+  1.7 s ≤ 2.4 m over the first 10 m of a 6 m/s wind, no more than the plume's own width
+  there: nearer than that the plume is continuous on its axis, so the axis rate grows as
+  10 m / along (and P(no hit) reaches the floor). Without it a burst of hits is best
+  explained by a source just upwind of where it came, whose narrow plume no miss beside it
+  contradicts (tuning seeds ≥ 1000, meander_small: median final error 26 m with it, 50 m
+  without).
+- ``evidence_weight`` 0.5: each step's likelihood is raised to this power before Bayes'
+  rule. In a meandering plume hits come in bursts while the wandering centreline sweeps over
+  the searcher, correlated over seconds, not independently as the Poisson model has them;
+  a 1 s step counts as half an independent observation (tuning seeds ≥ 1000, runs 0–5:
+  meander_small 4 false declarations of 6 → 0, median final error 26 → 9.7 m; steady plume
+  3 of 6 within 2 m either way).
+- ``declare_radius_m`` 2 m (the success radius), ``declare_mass`` 0.9 (0.6 declared in 5 of 6
+  runs in the steady plume, none within 2 m; tuning seeds ≥ 1000); the box: 100 m
+  upwind, 20 m downwind, ±40 m across of the start (the starts are 30–80 m downwind, ±20 m
+  across).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
-import numpy.typing as npt
-from scipy.special import k0e
 
 from agents.behavior import BehaviorContext, SourceEstimate
 from agents.behaviors.detection import PLUME_THRESHOLD_G_M3, detector_for
+from agents.behaviors.infotaxis_core import (
+    FloatArray,
+    IntArray,
+    PlumeEncounterModel,
+    PlumeHitStatistics,
+    bayes_update,
+    choose_move,
+    expected_entropy,
+    hit_likelihoods,
+    model_from_statistics,
+    width_slope,
+)
 from agents.behaviors.seeking import SeekingBehavior, Wind
 from agents.behaviors.steering import fly, toward
 from agents.behaviors.wind import WindFrame
 from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
 
-FloatArray = npt.NDArray[np.float64]
+#: Cells whose belief is below this fraction of the largest are left out of the move choice.
+SUPPORT_FLOOR = 1e-12
+#: Distances (m) downwind at which the scenario's σy is fitted: the bench's start distances.
+WIDTH_FIT_DISTANCES_M = (30.0, 50.0, 80.0)
 
 
-def encounter_rate_hz(
-    along_m: FloatArray,
-    across_m: FloatArray,
-    wind_speed_m_s: float,
-    diffusivity_m2_s: float,
-    lifetime_s: float,
-    emission_rate_hz: float,
-    searcher_size_m: float,
-) -> FloatArray:
-    """Vergassola et al.'s R(r|r₀) at offsets (along downwind, across) of r from r₀."""
-    d, v, tau = diffusivity_m2_s, wind_speed_m_s, lifetime_s
-    lam = math.sqrt(d * tau / (1.0 + v * v * tau / (4.0 * d)))
-    dist = np.maximum(np.hypot(along_m, across_m), searcher_size_m)
-    # K₀(u) = k0e(u)·e^(−u): combine the exponentials so far cells underflow to 0, never inf.
-    exponent = v * along_m / (2.0 * d) - dist / lam
-    with np.errstate(under="ignore"):
-        rate = k0e(dist / lam) * np.exp(exponent)
-    return np.asarray(emission_rate_hz / math.log(lam / searcher_size_m) * rate)
+def scenario_width_slope(ctx: BehaviorContext) -> float:
+    """k of σy ≈ k·x for the scenario's plume (its dispersion family and stability class)."""
+    from swarmbus.dispersion import dispersion_curves
 
-
-def bayes_update(belief: FloatArray, hit_probability: FloatArray, hit: bool) -> FloatArray:
-    """Posterior over cells after one binary observation (normalised; the prior if all 0)."""
-    likelihood = hit_probability if hit else 1.0 - hit_probability
-    post = belief * likelihood
-    total = post.sum()
-    return belief.copy() if total <= 0.0 else np.asarray(post / total)
-
-
-def entropy(belief: FloatArray) -> float:
-    p = belief[belief > 0.0]
-    return float(-(p * np.log(p)).sum())
+    plume = ctx.scenario.plume
+    curves = dispersion_curves(plume.coefficients, plume.stability)
+    sigma_y, _ = curves.sigmas(np.array(WIDTH_FIT_DISTANCES_M))
+    return width_slope(WIDTH_FIT_DISTANCES_M, list(sigma_y))
 
 
 class Infotaxis(SeekingBehavior):
@@ -86,7 +125,10 @@ class Infotaxis(SeekingBehavior):
         "belief",
         "target_xy",
         "step_started_s",
-        "hit",
+        "hits",
+        "detecting_since_s",
+        "observed_xy",
+        "wind_sum",
     )
     cell_m = 1.0
     step_m = 2.0
@@ -94,24 +136,55 @@ class Infotaxis(SeekingBehavior):
     prior_upwind_m = 100.0
     prior_downwind_m = 20.0
     prior_half_width_m = 40.0
-    diffusivity_m2_s = 1.0
-    lifetime_s = 50.0
-    emission_rate_hz = 100.0
-    searcher_size_m = 0.1
-    background_rate_hz = 0.02
+    rearm_s = 1.0
+    n_hits = 4
+    miss_floor = 0.25
+    background_hz = 0.02
+    axis_rates_hz: tuple[float, ...] = (0.3, 1.0, 3.0)
+    width_factors: tuple[float, ...] = (0.3, 1.0)
+    hit_statistics: ClassVar[PlumeHitStatistics | None] = None
     threshold_g_m3 = PLUME_THRESHOLD_G_M3
-    declare_radius_m = 1.5
+    near_source_m = 10.0
+    evidence_weight = 0.5
+    declare_radius_m = 2.0
     declare_mass = 0.9
 
     def __init__(self, ctx: BehaviorContext) -> None:
         super().__init__(ctx)
         self.detector = detector_for(ctx, self.threshold_g_m3)
+        self.models = self._models(ctx)
         self.cells_xy: FloatArray | None = None  # (n, 2) ENU centres
         self.grid_origin: tuple[tuple[float, float], float, float] | None = None  # wind, x, y
-        self.belief: FloatArray | None = None
+        self.belief: FloatArray | None = None  # (models, cells)
         self.target_xy: tuple[float, float] | None = None
         self.step_started_s = 0.0
-        self.hit = False
+        self.hits = 0
+        self.detecting_since_s: float | None = None
+        self.observed_xy = (0.0, 0.0, 0.0)  # Σx, Σy, n of this step's readings
+        self.wind_sum = (0.0, 0.0, 0.0)  # Σ east, Σ north, n: the mean wind of the search
+
+    def _models(self, ctx: BehaviorContext) -> list[PlumeEncounterModel]:
+        width_min_m = self.cell_m
+        if self.hit_statistics is not None:
+            return [
+                model_from_statistics(
+                    self.hit_statistics, width_min_m, self.background_hz, self.near_source_m
+                )
+            ]
+        slope = scenario_width_slope(ctx)
+        return [
+            PlumeEncounterModel(
+                axis_rate_hz=rate,
+                axis_ref_m=1.0,
+                axis_decay=0.0,
+                width_slope=factor * slope,
+                width_min_m=width_min_m,
+                background_hz=self.background_hz,
+                near_source_m=self.near_source_m,
+            )
+            for rate in self.axis_rates_hz
+            for factor in self.width_factors
+        ]
 
     def restore(self, data: dict[str, Any]) -> None:
         super().restore(data)
@@ -136,68 +209,101 @@ class Infotaxis(SeekingBehavior):
         a, c = a.ravel(), c.ravel()
         dw, cw = frame.downwind, frame.crosswind
         self.cells_xy = np.column_stack([a * dw[0] + c * cw[0], a * dw[1] + c * cw[1]])
-        self.belief = np.full(a.size, 1.0 / a.size)
+        self.belief = np.full((len(self.models), a.size), 1.0 / (len(self.models) * a.size))
 
-    def hit_probability(self, frame: WindFrame, x: float, y: float, dt_s: float) -> FloatArray:
-        """P(hit at (x, y) within dt | source in each cell)."""
+    def mean_wind(self) -> WindFrame:
+        e, n, k = self.wind_sum
+        return WindFrame.of((e / k, n / k))
+
+    def likelihoods(
+        self, frame: WindFrame, x: float, y: float, dt_s: float, cells: IntArray | None = None
+    ) -> FloatArray:
+        """P(h hits at (x, y) in dt | model, source cell): shape (n_hits, models, cells), for
+        every cell or the ``cells`` given."""
         assert self.cells_xy is not None
-        dx = x - self.cells_xy[:, 0]
-        dy = y - self.cells_xy[:, 1]
+        xy = self.cells_xy if cells is None else self.cells_xy[cells]
+        dx = x - xy[:, 0]
+        dy = y - xy[:, 1]
         along = dx * frame.downwind[0] + dy * frame.downwind[1]
         across = dx * frame.crosswind[0] + dy * frame.crosswind[1]
-        rate = encounter_rate_hz(
-            along,
-            across,
-            frame.speed_m_s,
-            self.diffusivity_m2_s,
-            self.lifetime_s,
-            self.emission_rate_hz,
-            self.searcher_size_m,
-        )
-        return np.asarray(-np.expm1(-(rate + self.background_rate_hz) * dt_s))
+        # Only cells whose plume reaches (x, y) need the Poisson classes; the others see the
+        # background's.
+        support = np.stack([m.plume_cells(along, across) for m in self.models])
+        table = np.empty((self.n_hits, *support.shape))
+        background = np.array([self.background_hz * dt_s])
+        table[:] = hit_likelihoods(background, self.n_hits, self.miss_floor)[:, :, None]
+        for k, m in enumerate(self.models):
+            inside = support[k]
+            mean = m.mean_hits(along[inside], across[inside], dt_s)
+            table[:, k, inside] = hit_likelihoods(mean, self.n_hits, self.miss_floor)
+        return table
 
     def _observe(self, readings: Sequence[ConcentrationReading]) -> None:
+        sx, sy, n = self.observed_xy
         for r in readings:
-            if r.available and r.reported_g_m3 is not None and self.detector.hit(r.reported_g_m3):
-                self.hit = True
+            if not r.available or r.reported_g_m3 is None:
+                continue
+            sx, sy, n = sx + r.position_enu_m[0], sy + r.position_enu_m[1], n + 1
+            if not self.detector.hit(r.reported_g_m3):
+                self.detecting_since_s = None
+            elif (
+                self.detecting_since_s is None
+                or r.sim_time_s - self.detecting_since_s >= self.rearm_s
+            ):
+                self.hits += 1
+                self.detecting_since_s = r.sim_time_s
+        self.observed_xy = (sx, sy, n)
 
-    def _expected_entropy(self, frame: WindFrame, x: float, y: float, dt_s: float) -> float:
-        assert self.belief is not None and self.cells_xy is not None
-        b = self.belief
-        p1 = self.hit_probability(frame, x, y, dt_s)
-        p_hit = float((b * p1).sum())
-        found = self._mass_near(x, y, 0.5 * self.cell_m)
-        expected = 0.0
-        for prob, hit in ((p_hit, True), (1.0 - p_hit, False)):
-            if prob > 0.0:
-                expected += prob * entropy(bayes_update(b, p1, hit))
-        return (1.0 - found) * expected
-
-    def _mass_near(self, x: float, y: float, radius_m: float) -> float:
-        assert self.belief is not None and self.cells_xy is not None
+    def _near(self, x: float, y: float, radius_m: float) -> np.ndarray:
+        assert self.cells_xy is not None
         near = np.hypot(self.cells_xy[:, 0] - x, self.cells_xy[:, 1] - y) <= radius_m
-        return float(self.belief[near].sum())
+        return np.broadcast_to(near, (len(self.models), len(near)))
 
     def _decide(self, frame: WindFrame, x: float, y: float, dt_s: float) -> tuple[float, float]:
-        assert self.cells_xy is not None
+        assert self.cells_xy is not None and self.belief is not None
         lo, hi = self.cells_xy.min(axis=0), self.cells_xy.max(axis=0)
+        # The choice is made on the cells the belief has not ruled out (mass above 1e-12 of
+        # the largest): the rest cannot change an expected entropy by more than that.
+        marginal = self.belief.sum(axis=0)
+        cells = np.flatnonzero(marginal > SUPPORT_FLOOR * marginal.max())
+        belief = self.belief[:, cells]
         s = self.step_m
-        moves = [(0.0, 0.0), *(frame.velocity(a * s, c * s) for a, c in _DIRECTIONS)]
-        best, best_xy = math.inf, (x, y)
-        for mx, my in moves:
-            nx, ny = x + mx, y + my
-            if not (lo[0] <= nx <= hi[0] and lo[1] <= ny <= hi[1]):
-                continue
-            score = self._expected_entropy(frame, nx, ny, dt_s)
-            if score < best - 1e-12:
-                best, best_xy = score, (nx, ny)
-        return best_xy
+        places = [(x, y)]
+        for a, c in _DIRECTIONS:
+            mx, my = frame.velocity(a * s, c * s)
+            if lo[0] <= x + mx <= hi[0] and lo[1] <= y + my <= hi[1]:
+                places.append((x + mx, y + my))
+        scores = [
+            expected_entropy(
+                belief,
+                self.likelihoods(frame, px, py, dt_s, cells),
+                self._near(px, py, 0.5 * self.cell_m)[:, cells],
+                nuisance_axes=1,
+            )
+            for px, py in places
+        ]
+        return places[choose_move(scores)]
 
-    def _belief_mean(self) -> tuple[float, float, float]:
+    def _update(self, frame: WindFrame, x: float, y: float, dt_s: float) -> None:
+        assert self.belief is not None
+        sx, sy, n = self.observed_xy
+        ox, oy = (sx / n, sy / n) if n else (x, y)
+        table = self.likelihoods(frame, ox, oy, dt_s)
+        likelihood = table[min(self.hits, self.n_hits - 1)]
+        if self.evidence_weight != 1.0:
+            likelihood = likelihood**self.evidence_weight
+        self.belief = bayes_update(self.belief, likelihood, None)
+        self.hits = 0
+        self.observed_xy = (0.0, 0.0, 0.0)
+
+    def _belief_mean(self) -> tuple[float, float, float, float]:
+        """Mean (x, y), spread and the mass within ``declare_radius_m`` of the mean."""
         assert self.belief is not None and self.cells_xy is not None
-        mean = self.belief @ self.cells_xy
-        var = self.belief @ ((self.cells_xy - mean) ** 2)
-        return float(mean[0]), float(mean[1]), float(math.sqrt(var.sum()))
+        cells = self.belief.sum(axis=0)
+        mean = cells @ self.cells_xy
+        var = cells @ ((self.cells_xy - mean) ** 2)
+        near = np.hypot(*(self.cells_xy - mean).T) <= self.declare_radius_m
+        return float(mean[0]), float(mean[1]), float(math.sqrt(var.sum())), float(cells[near].sum())
 
     def seek(
         self,
@@ -208,7 +314,10 @@ class Infotaxis(SeekingBehavior):
     ) -> Setpoint | None:
         x, y, _ = own.position_enu_m
         now = own.sim_time_s
-        wind, frame = wind_read.vector_m_s, wind_read.frame
+        wind = wind_read.vector_m_s
+        e, n, k = self.wind_sum
+        self.wind_sum = (e + wind[0], n + wind[1], k + 1.0)
+        frame = self.mean_wind()
         if self.belief is None:
             self.grid_origin = (wind, x, y)
             self._build_grid(frame, x, y)
@@ -218,15 +327,12 @@ class Infotaxis(SeekingBehavior):
         elapsed = now - self.step_started_s
         if self.target_xy is None:
             self.target_xy = self._decide(frame, x, y, step_dt)
-        arrived = math.dist((x, y), self.target_xy) < 0.2
-        if (arrived and elapsed >= 0.5 * step_dt) or elapsed > 3.0 * step_dt:
-            assert self.belief is not None
-            dt = max(elapsed, 0.5 * step_dt)
-            self.belief = bayes_update(self.belief, self.hit_probability(frame, x, y, dt), self.hit)
-            self.hit = False
+        arrived = math.dist((x, y), self.target_xy) < 0.5
+        if (arrived and elapsed >= step_dt) or elapsed > 3.0 * step_dt:
+            self._update(frame, x, y, elapsed)
             self.step_started_s = now
-            mx, my, spread = self._belief_mean()
-            if self._mass_near(mx, my, self.declare_radius_m) >= self.declare_mass:
+            mx, my, spread, mass = self._belief_mean()
+            if mass >= self.declare_mass:
                 self.declaration = SourceEstimate(x_m=mx, y_m=my, sim_time_s=now, spread_m=spread)
                 return None
             self.target_xy = self._decide(frame, x, y, step_dt)

@@ -876,6 +876,48 @@ def bench_gsl_sweep(params: tuple[str, ...], allow_test_seeds: bool, **kwargs: A
     _gsl_run(kwargs, run, check)
 
 
+@bench.command("pomdp")
+@click.option("--dims", type=int, default=2, show_default=True, help="Space dimensions: 1, 2 or 3.")
+@click.option("--lambda-over-dx", type=float, default=2.0, show_default=True, help="λ/Δx, >= 1.")
+@click.option("--r-dt", type=float, default=2.0, show_default=True, help="R·Δt, > 0.")
+@click.option("--episodes", type=int, default=1000, show_default=True)
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=None,
+    help="Directory for pomdp.json (default runs/bench-pomdp-<time>/).",
+)
+def bench_pomdp(
+    dims: int,
+    lambda_over_dx: float,
+    r_dt: float,
+    episodes: int,
+    seed: int,
+    out: Path | None,
+) -> None:
+    """Infotaxis on the source-tracking POMDP (Loisy & Eloy 2022), evaluated as OTTO does."""
+    import time
+
+    from bench.pomdp import PomdpError, PomdpOptions, report_lines, run_pomdp, write_result
+
+    try:
+        opts = PomdpOptions(dims, lambda_over_dx, r_dt, episodes, seed)
+    except PomdpError as exc:
+        fail(str(exc))
+    step = max(1, episodes // 20)
+
+    def progress(done: int, total: int) -> None:
+        if done % step == 0 or done == total:
+            click.echo(f"episodes {done}/{total}", err=True)
+
+    result = run_pomdp(opts, progress)
+    for line in report_lines(result):
+        click.echo(line)
+    directory = out or Path("runs") / time.strftime("bench-pomdp-%Y%m%d-%H%M%S")
+    click.echo(f"wrote {write_result(directory, result)}")
+
+
 def _register_groups() -> None:
     from deploy.cli.certs import certs
     from deploy.cli.chaos import chaos

@@ -7,13 +7,13 @@ import math
 import msgspec
 import numpy as np
 import pytest
-from scipy.special import k0
 
 from agents.behavior import BehaviorContext
 from agents.behaviors.casting import Casting
 from agents.behaviors.detection import PLUME_THRESHOLD_G_M3, PlumeDetector, detector_for
 from agents.behaviors.gradient_swarm import GradientSwarm, log_gradient
-from agents.behaviors.infotaxis import Infotaxis, bayes_update
+from agents.behaviors.infotaxis import Infotaxis
+from agents.behaviors.infotaxis_core import PlumeHitStatistics
 from agents.behaviors.oracle import Oracle
 from agents.behaviors.particle_filter import SourceTermFilter
 from agents.behaviors.random_walk import RandomWalk
@@ -74,34 +74,91 @@ def test_the_shared_formula_matches_the_plume_service() -> None:
 
 
 # ---------------------------------------------------------------- infotaxis
-def test_infotaxis_belief_update_matches_a_hand_computed_posterior() -> None:
-    beh = Infotaxis(ctx())
+#: Hit statistics of the calibrated plume's kind (P(hit within 1 s) on the axis, its width).
+STATS = PlumeHitStatistics(
+    distances_m=(30.0, 50.0, 80.0), axis_p_hit_1s=(0.75, 0.6, 0.45), width_m=(2.4, 4.0, 6.3)
+)
+
+
+class CalibratedInfotaxis(Infotaxis):
+    hit_statistics = STATS
+
+
+def _laid(beh: Infotaxis) -> WindFrame:
     frame = WindFrame.of((6.0, 0.0))  # toward +x at 6 m/s
-    beh.cells_xy = np.array([[0.0, 0.0], [0.0, 3.0], [10.0, 0.0], [-5.0, 0.0]])
-    prior = np.array([0.4, 0.3, 0.2, 0.1])
-    beh.belief = prior
-    searcher, dt = (6.0, 1.0), 1.5
-    # Vergassola et al. 2007, eq. 1, with the wind along +x (their −y):
-    # R = R0/ln(λ/a) · exp(V(x − x0)/2D) · K0(d/λ), λ = √(Dτ/(1 + V²τ/4D)).
-    d_, tau, v, r0, a, bg = 1.0, 50.0, 6.0, 100.0, 0.1, 0.02
-    lam = math.sqrt(d_ * tau / (1 + v * v * tau / (4 * d_)))
-    expected_p = []
-    for x0, y0 in beh.cells_xy:
-        dist = max(math.hypot(searcher[0] - x0, searcher[1] - y0), a)
-        rate = r0 / math.log(lam / a) * math.exp(v * (searcher[0] - x0) / (2 * d_))
-        rate *= float(k0(dist / lam))
-        expected_p.append(1 - math.exp(-(rate + bg) * dt))
-    p = np.array(expected_p)
-    hit_post = prior * p / (prior * p).sum()
-    miss_post = prior * (1 - p) / (prior * (1 - p)).sum()
-    got_p = beh.hit_probability(frame, *searcher, dt)
-    np.testing.assert_allclose(got_p, p, rtol=1e-9)
-    np.testing.assert_allclose(bayes_update(prior, got_p, True), hit_post, rtol=1e-9)
-    np.testing.assert_allclose(bayes_update(prior, got_p, False), miss_post, rtol=1e-9)
-    # The source 6 m upwind on the axis explains a hit; one downwind of the searcher hardly can.
-    assert hit_post[0] > prior[0] and hit_post[2] < 0.1 * prior[2]
-    # A source upwind of the searcher but 3 m off the axis makes a hit less likely than one on it
-    assert p[1] < p[0]
+    beh.wind_sum = (6.0, 0.0, 1.0)
+    beh._build_grid(frame, 50.0, 0.0)
+    return frame
+
+
+def _cell(beh: Infotaxis, x: float, y: float) -> int:
+    assert beh.cells_xy is not None
+    return int(np.argmin(np.hypot(beh.cells_xy[:, 0] - x, beh.cells_xy[:, 1] - y)))
+
+
+def test_calibrated_infotaxis_predicts_the_measured_hit_statistics() -> None:
+    """The likelihood of at least one hit in 1 s, for a searcher d m downwind of a cell on its
+    axis, is the measured P(hit within 1 s) at d (a power law through three points: within
+    0.03), and at one measured width across it is lower by the Gaussian's e^(-1/2) in rate."""
+    beh = CalibratedInfotaxis(ctx())
+    frame = _laid(beh)
+    for d, p in zip(STATS.distances_m, STATS.axis_p_hit_1s, strict=True):
+        table = beh.likelihoods(frame, 50.0, 0.0, 1.0)
+        source = _cell(beh, 50.0 - d, 0.0)
+        assert 1.0 - table[0, 0, source] == pytest.approx(p, abs=0.03)
+    table = beh.likelihoods(frame, 50.0, 4.0, 1.0)
+    rate_axis = -math.log(1.0 - 0.6)
+    p_across = 1.0 - math.exp(-rate_axis * math.exp(-0.5 * (4.0 / 4.0) ** 2))
+    assert 1.0 - table[0, 0, _cell(beh, 0.0, 0.0)] == pytest.approx(p_across, abs=0.05)
+
+
+def test_infotaxis_a_miss_on_the_axis_costs_the_true_cell_at_most_the_miss_floor() -> None:
+    """With the plume's P(hit within 1 s) of 0.75 on its axis, a model without a floor would
+    multiply the true cell by e^(-r·Δt) for a miss: 0.25 for 1 s, 0.004 for 4 s (the old
+    model: 1e-4–1e-2). The floor keeps any one miss from costing more than 0.25, and each
+    step's evidence is weighed by ``evidence_weight`` w (the likelihood to the power w)."""
+    beh = CalibratedInfotaxis(ctx())
+    w = beh.evidence_weight
+    assert 0.0 < w <= 1.0
+    frame = _laid(beh)
+    assert beh.belief is not None
+    prior = beh.belief.copy()
+    true, far = _cell(beh, 20.0, 0.0), _cell(beh, 40.0, 30.0)
+    beh.hits = 0
+    beh._update(frame, 50.0, 0.0, 4.0)
+    ratio = (beh.belief[0, true] / prior[0, true]) / (beh.belief[0, far] / prior[0, far])
+    assert ratio == pytest.approx((0.25 / math.exp(-0.02 * 4.0)) ** w, rel=1e-6)
+    # one hit in 1 s: a cell that sees only the background (0.02 /s) explains it with
+    # 0.02·e^(-0.02), the true cell (r = -ln 0.25 + 0.02 there, P(0) raised to the floor
+    # 0.25 and the rest scaled by 0.75/(1 - e^(-r))) with r·e^(-r)·0.75/(1 - e^(-r))
+    beh.hits = 1
+    before = beh.belief.copy()
+    beh._update(frame, 50.0, 0.0, 1.0)
+    ratio = (beh.belief[0, far] / before[0, far]) / (beh.belief[0, true] / before[0, true])
+    r = -math.log(0.25) + 0.02
+    p1 = r * math.exp(-r) * 0.75 / -math.expm1(-r)
+    assert ratio == pytest.approx((0.02 * math.exp(-0.02) / p1) ** w, rel=1e-6)
+
+
+def test_online_infotaxis_learns_the_rate_with_the_place() -> None:
+    """Without statistics the belief is over (hypothesis, cell); hits at 3 /s on the axis
+    make the 3 /s hypotheses the likeliest and put the
+    source upwind of the searcher, centred on its axis."""
+    beh = Infotaxis(ctx())
+    frame = _laid(beh)
+    assert beh.belief is not None and len(beh.models) == 6
+    rng = np.random.default_rng(3)
+    for _ in range(30):
+        beh.hits = int(rng.poisson(3.0))
+        beh._update(frame, 40.0, 0.0, 1.0)
+    by_model = beh.belief.sum(axis=1)
+    rates = [m.axis_rate_hz for m in beh.models]
+    assert rates[int(np.argmax(by_model))] == 3.0
+    marginal = beh.belief.sum(axis=0)
+    assert beh.cells_xy is not None
+    # the source is upwind of the searcher, centred on its axis
+    assert marginal[beh.cells_xy[:, 0] < 40.0].sum() > 0.999
+    assert abs(float(marginal @ beh.cells_xy[:, 1])) < 0.5
 
 
 # ---------------------------------------------------------------- particle filter

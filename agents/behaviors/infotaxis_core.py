@@ -1,0 +1,322 @@
+"""Infotaxis as pure functions: a belief over cells, hit-count likelihoods, Bayes, the move.
+
+Nothing here knows a vehicle, a bus or a clock. A search keeps a belief ``b`` (a flat array
+of probabilities, one per candidate source cell); at each decision the searcher stands
+somewhere and observes a number of hits ``h``; what it knows about the plume is a table
+``L[h, i] = P(h | source in cell i)`` for where it stands. Then:
+
+- :func:`hit_likelihoods` makes ``L`` from the mean number of hits ``μ_i`` expected in the
+  step if the source is in cell ``i``: Poisson counts, the last class collecting every
+  count ≥ ``n_hits − 1`` (Loisy & Eloy 2022, Proc. R. Soc. A 478:20220118, §2: hits are
+  Poisson with a cap), and an optional floor on the miss probability, ``P(0) ≥
+  miss_floor``: a plume that is intermittent at scales the model does not resolve can give
+  nothing where the model expects gas, and one such miss must not rule a cell out for good.
+- :func:`bayes_update` is Bayes' rule with the cell the searcher stands on removed (it was
+  not the source: the search would have ended).
+- :func:`expected_entropy` is the criterion of Vergassola, Villermaux & Shraiman (2007,
+  Nature 445:406, eq. 2): the entropy of the belief after the move, averaged over "the source
+  is here" (entropy 0) and every hit count; :func:`choose_move` takes the candidate with the
+  lowest (the first one within 1e-10 on a tie, as OTTO does).
+
+Two encounter models give ``μ``: :func:`isotropic_mean_hits` is the source-tracking POMDP's
+(Loisy & Eloy 2022 eq. 2.3–2.5, the mean hits of a searcher of radius ``a`` at distance ``r``
+from a source emitting ``R`` particles per unit time that diffuse with ``D`` and live ``τ``,
+``λ = √(Dτ)``), used by ``plumeswarm bench pomdp``; :class:`PlumeEncounterModel` is an
+advected plume's, parametrised by the statistics a searcher meets in it (the hit rate on the
+axis and the crosswind width of the hit rate against distance downwind), used by
+:class:`agents.behaviors.infotaxis.Infotaxis`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+FloatArray = npt.NDArray[np.float64]
+BoolArray = npt.NDArray[np.bool_]
+IntArray = npt.NDArray[np.intp]
+
+#: Below this a probability is zero (OTTO's EPSILON).
+EPSILON = 1e-10
+
+
+# ------------------------------------------------------------------ the POMDP's hit model
+def mu0_poisson(dims: int, lambda_over_dx: float, r_dt: float) -> float:
+    """Mean hits in one step at distance λ from the source (Loisy & Eloy 2022, eq. 2.5), with
+    the searcher's radius a = Δx/2 (their choice): 1D (1 − a/λ)⁻¹e⁻¹, 2D K₀(1)/ln(λ/a),
+    3D (a/λ)e⁻¹, each times R·Δt."""
+    from scipy.special import gamma, kn, kv
+
+    lambda_over_a = 2.0 * lambda_over_dx
+    a_over_lambda = 1.0 / lambda_over_a
+    if dims == 1:
+        mu0 = 1.0 / (1.0 - a_over_lambda) * math.exp(-1.0)
+    elif dims == 2:
+        mu0 = float(kn(0, 1.0)) / math.log(lambda_over_a)
+    elif dims == 3:
+        mu0 = a_over_lambda * math.exp(-1.0)
+    else:
+        mu0 = (
+            (dims - 2)
+            / float(gamma(dims / 2))
+            / 2 ** (dims / 2 - 1)
+            * a_over_lambda ** (dims - 2)
+            * float(kv(dims / 2 - 1, 1.0))
+        )
+    return mu0 * r_dt
+
+
+def isotropic_mean_hits(
+    distance_cells: FloatArray, dims: int, lambda_over_dx: float, r_dt: float
+) -> FloatArray:
+    """Mean hits in one step at ``distance_cells`` (in steps Δx) from the source (Loisy & Eloy
+    2022, eq. 2.4, no mean wind): μ(r) = μ₀·f(r/λ)/f(1) with f = e^(−u) (1D), K₀(u) (2D),
+    e^(−u)/u (3D). A distance of 0 counts as 1 (the cell itself is handled by the caller)."""
+    from scipy.special import kn, kv
+
+    d = np.where(np.asarray(distance_cells, dtype=float) == 0.0, 1.0, distance_cells)
+    u = d / lambda_over_dx
+    if dims == 1:
+        shape = np.exp(1.0 - u)
+    elif dims == 2:
+        shape = kn(0, u) / kn(0, 1.0)
+    elif dims == 3:
+        shape = np.exp(1.0 - u) / u
+    else:
+        nu = dims / 2 - 1
+        shape = u ** (-nu) * kv(nu, u) / kv(nu, 1.0)
+    return np.asarray(mu0_poisson(dims, lambda_over_dx, r_dt) * shape, dtype=float)
+
+
+# ------------------------------------------------------------------ likelihoods and Bayes
+def poisson_classes(mean_hits: FloatArray, n_hits: int) -> FloatArray:
+    """P(h | μ) for h = 0 … n_hits − 1, the last class being P(h ≥ n_hits − 1); shape
+    ``(n_hits, *mean_hits.shape)``."""
+    mu = np.asarray(mean_hits, dtype=float)
+    out = np.empty((n_hits, *mu.shape))
+    term = np.exp(-mu)
+    below = np.zeros_like(mu)
+    for h in range(n_hits - 1):
+        out[h] = term
+        below = below + term
+        term = term * mu / (h + 1)
+    out[n_hits - 1] = np.maximum(0.0, 1.0 - below)
+    return out
+
+
+def hit_likelihoods(mean_hits: FloatArray, n_hits: int, miss_floor: float = 0.0) -> FloatArray:
+    """``L[h, i] = P(h hits | source in cell i)``: Poisson classes of :func:`poisson_classes`
+    with ``P(0)`` raised to at least ``miss_floor`` (the other classes scaled down to keep the
+    sum 1)."""
+    table = poisson_classes(mean_hits, n_hits)
+    if miss_floor > 0.0:
+        p0 = table[0]
+        floored = np.maximum(p0, miss_floor)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            scale = np.where(p0 < 1.0, (1.0 - floored) / (1.0 - p0), 0.0)
+        table[1:] *= scale
+        table[0] = floored
+    return table
+
+
+def bayes_update(belief: FloatArray, likelihood: FloatArray, here: BoolArray | None) -> FloatArray:
+    """Posterior after one observation whose likelihood per cell is ``likelihood``, the cells
+    ``here`` (where the searcher stands; None: none) ruled out. Normalised; the prior (with
+    ``here`` removed) if no cell explains the observation."""
+    prior = belief.copy()
+    if here is not None:
+        prior[here] = 0.0
+    post = prior * likelihood
+    total = post.sum()
+    if total > EPSILON:
+        return np.asarray(post / total)
+    rest = prior.sum()
+    return np.asarray(prior / rest) if rest > EPSILON else belief.copy()
+
+
+def entropy_bits(belief: FloatArray) -> float:
+    p = belief[belief > EPSILON]
+    return float(-(p * np.log2(p)).sum())
+
+
+def _row_entropies_bits(joint: FloatArray, totals: FloatArray) -> FloatArray:
+    """Entropy (bits) of each row of ``joint`` (rows × cells) normalised by its total:
+    (Σ −j ln j)/t/ln 2 + log₂ t."""
+    from scipy.special import entr
+
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = entr(joint).sum(axis=1) / totals / math.log(2.0) + np.log2(totals)
+    return np.where(totals > EPSILON, out, 0.0)
+
+
+def hit_probabilities(
+    belief: FloatArray, likelihoods: FloatArray, here: BoolArray | None
+) -> FloatArray:
+    """P(h) for each hit class at a place, given the source is not in ``here``."""
+    b = belief.copy()
+    if here is not None:
+        b[here] = 0.0
+    total = b.sum()
+    if total > EPSILON:
+        b /= total
+    return np.asarray(likelihoods.reshape(len(likelihoods), -1) @ b.ravel())
+
+
+def expected_entropy(
+    belief: FloatArray, likelihoods: FloatArray, here: BoolArray | None, nuisance_axes: int = 0
+) -> float:
+    """Expected entropy (bits) of the belief after moving to a place whose hit likelihoods are
+    ``likelihoods`` (shape ``(n_hits, *belief.shape)``) and whose cells are ``here``: with
+    probability ``p_end`` (the belief's mass in ``here``) the source is found (entropy 0), else
+    a hit count ``h`` comes with probability P(h) and leaves the posterior of
+    :func:`bayes_update`. The first ``nuisance_axes`` axes of the belief are parameters of the
+    model, not the source's place: they are summed out before the entropy is taken."""
+    b = belief.ravel()
+    mask = None if here is None else np.broadcast_to(here, belief.shape).ravel()
+    p_end = float(b[mask].sum()) if mask is not None else 0.0
+    if p_end > 1.0 - EPSILON:
+        return -EPSILON
+    rest = b.copy()
+    if mask is not None:
+        rest[mask] = 0.0
+    total = rest.sum()
+    if total > EPSILON:
+        rest /= total
+    joint = likelihoods.reshape(len(likelihoods), -1) * rest
+    if nuisance_axes:
+        lead = int(np.prod(belief.shape[:nuisance_axes]))
+        joint = joint.reshape(len(likelihoods), lead, -1).sum(axis=1)
+    p_h = joint.sum(axis=1)
+    return (1.0 - p_end) * float((p_h * _row_entropies_bits(joint, p_h)).sum())
+
+
+def choose_move(scores: Sequence[float]) -> int:
+    """The first candidate whose score is within 1e-10 of the lowest (OTTO's tie rule)."""
+    arr = np.asarray(scores, dtype=float)
+    return int(np.flatnonzero(np.abs(arr - arr.min()) < EPSILON)[0])
+
+
+# ------------------------------------------------------------------ an advected plume's hits
+@dataclass(frozen=True)
+class PlumeEncounterModel:
+    """Hit rate of a searcher at (along, across) of a source in a mean wind, along downwind:
+
+        r(along, across) = r_axis(along) · exp(−across² / (2 w(along)²)) + r_background,
+        w(along) = max(width_min_m, width_slope · along),
+        r_axis(along) = axis_rate_hz · (along / axis_ref_m) ^ (−axis_decay)   (along > 0),
+
+    and no hits upwind of the source (along ≤ 0) but the background. Nearer than
+    ``near_source_m`` the axis rate grows as ``near_source_m / along``: there the centreline
+    has not wandered yet and the plume is continuous, so a searcher just downwind of the
+    source on its axis cannot miss it for long. The hit counts in a step
+    of ``dt`` are Poisson with mean ``r·dt`` (:func:`hit_likelihoods`). Each parameter is a
+    statistic a searcher measures in the plume: ``axis_rate_hz`` from P(a hit within 1 s)
+    on the axis at ``axis_ref_m`` (r = −ln(1 − P)), ``width_slope`` from the crosswind
+    standard deviation of that probability against distance, ``axis_decay`` from how the axis
+    rate falls between two distances. A cell within ``width_min_m`` across of the searcher
+    near the source is not judged on a hit rate the model does not resolve.
+    """
+
+    axis_rate_hz: float
+    axis_ref_m: float
+    axis_decay: float
+    width_slope: float
+    width_min_m: float
+    background_hz: float
+    near_source_m: float = 0.0
+
+    def rate_hz(self, along_m: FloatArray, across_m: FloatArray) -> FloatArray:
+        along = np.asarray(along_m, dtype=float)
+        downwind = along > 0.0
+        safe = np.where(downwind, along, 1.0)
+        width = np.maximum(self.width_min_m, self.width_slope * safe)
+        near = np.maximum(safe, self.width_min_m)
+        axis = self.axis_rate_hz * (near / self.axis_ref_m) ** (-self.axis_decay)
+        if self.near_source_m > 0.0:
+            axis = axis * np.maximum(1.0, self.near_source_m / near)
+        u2 = (np.asarray(across_m) / width) ** 2
+        # beyond 6 widths the plume's share is < 2e-8 of the axis rate: the background's
+        rate = np.where(downwind & (u2 < 36.0), axis * np.exp(-0.5 * u2), 0.0)
+        return np.asarray(rate + self.background_hz)
+
+    def plume_cells(self, along_m: FloatArray, across_m: FloatArray) -> BoolArray:
+        """Where the rate is more than the background (:meth:`rate_hz`'s support)."""
+        along = np.asarray(along_m, dtype=float)
+        safe = np.where(along > 0.0, along, 1.0)
+        width = np.maximum(self.width_min_m, self.width_slope * safe)
+        return np.asarray((along > 0.0) & ((np.asarray(across_m) / width) ** 2 < 36.0))
+
+    def mean_hits(self, along_m: FloatArray, across_m: FloatArray, dt_s: float) -> FloatArray:
+        return np.asarray(self.rate_hz(along_m, across_m) * dt_s)
+
+
+@dataclass(frozen=True)
+class PlumeHitStatistics:
+    """What a searcher meets in a plume, measured at distances downwind on its axis: P(at least
+    one hit within 1 s) there, and the crosswind standard deviation (m) of that probability."""
+
+    distances_m: tuple[float, ...]
+    axis_p_hit_1s: tuple[float, ...]
+    width_m: tuple[float, ...]
+
+
+def width_slope(distances_m: Sequence[float], widths_m: Sequence[float]) -> float:
+    """Least-squares k of width = k·distance (a line through the source)."""
+    x = np.asarray(distances_m, dtype=float)
+    w = np.asarray(widths_m, dtype=float)
+    return float((x * w).sum() / (x * x).sum())
+
+
+def model_from_statistics(
+    stats: PlumeHitStatistics,
+    width_min_m: float,
+    background_hz: float,
+    near_source_m: float = 0.0,
+) -> PlumeEncounterModel:
+    """The encounter model that reproduces ``stats``: the axis rate r = −ln(1 − P) at the
+    nearest distance, its power-law decay fitted in log–log through every distance, the width
+    slope fitted through the source."""
+    x = np.asarray(stats.distances_m, dtype=float)
+    rates = -np.log1p(-np.clip(np.asarray(stats.axis_p_hit_1s, dtype=float), 0.0, 0.999))
+    if len(x) > 1:
+        slope = float(np.polyfit(np.log(x), np.log(np.maximum(rates, 1e-6)), 1)[0])
+    else:
+        slope = 0.0
+    return PlumeEncounterModel(
+        axis_rate_hz=float(rates[0]),
+        axis_ref_m=float(x[0]),
+        axis_decay=-slope,
+        width_slope=width_slope(stats.distances_m, stats.width_m),
+        width_min_m=width_min_m,
+        background_hz=background_hz,
+        near_source_m=near_source_m,
+    )
+
+
+def hit_statistics_from_points(
+    points: Sequence[tuple[float, float, float]], p_max: float = 0.999
+) -> PlumeHitStatistics:
+    """:class:`PlumeHitStatistics` from P(hit within 1 s) measured at (distance downwind,
+    offset across) points, as ``plumeswarm plume intermittency`` reports them: at each
+    distance the axis value (the smallest offset) and the width w of the hit rate
+    r = −ln(1 − P) across the wind, from its second moment over the offsets measured,
+    w² = ∫ r·y² dy / ∫ r dy (trapezoids; exactly w² for r ∝ exp(−y²/2w²) sampled finely).
+    P is clipped at ``p_max`` (a detector that never goes off has no finite rate)."""
+    by_distance: dict[float, list[tuple[float, float]]] = {}
+    for x, y, p in points:
+        by_distance.setdefault(float(x), []).append((abs(float(y)), float(p)))
+    distances, axis, widths = [], [], []
+    for x in sorted(by_distance):
+        ys, ps = (np.array(v) for v in zip(*sorted(by_distance[x]), strict=True))
+        rates = -np.log1p(-np.clip(ps, 0.0, p_max))
+        mass = float(np.trapezoid(rates, ys))
+        if mass <= 0.0:
+            continue
+        distances.append(x)
+        axis.append(float(ps[0]))
+        widths.append(math.sqrt(float(np.trapezoid(rates * ys * ys, ys)) / mass))
+    return PlumeHitStatistics(tuple(distances), tuple(axis), tuple(widths))
