@@ -66,3 +66,18 @@ def vehicles_per_process_option(help_text: str | None = None) -> Decorator:
         show_default=True,
         help=help_text,
     )
+
+
+SCENARIO_OPT = click.option(
+    "--scenario",
+    "-s",
+    "scenario",
+    default=None,
+    metavar="FILE|NAME",
+    help="Scenario file or bundled scenario name (default: novak2018).",
+)
+
+
+def comma_list(value: str) -> tuple[str, ...]:
+    """A comma-separated list's items."""
+    return tuple(v.strip() for v in value.split(",") if v.strip())
