@@ -493,6 +493,12 @@ class Swarm(Closeable):
         return max(times)
 
     @property
+    def clock(self) -> Clock | None:
+        """The latest ``sim/clock`` seen (None before the first)."""
+        with self._lock:
+            return self._clock
+
+    @property
     def holds_clock(self) -> bool:
         """Whether this client steps the world's clock (since its first accepted step)."""
         return self._last_step is not None

@@ -48,6 +48,7 @@ log = logging.getLogger(__name__)
 
 COMMAND_TIMEOUT_S = 5.0
 CLOCK_POLL_S = 0.02
+ATTACH_TICK_S = 2.0  # a running world ticks within this; a paused stepped one publishes none
 BUS_ROLES = ("router", "plume", "physics", "autopilot")
 
 
@@ -227,10 +228,15 @@ class BusDriver:
             attach = self.attach or ""
             self._join(scenario.world.name, [attach] if isinstance(attach, str) else attach)
             self._stepped = True  # until the world says otherwise (first step)
-        assert self._ticks is not None
+        assert self._ticks is not None and self._swarm is not None
         self._wait_handshake()
-        latest = self._ticks.wait_past(0, self.startup_timeout_s)
-        self._take(latest.tick, latest.states)
+        try:
+            latest = self._ticks.wait_past(0, ATTACH_TICK_S)
+        except DriverError:  # no tick: a stepped world paused before we joined
+            clock = self._swarm.clock
+            self._take(clock.tick if clock is not None else 0, [])
+        else:
+            self._take(latest.tick, latest.states)
 
     def _launch(self, scenario: Scenario) -> None:
         self.close()
