@@ -6,8 +6,9 @@ Benhamou 2008, "Random walk models in biology", J. R. Soc. Interface 5:813): fly
 a Poisson process with mean run time ``mean_run_s`` (per control tick with probability
 1 − exp(−dt/mean_run_s)). Its mean squared displacement is
 MSD(t) = 2v²τ²(t/τ − 1 + e^(−t/τ)) with τ = ``mean_run_s``. It ignores the sensor and the
-wind, never declares a source, and holds the altitude it starts at. The headings come from
-the context's seeded generator, so a run repeats exactly.
+wind, never declares a source, and holds the altitude it starts at (the seeking base's
+preamble, :class:`agents.behaviors.seeking.SeekingBehavior`). The headings come from the
+context's seeded generator, so a run repeats exactly.
 
 Use ``behavior = "agents.behaviors.random_walk:RandomWalk"``.
 """
@@ -17,36 +18,39 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from agents.behavior import BehaviorContext, SourceEstimate
-from agents.behavior_state import SavesState
+from agents.behavior import BehaviorContext
+from agents.behaviors.seeking import SeekingBehavior, Wind
 from agents.behaviors.steering import fly
 from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
 
 
-class RandomWalk(SavesState):
+def _calm(own: VehicleState) -> tuple[float, float]:
+    return 0.0, 0.0
+
+
+class RandomWalk(SeekingBehavior):
     # ``rng`` is the context's generator, which the autopilot saves on its own
-    state_attributes = ("heading_rad", "altitude_m", "declaration")
+    own_state = ("heading_rad",)
     speed_m_s = 2.0
     mean_run_s = 5.0
 
     def __init__(self, ctx: BehaviorContext) -> None:
+        super().__init__(ctx)
+        self.read_wind = _calm  # it ignores the wind: no anemometer read every step
         self.rng = ctx.rng
         self.tumble_probability = 1.0 - math.exp(-ctx.control_dt_s / self.mean_run_s)
         self.heading_rad = float(self.rng.uniform(0.0, 2.0 * math.pi))
-        self.altitude_m: float | None = None
-        self.declaration: SourceEstimate | None = None
 
-    def step(
+    def seek(
         self,
         own: VehicleState,
         peers: Sequence[VehicleState],
         readings: Sequence[ConcentrationReading],
+        wind: Wind,
     ) -> Setpoint | None:
-        if self.altitude_m is None:
-            self.altitude_m = own.position_enu_m[2]
         if self.rng.random() < self.tumble_probability:
             self.heading_rad = float(self.rng.uniform(0.0, 2.0 * math.pi))
         v = self.speed_m_s
         return fly(
-            own, (v * math.cos(self.heading_rad), v * math.sin(self.heading_rad)), self.altitude_m
+            own, (v * math.cos(self.heading_rad), v * math.sin(self.heading_rad)), self.altitude
         )
