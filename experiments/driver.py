@@ -4,7 +4,8 @@ ticks, read the vehicles' latest states and readings, close) and its two impleme
 chosen by :func:`open_driver` (docs/architecture.md, "Layers"). The environments, the
 source-seeking benchmark, the demo and ``bench scale`` drive their worlds through it.
 
-- :class:`InProcessDriver`: a :class:`~experiments.fused.FusedRunner` (no bus, no processes).
+- :class:`InProcessDriver`: a :class:`~experiments.fused.FusedRunner` (no bus, no processes);
+  its :attr:`~InProcessDriver.runner` also gives the world's autopilots, in this process.
 - :class:`BusDriver`: the distributed stack. Started by the driver (router, plume, physics and
   one autopilot process per ``vehicles_per_process`` vehicles, on a free loopback port; a new
   stack per episode, since the spawns change) on the stepped clock (``time.mode = "stepped"``),
@@ -30,7 +31,7 @@ import zenoh
 from agents import ClockError, Swarm
 from deploy.launcher import Launcher, LaunchOptions
 from deploy.scaling import local_stack_scenario
-from experiments.fused import FusedRunner
+from experiments.fused import FusedRunner, StatesObserver
 from swarmbus.codec import MessageError, decode
 from swarmbus.keys import Keys
 from swarmbus.messages import (
@@ -79,7 +80,10 @@ class Driver(Protocol):
 
 
 class InProcessDriver:
-    def __init__(self) -> None:
+    """The world in this process; ``on_states`` sees every tick's states from tick 0."""
+
+    def __init__(self, on_states: StatesObserver | None = None) -> None:
+        self.on_states = on_states
         self._runner: FusedRunner | None = None
 
     @property
@@ -90,7 +94,7 @@ class InProcessDriver:
 
     def start(self, scenario: Scenario) -> None:
         self.close()
-        self._runner = FusedRunner(scenario)
+        self._runner = FusedRunner(scenario, on_states=self.on_states)
 
     def command(self, commands: Sequence[tuple[str, Command]]) -> list[CommandReply]:
         runner = self.runner

@@ -10,8 +10,9 @@ concentration field and its wind), one sensor model, one seeded start — all of
   not a controller's, make the result. The field is sampled at every vehicle's position every
   ``sensor_period_ticks``; each vehicle's reading goes through its sensor model and carries the
   field's values at its peers' positions, as on the bus, and reaches the behaviour that tick.
-- ``full`` (:func:`fused_episode`): the scenario on the fused runner (:mod:`experiments.fused`) —
-  the distributed stack's physics, autopilots, sensors and plume, the same bits; a take-off
+- ``full`` (:func:`fused_episode`): the scenario driven through the in-process driver
+  (:class:`experiments.driver.InProcessDriver`, the fused runner of :mod:`experiments.fused`)
+  — the distributed stack's physics, autopilots, sensors and plume, the same bits; a take-off
   and an offboard switch at recorded tick boundaries (:class:`Schedule`), so the same episode
   can be flown on the distributed stack.
 
@@ -35,7 +36,8 @@ from agents.behavior import Behavior, BehaviorContext, SourceEstimate, load_beha
 from agents.behaviors.detection import PLUME_THRESHOLD_G_M3
 from agents.build import behavior_rng
 from agents.sensor import ConcentrationSensor
-from experiments.fused import FusedRunner, StatesObserver
+from experiments.driver import InProcessDriver
+from experiments.fused import StatesObserver
 from experiments.gsl_registry import (
     SENSORS,
     Algorithm,
@@ -427,55 +429,64 @@ class Schedule:
 
 
 class FusedEpisode:
-    """A full-dynamics episode on the fused runner (:class:`experiments.fused.FusedRunner`: the
-    distributed stack's world, autopilots, sensors and plume in one process, the same bits).
+    """A full-dynamics episode driven through an :class:`~experiments.driver.InProcessDriver`
+    (the fused runner: the distributed stack's world, autopilots, sensors and plume in one
+    process, the same bits).
 
     Each vehicle is armed on the ground at its start and takes off to the start altitude;
     once all hover within ``altitude_tolerance_m`` of it in hold mode — and not before sim
     time ``start_s`` — all switch to offboard and their behaviours fly the episode. Every
-    command is recorded at its tick boundary (:attr:`commands`)."""
+    command is recorded at its tick boundary (:attr:`commands`). The flight modes and the
+    behaviours' declarations are read off the autopilots, which the in-process driver holds."""
 
     takeoff_timeout_s = 60.0
     altitude_tolerance_m = 0.03
 
     def __init__(self, scenario: Scenario, on_states: StatesObserver | None = None) -> None:
-        self.runner = FusedRunner(scenario, on_states=on_states)
+        self.scenario = scenario
+        self.driver = InProcessDriver(on_states)
+        self.driver.start(scenario)
+        self.control_dt_s = 1.0 / scenario.time.control_hz
         self.commands: Boundary = {}
-        self.autopilots = [f.autopilot for f in self.runner.flights.values()]
+        self.autopilots = [f.autopilot for f in self.driver.runner.flights.values()]
 
     def give(self, command: Command) -> None:
-        """``command`` to every vehicle at the runner's tick; it must be accepted."""
-        at = self.commands.setdefault(self.runner.tick, [])
-        for vid in self.runner.flights:
-            reply = self.runner.command(vid, command)
+        """``command`` to every vehicle at the driver's tick; it must be accepted."""
+        batch = [(vid, command) for vid in self.driver.states()]
+        for (vid, _), reply in zip(batch, self.driver.command(batch), strict=True):
             if not reply.accepted:
                 raise RuntimeError(f"{vid}: {type(command).__name__}: {reply.reason}")
-            at.append((vid, command))
+        self.commands.setdefault(self.driver.tick, []).extend(batch)
 
     def _hovering(self, altitude_m: float) -> bool:
         return all(ap.modes.mode == FlightMode.HOLD for ap in self.autopilots) and all(
             abs(s.position_enu_m[2] - altitude_m) <= self.altitude_tolerance_m
-            for s in self.runner.states
+            for s in self.driver.states().values()
         )
 
     def take_off(self, altitude_m: float, start_s: float) -> None:
         """Arm, take off, hover till ``start_s``, then offboard: the behaviours fly from the
         next tick on."""
-        run = self.runner
+        drv = self.driver
         self.give(Arm())
         self.give(Takeoff(altitude_m=altitude_m))
-        deadline = round(self.takeoff_timeout_s / run.control_dt_s)
+        deadline = round(self.takeoff_timeout_s / self.control_dt_s)
         while not self._hovering(altitude_m):
-            if run.tick > deadline:
+            if drv.tick > deadline:
                 raise RuntimeError(
                     f"vehicles not hovering at {altitude_m} m after {self.takeoff_timeout_s} s"
                 )
-            run.step()
-        run.step(max(0, round(start_s / run.control_dt_s) - 1 - run.tick))
+            drv.step(1)
+        drv.step(max(0, round(start_s / self.control_dt_s) - 1 - drv.tick))
         self.give(SetMode(mode=FlightMode.OFFBOARD))
 
+    def observe(self, tally: Tally) -> None:
+        """This tick's positions to ``tally``."""
+        states = list(self.driver.states().values())
+        tally.observe(states[0].sim_time_s, [s.position_enu_m for s in states])
+
     def close(self) -> None:
-        self.runner.close()
+        self.driver.close()
 
 
 def fused_episode(
@@ -483,35 +494,35 @@ def fused_episode(
     environment: Scenario | None = None,
     on_states: StatesObserver | None = None,
 ) -> tuple[Outcome, Schedule]:
-    """The episode with the real vehicles on the fused runner; its outcome and schedule
+    """The episode with the real vehicles, driven in process; its outcome and schedule
     (``on_states`` sees every tick's states from tick 0)."""
     scenario = episode_scenario(spec, environment)
     episode = FusedEpisode(scenario, on_states)
     try:
-        run = episode.runner
         episode.take_off(START_ALTITUDE_M, start_s(scenario, spec.start_along_m))
-        behaviors = [ap.behavior for ap in episode.autopilots]
-        dt = run.control_dt_s
-        run.step()  # the first tick the behaviours fly
-        tally = _tally(spec, scenario, dt, run.sim_time_s)
-        tally.observe(run.sim_time_s, [s.position_enu_m for s in run.states])
-        declared = _fly_fused(spec, run, behaviors, tally)
-        elapsed_s = run.sim_time_s - tally.t0
-        return tally.outcome(elapsed_s, declared), Schedule(scenario, episode.commands, run.tick)
+        drv = episode.driver
+        drv.step(1)  # the first tick the behaviours fly
+        t0 = next(iter(drv.states().values())).sim_time_s
+        tally = _tally(spec, scenario, episode.control_dt_s, t0)
+        episode.observe(tally)
+        declared = _fly_fused(spec, episode, tally)
+        elapsed_s = next(iter(drv.states().values())).sim_time_s - t0
+        schedule = Schedule(scenario, episode.commands, drv.tick)
+        return tally.outcome(elapsed_s, declared), schedule
     finally:
         episode.close()
 
 
-def _fly_fused(
-    spec: EpisodeSpec, run: FusedRunner, behaviors: Sequence[object], tally: Tally
-) -> SourceEstimate | None:
+def _fly_fused(spec: EpisodeSpec, episode: FusedEpisode, tally: Tally) -> SourceEstimate | None:
     """Step until a declaration or the time limit; every tick's positions and every new
     reading go to ``tally``."""
-    seen = dict(run.latest_readings)
-    for _ in range(round(spec.time_limit_s * run.scenario.time.control_hz)):
-        run.step()
-        tally.observe(run.sim_time_s, [s.position_enu_m for s in run.states])
-        for vid, r in run.latest_readings.items():
+    drv = episode.driver
+    behaviors = [ap.behavior for ap in episode.autopilots]
+    seen = dict(drv.readings())
+    for _ in range(round(spec.time_limit_s * episode.scenario.time.control_hz)):
+        drv.step(1)
+        episode.observe(tally)
+        for vid, r in drv.readings().items():
             if seen.get(vid) is not r:
                 seen[vid] = r
                 tally.reading(r)
