@@ -1,5 +1,8 @@
 """``plumeswarm bench scale``: real-time factor, CPU and memory of the full stack against vehicle
-count, grounded, hovering and flying. See docs/performance.md ("What the bench does").
+count, grounded, hovering and flying. Each row's stack is started and commanded by a
+:class:`~experiments.driver.BusDriver` that only commands (``follow=False``: the bench watches
+the clock and the statuses itself, nothing else). See docs/performance.md ("What the bench
+does").
 """
 
 from __future__ import annotations
@@ -19,7 +22,7 @@ import psutil
 import zenoh
 
 from agents import SwarmError, VehicleCommander
-from deploy.launcher import Launcher, LaunchError, LaunchOptions
+from deploy.launcher import Launcher, LaunchError
 from deploy.scaling import (
     flight_altitude,
     local_stack_scenario,
@@ -27,6 +30,7 @@ from deploy.scaling import (
     scale_scenario,
 )
 from deploy.up import stop_on_signals
+from experiments.driver import BusDriver, Driver, DriverError
 from swarmbus.codec import MessageError, decode
 from swarmbus.keys import KeyNameError, Keys
 from swarmbus.messages import (
@@ -81,15 +85,21 @@ CEILING = {
 
 
 # ---------------------------------------------------------------------------- scenario
-def prepare(
-    sc: Scenario, n: int, run_dir: Path, sensor_period_ticks: int | None = None
-) -> tuple[Scenario, Path]:
-    """``sc`` with ``n`` vehicles, in lockstep, on a free router port, written into run_dir
-    (with the sensor every ``sensor_period_ticks`` control ticks when given)."""
+def bench_scenario(sc: Scenario, n: int, sensor_period_ticks: int | None = None) -> Scenario:
+    """``sc`` with ``n`` vehicles (with the sensor every ``sensor_period_ticks`` control ticks
+    when given)."""
     sc = scale_scenario(sc, n)
     if sensor_period_ticks is not None:
         sensor = msgspec.structs.replace(sc.sensor, period_ticks=sensor_period_ticks)
         sc = msgspec.structs.replace(sc, sensor=sensor)
+    return sc
+
+
+def prepare(
+    sc: Scenario, n: int, run_dir: Path, sensor_period_ticks: int | None = None
+) -> tuple[Scenario, Path]:
+    """:func:`bench_scenario` in lockstep, on a free router port, written into run_dir."""
+    sc = bench_scenario(sc, n, sensor_period_ticks)
     return local_stack_scenario(sc, run_dir, "lockstep", startup_timeout_s=120.0)
 
 
@@ -200,19 +210,39 @@ class RoleUsage:
 
 
 # ---------------------------------------------------------------------------- one case
-def drive(session: zenoh.Session, sc: Scenario, state: str, deadline: float) -> None:
-    """Command every vehicle of ``sc`` into ``state`` (``grounded``: nothing; ``hovering``: arm and
-    take off; ``flying``: a looping square mission), each command retried until ``deadline``."""
-    keys = Keys(sc.world.name)
+def state_commands(sc: Scenario, state: str) -> dict[str, list[Command]]:
+    """What puts every vehicle of ``sc`` into ``state``, in order (``grounded``: nothing;
+    ``hovering``: arm and take off; ``flying``: a looping square mission)."""
+    commands: dict[str, list[Command]] = {}
     for k, v in enumerate(sc.vehicles):
-        uav = VehicleCommander(session, keys, v.id, COMMAND_TIMEOUT_S)
-        commands: list[Command] = []
+        commands[v.id] = []
         if state == "hovering":
-            commands = [Arm(), Takeoff(altitude_m=flight_altitude(sc, k))]
+            commands[v.id] = [Arm(), Takeoff(altitude_m=flight_altitude(sc, k))]
         elif state == "flying":
-            commands = [MissionUpload(items=loop_mission(sc, k)), Arm(), MissionStart()]
+            commands[v.id] = [MissionUpload(items=loop_mission(sc, k)), Arm(), MissionStart()]
+    return commands
+
+
+def drive(session: zenoh.Session, sc: Scenario, state: str, deadline: float) -> None:
+    """Command every vehicle of ``sc`` into ``state`` on ``session`` (a stack started without a
+    driver), each command retried until ``deadline`` while its autopilot does not answer."""
+    keys = Keys(sc.world.name)
+    for vid, commands in state_commands(sc, state).items():
+        uav = VehicleCommander(session, keys, vid, COMMAND_TIMEOUT_S)
         for command in commands:
             uav.send(command, retry_until=deadline)
+
+
+def command_into(driver: Driver, sc: Scenario, state: str) -> None:
+    """Command every vehicle of ``sc`` into ``state`` through ``driver`` (its world past the start
+    handshake: every autopilot takes commands): the first command of every vehicle at once,
+    then the second, ...; a refusal is a :class:`ScaleError`."""
+    plan = state_commands(sc, state)
+    for commands in zip(*plan.values(), strict=True):
+        batch = list(zip(plan, commands, strict=True))
+        for (vid, command), reply in zip(batch, driver.command(batch), strict=True):
+            if not reply.accepted:
+                raise ScaleError(f"{vid}: {type(command).__name__}: {reply.reason}")
 
 
 def _roles(opts: ScaleOptions, ceiling: bool) -> tuple[str, ...]:
@@ -239,35 +269,33 @@ def run_case(
 ) -> dict[str, Any]:
     """One row: the stack with ``n`` vehicles in ``state``, or (``ceiling``) the same processes
     replaced by the stand-ins of :mod:`bench.ceiling` (nothing is driven: they do no work)."""
-    run_dir = opts.out / (f"ceiling-{n}" if ceiling else f"{state}-{n}")
-    sc, path = prepare(opts.scenario, n, run_dir, opts.sensor_period_ticks)
+    sc = bench_scenario(opts.scenario, n, opts.sensor_period_ticks)
     ids = [v.id for v in sc.vehicles]
-    launch = LaunchOptions(
-        scenario_path=path,
-        headless=True,
-        run_dir=run_dir,
-        roles=_roles(opts, ceiling),
+    # A driver that only commands: it follows no state, so the bench adds no subscriber of every
+    # state to the stack it measures (it watches the clock and the statuses, below).
+    driver = BusDriver(
+        run_dir=opts.out / (f"ceiling-{n}" if ceiling else f"{state}-{n}"),
         vehicles_per_process=opts.vehicles_per_process,
-        verbose=0,
+        startup_timeout_s=opts.startup_timeout_s,
+        mode="lockstep",
+        roles=_roles(opts, ceiling),
         stand_ins=CEILING if ceiling else {},
+        follow=False,
     )
-    launcher = Launcher(sc, launch)
     deadline = time.monotonic() + opts.startup_timeout_s
     watch: Watch | None = None
     ros2_subscriber: zenoh.Subscriber[None] | None = None
     keys = Keys(sc.world.name)
     try:
-        launcher.start()
-        # The launcher's view subscribes to every state; the bench needs only clock + status.
-        if launcher.view is not None:
-            launcher.view.close()
-            launcher.view = None
+        driver.start(sc)
+        launcher = driver.launcher
+        assert launcher is not None
         watch = Watch(launcher.session, keys)
         ros2_subscriber = _ros2_subscriber(opts, launcher, ceiling)
         watch.wait(lambda w: len(w.status) >= len(ids), deadline, "every vehicle's status")
         watch.next_clock(time.monotonic(), deadline)
         if not ceiling:
-            drive(launcher.session, sc, state, deadline)
+            command_into(driver, sc, state)
         if state != "grounded" and not ceiling:
             watch.wait(_airborne(ids), deadline, "every vehicle airborne")
         time.sleep(WARMUP_S)
@@ -284,7 +312,7 @@ def run_case(
             if stop is not None and stop.is_set():
                 raise ScaleError("interrupted")
             usage.sample_rss()
-            launcher.supervise_once()
+            driver.supervise_once()
             time.sleep(min(SAMPLE_PERIOD_S, max(0.0, end - time.monotonic())))
         t1, c1 = watch.next_clock(time.monotonic() - 1e-3, time.monotonic() + 30.0)
         cpu_wall = time.monotonic() - cpu_t0
@@ -319,7 +347,7 @@ def run_case(
             ros2_subscriber.undeclare()
         if watch is not None:
             watch.close()
-        launcher.stop()
+        driver.close()
 
 
 # ---------------------------------------------------------------------------- output
@@ -419,7 +447,7 @@ def _one(opts: ScaleOptions, n: int, state: str, stop: threading.Event, bar: Any
     bar.set_postfix_str(f"{n} {state}")
     try:
         row = run_case(opts, n, state, stop)
-    except (LaunchError, ScaleError, SwarmError) as exc:
+    except (LaunchError, DriverError, ScaleError, SwarmError) as exc:
         row = {"vehicles": n, "state": state, "error": str(exc)}
     if opts.baseline and "error" not in row:
         bar.set_postfix_str(f"{n} {state} ceiling")
@@ -447,7 +475,7 @@ def _ceiling_ticks_per_s(opts: ScaleOptions, n: int, stop: threading.Event) -> d
     """The ceiling's row for ``n`` vehicles, or why it could not be measured."""
     try:
         return run_case(opts, n, "grounded", stop, ceiling=True)
-    except (LaunchError, ScaleError, SwarmError) as exc:
+    except (LaunchError, DriverError, ScaleError, SwarmError) as exc:
         return str(exc)
 
 

@@ -13,7 +13,9 @@ source-seeking benchmark, the demo and ``bench scale`` drive their worlds throug
   and the stack gives the same states as the in-process driver. Attached to a running stack
   (``attach=ENDPOINT``) it never respawns; it steps a stepped world's clock if it can have it,
   and otherwise lets the world run at its own pace (a step waits until k more ticks were
-  published; such runs do not repeat).
+  published; such runs do not repeat). Started with ``follow=False`` it only commands the world
+  it started, through its stack's own session (no subscriptions of its own once the world is at
+  tick 0: no steps, states or readings): what ``bench scale`` measures the stack with.
 """
 
 from __future__ import annotations
@@ -156,7 +158,9 @@ class BusDriver:
     endpoint(s); otherwise the driver starts a stack of ``roles`` on this host for each world,
     its clock in ``mode`` (``"stepped"``: this driver holds it; ``"lockstep"`` or
     ``"realtime"``: the world runs on its own and a step waits for the ticks). ``on_join`` is
-    called with the driver's :class:`~agents.Swarm` client before the world's first tick."""
+    called with the driver's :class:`~agents.Swarm` client before the world's first tick.
+    ``follow=False``: once the world is at tick 0, the driver drops its client and its view of
+    every state and only commands (see the module doc)."""
 
     def __init__(
         self,
@@ -171,7 +175,10 @@ class BusDriver:
         stand_ins: Mapping[str, str] | None = None,
         network: NetworkConfig | None = None,
         on_join: Callable[[Swarm], None] | None = None,
+        follow: bool = True,
     ) -> None:
+        if attach is not None and not follow:
+            raise ValueError("follow=False: only for a stack the driver starts, not attach")
         self.attach = attach
         self.vehicles_per_process = vehicles_per_process
         self.run_dir = run_dir
@@ -182,6 +189,7 @@ class BusDriver:
         self.stand_ins = dict(stand_ins or {})
         self.network = network
         self.on_join = on_join
+        self.follow = follow
         self._tmp: tempfile.TemporaryDirectory[str] | None = None
         self._launcher: Launcher | None = None
         self._swarm: Swarm | None = None
@@ -266,6 +274,20 @@ class BusDriver:
         tick0 = self._ticks.wait_past(0, self.startup_timeout_s)
         self._wait_handshake()  # stepped: from then on the world is paused at tick 0
         self._take(tick0.tick, tick0.states)
+        if not self.follow:
+            self._unfollow()
+
+    def _unfollow(self) -> None:
+        """Only command from now on: no client, no tick subscriber, no launcher's view."""
+        if self._ticks is not None:
+            self._ticks.close()
+            self._ticks = None
+        if self._swarm is not None:
+            self._swarm.close()
+            self._swarm = None
+        if self._launcher is not None and self._launcher.view is not None:
+            self._launcher.view.close()
+            self._launcher.view = None
 
     def _wait_handshake(self) -> None:
         """The physics publishes its clock once every autopilot answered the first tick (the
@@ -280,12 +302,7 @@ class BusDriver:
             time.sleep(CLOCK_POLL_S)
 
     def close(self) -> None:
-        if self._ticks is not None:
-            self._ticks.close()
-            self._ticks = None
-        if self._swarm is not None:
-            self._swarm.close()  # before the router goes
-            self._swarm = None
+        self._unfollow()  # our client before the router goes
         if self._launcher is not None:
             self._launcher.stop()
             self._launcher = None
@@ -302,6 +319,8 @@ class BusDriver:
     def step(self, ticks: int) -> None:
         sw, seen = self._swarm, self._ticks
         if sw is None or seen is None:
+            if self._launcher is not None and not self.follow:
+                raise DriverError("a driver started with follow=False only commands")
             raise DriverError("the environment has no world before reset()")
         if self._stepped:
             try:
@@ -333,9 +352,12 @@ class BusDriver:
 
     def command(self, commands: Sequence[tuple[str, Command]]) -> list[CommandReply]:
         """All queries first, then all replies: one round trip for the lot, not one each."""
-        if self._swarm is None:
+        if self._swarm is not None:
+            session = self._swarm.session
+        elif self._launcher is not None:
+            session = self._launcher.session  # follow=False
+        else:
             raise DriverError("the environment has no world before reset()")
-        session = self._swarm.session
         pending = [
             (vid, ask(session, self._keys.vehicle_cmd(vid), cmd, CommandReply, COMMAND_TIMEOUT_S))
             for vid, cmd in commands
