@@ -5,11 +5,15 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from bench.scale import CEILING, markdown
+import pytest
+
+from agents import Swarm
+from bench.scale import CEILING, bench_scenario, command_into, markdown
 from deploy.launcher import LaunchOptions, plan
 from deploy.scaling import loop_mission, scale_scenario
+from experiments.driver import BusDriver, DriverError
 from swarmbus.scenario import load_scenario, resolve_scenario_path
-from tests.support.procs import run_cli
+from tests.support.procs import run_cli, wait_until
 
 COLUMNS = {
     "vehicles",
@@ -110,3 +114,34 @@ def test_bench_scale_baseline_tiny(tmp_path: Path) -> None:
     assert "| 2 | hovering | 2 |" in (out / "scale.md").read_text()
     # the ceiling ran in its own run directory, with the stand-ins' logs in it
     assert (out / "ceiling-2").is_dir()
+
+
+def test_the_benchs_driver_only_commands_and_its_commands_fly(tmp_path: Path) -> None:
+    """The bench's path: a BusDriver with follow=False starts the stack, keeps no view of it and
+    refuses to step; the hovering commands reach every autopilot: another client sees each
+    vehicle climb above 5 m (it takes off to 10 m or more)."""
+    sc = bench_scenario(load_scenario(resolve_scenario_path(None)), 2)
+    ids = [v.id for v in sc.vehicles]
+    driver = BusDriver(
+        run_dir=tmp_path,
+        mode="lockstep",
+        roles=("router", "plume", "physics", "autopilot"),
+        follow=False,
+    )
+    try:
+        driver.start(sc)
+        launcher = driver.launcher
+        assert launcher is not None
+        assert launcher.view is None
+        with pytest.raises(DriverError, match="only commands"):
+            driver.step(1)
+        command_into(driver, sc, "hovering")
+        with Swarm.connect(sc.world.name, launcher.scenario.network.connect) as sw:
+
+            def climbed() -> bool:
+                states = [sw.state(v) for v in ids]
+                return all(s is not None and s.position_enu_m[2] > 5.0 for s in states)
+
+            wait_until(climbed, 60.0, "both vehicles above 5 m")
+    finally:
+        driver.close()
