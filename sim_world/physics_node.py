@@ -19,6 +19,7 @@ import msgspec
 from sim_world.checkpoint import CheckpointError
 from sim_world.checkpointer import Checkpointer
 from sim_world.drops import report_dropped
+from sim_world.failsafe import CommandGaps
 from sim_world.holds import Holds, UnreachableGrace
 from sim_world.inputs import STOP_POLL_S, LockstepInputs
 from sim_world.lockstep import Lockstep
@@ -110,6 +111,13 @@ class PhysicsNode:
             time.monotonic,
         )
         self.dropped_total = 0  # participants dropped for a missed deadline (health detail)
+        # Realtime: a vehicle without its command lands under the physics' failsafe.
+        self.gaps = (
+            CommandGaps(self.scenario, world.vehicle_ids)
+            if options.mode == SpeedMode.REALTIME
+            else None
+        )
+        self._states: list[VehicleState] = []  # the current tick's (the failsafe's input)
 
     def _step_refusal(self) -> str | None:
         """Why ``clock/step`` is refused in this mode (None: stepped)."""
@@ -216,6 +224,8 @@ class PhysicsNode:
             abandoned = self.clock_gate.abandon()
         if abandoned is not None:
             abandoned.refuse("ticks", f"the world stopped at tick {self.tick}")
+        if self.gaps is not None:
+            log.info("%s", self.gaps.summary(self.tick))
         wall = self.pacer.elapsed_s()
         log.info(
             "physics stopped at tick %d, sim %.3f s after %.3f s wall (%.0f ticks/s)",
@@ -297,6 +307,8 @@ class PhysicsNode:
         log.info("re-sent the last %d ticks to the new recorder", len(self.holds.recent))
 
     def _apply(self, commands: Mapping[str, Sequence[float]]) -> None:
+        if self.gaps is not None:
+            commands = self.gaps.fill(self.tick, commands, self._states)
         for bad in self.world.apply_tick(commands):
             log.warning("tick %d: %s; motors off", self.tick, bad)
 
@@ -307,6 +319,7 @@ class PhysicsNode:
         with self._cond:
             queried = self.barrier.waits(PLUME)
             carried = self.plume.published(queried, len(states))
+        self._states = states
         msg = SimTick(
             tick=self.tick,
             sim_time_s=self.world.sim_time_s,
@@ -347,6 +360,8 @@ class PhysicsNode:
             detail = f"tick {self.tick} dropped {self.dropped_total} states {self.out.states_sent}"
             if self.inputs.intake.foreign_dropped:
                 detail += f" foreign commands {self.inputs.intake.foreign_dropped}"
+            if self.gaps is not None and (late := self.gaps.note()):
+                detail += f"; {late}"
             if self.checkpoints.note:
                 detail += f"; {self.checkpoints.note}"
             self.rt.publish_health(sim_time_s=sim_time_s, detail=detail)
