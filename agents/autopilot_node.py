@@ -79,7 +79,11 @@ class _Served:
             else None
         )
         self.status_pub = session.declare_publisher(keys.vehicle_status(vehicle_id))
-        self.state_loss_s = scenario.failsafe_for(vehicle_id).state_loss_timeout_s
+        # a realtime tick may wait this long for a slow participant: no tick then is no loss
+        self.state_loss_s = max(
+            scenario.failsafe_for(vehicle_id).state_loss_timeout_s,
+            scenario.time.participant_timeout_s,
+        )
         self.readings_pub = session.declare_publisher(keys.vehicle_concentration(vehicle_id))
         self.last_status: VehicleStatus | None = None
         self.last_status_time_s = -1e9
@@ -390,8 +394,9 @@ class AutopilotNode:
                 served.publish_status(force=True, period_s=0.0)
 
     def _watch_ticks(self) -> None:
-        """Realtime mode: a vehicle whose ticks stopped for its ``state_loss_timeout_s`` (wall)
-        lands (:meth:`Autopilot.state_lost`); its status says so."""
+        """Realtime mode: a vehicle whose ticks stopped for its ``state_loss_timeout_s`` (wall;
+        at least ``time.participant_timeout_s``) lands (:meth:`Autopilot.state_lost`); its
+        status says so."""
         if not self._realtime or self.last_tick < 0:
             return
         silent_s = time.monotonic() - self.last_tick_wall

@@ -42,6 +42,8 @@ from swarmbus.scenario import Scenario
 log = logging.getLogger(__name__)
 
 HANDSHAKE_REPUBLISH_S = 0.1  # tick 0 is re-sent until every participant has answered it
+# Realtime: a dropped participant rejoins by answering one of the last ticks, not an old one.
+REJOIN_WINDOW_TICKS = 12
 
 
 class PhysicsOptions(RoleOptions, frozen=True, kw_only=True):
@@ -84,8 +86,13 @@ class PhysicsNode:
         self.substeps = self.scenario.substeps
         sensor_period = self.scenario.sensor.resolved().period_ticks
         timeout_s = self.scenario.time.participant_timeout_s
+        realtime = options.mode == SpeedMode.REALTIME
         barrier = Lockstep(
-            world.vehicle_ids, timeout_s, time.monotonic, periodic={PLUME: sensor_period}
+            world.vehicle_ids,
+            timeout_s,
+            time.monotonic,
+            periodic={PLUME: sensor_period},
+            rejoin_window=REJOIN_WINDOW_TICKS if realtime else None,
         )
         # Restarts (lockstep): hold the tick for a process the launcher is restarting.
         grace_s = self.scenario.time.restart_grace_s if options.mode != SpeedMode.REALTIME else 0.0
@@ -112,11 +119,7 @@ class PhysicsNode:
         )
         self.dropped_total = 0  # participants dropped for a missed deadline (health detail)
         # Realtime: a vehicle without its command lands under the physics' failsafe.
-        self.gaps = (
-            CommandGaps(self.scenario, world.vehicle_ids)
-            if options.mode == SpeedMode.REALTIME
-            else None
-        )
+        self.gaps = CommandGaps(self.scenario, world.vehicle_ids) if realtime else None
         self._states: list[VehicleState] = []  # the current tick's (the failsafe's input)
 
     def _step_refusal(self) -> str | None:

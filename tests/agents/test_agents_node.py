@@ -236,8 +236,8 @@ def test_a_tick_going_back_counts_only_if_it_is_a_whole_sim_tick(tmp_path: Path)
 def _toy_flight_paused(
     network: tuple[Network, zenoh.Session], swarm: Swarm, tmp_path: Path, mode: str
 ) -> tuple[float, VehicleStatus, str]:
-    """uav1 holding at 10 m over the toy physics; the ticks stop for 2 s (wall), then go on
-    until it is disarmed or 20 s passed. The status seen 2 s into the pause, and the log."""
+    """uav1 holding at 10 m over the toy physics; the ticks stop for 4 s (wall), then go on
+    until it is disarmed or 20 s passed. The status seen 4 s into the pause, and the log."""
     net, router = network
     scenario_file = tmp_path / f"{mode}.toml"
     text = DEFAULT_SCENARIO.read_text()
@@ -254,7 +254,7 @@ def _toy_flight_paused(
             swarm.wait_until(lambda: swarm.status("uav1").mode == FlightMode.HOLD, 60, "hover")
             physics.pause()
             paused_at = time.monotonic()
-            time.sleep(2.0)
+            time.sleep(4.0)  # the state-loss timeout is 3 s
             during = swarm.status("uav1")
             assert during is not None
             landed_at = 0.0
