@@ -297,7 +297,7 @@ class AutopilotNode:
         self._snap_pending: PendingSnapshot | None = None
         self._snap_tick = -1  # the tick of the state (last_tick runs ahead while resuming)
         self.node_name = ctx.name
-        # Realtime: the vehicles that landed for want of ticks, and since when (docs/agents.md)
+        # Realtime: the vehicles that landed for want of ticks (docs/agents.md)
         self._realtime = ctx.scenario.time.mode == "realtime"
         self._state_lost: set[str] = set()
 

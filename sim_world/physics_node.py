@@ -254,7 +254,8 @@ class PhysicsNode:
                     dropped = barrier.expire()
                     self.dropped_total += len(dropped)
                     waited_s = self.silent.waited_s(self.tick, barrier.timeout_s)
-                    report_dropped(self.tick, dropped, held, waited_s, self.holds.grace_s)
+                    then = "motors off" if self.gaps is None else "the physics' failsafe"
+                    report_dropped(self.tick, dropped, held, waited_s, self.holds.grace_s, then)
                     self.silent.dropped()
                     break
                 self._cond.wait(min(remaining, STOP_POLL_S))
