@@ -19,7 +19,7 @@ from agents.control import Controller, Estimate
 from agents.estimator import Estimator
 from agents.failsafe import FailsafeMonitor
 from agents.mixer import Mixer
-from agents.mode_table import Refusal, denied, invalid
+from agents.mode_table import AIRBORNE, Refusal, denied, invalid
 from agents.modes import FlightModes
 from swarmbus.messages import (
     ACTION_CODES_OF_PARAM,
@@ -56,6 +56,7 @@ from swarmbus.vehicle_types import load_vehicle_type
 
 log = logging.getLogger(__name__)
 
+STATE_LOST = "vehicle state lost"
 IDLE_COMMAND = 0.15  # rotor command while armed on the ground (props spinning)
 
 # PX4-style parameter names → failsafe field, with the enum encodings PX4 uses
@@ -189,6 +190,14 @@ class Autopilot:
             refusal = self.modes.setpoint(setpoint, self.now)
             if refusal is not None:
                 log.warning("%s: behaviour setpoint refused: %s", self.vehicle_id, refusal.reason)
+
+    def state_lost(self, silent_s: float) -> None:
+        """Realtime mode: no tick, so no vehicle state, for ``silent_s`` wall seconds (the link
+        to the physics is down): land, as PX4 does when it loses its position estimate in the
+        air. The mode stays after the ticks come back, until the pilot changes it."""
+        if self.est is not None and self.modes.mode in AIRBORNE:
+            reason = f"{STATE_LOST}: no tick for {silent_s:.1f} s"
+            self.modes.failsafe_action("land", self.est, reason)
 
     # ------------------------------------------------------------------ commands
     def handle(self, command: Any) -> CommandReply:

@@ -79,6 +79,11 @@ class _Served:
             else None
         )
         self.status_pub = session.declare_publisher(keys.vehicle_status(vehicle_id))
+        # a realtime tick may wait this long for a slow participant: no tick then is no loss
+        self.state_loss_s = max(
+            scenario.failsafe_for(vehicle_id).state_loss_timeout_s,
+            scenario.time.participant_timeout_s,
+        )
         self.readings_pub = session.declare_publisher(keys.vehicle_concentration(vehicle_id))
         self.last_status: VehicleStatus | None = None
         self.last_status_time_s = -1e9
@@ -292,6 +297,9 @@ class AutopilotNode:
         self._snap_pending: PendingSnapshot | None = None
         self._snap_tick = -1  # the tick of the state (last_tick runs ahead while resuming)
         self.node_name = ctx.name
+        # Realtime: the vehicles that landed for want of ticks (docs/agents.md)
+        self._realtime = ctx.scenario.time.mode == "realtime"
+        self._state_lost: set[str] = set()
 
     # ------------------------------------------------------------------ set-up
     def declare(self, node_name: str) -> None:
@@ -344,8 +352,10 @@ class AutopilotNode:
                 case CommandArrived():
                     self._on_command(event)
                     self._idle_statuses()
+                    self._watch_ticks()
                 case Idle():
                     self._idle_statuses()
+                    self._watch_ticks()
 
     def _on_tick_data(self, data: bytes) -> None:
         try:
@@ -383,9 +393,45 @@ class AutopilotNode:
             for served in self.served.values():
                 served.publish_status(force=True, period_s=0.0)
 
+    def _watch_ticks(self) -> None:
+        """Realtime mode: a vehicle whose ticks stopped for its ``state_loss_timeout_s`` (wall;
+        at least ``time.participant_timeout_s``) lands (:meth:`Autopilot.state_lost`); its
+        status says so."""
+        if not self._realtime or self.last_tick < 0:
+            return
+        silent_s = time.monotonic() - self.last_tick_wall
+        for vid, served in self.served.items():
+            if vid in self._state_lost or silent_s < served.state_loss_s:
+                continue
+            self._state_lost.add(vid)
+            log.warning(
+                "%s: no tick for %.1f s after tick %d: vehicle state lost, landing",
+                vid,
+                silent_s,
+                self.last_tick,
+            )
+            served.autopilot.state_lost(silent_s)
+            served.publish_status(force=True, period_s=0.0)
+
+    def _ticks_back(self, tick: _Tick, silent_s: float) -> None:
+        """Realtime: the first tick after an outage; how late it was, what was missed."""
+        log.warning(
+            "ticks again after %.1f s without: tick %d after tick %d (%d missed); still in "
+            "their failsafe mode: %s",
+            silent_s,
+            tick.tick,
+            self.last_tick,
+            max(0, tick.tick - self.last_tick - 1),
+            ", ".join(sorted(self._state_lost)),
+        )
+        self._state_lost.clear()
+
     def on_tick(self, tick: _Tick) -> None:
         """Tick k: readings of the last sensor tick, each vehicle's step, one batch back."""
-        self.last_tick_wall = time.monotonic()
+        now = time.monotonic()
+        if self._state_lost:
+            self._ticks_back(tick, now - self.last_tick_wall)
+        self.last_tick_wall = now
         if self.keeper is not None:
             self._resume(tick)
         if tick.tick == self.last_tick:  # the start handshake repeats a tick: same answer

@@ -14,17 +14,23 @@ log = logging.getLogger(__name__)
 
 
 def report_dropped(
-    tick: int, dropped: Sequence[str], held: Collection[str], timeout_s: float, grace_s: float
+    tick: int,
+    dropped: Sequence[str],
+    held: Collection[str],
+    timeout_s: float,
+    grace_s: float,
+    then: str = "motors off",
 ) -> None:
-    """Log who tick ``tick`` dropped: silent vehicles (motors off), the plume (its readings
-    unavailable), held participants whose restart grace passed."""
+    """Log who tick ``tick`` dropped: silent vehicles (``then``: what becomes of them), the
+    plume (its readings unavailable), held participants whose restart grace passed."""
     vehicles = [v for v in dropped if v != PLUME]
     if vehicles:
         log.warning(
-            "tick %d: dropped %s after %.2f s without actuators (motors off)",
+            "tick %d: dropped %s after %.2f s without actuators (%s)",
             tick,
             ", ".join(vehicles),
             timeout_s,
+            then,
         )
     if PLUME in dropped:
         log.warning(

@@ -9,6 +9,8 @@ while the barrier waits for it. :meth:`Lockstep.start` makes every present parti
 (the start-up handshake). A participant that misses the deadline of a tick is dropped (no longer
 active: its motors go to zero); a dropped or newly arrived participant becomes active again
 as soon as it answers a tick published since (it has caught up), and is waited for from then on.
+With a ``rejoin_window`` (realtime mode) the tick it answers must also be one of the last few:
+an answer that sat in a healed link's backlog says nothing of how soon it answers the next.
 
 A *periodic* participant (the plume service, which answers every sensor tick) is waited for only
 on the ticks its period divides, and is no vehicle: the start does not wait for its token
@@ -45,8 +47,10 @@ class Lockstep:
         timeout_s: float,
         clock: Callable[[], float],
         periodic: Mapping[str, int] | None = None,
+        rejoin_window: int | None = None,
     ) -> None:
         self.vehicle_ids = tuple(vehicle_ids)
+        self.rejoin_window = rejoin_window  # ticks behind the current one an answer rejoins
         self._periods = dict(periodic or {})  # participant → its period in ticks (>= 1)
         if any(p < 1 for p in self._periods.values()) or self._periods.keys() & set(vehicle_ids):
             raise ValueError(f"bad periodic participants {self._periods}")
@@ -122,6 +126,8 @@ class Lockstep:
         if vehicle_id not in self._active:
             if tick < self._rejoin_from.get(vehicle_id, 0):
                 return False  # sent before it was dropped
+            if self.rejoin_window is not None and tick < self.tick - self.rejoin_window:
+                return False  # an old answer, late: it has not caught up
             self._active.add(vehicle_id)
             self.rejoined.append((vehicle_id, tick))
             if self.waits_for(vehicle_id, self.tick):

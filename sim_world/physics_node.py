@@ -19,6 +19,7 @@ import msgspec
 from sim_world.checkpoint import CheckpointError
 from sim_world.checkpointer import Checkpointer
 from sim_world.drops import report_dropped
+from sim_world.failsafe import CommandGaps
 from sim_world.holds import Holds, UnreachableGrace
 from sim_world.inputs import STOP_POLL_S, LockstepInputs
 from sim_world.lockstep import Lockstep
@@ -41,6 +42,8 @@ from swarmbus.scenario import Scenario
 log = logging.getLogger(__name__)
 
 HANDSHAKE_REPUBLISH_S = 0.1  # tick 0 is re-sent until every participant has answered it
+# Realtime: a dropped participant rejoins by answering one of the last ticks, not an old one.
+REJOIN_WINDOW_TICKS = 12
 
 
 class PhysicsOptions(RoleOptions, frozen=True, kw_only=True):
@@ -83,8 +86,13 @@ class PhysicsNode:
         self.substeps = self.scenario.substeps
         sensor_period = self.scenario.sensor.resolved().period_ticks
         timeout_s = self.scenario.time.participant_timeout_s
+        realtime = options.mode == SpeedMode.REALTIME
         barrier = Lockstep(
-            world.vehicle_ids, timeout_s, time.monotonic, periodic={PLUME: sensor_period}
+            world.vehicle_ids,
+            timeout_s,
+            time.monotonic,
+            periodic={PLUME: sensor_period},
+            rejoin_window=REJOIN_WINDOW_TICKS if realtime else None,
         )
         # Restarts (lockstep): hold the tick for a process the launcher is restarting.
         grace_s = self.scenario.time.restart_grace_s if options.mode != SpeedMode.REALTIME else 0.0
@@ -110,6 +118,9 @@ class PhysicsNode:
             time.monotonic,
         )
         self.dropped_total = 0  # participants dropped for a missed deadline (health detail)
+        # Realtime: a vehicle without its command lands under the physics' failsafe.
+        self.gaps = CommandGaps(self.scenario, world.vehicle_ids) if realtime else None
+        self._states: list[VehicleState] = []  # the current tick's (the failsafe's input)
 
     def _step_refusal(self) -> str | None:
         """Why ``clock/step`` is refused in this mode (None: stepped)."""
@@ -216,6 +227,8 @@ class PhysicsNode:
             abandoned = self.clock_gate.abandon()
         if abandoned is not None:
             abandoned.refuse("ticks", f"the world stopped at tick {self.tick}")
+        if self.gaps is not None:
+            log.info("%s", self.gaps.summary(self.tick))
         wall = self.pacer.elapsed_s()
         log.info(
             "physics stopped at tick %d, sim %.3f s after %.3f s wall (%.0f ticks/s)",
@@ -241,7 +254,8 @@ class PhysicsNode:
                     dropped = barrier.expire()
                     self.dropped_total += len(dropped)
                     waited_s = self.silent.waited_s(self.tick, barrier.timeout_s)
-                    report_dropped(self.tick, dropped, held, waited_s, self.holds.grace_s)
+                    then = "motors off" if self.gaps is None else "the physics' failsafe"
+                    report_dropped(self.tick, dropped, held, waited_s, self.holds.grace_s, then)
                     self.silent.dropped()
                     break
                 self._cond.wait(min(remaining, STOP_POLL_S))
@@ -297,6 +311,8 @@ class PhysicsNode:
         log.info("re-sent the last %d ticks to the new recorder", len(self.holds.recent))
 
     def _apply(self, commands: Mapping[str, Sequence[float]]) -> None:
+        if self.gaps is not None:
+            commands = self.gaps.fill(self.tick, commands, self._states)
         for bad in self.world.apply_tick(commands):
             log.warning("tick %d: %s; motors off", self.tick, bad)
 
@@ -307,6 +323,7 @@ class PhysicsNode:
         with self._cond:
             queried = self.barrier.waits(PLUME)
             carried = self.plume.published(queried, len(states))
+        self._states = states
         msg = SimTick(
             tick=self.tick,
             sim_time_s=self.world.sim_time_s,
@@ -347,6 +364,8 @@ class PhysicsNode:
             detail = f"tick {self.tick} dropped {self.dropped_total} states {self.out.states_sent}"
             if self.inputs.intake.foreign_dropped:
                 detail += f" foreign commands {self.inputs.intake.foreign_dropped}"
+            if self.gaps is not None and (late := self.gaps.note()):
+                detail += f"; {late}"
             if self.checkpoints.note:
                 detail += f"; {self.checkpoints.note}"
             self.rt.publish_health(sim_time_s=sim_time_s, detail=detail)

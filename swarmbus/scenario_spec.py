@@ -299,6 +299,11 @@ class Failsafe(_Section, frozen=True, kw_only=True):
     rtl_altitude_m: Pos = 15.0
     takeoff_altitude_m: Pos = 2.5
     crash_speed_m_s: Pos = 3.0
+    # Realtime mode, a link to the physics lost (docs/reliability.md, "Partitions"): the
+    # autopilot lands after this long without a tick (never less than time.participant_timeout_s);
+    # the physics lands a vehicle without commands at this speed (PX4's MPC_LAND_SPEED).
+    state_loss_timeout_s: Pos = 3.0
+    descend_speed_m_s: Pos = 0.7
 
 
 class VehicleSpec(_Section, frozen=True, kw_only=True):

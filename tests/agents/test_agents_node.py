@@ -6,7 +6,10 @@ tick / actuator protocol over toy dynamics); the plume service is the real proce
 
 from __future__ import annotations
 
+import contextlib
+import re
 import threading
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -26,6 +29,7 @@ from swarmbus.messages import (
     FlightMode,
     RejectCode,
     SimTick,
+    VehicleStatus,
 )
 from swarmbus.node import NodeContext
 from swarmbus.scenario import DEFAULT_SCENARIO, load_scenario
@@ -227,3 +231,69 @@ def test_a_tick_going_back_counts_only_if_it_is_a_whole_sim_tick(tmp_path: Path)
             assert node.last_tick == 42
         finally:
             node.close()
+
+
+def _toy_flight_paused(
+    network: tuple[Network, zenoh.Session], swarm: Swarm, tmp_path: Path, mode: str
+) -> tuple[float, VehicleStatus, str]:
+    """uav1 holding at 10 m over the toy physics; the ticks stop for 4 s (wall), then go on
+    until it is disarmed or 20 s passed. The status seen 4 s into the pause, and the log."""
+    net, router = network
+    scenario_file = tmp_path / f"{mode}.toml"
+    text = DEFAULT_SCENARIO.read_text()
+    scenario_file.write_text(text.replace('mode = "lockstep"', f'mode = "{mode}"', 1))
+    sc = load_scenario(scenario_file)
+    with NodeProcs(net, scenario_file, tmp_path) as procs:
+        start_autopilots(procs, swarm, ["uav1"])
+        physics = BusToyPhysics(router, sc, participants=["uav1"]).start()
+        try:
+            uav = swarm.command("uav1")
+            swarm.wait_until(lambda: swarm.state("uav1"), 10.0, "uav1 state")
+            uav.arm()
+            uav.takeoff(10.0)
+            swarm.wait_until(lambda: swarm.status("uav1").mode == FlightMode.HOLD, 60, "hover")
+            physics.pause()
+            paused_at = time.monotonic()
+            time.sleep(4.0)  # the state-loss timeout is 3 s
+            during = swarm.status("uav1")
+            assert during is not None
+            landed_at = 0.0
+            with contextlib.suppress(WaitTimeout):
+                swarm.wait_until(
+                    lambda: (s := swarm.status("uav1")) is not None and s.mode == FlightMode.LAND,
+                    5.0,
+                    "LAND",
+                )
+                landed_at = time.monotonic() - paused_at
+            physics.resume()
+            with contextlib.suppress(WaitTimeout):
+                swarm.wait_until(lambda: not swarm.status("uav1").armed, 20.0, "disarmed")
+        finally:
+            physics.stop()
+        assert physics.error is None, physics.error
+    return landed_at, during, (tmp_path / "autopilot-uav1.log").read_text()
+
+
+def test_realtime_without_ticks_for_the_state_loss_timeout_the_autopilot_lands(
+    network: tuple[Network, zenoh.Session], swarm: Swarm, tmp_path: Path
+) -> None:
+    landed_at, during, log = _toy_flight_paused(network, swarm, tmp_path, "realtime")
+    timeout_s = load_scenario().failsafe.state_loss_timeout_s
+    assert during.mode == FlightMode.LAND, during
+    assert during.failsafe.startswith("vehicle state lost: no tick for"), during.failsafe
+    assert landed_at >= timeout_s
+    assert re.search(r"uav1: no tick for [0-9.]+ s after tick \d+: vehicle state lost", log)
+    assert re.search(r"ticks again after [0-9.]+ s without: tick \d+ after tick \d+", log)
+    final = swarm.status("uav1")
+    assert final is not None and not final.armed and final.mode == FlightMode.DISARMED
+
+
+def test_lockstep_without_ticks_the_autopilot_waits_in_its_mode(
+    network: tuple[Network, zenoh.Session], swarm: Swarm, tmp_path: Path
+) -> None:
+    """In lockstep the physics holds the clock: ticks that stop are no lost state."""
+    _, during, log = _toy_flight_paused(network, swarm, tmp_path, "lockstep")
+    assert during.mode == FlightMode.HOLD and during.failsafe == "", during
+    assert "vehicle state lost" not in log
+    final = swarm.status("uav1")
+    assert final is not None and final.mode == FlightMode.HOLD and final.armed

@@ -43,3 +43,28 @@ def test_restarted_on_the_ground_stays_disarmed() -> None:
     w.run(2.0)
     assert fresh.modes.mode == FlightMode.DISARMED
     assert w.vehicles["uav1"].on_ground
+
+
+def test_the_vehicle_state_lost_in_the_air_lands_and_keeps_landing_when_it_returns() -> None:
+    """Realtime mode, the ticks stopped (a link to the physics down): the autopilot lands, says
+    why, and keeps landing once the states come back (PX4 stays in its failsafe mode)."""
+    sc = load_scenario()
+    ap = Autopilot(sc, "uav1")
+    w = ToyWorld(sc, {"uav1": ap})
+    w.run(0.05)
+    assert ap.handle(Arm()).accepted and ap.handle(Takeoff(altitude_m=12.0)).accepted
+    w.run(20.0, until=lambda: ap.modes.mode == FlightMode.HOLD)
+    ap.state_lost(2.0)
+    assert ap.modes.mode == FlightMode.LAND
+    assert ap.status().failsafe == "vehicle state lost: no tick for 2.0 s"
+    w.run(30.0, until=lambda: not ap.modes.armed)
+    assert not ap.modes.armed and w.vehicles["uav1"].on_ground and not w.vehicles["uav1"].crashed
+
+
+def test_the_vehicle_state_lost_on_the_ground_changes_nothing() -> None:
+    sc = load_scenario()
+    ap = Autopilot(sc, "uav1")
+    w = ToyWorld(sc, {"uav1": ap})
+    w.run(0.5)
+    ap.state_lost(3.0)
+    assert ap.modes.mode == FlightMode.DISARMED and ap.status().failsafe == ""

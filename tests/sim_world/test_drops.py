@@ -29,3 +29,13 @@ def test_nobody_dropped_says_nothing(caplog: pytest.LogCaptureFixture) -> None:
     caplog.set_level(logging.WARNING, logger="sim_world.drops")
     report_dropped(3, [], {"uav1"}, 0.5, 30.0)
     assert lines(caplog) == []
+
+
+def test_in_realtime_the_dropped_vehicles_go_to_the_physics_failsafe(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    caplog.set_level(logging.WARNING, logger="sim_world.drops")
+    report_dropped(7, ["uav2"], set(), 2.0, 0.0, "the physics' failsafe")
+    assert lines(caplog) == [
+        "tick 7: dropped uav2 after 2.00 s without actuators (the physics' failsafe)"
+    ]

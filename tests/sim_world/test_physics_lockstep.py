@@ -279,3 +279,23 @@ def test_a_held_periodic_participant_holds_only_its_own_ticks() -> None:
     ls.joined("plume")
     assert ls.receive("plume", 3, ())
     assert ls.complete() and ls.held == frozenset()
+
+
+def test_with_a_rejoin_window_only_a_recent_answer_rejoins() -> None:
+    """Realtime: answers that sat in a healed link's backlog do not rejoin; a recent one does."""
+    clock = FakeClock()
+    ls = Lockstep(["a", "b"], timeout_s=0.5, clock=clock, rejoin_window=12)
+    ls.joined("a")
+    ls.joined("b")
+    ls.start()
+    ls.begin(3)
+    ls.receive("a", 3, [0.1])
+    clock.now += 1.0
+    assert ls.expire() == ["b"]
+    ls.begin(600)
+    assert not ls.receive("b", 3, [0.0])  # the tick it missed, 597 ticks late
+    assert not ls.receive("b", 587, [0.0])  # 13 behind
+    assert ls.active == {"a"}
+    assert not ls.receive("b", 588, [0.0])  # 12 behind: back (not this tick's command) ...
+    assert ls.active == {"a", "b"} and ls.missing() == ["a", "b"]  # ... and waited for
+    assert ls.receive("b", 600, [0.5])

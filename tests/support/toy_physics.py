@@ -241,6 +241,7 @@ class BusToyPhysics:
         self._cond = threading.Condition()
         self._commands: dict[str, tuple[int, list[float]]] = {}
         self._stop = threading.Event()
+        self._paused = threading.Event()  # no ticks while set (a cut link, seen from afar)
         self._thread = threading.Thread(target=self._run, daemon=True)
         self._subs = [
             session.declare_subscriber(self.keys.all_autopilot_actuators(), self._on_cmd),
@@ -275,6 +276,17 @@ class BusToyPhysics:
         self._thread.start()
         return self
 
+    def pause(self) -> None:
+        """Publish no tick until :meth:`resume` (the world frozen where it is)."""
+        self._paused.set()
+
+    def resume(self) -> None:
+        self._paused.clear()
+
+    def _wait_while_paused(self) -> None:
+        while self._paused.is_set() and not self._stop.wait(0.01):
+            pass
+
     def stop(self) -> None:
         self._stop.set()
         self._thread.join(timeout=10)
@@ -298,6 +310,7 @@ class BusToyPhysics:
         period = self.scenario.sensor.resolved().period_ticks
         answer: PlumeSample | None = None
         while not self._stop.is_set():
+            self._wait_while_paused()
             k = self.tick
             states = [toy.state(k, self.sim_time_s) for toy in self.vehicles.values()]
             queried = self.plume and k % period == 0

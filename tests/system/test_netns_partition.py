@@ -21,18 +21,29 @@ pytestmark = pytest.mark.netns
 GRACE_S = 10.0
 
 
-def partition(tmp: Path, seconds: float) -> str:
-    """The physics log of a run whose agents host is cut off for ``seconds``."""
+def seed_scenario(tmp: Path, old: str, new: str) -> Path:
+    """The seed scenario with ``old`` replaced by ``new`` (once), in ``tmp``."""
     base = (REPO / "deploy" / "scenarios" / "novak2018.toml").read_text()
     scenario = tmp / "scenario.toml"
-    scenario.write_text(base.replace("[time]\n", f"[time]\nunreachable_grace_s = {GRACE_S}\n", 1))
+    scenario.write_text(base.replace(old, new, 1))
+    return scenario
+
+
+def sim_and_agents(ns: dict[str, str], tmp: Path, scenario: Path) -> Hosts:
+    """``sim`` (router, physics, plume) and ``agents`` (the autopilots) flying ``scenario``."""
+    hosts = write_hosts(
+        tmp / "hosts.toml", {"sim": ["router", "physics", "plume"], "agents": ["autopilot"]}
+    )
+    first, rest = hosts.read_text().split("\n", 1)
+    hosts.write_text(f'{first}\nscenario = "{scenario}"\n{rest}')
+    return Hosts(ns, hosts, tmp)
+
+
+def partition(tmp: Path, seconds: float) -> str:
+    """The physics log of a run whose agents host is cut off for ``seconds``."""
+    scenario = seed_scenario(tmp, "[time]\n", f"[time]\nunreachable_grace_s = {GRACE_S}\n")
     with three_namespaces() as ns:
-        hosts = write_hosts(
-            tmp / "hosts.toml", {"sim": ["router", "physics", "plume"], "agents": ["autopilot"]}
-        )
-        first, rest = hosts.read_text().split("\n", 1)
-        hosts.write_text(f'{first}\nscenario = "{scenario}"\n{rest}')
-        h = Hosts(ns, hosts, tmp)
+        h = sim_and_agents(ns, tmp, scenario)
         log = tmp / "sim" / "physics.log"
         try:
             h.up("sim")
