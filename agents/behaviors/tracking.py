@@ -1,6 +1,7 @@
 """Tracking an intermittent plume upwind, and declaring its source on evidence.
 
-The common core of casting and surge-cast (:class:`PlumeTracker`), built for the signal a
+The common core of casting and surge-cast (:class:`PlumeTracker`, and the behaviour around it,
+:class:`TrackingBehavior`), built for the signal a
 searcher meets in a real plume: short whiffs separated by blanks, the plume's centreline
 wandering with the wind.
 
@@ -40,11 +41,17 @@ from __future__ import annotations
 
 import math
 import statistics
+from abc import abstractmethod
+from collections.abc import Sequence
+from typing import ClassVar
 
-from agents.behavior import SourceEstimate
+from agents.behavior import BehaviorContext, SourceEstimate
 from agents.behavior_state import SavesState
-from agents.behaviors.steering import CrosswindSweep
+from agents.behaviors.detection import PLUME_THRESHOLD_G_M3, detector_for
+from agents.behaviors.seeking import SeekingBehavior, Wind
+from agents.behaviors.steering import CrosswindSweep, fly
 from agents.behaviors.wind import WindFrame
+from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
 
 
 class AveragedWind(SavesState):
@@ -212,3 +219,59 @@ class PlumeTracker(SavesState):
         else:
             frame = WindFrame.of(self.cast_frame)
         return self.cast.velocity(frame, x_m, y_m)
+
+
+class TrackingBehavior(SeekingBehavior):
+    """A behaviour that flies a :class:`PlumeTracker`: each step it gives the tracker the wind
+    and its detections (:meth:`observe`), advances it, and flies its search, back and cast
+    velocities; while surging it flies upwind at ``surge_speed_m_s`` in the frame of the
+    recent wind, ``surge_across_m_s()`` across it. The first sweep starts to the left on an
+    even vehicle index, to the right on an odd one."""
+
+    own_state: ClassVar[tuple[str, ...]] = ("detector", "tracker")
+    # the algorithm's numbers, given by each subclass
+    surge_speed_m_s: float
+    cast_speed_m_s: float
+    first_cast_half_width_m: float
+    cast_growth: float
+    max_cast_half_width_m: float
+    threshold_g_m3 = PLUME_THRESHOLD_G_M3
+
+    def __init__(self, ctx: BehaviorContext) -> None:
+        super().__init__(ctx)
+        self.detector = detector_for(ctx, self.threshold_g_m3)
+        self.tracker = PlumeTracker(
+            self.cast_speed_m_s,
+            self.first_cast_half_width_m,
+            self.cast_growth,
+            self.max_cast_half_width_m,
+            side=1.0 if ctx.vehicle_index % 2 == 0 else -1.0,
+        )
+
+    def observe(self, readings: Sequence[ConcentrationReading]) -> None:
+        """Give the tracker every detection among ``readings``."""
+        for r in readings:
+            if r.available and r.reported_g_m3 is not None and self.detector.hit(r.reported_g_m3):
+                self.tracker.hit(r.position_enu_m[0], r.position_enu_m[1], r.sim_time_s)
+
+    @abstractmethod
+    def surge_across_m_s(self) -> float:
+        """The cross-wind speed while surging."""
+
+    def seek(
+        self,
+        own: VehicleState,
+        peers: Sequence[VehicleState],
+        readings: Sequence[ConcentrationReading],
+        wind: Wind,
+    ) -> Setpoint | None:
+        x, y, _ = own.position_enu_m
+        tracker = self.tracker
+        tracker.observe_wind(wind.vector_m_s, own.sim_time_s)
+        self.observe(readings)
+        self.declaration = tracker.advance(x, y, own.sim_time_s)
+        velocity = tracker.velocity(x, y)
+        if velocity is None:  # surging
+            frame = tracker.wind.recent()
+            velocity = frame.velocity(-self.surge_speed_m_s, self.surge_across_m_s())
+        return fly(own, velocity, self.altitude)
