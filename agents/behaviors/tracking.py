@@ -43,6 +43,7 @@ import math
 import statistics
 from abc import abstractmethod
 from collections.abc import Sequence
+from dataclasses import InitVar, dataclass, field
 from typing import ClassVar
 
 from agents.behavior import BehaviorContext, SourceEstimate
@@ -90,6 +91,7 @@ class AveragedWind(SavesState):
         return WindFrame.of((self.total[0] / n, self.total[1] / n))
 
 
+@dataclass(eq=False)
 class PlumeTracker(SavesState):
     """The surge / cast state machine and the evidence declaration.
 
@@ -110,39 +112,25 @@ class PlumeTracker(SavesState):
         "cast_line",
     )
 
-    def __init__(
-        self,
-        cast_speed_m_s: float,
-        first_half_width_m: float,
-        growth: float,
-        max_half_width_m: float,
-        side: float,
-        memory_s: float = 2.0,
-        wind_average_s: float = 3.0,
-        empty_legs: int = 8,
-        min_hits: int = 10,
-        cluster_m: float = 3.0,
-        line_ahead_m: float = 1.5,
-        back_speed_m_s: float = 2.0,
-        blank_factor: float = 1.5,
-    ) -> None:
-        self.memory_s = memory_s
-        self.line_ahead_m = line_ahead_m
-        self.back_speed_m_s = back_speed_m_s
-        self.blank_factor = blank_factor
-        self.longest_blank_s = 0.0
-        self.empty_legs = empty_legs
-        self.min_hits = min_hits
-        self.cluster_m = cluster_m
-        self.state = "search"
-        self.last_hit_s: float | None = None
-        self.hits: list[tuple[float, float]] = []  # ENU positions of the detections
+    cast: CrosswindSweep  # the cast's legs (no drift), also the search before the first hit
+    memory_s: float = 2.0
+    wind_average_s: InitVar[float] = 3.0
+    empty_legs: int = 8
+    min_hits: int = 10
+    cluster_m: float = 3.0
+    line_ahead_m: float = 1.5
+    back_speed_m_s: float = 2.0
+    blank_factor: float = 1.5
+    state: str = field(default="search", init=False)
+    last_hit_s: float | None = field(default=None, init=False)
+    longest_blank_s: float = field(default=0.0, init=False)
+    hits: list[tuple[float, float]] = field(default_factory=list, init=False)  # ENU positions
+    wind: AveragedWind = field(init=False)
+    cast_frame: tuple[float, float] | None = field(default=None, init=False)  # wind at last hit
+    cast_line: tuple[int, float] | None = field(default=None, init=False)  # legs before, along m
+
+    def __post_init__(self, wind_average_s: float) -> None:
         self.wind = AveragedWind(wind_average_s)
-        self.cast_frame: tuple[float, float] | None = None  # averaged wind at the last hit
-        self.cast = CrosswindSweep(
-            cast_speed_m_s, 0.0, first_half_width_m, growth, max_half_width_m, side=side
-        )
-        self.cast_line: tuple[int, float] | None = None  # legs flown before, along-wind m
 
     def observe_wind(self, wind_m_s: tuple[float, float], sim_time_s: float) -> None:
         self.wind.add(wind_m_s, sim_time_s)
@@ -240,13 +228,15 @@ class TrackingBehavior(SeekingBehavior):
     def __init__(self, ctx: BehaviorContext) -> None:
         super().__init__(ctx)
         self.detector = detector_for(ctx, self.threshold_g_m3)
-        self.tracker = PlumeTracker(
+        cast = CrosswindSweep(
             self.cast_speed_m_s,
+            0.0,
             self.first_cast_half_width_m,
             self.cast_growth,
             self.max_cast_half_width_m,
             side=1.0 if ctx.vehicle_index % 2 == 0 else -1.0,
         )
+        self.tracker = PlumeTracker(cast)
 
     def observe(self, readings: Sequence[ConcentrationReading]) -> None:
         """Give the tracker every detection among ``readings``."""
