@@ -8,8 +8,10 @@ hold, touchdown → disarmed, offboard stream lost → the configured action, �
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
+from typing import Concatenate, ParamSpec
 
 from agents.control import Estimate, Target, yaw_of
 from agents.geofence import zone_error, zones_violation
@@ -42,6 +44,34 @@ TOUCHDOWN_TIME_S = 0.5
 LAND_SLOW_BELOW_M = 4.0  # height above home under which the descent slows down
 LAND_SLOW_SPEED_M_S = 0.6
 RTL_HOME_RADIUS_M = 1.0
+
+
+P = ParamSpec("P")
+
+
+def _guarded(
+    action: Action,
+) -> Callable[
+    [Callable[Concatenate[FlightModes, FlightMode, P], Refusal | None]],
+    Callable[Concatenate[FlightModes, P], Refusal | None],
+]:
+    """An action the mode table guards: refused with the table's reason (:data:`REFUSALS`)
+    unless :data:`TRANSITIONS` allow ``action`` in the current mode; otherwise the method runs,
+    given the mode the action leads to (it checks the rest and changes the mode)."""
+
+    def wrap(
+        body: Callable[Concatenate[FlightModes, FlightMode, P], Refusal | None],
+    ) -> Callable[Concatenate[FlightModes, P], Refusal | None]:
+        def act(modes: FlightModes, /, *args: P.args, **kwargs: P.kwargs) -> Refusal | None:
+            to = modes._allowed(action)
+            if isinstance(to, Refusal):
+                return to
+            return body(modes, to, *args, **kwargs)
+
+        functools.update_wrapper(act, body)
+        return act
+
+    return wrap
 
 
 class FlightModes:
@@ -140,10 +170,8 @@ class FlightModes:
         return None
 
     # ------------------------------------------------------------------ actions
-    def arm(self, est: Estimate, crashed: bool = False) -> Refusal | None:
-        to = self._allowed(Action.ARM)
-        if isinstance(to, Refusal):
-            return to
+    @_guarded(Action.ARM)
+    def arm(self, to: FlightMode, est: Estimate, crashed: bool = False) -> Refusal | None:
         if crashed:
             return denied("crashed: the vehicle cannot be armed again")
         if not est.on_ground:
@@ -161,19 +189,15 @@ class FlightModes:
         self._set_mode(M.HOLD, est)
         self.failsafe_reason = "autopilot restarted in the air: holding"
 
-    def disarm(self, est: Estimate, force: bool = False) -> Refusal | None:
-        to = self._allowed(Action.DISARM)
-        if isinstance(to, Refusal):
-            return to
+    @_guarded(Action.DISARM)
+    def disarm(self, to: FlightMode, est: Estimate, force: bool = False) -> Refusal | None:
         if self.mode in AIRBORNE and not est.on_ground and not force:
             return denied("in the air: disarming would drop the vehicle (use force)")
         self._set_mode(to, est)
         return None
 
-    def takeoff(self, est: Estimate, altitude_m: float) -> Refusal | None:
-        to = self._allowed(Action.TAKEOFF)
-        if isinstance(to, Refusal):
-            return to
+    @_guarded(Action.TAKEOFF)
+    def takeoff(self, to: FlightMode, est: Estimate, altitude_m: float) -> Refusal | None:
         x, y, _ = est.position
         z = self.home[2] + altitude_m
         fence = self.fence_violation(x, y, z)
@@ -184,18 +208,14 @@ class FlightModes:
         self._set_mode(to, est)
         return None
 
-    def land(self, est: Estimate) -> Refusal | None:
-        to = self._allowed(Action.LAND)
-        if isinstance(to, Refusal):
-            return to
+    @_guarded(Action.LAND)
+    def land(self, to: FlightMode, est: Estimate) -> Refusal | None:
         self._target = est.position
         self._set_mode(to, est)
         return None
 
-    def rtl(self, est: Estimate) -> Refusal | None:
-        to = self._allowed(Action.RTL)
-        if isinstance(to, Refusal):
-            return to
+    @_guarded(Action.RTL)
+    def rtl(self, to: FlightMode, est: Estimate) -> Refusal | None:
         self._rtl_phase = RtlPhase.CLIMB
         self._rtl_alt = max(est.position[2], self.home[2] + self.failsafe.rtl_altitude_m)
         # PX4's default RTL_TYPE 0: the closest safe point, home or a rally point
@@ -207,24 +227,21 @@ class FlightModes:
         self._set_mode(to, est)
         return None
 
-    def hold(self, est: Estimate) -> Refusal | None:
-        to = self._allowed(Action.HOLD)
-        if isinstance(to, Refusal):
-            return to
+    @_guarded(Action.HOLD)
+    def hold(self, to: FlightMode, est: Estimate) -> Refusal | None:
         self._hold_here(est)
         self._set_mode(to, est)
         return None
 
+    @_guarded(Action.GOTO)
     def goto(
         self,
+        to: FlightMode,
         est: Estimate,
         position: tuple[float, float, float],
         yaw_rad: float | None,
         speed_m_s: float,
     ) -> Refusal | None:
-        to = self._allowed(Action.GOTO)
-        if isinstance(to, Refusal):
-            return to
         fence = self.fence_violation(*position)
         if fence is not None:
             return invalid(f"goto: {fence}")
@@ -235,10 +252,8 @@ class FlightModes:
             self._yaw = yaw_rad
         return None
 
-    def orbit(self, est: Estimate, orbit: Orbit) -> Refusal | None:
-        to = self._allowed(Action.ORBIT)
-        if isinstance(to, Refusal):
-            return to
+    @_guarded(Action.ORBIT)
+    def orbit(self, to: FlightMode, est: Estimate, orbit: Orbit) -> Refusal | None:
         cx, cy, cz = orbit.center_enu_m
         for k in range(8):  # the circle, sampled, must lie inside the fence
             a = k * math.pi / 4.0
@@ -271,11 +286,11 @@ class FlightModes:
         self.mission.clear()
         return None
 
-    def start_mission(self, est: Estimate, start_index: int | None) -> Refusal | None:
+    @_guarded(Action.MISSION)
+    def start_mission(
+        self, to: FlightMode, est: Estimate, start_index: int | None
+    ) -> Refusal | None:
         """``start_index`` None resumes at the current item (set mode mission)."""
-        to = self._allowed(Action.MISSION)
-        if isinstance(to, Refusal):
-            return to
         mission = self.mission
         if mission.count == 0:
             return denied("no mission uploaded")
@@ -324,10 +339,8 @@ class FlightModes:
         self._setpoint_time_s = now
         return None
 
-    def offboard(self, est: Estimate, now: float) -> Refusal | None:
-        to = self._allowed(Action.OFFBOARD)
-        if isinstance(to, Refusal):
-            return to
+    @_guarded(Action.OFFBOARD)
+    def offboard(self, to: FlightMode, est: Estimate, now: float) -> Refusal | None:
         if not self.has_behavior and not self._stream_alive(now):
             return denied("no offboard setpoint stream: send setpoints first")
         self._hold_here(est)
@@ -337,12 +350,10 @@ class FlightModes:
             self._setpoint_time_s = now
         return None
 
-    def position_mode(self, est: Estimate, now: float) -> Refusal | None:
+    @_guarded(Action.POSITION)
+    def position_mode(self, to: FlightMode, est: Estimate, now: float) -> Refusal | None:
         """PX4's position mode: the ground station's sticks arrive as setpoints (velocity,
         yaw rate); centred sticks hold. Needs the stick stream, as offboard needs its own."""
-        to = self._allowed(Action.POSITION)
-        if isinstance(to, Refusal):
-            return to
         if not self._stream_alive(now):
             return denied("no manual control input: send MANUAL_CONTROL first")
         self._hold_here(est)
@@ -350,12 +361,10 @@ class FlightModes:
         self._offboard_tick_s = -math.inf
         return None
 
-    def follow(self, est: Estimate) -> Refusal | None:
+    @_guarded(Action.FOLLOW)
+    def follow(self, to: FlightMode, est: Estimate) -> Refusal | None:
         """PX4's follow-me: hold here until target setpoints arrive, fly them while they do,
         hold where they stopped when they stop (the target is lost)."""
-        to = self._allowed(Action.FOLLOW)
-        if isinstance(to, Refusal):
-            return to
         self._hold_here(est)
         self._set_mode(to, est)
         self._setpoint = None

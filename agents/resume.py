@@ -8,14 +8,8 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-from agents.snapshot import (
-    BlobLog,
-    ProcessSnapshot,
-    SnapshotError,
-    SnapshotSlots,
-    decode_process,
-    missing_lists,
-)
+from agents.snapshot import ProcessSnapshot, decode_process, missing_lists
+from agents.snapshot_store import BlobLog, SnapshotError, SnapshotSlots
 
 log = logging.getLogger(__name__)
 

@@ -288,27 +288,21 @@ class ConcentrationSensor:
         true_g_m3: float | None,
         peers: list[PeerReading],
     ) -> ConcentrationReading:
-        """A bus reading; ``true_g_m3`` ``None`` (plume service silent) → unavailable."""
-        if true_g_m3 is None:
-            return ConcentrationReading(
-                vehicle_id=vehicle_id,
-                sim_time_s=sim_time_s,
-                position_enu_m=position,
-                available=False,
-                reported_g_m3=None,
-                true_g_m3=None,
-                gas=self.config.gas,
-            )
-        reported, resistance = self.measure(true_g_m3, sim_time_s)
+        """A bus reading; ``true_g_m3`` ``None`` (plume service silent) → unavailable (no
+        value, no peers)."""
+        reported: float | None = None
+        resistance: float | None = None
+        if true_g_m3 is not None:
+            reported, resistance = self.measure(true_g_m3, sim_time_s)
         return ConcentrationReading(
             vehicle_id=vehicle_id,
             sim_time_s=sim_time_s,
             position_enu_m=position,
-            available=True,
+            available=true_g_m3 is not None,
             reported_g_m3=reported,
             true_g_m3=true_g_m3,
-            peers=peers,
+            peers=peers if true_g_m3 is not None else [],
             gas=self.config.gas,
-            reported_ppm=self.to_ppm(reported),
+            reported_ppm=None if reported is None else self.to_ppm(reported),
             resistance_ohm=resistance,
         )

@@ -23,14 +23,11 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from agents.behavior import BehaviorContext
-from agents.behaviors.detection import PLUME_THRESHOLD_G_M3, detector_for
-from agents.behaviors.seeking import SeekingBehavior, Wind
-from agents.behaviors.steering import fly
-from agents.behaviors.tracking import PlumeTracker
-from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
+from agents.behaviors.tracking import TrackingBehavior
+from swarmbus.messages import ConcentrationReading
 
 
-class Casting(SeekingBehavior):
+class Casting(TrackingBehavior):
     own_state = ("detector", "tracker", "side", "leg_best")
     surge_speed_m_s = 2.0
     weave_speed_m_s = 0.3
@@ -39,22 +36,13 @@ class Casting(SeekingBehavior):
     cast_growth = 1.5
     max_cast_half_width_m = 20.0
     turn_fraction = 0.9
-    threshold_g_m3 = PLUME_THRESHOLD_G_M3
 
     def __init__(self, ctx: BehaviorContext) -> None:
         super().__init__(ctx)
-        self.detector = detector_for(ctx, self.threshold_g_m3)
-        self.side = 1.0 if ctx.vehicle_index % 2 == 0 else -1.0
+        self.side = self.tracker.cast.side  # the weave starts on the side the first sweep does
         self.leg_best = 0.0  # best reading since the last turn
-        self.tracker = PlumeTracker(
-            self.cast_speed_m_s,
-            self.first_cast_half_width_m,
-            self.cast_growth,
-            self.max_cast_half_width_m,
-            side=self.side,
-        )
 
-    def _observe(self, readings: Sequence[ConcentrationReading]) -> None:
+    def observe(self, readings: Sequence[ConcentrationReading]) -> None:
         for r in readings:
             if not r.available or r.reported_g_m3 is None:
                 continue
@@ -68,19 +56,6 @@ class Casting(SeekingBehavior):
             else:
                 self.leg_best = 0.0
 
-    def seek(
-        self,
-        own: VehicleState,
-        peers: Sequence[VehicleState],
-        readings: Sequence[ConcentrationReading],
-        wind: Wind,
-    ) -> Setpoint | None:
-        x, y, _ = own.position_enu_m
-        self.tracker.observe_wind(wind.vector_m_s, own.sim_time_s)
-        self._observe(readings)
-        self.declaration = self.tracker.advance(x, y, own.sim_time_s)
-        velocity = self.tracker.velocity(x, y)
-        if velocity is None:  # surging: upwind, weaving across the plume's axis
-            frame = self.tracker.wind.recent()
-            velocity = frame.velocity(-self.surge_speed_m_s, self.weave_speed_m_s * self.side)
-        return fly(own, velocity, self.altitude)
+    def surge_across_m_s(self) -> float:
+        """Weaving across the plume's axis."""
+        return self.weave_speed_m_s * self.side

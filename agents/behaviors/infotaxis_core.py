@@ -157,13 +157,20 @@ def hit_probabilities(
     belief: FloatArray, likelihoods: FloatArray, here: BoolArray | None
 ) -> FloatArray:
     """P(h) for each hit class at a place, given the source is not in ``here``."""
+    b = _given_not_in(belief, here)
+    return np.asarray(likelihoods.reshape(len(likelihoods), -1) @ b.ravel())
+
+
+def _given_not_in(belief: FloatArray, here: BoolArray | None) -> FloatArray:
+    """A copy of ``belief`` with the cells ``here`` ruled out, normalised again (unless
+    nothing is left)."""
     b = belief.copy()
     if here is not None:
         b[here] = 0.0
     total = b.sum()
     if total > EPSILON:
         b /= total
-    return np.asarray(likelihoods.reshape(len(likelihoods), -1) @ b.ravel())
+    return b
 
 
 def expected_entropy(
@@ -180,13 +187,7 @@ def expected_entropy(
     p_end = float(b[mask].sum()) if mask is not None else 0.0
     if p_end > 1.0 - EPSILON:
         return -EPSILON
-    rest = b.copy()
-    if mask is not None:
-        rest[mask] = 0.0
-    total = rest.sum()
-    if total > EPSILON:
-        rest /= total
-    joint = likelihoods.reshape(len(likelihoods), -1) * rest
+    joint = likelihoods.reshape(len(likelihoods), -1) * _given_not_in(b, mask)
     if nuisance_axes:
         lead = int(np.prod(belief.shape[:nuisance_axes]))
         joint = joint.reshape(len(likelihoods), lead, -1).sum(axis=1)

@@ -41,7 +41,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from typing import Any
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
 
 import numpy as np
 import numpy.typing as npt
@@ -59,6 +60,7 @@ from swarmbus.plume_formula import gaussian_plume_g_m3
 FloatArray = npt.NDArray[np.float64]
 
 
+@dataclass(eq=False)
 class SourceTermFilter(SavesState):
     """The estimator alone: particles (x₀, y₀, Q) and their weights, updated reading by reading.
 
@@ -67,37 +69,26 @@ class SourceTermFilter(SavesState):
 
     state_attributes = ("particles", "weights")
 
-    def __init__(
-        self,
-        particles: FloatArray,
-        curves: DispersionCurves,
-        release_height_m: float,
-        rng: np.random.Generator,
-        log_sigma: float = 0.6,
-        floor_g_m3: float = 1e-4,
-        jitter: float = 0.1,
-        prior: Callable[[int], FloatArray] | None = None,
-        detect_g_m3: float = PLUME_THRESHOLD_G_M3,
-        detect_scale_g_m3: float = PLUME_THRESHOLD_G_M3,
-        background_probability: float = 0.01,
-        miss_probability: float = 0.3,
-    ) -> None:
-        self.particles = np.array(particles, dtype=np.float64)  # (n, 3): x0, y0, Q
+    particles: FloatArray  # (n, 3): x0, y0, Q
+    curves: DispersionCurves
+    release_height_m: float
+    rng: np.random.Generator
+    log_sigma: float = 0.6
+    floor_g_m3: float = 1e-4
+    jitter: float = 0.1
+    prior: Callable[[int], FloatArray] | None = None
+    detect_g_m3: float = PLUME_THRESHOLD_G_M3
+    detect_scale_g_m3: float = PLUME_THRESHOLD_G_M3
+    background_probability: float = 0.01
+    miss_probability: float = 0.3
+    weights: FloatArray = field(init=False)
+    # below this for every particle, a reading is unexplained: ln of the 3σ magnitude
+    # floor times a 2 % detection probability (twice the background)
+    redraw_log_likelihood: ClassVar[float] = -4.5 + math.log(0.02)
+
+    def __post_init__(self) -> None:
+        self.particles = np.array(self.particles, dtype=np.float64)
         self.weights = np.full(len(self.particles), 1.0 / len(self.particles))
-        self.curves = curves
-        self.release_height_m = release_height_m
-        self.rng = rng
-        self.log_sigma = log_sigma
-        self.floor_g_m3 = floor_g_m3
-        self.jitter = jitter
-        self.prior = prior
-        self.detect_g_m3 = detect_g_m3
-        self.detect_scale_g_m3 = detect_scale_g_m3
-        self.background_probability = background_probability
-        self.miss_probability = miss_probability
-        # below this for every particle, a reading is unexplained: ln of the 3σ magnitude
-        # floor times a 2 % detection probability (twice the background)
-        self.redraw_log_likelihood = -4.5 + math.log(0.02)
 
     def predict(self, x_m: float, y_m: float, z_m: float, wind: tuple[float, float]) -> FloatArray:
         """Each particle's predicted concentration at (x, y, z) in the wind (east, north)."""

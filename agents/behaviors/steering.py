@@ -5,6 +5,7 @@ plume-less phases of the other strategies)."""
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 
 from agents.behavior import SourceEstimate
 from agents.behavior_state import SavesState
@@ -46,6 +47,7 @@ def toward(own: VehicleState, x_m: float, y_m: float, speed_m_s: float) -> tuple
     return speed * dx / dist, speed * dy / dist
 
 
+@dataclass(eq=False)
 class CrosswindSweep(SavesState):
     """Crosswind legs of growing width around an anchor line, drifting along the wind: the
     search pattern of casting, surge-cast and the plume-less phases of the other strategies.
@@ -57,24 +59,18 @@ class CrosswindSweep(SavesState):
 
     state_attributes = ("side", "anchor_across_m", "half_width_m", "legs")
 
-    def __init__(
-        self,
-        speed_m_s: float,
-        drift_m_s: float,
-        first_half_width_m: float,
-        growth: float,
-        max_half_width_m: float = 40.0,
-        side: float = 1.0,
-    ) -> None:
-        self.speed_m_s = speed_m_s
-        self.drift_m_s = drift_m_s
-        self.first_half_width_m = first_half_width_m
-        self.growth = growth
-        self.max_half_width_m = max_half_width_m
-        self.side = side
-        self.anchor_across_m: float | None = None
-        self.half_width_m = first_half_width_m
-        self.legs = 0  # legs completed (turns), over every sweep
+    speed_m_s: float
+    drift_m_s: float
+    first_half_width_m: float
+    growth: float
+    max_half_width_m: float = 40.0
+    side: float = 1.0
+    anchor_across_m: float | None = field(default=None, init=False)
+    half_width_m: float = field(init=False)
+    legs: int = field(default=0, init=False)  # legs completed (turns), over every sweep
+
+    def __post_init__(self) -> None:
+        self.half_width_m = self.first_half_width_m
 
     def restart(self) -> None:
         """The next call starts a new sweep around where the vehicle is then."""

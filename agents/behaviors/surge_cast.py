@@ -28,55 +28,19 @@ the altitude it starts at.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-
-from agents.behavior import BehaviorContext
-from agents.behaviors.detection import PLUME_THRESHOLD_G_M3, detector_for
-from agents.behaviors.seeking import SeekingBehavior, Wind
-from agents.behaviors.steering import fly
-from agents.behaviors.tracking import PlumeTracker
-from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
+from agents.behaviors.tracking import TrackingBehavior
 
 
-class SurgeCast(SeekingBehavior):
-    own_state = ("detector", "tracker")
+class SurgeCast(TrackingBehavior):
     surge_speed_m_s = 2.0
     cast_speed_m_s = 2.5
     first_cast_half_width_m = 3.0
     cast_growth = 1.6
     max_cast_half_width_m = 20.0
-    threshold_g_m3 = PLUME_THRESHOLD_G_M3
-
-    def __init__(self, ctx: BehaviorContext) -> None:
-        super().__init__(ctx)
-        self.detector = detector_for(ctx, self.threshold_g_m3)
-        self.tracker = PlumeTracker(
-            self.cast_speed_m_s,
-            self.first_cast_half_width_m,
-            self.cast_growth,
-            self.max_cast_half_width_m,
-            side=1.0 if ctx.vehicle_index % 2 == 0 else -1.0,
-        )
 
     @property
     def state(self) -> str:
         return self.tracker.state
 
-    def seek(
-        self,
-        own: VehicleState,
-        peers: Sequence[VehicleState],
-        readings: Sequence[ConcentrationReading],
-        wind: Wind,
-    ) -> Setpoint | None:
-        x, y, _ = own.position_enu_m
-        tracker = self.tracker
-        tracker.observe_wind(wind.vector_m_s, own.sim_time_s)
-        for r in readings:
-            if r.available and r.reported_g_m3 is not None and self.detector.hit(r.reported_g_m3):
-                tracker.hit(r.position_enu_m[0], r.position_enu_m[1], r.sim_time_s)
-        self.declaration = tracker.advance(x, y, own.sim_time_s)
-        velocity = tracker.velocity(x, y)
-        if velocity is None:  # surging
-            velocity = tracker.wind.recent().velocity(-self.surge_speed_m_s, 0.0)
-        return fly(own, velocity, self.altitude)
+    def surge_across_m_s(self) -> float:
+        return 0.0  # straight upwind

@@ -1,6 +1,7 @@
 """Tracking an intermittent plume upwind, and declaring its source on evidence.
 
-The common core of casting and surge-cast (:class:`PlumeTracker`), built for the signal a
+The common core of casting and surge-cast (:class:`PlumeTracker`, and the behaviour around it,
+:class:`TrackingBehavior`), built for the signal a
 searcher meets in a real plume: short whiffs separated by blanks, the plume's centreline
 wandering with the wind.
 
@@ -40,11 +41,18 @@ from __future__ import annotations
 
 import math
 import statistics
+from abc import abstractmethod
+from collections.abc import Sequence
+from dataclasses import InitVar, dataclass, field
+from typing import ClassVar
 
-from agents.behavior import SourceEstimate
+from agents.behavior import BehaviorContext, SourceEstimate
 from agents.behavior_state import SavesState
-from agents.behaviors.steering import CrosswindSweep
+from agents.behaviors.detection import PLUME_THRESHOLD_G_M3, detector_for
+from agents.behaviors.seeking import SeekingBehavior, Wind
+from agents.behaviors.steering import CrosswindSweep, fly
 from agents.behaviors.wind import WindFrame
+from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
 
 
 class AveragedWind(SavesState):
@@ -83,6 +91,7 @@ class AveragedWind(SavesState):
         return WindFrame.of((self.total[0] / n, self.total[1] / n))
 
 
+@dataclass(eq=False)
 class PlumeTracker(SavesState):
     """The surge / cast state machine and the evidence declaration.
 
@@ -103,39 +112,25 @@ class PlumeTracker(SavesState):
         "cast_line",
     )
 
-    def __init__(
-        self,
-        cast_speed_m_s: float,
-        first_half_width_m: float,
-        growth: float,
-        max_half_width_m: float,
-        side: float,
-        memory_s: float = 2.0,
-        wind_average_s: float = 3.0,
-        empty_legs: int = 8,
-        min_hits: int = 10,
-        cluster_m: float = 3.0,
-        line_ahead_m: float = 1.5,
-        back_speed_m_s: float = 2.0,
-        blank_factor: float = 1.5,
-    ) -> None:
-        self.memory_s = memory_s
-        self.line_ahead_m = line_ahead_m
-        self.back_speed_m_s = back_speed_m_s
-        self.blank_factor = blank_factor
-        self.longest_blank_s = 0.0
-        self.empty_legs = empty_legs
-        self.min_hits = min_hits
-        self.cluster_m = cluster_m
-        self.state = "search"
-        self.last_hit_s: float | None = None
-        self.hits: list[tuple[float, float]] = []  # ENU positions of the detections
+    cast: CrosswindSweep  # the cast's legs (no drift), also the search before the first hit
+    memory_s: float = 2.0
+    wind_average_s: InitVar[float] = 3.0
+    empty_legs: int = 8
+    min_hits: int = 10
+    cluster_m: float = 3.0
+    line_ahead_m: float = 1.5
+    back_speed_m_s: float = 2.0
+    blank_factor: float = 1.5
+    state: str = field(default="search", init=False)
+    last_hit_s: float | None = field(default=None, init=False)
+    longest_blank_s: float = field(default=0.0, init=False)
+    hits: list[tuple[float, float]] = field(default_factory=list, init=False)  # ENU positions
+    wind: AveragedWind = field(init=False)
+    cast_frame: tuple[float, float] | None = field(default=None, init=False)  # wind at last hit
+    cast_line: tuple[int, float] | None = field(default=None, init=False)  # legs before, along m
+
+    def __post_init__(self, wind_average_s: float) -> None:
         self.wind = AveragedWind(wind_average_s)
-        self.cast_frame: tuple[float, float] | None = None  # averaged wind at the last hit
-        self.cast = CrosswindSweep(
-            cast_speed_m_s, 0.0, first_half_width_m, growth, max_half_width_m, side=side
-        )
-        self.cast_line: tuple[int, float] | None = None  # legs flown before, along-wind m
 
     def observe_wind(self, wind_m_s: tuple[float, float], sim_time_s: float) -> None:
         self.wind.add(wind_m_s, sim_time_s)
@@ -212,3 +207,61 @@ class PlumeTracker(SavesState):
         else:
             frame = WindFrame.of(self.cast_frame)
         return self.cast.velocity(frame, x_m, y_m)
+
+
+class TrackingBehavior(SeekingBehavior):
+    """A behaviour that flies a :class:`PlumeTracker`: each step it gives the tracker the wind
+    and its detections (:meth:`observe`), advances it, and flies its search, back and cast
+    velocities; while surging it flies upwind at ``surge_speed_m_s`` in the frame of the
+    recent wind, ``surge_across_m_s()`` across it. The first sweep starts to the left on an
+    even vehicle index, to the right on an odd one."""
+
+    own_state: ClassVar[tuple[str, ...]] = ("detector", "tracker")
+    # the algorithm's numbers, given by each subclass
+    surge_speed_m_s: float
+    cast_speed_m_s: float
+    first_cast_half_width_m: float
+    cast_growth: float
+    max_cast_half_width_m: float
+    threshold_g_m3 = PLUME_THRESHOLD_G_M3
+
+    def __init__(self, ctx: BehaviorContext) -> None:
+        super().__init__(ctx)
+        self.detector = detector_for(ctx, self.threshold_g_m3)
+        cast = CrosswindSweep(
+            self.cast_speed_m_s,
+            0.0,
+            self.first_cast_half_width_m,
+            self.cast_growth,
+            self.max_cast_half_width_m,
+            side=1.0 if ctx.vehicle_index % 2 == 0 else -1.0,
+        )
+        self.tracker = PlumeTracker(cast)
+
+    def observe(self, readings: Sequence[ConcentrationReading]) -> None:
+        """Give the tracker every detection among ``readings``."""
+        for r in readings:
+            if r.available and r.reported_g_m3 is not None and self.detector.hit(r.reported_g_m3):
+                self.tracker.hit(r.position_enu_m[0], r.position_enu_m[1], r.sim_time_s)
+
+    @abstractmethod
+    def surge_across_m_s(self) -> float:
+        """The cross-wind speed while surging."""
+
+    def seek(
+        self,
+        own: VehicleState,
+        peers: Sequence[VehicleState],
+        readings: Sequence[ConcentrationReading],
+        wind: Wind,
+    ) -> Setpoint | None:
+        x, y, _ = own.position_enu_m
+        tracker = self.tracker
+        tracker.observe_wind(wind.vector_m_s, own.sim_time_s)
+        self.observe(readings)
+        self.declaration = tracker.advance(x, y, own.sim_time_s)
+        velocity = tracker.velocity(x, y)
+        if velocity is None:  # surging
+            frame = tracker.wind.recent()
+            velocity = frame.velocity(-self.surge_speed_m_s, self.surge_across_m_s())
+        return fly(own, velocity, self.altitude)

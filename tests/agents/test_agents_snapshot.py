@@ -23,7 +23,8 @@ import agents.behaviors
 from agents.autopilot import Autopilot
 from agents.build import AutopilotOptions, behavior_rng, build_autopilot
 from agents.sensor import ConcentrationSensor
-from agents.snapshot import SnapshotError, SnapshotSlots, VehicleSnapshot, capture, restore
+from agents.snapshot import SnapshotError, VehicleSnapshot, capture, restore
+from agents.snapshot_store import SnapshotSlots
 from plume_service import GaussianPlume
 from swarmbus.messages import (
     Arm,
@@ -369,7 +370,7 @@ def test_the_blob_log_gives_a_restarted_process_its_lists_and_survives_a_torn_ap
 ) -> None:
     """A new process (its own Blobs) reads the lists back by their keys; an append cut short
     by a kill is cut off, and what is appended after it reads back."""
-    from agents.snapshot import BlobLog, Blobs
+    from agents.snapshot_store import BlobLog, Blobs
 
     path = tmp_path / "ap.state.blobs"
     first = Blobs()
