@@ -43,7 +43,7 @@ import numpy as np
 import numpy.typing as npt
 
 from agents.behavior import BehaviorContext, SourceEstimate
-from agents.behaviors.seeking import SeekingBehavior, Wind
+from agents.behaviors.seeking import SeekingBehavior, SeekStep
 from agents.behaviors.steering import CrosswindSweep, fly
 from agents.behaviors.wind import WindFrame
 from agents.sensor import ConcentrationSensor
@@ -169,16 +169,11 @@ class GradientSwarm(SeekingBehavior):
         ids = sorted([own.vehicle_id, *(p.vehicle_id for p in peers)])
         return ids.index(own.vehicle_id)
 
-    def seek(
-        self,
-        own: VehicleState,
-        peers: Sequence[VehicleState],
-        readings: Sequence[ConcentrationReading],
-        wind: Wind,
-    ) -> Setpoint | None:
+    def seek(self, step: SeekStep) -> Setpoint | None:
+        own, peers, wind = step.own, step.peers, step.wind
         x, y, _ = own.position_enu_m
         frame = wind.frame
-        self._observe(readings)
+        self._observe(step.readings)
         members = [own, *peers]
         cx = sum(m.position_enu_m[0] for m in members) / len(members)
         cy = sum(m.position_enu_m[1] for m in members) / len(members)

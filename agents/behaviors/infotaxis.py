@@ -96,10 +96,10 @@ from agents.behaviors.infotaxis_core import (
     model_from_statistics,
     width_slope,
 )
-from agents.behaviors.seeking import SeekingBehavior, Wind
+from agents.behaviors.seeking import SeekingBehavior, SeekStep
 from agents.behaviors.steering import fly, toward
 from agents.behaviors.wind import WindFrame
-from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
+from swarmbus.messages import ConcentrationReading, Setpoint
 
 #: Cells whose belief is below this fraction of the largest are left out of the move choice.
 SUPPORT_FLOOR = 1e-12
@@ -305,13 +305,8 @@ class Infotaxis(SeekingBehavior):
         near = np.hypot(*(self.cells_xy - mean).T) <= self.declare_radius_m
         return float(mean[0]), float(mean[1]), float(math.sqrt(var.sum())), float(cells[near].sum())
 
-    def seek(
-        self,
-        own: VehicleState,
-        peers: Sequence[VehicleState],
-        readings: Sequence[ConcentrationReading],
-        wind_read: Wind,
-    ) -> Setpoint | None:
+    def seek(self, step: SeekStep) -> Setpoint | None:
+        own, readings, wind_read = step.own, step.readings, step.wind
         x, y, _ = own.position_enu_m
         now = own.sim_time_s
         wind = wind_read.vector_m_s

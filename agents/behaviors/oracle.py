@@ -14,12 +14,11 @@ Use ``behavior = "agents.behaviors.oracle:Oracle"``.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 
 from agents.behavior import BehaviorContext, SourceEstimate
-from agents.behaviors.seeking import SeekingBehavior, Wind
+from agents.behaviors.seeking import SeekingBehavior, SeekStep
 from agents.behaviors.steering import fly, toward
-from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
+from swarmbus.messages import Setpoint
 
 
 class Oracle(SeekingBehavior):
@@ -34,13 +33,8 @@ class Oracle(SeekingBehavior):
         source = ctx.scenario.plume.sources[0]
         self.source_xy = (source.x_m, source.y_m)
 
-    def seek(
-        self,
-        own: VehicleState,
-        peers: Sequence[VehicleState],
-        readings: Sequence[ConcentrationReading],
-        wind: Wind,
-    ) -> Setpoint | None:
+    def seek(self, step: SeekStep) -> Setpoint | None:
+        own = step.own
         sx, sy = self.source_xy
         x, y, _ = own.position_enu_m
         if math.hypot(sx - x, sy - y) <= self.arrive_m:

@@ -50,7 +50,7 @@ import numpy.typing as npt
 from agents.behavior import BehaviorContext, SourceEstimate
 from agents.behavior_state import SavesState
 from agents.behaviors.detection import PLUME_THRESHOLD_G_M3
-from agents.behaviors.seeking import SeekingBehavior, Wind
+from agents.behaviors.seeking import SeekingBehavior, SeekStep
 from agents.behaviors.steering import CrosswindSweep, fly, toward
 from agents.behaviors.wind import WindFrame
 from swarmbus.dispersion import DispersionCurves, dispersion_curves
@@ -333,13 +333,8 @@ class ParticleFilter(SeekingBehavior):
         self.filter.update_mean(points, sum(values) / len(values), mean_wind, detected)
         self.window, self.window_wind, self.window_start_s = [], [], None
 
-    def seek(
-        self,
-        own: VehicleState,
-        peers: Sequence[VehicleState],
-        readings: Sequence[ConcentrationReading],
-        wind_read: Wind,
-    ) -> Setpoint | None:
+    def seek(self, step: SeekStep) -> Setpoint | None:
+        own, readings, wind_read = step.own, step.readings, step.wind
         x, y, _ = own.position_enu_m
         wind, frame = wind_read.vector_m_s, wind_read.frame
         if self.filter is None:

@@ -7,8 +7,9 @@ algorithm's own :meth:`~SeekingBehavior.seek`:
 2. once the source is declared (``self.declaration``), hold over it and decide nothing more;
 3. read the wind (``self.read_wind``, the vehicle's anemometer by default,
    :func:`agents.behaviors.wind.anemometer_wind`) and its frame;
-4. ``seek(own, peers, readings, wind)``: the algorithm's setpoint; if it declared the source
-   during that call, the setpoint holds over the declaration instead.
+4. ``seek(step)``: the algorithm's setpoint from what it has at this step (:class:`SeekStep`:
+   ``own``, ``peers``, ``readings``, ``wind``); if it declared the source during that call, the
+   setpoint holds over the declaration instead.
 
 Its state (``altitude_m``, ``declaration``) is saved with the subclass's own
 ``state_attributes`` (:class:`agents.behavior_state.SavesState`).
@@ -36,6 +37,17 @@ class Wind:
     frame: WindFrame
 
 
+@dataclass(frozen=True)
+class SeekStep:
+    """What a source-seeking behaviour has at one control step: its vehicle's state, its
+    peers' states, the readings that reached it since the last step, and the wind read now."""
+
+    own: VehicleState
+    peers: Sequence[VehicleState]
+    readings: Sequence[ConcentrationReading]
+    wind: Wind
+
+
 class SeekingBehavior(SavesState, ABC):
     """A source-seeking behaviour: subclasses implement :meth:`seek` and list their own state
     in ``own_state``; the base adds ``altitude_m`` and ``declaration`` to it."""
@@ -61,7 +73,7 @@ class SeekingBehavior(SavesState, ABC):
         if held is not None:
             return held
         vector = self.read_wind(own)
-        setpoint = self.seek(own, peers, readings, Wind(vector, WindFrame.of(vector)))
+        setpoint = self.seek(SeekStep(own, peers, readings, Wind(vector, WindFrame.of(vector))))
         if self.declaration is not None:
             return hold_at(self.declaration.x_m, self.declaration.y_m, self.altitude_m)
         return setpoint
@@ -73,11 +85,5 @@ class SeekingBehavior(SavesState, ABC):
         return self.altitude_m
 
     @abstractmethod
-    def seek(
-        self,
-        own: VehicleState,
-        peers: Sequence[VehicleState],
-        readings: Sequence[ConcentrationReading],
-        wind: Wind,
-    ) -> Setpoint | None:
+    def seek(self, step: SeekStep) -> Setpoint | None:
         """The algorithm's setpoint for this step; set ``self.declaration`` to declare."""

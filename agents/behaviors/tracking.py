@@ -49,10 +49,10 @@ from typing import ClassVar
 from agents.behavior import BehaviorContext, SourceEstimate
 from agents.behavior_state import SavesState
 from agents.behaviors.detection import PLUME_THRESHOLD_G_M3, detector_for
-from agents.behaviors.seeking import SeekingBehavior, Wind
+from agents.behaviors.seeking import SeekingBehavior, SeekStep
 from agents.behaviors.steering import CrosswindSweep, fly
 from agents.behaviors.wind import WindFrame
-from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
+from swarmbus.messages import ConcentrationReading, Setpoint
 
 
 class AveragedWind(SavesState):
@@ -248,17 +248,12 @@ class TrackingBehavior(SeekingBehavior):
     def surge_across_m_s(self) -> float:
         """The cross-wind speed while surging."""
 
-    def seek(
-        self,
-        own: VehicleState,
-        peers: Sequence[VehicleState],
-        readings: Sequence[ConcentrationReading],
-        wind: Wind,
-    ) -> Setpoint | None:
+    def seek(self, step: SeekStep) -> Setpoint | None:
+        own = step.own
         x, y, _ = own.position_enu_m
         tracker = self.tracker
-        tracker.observe_wind(wind.vector_m_s, own.sim_time_s)
-        self.observe(readings)
+        tracker.observe_wind(step.wind.vector_m_s, own.sim_time_s)
+        self.observe(step.readings)
         self.declaration = tracker.advance(x, y, own.sim_time_s)
         velocity = tracker.velocity(x, y)
         if velocity is None:  # surging
