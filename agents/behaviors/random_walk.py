@@ -16,12 +16,11 @@ Use ``behavior = "agents.behaviors.random_walk:RandomWalk"``.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 
 from agents.behavior import BehaviorContext
-from agents.behaviors.seeking import SeekingBehavior, Wind
+from agents.behaviors.seeking import SeekingBehavior, SeekStep
 from agents.behaviors.steering import fly
-from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
+from swarmbus.messages import Setpoint, VehicleState
 
 
 def _calm(own: VehicleState) -> tuple[float, float]:
@@ -41,13 +40,8 @@ class RandomWalk(SeekingBehavior):
         self.tumble_probability = 1.0 - math.exp(-ctx.control_dt_s / self.mean_run_s)
         self.heading_rad = float(self.rng.uniform(0.0, 2.0 * math.pi))
 
-    def seek(
-        self,
-        own: VehicleState,
-        peers: Sequence[VehicleState],
-        readings: Sequence[ConcentrationReading],
-        wind: Wind,
-    ) -> Setpoint | None:
+    def seek(self, step: SeekStep) -> Setpoint | None:
+        own = step.own
         if self.rng.random() < self.tumble_probability:
             self.heading_rad = float(self.rng.uniform(0.0, 2.0 * math.pi))
         v = self.speed_m_s
