@@ -41,7 +41,7 @@ from swarmbus.messages import (
     Vec3,
 )
 from swarmbus.node import NodeContext, NodeRuntime
-from swarmbus.options import OptionError, RoleOptions, role_options
+from swarmbus.options import RoleOptions, role_main
 from swarmbus.reqrep import Incoming, serve, serve_later
 from swarmbus.scenario import Scenario
 from swarmbus.session import SINGLE_THREAD_RUNTIME
@@ -353,13 +353,10 @@ def _start_state_publisher(
     return subscriber, state_thread
 
 
-def main(ctx: NodeContext) -> int:
+@role_main(PlumeOptions, "plume")
+def main(ctx: NodeContext, options: PlumeOptions) -> int:
     """Serve the scenario's plume until stopped."""
-    try:
-        role_options(PlumeOptions, ctx)
-    except OptionError as exc:
-        log.error("plume: %s", exc)
-        return 2
+    del options  # none are declared: an unknown one is refused
     service = PlumeService(field_from_scenario(ctx.scenario), ctx.scenario)
     states = StatePublisher(service.field, ctx.scenario.plume.state_period_s)
     # One Zenoh thread: a sensor tick is received, sampled and answered with no hand-over

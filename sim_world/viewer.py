@@ -46,7 +46,7 @@ from swarmbus.messages import (
     VehicleState,
 )
 from swarmbus.node import NodeContext, NodeRuntime
-from swarmbus.options import OptionError, RoleOptions, role_options
+from swarmbus.options import RoleOptions, role_main
 from swarmbus.scenario import Scenario
 from swarmbus.session import free_tcp_port
 from swarmbus.vehicle_types import load_vehicle_type
@@ -385,12 +385,8 @@ def render(scene: Scene, feed: Feed, meshes: MeshFetcher) -> int:
     return len(new_meshes)
 
 
-def main(ctx: NodeContext) -> int:
-    try:
-        opts = role_options(ViewerOptions, ctx)
-    except OptionError as exc:
-        log.error("viewer: %s", exc)
-        return 2
+@role_main(ViewerOptions, "viewer")
+def main(ctx: NodeContext, opts: ViewerOptions) -> int:
     with NodeRuntime(ctx, role="viewer") as rt, MeshcatServer(http_port=opts.http_port) as srv:
         vis = meshcat.Visualizer(zmq_url=srv.zmq_url)
         scene = Scene(vis, ctx.scenario, opts)

@@ -34,7 +34,7 @@ from recorder.foxglove.scene import (
 from swarmbus.codec import MessageError, decode
 from swarmbus.messages import ConcentrationReading, PlumeState, SimTick
 from swarmbus.node import NodeContext, NodeRuntime
-from swarmbus.options import OptionError, RoleOptions, role_options
+from swarmbus.options import RoleOptions, role_main
 from swarmbus.view_feed import Feed, MeshFetcher, isosurface_queries
 
 log = logging.getLogger(__name__)
@@ -107,12 +107,8 @@ def convert(scene: FoxgloveScene, feed: Feed, meshes: MeshFetcher, channels: Liv
     return -1 if tick is None else tick.tick
 
 
-def main(ctx: NodeContext) -> int:
-    try:
-        opts = role_options(LiveOptions, ctx)
-    except OptionError as exc:
-        log.error("foxglove: %s", exc)
-        return 2
+@role_main(LiveOptions, "foxglove")
+def main(ctx: NodeContext, opts: LiveOptions) -> int:
     context = foxglove.Context()
     try:
         server = foxglove.start_server(
