@@ -172,79 +172,44 @@ def bench_envs(
 
 
 def _gsl_options(seed_default: int) -> Callable[[Callable[..., None]], Callable[..., None]]:
-    """The options ``bench gsl`` and ``bench gsl sweep`` share."""
+    """The options ``bench gsl`` and ``bench gsl sweep`` share: one row an option, each shown
+    with its default (``--out`` has none)."""
+    rows: list[tuple[str, Any, object, str | None]] = [
+        ("--algorithms", None, "all", "Comma-separated names, name=module:Class, or 'all'; "
+         "random_walk and oracle always run."),
+        ("--environments", None, "all", "Comma-separated names (deploy/scenarios/gsl) or "
+         "scenario paths, or 'all'."),
+        ("--sensors", None, "all", "Comma-separated, or 'all' available."),
+        ("--runs", click.IntRange(min=1), 30, None),
+        ("--seed", click.IntRange(min=0, max=2**31 - 1), seed_default,
+         "Published tables: 0; tuning: >= 1000."),
+        ("--time-limit", click.FloatRange(min=1.0), 300.0, "Seconds of simulated time per run."),
+        ("--dynamics", click.Choice(["kinematic", "full"]), "kinematic", "kinematic: point "
+         "masses following the setpoint; full: pybullet vehicles and autopilots."),
+        ("--control-hz", click.IntRange(min=1, max=1000), 20, "Behaviour rate with kinematic "
+         "dynamics (full uses the scenario's)."),
+        ("--sensor-period-ticks", click.IntRange(min=1), 2, "A reading every N control ticks "
+         "(kinematic; full: 10 Hz)."),
+        ("--jobs", click.IntRange(min=1), 2, "Worker processes."),
+    ]  # fmt: skip
     options = [
         click.option(
-            "--algorithms",
-            default="all",
+            *([flag, "time_limit_s"] if flag == "--time-limit" else [flag]),
+            type=type_,
+            default=default,
             show_default=True,
-            help="Comma-separated names, name=module:Class, or 'all'; random_walk and oracle "
-            "always run.",
-        ),
-        click.option(
-            "--environments",
-            default="all",
-            show_default=True,
-            help="Comma-separated names (deploy/scenarios/gsl) or scenario paths, or 'all'.",
-        ),
-        click.option(
-            "--sensors",
-            default="all",
-            show_default=True,
-            help="Comma-separated, or 'all' available.",
-        ),
-        click.option("--runs", type=click.IntRange(min=1), default=30, show_default=True),
-        click.option(
-            "--seed",
-            type=click.IntRange(min=0, max=2**31 - 1),
-            default=seed_default,
-            show_default=True,
-            help="Published tables: 0; tuning: >= 1000.",
-        ),
-        click.option(
-            "--time-limit",
-            "time_limit_s",
-            type=click.FloatRange(min=1.0),
-            default=300.0,
-            show_default=True,
-            help="Seconds of simulated time per run.",
-        ),
-        click.option(
-            "--dynamics",
-            type=click.Choice(["kinematic", "full"]),
-            default="kinematic",
-            show_default=True,
-            help="kinematic: point masses following the setpoint; full: pybullet vehicles and "
-            "autopilots.",
-        ),
-        click.option(
-            "--control-hz",
-            type=click.IntRange(min=1, max=1000),
-            default=20,
-            show_default=True,
-            help="Behaviour rate with kinematic dynamics (full uses the scenario's).",
-        ),
-        click.option(
-            "--sensor-period-ticks",
-            type=click.IntRange(min=1),
-            default=2,
-            show_default=True,
-            help="A reading every N control ticks (kinematic; full: 10 Hz).",
-        ),
-        click.option(
-            "--jobs",
-            type=click.IntRange(min=1),
-            default=2,
-            show_default=True,
-            help="Worker processes.",
-        ),
+            help=help_text,
+        )
+        for flag, type_, default, help_text in rows
+    ]
+    options.append(
         click.option(
             "--out",
             type=click.Path(file_okay=False, path_type=Path),
             default=None,
             help="Output directory (default runs/bench-gsl-…).",
-        ),
-    ]
+        )
+    )
 
     def apply(f: Callable[..., None]) -> Callable[..., None]:
         for option in reversed(options):
