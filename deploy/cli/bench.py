@@ -14,8 +14,10 @@ import click
 from deploy.cli.common import (
     SCENARIO_OPT,
     SET_OPT,
+    Decorator,
     comma_list,
     fail,
+    out_dir_option,
     scenario_from,
     vehicles_per_process_option,
 )
@@ -76,7 +78,7 @@ def _int_list(ctx: click.Context, param: click.Parameter, value: str) -> tuple[i
     help="Also run the ROS 2 bridge: with no ROS 2 subscriber (idle) or with one subscribed to "
     "every topic it publishes (subscribed).",
 )
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=None)
+@out_dir_option()
 @SET_OPT
 def bench_scale(
     scenario: str | None,
@@ -136,12 +138,7 @@ def bench_scale(
     help="Control ticks per environment step.",
 )  # fmt: skip
 @vehicles_per_process_option("Bus backend: autopilot processes serve this many vehicles each.")
-@click.option(
-    "--out",
-    type=click.Path(file_okay=False, path_type=Path),
-    default=None,
-    help="Directory for envs.json (default: runs/bench-envs-<time>/).",
-)
+@out_dir_option("Directory for envs.json (default: runs/bench-envs-<time>/).")
 def bench_envs(
     scenario: str | None,
     vehicles: tuple[int, ...],
@@ -192,7 +189,7 @@ def _gsl_options(seed_default: int) -> Callable[[Callable[..., None]], Callable[
          "(kinematic; full: 10 Hz)."),
         ("--jobs", click.IntRange(min=1), 2, "Worker processes."),
     ]  # fmt: skip
-    options = [
+    options: list[Decorator] = [
         click.option(
             *([flag, "time_limit_s"] if flag == "--time-limit" else [flag]),
             type=type_,
@@ -202,14 +199,7 @@ def _gsl_options(seed_default: int) -> Callable[[Callable[..., None]], Callable[
         )
         for flag, type_, default, help_text in rows
     ]
-    options.append(
-        click.option(
-            "--out",
-            type=click.Path(file_okay=False, path_type=Path),
-            default=None,
-            help="Output directory (default runs/bench-gsl-…).",
-        )
-    )
+    options.append(out_dir_option("Output directory (default runs/bench-gsl-…)."))
 
     def apply(f: Callable[..., None]) -> Callable[..., None]:
         for option in reversed(options):
@@ -325,12 +315,7 @@ def bench_gsl_sweep(params: tuple[str, ...], allow_test_seeds: bool, **kwargs: A
 @click.option("--r-dt", type=float, default=2.0, show_default=True, help="R·Δt, > 0.")
 @click.option("--episodes", type=int, default=1000, show_default=True)
 @click.option("--seed", type=int, default=0, show_default=True)
-@click.option(
-    "--out",
-    type=click.Path(file_okay=False, path_type=Path),
-    default=None,
-    help="Directory for pomdp.json (default runs/bench-pomdp-<time>/).",
-)
+@out_dir_option("Directory for pomdp.json (default runs/bench-pomdp-<time>/).")
 def bench_pomdp(
     dims: int,
     lambda_over_dx: float,
@@ -340,8 +325,6 @@ def bench_pomdp(
     out: Path | None,
 ) -> None:
     """Infotaxis on the source-tracking POMDP (Loisy & Eloy 2022), evaluated as OTTO does."""
-    import time
-
     from bench.pomdp import PomdpError, PomdpOptions, report_lines, run_pomdp, write_result
 
     try:
@@ -357,5 +340,4 @@ def bench_pomdp(
     result = run_pomdp(opts, progress)
     for line in report_lines(result):
         click.echo(line)
-    directory = out or Path("runs") / time.strftime("bench-pomdp-%Y%m%d-%H%M%S")
-    click.echo(f"wrote {write_result(directory, result)}")
+    click.echo(f"wrote {write_result(_bench_dir(out, 'pomdp'), result)}")
