@@ -14,7 +14,7 @@ import zenoh
 
 from swarmbus.codec import decode
 from swarmbus.messages import NodeHealth, VehicleState
-from tests.sim_world.test_physics_node import KEYS, Watch, start_script, two_vehicle_scenario
+from tests.support.physics_rig import KEYS, Watch, start_script, two_vehicle_scenario
 from tests.support.procs import Network, NodeProcs, wait_until
 
 
