@@ -25,7 +25,7 @@ from plume_service.gaussian import GaussianPlume
 from plume_service.mesh import isosurface
 from plume_service.puff import PuffPlume
 from plume_service.timestepped import TimeSteppedField
-from swarmbus.codec import MessageError, decode, encode
+from swarmbus.codec import decode_or_none, encode
 from swarmbus.keys import Keys
 from swarmbus.messages import (
     Clock,
@@ -266,10 +266,8 @@ class SensorAnswers:
         self._lock = threading.Lock()
 
     def on_tick(self, data: bytes) -> None:
-        try:
-            view = decode(data, TickView)
-        except MessageError as exc:
-            log.warning("plume: ignoring a sensor tick: %s", exc)
+        view = decode_or_none(data, TickView, "a sensor tick", log)
+        if view is None:
             return
         with self._lock:
             last = self._last
@@ -334,10 +332,8 @@ def _start_state_publisher(
     publisher = rt.session.declare_publisher(rt.keys.plume_state())
 
     def on_clock(sample: zenoh.Sample) -> None:
-        try:
-            clock = decode(sample.payload.to_bytes(), Clock)
-        except MessageError as exc:
-            log.warning("plume: bad clock message: %s", exc)
+        clock = decode_or_none(sample.payload.to_bytes(), Clock, "a clock message", log)
+        if clock is None:
             return
         states.on_clock(clock.sim_time_s)
 
