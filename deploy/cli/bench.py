@@ -7,7 +7,7 @@ import logging
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import click
 
@@ -37,8 +37,17 @@ def _bench_dir(out: Path | None, bench_name: str) -> Path:
     return out or Path("runs") / time.strftime(f"bench-{bench_name}-%Y%m%d-%H%M%S")
 
 
-def _exit_by_rows(rows: list[dict[str, object]]) -> None:
-    """Exit status 1 when a row holds an error, else 0."""
+def _run_rows(
+    run: Callable[[Any, Callable[[str], None]], list[dict[str, object]]],
+    opts: object,
+    refused: type[Exception],
+) -> NoReturn:
+    """Run a bench of rows, echoing its progress: ``refused`` (bad options) is one line and exit
+    status 2; else exit status 1 when a row holds an error, 0 when none does."""
+    try:
+        rows = run(opts, click.echo)
+    except refused as exc:
+        fail(str(exc))
     sys.exit(1 if any("error" in r for r in rows) else 0)
 
 
@@ -108,11 +117,7 @@ def bench_scale(
         baseline=baseline,
         ros2=ros2,
     )
-    try:
-        rows = run_scale(opts, click.echo)
-    except ScaleError as exc:
-        fail(str(exc))
-    _exit_by_rows(rows)
+    _run_rows(run_scale, opts, ScaleError)
 
 
 @bench.command("envs")
@@ -161,11 +166,7 @@ def bench_envs(
         ticks_per_step=ticks_per_step,
         vehicles_per_process=vehicles_per_process,
     )
-    try:
-        rows = run_env_bench(opts, click.echo)
-    except ValueError as exc:
-        fail(str(exc))
-    _exit_by_rows(rows)
+    _run_rows(run_env_bench, opts, ValueError)
 
 
 def _gsl_options(seed_default: int) -> Callable[[Callable[..., None]], Callable[..., None]]:
