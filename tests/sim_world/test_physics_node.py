@@ -15,6 +15,7 @@ from tests.support.physics_rig import (
     KEYS,
     Watch,
     exit_code,
+    fly_a_and_b,
     report,
     start_script,
     two_vehicle_scenario,
@@ -53,9 +54,7 @@ def test_sigkilled_participant_is_dropped_others_go_on_and_a_restart_rejoins(
 ) -> None:
     procs, watch = rig
     sc = two_vehicle_scenario(tmp_path, timeout_s=1.0)
-    procs.start("physics", "--scenario", str(sc), name="physics")
-    victim = start_script(procs, sc, "--vehicle", "a", "--throttle", "0.2", label="script-a")
-    start_script(procs, sc, "--vehicle", "b", "--throttle", "0.2", label="script-b")
+    victim = fly_a_and_b(procs, sc)
     wait_until(lambda: watch.last_tick >= 20, 60.0, "tick 20")
     procs.kill(victim)
     killed_at = watch.last_tick
@@ -80,12 +79,7 @@ def test_stalled_participant_is_dropped_at_the_timeout_and_rejoins(
 ) -> None:
     procs, watch = rig
     sc = two_vehicle_scenario(tmp_path, timeout_s=0.5)
-    procs.start("physics", "--scenario", str(sc), name="physics")
-    start_script(
-        procs, sc, "--vehicle", "a", "--throttle", "0.2", "--stall-at-tick", "20",
-        "--stall-s", "2.0", label="script-a",
-    )  # fmt: skip
-    start_script(procs, sc, "--vehicle", "b", "--throttle", "0.2", label="script-b")
+    fly_a_and_b(procs, sc, "--stall-at-tick", "20", "--stall-s", "2.0")
     dropped = wait_until(lambda: watch.first_tick_after(20, "a", False), 60.0, "a dropped")
     assert all(watch.motors[k]["a"] for k in range(1, 21))  # it answered those in time
     wait_until(lambda: watch.last_tick >= dropped + 50, 30.0, "ticks go on without a")

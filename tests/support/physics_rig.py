@@ -7,9 +7,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 import subprocess
-import sys
 import threading
 from pathlib import Path
 
@@ -19,10 +17,21 @@ from swarmbus.codec import decode
 from swarmbus.keys import Keys
 from swarmbus.messages import Clock, SimTick
 from swarmbus.session import Presence
-from tests.support.procs import REPO, NodeProcs, wait_until
+from tests.support.procs import NodeProcs, wait_until
 
 WORLD = "physics-test"
 KEYS = Keys(WORLD)
+
+
+Spawn = tuple[float, float, float]
+
+
+def vehicles_toml(*vehicles: tuple[str, str, Spawn]) -> str:
+    """The ``[[vehicles]]`` tables of a scenario: each vehicle's id, type and spawn (ENU m)."""
+    return "".join(
+        f'[[vehicles]]\nid = "{vid}"\ntype = "{vtype}"\nspawn_enu_m = [{x}, {y}, {z}]\n'
+        for vid, vtype, (x, y, z) in vehicles
+    )
 
 
 def two_vehicle_scenario(
@@ -45,14 +54,7 @@ control_hz = 120
 participant_timeout_s = {timeout_s}
 startup_timeout_s = {startup_s}
 {extra_time}
-[[vehicles]]
-id = "a"
-spawn_enu_m = [0.0, 0.0, 0.0]
-[[vehicles]]
-id = "b"
-type = "typhoon_h480"
-spawn_enu_m = [5.0, 0.0, 0.0]
-"""
+{vehicles_toml(("a", "iris", (0.0, 0.0, 0.0)), ("b", "typhoon_h480", (5.0, 0.0, 0.0)))}"""
     )
     return path
 
@@ -61,22 +63,23 @@ def start_script(
     procs: NodeProcs, scenario: Path, *args: str, label: str
 ) -> subprocess.Popen[bytes]:
     """A scripted participant in its own process group, stopped with the node processes."""
-    cmd = [
-        sys.executable,
-        "-m",
-        "tests.support.scripted_participant",
-        "--connect",
-        procs.net.endpoint,
-    ]
-    cmd += ["--scenario", str(scenario), *args]
     assert procs.log_dir is not None
-    env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONUNBUFFERED="1")
-    with open(procs.log_dir / f"{label}.log", "wb") as log:  # the child keeps its own descriptor
-        proc = subprocess.Popen(
-            cmd, cwd=REPO, stdout=log, stderr=subprocess.STDOUT, env=env, start_new_session=True
-        )
-    procs.procs.append((label, proc))
-    return proc
+    return procs.start_module(
+        "tests.support.scripted_participant",
+        *("--connect", procs.net.endpoint, "--scenario", str(scenario), *args),
+        label=label,
+    )
+
+
+def fly_a_and_b(procs: NodeProcs, scenario: Path, *a_args: str) -> subprocess.Popen[bytes]:
+    """A physics and two scripted participants at 0.2 throttle: a (with ``a_args``) and b;
+    a's process."""
+    procs.start("physics", "--scenario", str(scenario), name="physics")
+    a = start_script(
+        procs, scenario, "--vehicle", "a", "--throttle", "0.2", *a_args, label="script-a"
+    )
+    start_script(procs, scenario, "--vehicle", "b", "--throttle", "0.2", label="script-b")
+    return a
 
 
 class Watch:
