@@ -13,7 +13,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 
 import zenoh
 
-from swarmbus.codec import MessageError, decode, encode
+from swarmbus.codec import decode_or_none, encode
 from swarmbus.keys import Keys, autopilot_node
 from swarmbus.messages import (
     ActuatorBatch,
@@ -52,10 +52,10 @@ def answer_ticks(
     pub = session.declare_publisher(keys.autopilot_actuators(node_name))
 
     def on_tick(sample: zenoh.Sample) -> None:
-        try:
-            tick = decode(sample.payload.to_bytes(), TickView).tick
-        except MessageError:
+        decoded = decode_or_none(sample.payload.to_bytes(), TickView, "a tick", log)
+        if decoded is None:
             return
+        tick = decoded.tick
         commands = [
             ActuatorCommand(vehicle_id=v, tick=tick, rotor_commands=list(u))
             for v, u in rotors.items()
@@ -112,9 +112,8 @@ class _Barrier:
         self.expected = vehicles
 
     def on_batch(self, sample: zenoh.Sample) -> None:
-        try:
-            view = decode(sample.payload.to_bytes(), BatchView)
-        except MessageError:
+        view = decode_or_none(sample.payload.to_bytes(), BatchView, "an actuator batch", log)
+        if view is None:
             return
         with self.cond:
             if view.tick == self.tick:
@@ -123,10 +122,10 @@ class _Barrier:
                     self.cond.notify()
 
     def on_sample(self, sample: zenoh.Sample) -> None:
-        try:
-            tick = decode(sample.payload.to_bytes(), FieldSample).tick
-        except MessageError:
+        decoded = decode_or_none(sample.payload.to_bytes(), FieldSample, "a plume sample", log)
+        if decoded is None:
             return
+        tick = decoded.tick
         with self.cond:
             if tick == self.tick and self.expected > self.vehicles:
                 self.answered += 1
@@ -287,9 +286,8 @@ def plume_main(ctx: NodeContext) -> int:
         pub = rt.session.declare_publisher(keys.plume_sample())
 
         def on_tick(sample: zenoh.Sample) -> None:
-            try:
-                view = decode(sample.payload.to_bytes(), TickView)
-            except MessageError:
+            view = decode_or_none(sample.payload.to_bytes(), TickView, "a tick", log)
+            if view is None:
                 return
             answer = FieldSample(tick=view.tick, sim_time_s=view.sim_time_s, values_g_m3=values)
             pub.put(encode(answer))

@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import logging
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
 import zenoh
 
-from swarmbus.codec import MessageError, decode
+from swarmbus.codec import decode_or_none
 from swarmbus.keys import KeyNameError, Keys
 from swarmbus.messages import (
     Clock,
@@ -104,13 +105,18 @@ class BusView:
         self.presence = Presence(session, keys, on_change=self._on_presence)
         self._subs = [
             session.declare_subscriber(keys.clock(), self._on_clock),
-            session.declare_subscriber(keys.all_node_health(), self._on_health),
-            session.declare_subscriber(keys.all_vehicle_states(), self._vehicle_cb("state")),
-            session.declare_subscriber(keys.all_vehicle_status(), self._vehicle_cb("status")),
             session.declare_subscriber(
-                keys.all_vehicle_concentration(), self._vehicle_cb("reading")
+                keys.all_node_health(), self._newest_by_name(keys.node_name_of, self._health)
             ),
         ]
+        for kind, key in (
+            ("state", keys.all_vehicle_states()),
+            ("status", keys.all_vehicle_status()),
+            ("reading", keys.all_vehicle_concentration()),
+        ):
+            table = self._per_vehicle[kind]
+            handle = self._newest_by_name(keys.vehicle_id_of, table)
+            self._subs.append(session.declare_subscriber(key, handle))
 
     # -- callbacks (Zenoh's threads): store, never decode --------------------
     def _notify(self) -> None:
@@ -125,25 +131,19 @@ class BusView:
             self._clock = sample.payload.to_bytes()
             self._notify()
 
-    def _on_health(self, sample: zenoh.Sample) -> None:
-        try:
-            name = self.keys.node_name_of(str(sample.key_expr))
-        except KeyNameError:
-            return
-        with self._lock:
-            self._health[name] = sample.payload.to_bytes()
-            self._notify()
-
-    def _vehicle_cb(self, kind: str) -> Any:
-        table = self._per_vehicle[kind]
+    def _newest_by_name(
+        self, name_of: Callable[[str], str], table: dict[str, bytes]
+    ) -> Callable[[zenoh.Sample], None]:
+        """A callback keeping in ``table`` the newest payload of each name ``name_of`` reads
+        from a sample's key (a key it cannot read is ignored)."""
 
         def handle(sample: zenoh.Sample) -> None:
             try:
-                vid = self.keys.vehicle_id_of(str(sample.key_expr))
+                name = name_of(str(sample.key_expr))
             except KeyNameError:
                 return
             with self._lock:
-                table[vid] = sample.payload.to_bytes()
+                table[name] = sample.payload.to_bytes()
                 self._notify()
 
         return handle
@@ -151,13 +151,7 @@ class BusView:
     # -- queries -------------------------------------------------------------
     @staticmethod
     def _decode(data: bytes | None, type_: type[M], what: str) -> M | None:
-        if data is None:
-            return None
-        try:
-            return decode(data, type_)
-        except MessageError as exc:
-            log.warning("ignoring %s: %s", what, exc)
-            return None
+        return None if data is None else decode_or_none(data, type_, what, log)
 
     def snapshot(self) -> Snapshot:
         with self._lock:

@@ -7,7 +7,7 @@ import logging
 import msgspec
 
 from swarmbus.node import NodeContext, NodeRuntime
-from swarmbus.options import OptionError, RoleOptions, role_options
+from swarmbus.options import RoleOptions, role_main
 
 log = logging.getLogger(__name__)
 
@@ -16,13 +16,10 @@ class RouterOptions(RoleOptions, frozen=True, kw_only=True):
     """The router takes no options (its endpoints are ``--listen``): any ``--set`` is refused."""
 
 
-def main(ctx: NodeContext) -> int:
+@role_main(RouterOptions, "router")
+def main(ctx: NodeContext, options: RouterOptions) -> int:
     """Run a router on ``ctx.network.listen`` (default: the scenario's first connect endpoint)."""
-    try:
-        role_options(RouterOptions, ctx)
-    except OptionError as exc:
-        log.error("router: %s", exc)
-        return 2
+    del options  # none are declared: an unknown one is refused
     net = ctx.network
     listen = [e for e in net.listen if not e.endswith(":0")] or list(net.connect)
     router_net = msgspec.structs.replace(net, mode="router", listen=listen, connect=[])

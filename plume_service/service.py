@@ -25,7 +25,7 @@ from plume_service.gaussian import GaussianPlume
 from plume_service.mesh import isosurface
 from plume_service.puff import PuffPlume
 from plume_service.timestepped import TimeSteppedField
-from swarmbus.codec import MessageError, decode, encode
+from swarmbus.codec import decode_or_none, encode
 from swarmbus.keys import Keys
 from swarmbus.messages import (
     Clock,
@@ -41,7 +41,7 @@ from swarmbus.messages import (
     Vec3,
 )
 from swarmbus.node import NodeContext, NodeRuntime
-from swarmbus.options import OptionError, RoleOptions, role_options
+from swarmbus.options import RoleOptions, role_main
 from swarmbus.reqrep import Incoming, serve, serve_later
 from swarmbus.scenario import Scenario
 from swarmbus.session import SINGLE_THREAD_RUNTIME
@@ -266,10 +266,8 @@ class SensorAnswers:
         self._lock = threading.Lock()
 
     def on_tick(self, data: bytes) -> None:
-        try:
-            view = decode(data, TickView)
-        except MessageError as exc:
-            log.warning("plume: ignoring a sensor tick: %s", exc)
+        view = decode_or_none(data, TickView, "a sensor tick", log)
+        if view is None:
             return
         with self._lock:
             last = self._last
@@ -334,10 +332,8 @@ def _start_state_publisher(
     publisher = rt.session.declare_publisher(rt.keys.plume_state())
 
     def on_clock(sample: zenoh.Sample) -> None:
-        try:
-            clock = decode(sample.payload.to_bytes(), Clock)
-        except MessageError as exc:
-            log.warning("plume: bad clock message: %s", exc)
+        clock = decode_or_none(sample.payload.to_bytes(), Clock, "a clock message", log)
+        if clock is None:
             return
         states.on_clock(clock.sim_time_s)
 
@@ -353,13 +349,10 @@ def _start_state_publisher(
     return subscriber, state_thread
 
 
-def main(ctx: NodeContext) -> int:
+@role_main(PlumeOptions, "plume")
+def main(ctx: NodeContext, options: PlumeOptions) -> int:
     """Serve the scenario's plume until stopped."""
-    try:
-        role_options(PlumeOptions, ctx)
-    except OptionError as exc:
-        log.error("plume: %s", exc)
-        return 2
+    del options  # none are declared: an unknown one is refused
     service = PlumeService(field_from_scenario(ctx.scenario), ctx.scenario)
     states = StatePublisher(service.field, ctx.scenario.plume.state_period_s)
     # One Zenoh thread: a sensor tick is received, sampled and answered with no hand-over

@@ -41,8 +41,8 @@ FloatArray = npt.NDArray[np.float64]
 
 
 @dataclass
-class Track:
-    """Ground truth of one vehicle, in time order (sim time)."""
+class _Columns:
+    """One vehicle's time series, a column of equal length per field, in time order."""
 
     columns: dict[str, FloatArray]
 
@@ -55,17 +55,13 @@ class Track:
 
 
 @dataclass
-class Readings:
+class Track(_Columns):
+    """Ground truth of one vehicle, in time order (sim time)."""
+
+
+@dataclass
+class Readings(_Columns):
     """Sensor readings of one vehicle; unavailable values are NaN."""
-
-    columns: dict[str, FloatArray]
-
-    @property
-    def t(self) -> FloatArray:
-        return self.columns["sim_time_s"]
-
-    def __len__(self) -> int:
-        return len(self.t)
 
 
 @dataclass

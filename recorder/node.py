@@ -42,7 +42,7 @@ from swarmbus.codec import encode
 from swarmbus.keys import Keys
 from swarmbus.messages import NodeHealth, PlumeInfo, PlumeInfoQuery, SimTick, VehicleState
 from swarmbus.node import NodeContext, NodeRuntime, package_version
-from swarmbus.options import OptionError, RoleOptions, role_options
+from swarmbus.options import RoleOptions, role_main
 from swarmbus.reqrep import RequestError, request
 from swarmbus.scenario import Scenario
 from swarmbus.view_feed import fetch_mesh, isosurface_queries
@@ -507,13 +507,9 @@ GAP_TICK_WAIT_S = 10.0  # wall: a lockstep that does not tick (paused, gone) get
 GAP_SCAN_TIMEOUT_S = 60.0
 
 
-def main(ctx: NodeContext) -> int:
+@role_main(RecorderOptions, "recorder")
+def main(ctx: NodeContext, opts: RecorderOptions) -> int:
     """Record until SIGINT/SIGTERM; returns the process exit code."""
-    try:
-        opts = role_options(RecorderOptions, ctx)
-    except OptionError as exc:
-        log.error("recorder: %s", exc)
-        return 2
     sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)  # this process is the recorder alone
     metadata = {
         "world": ctx.scenario.world.name,

@@ -35,7 +35,7 @@ import zenoh
 
 from ros2_bridge import convert as cv
 from ros2_bridge import wire
-from swarmbus.codec import MessageError, decode
+from swarmbus.codec import decode_or_none
 from swarmbus.keys import Keys
 from swarmbus.messages import (
     AnemometerReading,
@@ -156,14 +156,6 @@ class Latest:
 
     def close(self) -> None:
         self.want(False)
-
-
-def _decoded(raw: bytes, type_: type[Any], what: str) -> Any:
-    try:
-        return decode(raw, type_)
-    except MessageError as exc:
-        log.warning("ros2: ignoring %s: %s", what, exc)
-        return None
 
 
 class SetpointSender:
@@ -324,7 +316,7 @@ class Bridge:
         raw = self.ticks.take().get(self.rt.keys.tick())
         if raw is None:
             return
-        tick = _decoded(raw, SimTick, "tick")
+        tick = decode_or_none(raw, SimTick, "tick", log)
         if tick is None:
             return
         with self._states_lock:
@@ -344,11 +336,11 @@ class Bridge:
 
     def publish_readings(self) -> None:
         for key, raw in self.readings.take().items():
-            r = _decoded(raw, ConcentrationReading, key)
+            r = decode_or_none(raw, ConcentrationReading, key, log)
             if r is not None and r.vehicle_id in self.vehicle_ids:
                 self._put(f"/{r.vehicle_id}/gas", partial(cv.gas, r))
         for key, raw in self.winds.take().items():
-            w = _decoded(raw, AnemometerReading, key)
+            w = decode_or_none(raw, AnemometerReading, key, log)
             if w is not None and w.vehicle_id in self.vehicle_ids:
                 self._put(f"/{w.vehicle_id}/wind", partial(cv.wind, w))
 
@@ -357,7 +349,7 @@ class Bridge:
         if not pub.wanted:
             return
         raw_clock = self.clock.take().get(self.rt.keys.clock())
-        clock = None if raw_clock is None else _decoded(raw_clock, Clock, "clock")
+        clock = None if raw_clock is None else decode_or_none(raw_clock, Clock, "clock", log)
         if clock is not None:
             self._sim_time_s = max(self._sim_time_s, clock.sim_time_s)
         if self._meshes is None:  # asked once somebody wants the markers
@@ -366,7 +358,9 @@ class Bridge:
         self._mesh_list.update(self._meshes.take())
         raw = self.plume_state.take().get(self.rt.keys.plume_state())
         if raw is not None:
-            self._newest_state = _decoded(raw, PlumeState, "plume state") or self._newest_state
+            self._newest_state = (
+                decode_or_none(raw, PlumeState, "plume state", log) or self._newest_state
+            )
         meshes = [self._mesh_list[i] for i in sorted(self._mesh_list)]
         msg = cv.markers(self.scenario, self._sim_time_s, meshes, self._newest_state)
         pub.publish(msg)

@@ -19,7 +19,7 @@ from sim_world.intake import ActuatorIntake
 from sim_world.lockstep import Lockstep, participant_of
 from sim_world.plume_part import PLUME, PlumeParticipation, decode_answer, is_plume
 from sim_world.stepping import SteppedClock, StepRefused
-from swarmbus.codec import MessageError, decode
+from swarmbus.codec import decode_or_none
 from swarmbus.keys import Keys, autopilot_node
 from swarmbus.messages import RestartNotice, StepRequest
 from swarmbus.reqrep import Incoming, serve_later
@@ -184,10 +184,9 @@ class LockstepInputs:
 
     def _on_restart_notice(self, sample: zenoh.Sample) -> None:
         """The launcher's word on a process that ended: hold or drop its vehicles."""
-        try:
-            notice = decode(sample.payload.to_bytes(), RestartNotice)
-        except MessageError as exc:
-            log.warning("ignoring restart notice on %s: %s", sample.key_expr, exc)
+        what = f"restart notice on {sample.key_expr}"
+        notice = decode_or_none(sample.payload.to_bytes(), RestartNotice, what, log)
+        if notice is None:
             return
         holds = self.holds
         if notice.role == RECORDER and holds.enabled:

@@ -36,7 +36,7 @@ from swarmbus.messages import (
     VehicleState,
 )
 from swarmbus.node import NodeContext, NodeRuntime
-from swarmbus.options import OptionError, RoleOptions, role_options
+from swarmbus.options import RoleOptions, role_main
 from swarmbus.scenario import Scenario
 
 log = logging.getLogger(__name__)
@@ -371,13 +371,9 @@ class PhysicsNode:
             self.rt.publish_health(sim_time_s=sim_time_s, detail=detail)
 
 
-def main(ctx: NodeContext) -> int:
+@role_main(PhysicsOptions, "physics")
+def main(ctx: NodeContext, options: PhysicsOptions) -> int:
     """Entry point of the ``physics`` role."""
-    try:
-        options = role_options(PhysicsOptions, ctx)
-    except OptionError as exc:
-        log.error("physics: %s", exc)
-        return 2
     with World(ctx.scenario) as world, NodeRuntime(ctx, role="physics") as rt:
         node = PhysicsNode(rt, world, options)
         try:

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import logging
 
-from swarmbus.codec import MessageError, decode
+from swarmbus.codec import decode_or_none
 from swarmbus.messages import FieldSample, PlumeSample
 
 log = logging.getLogger(__name__)
@@ -22,11 +22,7 @@ def is_plume(node_name: str) -> bool:
 
 def decode_answer(data: bytes, key: object) -> FieldSample | None:
     """A ``FieldSample`` from ``field/sample``, or None (logged) if it does not decode."""
-    try:
-        return decode(data, FieldSample)
-    except MessageError as exc:
-        log.warning("ignoring plume sample on %s: %s", key, exc)
-        return None
+    return decode_or_none(data, FieldSample, f"plume sample on {key}", log)
 
 
 class PlumeParticipation:

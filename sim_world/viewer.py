@@ -36,17 +36,15 @@ import msgspec
 import numpy as np
 from meshcat.servers.zmqserver import ZMQWebSocketBridge
 
-from swarmbus.codec import MessageError, decode
 from swarmbus.messages import (
     ConcentrationReading,
     PlumeMesh,
     PlumeMeshQuery,
     PlumeState,
-    SimTick,
     VehicleState,
 )
 from swarmbus.node import NodeContext, NodeRuntime
-from swarmbus.options import OptionError, RoleOptions, role_options
+from swarmbus.options import RoleOptions, role_main
 from swarmbus.scenario import Scenario
 from swarmbus.session import free_tcp_port
 from swarmbus.vehicle_types import load_vehicle_type
@@ -360,37 +358,22 @@ def mesh_queries(scenario: Scenario, opts: ViewerOptions) -> list[PlumeMeshQuery
 
 def render(scene: Scene, feed: Feed, meshes: MeshFetcher) -> int:
     """Draw what is new; the number of plume levels that arrived."""
-    tick_raw, readings_raw = feed.take()
-    if tick_raw is not None:
-        try:
-            tick = decode(tick_raw, SimTick)
-            scene.update_states(tick.states, tick.sim_time_s)
-            scene.drawn_tick = tick.tick
-        except MessageError as exc:
-            log.warning("ignoring tick: %s", exc)
-    for vid, raw in readings_raw.items():
-        try:
-            scene.update_reading(decode(raw, ConcentrationReading))
-        except MessageError as exc:
-            log.warning("ignoring reading of %s: %s", vid, exc)
-    state_raw = feed.take_plume_state()
-    if state_raw is not None:
-        try:
-            scene.set_plume_state(decode(state_raw, PlumeState))
-        except MessageError as exc:
-            log.warning("ignoring plume state: %s", exc)
+    fresh = feed.take_decoded()
+    if fresh.tick is not None:
+        scene.update_states(fresh.tick.states, fresh.tick.sim_time_s)
+        scene.drawn_tick = fresh.tick.tick
+    for reading in fresh.readings:
+        scene.update_reading(reading)
+    if fresh.plume_state is not None:
+        scene.set_plume_state(fresh.plume_state)
     new_meshes = meshes.take()
     for index, mesh in new_meshes.items():
         scene.set_plume(index, mesh)
     return len(new_meshes)
 
 
-def main(ctx: NodeContext) -> int:
-    try:
-        opts = role_options(ViewerOptions, ctx)
-    except OptionError as exc:
-        log.error("viewer: %s", exc)
-        return 2
+@role_main(ViewerOptions, "viewer")
+def main(ctx: NodeContext, opts: ViewerOptions) -> int:
     with NodeRuntime(ctx, role="viewer") as rt, MeshcatServer(http_port=opts.http_port) as srv:
         vis = meshcat.Visualizer(zmq_url=srv.zmq_url)
         scene = Scene(vis, ctx.scenario, opts)
@@ -404,11 +387,9 @@ def main(ctx: NodeContext) -> int:
         answered = 0
         rt.publish_health(detail=f"url={srv.web_url} plume=0/{levels}")
         rt.ready()
-        period = 1.0 / opts.rate_hz
         next_health = time.monotonic() + HEALTH_PERIOD_S
         try:
-            while not rt.stop.is_set():
-                t0 = time.monotonic()
+            for t0 in rt.paced(opts.rate_hz):
                 arrived = render(scene, feed, meshes)
                 answered += arrived
                 if arrived or t0 >= next_health:
@@ -418,7 +399,6 @@ def main(ctx: NodeContext) -> int:
                         detail=f"url={srv.web_url} plume={answered}/{levels} "
                         f"tick={'-' if scene.drawn_tick is None else scene.drawn_tick}"
                     )
-                rt.stop.wait(max(0.0, period - (time.monotonic() - t0)))
         finally:
             feed.close()
             meshes.close()

@@ -6,6 +6,7 @@ and msgspec validates while it decodes (types, bounds, schema tag) in one pass.
 
 from __future__ import annotations
 
+import logging
 import re
 from functools import cache
 from typing import Any, TypeVar
@@ -66,3 +67,15 @@ def decode(data: bytes | bytearray | memoryview, type_: type[T]) -> T:
         raise MessageError(_type_name(type_), "", f"malformed payload: {exc}") from None
     except (TypeError, ValueError) as exc:  # __post_init__ checks
         raise MessageError(_type_name(type_), "", str(exc)) from None
+
+
+def decode_or_none(
+    data: bytes | bytearray | memoryview, type_: type[T], what: object, log: logging.Logger
+) -> T | None:
+    """``data`` decoded as ``type_``, or None after one warning on ``log``, ``ignoring <what>:
+    <why>``: how a process drops a message that does not decode and goes on."""
+    try:
+        return decode(data, type_)
+    except MessageError as exc:
+        log.warning("ignoring %s: %s", what, exc)
+        return None

@@ -76,9 +76,16 @@ class Keys:
         """``StepRequest`` → ``StepReply``: the stepped clock's grants."""
         return f"{self.prefix}/clock/step"
 
+    # -- one name's keys and every name's: ``<plane>/<name>/<leaf>``, ``<plane>/*/<leaf>`` ----
+    def _named(self, plane: str, kind: str, name: str, leaf: str) -> str:
+        return f"{self.prefix}/{plane}/{check_name(kind, name)}/{leaf}"
+
+    def _every(self, plane: str, leaf: str) -> str:
+        return f"{self.prefix}/{plane}/*/{leaf}"
+
     # -- vehicle data plane ----------------------------------------------------
     def _vehicle(self, vehicle_id: str, leaf: str) -> str:
-        return f"{self.prefix}/vehicle/{check_name('vehicle', vehicle_id)}/{leaf}"
+        return self._named("vehicle", "vehicle", vehicle_id, leaf)
 
     def vehicle_state(self, vehicle_id: str) -> str:
         return self._vehicle(vehicle_id, "state")
@@ -93,21 +100,21 @@ class Keys:
         return self._vehicle(vehicle_id, "cmd")
 
     def all_vehicle_states(self) -> str:
-        return f"{self.prefix}/vehicle/*/state"
+        return self._every("vehicle", "state")
 
     def all_vehicle_status(self) -> str:
-        return f"{self.prefix}/vehicle/*/status"
+        return self._every("vehicle", "status")
 
     def all_vehicle_concentration(self) -> str:
-        return f"{self.prefix}/vehicle/*/concentration"
+        return self._every("vehicle", "concentration")
 
     # -- autopilot process data plane ------------------------------------------
     def autopilot_actuators(self, node_name: str) -> str:
         """One autopilot process's ``ActuatorBatch`` (see the module doc)."""
-        return f"{self.prefix}/autopilot/{check_name('node', node_name)}/actuators"
+        return self._named("autopilot", "node", node_name, "actuators")
 
     def all_autopilot_actuators(self) -> str:
-        return f"{self.prefix}/autopilot/*/actuators"
+        return self._every("autopilot", "actuators")
 
     # -- plume control plane ---------------------------------------------------
     def plume_concentration(self) -> str:
@@ -132,54 +139,45 @@ class Keys:
         return self._vehicle(vehicle_id, "wind")
 
     def all_vehicle_wind(self) -> str:
-        return f"{self.prefix}/vehicle/*/wind"
+        return self._every("vehicle", "wind")
 
     # -- presence plane --------------------------------------------------------
     def node_health(self, node_name: str) -> str:
-        return f"{self.prefix}/node/{check_name('node', node_name)}/health"
+        return self._named("node", "node", node_name, "health")
 
     def all_node_health(self) -> str:
-        return f"{self.prefix}/node/*/health"
+        return self._every("node", "health")
 
     def node_restart(self, node_name: str) -> str:
         """The launcher's :class:`~swarmbus.messages.RestartNotice` about ``node_name``."""
-        return f"{self.prefix}/node/{check_name('node', node_name)}/restart"
+        return self._named("node", "node", node_name, "restart")
 
     def all_node_restart(self) -> str:
-        return f"{self.prefix}/node/*/restart"
+        return self._every("node", "restart")
 
     # -- parsing ---------------------------------------------------------------
     def vehicle_id_of(self, key: str) -> str:
         """The vehicle id in a ``vehicle/<id>/...`` key of this world."""
-        parts = str(key).split("/")
-        head = self.prefix.split("/")
-        if (
-            parts[: len(head)] != head
-            or len(parts) < len(head) + 3
-            or parts[len(head)] != "vehicle"
-        ):
-            raise KeyNameError(f"{key!r} is not a vehicle key of world {self.world!r}")
-        return parts[len(head) + 1]
+        return self._name_in(key, "vehicle", "a vehicle")
 
     def node_name_of(self, key: str) -> str:
         """The node name in a ``node/<name>/health`` key of this world."""
-        parts = str(key).split("/")
-        head = self.prefix.split("/")
-        if parts[: len(head)] != head or len(parts) < len(head) + 3 or parts[len(head)] != "node":
-            raise KeyNameError(f"{key!r} is not a node key of world {self.world!r}")
-        return parts[len(head) + 1]
+        return self._name_in(key, "node", "a node")
 
     def autopilot_node_of(self, key: str) -> str:
         """The node name in an ``autopilot/<node>/actuators`` key of this world."""
+        return self._name_in(key, "autopilot", "an autopilot", exact=True)
+
+    def _name_in(self, key: str, plane: str, what: str, exact: bool = False) -> str:
+        """The ``<name>`` of a ``<plane>/<name>/<leaf>...`` key of this world (``exact``: one
+        leaf, no more), else :class:`KeyNameError` saying the key is not ``what`` key."""
         parts = str(key).split("/")
         head = self.prefix.split("/")
-        if (
-            parts[: len(head)] != head
-            or len(parts) != len(head) + 3
-            or parts[len(head)] != "autopilot"
-        ):
-            raise KeyNameError(f"{key!r} is not an autopilot key of world {self.world!r}")
-        return parts[len(head) + 1]
+        n = len(head)
+        sized = len(parts) == n + 3 if exact else len(parts) >= n + 3
+        if parts[:n] != head or not sized or parts[n] != plane:
+            raise KeyNameError(f"{key!r} is not {what} key of world {self.world!r}")
+        return parts[n + 1]
 
     def relative(self, key: str) -> str:
         """``key`` without the ``plumeswarm/<world>/`` prefix (for channel names)."""

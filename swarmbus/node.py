@@ -3,8 +3,9 @@
 A role's entry point is ``main(ctx: NodeContext) -> int``. It opens a :class:`NodeRuntime`
 (``with NodeRuntime(ctx, role="physics") as rt:``), which opens the Zenoh session, publishes
 its :class:`~swarmbus.messages.NodeHealth` (up → ready → stopping) and turns SIGINT/SIGTERM
-into ``rt.stop`` being set, so the role's loop ends cleanly. ``rt.ready()`` declares the node's
-liveliness token once the role serves.
+into ``rt.stop`` being set, so the role's loop ends cleanly (``for t0 in rt.paced(rate_hz):``
+runs one at a fixed rate until then). ``rt.ready()`` declares the node's liveliness token once
+the role serves.
 """
 
 from __future__ import annotations
@@ -13,6 +14,8 @@ import functools
 import logging
 import signal
 import threading
+import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from importlib.metadata import PackageNotFoundError, version
 from types import FrameType, TracebackType
@@ -139,6 +142,15 @@ class NodeRuntime:
                 )
             )
         )
+
+    def paced(self, rate_hz: float) -> Iterator[float]:
+        """A role's loop at ``rate_hz`` until stopped: yields each round's start (monotonic
+        seconds); the next round starts a period after this one began, at once if it ran late."""
+        period = 1.0 / rate_hz
+        while not self.stop.is_set():
+            t0 = time.monotonic()
+            yield t0
+            self.stop.wait(max(0.0, period - (time.monotonic() - t0)))
 
     def ready(self) -> None:
         """Declare the liveliness token: the node is alive and serving from here on.

@@ -3,12 +3,16 @@
 A role declares its options as one :class:`RoleOptions` struct: names, types, defaults, and
 ranges as ``msgspec.Meta`` constraints, each field documented where it is declared (a role whose
 defaults come from the scenario overrides :meth:`RoleOptions.defaults`). Its ``main`` reads them
-with :func:`role_options`, which raises :class:`OptionError` naming the option and the bad value::
+with :func:`role_options`, which raises :class:`OptionError` naming the option and the bad value,
+or is made by :func:`role_main`, which reads them and hands them to the role's code::
 
     class ViewerOptions(RoleOptions, frozen=True, kw_only=True):
         rate_hz: Annotated[float, msgspec.Meta(gt=0.0, le=25.0)] = 25.0
 
     opts = role_options(ViewerOptions, ctx)  # ctx.options == {"rate_hz": "10"}
+
+    @role_main(ViewerOptions, "viewer")  # a bad option: logged in one line, exit code 2
+    def main(ctx: NodeContext, opts: ViewerOptions) -> int: ...
 
 Values are read as msgspec reads text in lax mode (``"1.5"`` a float, ``"3"`` an int); a
 ``bool`` also takes on/off and yes/no; a tuple or list takes comma-separated items; a ``dict``
@@ -18,7 +22,8 @@ list of the known ones.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+import logging
+from collections.abc import Callable, Iterable, Mapping
 from typing import TYPE_CHECKING, Any, Self, TypeVar
 
 import msgspec
@@ -27,6 +32,8 @@ from msgspec import inspect as mi
 if TYPE_CHECKING:  # the node runtime opens Zenoh; a role's options need not
     from swarmbus.node import NodeContext
     from swarmbus.scenario import Scenario
+
+log = logging.getLogger(__name__)
 
 _TRUE = ("true", "on", "yes", "1")
 _FALSE = ("false", "off", "no", "0")
@@ -54,6 +61,28 @@ def role_options(spec: type[T], ctx: NodeContext) -> T:
     """A role's options: ``ctx.options`` over ``spec.defaults(ctx.scenario)``, or
     :class:`OptionError`."""
     return parse_options(spec, ctx.options, spec.defaults(ctx.scenario))
+
+
+def role_main(
+    spec: type[T], role: str
+) -> Callable[[Callable[[NodeContext, T], int]], Callable[[NodeContext], int]]:
+    """A role's entry point ``main(ctx)`` made of ``run(ctx, options)``: the options read with
+    :func:`role_options`; a bad one is logged as ``<role>: <what is wrong>`` and the exit code
+    is 2, before the role joins the bus."""
+
+    def wrap(run: Callable[[NodeContext, T], int]) -> Callable[[NodeContext], int]:
+        def main(ctx: NodeContext) -> int:
+            try:
+                options = role_options(spec, ctx)
+            except OptionError as exc:
+                log.error("%s: %s", role, exc)
+                return 2
+            return run(ctx, options)
+
+        main.__doc__ = run.__doc__
+        return main
+
+    return wrap
 
 
 def split_settings(items: Iterable[str]) -> dict[str, str]:

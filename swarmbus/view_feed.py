@@ -10,13 +10,15 @@ import logging
 import math
 import threading
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 import zenoh
 
+from swarmbus.codec import decode_or_none
 from swarmbus.keys import KeyNameError, Keys
-from swarmbus.messages import PlumeMesh, PlumeMeshQuery, PlumeState
+from swarmbus.messages import ConcentrationReading, PlumeMesh, PlumeMeshQuery, PlumeState, SimTick
 from swarmbus.reqrep import NoReply, RequestError, ask
 from swarmbus.scenario import Scenario
 
@@ -132,9 +134,34 @@ class Feed:
             readings, self._readings = self._readings, {}
         return tick, readings
 
+    def take_decoded(self) -> Fresh:
+        """:meth:`take`, then :meth:`take_plume_state`, decoded; a payload that does not decode
+        is logged and left out."""
+        tick_raw, readings_raw = self.take()
+        tick = None if tick_raw is None else decode_or_none(tick_raw, SimTick, "tick", log)
+        read = [
+            decode_or_none(raw, ConcentrationReading, f"reading of {vid}", log)
+            for vid, raw in readings_raw.items()
+        ]
+        state_raw = self.take_plume_state()
+        state = (
+            None if state_raw is None else decode_or_none(state_raw, PlumeState, "plume state", log)
+        )
+        return Fresh(tick, [r for r in read if r is not None], state)
+
     def close(self) -> None:
         for sub in self._subs:
             sub.undeclare()
+
+
+@dataclass(frozen=True)
+class Fresh:
+    """What a view has not drawn yet: the newest tick, the newest reading of each vehicle that
+    sent one, the newest plume state (each None or empty when nothing new came)."""
+
+    tick: SimTick | None
+    readings: list[ConcentrationReading]
+    plume_state: PlumeState | None
 
 
 def fetch_mesh(

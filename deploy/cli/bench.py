@@ -7,15 +7,17 @@ import logging
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import click
 
 from deploy.cli.common import (
     SCENARIO_OPT,
     SET_OPT,
+    Decorator,
     comma_list,
     fail,
+    out_dir_option,
     scenario_from,
     vehicles_per_process_option,
 )
@@ -35,8 +37,17 @@ def _bench_dir(out: Path | None, bench_name: str) -> Path:
     return out or Path("runs") / time.strftime(f"bench-{bench_name}-%Y%m%d-%H%M%S")
 
 
-def _exit_by_rows(rows: list[dict[str, object]]) -> None:
-    """Exit status 1 when a row holds an error, else 0."""
+def _run_rows(
+    run: Callable[[Any, Callable[[str], None]], list[dict[str, object]]],
+    opts: object,
+    refused: type[Exception],
+) -> NoReturn:
+    """Run a bench of rows, echoing its progress: ``refused`` (bad options) is one line and exit
+    status 2; else exit status 1 when a row holds an error, 0 when none does."""
+    try:
+        rows = run(opts, click.echo)
+    except refused as exc:
+        fail(str(exc))
     sys.exit(1 if any("error" in r for r in rows) else 0)
 
 
@@ -76,7 +87,7 @@ def _int_list(ctx: click.Context, param: click.Parameter, value: str) -> tuple[i
     help="Also run the ROS 2 bridge: with no ROS 2 subscriber (idle) or with one subscribed to "
     "every topic it publishes (subscribed).",
 )
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=None)
+@out_dir_option()
 @SET_OPT
 def bench_scale(
     scenario: str | None,
@@ -106,11 +117,7 @@ def bench_scale(
         baseline=baseline,
         ros2=ros2,
     )
-    try:
-        rows = run_scale(opts, click.echo)
-    except ScaleError as exc:
-        fail(str(exc))
-    _exit_by_rows(rows)
+    _run_rows(run_scale, opts, ScaleError)
 
 
 @bench.command("envs")
@@ -136,12 +143,7 @@ def bench_scale(
     help="Control ticks per environment step.",
 )  # fmt: skip
 @vehicles_per_process_option("Bus backend: autopilot processes serve this many vehicles each.")
-@click.option(
-    "--out",
-    type=click.Path(file_okay=False, path_type=Path),
-    default=None,
-    help="Directory for envs.json (default: runs/bench-envs-<time>/).",
-)
+@out_dir_option("Directory for envs.json (default: runs/bench-envs-<time>/).")
 def bench_envs(
     scenario: str | None,
     vehicles: tuple[int, ...],
@@ -164,87 +166,41 @@ def bench_envs(
         ticks_per_step=ticks_per_step,
         vehicles_per_process=vehicles_per_process,
     )
-    try:
-        rows = run_env_bench(opts, click.echo)
-    except ValueError as exc:
-        fail(str(exc))
-    _exit_by_rows(rows)
+    _run_rows(run_env_bench, opts, ValueError)
 
 
 def _gsl_options(seed_default: int) -> Callable[[Callable[..., None]], Callable[..., None]]:
-    """The options ``bench gsl`` and ``bench gsl sweep`` share."""
-    options = [
+    """The options ``bench gsl`` and ``bench gsl sweep`` share: one row an option, each shown
+    with its default (``--out`` has none)."""
+    rows: list[tuple[str, Any, object, str | None]] = [
+        ("--algorithms", None, "all", "Comma-separated names, name=module:Class, or 'all'; "
+         "random_walk and oracle always run."),
+        ("--environments", None, "all", "Comma-separated names (deploy/scenarios/gsl) or "
+         "scenario paths, or 'all'."),
+        ("--sensors", None, "all", "Comma-separated, or 'all' available."),
+        ("--runs", click.IntRange(min=1), 30, None),
+        ("--seed", click.IntRange(min=0, max=2**31 - 1), seed_default,
+         "Published tables: 0; tuning: >= 1000."),
+        ("--time-limit", click.FloatRange(min=1.0), 300.0, "Seconds of simulated time per run."),
+        ("--dynamics", click.Choice(["kinematic", "full"]), "kinematic", "kinematic: point "
+         "masses following the setpoint; full: pybullet vehicles and autopilots."),
+        ("--control-hz", click.IntRange(min=1, max=1000), 20, "Behaviour rate with kinematic "
+         "dynamics (full uses the scenario's)."),
+        ("--sensor-period-ticks", click.IntRange(min=1), 2, "A reading every N control ticks "
+         "(kinematic; full: 10 Hz)."),
+        ("--jobs", click.IntRange(min=1), 2, "Worker processes."),
+    ]  # fmt: skip
+    options: list[Decorator] = [
         click.option(
-            "--algorithms",
-            default="all",
+            *([flag, "time_limit_s"] if flag == "--time-limit" else [flag]),
+            type=type_,
+            default=default,
             show_default=True,
-            help="Comma-separated names, name=module:Class, or 'all'; random_walk and oracle "
-            "always run.",
-        ),
-        click.option(
-            "--environments",
-            default="all",
-            show_default=True,
-            help="Comma-separated names (deploy/scenarios/gsl) or scenario paths, or 'all'.",
-        ),
-        click.option(
-            "--sensors",
-            default="all",
-            show_default=True,
-            help="Comma-separated, or 'all' available.",
-        ),
-        click.option("--runs", type=click.IntRange(min=1), default=30, show_default=True),
-        click.option(
-            "--seed",
-            type=click.IntRange(min=0, max=2**31 - 1),
-            default=seed_default,
-            show_default=True,
-            help="Published tables: 0; tuning: >= 1000.",
-        ),
-        click.option(
-            "--time-limit",
-            "time_limit_s",
-            type=click.FloatRange(min=1.0),
-            default=300.0,
-            show_default=True,
-            help="Seconds of simulated time per run.",
-        ),
-        click.option(
-            "--dynamics",
-            type=click.Choice(["kinematic", "full"]),
-            default="kinematic",
-            show_default=True,
-            help="kinematic: point masses following the setpoint; full: pybullet vehicles and "
-            "autopilots.",
-        ),
-        click.option(
-            "--control-hz",
-            type=click.IntRange(min=1, max=1000),
-            default=20,
-            show_default=True,
-            help="Behaviour rate with kinematic dynamics (full uses the scenario's).",
-        ),
-        click.option(
-            "--sensor-period-ticks",
-            type=click.IntRange(min=1),
-            default=2,
-            show_default=True,
-            help="A reading every N control ticks (kinematic; full: 10 Hz).",
-        ),
-        click.option(
-            "--jobs",
-            type=click.IntRange(min=1),
-            default=2,
-            show_default=True,
-            help="Worker processes.",
-        ),
-        click.option(
-            "--out",
-            type=click.Path(file_okay=False, path_type=Path),
-            default=None,
-            help="Output directory (default runs/bench-gsl-…).",
-        ),
+            help=help_text,
+        )
+        for flag, type_, default, help_text in rows
     ]
+    options.append(out_dir_option("Output directory (default runs/bench-gsl-…)."))
 
     def apply(f: Callable[..., None]) -> Callable[..., None]:
         for option in reversed(options):
@@ -360,12 +316,7 @@ def bench_gsl_sweep(params: tuple[str, ...], allow_test_seeds: bool, **kwargs: A
 @click.option("--r-dt", type=float, default=2.0, show_default=True, help="R·Δt, > 0.")
 @click.option("--episodes", type=int, default=1000, show_default=True)
 @click.option("--seed", type=int, default=0, show_default=True)
-@click.option(
-    "--out",
-    type=click.Path(file_okay=False, path_type=Path),
-    default=None,
-    help="Directory for pomdp.json (default runs/bench-pomdp-<time>/).",
-)
+@out_dir_option("Directory for pomdp.json (default runs/bench-pomdp-<time>/).")
 def bench_pomdp(
     dims: int,
     lambda_over_dx: float,
@@ -375,8 +326,6 @@ def bench_pomdp(
     out: Path | None,
 ) -> None:
     """Infotaxis on the source-tracking POMDP (Loisy & Eloy 2022), evaluated as OTTO does."""
-    import time
-
     from bench.pomdp import PomdpError, PomdpOptions, report_lines, run_pomdp, write_result
 
     try:
@@ -392,5 +341,4 @@ def bench_pomdp(
     result = run_pomdp(opts, progress)
     for line in report_lines(result):
         click.echo(line)
-    directory = out or Path("runs") / time.strftime("bench-pomdp-%Y%m%d-%H%M%S")
-    click.echo(f"wrote {write_result(directory, result)}")
+    click.echo(f"wrote {write_result(_bench_dir(out, 'pomdp'), result)}")

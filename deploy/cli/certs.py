@@ -6,6 +6,8 @@ from pathlib import Path
 
 import click
 
+from deploy.cli.common import out_dir_option
+
 # cryptography and the launcher load only when a certs command runs, not with every command.
 
 
@@ -16,12 +18,7 @@ def certs() -> None:
 
 @certs.command("generate")
 @click.option("--hosts", "hosts_file", required=True, type=click.Path(path_type=Path))
-@click.option(
-    "--out",
-    type=click.Path(file_okay=False, path_type=Path),
-    default=None,
-    help="Directory (default: the hosts file's [tls] certs).",
-)
+@out_dir_option("Directory (default: the hosts file's [tls] certs).")
 @click.option("--days", type=click.IntRange(1, 3650), default=365, show_default=True)
 def certs_generate(hosts_file: Path, out: Path | None, days: int) -> None:
     """A CA and one certificate per role and host (common name <role>.<host>)."""

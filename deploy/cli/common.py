@@ -68,6 +68,13 @@ def vehicles_per_process_option(help_text: str | None = None) -> Decorator:
     )
 
 
+def out_dir_option(help_text: str | None = None) -> Decorator:
+    """``--out DIR``, a directory (default None: the command names one)."""
+    return click.option(
+        "--out", type=click.Path(file_okay=False, path_type=Path), default=None, help=help_text
+    )
+
+
 SCENARIO_OPT = click.option(
     "--scenario",
     "-s",

@@ -4,13 +4,16 @@ from __future__ import annotations
 
 import logging
 import sys
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import click
 
 from deploy.cli.common import (
     SCENARIO_OPT,
     SET_OPT,
+    Decorator,
     comma_list,
     connect_option,
     fail,
@@ -216,35 +219,36 @@ def node(
 
 
 # ---------------------------------------------------------------------------- the rest
+def _optional_role(flag: tuple[str, str, str], value: tuple[str, click.IntRange, str]) -> Decorator:
+    """A role ``up`` adds on request: its flag (``--NAME``, to a boolean ``dest``) and the flag of
+    its one option (no default; giving it implies the role), each with its help."""
+    name, dest, flag_help = flag
+    value_flag, value_type, value_help = value
+
+    def apply(f: Callable[..., Any]) -> Callable[..., Any]:
+        f = click.option(value_flag, type=value_type, default=None, help=value_help)(f)
+        return click.option(name, dest, is_flag=True, help=flag_help)(f)
+
+    return apply
+
+
 @cli.command()
 @click.argument("scenario_arg", metavar="[SCENARIO]", required=False)
 @SCENARIO_OPT
 @click.option("--headless", is_flag=True, help="No viewer.")
 @click.option("--record", is_flag=True, help="Also run the recorder (MCAP in the run directory).")
-@click.option(
-    "--foxglove",
-    "foxglove_live",
-    is_flag=True,
-    help="Also serve the run live to Foxglove (WebSocket on 127.0.0.1).",
-)
-@click.option(
-    "--foxglove-port",
-    type=click.IntRange(0, 65535),
-    default=None,
-    help="Port of the live Foxglove server (implies --foxglove; default 8765, 0: any free).",
-)
-@click.option(
-    "--ros2",
-    "ros2_bridge",
-    is_flag=True,
-    help="Also run the ROS 2 bridge: the run as ROS 2 topics for rmw_zenoh (docs/ros2.md).",
-)
-@click.option(
-    "--ros2-domain",
-    type=click.IntRange(0, 232),
-    default=None,
-    help="ROS domain id of the bridge (implies --ros2; default: ROS_DOMAIN_ID, else 0).",
-)
+@_optional_role(
+    ("--foxglove", "foxglove_live", "Also serve the run live to Foxglove (WebSocket on "
+     "127.0.0.1)."),
+    ("--foxglove-port", click.IntRange(0, 65535), "Port of the live Foxglove server (implies "
+     "--foxglove; default 8765, 0: any free)."),
+)  # fmt: skip
+@_optional_role(
+    ("--ros2", "ros2_bridge", "Also run the ROS 2 bridge: the run as ROS 2 topics for rmw_zenoh "
+     "(docs/ros2.md)."),
+    ("--ros2-domain", click.IntRange(0, 232), "ROS domain id of the bridge (implies --ros2; "
+     "default: ROS_DOMAIN_ID, else 0)."),
+)  # fmt: skip
 @click.option("--out", type=click.Path(path_type=Path), default=None, help="Run directory.")
 @click.option("--connect", multiple=True, help="Router endpoint (default: the scenario's).")
 @click.option("--listen", multiple=True, help="Endpoint every node listens on.")

@@ -31,10 +31,8 @@ from recorder.foxglove.channels import (
 from recorder.foxglove.scene import (
     FoxgloveScene,
 )
-from swarmbus.codec import MessageError, decode
-from swarmbus.messages import ConcentrationReading, PlumeState, SimTick
 from swarmbus.node import NodeContext, NodeRuntime
-from swarmbus.options import OptionError, RoleOptions, role_options
+from swarmbus.options import RoleOptions, role_main
 from swarmbus.view_feed import Feed, MeshFetcher, isosurface_queries
 
 log = logging.getLogger(__name__)
@@ -77,42 +75,22 @@ class LiveChannels:
         self.sent += 1
 
 
-def _decoded(raw: bytes, type_: type[T], what: str) -> T | None:
-    try:
-        return decode(raw, type_)
-    except MessageError as exc:
-        log.warning("ignoring %s: %s", what, exc)
-        return None
-
-
 def convert(scene: FoxgloveScene, feed: Feed, meshes: MeshFetcher, channels: LiveChannels) -> int:
     """Feed what is new to ``scene`` and send what it makes; the newest tick, or -1."""
     now = time.time_ns()
     for mesh in meshes.take().values():
         for out in scene.feed(mesh, now):
             channels.log(out)
-    tick_raw, readings_raw = feed.take()
-    tick = None if tick_raw is None else _decoded(tick_raw, SimTick, "tick")
-    messages: list[object | None] = [tick]
-    messages += [
-        _decoded(raw, ConcentrationReading, f"reading of {vid}")
-        for vid, raw in readings_raw.items()
-    ]
-    state_raw = feed.take_plume_state()  # after the tick, which anchors the scene's clock
-    if state_raw is not None:
-        messages.append(_decoded(state_raw, PlumeState, "plume state"))
+    fresh = feed.take_decoded()  # the plume state after the tick, which anchors the scene's clock
+    messages: list[object | None] = [fresh.tick, *fresh.readings, fresh.plume_state]
     for message in messages:
         for out in scene.feed(message, now):
             channels.log(out)
-    return -1 if tick is None else tick.tick
+    return -1 if fresh.tick is None else fresh.tick.tick
 
 
-def main(ctx: NodeContext) -> int:
-    try:
-        opts = role_options(LiveOptions, ctx)
-    except OptionError as exc:
-        log.error("foxglove: %s", exc)
-        return 2
+@role_main(LiveOptions, "foxglove")
+def main(ctx: NodeContext, opts: LiveOptions) -> int:
     context = foxglove.Context()
     try:
         server = foxglove.start_server(
@@ -141,12 +119,10 @@ def main(ctx: NodeContext) -> int:
             sys.stdout.flush()
             rt.publish_health(detail=f"url={url} tick=-")
             rt.ready()
-            period = 1.0 / opts.rate_hz
             next_health = next_static = time.monotonic()
             drawn = -1
             try:
-                while not rt.stop.is_set():
-                    t0 = time.monotonic()
+                for t0 in rt.paced(opts.rate_hz):
                     drawn = max(drawn, convert(scene, feed, meshes, channels))
                     if t0 >= next_static:
                         next_static = t0 + opts.static_period_s
@@ -158,7 +134,6 @@ def main(ctx: NodeContext) -> int:
                             detail=f"url={url} tick={drawn if drawn >= 0 else '-'} "
                             f"sent={channels.sent}"
                         )
-                    rt.stop.wait(max(0.0, period - (time.monotonic() - t0)))
             finally:
                 feed.close()
                 meshes.close()

@@ -17,8 +17,8 @@ from pathlib import Path
 import pytest
 
 from swarmbus.scenario import SCENARIOS_DIR
-from tests.recorder.test_recorder import run_publisher, start_recorder
-from tests.support.procs import REPO, NodeProcs, zenoh_network
+from tests.support.procs import REPO, zenoh_network
+from tests.support.recording import recorded_run
 from tests.support.upstack import plumeswarm_up
 
 EXAMPLES = REPO / "examples"
@@ -91,12 +91,10 @@ def test_pettingzoo_swarm_returns_telescope(tmp_path: Path) -> None:
 
 def test_read_recording_counts_what_was_published(tmp_path: Path) -> None:
     recording = tmp_path / "flight.mcap"
-    with zenoh_network() as (net, _), NodeProcs(net, log_dir=tmp_path) as procs:
-        start_recorder(procs, recording)
-        run_publisher(
-            net, tmp_path / "pub.json", "--vehicles", "uav1,uav2", "--steps", "120", "--every", "4"
+    with zenoh_network() as (net, _):
+        recorded_run(
+            net, tmp_path, recording, "--vehicles", "uav1,uav2", "--steps", "120", "--every", "4"
         )
-        procs.stop_all()
     out = run_example("read_recording.py", str(recording), cwd=tmp_path)
     pattern = (
         rf"(uav\d): (\d+) states over {NUM} s, flew {NUM} m, max altitude {NUM} m, (\d+) reading"

@@ -9,12 +9,14 @@ from pathlib import Path
 
 from swarmbus.codec import decode
 from swarmbus.messages import SimTick
-from swarmbus.session import Presence
-from tests.sim_world import test_physics_node
+from tests.support.physics_rig import (
+    Watch,
+    fly_scripted,
+    stream_hash,
+    two_vehicle_scenario,
+    wait_for_plume,
+)
 from tests.support.procs import NodeProcs, wait_until
-
-setup = test_physics_node.setup  # the same fixture: physics network, procs and tick watch
-Watch = test_physics_node.Watch
 
 DYNAMIC = """
 [wind]
@@ -40,24 +42,22 @@ period_ticks = 3
 
 def _start_plume(procs: NodeProcs, watch: Watch, sc: Path) -> None:
     procs.start("plume", "--scenario", str(sc), name="plume")
-    presence = Presence(watch.session, test_physics_node.KEYS)
-    assert presence.wait_for(lambda alive: "plume" in alive, 60.0), sorted(presence.alive)
-    presence.close()
+    wait_for_plume(watch)
 
 
 def test_a_filament_scenario_twice_in_lockstep_gives_the_same_ticks_and_plume_values(
-    setup: tuple[NodeProcs, Watch], tmp_path: Path
+    rig: tuple[NodeProcs, Watch], tmp_path: Path
 ) -> None:
-    procs, watch = setup
-    sc = test_physics_node.two_vehicle_scenario(tmp_path, extra_time=DYNAMIC)
+    procs, watch = rig
+    sc = two_vehicle_scenario(tmp_path, extra_time=DYNAMIC)
     _start_plume(procs, watch, sc)
     ticks = 480
-    first = test_physics_node.stream_hash(procs, watch, sc, ticks, "run1")
+    first = stream_hash(procs, watch, sc, ticks, "run1")
     seen = [decode(watch.raw[k], SimTick) for k in range(ticks + 1)]
     values = [v for t in seen if t.plume_values for v in t.plume_values.values_g_m3 or []]
     assert sum(t.plume_queried for t in seen) >= ticks // 3
     assert max(values) > 0.0, "the filaments never reached the vehicles"
-    second = test_physics_node.stream_hash(procs, watch, sc, ticks, "run2")
+    second = stream_hash(procs, watch, sc, ticks, "run2")
     assert first == second
 
 
@@ -66,32 +66,20 @@ def _run(
 ) -> dict[int, bytes]:
     """Physics (with ``physics_args``) and a scripted participant until tick ``last``; the raw
     SimTicks the test's session saw, by tick."""
-    with watch.lock:
-        watch.raw.clear()
-        watch.last_tick = -1
-    physics = procs.start(
-        "physics", "--scenario", str(sc), "--set", f"max_ticks={last}", *physics_args,
-        name=f"physics-{label}",
-    )  # fmt: skip
-    script = test_physics_node.start_script(
-        procs, sc, "--vehicle", "a", "--vehicle", "b", "--altitude", "3.0",
-        "--max-tick", str(last), label=label,
-    )  # fmt: skip
-    assert test_physics_node.exit_code(physics, "physics") == 0
-    assert test_physics_node.exit_code(script, "participant") == 0
+    fly_scripted(procs, watch, sc, last, label, physics_args=physics_args)
     wait_until(lambda: watch.last_tick >= last, 10.0, f"tick {last} at the subscriber")
     with watch.lock:
         return dict(watch.raw)
 
 
 def test_a_physics_stopped_and_resumed_from_its_checkpoint_sees_the_same_plume_and_wind(
-    setup: tuple[NodeProcs, Watch], tmp_path: Path
+    rig: tuple[NodeProcs, Watch], tmp_path: Path
 ) -> None:
     """An uninterrupted run to tick 480 against a run stopped at tick 250 and resumed from its
     checkpoint (tick 240) to 480: from the restored tick on, every SimTick is the same bytes —
     states under the meandering wind's drag and the filaments' values at the vehicles."""
-    procs, watch = setup
-    sc = test_physics_node.two_vehicle_scenario(tmp_path, extra_time=DYNAMIC)
+    procs, watch = rig
+    sc = two_vehicle_scenario(tmp_path, extra_time=DYNAMIC)
     _start_plume(procs, watch, sc)
     straight = _run(procs, watch, sc, "straight", 480)
     ckpt = tmp_path / "physics.ckpt"

@@ -8,53 +8,22 @@ import signal
 import subprocess
 import sys
 from pathlib import Path
-from typing import Any
 
 import zenoh
 
 from recorder.reader import Recording
 from swarmbus.codec import encode
 from tests.support.procs import REPO, Network, NodeProcs, keys_for, run_cli, wait_until
+from tests.support.recording import (
+    finish_publisher,
+    published_messages,
+    recorded_run,
+    run_publisher,
+    start_publisher,
+    start_recorder,
+)
 
 KEYS = keys_for()
-
-
-def start_publisher(net: Network, out: Path, *args: str) -> subprocess.Popen[str]:
-    env = dict(os.environ, PYTHONPATH=str(REPO))
-    cmd = [sys.executable, "-m", "tests.support.scripted_publisher", "--connect", net.endpoint]
-    return subprocess.Popen(
-        [*cmd, "--out", str(out), *args],
-        cwd=REPO,
-        env=env,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-        text=True,
-        start_new_session=True,
-    )
-
-
-def finish_publisher(
-    proc: subprocess.Popen[str], out: Path, timeout_s: float = 90.0
-) -> dict[str, Any]:
-    """Wait for a scripted publisher; its counts and published payloads."""
-    try:
-        _, err = proc.communicate(timeout=timeout_s)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait(10)
-    assert proc.returncode == 0, f"scripted publisher failed:\n{err[-3000:]}"
-    result: dict[str, Any] = json.loads(out.read_text())
-    return result
-
-
-def run_publisher(net: Network, out: Path, *args: str) -> dict[str, Any]:
-    """Run the scripted publisher to completion."""
-    return finish_publisher(start_publisher(net, out, *args), out)
-
-
-def start_recorder(procs: NodeProcs, out: Path, *extra: str) -> subprocess.Popen[bytes]:
-    return procs.start("recorder", "--set", f"out={out}", *extra, name="recorder")
 
 
 def vehicle_messages(recording: Recording) -> list[tuple[str, bytes]]:
@@ -73,18 +42,12 @@ def test_round_trip_same_messages_in_order(
 ) -> None:
     net, _ = network
     out = tmp_path / "round_trip.mcap"
-    with NodeProcs(net, log_dir=tmp_path) as procs:
-        rec = start_recorder(procs, out)
-        published = run_publisher(
-            net, tmp_path / "pub.json", "--vehicles", "uav1,uav2", "--steps", "60", "--garbage"
-        )
-        procs.stop_all()
-    assert rec.returncode == 0, (tmp_path / "recorder.log").read_text()[-3000:]
-
+    published = recorded_run(
+        net, tmp_path, out, "--vehicles", "uav1,uav2", "--steps", "60", "--garbage"
+    )
     recording = Recording.open(out)
     assert not recording.truncated
-    expected = [(key, bytes.fromhex(payload)) for key, payload, _ in published["published"]]
-    assert vehicle_messages(recording) == expected
+    assert vehicle_messages(recording) == published_messages(published)
     # publish_time is the publisher's own clock: between its readings after the previous put and
     # after this one (the scripted publisher notes time.time_ns() after each put).
     times = [r.publish_time_ns for r in recording.messages() if "/vehicle/" in r.topic]
@@ -118,8 +81,7 @@ def test_sigkill_leaves_completed_chunks_readable(
     recording = Recording.open(out)
     got = vehicle_messages(recording)
     assert recording.truncated
-    expected = [(key, bytes.fromhex(payload)) for key, payload, _ in published["published"]]
-    assert got == expected
+    assert got == published_messages(published)
 
 
 def _complete_chunks_cover(path: Path, n_vehicle_messages: int) -> bool:
@@ -196,12 +158,7 @@ def test_ticks_missing_from_a_state_stream_are_counted_and_recorded(
 ) -> None:
     net, _ = network
     out = tmp_path / "gaps.mcap"
-    with NodeProcs(net, log_dir=tmp_path) as procs:
-        start_recorder(procs, out)
-        run_publisher(
-            net, tmp_path / "pub.json", *("--steps", "30", "--skip-at", "10", "--skip-n", "5")
-        )
-        procs.stop_all()
+    recorded_run(net, tmp_path, out, *("--steps", "30", "--skip-at", "10", "--skip-n", "5"))
     recording = Recording.open(out)
     gaps = [e for m in recording.messages() if (e := m.event()) is not None and e.kind == "gap"]
     assert [e.lost_upstream for e in gaps] == [5]

@@ -9,8 +9,8 @@ import pytest
 import zenoh
 
 from recorder.reader import Recording
-from tests.recorder.test_recorder import run_publisher, start_recorder
 from tests.support.procs import Network, NodeProcs, run_cli
+from tests.support.recording import recorded_run
 
 # Generous: two processes on a shared 2-core machine. Most messages must be within 50 ms of
 # their recorded offset; a single scheduling stall may delay a burst further, not the stream.
@@ -37,14 +37,12 @@ def test_replay_reproduces_order_and_timing(
     net, _ = network
     original = tmp_path / "original.mcap"
     again = tmp_path / "again.mcap"
-    with NodeProcs(net, log_dir=tmp_path) as procs:
-        start_recorder(procs, original)
-        run_publisher(
-            net,
-            tmp_path / "pub.json",
-            *("--steps", "40", "--rate-hz", "50", "--pause-at", "20", "--pause-s", "0.4"),
-        )
-        procs.stop_all()
+    recorded_run(
+        net,
+        tmp_path,
+        original,
+        *("--steps", "40", "--rate-hz", "50", "--pause-at", "20", "--pause-s", "0.4"),
+    )
     with NodeProcs(net, log_dir=tmp_path) as procs:
         procs.start("recorder", "--name", "recorder-b", "--set", f"out={again}", name="rec-b")
         result = run_cli(

@@ -13,8 +13,8 @@ from matplotlib.image import imread
 
 from recorder.report import READING_COLUMNS, TRACK_COLUMNS
 from swarmbus.session import Presence
-from tests.recorder.test_recorder import run_publisher, start_recorder
 from tests.support.procs import Network, NodeProcs, keys_for, run_cli
+from tests.support.recording import recorded_run, start_recorder
 from tests.support.scripted_publisher import PPM_PER_G_M3, RESISTANCE_OHM
 
 PNGS = ("top_view.png", "altitude.png", "concentration.png", "reported_vs_model.png")
@@ -27,12 +27,10 @@ def short_recording(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
     tmp = tmp_path_factory.mktemp("report")
     out = tmp / "flight.mcap"
-    with zenoh_network() as (net, _), NodeProcs(net, log_dir=tmp) as procs:
-        start_recorder(procs, out)
-        run_publisher(
-            net, tmp / "pub.json", "--vehicles", "uav1,uav2,uav3", "--steps", "120", "--every", "4"
+    with zenoh_network() as (net, _):
+        recorded_run(
+            net, tmp, out, "--vehicles", "uav1,uav2,uav3", "--steps", "120", "--every", "4"
         )
-        procs.stop_all()
     return out
 
 

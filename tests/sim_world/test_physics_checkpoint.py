@@ -13,31 +13,25 @@ from sim_world.checkpoint import CheckpointError, ProgressMarker
 from sim_world.world import World
 from swarmbus.messages import VehicleState
 from swarmbus.scenario import Scenario, parse_scenario
+from tests.support.physics_rig import vehicles_toml
 
 CONTROL_HZ = 120
 SUBSTEPS = 2
 
 
 def scenario(world: str = "default", second_type: str = "iris", extra: str = "") -> Scenario:
+    vehicles = vehicles_toml(
+        ("ground", "iris", (0.0, 0.0, 0.0)),
+        ("air", second_type, (5.0, 0.0, 20.0)),
+        ("lifting", "iris", (-5.0, 3.0, 0.0)),
+    )
     text = f"""{extra}
 [world]
 name = "{world}"
 [time]
 physics_hz = {CONTROL_HZ * SUBSTEPS}
 control_hz = {CONTROL_HZ}
-[[vehicles]]
-id = "ground"
-type = "iris"
-spawn_enu_m = [0.0, 0.0, 0.0]
-[[vehicles]]
-id = "air"
-type = "{second_type}"
-spawn_enu_m = [5.0, 0.0, 20.0]
-[[vehicles]]
-id = "lifting"
-type = "iris"
-spawn_enu_m = [-5.0, 3.0, 0.0]
-"""
+{vehicles}"""
     return parse_scenario(text)
 
 

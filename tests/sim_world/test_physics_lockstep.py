@@ -14,6 +14,20 @@ def barrier(*present: str) -> tuple[Lockstep, FakeClock]:
     return ls, clock
 
 
+def begun(tick: int, *present: str) -> tuple[Lockstep, FakeClock]:
+    """A started :func:`barrier` with ``present`` joined, at tick ``tick``."""
+    ls, clock = barrier(*present)
+    ls.start()
+    ls.begin(tick)
+    return ls, clock
+
+
+def answered(ls: Lockstep, tick: int, *vids: str) -> None:
+    """Each of ``vids`` answers ``tick`` (a zero command)."""
+    for vid in vids:
+        ls.receive(vid, tick, [0.0])
+
+
 def test_participant_tokens_name_exactly_one_known_vehicle() -> None:
     ids = ("uav1", "uav-2")
     assert participant_of("autopilot-uav1", ids) == "uav1"
@@ -30,9 +44,7 @@ def test_startup_names_who_is_missing() -> None:
 
 
 def test_tick_completes_only_when_every_active_participant_answered() -> None:
-    ls, _ = barrier("a", "b")
-    ls.start()
-    ls.begin(0)
+    ls, _ = begun(0, "a", "b")
     assert not ls.complete()
     assert ls.receive("a", 0, [0.1])
     assert not ls.complete() and ls.missing() == ["b"]
@@ -45,18 +57,14 @@ def test_tick_completes_only_when_every_active_participant_answered() -> None:
 
 
 def test_stale_and_tokenless_commands_are_ignored() -> None:
-    ls, _ = barrier("a")
-    ls.start()
-    ls.begin(5)
+    ls, _ = begun(5, "a")
     assert not ls.receive("a", 4, [0.0])
     assert not ls.receive("c", 5, [0.0])  # no token
     assert not ls.complete()
 
 
 def test_a_silent_participant_is_dropped_at_the_deadline_not_before() -> None:
-    ls, clock = barrier("a", "b")
-    ls.start()
-    ls.begin(3)
+    ls, clock = begun(3, "a", "b")
     ls.receive("a", 3, [0.3])
     clock.now += 0.49
     assert ls.expire() == []
@@ -70,9 +78,7 @@ def test_a_silent_participant_is_dropped_at_the_deadline_not_before() -> None:
 
 
 def test_a_dropped_participant_rejoins_when_it_answers_a_tick_since_its_drop() -> None:
-    ls, clock = barrier("a", "b")
-    ls.start()
-    ls.begin(3)
+    ls, clock = begun(3, "a", "b")
     clock.now += 1.0
     assert ls.expire() == ["a", "b"]
     ls.begin(4)
@@ -86,9 +92,7 @@ def test_a_dropped_participant_rejoins_when_it_answers_a_tick_since_its_drop() -
 
 
 def test_a_late_joiner_is_admitted_by_its_first_answer() -> None:
-    ls, _ = barrier("a")
-    ls.start()
-    ls.begin(10)
+    ls, _ = begun(10, "a")
     ls.joined("c")
     assert ls.present == {"a", "c"} and ls.active == {"a"}
     ls.receive("a", 10, [0.1])
@@ -101,9 +105,7 @@ def test_a_late_joiner_is_admitted_by_its_first_answer() -> None:
 
 
 def test_a_participant_whose_token_goes_is_not_waited_for() -> None:
-    ls, _ = barrier("a", "b")
-    ls.start()
-    ls.begin(0)
+    ls, _ = begun(0, "a", "b")
     ls.receive("b", 0, [0.2])
     ls.left("b")
     assert not ls.complete()
@@ -125,9 +127,7 @@ def test_startup_handshake_uses_its_own_deadline() -> None:
 
 # ---------------------------------------------------------------------------- restarts
 def test_a_held_participant_is_waited_for_until_the_deadline_without_a_notice() -> None:
-    ls, clock = barrier("a", "b")
-    ls.start()
-    ls.begin(0)
+    ls, clock = begun(0, "a", "b")
     ls.receive("a", 0, [0.1])
     ls.held_leave("b")  # token gone: the launcher may be restarting it
     assert not ls.complete() and ls.missing() == ["b"] and ls.held == {"b"}
@@ -138,9 +138,7 @@ def test_a_held_participant_is_waited_for_until_the_deadline_without_a_notice() 
 
 
 def test_a_restart_notice_holds_the_tick_for_the_grace_and_the_new_process_answers_it() -> None:
-    ls, clock = barrier("a", "b")
-    ls.start()
-    ls.begin(7)
+    ls, clock = begun(7, "a", "b")
     ls.receive("a", 7, [0.1])
     ls.held_leave("b")
     assert ls.restarting("b", grace_s=20.0)
@@ -156,9 +154,7 @@ def test_a_restart_notice_holds_the_tick_for_the_grace_and_the_new_process_answe
 
 
 def test_a_hold_spans_ticks_when_the_dead_process_had_answered_and_expires_after_grace() -> None:
-    ls, clock = barrier("a", "b")
-    ls.start()
-    ls.begin(3)
+    ls, clock = begun(3, "a", "b")
     ls.receive("b", 3, [0.2])
     ls.restarting("b", grace_s=5.0)  # the notice came before the token's departure
     ls.held_leave("b")
@@ -175,9 +171,7 @@ def test_a_hold_spans_ticks_when_the_dead_process_had_answered_and_expires_after
 
 
 def test_no_hold_for_a_process_that_is_not_restarted_or_a_dropped_participant() -> None:
-    ls, clock = barrier("a", "b", "c")
-    ls.start()
-    ls.begin(0)
+    ls, clock = begun(0, "a", "b", "c")
     ls.held_leave("b")
     assert ls.gone("b")  # the launcher gave up on it: not waited for any more
     assert ls.missing() == ["a", "c"] and "b" not in ls.active
@@ -186,16 +180,17 @@ def test_no_hold_for_a_process_that_is_not_restarted_or_a_dropped_participant() 
     assert not ls.restarting("c", grace_s=20.0)  # already dropped: it rejoins by answering
 
 
-def periodic_barrier(period: int) -> tuple[Lockstep, FakeClock]:
+def periodic_barrier(period: int, *present: str) -> tuple[Lockstep, FakeClock]:
+    """Vehicles a and b and a ``plume`` answering every ``period``-th tick; ``present`` joined."""
     clock = FakeClock()
     ls = Lockstep(["a", "b"], timeout_s=0.5, clock=clock, periodic={"plume": period})
+    for p in present:
+        ls.joined(p)
     return ls, clock
 
 
 def test_a_periodic_participant_is_waited_for_only_on_the_ticks_its_period_divides() -> None:
-    ls, _ = periodic_barrier(3)
-    for p in ("a", "b", "plume"):
-        ls.joined(p)
+    ls, _ = periodic_barrier(3, "a", "b", "plume")
     assert ls.missing_tokens() == []
     ls.start()
     for tick in range(7):
@@ -222,13 +217,11 @@ def test_the_start_waits_for_vehicle_tokens_only_and_a_late_periodic_one_joins_b
     ls.begin(0)
     assert not ls.waits("plume")  # absent at the start: not waited for
     ls.joined("plume")
-    ls.receive("a", 0, [0.0])
-    ls.receive("b", 0, [0.0])
+    answered(ls, 0, "a", "b")
     assert ls.complete()
     ls.begin(1)
     assert not ls.receive("plume", 1, ())  # not its tick: it answers even ticks only
-    ls.receive("a", 1, [0.0])
-    ls.receive("b", 1, [0.0])
+    answered(ls, 1, "a", "b")
     assert ls.complete()  # an answer to a tick it does not answer did not make it wait
     ls.begin(2)
     assert not ls.waits("plume")
@@ -242,38 +235,30 @@ def test_the_start_waits_for_vehicle_tokens_only_and_a_late_periodic_one_joins_b
 def test_a_periodic_participant_dropped_at_the_deadline_rejoins_without_stalling_other_ticks() -> (
     None
 ):
-    ls, clock = periodic_barrier(2)
-    for p in ("a", "b", "plume"):
-        ls.joined(p)
+    ls, clock = periodic_barrier(2, "a", "b", "plume")
     ls.start()
     ls.begin(0)
-    ls.receive("a", 0, [0.0])
-    ls.receive("b", 0, [0.0])
+    answered(ls, 0, "a", "b")
     clock.now += 0.6
     assert ls.expire() == ["plume"]
     ls.begin(1)
     assert ls.receive("plume", 0, ()) is False  # its late answer to tick 0: too late to count
     assert not ls.waits("plume")  # ...and it makes no odd tick wait for it
-    ls.receive("a", 1, [0.0])
-    ls.receive("b", 1, [0.0])
+    answered(ls, 1, "a", "b")
     assert ls.complete()
     ls.begin(2)
     assert ls.waits("plume")  # active again since it answered a tick since its drop
 
 
 def test_a_held_periodic_participant_holds_only_its_own_ticks() -> None:
-    ls, clock = periodic_barrier(3)
-    for p in ("a", "b", "plume"):
-        ls.joined(p)
+    ls, clock = periodic_barrier(3, "a", "b", "plume")
     ls.start()
     ls.begin(1)
     assert ls.held_leave("plume") and ls.restarting("plume", 10.0)
-    ls.receive("a", 1, [0.0])
-    ls.receive("b", 1, [0.0])
+    answered(ls, 1, "a", "b")
     assert ls.complete()  # tick 1 is not the plume's
     ls.begin(3)
-    ls.receive("a", 3, [0.0])
-    ls.receive("b", 3, [0.0])
+    answered(ls, 3, "a", "b")
     clock.now += 5.0
     assert not ls.complete() and ls.expire() == []  # held within its grace
     ls.joined("plume")

@@ -14,7 +14,7 @@ import zenoh
 
 from swarmbus.codec import decode
 from swarmbus.messages import NodeHealth, VehicleState
-from tests.sim_world.test_physics_node import KEYS, Watch, start_script, two_vehicle_scenario
+from tests.support.physics_rig import KEYS, Watch, fly_a_and_b, two_vehicle_scenario
 from tests.support.procs import Network, NodeProcs, wait_until
 
 
@@ -72,9 +72,7 @@ def running(
     watch, health = Watch(session), Health(session)
     procs = NodeProcs(net, log_dir=tmp_path)
     sc = two_vehicle_scenario(tmp_path, timeout_s=2.0)
-    procs.start("physics", "--scenario", str(sc), name="physics")
-    start_script(procs, sc, "--vehicle", "a", "--throttle", "0.2", label="script-a")
-    start_script(procs, sc, "--vehicle", "b", "--throttle", "0.2", label="script-b")
+    fly_a_and_b(procs, sc)
     try:
         yield session, watch, health
     finally:

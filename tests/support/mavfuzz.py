@@ -102,6 +102,15 @@ class Target:
 Case = tuple[list[Msg], list[Reply]]
 
 
+CaseMethod = Callable[[Any, Target], Case]
+
+
+def _stateless(case: CaseMethod) -> CaseMethod:
+    """Mark a case of one frame that needs no state on the vehicle (see ``Fuzzer.simple``)."""
+    setattr(case, "stateless", True)  # noqa: B010 - an attribute a function cannot declare
+    return case
+
+
 class Fuzzer:
     """Deterministic for a seed: ``datagrams(n_frames)`` yields the same traffic every run."""
 
@@ -137,18 +146,9 @@ class Fuzzer:
             self.broadcast,
             self.mavlink1,
         ]
-        # stateless one-frame cases: safe to send to every vehicle at once, or as MAVLink 1
-        self.simple: list[Callable[[Target], Case]] = [
-            self.bad_arm,
-            self.bad_takeoff,
-            self.bad_reposition,
-            self.bad_set_mode,
-            self.bad_pause,
-            self.unknown_command,
-            self.bad_message_interval,
-            self.bad_request_message,
-            self.bad_param_set,
-        ]
+        # stateless one-frame cases (marked @_stateless): safe to send to every vehicle at
+        # once, or as MAVLink 1
+        self.simple = [case for case in self.cases if getattr(case, "stateless", False)]
         self.counts: dict[str, int] = {}
 
     # ------------------------------------------------------------------ helpers
@@ -212,6 +212,7 @@ class Fuzzer:
         return ("MISSION_ACK", t.sysid, result, 0)
 
     # ------------------------------------------------------------------ commands
+    @_stateless
     def bad_arm(self, t: Target) -> Case:
         p1 = self.rng.choice([NAN, INF, -INF, 0.5, 2.0, -1.0, 1e30, 21196.0])
         msg = self._command(t, 400, [p1, self._float()], self.rng.random() < 0.5)
@@ -223,6 +224,7 @@ class Fuzzer:
         p2 = self.rng.choice([NAN, INF, 0.0, 21195.0, self._float()])
         return [self._command(t, 400, [0.0, p2])], [self._ack(t, 400, TEMP_REJECTED)]
 
+    @_stateless
     def bad_takeoff(self, t: Target) -> Case:
         """Altitude infinite, zero, negative or absurd (NaN alone means MIS_TAKEOFF_ALT)."""
         z = self.rng.choice(
@@ -236,6 +238,7 @@ class Fuzzer:
             msg = self._command(t, 22, [NAN, 0, 0, NAN, NAN, NAN, z])
         return [msg], [self._ack(t, 22, DENIED)]
 
+    @_stateless
     def bad_reposition(self, t: Target) -> Case:
         """Latitude / longitude out of range or infinite, or an infinite altitude."""
         kind = self.rng.randrange(3)
@@ -252,6 +255,7 @@ class Fuzzer:
         msg = self._command(t, 192, [-1.0, 1.0, 0.0, NAN, lat, lon, alt], as_int=as_int)
         return [msg], [self._ack(t, 192, DENIED)]
 
+    @_stateless
     def bad_set_mode(self, t: Target) -> Case:
         kind = self.rng.randrange(3)
         if kind == 0:  # not a finite mode
@@ -265,10 +269,12 @@ class Fuzzer:
             p = [1.0, 4.0, float(self.rng.choice([0, 1, 7, 9, 200]))]
         return [self._command(t, 176, p, self.rng.random() < 0.5)], [self._ack(t, 176, DENIED)]
 
+    @_stateless
     def bad_pause(self, t: Target) -> Case:
         p1 = self.rng.choice([NAN, INF, 2.0, -1.0, 0.5, 1e9])
         return [self._command(t, 193, [p1])], [self._ack(t, 193, DENIED)]
 
+    @_stateless
     def unknown_command(self, t: Target) -> Case:
         while (command := self.rng.randrange(65536)) in KNOWN_COMMANDS:
             pass
@@ -276,6 +282,7 @@ class Fuzzer:
         msg = self._command(t, command, p, self.rng.random() < 0.3)
         return [msg], [self._ack(t, command, UNSUPPORTED)]
 
+    @_stateless
     def bad_message_interval(self, t: Target) -> Case:
         if self.rng.random() < 0.5:  # SET: NaN / unknown stream / NaN interval
             p = self.rng.choice(
@@ -285,6 +292,7 @@ class Fuzzer:
         p1 = self.rng.choice([NAN, INF, -1.0, 65536.0, 1e12])
         return [self._command(t, 510, [p1])], [self._ack(t, 510, DENIED)]
 
+    @_stateless
     def bad_request_message(self, t: Target) -> Case:
         p1 = self.rng.choice([NAN, INF, -1.0, 1e12, 435.0, 397.0, 395.0, 65535.0])
         return [self._command(t, 512, [p1])], [self._ack(t, 512, UNSUPPORTED)]
@@ -434,6 +442,7 @@ class Fuzzer:
         return [V1(m) for m in msgs], replies
 
     # ------------------------------------------------------------------ parameters
+    @_stateless
     def bad_param_set(self, t: Target) -> Case:
         """A known parameter set to NaN / inf / out of range: PARAM_VALUE with the old value."""
         index = self.rng.randrange(len(SPECS))

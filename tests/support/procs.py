@@ -99,17 +99,26 @@ class NodeProcs:
         self.procs: list[tuple[str, subprocess.Popen[bytes]]] = []
 
     def start(self, role: str, *args: str, name: str | None = None) -> subprocess.Popen[bytes]:
-        cmd = [sys.executable, "-m", "deploy", "node", role, *self.net.cli_args()]
+        cmd = ["deploy", "node", role, *self.net.cli_args()]
         if self.scenario is not None:
             cmd += ["--scenario", self.scenario]
-        cmd += list(args)
         label = name or "-".join([role, *[a for a in args if not a.startswith("-")]])
+        return self.start_module(*cmd, *args, label=label)
+
+    def start_module(self, module: str, *args: str, label: str) -> subprocess.Popen[bytes]:
+        """``python -m MODULE ARGS`` in its own process group, its output in ``<label>.log``
+        of the log directory (if any); stopped with the others."""
         out: int | IO[bytes] = subprocess.DEVNULL
         if self.log_dir is not None:
             out = open(self.log_dir / f"{label}.log", "wb")  # noqa: SIM115 - closed with the proc
         env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONUNBUFFERED="1")
         proc = subprocess.Popen(
-            cmd, cwd=REPO, stdout=out, stderr=subprocess.STDOUT, env=env, start_new_session=True
+            [sys.executable, "-m", module, *args],
+            cwd=REPO,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            env=env,
+            start_new_session=True,
         )
         if not isinstance(out, int):
             out.close()  # the child holds its own descriptor

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import logging
 import math
 from typing import Any
 
@@ -12,7 +13,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from swarmbus import messages as m
-from swarmbus.codec import MessageError, decode, encode
+from swarmbus.codec import MessageError, decode, decode_or_none, encode
 from tests.support.messages_samples import SAMPLES
 
 ALL = list(m.ALL_MESSAGES)
@@ -112,6 +113,20 @@ def test_garbage_is_a_typed_error() -> None:
     for junk in (b"", b"\xc1", b"\x93\x01\x02", b"not msgpack at all", b"\xff" * 50):
         with pytest.raises(MessageError):
             decode(junk, m.VehicleState)
+
+
+def test_decode_or_none_gives_the_message_or_none_and_one_warning_naming_what_and_why(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    log = logging.getLogger("tests.decode_or_none")
+    good = SAMPLES[m.VehicleState]
+    with caplog.at_level(logging.WARNING, logger=log.name):
+        assert decode_or_none(encode(good), m.VehicleState, "a state", log) == good
+        assert caplog.records == []
+        assert decode_or_none(b"\xc1", m.VehicleState, "a state on k", log) is None
+    [record] = caplog.records
+    assert record.name == log.name
+    assert record.getMessage().startswith("ignoring a state on k: invalid VehicleState: ")
 
 
 # -------------------------------------------------------------------- fuzz every decoder

@@ -7,7 +7,7 @@ import msgspec
 import pytest
 
 from swarmbus.codec import decode, encode
-from swarmbus.keys import KeyNameError, autopilot_node, process_node, vehicle_of_autopilot
+from swarmbus.keys import KeyNameError, Keys, autopilot_node, process_node, vehicle_of_autopilot
 from swarmbus.messages import ActuatorBatch, ActuatorCommand, SimTick, VehicleState
 from swarmbus.views import (
     BatchView,
@@ -29,6 +29,25 @@ def test_node_names() -> None:
     assert process_node("autopilot", ["uav1", "uav2", "uav3"]) == "autopilot-uav1-plus2"
     with pytest.raises(KeyNameError):
         autopilot_node("a/b")
+
+
+def test_names_are_read_back_from_keys_of_this_world_and_plane_only() -> None:
+    keys = Keys("w1")
+    assert keys.vehicle_id_of("plumeswarm/w1/vehicle/uav1/state") == "uav1"
+    assert keys.vehicle_id_of("plumeswarm/w1/vehicle/uav1/a/b") == "uav1"
+    assert keys.node_name_of("plumeswarm/w1/node/physics/health") == "physics"
+    assert keys.autopilot_node_of("plumeswarm/w1/autopilot/autopilot-0/actuators") == "autopilot-0"
+    refused = [
+        (keys.vehicle_id_of, "plumeswarm/w2/vehicle/uav1/state", "a vehicle"),  # other world
+        (keys.vehicle_id_of, "plumeswarm/w1/node/uav1/state", "a vehicle"),  # other plane
+        (keys.vehicle_id_of, "plumeswarm/w1/vehicle/uav1", "a vehicle"),  # no leaf
+        (keys.node_name_of, "plumeswarm/w1/vehicle/physics/health", "a node"),
+        (keys.autopilot_node_of, "plumeswarm/w1/autopilot/a/actuators/x", "an autopilot"),
+        (keys.autopilot_node_of, "plumeswarm/w1/autopilot/a", "an autopilot"),
+    ]
+    for parse, key, what in refused:
+        with pytest.raises(KeyNameError, match=f"is not {what} key of world 'w1'"):
+            parse(key)
 
 
 def test_views_read_what_the_full_messages_encode() -> None:

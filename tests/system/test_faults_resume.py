@@ -97,6 +97,16 @@ class ResumeRun:
         ticks = self.states.get(vid)
         return max(ticks) if ticks else -1
 
+    def on_first_leg(self) -> int:
+        """Once :data:`KILLED` flies its first mission leg: the last tick of it seen then."""
+        self.wait(
+            lambda: (s := self.status.get(KILLED)) is not None and s.mission_index >= 1,
+            300.0,
+            f"{KILLED} on its first leg",
+        )
+        with self.lock:
+            return self.last_tick(KILLED)
+
     def done(self) -> bool:
         """Every mission finished and every vehicle landed and disarmed (caller holds lock)."""
         return all(
@@ -200,13 +210,7 @@ def fly_with_kill(
     """Fly the missions, SIGKILL ``names`` while uav1 flies its first leg at 10 m; the flight
     and the last tick of uav1 seen before the kill."""
     with flight(tmp, per_process, network_mode) as f:
-        f.wait(
-            lambda: (s := f.status.get(KILLED)) is not None and s.mission_index >= 1,
-            300.0,
-            f"{KILLED} on its first leg",
-        )
-        with f.lock:
-            before = f.last_tick(KILLED)
+        before = f.on_first_leg()
         old = f.launcher.supervisor.pids()
         kill(f, *names)
         f.wait(

@@ -21,7 +21,6 @@ from pathlib import Path
 import pytest
 
 from tests.system.test_faults_resume import (
-    KILLED,
     ResumeRun,
     assert_nothing_lost,
     flight,
@@ -54,13 +53,7 @@ def test_router_killed_twice_mid_mission_clients_the_clock_holds_and_nothing_is_
     baseline: ResumeRun, tmp_path: Path
 ) -> None:
     with flight(tmp_path, network_mode="client") as f:
-        f.wait(
-            lambda: (s := f.status.get(KILLED)) is not None and s.mission_index >= 1,
-            300.0,
-            f"{KILLED} on its first leg",
-        )
-        with f.lock:
-            killed_at = f.last_tick(KILLED)
+        killed_at = f.on_first_leg()
         for _ in range(2):
             old = f.launcher.supervisor.pids()["router"]
             kill(f, "router")

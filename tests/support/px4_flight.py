@@ -1,0 +1,74 @@
+"""Where a vehicle is and how it gets there, as a MAVSDK user sees it through the telemetry and
+action plugins (the one-vehicle scenario of tests/support/mavclient.py). Imports MAVSDK: a test
+imports this only after ``pytest.importorskip("mavsdk")``."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from mavsdk.asyncio.plugins.action import ActionAsync
+from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
+
+from gcs_bridge.frames import enu_to_geodetic
+from swarmbus.scenario import Origin
+from tests.support.mavclient import first
+
+ORIGIN = Origin()
+SPAWN_ENU = (20.0, 0.0)  # tests.support.mavclient.scenario_text, one vehicle
+SYSID = 1  # ditto
+TELEMETRY_HZ = 4.0  # ditto: GLOBAL_POSITION_INT per simulated second
+
+
+def horizontal_m(a: Any, b: Any) -> float:
+    """Distance between two telemetry positions (small-angle, metres)."""
+    north = (a.latitude_deg - b.latitude_deg) * 111_320.0
+    east = (a.longitude_deg - b.longitude_deg) * 111_320.0 * math.cos(math.radians(a.latitude_deg))
+    return math.hypot(north, east)
+
+
+def latlon(east_m: float, north_m: float) -> tuple[float, float]:
+    lat, lon, _ = enu_to_geodetic((east_m, north_m, 0.0), ORIGIN)
+    return lat, lon
+
+
+async def take_off(system: Any, alt_m: float) -> None:
+    tel, act = TelemetryAsync(system), ActionAsync(system)
+    await first(tel.subscribe_health(), lambda h: h.is_armable, "ready to arm")
+    await act.set_takeoff_altitude(alt_m)
+    await act.arm()
+    await act.takeoff()
+    await first(
+        tel.subscribe_position(), lambda p: p.relative_altitude_m > alt_m - 0.5, f"at {alt_m} m"
+    )
+
+
+def east_north_of(p: Any) -> tuple[float, float]:
+    """ENU metres of a telemetry position (small-angle, about the origin)."""
+    o = ORIGIN
+    north = (p.latitude_deg - o.lat_deg) * 111_320.0
+    east = (p.longitude_deg - o.lon_deg) * 111_320.0 * math.cos(math.radians(o.lat_deg))
+    return east, north
+
+
+async def arrive(tel: Any, east: float, north: float, what: str, within_m: float = 1.0) -> None:
+    await first(
+        tel.subscribe_position(),
+        lambda p: math.dist(east_north_of(p), (east, north)) < within_m,
+        what,
+    )
+
+
+async def moved(tel: Any, distance_m: float, what: str) -> tuple[float, float]:
+    """The unit direction (east, north) of the next ``distance_m`` flown."""
+    start = east_north_of(await first(tel.subscribe_position(), lambda p: True, "a position"))
+    end = east_north_of(
+        await first(
+            tel.subscribe_position(),
+            lambda p: math.dist(east_north_of(p), start) > distance_m,
+            what,
+            60.0,
+        )
+    )
+    d = math.dist(end, start)
+    return (end[0] - start[0]) / d, (end[1] - start[1]) / d
