@@ -15,7 +15,13 @@ from deploy.certs import OPERATOR, HostIdentities, identity
 from deploy.hosts import Deployment, HostsError
 from deploy.launcher import LaunchOptions
 from swarmbus.keys import Keys, autopilot_node
-from swarmbus.session import NetworkConfig, NetworkConfigError, TlsConfig, check_tls_files
+from swarmbus.session import (
+    ROUTER_ADMIN_KEYS,
+    NetworkConfig,
+    NetworkConfigError,
+    TlsConfig,
+    check_tls_files,
+)
 
 MESSAGES = (
     "put",
@@ -96,7 +102,7 @@ def access_control(dep: Deployment, keys: Keys) -> dict[str, Any]:
             "permission": "allow",
             "flows": ["ingress", "egress"],
             "messages": list(MESSAGES),
-            "key_exprs": ["**"],
+            "key_exprs": ["**", ROUTER_ADMIN_KEYS],
         }
     ]
     subjects: list[dict[str, Any]] = [{"id": "members", "cert_common_names": members}]
@@ -190,14 +196,14 @@ def _shared_vehicle_rules() -> list[dict[str, Any]]:
             "flows": ["ingress", "egress"],
             "messages": ["declare_subscriber", "query", "liveliness_query",
                          "declare_liveliness_subscriber"],
-            "key_exprs": ["**"],
+            "key_exprs": ["**", ROUTER_ADMIN_KEYS],
         },
         {
             "id": "receive-anything",
             "permission": "allow",
             "flows": ["egress"],
             "messages": list(MESSAGES),
-            "key_exprs": ["**"],
+            "key_exprs": ["**", ROUTER_ADMIN_KEYS],
         },
     ]  # fmt: skip
 

@@ -13,6 +13,7 @@ import os
 import random
 import socket
 import threading
+import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager, suppress
 from typing import Annotated, Any, Literal
@@ -36,6 +37,11 @@ SINGLE_THREAD_RUNTIME = (
 # connect to) breaks tries again every 100 ms, doubling up to 1 s, for ever; when it is back,
 # Zenoh declares its subscribers, queryables and liveliness tokens again on the new link. A
 # killed router restarted on the same endpoints is rejoined within about a second of its start.
+# How long a new peer waits for its links to the other peers (join_peers), and the key of the
+# liveliness query that flushes their declarations (no token lives there).
+PEER_JOIN_TIMEOUT_S = 2.0
+JOIN_FLUSH_KEY = "plumeswarm/join"
+ROUTER_ADMIN_KEYS = "@/*/router"  # a router's admin space entry: its sessions
 CONNECT_RETRY = {"period_init_ms": 100, "period_max_ms": 1000, "period_increase_factor": 2.0}
 Endpoint = Annotated[str, msgspec.Meta(pattern=r"^(tcp|udp|tls|quic|unixsock-stream)/.+$")]
 
@@ -109,6 +115,9 @@ def zenoh_config(net: NetworkConfig) -> zenoh.Config:
             conf.insert_json5(f"transport/link/tls/{key}", json.dumps(value))
     if net.access_control:
         conf.insert_json5("access_control", json.dumps(net.access_control))
+    if net.mode == "router":
+        # Read-only: a new peer asks its router which peers it must connect to (join_peers).
+        conf.insert_json5("adminspace/enabled", "true")
     return conf
 
 
@@ -149,8 +158,55 @@ def check_tls_files(tls: TlsConfig) -> None:
 
 
 def open_session(net: NetworkConfig) -> zenoh.Session:
-    """Open a session; use it as a context manager (``with open_session(net) as s``)."""
-    return zenoh.open(zenoh_config(net))
+    """Open a session; use it as a context manager (``with open_session(net) as s``). A peer
+    returns once it is connected to the peers its router knows (:func:`join_peers`)."""
+    session = zenoh.open(zenoh_config(net))
+    if net.mode == "peer":
+        join_peers(session, PEER_JOIN_TIMEOUT_S)
+    return session
+
+
+def join_peers(session: zenoh.Session, timeout_s: float) -> bool:
+    """Wait until ``session`` (a peer) is connected to every peer of the routers it is
+    connected to, and has their declarations; returns whether it got there in time.
+
+    Zenoh opens a peer's session once its router's declarations are in; the links to the other
+    peers (which data between peers takes: routers do not relay it) come a moment later, from
+    the router's gossip. A put made before them reaches no other peer, so a restarted process's
+    first reading or state would be lost. The router's admin space names its peers; a
+    liveliness query then crosses every new link after the declarations sent on it."""
+    deadline = time.monotonic() + timeout_s
+    want = _router_peers(session, timeout_s) - {str(session.info.zid())}
+    while not want <= {str(z) for z in session.info.peers_zid()}:
+        if time.monotonic() >= deadline:
+            log.warning(
+                "not connected to %d of the router's peers after %.1f s",
+                len(want - {str(z) for z in session.info.peers_zid()}),
+                timeout_s,
+            )
+            return False
+        time.sleep(0.005)
+    for _ in session.liveliness().get(
+        JOIN_FLUSH_KEY, timeout=max(0.1, deadline - time.monotonic())
+    ):
+        pass
+    return True
+
+
+def _router_peers(session: zenoh.Session, timeout_s: float) -> set[str]:
+    """The peers of the routers ``session`` is connected to, from their admin space (none
+    where it cannot be read, e.g. an access-control list that does not admit it)."""
+    peers: set[str] = set()
+    for router in session.info.routers_zid():
+        for reply in session.get(ROUTER_ADMIN_KEYS.replace("*", str(router)), timeout=timeout_s):
+            if reply.ok is None:
+                continue
+            with suppress(ValueError, TypeError, AttributeError):
+                info = json.loads(reply.ok.payload.to_string())
+                peers |= {
+                    str(s["peer"]) for s in info.get("sessions", []) if s.get("whatami") == "peer"
+                }
+    return peers
 
 
 def free_tcp_port(host: str = "127.0.0.1") -> int:
