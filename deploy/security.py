@@ -14,9 +14,8 @@ import msgspec
 from deploy.certs import OPERATOR, HostIdentities, identity
 from deploy.hosts import Deployment, HostsError
 from deploy.launcher import LaunchOptions
-from swarmbus.keys import Keys, autopilot_node
+from swarmbus.keys import ROUTER_ADMIN, Keys, autopilot_node
 from swarmbus.session import (
-    ROUTER_ADMIN_KEYS,
     NetworkConfig,
     NetworkConfigError,
     TlsConfig,
@@ -102,7 +101,7 @@ def access_control(dep: Deployment, keys: Keys) -> dict[str, Any]:
             "permission": "allow",
             "flows": ["ingress", "egress"],
             "messages": list(MESSAGES),
-            "key_exprs": ["**", ROUTER_ADMIN_KEYS],
+            "key_exprs": ["**", ROUTER_ADMIN],
         }
     ]
     subjects: list[dict[str, Any]] = [{"id": "members", "cert_common_names": members}]
@@ -196,14 +195,14 @@ def _shared_vehicle_rules() -> list[dict[str, Any]]:
             "flows": ["ingress", "egress"],
             "messages": ["declare_subscriber", "query", "liveliness_query",
                          "declare_liveliness_subscriber"],
-            "key_exprs": ["**", ROUTER_ADMIN_KEYS],
+            "key_exprs": ["**", ROUTER_ADMIN],
         },
         {
             "id": "receive-anything",
             "permission": "allow",
             "flows": ["egress"],
             "messages": list(MESSAGES),
-            "key_exprs": ["**", ROUTER_ADMIN_KEYS],
+            "key_exprs": ["**", ROUTER_ADMIN],
         },
     ]  # fmt: skip
 

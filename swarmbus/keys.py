@@ -11,6 +11,10 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 ROOT = "plumeswarm"
+# Outside every world: the liveliness query by which a new peer flushes its new links
+# (swarmbus.session.join_peers; no token lives there), and a router's admin-space entry.
+JOIN_FLUSH = f"{ROOT}/join"
+ROUTER_ADMIN = "@/*/router"
 _NAME_RE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}$")
 
 

@@ -21,7 +21,7 @@ from typing import Annotated, Any, Literal
 import msgspec
 import zenoh
 
-from swarmbus.keys import Keys
+from swarmbus.keys import JOIN_FLUSH, ROUTER_ADMIN, Keys
 
 log = logging.getLogger(__name__)
 
@@ -37,11 +37,8 @@ SINGLE_THREAD_RUNTIME = (
 # connect to) breaks tries again every 100 ms, doubling up to 1 s, for ever; when it is back,
 # Zenoh declares its subscribers, queryables and liveliness tokens again on the new link. A
 # killed router restarted on the same endpoints is rejoined within about a second of its start.
-# How long a new peer waits for its links to the other peers (join_peers), and the key of the
-# liveliness query that flushes their declarations (no token lives there).
+# How long a new peer waits for its links to the other peers (join_peers).
 PEER_JOIN_TIMEOUT_S = 2.0
-JOIN_FLUSH_KEY = "plumeswarm/join"
-ROUTER_ADMIN_KEYS = "@/*/router"  # a router's admin space entry: its sessions
 CONNECT_RETRY = {"period_init_ms": 100, "period_max_ms": 1000, "period_increase_factor": 2.0}
 Endpoint = Annotated[str, msgspec.Meta(pattern=r"^(tcp|udp|tls|quic|unixsock-stream)/.+$")]
 
@@ -186,9 +183,7 @@ def join_peers(session: zenoh.Session, timeout_s: float) -> bool:
             )
             return False
         time.sleep(0.005)
-    for _ in session.liveliness().get(
-        JOIN_FLUSH_KEY, timeout=max(0.1, deadline - time.monotonic())
-    ):
+    for _ in session.liveliness().get(JOIN_FLUSH, timeout=max(0.1, deadline - time.monotonic())):
         pass
     return True
 
@@ -198,7 +193,7 @@ def _router_peers(session: zenoh.Session, timeout_s: float) -> set[str]:
     where it cannot be read, e.g. an access-control list that does not admit it)."""
     peers: set[str] = set()
     for router in session.info.routers_zid():
-        for reply in session.get(ROUTER_ADMIN_KEYS.replace("*", str(router)), timeout=timeout_s):
+        for reply in session.get(ROUTER_ADMIN.replace("*", str(router)), timeout=timeout_s):
             if reply.ok is None:
                 continue
             with suppress(ValueError, TypeError, AttributeError):
