@@ -10,18 +10,17 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from swarmbus.errors import FieldError
 from swarmbus.messages import MissionCommand, MissionFrame, MissionItem
 from swarmbus.scenario import Origin
 
 
-class MissionError(ValueError):
+class MissionError(FieldError):
     """An item that cannot be flown: which item, which field, why."""
 
     def __init__(self, index: int, field: str, reason: str) -> None:
         self.index = index
-        self.field = field
-        self.reason = reason
-        super().__init__(f"item {index}: {field}: {reason}")
+        super().__init__(f"item {index}", field, reason)
 
 
 @dataclass(frozen=True, slots=True)

@@ -22,7 +22,6 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from types import TracebackType
 
 import msgspec
 import zenoh
@@ -39,6 +38,7 @@ from deploy.supervisor import (
     Supervisor,
 )
 from sim_world import checkpoint
+from swarmbus.closeable import Closeable
 from swarmbus.codec import encode
 from swarmbus.keys import Keys, process_node
 from swarmbus.messages import RestartNotice
@@ -229,7 +229,7 @@ def _last_lines(path: Path, n: int = 3) -> str:
     return " / ".join(ln.strip() for ln in lines[-n:] if not ln.startswith("--- start"))
 
 
-class Launcher:
+class Launcher(Closeable):
     """Carries out a plan: ``with Launcher(sc, opts) as l: l.supervise(stop)``."""
 
     def __init__(
@@ -450,10 +450,6 @@ class Launcher:
             raise
         return self
 
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
+    def close(self) -> None:
+        """:meth:`stop` (what leaving ``with`` does), without the exit codes."""
         self.stop()

@@ -118,6 +118,19 @@ class _Vehicle:
         self.max_speed2 = 0.0
 
 
+# The vehicle state a checkpoint carries as it is (same name on _Vehicle and VehicleCheckpoint):
+# one list for both ways, so that a field saved is a field restored.
+_CHECKPOINTED = (
+    "settled",
+    "wrench",
+    "motors_enabled",
+    "crashed",
+    "on_ground",
+    "in_contact",
+    "max_speed2",
+)
+
+
 def _spin_motors(v: _Vehicle) -> tuple[float, float, float, float]:
     """One motor-lag step; the body-frame thrust and torque (x, y, z) of the new speeds."""
     alpha = v.motor_alpha
@@ -400,13 +413,7 @@ class World(Closeable):
                     vehicle_type=v.type.name,
                     omega_rad_s=list(v.omega),
                     target_rad_s=list(v.target),
-                    settled=v.settled,
-                    wrench=v.wrench,
-                    motors_enabled=v.motors_enabled,
-                    crashed=v.crashed,
-                    on_ground=v.on_ground,
-                    in_contact=v.in_contact,
-                    max_speed2=v.max_speed2,
+                    **{name: getattr(v, name) for name in _CHECKPOINTED},
                     position_enu_m=pos,
                     attitude_xyzw=q,
                     velocity_enu_m_s=lin,
@@ -457,13 +464,8 @@ class World(Closeable):
                 )
             v.omega[:] = saved.omega_rad_s
             v.target[:] = saved.target_rad_s
-            v.settled = saved.settled
-            v.wrench = saved.wrench
-            v.motors_enabled = saved.motors_enabled
-            v.crashed = saved.crashed
-            v.on_ground = saved.on_ground
-            v.in_contact = saved.in_contact
-            v.max_speed2 = saved.max_speed2
+            for name in _CHECKPOINTED:
+                setattr(v, name, getattr(saved, name))
         self.step_count = cp.step_count
         self._fresh_step = -1
 

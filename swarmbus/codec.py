@@ -13,20 +13,20 @@ from typing import Any, TypeVar
 
 import msgspec
 
+from swarmbus.errors import FieldError
+
 T = TypeVar("T")
 
 _encoder = msgspec.msgpack.Encoder()
 _PATH_RE = re.compile(r" - at `\$(?P<path>[^`]*)`$")
 
 
-class MessageError(ValueError):
+class MessageError(FieldError):
     """A payload that is not a valid message: names the field (``$``-path) and the reason."""
 
     def __init__(self, type_name: str, field: str, reason: str) -> None:
         self.type_name = type_name
-        self.field = field
-        self.reason = reason
-        super().__init__(f"invalid {type_name}: {field or '<payload>'}: {reason}")
+        super().__init__(f"invalid {type_name}", field, reason, blank="<payload>")
 
 
 def encode(message: Any) -> bytes:

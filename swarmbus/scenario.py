@@ -16,6 +16,7 @@ import msgspec
 
 from swarmbus.calibration import AtmosphereCalibration, derive_calibration
 from swarmbus.codec import split_validation_error
+from swarmbus.errors import FieldError
 from swarmbus.gases import FORMULAS
 from swarmbus.scenario_spec import (
     DEFAULT_SCENARIO,
@@ -91,14 +92,12 @@ __all__ = [
 ]
 
 
-class ScenarioError(ValueError):
+class ScenarioError(FieldError):
     """One line: the file, the field and what is wrong."""
 
     def __init__(self, source: str, field: str, reason: str) -> None:
         self.source = source
-        self.field = field
-        self.reason = reason
-        super().__init__(f"{source}: {field or '<file>'}: {reason}")
+        super().__init__(source, field, reason, blank="<file>")
 
 
 def _check(scenario: Scenario, source: str) -> None:

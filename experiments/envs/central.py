@@ -11,41 +11,29 @@ ignored and its slice of the observation keeps its last value.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import gymnasium
 import numpy as np
 
-from experiments.driver import Driver
-from experiments.envs.swarm import RENDER_MODES, Action, Obs, PlumeSwarmEnv
+from experiments.envs.swarm import Action, Obs, PlumeSwarmEnv
+from experiments.envs.wrapped import SwarmWrapper
 from swarmbus.scenario import Scenario
 
 
-class PlumeSwarmCentralEnv(gymnasium.Env[Obs, Action]):
-    metadata = {"render_modes": RENDER_MODES, "render_fps": 10}  # noqa: RUF012 - Gymnasium's
-
+class PlumeSwarmCentralEnv(SwarmWrapper):
     def __init__(
         self,
         scenario: Scenario | str | Path | None = None,
         *,
-        scenario_overrides: Sequence[str] = (),
-        vehicles: int | None = None,
-        backend: str | Driver = "fused",
-        k_peers: int = 2,
         render_mode: str | None = None,
         **kwargs: Any,
     ) -> None:
-        self.swarm = PlumeSwarmEnv(
-            scenario,
-            scenario_overrides=scenario_overrides,
-            vehicles=vehicles,
-            backend=backend,
-            k_peers=k_peers,
-            render_mode=render_mode,
-            **kwargs,
-        )
+        """``kwargs``: the options of :class:`PlumeSwarmEnv` (``vehicles``, ``backend``,
+        ``k_peers``, ...)."""
+        swarm = PlumeSwarmEnv(scenario, render_mode=render_mode, **kwargs)
+        super().__init__(swarm, render_mode)
         self.order = list(self.swarm.possible_agents)
         n, size = len(self.order), self.swarm.observation_size
         one = self.swarm.observation_space(self.order[0])
@@ -53,7 +41,6 @@ class PlumeSwarmCentralEnv(gymnasium.Env[Obs, Action]):
             float(one.low[0]), float(one.high[0]), shape=(n * size,), dtype=np.float32
         )
         self.action_space = gymnasium.spaces.Box(-1.0, 1.0, shape=(n * 4,), dtype=np.float32)
-        self.render_mode = render_mode
         self._last: dict[str, Obs] = {}
         self._truncated_any = False
 
@@ -64,17 +51,13 @@ class PlumeSwarmCentralEnv(gymnasium.Env[Obs, Action]):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[Obs, dict[str, Any]]:
-        super().reset(seed=seed)
-        observations, infos = self.swarm.reset(
-            seed=int(self.np_random.integers(2**63 - 1)), options=options
-        )
+        observations, infos = self._reset_swarm(seed, options)
         self._last = {}
         self._truncated_any = False
         return self._joined(observations), {"agents": infos, "success": False}
 
     def step(self, action: Action) -> tuple[Obs, float, bool, bool, dict[str, Any]]:
-        if not self.swarm.agents:
-            raise RuntimeError("step() after the episode ended: call reset()")
+        self._check_running()
         flat = np.asarray(action, dtype=np.float32).reshape(len(self.order), 4)
         actions = {a: flat[i] for i, a in enumerate(self.order) if a in self.swarm.agents}
         obs, rewards, _terminated, truncated, infos = self.swarm.step(actions)
@@ -95,9 +78,3 @@ class PlumeSwarmCentralEnv(gymnasium.Env[Obs, Action]):
             done_truncated,
             info,
         )
-
-    def render(self) -> Any:
-        return self.swarm.render()
-
-    def close(self) -> None:
-        self.swarm.close()
