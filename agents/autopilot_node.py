@@ -26,6 +26,7 @@ from agents.build import AutopilotOptions, build_flight, vehicle_index
 from agents.flight import take_readings
 from agents.resume import StateKeeper
 from agents.snapshot import PendingSnapshot, ProcessSnapshot, SnapshotError, capture, restore
+from swarmbus.catchup import CatchUpPublisher, RouterOutage, watch_router
 from swarmbus.codec import MessageError, decode, encode
 from swarmbus.keys import Keys, autopilot_node
 from swarmbus.messages import (
@@ -52,6 +53,9 @@ IDLE_STATUS_PERIOD_S = 1.0  # wall clock: status while no ticks arrive (physics 
 # Longest wait for an event: the stop signal is seen this often (a signal's handler runs only
 # when the main thread wakes).
 EVENT_POLL_S = 0.25
+# The readings kept per vehicle, put again for a subscriber back after a router outage
+# (swarmbus.catchup): 25.6 s of sim time at the default 10 Hz sensor.
+READINGS_KEPT = 256
 
 
 class _Served:
@@ -84,7 +88,9 @@ class _Served:
             scenario.failsafe_for(vehicle_id).state_loss_timeout_s,
             scenario.time.participant_timeout_s,
         )
-        self.readings_pub = session.declare_publisher(keys.vehicle_concentration(vehicle_id))
+        self.readings_pub = CatchUpPublisher(
+            session, keys.vehicle_concentration(vehicle_id), READINGS_KEPT
+        )
         self.last_status: VehicleStatus | None = None
         self.last_status_time_s = -1e9
 
@@ -289,6 +295,7 @@ class AutopilotNode:
         self.pending: _PendingSensor | None = None
         self._declared: list[Any] = []  # subscribers and queryables, undeclared on close
         self._tokens: list[zenoh.LivelinessToken] = []
+        self.router_outage = RouterOutage()  # readings are put again for subscribers back after it
         # Snapshots (agents.resume): the keeper, and the tick part of the latest snapshot.
         self.keeper: StateKeeper | None = None
         if options.checkpoint:
@@ -306,6 +313,7 @@ class AutopilotNode:
         """Subscriber and queryables first, then the participants' tokens."""
         if self.keeper is not None:
             self.keeper.open(self._snapshot())
+        self._declared.append(watch_router(self.session, self.keys, self.router_outage))
         self._declared.append(
             self.session.declare_subscriber(self.keys.tick(), self._on_tick_sample)
         )
@@ -331,6 +339,9 @@ class AutopilotNode:
         for entity in self._declared:
             with suppress(zenoh.ZError):
                 entity.undeclare()
+        for served in self.served.values():
+            with suppress(zenoh.ZError):
+                served.readings_pub.close()
 
     # ------------------------------------------------------------------ bus callbacks
     def _on_tick_sample(self, sample: zenoh.Sample) -> None:
@@ -356,6 +367,7 @@ class AutopilotNode:
                 case Idle():
                     self._idle_statuses()
                     self._watch_ticks()
+                    self._catch_up()
 
     def _on_tick_data(self, data: bytes) -> None:
         try:
@@ -384,6 +396,14 @@ class AutopilotNode:
         if not reply.accepted:
             log.info("%s: %s refused: %s", served.vehicle_id, type(command).__name__, reply.reason)
         return reply
+
+    def _catch_up(self) -> None:
+        """Put the kept readings again for a subscriber back after a router outage (it may
+        have missed any of them: the dead router held some, others were put before it was
+        back; subscribers keep one reading per vehicle and sim time)."""
+        for vid, served in self.served.items():
+            if n := served.readings_pub.catch_up(self.router_outage):
+                log.info("%s: re-sent its last %d readings after the router's outage", vid, n)
 
     def _idle_statuses(self) -> None:
         """While no ticks arrive (physics not running), a status every IDLE_STATUS_PERIOD_S."""
@@ -432,6 +452,7 @@ class AutopilotNode:
         if self._state_lost:
             self._ticks_back(tick, now - self.last_tick_wall)
         self.last_tick_wall = now
+        self._catch_up()
         if self.keeper is not None:
             self._resume(tick)
         if tick.tick == self.last_tick:  # the start handshake repeats a tick: same answer

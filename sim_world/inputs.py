@@ -19,6 +19,7 @@ from sim_world.intake import ActuatorIntake
 from sim_world.lockstep import Lockstep, participant_of
 from sim_world.plume_part import PLUME, PlumeParticipation, decode_answer, is_plume
 from sim_world.stepping import SteppedClock, StepRefused
+from swarmbus.catchup import RouterOutage
 from swarmbus.codec import decode_or_none
 from swarmbus.keys import Keys, autopilot_node
 from swarmbus.messages import RestartNotice, StepRequest
@@ -50,6 +51,7 @@ class LockstepInputs:
         self.intake = ActuatorIntake(barrier.vehicle_ids, keys.autopilot_node_of)
         self.plume = PlumeParticipation()  # the plume's part of the sensor ticks
         self.clock_gate: SteppedClock[Incoming[StepRequest]] = SteppedClock()
+        self.router_outage = RouterOutage()  # states are put again for subscribers back after it
         self._tick = tick  # the physics' current tick (for the logs and step grants)
         self._step_refusal = step_refusal  # why clock/step is refused; None in stepped mode
         self._actuator_sub = session.declare_subscriber(
@@ -107,6 +109,8 @@ class LockstepInputs:
         if is_plume(name):
             self._on_plume_presence(name, alive)
             return
+        if name == ROUTER:
+            self.router_outage.router(alive)
         if name == ROUTER and self.holds.enabled:
             self._on_router_presence(alive)
             return

@@ -288,6 +288,7 @@ class PhysicsNode:
             self.out.put_tick()
             if self.holds.resend_states(self.tick):
                 self.out.put_states()
+        self.out.catch_up(self.inputs.router_outage)
 
     def _wait_for_recorder(self) -> None:
         """The recorder left (lockstep): hold the next tick until a recorder is back, and
@@ -337,6 +338,7 @@ class PhysicsNode:
         self.checkpoints.mark(self.tick)
         sent = self.out.put_states()
         self.holds.remember([(self.keys.tick(), self.out.payload), *sent])
+        self.out.catch_up(self.inputs.router_outage)
 
     def _maybe_publish_clock(self, sim_time_s: float) -> None:
         now = self.pacer.clock_due()

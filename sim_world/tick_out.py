@@ -6,14 +6,24 @@ See docs/physics.md, "Lockstep" (rule 3) and "Restarts: the clock waits".
 
 from __future__ import annotations
 
+import logging
+from collections import deque
 from collections.abc import Iterable, Sequence
-from typing import Any
 
 import zenoh
 
+from swarmbus.catchup import Matching, RouterOutage
 from swarmbus.codec import encode
 from swarmbus.keys import Keys
 from swarmbus.messages import VehicleState
+
+log = logging.getLogger(__name__)
+
+# The ticks whose states are kept to be put again for a subscriber back after a router outage
+# (swarmbus.catchup): those the dead router held, and those published before the subscriber
+# was back (the clock goes on once the participants are back: up to 190 ticks measured).
+CATCH_UP_TICKS = 256  # kept at any time
+CATCH_UP_OUTAGE_TICKS = 4096  # kept while an outage lasts
 
 
 class TickOutput:
@@ -32,12 +42,35 @@ class TickOutput:
         self.payload = b""  # the current tick's SimTick, encoded
         self._states: list[VehicleState] = []
         self.states_sent = 0  # per-vehicle state puts (health detail)
+        self._kept: deque[tuple[int, list[VehicleState]]] = deque(maxlen=CATCH_UP_OUTAGE_TICKS)
 
     def set(self, tick: int, payload: bytes, states: list[VehicleState]) -> None:
         """Tick ``tick`` (``payload``, its ``states``) is the current one."""
         self.tick = tick
         self.payload = payload
         self._states = states
+        self._kept.append((tick, states))
+
+    def catch_up(self, outage: RouterOutage) -> None:
+        """Put the kept ticks' states again on each ``vehicle/<id>/state`` that a subscriber
+        matched again during a router outage (it may have missed any of them); outside an
+        outage keep the last CATCH_UP_TICKS only."""
+        if not outage.on():
+            while len(self._kept) > CATCH_UP_TICKS:
+                self._kept.popleft()
+        for i, pub in enumerate(self._state_pubs):
+            if not (pub.matching_again() and outage.on()):
+                continue
+            for _, states in self._kept:
+                pub.put(encode(states[i]))
+            log.info(
+                "tick %d: %s matched again after the router left: re-sent the states of "
+                "ticks %d..%d",
+                self.tick,
+                pub.key,
+                self._kept[0][0],
+                self._kept[-1][0],
+            )
 
     def put_tick(self) -> None:
         """The current tick on ``sim/tick``, and on ``sim/sensor`` if it is a sensor tick."""
@@ -78,17 +111,19 @@ class _StatePublisher:
     def __init__(self, session: zenoh.Session, key: str) -> None:
         self.key = key
         self._pub = session.declare_publisher(key)
-        self.matching = False
-        self._listener = self._pub.declare_matching_listener(self._on_matching)
-        status: Any = self._pub.matching_status  # a MatchingStatus (the stub says bool)
-        self.matching = bool(status.matching)
+        self._matching = Matching(self._pub)
 
-    def _on_matching(self, status: zenoh.MatchingStatus) -> None:
-        self.matching = status.matching
+    @property
+    def matching(self) -> bool:
+        return self._matching.matching
+
+    def matching_again(self) -> bool:
+        """Whether a subscriber matched again (none, then some) since last asked."""
+        return self._matching.again()
 
     def put(self, payload: bytes) -> None:
         self._pub.put(payload)
 
     def close(self) -> None:
-        self._listener.undeclare()
+        self._matching.close()
         self._pub.undeclare()

@@ -9,6 +9,7 @@ import msgspec
 import zenoh
 
 from sim_world.tick_out import TickOutput
+from swarmbus.catchup import RouterOutage
 from swarmbus.codec import encode
 from swarmbus.keys import Keys
 from tests.support.messages_samples import STATE
@@ -67,4 +68,39 @@ def test_ticks_sensor_ticks_states_and_backfill(network: tuple[Network, zenoh.Se
     finally:
         out.close()
         for inbox in (ticks, sensor, state_b, backfill):
+            inbox.sub.undeclare()
+
+
+def test_states_put_again_for_a_subscriber_back_during_a_router_outage(
+    network: tuple[Network, zenoh.Session],
+) -> None:
+    """Ticks published while nobody subscribed (no state put) reach a subscriber that matches
+    again during an outage; the last CATCH_UP_TICKS are kept outside one, every tick during it."""
+    _, session = network
+    out = TickOutput(session, KEYS, ["a"], SENSOR_PERIOD)
+    outage = RouterOutage(after_s=3600.0)
+    inbox: Inbox | None = None
+    try:
+        states = {k: [msgspec.structs.replace(STATE, vehicle_id="a", tick=k)] for k in range(400)}
+        for k in range(300):  # nobody listens: nothing put; 256 kept
+            out.set(k, b"", states[k])
+            assert out.put_states() == []
+            out.catch_up(outage)
+        outage.router(False)
+        for k in range(300, 400):  # during the outage every tick is kept
+            out.set(k, b"", states[k])
+            out.catch_up(outage)
+        inbox = Inbox(session, KEYS.vehicle_state("a"))
+        wait_until(lambda: out.put_states(), 5.0, "the subscriber matched")
+        wait_until(lambda: inbox.got, 5.0, "tick 399's state, put by put_states")
+        assert inbox.taken() == [(KEYS.vehicle_state("a"), encode(states[399][0]))]
+        out.catch_up(outage)
+        want = [encode(states[k][0]) for k in range(44, 400)]
+        wait_until(lambda: len(inbox.got) == len(want), 5.0, "ticks 44..399 again")
+        assert [p for _, p in inbox.taken()] == want
+        out.catch_up(outage)  # once per return
+        assert inbox.taken() == []
+    finally:
+        out.close()
+        if inbox is not None:
             inbox.sub.undeclare()

@@ -44,11 +44,6 @@ def test_router_killed_mid_mission_peers_the_run_goes_on_and_nothing_is_lost(
     assert f.launcher.supervisor.procs["router"].restarts == 1
 
 
-@pytest.mark.skip(
-    reason="all-clients layout: in 2 of 4 fresh-clone full-suite runs a state or reading in "
-    "flight when the router died was lost (uav1 tick 471; a reading at 4.2 s), though it "
-    "passes alone; not traced (docs/reliability.md)"
-)
 def test_router_killed_twice_mid_mission_clients_the_clock_holds_and_nothing_is_lost(
     baseline: ResumeRun, tmp_path: Path
 ) -> None:
