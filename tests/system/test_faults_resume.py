@@ -103,12 +103,19 @@ class ResumeRun:
         return max(ticks) if ticks else -1
 
     def on_first_leg(self) -> int:
-        """Once :data:`KILLED` flies its first mission leg: the last tick of it seen then."""
-        self.wait(
-            lambda: (s := self.status.get(KILLED)) is not None and s.mission_index >= 1,
+        """Once :data:`KILLED` flies its first mission leg: the last tick of it seen then, once
+        its states have caught up with the status that says so (the two streams are separate
+        subscriptions: under load the states seen lagged the physics by 200 ticks, still
+        climbing)."""
+        leg = self.wait(
+            lambda: (
+                s if (s := self.status.get(KILLED)) is not None and s.mission_index >= 1 else None
+            ),
             300.0,
             f"{KILLED} on its first leg",
         )
+        leg_tick = round(leg.sim_time_s * self.launcher.scenario.time.control_hz)
+        self.wait(lambda: self.last_tick(KILLED) >= leg_tick, 60.0, f"{KILLED}'s tick {leg_tick}")
         with self.lock:
             return self.last_tick(KILLED)
 
