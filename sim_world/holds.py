@@ -139,9 +139,10 @@ class Holds:
 
 
 class UnreachableGrace:
-    """A tick whose deadline passed without some answers waits up to ``grace_s`` in all before
-    it drops anyone (lockstep, ``time.unreachable_grace_s``; 0: off): a partitioned host whose
-    link lease outlives the cut has no token to leave. See docs/physics.md, "Lockstep"."""
+    """A tick whose deadline passed without the answers of participants whose token is up
+    waits up to ``grace_s`` in all before it drops them (lockstep, ``time.unreachable_grace_s``;
+    0: off): a process slowed down by a loaded machine changes no bit, and a partitioned host
+    whose link lease outlives the cut has no token to leave. See docs/physics.md, "Lockstep"."""
 
     def __init__(self, grace_s: float, clock: Callable[[], float]) -> None:
         self.grace_s = grace_s

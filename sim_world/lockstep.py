@@ -164,17 +164,25 @@ class Lockstep:
             return self._held_deadline() - self._clock()
         return self._deadline - self._clock()
 
+    def late(self) -> list[str]:
+        """Missing participants whose token is up (late, not gone), in :meth:`missing` order."""
+        return [p for p in self.missing() if p in self._present]
+
     def expire(self) -> list[str]:
         """After the deadline, drop whoever has not answered; returns the dropped ids."""
         if self.remaining_s() > 0.0:
             return []
         dropped = self.missing()
+        self.drop(dropped)
+        return dropped
+
+    def drop(self, dropped: Sequence[str]) -> None:
+        """Stop waiting for ``dropped`` (missing participants) until they answer again."""
         for vid in dropped:
             self._active.discard(vid)
             self._waiting.discard(vid)
             self._rejoin_from[vid] = self.tick
             self._held.pop(vid, None)
-        return dropped
 
     def extend(self, until_s: float) -> None:
         """The current tick waits for its missing participants until ``until_s`` (clock time)."""

@@ -247,15 +247,14 @@ class PhysicsNode:
                 if self.rt.stop.is_set():
                     return None
                 remaining = barrier.remaining_s()
-                if remaining <= 0.0 and self.silent.hold(barrier, self.tick):
+                late = barrier.late() if remaining <= 0.0 else []
+                if late and self.silent.hold(barrier, self.tick):
+                    # late, not gone: wait for them; the ones whose token went are dropped now
+                    self._drop([p for p in barrier.missing() if p not in late], barrier.timeout_s)
                     continue
                 if remaining <= 0.0:
-                    held = barrier.held
-                    dropped = barrier.expire()
-                    self.dropped_total += len(dropped)
                     waited_s = self.silent.waited_s(self.tick, barrier.timeout_s)
-                    then = "motors off" if self.gaps is None else "the physics' failsafe"
-                    report_dropped(self.tick, dropped, held, waited_s, self.holds.grace_s, then)
+                    self._drop(barrier.missing(), waited_s)
                     self.silent.dropped()
                     break
                 self._cond.wait(min(remaining, STOP_POLL_S))
@@ -263,6 +262,16 @@ class PhysicsNode:
                     self._republish_held_tick()
             self.silent.report_back(barrier, self.tick)
             return barrier.commands()  # a new dict of the decoded (never mutated) lists
+
+    def _drop(self, dropped: list[str], waited_s: float) -> None:
+        """Tick's deadline passed: stop waiting for ``dropped`` (caller holds the lock)."""
+        if not dropped:
+            return
+        held = self.barrier.held
+        self.barrier.drop(dropped)
+        self.dropped_total += len(dropped)
+        then = "motors off" if self.gaps is None else "the physics' failsafe"
+        report_dropped(self.tick, dropped, held, waited_s, self.holds.grace_s, then)
 
     # ------------------------------------------------------------------ stepped clock
     def _await_grant(self) -> bool:

@@ -61,9 +61,10 @@ class Time(_Section, frozen=True, kw_only=True):
     checkpoint_period_s: NonNeg = 1.0  # physics checkpoints the world every S sim s; 0: never
     # lockstep: wall seconds the clock holds for an autopilot the launcher is restarting
     restart_grace_s: NonNeg = 30.0
-    # lockstep: wall seconds in all a tick waits for a participant that stopped answering (cut
-    # off by a partition, or stalled) before it is dropped; 0: dropped at participant_timeout_s
-    unreachable_grace_s: NonNeg = 0.0
+    # lockstep: wall seconds in all a tick waits for a participant whose token is up but which
+    # has not answered (slow on a loaded machine, stalled, or cut off by a partition) before it
+    # is dropped, so that lateness changes no bit; 0: dropped at participant_timeout_s
+    unreachable_grace_s: NonNeg = 30.0
 
 
 class WindMeander(_Section, frozen=True, kw_only=True):

@@ -18,6 +18,7 @@ from tests.support.physics_rig import (
     fly_a_and_b,
     report,
     start_script,
+    stream_hash,
     two_vehicle_scenario,
 )
 from tests.support.procs import NodeProcs, run_cli, wait_until
@@ -78,12 +79,29 @@ def test_stalled_participant_is_dropped_at_the_timeout_and_rejoins(
     rig: tuple[NodeProcs, Watch], tmp_path: Path
 ) -> None:
     procs, watch = rig
-    sc = two_vehicle_scenario(tmp_path, timeout_s=0.5)
+    # without the grace a late participant is dropped at the timeout (the default waits)
+    sc = two_vehicle_scenario(tmp_path, timeout_s=0.5, extra_time="unreachable_grace_s = 0.0")
     fly_a_and_b(procs, sc, "--stall-at-tick", "20", "--stall-s", "2.0")
     dropped = wait_until(lambda: watch.first_tick_after(20, "a", False), 60.0, "a dropped")
     assert all(watch.motors[k]["a"] for k in range(1, 21))  # it answered those in time
     wait_until(lambda: watch.last_tick >= dropped + 50, 30.0, "ticks go on without a")
     wait_until(lambda: watch.first_tick_after(dropped, "a", True), 60.0, "a rejoined")
+
+
+def test_a_late_participant_is_waited_for_and_the_stream_is_the_same_bits(
+    rig: tuple[NodeProcs, Watch], tmp_path: Path
+) -> None:
+    """Lockstep, default grace: a participant (flying a and b) whose token is up answers tick 20
+    after 2 s, four times the 0.5 s timeout (a process starved on a loaded machine). Nothing is
+    dropped, and the tick stream is the bits of a run without the delay."""
+    procs, watch = rig
+    sc = two_vehicle_scenario(tmp_path, timeout_s=0.5)
+    straight = stream_hash(procs, watch, sc, 120, "straight")
+    late = stream_hash(procs, watch, sc, 120, "late", "--delay-tick", "20", "--delay-s", "2.0")
+    assert late == straight
+    log = (tmp_path / "physics-late.log").read_text()
+    assert "tick 20: no answer from a, b for 0.50 s: holding the clock up to 30.0 s in all" in log
+    assert all(all(watch.motors[k].values()) for k in range(1, 121))  # never dropped
 
 
 def test_late_joiner_is_admitted(rig: tuple[NodeProcs, Watch], tmp_path: Path) -> None:

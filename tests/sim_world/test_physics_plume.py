@@ -114,7 +114,8 @@ def test_the_clock_waits_for_the_plume_sample_asks_nothing_and_drops_a_silent_pl
     tick waits for it: with no autopilot the physics runs on at once) and, once it answers a
     tick again, every tick waits for it as before."""
     procs, watch = rig
-    sc = two_vehicle_scenario(tmp_path)  # participant timeout 1 s
+    # participant timeout 1 s; without the grace that waits for a late plume whose token is up
+    sc = two_vehicle_scenario(tmp_path, extra_time="unreachable_grace_s = 0.0")
     plume = StandInPlume(watch, silent=range(5, 10))
     try:
         ticks = ticks_with_a_plume(procs, watch, sc, 400)
