@@ -8,10 +8,9 @@ from __future__ import annotations
 
 import logging
 import os
-import queue
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from contextlib import suppress
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,6 +23,7 @@ from agents.anemometer import Anemometer
 from agents.behavior import BehaviorError
 from agents.build import AutopilotOptions, build_flight, vehicle_index
 from agents.flight import take_readings
+from agents.node_events import Idle, Inbox, PendingSensor, Tick, TickArrived
 from agents.resume import StateKeeper
 from agents.snapshot import PendingSnapshot, ProcessSnapshot, SnapshotError, capture, restore
 from swarmbus.catchup import CatchUpPublisher, RouterOutage, watch_router
@@ -36,7 +36,6 @@ from swarmbus.messages import (
     CommandReply,
     PlumeSample,
     SimTick,
-    VehicleState,
     VehicleStatus,
 )
 from swarmbus.node import NodeContext, NodeRuntime
@@ -44,15 +43,12 @@ from swarmbus.options import OptionError, role_options
 from swarmbus.reqrep import Incoming, serve_later
 from swarmbus.scenario import Scenario
 from swarmbus.session import SINGLE_THREAD_RUNTIME
-from swarmbus.views import StateHead, TickView, state_head_decoder
+from swarmbus.views import StateHead
 from swarmbus.wind import WindModel, wind_from_scenario
 
 log = logging.getLogger(__name__)
 
 IDLE_STATUS_PERIOD_S = 1.0  # wall clock: status while no ticks arrive (physics not running)
-# Longest wait for an event: the stop signal is seen this often (a signal's handler runs only
-# when the main thread wakes).
-EVENT_POLL_S = 0.25
 # The readings kept per vehicle, put again for a subscriber back after a router outage
 # (swarmbus.catchup): 25.6 s of sim time at the default 10 Hz sensor.
 READINGS_KEPT = 256
@@ -103,7 +99,7 @@ class _Served:
             self.last_status = status
             self.last_status_time_s = status.sim_time_s
 
-    def step(self, tick: _Tick) -> ActuatorCommand | None:
+    def step(self, tick: Tick) -> ActuatorCommand | None:
         """This vehicle's answer to ``tick`` (None: its state is not in the tick, or is bad)."""
         vid = self.vehicle_id
         try:
@@ -140,68 +136,6 @@ def _status_key(s: VehicleStatus) -> tuple[object, ...]:
     )
 
 
-class _Tick:
-    """One tick, decoded as far as it is used: a vehicle's own state always, every vehicle's
-    position on a sensor tick, the peers' full states only for a behaviour (once per process)."""
-
-    def __init__(self, view: TickView) -> None:
-        self.tick = view.tick
-        self.sim_time_s = view.sim_time_s
-        self.raw = view.states
-        self.plume_queried = view.plume_queried
-        self.plume_values = view.plume_values
-        self._heads: list[StateHead] | None = None
-        self._states: list[VehicleState] | None = None
-
-    @classmethod
-    def decode(cls, data: bytes) -> _Tick:
-        return cls(decode(data, TickView))
-
-    def state_of(self, vehicle_id: str, hint: int) -> tuple[int, VehicleState] | None:
-        """``vehicle_id``'s index and state: at ``hint`` (its place in the scenario, where the
-        physics puts it) or, should the list differ, wherever its head says."""
-        if 0 <= hint < len(self.raw):
-            state = decode(self.raw[hint], VehicleState)
-            if state.vehicle_id == vehicle_id:
-                return hint, state
-        for k, head in enumerate(self.heads()):
-            if head.vehicle_id == vehicle_id:
-                return k, decode(self.raw[k], VehicleState)
-        return None
-
-    def heads(self) -> list[StateHead]:
-        """Who is where in this tick."""
-        if self._heads is None:
-            try:
-                self._heads = [state_head_decoder.decode(r) for r in self.raw]
-            except (msgspec.ValidationError, msgspec.DecodeError) as exc:
-                raise MessageError("SimTick", "states", str(exc)) from None
-        return self._heads
-
-    def peers_of(self, own: int) -> list[VehicleState]:
-        if self._states is None:
-            self._states = [decode(r, VehicleState) for r in self.raw]
-        return self._states[:own] + self._states[own + 1 :]
-
-
-@dataclass
-class _PendingSensor:
-    """A sensor tick whose plume values the node waits for."""
-
-    tick: int
-    sim_time_s: float
-    states: list[StateHead]
-    by_physics: bool  # the physics queried: the answer comes with a later tick (else: none)
-
-
-# ---------------------------------------------------------------------- events
-@dataclass(frozen=True, slots=True)
-class TickArrived:
-    """A ``sim/tick`` sample (still encoded)."""
-
-    data: bytes
-
-
 @dataclass(frozen=True, slots=True)
 class CommandArrived:
     """A decoded command for one served vehicle, to answer from the loop."""
@@ -210,63 +144,7 @@ class CommandArrived:
     incoming: Incoming[Command]
 
 
-@dataclass(frozen=True, slots=True)
-class Idle:
-    """Nothing arrived for ``EVENT_POLL_S``."""
-
-
-Event = TickArrived | CommandArrived | Idle
-IDLE = Idle()
-
-
-class Inbox:
-    """The node's events in arrival order. Bus callbacks only :meth:`put` (on zenoh-python's
-    callback thread: no node state, no blocking); the node's one loop takes them from
-    :meth:`events`."""
-
-    def __init__(self) -> None:
-        self._queue: queue.SimpleQueue[Event] = queue.SimpleQueue()
-
-    def put(self, event: Event) -> None:
-        self._queue.put(event)
-
-    def events(self, stop: threading.Event) -> Iterator[Event]:
-        """Every event in order, ``Idle`` after ``EVENT_POLL_S`` without one, until ``stop``.
-        Of ticks that piled up only the newest is handed out (behind: only the latest counts)."""
-        q = self._queue
-        while not stop.is_set():
-            try:
-                arrived = [q.get(timeout=EVENT_POLL_S)]
-            except queue.Empty:
-                yield IDLE
-                continue
-            while not q.empty():
-                arrived.append(q.get_nowait())
-            ticks = [k for k, e in enumerate(arrived) if isinstance(e, TickArrived)]
-            newest = _newest_tick(arrived, ticks)
-            for k, event in enumerate(arrived):
-                if k == newest or not isinstance(event, TickArrived):
-                    yield event
-            del arrived  # the events handed out must not outlive their handling (queries)
-
-
-def _newest_tick(arrived: list[Event], ticks: list[int]) -> int:
-    """The index of the newest of the piled-up ticks that is a whole SimTick: a sample on
-    ``sim/tick`` that is not (garbage, a stranger's put) must not push the real tick it arrived
-    behind out of the pile, or the physics would wait for an answer that never comes. None
-    decodes: the newest (the loop logs and ignores it). Piles are rare (a held tick re-sent,
-    a realtime clock running ahead), so the whole decode costs little."""
-    if len(ticks) < 2:
-        return ticks[-1] if ticks else -1
-    for k in reversed(ticks):
-        event = arrived[k]
-        assert isinstance(event, TickArrived)
-        try:
-            decode(event.data, SimTick)  # whole: a partial view lets a mangled tick through
-        except MessageError:
-            continue
-        return k
-    return ticks[-1]
+Event = TickArrived | CommandArrived
 
 
 class AutopilotNode:
@@ -276,7 +154,7 @@ class AutopilotNode:
         self.session = session
         self.keys = ctx.keys
         self.options = options
-        self.inbox = Inbox()
+        self.inbox: Inbox[Event] = Inbox()
         wind = wind_from_scenario(ctx.scenario)  # one wind for every vehicle served here
         self.served = {
             vid: _Served(session, self.keys, ctx.scenario, vid, options, wind)
@@ -292,7 +170,7 @@ class AutopilotNode:
         # tick lets it know it has seen the tick it paused at (agents.Swarm waits for that).
         stepped = ctx.scenario.time.mode == "stepped"
         self.status_period_s = 0.0 if stepped else options.status_period_s
-        self.pending: _PendingSensor | None = None
+        self.pending: PendingSensor | None = None
         self._declared: list[Any] = []  # subscribers and queryables, undeclared on close
         self._tokens: list[zenoh.LivelinessToken] = []
         self.router_outage = RouterOutage()  # readings are put again for subscribers back after it
@@ -371,7 +249,7 @@ class AutopilotNode:
 
     def _on_tick_data(self, data: bytes) -> None:
         try:
-            tick = _Tick.decode(data)
+            tick = Tick.decode(data)
             if tick.tick < self.last_tick:
                 # Time going back is a physics resumed from its checkpoint, and the whole
                 # replay hangs on it: only a tick that is a SimTick in every state counts
@@ -433,7 +311,7 @@ class AutopilotNode:
             served.autopilot.state_lost(silent_s)
             served.publish_status(force=True, period_s=0.0)
 
-    def _ticks_back(self, tick: _Tick, silent_s: float) -> None:
+    def _ticks_back(self, tick: Tick, silent_s: float) -> None:
         """Realtime: the first tick after an outage; how late it was, what was missed."""
         log.warning(
             "ticks again after %.1f s without: tick %d after tick %d (%d missed); still in "
@@ -446,7 +324,7 @@ class AutopilotNode:
         )
         self._state_lost.clear()
 
-    def on_tick(self, tick: _Tick) -> None:
+    def on_tick(self, tick: Tick) -> None:
         """Tick k: readings of the last sensor tick, each vehicle's step, one batch back."""
         now = time.monotonic()
         if self._state_lost:
@@ -465,11 +343,11 @@ class AutopilotNode:
         commands = [c for s in self.served.values() if (c := s.step(tick)) is not None]
         self._answer(tick, commands, sensing)
         if sensing:
-            self.pending = _PendingSensor(
+            self.pending = PendingSensor(
                 tick.tick, tick.sim_time_s, tick.heads(), tick.plume_queried
             )
 
-    def _advance(self, tick: _Tick) -> None:
+    def _advance(self, tick: Tick) -> None:
         if tick.tick < self.last_tick:
             # Physics restarted from a checkpoint: fly on from its tick (timers stretch by it).
             log.warning(
@@ -485,7 +363,7 @@ class AutopilotNode:
         if self.keeper is not None:
             self.keeper.before_tick(tick.tick)
 
-    def _answer(self, tick: _Tick, commands: list[ActuatorCommand], sensing: bool) -> None:
+    def _answer(self, tick: Tick, commands: list[ActuatorCommand], sensing: bool) -> None:
         """Snapshot, then the batch of commands, then the statuses."""
         if commands:
             self.last_batch = encode(ActuatorBatch(tick=tick.tick, commands=commands))
@@ -499,7 +377,7 @@ class AutopilotNode:
             served.publish_status(force=False, period_s=self.status_period_s)
 
     # ------------------------------------------------------------------ snapshots
-    def _pending_after(self, tick: _Tick, sensing: bool) -> PendingSnapshot | None:
+    def _pending_after(self, tick: Tick, sensing: bool) -> PendingSnapshot | None:
         """The sensor tick awaited once ``tick`` is handled (see on_tick's end)."""
         p = self.pending
         if sensing:
@@ -547,7 +425,7 @@ class AutopilotNode:
             log.exception("snapshots off: a snapshot failed")
             self.keeper = None
 
-    def _resume(self, tick: _Tick) -> None:
+    def _resume(self, tick: Tick) -> None:
         """Restore a snapshot when this tick calls for one (agents.resume)."""
         keeper = self.keeper
         assert keeper is not None
@@ -585,12 +463,12 @@ class AutopilotNode:
         self.pending = None
         if p is not None:
             heads = [StateHead(vid, pos) for vid, pos in p.heads]
-            self.pending = _PendingSensor(p.tick, p.sim_time_s, heads, p.by_physics)
+            self.pending = PendingSensor(p.tick, p.sim_time_s, heads, p.by_physics)
         if self.keeper is not None:
             self.keeper.save(msgspec.msgpack.encode(snap))
 
     # ------------------------------------------------------------------ sensor
-    def _collect_readings(self, tick: _Tick) -> None:
+    def _collect_readings(self, tick: Tick) -> None:
         pending = self.pending
         if pending is None:
             return
@@ -605,7 +483,7 @@ class AutopilotNode:
             self.served[flight.vehicle_id].readings_pub.put(encode(reading))
 
     @staticmethod
-    def _values(pending: _PendingSensor, answer: PlumeSample | None) -> list[float] | None:
+    def _values(pending: PendingSensor, answer: PlumeSample | None) -> list[float] | None:
         """The plume's values for the pending sensor tick, or None (no plume was alive, it did
         not answer in time, or answered wrong: the readings are unavailable)."""
         if not pending.by_physics or answer is None:

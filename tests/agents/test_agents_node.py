@@ -19,8 +19,9 @@ import pytest
 import zenoh
 
 from agents import CommandRejected, Swarm, WaitTimeout
-from agents.autopilot_node import AutopilotNode, Inbox, TickArrived
+from agents.autopilot_node import AutopilotNode
 from agents.build import AutopilotOptions
+from agents.node_events import Inbox, TickArrived
 from plume_service import GaussianPlume
 from swarmbus.codec import MessageError, decode, encode
 from swarmbus.messages import (
@@ -189,7 +190,7 @@ def test_a_garbage_sample_behind_a_real_tick_does_not_push_it_out_of_the_inbox()
     (garbage, a stranger's put) must not be the "newest" that replaces the real one, or the
     physics would wait for an answer that never comes."""
     real = encode(SimTick(tick=7, sim_time_s=7 / 120, control_dt_s=1 / 120, states=[]))
-    inbox = Inbox()
+    inbox: Inbox[TickArrived] = Inbox()
     inbox.put(TickArrived(real))
     inbox.put(TickArrived(b"\x92\x01garbage"))
     first = next(inbox.events(threading.Event()))
