@@ -72,6 +72,26 @@ def pair(network: tuple[Network, zenoh.Session]) -> Iterator[tuple[zenoh.Session
         yield server, client
 
 
+Handler = Callable[[PlumeQuery], object]
+Serving = Callable[..., zenoh.Session]
+
+
+@pytest.fixture
+def serving(pair: tuple[zenoh.Session, zenoh.Session]) -> Iterator[Serving]:
+    """``serving(handler, memo=False)`` serves ``KEY`` with ``handler`` on the server session
+    and gives the client session; the queryable goes at the end of the test."""
+    server, client = pair
+    queryables: list[zenoh.Queryable[None]] = []
+
+    def start(handler: Handler, *, memo: bool = False) -> zenoh.Session:
+        queryables.append(serve(server, KEY, PlumeQuery, handler, memo=memo))
+        return client
+
+    yield start
+    for q in queryables:
+        q.undeclare()
+
+
 def first_answer(client: zenoh.Session, payload: object, reply_type: type[object]) -> object:
     """Ask until the queryable is routed to the client (it reaches a new session shortly after
     it is declared); the reply or the refusal."""
@@ -84,9 +104,8 @@ def first_answer(client: zenoh.Session, payload: object, reply_type: type[object
         time.sleep(0.05)
 
 
-def test_a_request_gets_the_typed_reply(pair: tuple[zenoh.Session, zenoh.Session]) -> None:
-    server, client = pair
-    q = serve(server, KEY, PlumeQuery, sums)
+def test_a_request_gets_the_typed_reply(serving: Serving) -> None:
+    client = serving(sums)
     query = PlumeQuery(points_enu_m=[(1.0, 2.0, 3.0), (10.0, -4.0, 0.5)])
     first = first_answer(client, query, PlumeValues)
     again = request(client, KEY, query, PlumeValues, 5.0)
@@ -97,12 +116,10 @@ def test_a_request_gets_the_typed_reply(pair: tuple[zenoh.Session, zenoh.Session
         assert time.monotonic() < deadline, "no answer to a polled request"
         time.sleep(0.01)
     assert pending.result() == first and pending.answered
-    q.undeclare()
 
 
-def test_a_handler_refusal_names_the_field(pair: tuple[zenoh.Session, zenoh.Session]) -> None:
-    server, client = pair
-    q = serve(server, KEY, PlumeQuery, sums)
+def test_a_handler_refusal_names_the_field(serving: Serving) -> None:
+    client = serving(sums)
     first_answer(client, PlumeQuery(points_enu_m=[(0.0, 0.0, 1.0)]), PlumeValues)
     with pytest.raises(Refused) as refused:
         query = PlumeQuery(points_enu_m=[(0.0, 0.0, 1.0), (5.0, 5.0, -2.0)])
@@ -110,30 +127,21 @@ def test_a_handler_refusal_names_the_field(pair: tuple[zenoh.Session, zenoh.Sess
     assert refused.value.field == "points_enu_m[1]"
     assert refused.value.reason == "below ground"
     assert refused.value.key == KEY and KEY in str(refused.value)
-    q.undeclare()
 
 
-def test_a_plain_value_error_is_a_refusal_of_the_whole_request(
-    pair: tuple[zenoh.Session, zenoh.Session],
-) -> None:
-    server, client = pair
-
+def test_a_plain_value_error_is_a_refusal_of_the_whole_request(serving: Serving) -> None:
     def picky(query: PlumeQuery) -> PlumeValues:
         raise ValueError("no points today")
 
-    q = serve(server, KEY, PlumeQuery, picky)
+    client = serving(picky)
     outcome = first_answer(client, PlumeQuery(points_enu_m=[]), PlumeValues)
     assert isinstance(outcome, Refused)
     assert (outcome.field, outcome.reason) == ("", "no points today")
-    q.undeclare()
 
 
-def test_a_malformed_request_is_refused_naming_the_field(
-    pair: tuple[zenoh.Session, zenoh.Session],
-) -> None:
-    server, client = pair
+def test_a_malformed_request_is_refused_naming_the_field(serving: Serving) -> None:
     calls: list[PlumeQuery] = []
-    q = serve(server, KEY, PlumeQuery, counting(calls))
+    client = serving(counting(calls))
     first_answer(client, PlumeQuery(points_enu_m=[]), PlumeValues)
     calls.clear()
     # A NaN coordinate (the struct's bounds reject it), written without the struct's checks.
@@ -153,7 +161,6 @@ def test_a_malformed_request_is_refused_naming_the_field(
     # and it keeps serving
     ok = request(client, KEY, PlumeQuery(points_enu_m=[(1.0, 1.0, 1.0)]), PlumeValues, 5.0)
     assert ok.values_g_m3 == [3.0]
-    q.undeclare()
 
 
 def test_no_server_or_a_silent_one_is_no_reply(
@@ -183,41 +190,29 @@ def test_no_server_or_a_silent_one_is_no_reply(
     q.undeclare()
 
 
-def test_a_reply_of_the_wrong_type_is_a_bad_reply(
-    pair: tuple[zenoh.Session, zenoh.Session],
-) -> None:
-    server, client = pair
-    q = serve(server, KEY, PlumeQuery, lambda query: PlumeInfoQuery())
+def test_a_reply_of_the_wrong_type_is_a_bad_reply(serving: Serving) -> None:
+    client = serving(lambda query: PlumeInfoQuery())
     outcome = first_answer(client, PlumeQuery(points_enu_m=[]), PlumeValues)
     assert isinstance(outcome, BadReply) and outcome.field == "schema"
-    q.undeclare()
 
 
-def test_a_failing_handler_leaves_no_reply_and_the_server_goes_on(
-    pair: tuple[zenoh.Session, zenoh.Session],
-) -> None:
-    server, client = pair
-
+def test_a_failing_handler_leaves_no_reply_and_the_server_goes_on(serving: Serving) -> None:
     def flaky(query: PlumeQuery) -> PlumeValues:
         if not query.points_enu_m:
             raise RuntimeError("a bug")
         return sums(query)
 
-    q = serve(server, KEY, PlumeQuery, flaky)
+    client = serving(flaky)
     first_answer(client, PlumeQuery(points_enu_m=[(1.0, 0.0, 0.0)]), PlumeValues)
     with pytest.raises(NoReply):
         request(client, KEY, PlumeQuery(points_enu_m=[]), PlumeValues, 5.0)
     ok = request(client, KEY, PlumeQuery(points_enu_m=[(2.0, 0.0, 0.0)]), PlumeValues, 5.0)
     assert ok.values_g_m3 == [2.0]
-    q.undeclare()
 
 
-def test_memo_answers_a_repeated_request_without_the_handler(
-    pair: tuple[zenoh.Session, zenoh.Session],
-) -> None:
-    server, client = pair
+def test_memo_answers_a_repeated_request_without_the_handler(serving: Serving) -> None:
     calls: list[PlumeQuery] = []
-    q = serve(server, KEY, PlumeQuery, counting(calls), memo=True)
+    client = serving(counting(calls), memo=True)
     same = PlumeQuery(points_enu_m=[(1.0, 2.0, 3.0)])
     first_answer(client, same, PlumeValues)
     n = len(calls)
@@ -230,7 +225,6 @@ def test_memo_answers_a_repeated_request_without_the_handler(
     # only the previous request is remembered: the first one is computed again
     assert request(client, KEY, same, PlumeValues, 5.0).values_g_m3 == [6.0]
     assert len(calls) == n + 2
-    q.undeclare()
 
 
 def test_ask_does_not_block_and_calls_back_once(
