@@ -3,7 +3,7 @@ entries of a batch count, which are dropped and counted."""
 
 from __future__ import annotations
 
-import pytest
+from collections.abc import Sequence
 
 from sim_world.intake import ActuatorIntake
 from swarmbus.codec import encode
@@ -23,62 +23,46 @@ def batch(tick: int, *entries: tuple[str, int, list[float]]) -> bytes:
     return encode(ActuatorBatch(tick=tick, commands=commands))
 
 
-# (the token the batch's key names, the batch, the entries taken, the foreign entries counted)
-CASES: dict[str, tuple[str, bytes, tuple[int, list[tuple[str, list[float]]]], int]] = {
-    "a process serving several vehicles commands each of them": (
-        "autopilot-0",
-        batch(7, ("uav2", 7, [0.5] * 4), ("uav1", 7, [0.25] * 4)),
-        (7, [("uav2", [0.5] * 4), ("uav1", [0.25] * 4)]),
-        0,
-    ),
-    "a one-vehicle key commands only its own vehicle and counts the others": (
-        "autopilot-uav1",
-        batch(3, ("uav1", 3, [0.1] * 4), ("uav2", 3, [0.9] * 4), ("uav3", 3, [0.9] * 4)),
-        (3, [("uav1", [0.1] * 4)]),
-        2,
-    ),
-    "a token of an unknown vehicle is no one-vehicle key": (
-        "autopilot-ghost",
-        batch(1, ("uav3", 1, [0.3] * 4)),
-        (1, [("uav3", [0.3] * 4)]),
-        0,
-    ),
-    "entries of another tick or an unknown vehicle are dropped uncounted": (
-        "autopilot-0",
-        batch(5, ("uav1", 4, [0.2] * 4), ("ghost", 5, [0.2] * 4), ("uav3", 5, [0.7] * 4)),
-        (5, [("uav3", [0.7] * 4)]),
-        0,
-    ),
-    # 1.5 is outside a rotor command's 0..1: that entry fails to decode, the batch does not.
-    "a bad entry sinks only itself": (
-        "autopilot-0",
-        batch(2, ("uav1", 2, [0.5] * 4), ("uav2", 2, [1.5] * 4), ("uav3", 2, [0.0] * 4)),
-        (2, [("uav1", [0.5] * 4), ("uav3", [0.0] * 4)]),
-        0,
-    ),
-}
+Taken = tuple[int, list[tuple[str, Sequence[float]]]]
 
 
-@pytest.mark.parametrize(("token", "data", "taken", "foreign"), CASES.values(), ids=CASES.keys())
-def test_the_entries_a_batch_commands(
-    token: str, data: bytes, taken: tuple[int, list[tuple[str, list[float]]]], foreign: int
-) -> None:
+def take(token: str, data: bytes) -> tuple[Taken, int]:
+    """A new intake's entries of ``data`` on the actuator key of ``token``, and the foreign
+    entries it counted."""
     taker = intake()
-    assert taker.entries(KEYS.autopilot_actuators(token), data) == taken
-    assert taker.foreign_dropped == foreign
+    return taker.entries(KEYS.autopilot_actuators(token), data), taker.foreign_dropped
 
 
-def test_the_foreign_count_adds_up_over_batches() -> None:
+def test_a_process_serving_several_vehicles_commands_each_of_them() -> None:
+    data = batch(7, ("uav2", 7, [0.5] * 4), ("uav1", 7, [0.25] * 4))
+    assert take("autopilot-0", data) == ((7, [("uav2", [0.5] * 4), ("uav1", [0.25] * 4)]), 0)
+
+
+def test_a_one_vehicle_key_commands_only_its_own_vehicle_and_counts_the_others() -> None:
     taker = intake()
     key = KEYS.autopilot_actuators("autopilot-uav1")
-    taker.entries(
-        key, batch(3, ("uav1", 3, [0.1] * 4), ("uav2", 3, [0.9] * 4), ("uav3", 3, [0.9] * 4))
-    )
+    data = batch(3, ("uav1", 3, [0.1] * 4), ("uav2", 3, [0.9] * 4), ("uav3", 3, [0.9] * 4))
+    assert taker.entries(key, data) == (3, [("uav1", [0.1] * 4)])
     assert taker.foreign_dropped == 2
     taker.entries(key, batch(4, ("uav2", 4, [0.9] * 4)))
     assert taker.foreign_dropped == 3
 
 
+def test_a_token_of_an_unknown_vehicle_is_no_one_vehicle_key() -> None:
+    data = batch(1, ("uav3", 1, [0.3] * 4))
+    assert take("autopilot-ghost", data) == ((1, [("uav3", [0.3] * 4)]), 0)
+
+
+def test_entries_of_another_tick_or_an_unknown_vehicle_are_dropped_uncounted() -> None:
+    data = batch(5, ("uav1", 4, [0.2] * 4), ("ghost", 5, [0.2] * 4), ("uav3", 5, [0.7] * 4))
+    assert take("autopilot-0", data) == ((5, [("uav3", [0.7] * 4)]), 0)
+
+
+def test_a_bad_entry_sinks_only_itself() -> None:
+    # 1.5 is outside a rotor command's 0..1: that entry fails to decode, the batch does not.
+    data = batch(2, ("uav1", 2, [0.5] * 4), ("uav2", 2, [1.5] * 4), ("uav3", 2, [0.0] * 4))
+    assert take("autopilot-0", data) == ((2, [("uav1", [0.5] * 4), ("uav3", [0.0] * 4)]), 0)
+
+
 def test_bytes_that_are_no_batch_give_nothing() -> None:
-    key = KEYS.autopilot_actuators("autopilot-0")
-    assert intake().entries(key, b"\x93not a batch") == (0, [])
+    assert take("autopilot-0", b"\x93not a batch") == ((0, []), 0)
