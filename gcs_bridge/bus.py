@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import collections
 import contextlib
+import dataclasses
 import logging
 import os
 import threading
@@ -222,6 +223,7 @@ def _handler(
 Done = Callable[[CommandReply], None]
 
 
+@dataclasses.dataclass(eq=False)
 class Commander:
     """Sends one vehicle's commands in order, one query at a time; results go to the loop.
 
@@ -230,22 +232,16 @@ class Commander:
     never queue behind their own kind: a newer one replaces the one still waiting.
     """
 
-    def __init__(
-        self,
-        session: zenoh.Session,
-        key: str,
-        vehicle_id: str,
-        timeout_s: float,
-        inbox: Inbox,
-    ) -> None:
-        self._session = session
-        self._key = key
-        self._vehicle_id = vehicle_id
-        self._timeout_s = timeout_s
-        self._inbox = inbox
-        self._lock = threading.Lock()
-        self._queue: collections.deque[tuple[Command, Done]] = collections.deque()
-        self._busy = False
+    session: zenoh.Session
+    key: str
+    vehicle_id: str
+    timeout_s: float
+    inbox: Inbox
+    _lock: threading.Lock = dataclasses.field(default_factory=threading.Lock, init=False)
+    _queue: collections.deque[tuple[Command, Done]] = dataclasses.field(
+        default_factory=collections.deque, init=False
+    )
+    _busy: bool = dataclasses.field(default=False, init=False)
 
     def submit(self, command: Command, done: Done) -> None:
         with self._lock:
@@ -256,7 +252,7 @@ class Commander:
                         return
             if len(self._queue) >= MAX_QUEUED_COMMANDS:
                 reply = self._failed("too many commands waiting")
-                self._inbox.post(lambda: done(reply))
+                self.inbox.post(lambda: done(reply))
                 return
             self._queue.append((command, done))
             if self._busy:
@@ -265,7 +261,7 @@ class Commander:
         self._start_next()
 
     def _failed(self, reason: str, code: RejectCode = RejectCode.FAILED) -> CommandReply:
-        return CommandReply(vehicle_id=self._vehicle_id, accepted=False, code=code, reason=reason)
+        return CommandReply(vehicle_id=self.vehicle_id, accepted=False, code=code, reason=reason)
 
     def _start_next(self) -> None:
         with self._lock:
@@ -277,9 +273,9 @@ class Commander:
 
         def on_done(outcome: CommandReply | RequestError) -> None:
             if isinstance(outcome, BadReply):
-                log.warning("%s: bad reply to %s: %s", self._key, name, outcome)
-            result = command_reply(self._vehicle_id, outcome)
-            self._inbox.post(lambda: done(result))
+                log.warning("%s: bad reply to %s: %s", self.key, name, outcome)
+            result = command_reply(self.vehicle_id, outcome)
+            self.inbox.post(lambda: done(result))
             self._start_next()
 
-        ask(self._session, self._key, command, CommandReply, self._timeout_s, on_done)
+        ask(self.session, self.key, command, CommandReply, self.timeout_s, on_done)

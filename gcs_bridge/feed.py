@@ -11,6 +11,7 @@ streams wait, and start again from the newest state once someone is there.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 
@@ -31,46 +32,39 @@ Window = tuple[float, float]
 ALWAYS_QUIET: Window = (-math.inf, math.inf)
 
 
+@dataclasses.dataclass(eq=False)
 class TelemetryFeed:
     """Each vehicle's telemetry streams on each of its links, fed by ticks and statuses."""
 
-    def __init__(
-        self,
-        vehicles: list[Vehicle],
-        links: LinkSet,
-        out: Outbox,
-        autopilots: Autopilots,
-        gcs: GcsHeartbeats,
-        streams: Streams | None,
-    ) -> None:
-        self._vehicles = vehicles
-        self._links = links
-        self._out = out
-        self._autopilots = autopilots
-        self._gcs = gcs
-        self._streams = streams
-        self._fed_sim_s = -math.inf  # sim time of the last tick taken (back: a new simulation)
+    vehicles: list[Vehicle]
+    links: LinkSet
+    out: Outbox
+    autopilots: Autopilots
+    gcs: GcsHeartbeats
+    streams: Streams | None
+    # sim time of the last tick taken (back: a new simulation)
+    _fed_sim_s: float = dataclasses.field(default=-math.inf, init=False)
 
     # ------------------------------------------------------------------ heartbeats
     def beat(self, now: float) -> None:
         """HEARTBEAT of every vehicle whose autopilot is there (wall-clock period)."""
-        for v in self._vehicles:
-            if self._autopilots.alive(v, now):
-                self._out.send_all(v, v.heartbeat(), now)
+        for v in self.vehicles:
+            if self.autopilots.alive(v, now):
+                self.out.send_all(v, v.heartbeat(), now)
 
     # ------------------------------------------------------------------ ticks
     def _window(self, v: Vehicle, now: float, names: frozenset[str]) -> Window:
         """``(lo, hi)``: nothing is due for ``v`` at a sim time t with lo <= t < hi (then its
         state need not even be decoded); a superset of the times something may be due."""
-        if not self._autopilots.alive_in(v, now, names):
+        if not self.autopilots.alive_in(v, now, names):
             return ALWAYS_QUIET
         lo, hi = -math.inf, math.inf
-        for link in self._links.of(v.sysid):
-            if self._gcs.heard(link, now):  # the GCS link keep-alive
+        for link in self.links.of(v.sysid):
+            if self.gcs.heard(link, now):  # the GCS link keep-alive
                 hi = min(hi, v.last_gcs_heartbeat_sim_s + 1.0 - 1e-6)
             if not link.listened(now):
                 continue
-            schedule = self._links.schedule(link, v.sysid)
+            schedule = self.links.schedule(link, v.sysid)
             lo = max(lo, schedule.lo - 1e-6)
             hi = min(hi, schedule.hi - 1e-9)
         return lo, hi
@@ -78,26 +72,26 @@ class TelemetryFeed:
     def on_ticks(self, ticks: list[TickView], now: float) -> None:
         """Every tick's sim time against each vehicle's window; a vehicle's state is decoded
         and handled only where its telemetry (or keep-alive) falls due."""
-        streams = self._streams
+        streams = self.streams
         if streams is None:
             return
-        names = self._autopilots.names()
-        windows = {v.id: self._window(v, now, names) for v in self._vehicles}
+        names = self.autopilots.names()
+        windows = {v.id: self._window(v, now, names) for v in self.vehicles}
         lo_all, hi_all = _common(windows)
         last = ticks[-1]
         for view in ticks:
             t = view.sim_time_s
             if t < self._fed_sim_s:  # a new simulation
-                for v in self._vehicles:
+                for v in self.vehicles:
                     v.last_gcs_heartbeat_sim_s = -1e9
                     windows[v.id] = self._window(v, now, names)
                 lo_all, hi_all = _common(windows)
             self._fed_sim_s = t
             if view is last:
-                _leave_states(self._vehicles, streams, view)
+                _leave_states(self.vehicles, streams, view)
             if lo_all <= t < hi_all:
                 continue
-            for v in self._vehicles:
+            for v in self.vehicles:
                 lo, hi = windows[v.id]
                 if lo <= t < hi:
                     continue
@@ -127,15 +121,15 @@ class TelemetryFeed:
     def on_state(self, v: Vehicle, state: VehicleState, now: float) -> None:
         """A decoded state: the GCS keep-alive, and every stream due on each link."""
         v.state = state
-        if not self._autopilots.alive(v, now):
+        if not self.autopilots.alive(v, now):
             return
-        self._gcs.keep_alive(v, now)
+        self.gcs.keep_alive(v, now)
         built: dict[int, Msg | None] = {}
         view = None
-        for link in self._links.of(v.sysid):
+        for link in self.links.of(v.sysid):
             if not link.listened(now):
                 continue
-            for msg_id in self._links.schedule(link, v.sysid).due(state.sim_time_s):
+            for msg_id in self.links.schedule(link, v.sysid).due(state.sim_time_s):
                 if msg_id not in built:
                     if msg_id == ID_MISSION_CURRENT:
                         built[msg_id] = v.mission_current_msg()
@@ -151,15 +145,15 @@ class TelemetryFeed:
         """What a new status means at once: heartbeat, items reached, current item, home."""
         ev = v.update_status(status, now)
         if ev.heartbeat:
-            self._out.send_all(v, v.heartbeat(), now)
+            self.out.send_all(v, v.heartbeat(), now)
         for seq in ev.reached_seqs:
-            self._out.send_all(v, mavlink.MAVLink_mission_item_reached_message(seq), now)
+            self.out.send_all(v, mavlink.MAVLink_mission_item_reached_message(seq), now)
         if ev.mission_current:
-            self._out.send_all(v, v.mission_current_msg(), now)
+            self.out.send_all(v, v.mission_current_msg(), now)
         if ev.home_changed:
             home = BUILDERS[mavlink.MAVLINK_MSG_ID_HOME_POSITION](v.view())
             if home is not None:
-                self._out.send_all(v, home, now)
+                self.out.send_all(v, home, now)
 
 
 def _leave_states(vehicles: list[Vehicle], streams: Streams, view: TickView) -> None:
