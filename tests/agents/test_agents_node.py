@@ -71,8 +71,7 @@ def test_one_vehicle_over_the_bus_with_the_plume_service(
         )
         assert replies and replies[0].err is not None
         assert decode(replies[0].err.payload.to_bytes(), ErrorReply).reason
-        physics = BusToyPhysics(router, sc, participants=["uav2"], plume=True).start()
-        try:
+        with BusToyPhysics(router, sc, participants=["uav2"], plume=True) as physics:
             swarm.wait_until(lambda: swarm.state("uav2"), 10.0, "uav2 state")
             uav.arm()
             uav.takeoff(10.0)
@@ -87,8 +86,6 @@ def test_one_vehicle_over_the_bus_with_the_plume_service(
             sub.close()
             uav.land()
             swarm.wait_until(lambda: not swarm.status("uav2").armed, 60, "landed and disarmed")
-        finally:
-            physics.stop()
         assert physics.error is None, physics.error
         assert all(p.poll() is None for _, p in procs.procs), "a node died"
     plume = GaussianPlume.preset("novak2018")
@@ -119,8 +116,7 @@ def test_without_a_plume_service_readings_are_unavailable_never_zero(
     sc = load_scenario()
     with NodeProcs(net, DEFAULT_SCENARIO) as procs:
         start_autopilots(procs, swarm, ["uav1"])
-        physics = BusToyPhysics(router, sc, participants=["uav1"]).start()
-        try:
+        with BusToyPhysics(router, sc, participants=["uav1"]):
             swarm.wait_until(lambda: swarm.reading("uav1"), 30.0, "a reading")
             r = swarm.reading("uav1")
             assert r is not None and not r.available
@@ -128,8 +124,6 @@ def test_without_a_plume_service_readings_are_unavailable_never_zero(
             swarm.wait_until(
                 lambda: "plume service" in swarm.status("uav1").health, 10.0, "sensor health"
             )
-        finally:
-            physics.stop()
 
 
 def test_one_process_serves_several_vehicles_with_one_token_each(
@@ -144,8 +138,7 @@ def test_one_process_serves_several_vehicles_with_one_token_each(
             lambda alive: {"autopilot-uav1", "autopilot-uav3"} <= alive, 30.0
         ), sorted(presence.alive)
         presence.close()
-        physics = BusToyPhysics(router, sc, participants=["uav1", "uav3"]).start()
-        try:
+        with BusToyPhysics(router, sc, participants=["uav1", "uav3"]) as physics:
             swarm.wait_until(lambda: swarm.state("uav3"), 10.0, "uav3 state")
             for vid in ("uav1", "uav3"):
                 swarm.command(vid).arm()
@@ -155,8 +148,6 @@ def test_one_process_serves_several_vehicles_with_one_token_each(
                 60,
                 "both hovering",
             )
-        finally:
-            physics.stop()
         assert physics.error is None
 
 
@@ -246,8 +237,7 @@ def _toy_flight_paused(
     sc = load_scenario(scenario_file)
     with NodeProcs(net, scenario_file, tmp_path) as procs:
         start_autopilots(procs, swarm, ["uav1"])
-        physics = BusToyPhysics(router, sc, participants=["uav1"]).start()
-        try:
+        with BusToyPhysics(router, sc, participants=["uav1"]) as physics:
             uav = swarm.command("uav1")
             swarm.wait_until(lambda: swarm.state("uav1"), 10.0, "uav1 state")
             uav.arm()
@@ -269,8 +259,6 @@ def _toy_flight_paused(
             physics.resume()
             with contextlib.suppress(WaitTimeout):
                 swarm.wait_until(lambda: not swarm.status("uav1").armed, 20.0, "disarmed")
-        finally:
-            physics.stop()
         assert physics.error is None, physics.error
     return landed_at, during, (tmp_path / "autopilot-uav1.log").read_text()
 

@@ -293,6 +293,12 @@ class BusToyPhysics:
         for sub in self._subs:
             sub.undeclare()
 
+    def __enter__(self) -> BusToyPhysics:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
     @property
     def sim_time_s(self) -> float:
         return self.tick * self.dt
