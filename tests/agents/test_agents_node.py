@@ -53,11 +53,25 @@ def start_autopilots(procs: NodeProcs, sw: Swarm, ids: list[str]) -> None:
     sw.wait_until(lambda: set(ids) <= set(sw.vehicles), 30.0, f"autopilot tokens of {ids}")
 
 
+@pytest.fixture
+def procs(network: tuple[Network, zenoh.Session]) -> Iterator[NodeProcs]:
+    """Node processes on the test network, flying the default scenario."""
+    net, _ = network
+    with NodeProcs(net, DEFAULT_SCENARIO) as started:
+        yield started
+
+
+def toy_physics(
+    network: tuple[Network, zenoh.Session], participants: list[str], plume: bool = False
+) -> BusToyPhysics:
+    """The lockstep stand-in for physics on the router's session, over the default scenario."""
+    return BusToyPhysics(network[1], load_scenario(), participants=participants, plume=plume)
+
+
 def test_one_vehicle_over_the_bus_with_the_plume_service(
     network: tuple[Network, zenoh.Session], swarm: Swarm, tmp_path: Path
 ) -> None:
     net, router = network
-    sc = load_scenario()
     with NodeProcs(net, DEFAULT_SCENARIO, tmp_path) as procs:
         procs.start("plume")
         start_autopilots(procs, swarm, ["uav2"])
@@ -71,7 +85,7 @@ def test_one_vehicle_over_the_bus_with_the_plume_service(
         )
         assert replies and replies[0].err is not None
         assert decode(replies[0].err.payload.to_bytes(), ErrorReply).reason
-        with BusToyPhysics(router, sc, participants=["uav2"], plume=True) as physics:
+        with toy_physics(network, ["uav2"], plume=True) as physics:
             swarm.wait_until(lambda: swarm.state("uav2"), 10.0, "uav2 state")
             uav.arm()
             uav.takeoff(10.0)
@@ -110,45 +124,39 @@ def test_one_vehicle_over_the_bus_with_the_plume_service(
 
 
 def test_without_a_plume_service_readings_are_unavailable_never_zero(
-    network: tuple[Network, zenoh.Session], swarm: Swarm
+    network: tuple[Network, zenoh.Session], swarm: Swarm, procs: NodeProcs
 ) -> None:
-    net, router = network
-    sc = load_scenario()
-    with NodeProcs(net, DEFAULT_SCENARIO) as procs:
-        start_autopilots(procs, swarm, ["uav1"])
-        with BusToyPhysics(router, sc, participants=["uav1"]):
-            swarm.wait_until(lambda: swarm.reading("uav1"), 30.0, "a reading")
-            r = swarm.reading("uav1")
-            assert r is not None and not r.available
-            assert r.reported_g_m3 is None and r.true_g_m3 is None
-            swarm.wait_until(
-                lambda: "plume service" in swarm.status("uav1").health, 10.0, "sensor health"
-            )
+    start_autopilots(procs, swarm, ["uav1"])
+    with toy_physics(network, ["uav1"]):
+        swarm.wait_until(lambda: swarm.reading("uav1"), 30.0, "a reading")
+        r = swarm.reading("uav1")
+        assert r is not None and not r.available
+        assert r.reported_g_m3 is None and r.true_g_m3 is None
+        swarm.wait_until(
+            lambda: "plume service" in swarm.status("uav1").health, 10.0, "sensor health"
+        )
 
 
 def test_one_process_serves_several_vehicles_with_one_token_each(
-    network: tuple[Network, zenoh.Session], swarm: Swarm
+    network: tuple[Network, zenoh.Session], swarm: Swarm, procs: NodeProcs
 ) -> None:
-    net, router = network
-    sc = load_scenario()
-    with NodeProcs(net, DEFAULT_SCENARIO) as procs:
-        procs.start("autopilot", "--vehicle", "uav1", "--vehicle", "uav3")
-        presence = Presence(router, keys_for())
-        assert presence.wait_for(
-            lambda alive: {"autopilot-uav1", "autopilot-uav3"} <= alive, 30.0
-        ), sorted(presence.alive)
-        presence.close()
-        with BusToyPhysics(router, sc, participants=["uav1", "uav3"]) as physics:
-            swarm.wait_until(lambda: swarm.state("uav3"), 10.0, "uav3 state")
-            for vid in ("uav1", "uav3"):
-                swarm.command(vid).arm()
-                swarm.command(vid).takeoff(3.0)
-            swarm.wait_until(
-                lambda: all(swarm.status(v).mode == FlightMode.HOLD for v in ("uav1", "uav3")),
-                60,
-                "both hovering",
-            )
-        assert physics.error is None
+    procs.start("autopilot", "--vehicle", "uav1", "--vehicle", "uav3")
+    presence = Presence(network[1], keys_for())
+    assert presence.wait_for(lambda alive: {"autopilot-uav1", "autopilot-uav3"} <= alive, 30.0), (
+        sorted(presence.alive)
+    )
+    presence.close()
+    with toy_physics(network, ["uav1", "uav3"]) as physics:
+        swarm.wait_until(lambda: swarm.state("uav3"), 10.0, "uav3 state")
+        for vid in ("uav1", "uav3"):
+            swarm.command(vid).arm()
+            swarm.command(vid).takeoff(3.0)
+        swarm.wait_until(
+            lambda: all(swarm.status(v).mode == FlightMode.HOLD for v in ("uav1", "uav3")),
+            60,
+            "both hovering",
+        )
+    assert physics.error is None
 
 
 def test_wait_until_names_what_did_not_happen(swarm: Swarm) -> None:
@@ -164,16 +172,12 @@ def test_command_to_a_missing_vehicle_times_out(swarm: Swarm) -> None:
         swarm.command("ghost").arm()
 
 
-def test_invalid_payload_values_are_rejected_by_the_decoder(
-    network: tuple[Network, zenoh.Session], swarm: Swarm
-) -> None:
-    net, _ = network
-    with NodeProcs(net, DEFAULT_SCENARIO) as procs:
-        start_autopilots(procs, swarm, ["uav1"])
-        with pytest.raises(CommandRejected) as info:
-            swarm.command("uav1").goto(float("nan"), 0.0, 5.0)
-        assert info.value.code == RejectCode.INVALID and "position_enu_m" in info.value.field
-        assert procs.procs[0][1].poll() is None
+def test_invalid_payload_values_are_rejected_by_the_decoder(swarm: Swarm, procs: NodeProcs) -> None:
+    start_autopilots(procs, swarm, ["uav1"])
+    with pytest.raises(CommandRejected) as info:
+        swarm.command("uav1").goto(float("nan"), 0.0, 5.0)
+    assert info.value.code == RejectCode.INVALID and "position_enu_m" in info.value.field
+    assert procs.procs[0][1].poll() is None
 
 
 def test_a_garbage_sample_behind_a_real_tick_does_not_push_it_out_of_the_inbox() -> None:
