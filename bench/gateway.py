@@ -150,9 +150,7 @@ def row(n: int, speed: float, per_process: int, tmp: Path) -> str:
     listen = Listener(gcs_port)
     try:
         with Launcher(sc, opts) as launcher:
-            if launcher.view is not None:  # the launcher's own view of every state: not needed
-                launcher.view.close()
-                launcher.view = None
+            launcher.close_view()  # the launcher's own view of every state: not needed
             sysids = heard(listen, n, 120.0)
             gw = psutil.Process(launcher.supervisor.pids()["gateway"])
             listen.receive(0.0)  # count only what arrives from now on

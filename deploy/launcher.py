@@ -432,11 +432,15 @@ class Launcher(Closeable):
             stop.wait(0.1)
 
     # ------------------------------------------------------------------ stop
-    def stop(self) -> dict[str, int | None]:
-        # Our own session goes first: it must not outlive the router it talks through.
+    def close_view(self) -> None:
+        """Drop the launcher's view of the bus (presence, status); the stack runs on."""
         if self.view is not None:
             self.view.close()
             self.view = None
+
+    def stop(self) -> dict[str, int | None]:
+        # Our own session goes first: it must not outlive the router it talks through.
+        self.close_view()
         if self._session is not None:
             self._session.close()
             self._session = None

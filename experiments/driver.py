@@ -285,9 +285,8 @@ class BusDriver:
         if self._swarm is not None:
             self._swarm.close()
             self._swarm = None
-        if self._launcher is not None and self._launcher.view is not None:
-            self._launcher.view.close()
-            self._launcher.view = None
+        if self._launcher is not None:
+            self._launcher.close_view()
 
     def _wait_handshake(self) -> None:
         """The physics publishes its clock once every autopilot answered the first tick (the
