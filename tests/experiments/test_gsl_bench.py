@@ -6,6 +6,7 @@ import hashlib
 import json
 import math
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -52,24 +53,25 @@ def test_starts_are_inside_the_protocol_box() -> None:
         assert START_ACROSS_M[0] <= y <= START_ACROSS_M[1]
 
 
-def test_same_seed_same_table_byte_for_byte(tmp_path: Path) -> None:
-    def once(jobs: int, out: Path) -> tuple[bytes, ...]:
-        opts = make_options(
-            ["random_walk", "casting"],
-            ["steady_gaussian"],
-            ["ideal"],
-            runs=2,
-            seed=4,
-            time_limit_s=20.0,
-            jobs=jobs,
-        )
-        outcomes = run_all(opts)
-        write_outputs(out, opts, rows_of(opts, outcomes), outcomes)
-        names = ("gsl.md", "gsl.json", "paired.json", "runs.csv")
-        return tuple((out / name).read_bytes() for name in names)
+TABLE_FILES = ("gsl.md", "gsl.json", "paired.json", "runs.csv")
 
-    first = once(1, tmp_path / "a")
-    second = once(2, tmp_path / "b")
+
+def _table_bytes(
+    out: Path, cell: tuple[list[str], list[str], list[str]], **options: Any
+) -> tuple[bytes, ...]:
+    """The bench's table files (``TABLE_FILES``) for ``cell`` — algorithms, environments,
+    sensors — and ``options``, written to ``out``."""
+    opts = make_options(*cell, **options)
+    outcomes = run_all(opts)
+    write_outputs(out, opts, rows_of(opts, outcomes), outcomes)
+    return tuple((out / name).read_bytes() for name in TABLE_FILES)
+
+
+def test_same_seed_same_table_byte_for_byte(tmp_path: Path) -> None:
+    cell = (["random_walk", "casting"], ["steady_gaussian"], ["ideal"])
+    options: dict[str, Any] = {"runs": 2, "seed": 4, "time_limit_s": 20.0}
+    first = _table_bytes(tmp_path / "a", cell, jobs=1, **options)
+    second = _table_bytes(tmp_path / "b", cell, jobs=2, **options)
     assert first == second
     rows = json.loads(first[1])
     # the floor and the ceiling run in every cell
@@ -99,19 +101,33 @@ def test_same_seed_same_table_byte_for_byte(tmp_path: Path) -> None:
 def test_same_seed_same_filament_cell_byte_for_byte(tmp_path: Path) -> None:
     """A time-dependent field, its anemometer and the MOX sensor repeat their bits too."""
 
-    def once(jobs: int, out: Path) -> tuple[bytes, bytes]:
-        opts = make_options(
-            ["casting"], ["meander_high"], ["mox"], runs=2, seed=4, time_limit_s=20.0, jobs=jobs
-        )
-        outcomes = run_all(opts)
-        write_outputs(out, opts, rows_of(opts, outcomes), outcomes)
-        return (out / "gsl.md").read_bytes(), (out / "gsl.json").read_bytes()
-
-    first = once(1, tmp_path / "a")
-    assert first == once(2, tmp_path / "b")
+    cell = (["casting"], ["meander_high"], ["mox"])
+    options: dict[str, Any] = {"runs": 2, "seed": 4, "time_limit_s": 20.0}
+    first = _table_bytes(tmp_path / "a", cell, jobs=1, **options)
+    assert first == _table_bytes(tmp_path / "b", cell, jobs=2, **options)
     _, row, _ = json.loads(first[1])
     assert (row["environment"], row["sensor"], row["runs"]) == ("meander_high", "mox", 2)
     assert row["time_dependent"] is True
+
+
+def test_same_seed_same_full_dynamics_table_byte_for_byte(tmp_path: Path) -> None:
+    """Full dynamics (pybullet vehicles and autopilots in each worker) repeat their bits
+    whatever the number of workers: the published full-dynamics table's claim."""
+    cell = (["casting"], ["steady_gaussian"], ["ideal"])
+    options: dict[str, Any] = {"runs": 2, "seed": 4, "time_limit_s": 10.0, "dynamics": "full"}
+    first = _table_bytes(tmp_path / "a", cell, jobs=1, **options)
+    assert first == _table_bytes(tmp_path / "b", cell, jobs=2, **options)
+    rows = json.loads(first[1])
+    assert [(r["algorithm"], r["dynamics"], r["runs"]) for r in rows] == [
+        ("random_walk", "full", 2),
+        ("casting", "full", 2),
+        ("oracle", "full", 2),
+    ]
+    # every episode flew: more than 1 m of path in every per-run line
+    lines = first[3].decode().splitlines()
+    assert len(lines) == 1 + 3 * 2
+    path = lines[0].split(",").index("path_length_m")
+    assert all(float(line.split(",")[path]) > 1.0 for line in lines[1:])
 
 
 def test_missing_environments_and_unknown_algorithms_are_refused_clearly() -> None:
