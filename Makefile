@@ -61,7 +61,7 @@ test: $(STAMP) lint typecheck docs test-prereqs
 	$(BIN)/python -m pytest -m soak -s
 
 bench: $(STAMP)
-	$(BIN)/python -m bench
+	$(BIN)/python -m plumeswarm.bench
 
 clean:
 	rm -rf $(VENV) dist build .pytest_cache .mypy_cache .ruff_cache site

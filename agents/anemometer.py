@@ -1,6 +1,6 @@
 """A vehicle's anemometer: the scenario's wind at the vehicle's position, plus its own noise.
 
-The wind is the one every process evaluates (:mod:`swarmbus.wind`), at the tick's sim time
+The wind is the one every process evaluates (:mod:`plume_atmosphere.wind`), at the tick's sim time
 and the vehicle's position in that tick's state, so the anemometer reads the very air
 velocity the physics applies as drag over that tick. The noise is Gaussian, ``noise_std_m_s``
 on each axis, drawn from a generator seeded by (scenario seed, vehicle index, tick): the same
@@ -12,9 +12,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from plume_atmosphere.wind import WindModel
 from swarmbus.messages import AnemometerReading
 from swarmbus.scenario import AnemometerSpec
-from swarmbus.wind import WindModel
 
 Vec3 = tuple[float, float, float]
 _STREAM = 0xA7E

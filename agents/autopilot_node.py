@@ -26,6 +26,7 @@ from agents.flight import take_readings
 from agents.node_events import Idle, Inbox, PendingSensor, Tick, TickArrived
 from agents.resume import StateKeeper
 from agents.snapshot import PendingSnapshot, ProcessSnapshot, SnapshotError, capture, restore
+from plume_atmosphere.wind import WindModel, wind_from_scenario
 from swarmbus.catchup import CatchUpPublisher, RouterOutage, watch_router
 from swarmbus.codec import MessageError, decode, encode
 from swarmbus.keys import Keys, autopilot_node
@@ -44,7 +45,6 @@ from swarmbus.reqrep import Incoming, serve_later
 from swarmbus.scenario import Scenario
 from swarmbus.session import SINGLE_THREAD_RUNTIME
 from swarmbus.views import StateHead
-from swarmbus.wind import WindModel, wind_from_scenario
 
 log = logging.getLogger(__name__)
 

@@ -1,7 +1,8 @@
 """Building a vehicle's autopilot and flight from a scenario, the one way every runner does.
 
 The autopilot process (:mod:`agents.autopilot_node`) and the in-process runners
-(``experiments.fused``, ``experiments.gsl_episode``) build their vehicles here, so both fly the
+(``plumeswarm.experiments.fused``, ``plumeswarm.gsl.episode``) build their vehicles here, so both
+fly the
 same bits (docs/architecture.md, "How a tick flows"). Imports no Zenoh.
 """
 

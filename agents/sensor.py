@@ -42,7 +42,7 @@ shift later ones.
 :attr:`ConcentrationSensor.floor_g_m3` and :attr:`ConcentrationSensor.noise_std_g_m3` are what
 a detection threshold must clear. The seed's 0.01 / 0.2 g/m³ window is the ``novak2018``
 preset. With a named ``gas`` the reading also carries the reported value in ppm (ideal gas at
-the scenario's ``[world]`` temperature and pressure, :mod:`swarmbus.gases`).
+the scenario's ``[world]`` temperature and pressure, :mod:`plume_atmosphere.gases`).
 
 The field value comes from the plume service (one batched query per sensor period with the
 vehicle's own and its peers' positions, see :mod:`agents.autopilot_node`); when it does not
@@ -59,7 +59,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from swarmbus.gases import ppm_per_g_m3
+from plume_atmosphere.gases import ppm_per_g_m3
 from swarmbus.messages import ConcentrationReading, PeerReading
 from swarmbus.scenario import Mox, Scenario, Sensor
 

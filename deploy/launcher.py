@@ -16,7 +16,6 @@ from __future__ import annotations
 import importlib.util
 import json
 import logging
-import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -105,11 +104,14 @@ class LaunchOptions:
     vehicles: tuple[str, ...] | None = None  # autopilots for these vehicles; None: all
     vehicles_per_process: int = 1  # autopilot processes serve this many vehicles each
     verbose: int = 1
+    # The command that runs ``node ROLE …`` (the user layer's CLI, e.g. ``python -m plumeswarm``):
+    # handed down by whoever launches, since orchestration never names the layer above it.
+    node_command: tuple[str, ...] = ()
     node_options: dict[str, tuple[str, ...]] = field(default_factory=dict)  # role → KEY=VALUE
     node_args: tuple[str, ...] = ()  # for every node (e.g. --hosts/--host: its TLS identity)
     client_network: NetworkConfig | None = None  # the launcher's own session (e.g. with TLS)
     # role → the ``node`` role that runs in its place, under the same process name (the bench's
-    # ceiling stand-ins, bench.ceiling); default: each role runs itself
+    # ceiling stand-ins, deploy.ceiling); default: each role runs itself
     stand_ins: dict[str, str] = field(default_factory=dict)
 
 
@@ -153,7 +155,9 @@ def plan(scenario: Scenario, opts: LaunchOptions) -> list[ProcessSpec]:
     """The processes of this run, in start order."""
     endpoints = router_endpoints(scenario, opts)
     listen = list(opts.listen) or ["tcp/127.0.0.1:0"]
-    base = [sys.executable, "-m", "deploy"] + ["-v"] * opts.verbose
+    if not opts.node_command:
+        raise LaunchError("LaunchOptions.node_command is empty: the command that runs `node ROLE`")
+    base = [*opts.node_command] + ["-v"] * opts.verbose
     common = ["--scenario", str(opts.scenario_path)]
     vehicle_ids = (
         list(opts.vehicles) if opts.vehicles is not None else [v.id for v in scenario.vehicles]

@@ -26,13 +26,13 @@ ROLES: dict[str, str] = {
 }
 
 
-# Stand-ins that take a role's place in ``plumeswarm bench scale --baseline`` (bench.ceiling):
+# Stand-ins that take a role's place in ``plumeswarm bench scale --baseline`` (deploy.ceiling):
 # the same processes doing no work but the lockstep handshake.
 BENCH_ROLES: dict[str, str] = {
-    "ceiling-physics": "bench.ceiling:physics_main",
-    "ceiling-autopilot": "bench.ceiling:autopilot_main",
-    "ceiling-plume": "bench.ceiling:plume_main",
-    "ceiling-gateway": "bench.ceiling:gateway_main",
+    "ceiling-physics": "deploy.ceiling:physics_main",
+    "ceiling-autopilot": "deploy.ceiling:autopilot_main",
+    "ceiling-plume": "deploy.ceiling:plume_main",
+    "ceiling-gateway": "deploy.ceiling:gateway_main",
 }
 
 

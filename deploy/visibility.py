@@ -24,9 +24,9 @@ import msgspec
 import numpy as np
 
 from agents.sensor import ConcentrationSensor
+from plume_atmosphere.plume_formula import downwind_unit
 from plume_service.field import ConcentrationField
 from plume_service.from_scenario import field_from_scenario
-from swarmbus.plume_formula import downwind_unit
 from swarmbus.scenario import Scenario, Sensor
 
 #: The crosswind distances (m downwind of the source) reported by default.

@@ -7,7 +7,7 @@ Runs in about 2 s (`pip install 'plumeswarm[rl]'`).
 import gymnasium
 import numpy as np
 
-env = gymnasium.make("experiments.envs:plumeswarm/PlumeSource-v0")
+env = gymnasium.make("plumeswarm.envs:plumeswarm/PlumeSource-v0")
 obs, info = env.reset(seed=7)
 side, total, done = 1.0, 0.0, False
 while not done:

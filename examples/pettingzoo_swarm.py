@@ -7,9 +7,9 @@ Each agent's return telescopes (the default reward is metres of progress toward 
 
 import numpy as np
 
-from experiments.envs.pettingzoo import plume_swarm_v0
+from plumeswarm.envs.pettingzoo import plumeswarm_v0
 
-env = plume_swarm_v0.parallel_env(k_peers=2)
+env = plumeswarm_v0.parallel_env(k_peers=2)
 observations, infos = env.reset(seed=3)
 start_m = {a: info["distance_m"] for a, info in infos.items()}
 returns = dict.fromkeys(env.possible_agents, 0.0)

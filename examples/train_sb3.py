@@ -23,7 +23,7 @@ parser.add_argument("--timesteps", type=int, default=2000)
 parser.add_argument("--episodes", type=int, default=3, help="evaluation episodes")
 args = parser.parse_args()
 
-env = gymnasium.make("experiments.envs:plumeswarm/PlumeSource-v0")
+env = gymnasium.make("plumeswarm.envs:plumeswarm/PlumeSource-v0")
 model = PPO("MlpPolicy", env, n_steps=256, batch_size=64, seed=0, verbose=0)
 model.learn(total_timesteps=args.timesteps)
 

@@ -19,10 +19,10 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from plume_atmosphere.wind import wind_model
 from plume_service.filament import FilamentPlume
 from plume_service.from_scenario import field_from_scenario
 from swarmbus.scenario import PlumeFilament, Wind, load_scenario, resolve_scenario_path
-from swarmbus.wind import wind_model
 
 
 def series_plot(path: Path) -> Path:

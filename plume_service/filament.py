@@ -16,7 +16,8 @@ normalised 3-D Gaussian plus its ground image,
 truncated at 4R, where P₄ = P(|N₃| < 4) = erf(2√2) − 8·e^−8/√(2π) ≈ 0.99888 renormalises the
 truncated kernel so each filament (with its image, over the half-space) carries exactly M.
 Filaments older than ``max_age_s`` are dropped. The cut-off is ``truncate_radii`` R (default 4)
-with the matching renormaliser. With a calibration (:mod:`swarmbus.calibration`) the centre's
+with the matching renormaliser. With a calibration (:mod:`plume_atmosphere.calibration`) the
+centre's
 step from age a to a + h has per-axis variance S(a + h) − S(a), the calibrated relative
 variances S_y (x, y) and S_z (z), instead of 2K·h. Without meander the long-time average is the
 Gaussian plume ``Q/(2πu s²)·exp(−y²/2s²)·[exp(−(z−H)²/2s²) + exp(−(z+H)²/2s²)]`` with
@@ -31,11 +32,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from plume_atmosphere.calibration import AtmosphereCalibration
+from plume_atmosphere.wind import WindModel
 from plume_service.field import FloatArray
 from plume_service.timestepped import TimeSteppedField
-from swarmbus.calibration import AtmosphereCalibration
 from swarmbus.scenario import PlumeFilament
-from swarmbus.wind import WindModel
 
 if TYPE_CHECKING:
     from scipy.spatial import cKDTree

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
+from plume_atmosphere.wind import WindModel, wind_from_scenario
 from plume_service.field import ConcentrationField, PlumeField
 from plume_service.filament import FilamentPlume
 from plume_service.gaussian import GaussianPlume
 from plume_service.puff import PuffPlume
 from swarmbus.scenario import Scenario, Source, scenario_calibration
-from swarmbus.wind import WindModel, wind_from_scenario
 
 
 def field_from_scenario(scenario: Scenario, wind: WindModel | None = None) -> ConcentrationField:

@@ -16,7 +16,7 @@ Conventions and guards (docs/plume.md):
   blows *from*, clockwise from north; 270 (the default) blows toward +x (east).
 * Upwind of and at the source (x ≤ 0), below ground (z < 0) and above a mixing lid (z > L)
   the concentration is exactly 0 — never NaN or inf, and no floating-point warnings.
-* σy, σz come from :mod:`swarmbus.dispersion`, which documents the near-source guard.
+* σy, σz come from :mod:`plume_atmosphere.dispersion`, which documents the near-source guard.
 """
 
 from __future__ import annotations
@@ -27,8 +27,8 @@ from typing import Any
 
 import numpy as np
 
+from plume_atmosphere.dispersion import DispersionCurves, dispersion_curves
 from plume_service.field import CHUNK_POINTS, ConcentrationField, FloatArray
-from swarmbus.dispersion import DispersionCurves, dispersion_curves
 
 _SQRT_2PI = math.sqrt(2.0 * math.pi)
 _SQRT_HALF = math.sqrt(0.5)

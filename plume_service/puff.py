@@ -24,12 +24,12 @@ from typing import Any
 
 import numpy as np
 
+from plume_atmosphere.calibration import AtmosphereCalibration
+from plume_atmosphere.dispersion import DispersionCurves, dispersion_curves
+from plume_atmosphere.wind import WindModel
 from plume_service.field import FloatArray
 from plume_service.timestepped import TimeSteppedField
-from swarmbus.calibration import AtmosphereCalibration
-from swarmbus.dispersion import DispersionCurves, dispersion_curves
 from swarmbus.scenario import PlumePuff
-from swarmbus.wind import WindModel
 
 _TWO_PI_1_5 = (2.0 * math.pi) ** 1.5
 #: Images farther than this many σz from the domain contribute < exp(−40) relative.

@@ -14,11 +14,11 @@ from typing import Any
 
 import numpy as np
 
+from plume_atmosphere.dispersion import dispersion_curves
+from plume_atmosphere.wind import wind_vector_enu
 from plume_service.field import ConcentrationField, FloatArray
 from plume_service.from_scenario import field_from_scenario
-from swarmbus.dispersion import dispersion_curves
 from swarmbus.scenario import Scenario
-from swarmbus.wind import wind_vector_enu
 
 #: The default hit threshold: an ideal sensor's level, g/m³ (the behaviours' detection level).
 HIT_THRESHOLD_G_M3 = 0.001

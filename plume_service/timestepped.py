@@ -16,13 +16,13 @@ from typing import Any, Generic, TypeVar
 
 import numpy as np
 
+from plume_atmosphere.wind import WindModel, step_index, thin_snapshots
 from plume_service.field import ConcentrationField
-from swarmbus.wind import WindModel, step_index, thin_snapshots
 
 State = TypeVar("State")
 
 #: Internal steps that share one seeded generator, and the spacing of kept snapshots (thinned
-#: by :func:`swarmbus.wind.thin_snapshots`).
+#: by :func:`plume_atmosphere.wind.thin_snapshots`).
 BLOCK_STEPS = 64
 
 

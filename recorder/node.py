@@ -501,7 +501,8 @@ class Recorder:
 
 # Zenoh's receive thread needs the GIL for every sample while the writer thread holds it for up
 # to the switch interval (5 ms by default); a stalled receive thread back-pressures the link and
-# upstream drops follow. A shorter interval reduced that loss at 61k msg/s in bench/recorder.py.
+# upstream drops follow. A shorter interval reduced that loss at 61k msg/s in
+# plumeswarm/bench/recorder.py.
 GIL_SWITCH_INTERVAL_S = 0.0005
 GAP_TICK_WAIT_S = 10.0  # wall: a lockstep that does not tick (paused, gone) gets a gap without
 GAP_SCAN_TIMEOUT_S = 60.0

@@ -2,7 +2,8 @@
 
 The plume's parameters come from the ``plume/info`` reply the recorder asked for, else from the
 scenario stored in the recording; the field is the steady Gaussian plume of
-:mod:`swarmbus.plume_formula` (ground reflection, and the images of a mixing lid when there is
+:mod:`plume_atmosphere.plume_formula` (ground reflection, and the images of a mixing lid when there
+is
 one), the equation the plume service serves. A time-dependent plume (filaments, puffs) has no
 steady map, and without parameters there is none either: the report then colours the readings.
 """
@@ -15,9 +16,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from plume_atmosphere.dispersion import DispersionCurves, dispersion_curves
+from plume_atmosphere.plume_formula import gaussian_plume_g_m3, plume_frame
 from recorder.flight_log import FlightLog, FloatArray
-from swarmbus.dispersion import DispersionCurves, dispersion_curves
-from swarmbus.plume_formula import gaussian_plume_g_m3, plume_frame
 
 log = logging.getLogger(__name__)
 

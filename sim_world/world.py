@@ -10,7 +10,8 @@ Forces per vehicle and substep (conventions in the team notes and ``docs/physics
 - thrust ``k_f * omega_i**2`` along body +z at the rotor's position, i.e. a body force plus the
   torque ``r_i x f_i``; reaction torque ``-spin_i * k_m * omega_i**2`` about body z;
 - linear drag ``-D * v_air`` in body axes, ``v_air = R^T (v - wind)`` with the scenario's wind
-  (``swarmbus.wind``; a time-varying wind is evaluated at each vehicle's position at the start
+  (``plume_atmosphere.wind``; a time-varying wind is evaluated at each vehicle's position at the
+  start
   of every :meth:`World.step` call, i.e. once per control tick, and held over its substeps);
 - gravity from pybullet; pybullet's own velocity damping is switched off.
 
@@ -24,6 +25,7 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from plume_atmosphere.wind import wind_from_scenario, wind_vector_enu
 from sim_world.checkpoint import CheckpointError, VehicleCheckpoint, WorldCheckpoint, scratch_file
 from sim_world.geodesy import EnuToGeodetic
 from sim_world.pybullet_quiet import pb
@@ -31,7 +33,6 @@ from swarmbus.closeable import Closeable
 from swarmbus.messages import VehicleState
 from swarmbus.scenario import Scenario, VehicleSpec
 from swarmbus.vehicle_types import VehicleType, load_vehicle_type
-from swarmbus.wind import wind_from_scenario, wind_vector_enu
 
 __all__ = ["GRAVITY_M_S2", "World", "rotate_to_body", "wind_vector_enu"]
 

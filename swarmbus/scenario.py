@@ -14,10 +14,10 @@ from pathlib import Path
 
 import msgspec
 
-from swarmbus.calibration import AtmosphereCalibration, derive_calibration
+from plume_atmosphere.calibration import AtmosphereCalibration, derive_calibration
+from plume_atmosphere.gases import FORMULAS
 from swarmbus.codec import split_validation_error
 from swarmbus.errors import FieldError
-from swarmbus.gases import FORMULAS
 from swarmbus.scenario_spec import (
     DEFAULT_SCENARIO,
     GSL_ENVIRONMENTS_DIR,
@@ -306,12 +306,12 @@ def _value_at(raw: object, field: str) -> tuple[bool, object]:
 
 
 def bundled_scenarios() -> list[str]:
-    """The names of the scenarios that ship with plumeswarm (``deploy/scenarios/*.toml``)."""
+    """The names of the scenarios that ship with plumeswarm (``swarmbus/scenarios/*.toml``)."""
     return sorted(p.stem for p in SCENARIOS_DIR.glob("*.toml"))
 
 
 def load_scenario(path: str | Path | None = None, overrides: Iterable[str] = ()) -> Scenario:
-    """Load and validate a scenario file (default: ``deploy/scenarios/novak2018.toml``), with
+    """Load and validate a scenario file (default: ``swarmbus/scenarios/novak2018.toml``), with
     ``section.key=value`` overrides applied before validation."""
     p = Path(path) if path is not None else DEFAULT_SCENARIO
     try:

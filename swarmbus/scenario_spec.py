@@ -11,11 +11,11 @@ from typing import Annotated, Literal, NamedTuple
 
 import msgspec
 
-from swarmbus.gases import ppm_per_g_m3
+from plume_atmosphere.gases import ppm_per_g_m3
 from swarmbus.messages import MissionItem
 from swarmbus.session import NetworkConfig
 
-SCENARIOS_DIR = Path(__file__).resolve().parent.parent / "deploy" / "scenarios"
+SCENARIOS_DIR = Path(__file__).resolve().parent.parent / "swarmbus" / "scenarios"
 DEFAULT_SCENARIO = SCENARIOS_DIR / "novak2018.toml"
 #: The gas-source-localisation benchmark's environments, one scenario file each.
 GSL_ENVIRONMENTS_DIR = SCENARIOS_DIR / "gsl"
@@ -102,7 +102,7 @@ class WindField(_Section, frozen=True, kw_only=True):
 
 class Wind(_Section, frozen=True, kw_only=True):
     """One wind, three consumers: the plume's advection, the vehicles' air velocity (drag) and
-    their anemometers (``swarmbus.wind``). ``speed_m_s``/``from_deg`` give the mean wind."""
+    their anemometers (``plume_atmosphere.wind``). ``speed_m_s``/``from_deg`` give the mean wind."""
 
     speed_m_s: Pos = 6.0
     from_deg: Degrees = 270.0  # meteorological: the direction it blows FROM; 270 → toward +x
@@ -143,7 +143,7 @@ class PlumePuff(_Section, frozen=True, kw_only=True):
 
 
 class PlumeCalibration(_Section, frozen=True, kw_only=True):
-    """Calibrate a filament or puff plume to the atmosphere (``swarmbus.calibration``): the
+    """Calibrate a filament or puff plume to the atmosphere (``plume_atmosphere.calibration``): the
     wind's meander (an Ornstein–Uhlenbeck process) and the filaments' relative dispersion are
     derived from ``stability``/``coefficients``, the wind speed and the release height so that
     the time-averaged field has the steady Gaussian plume's σy and σz; ``meander_share`` of
@@ -243,7 +243,7 @@ class Sensor(_Section, frozen=True, kw_only=True):
     decay_time_constant_s: NonNeg | None = None
     resolution_g_m3: NonNeg = 0.0  # quantisation step of the output; 0: none
     noise_rel: Annotated[float, msgspec.Meta(ge=0.0, le=10.0)] = 0.0  # std / lagged value
-    gas: Name | None = None  # also report ppm of this gas (swarmbus.gases)
+    gas: Name | None = None  # also report ppm of this gas (plume_atmosphere.gases)
     mox: Mox | None = None  # a metal-oxide transducer: the lag acts on its RS/R0 (with gas)
 
     def resolved(self) -> Sensor:

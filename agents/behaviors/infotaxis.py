@@ -109,7 +109,7 @@ WIDTH_FIT_DISTANCES_M = (30.0, 50.0, 80.0)
 
 def scenario_width_slope(ctx: BehaviorContext) -> float:
     """k of σy ≈ k·x for the scenario's plume (its dispersion family and stability class)."""
-    from swarmbus.dispersion import dispersion_curves
+    from plume_atmosphere.dispersion import dispersion_curves
 
     plume = ctx.scenario.plume
     curves = dispersion_curves(plume.coefficients, plume.stability)

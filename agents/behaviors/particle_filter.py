@@ -9,7 +9,7 @@ a source of hazardous substance dispersion using binary measurements", Atmos. En
 * Prior: ``particles`` samples, (x₀, y₀) uniform on a box around the start (``prior_upwind_m``
   upwind, ``prior_downwind_m`` downwind, ±``prior_half_width_m`` crosswind), Q log-uniform on
   [``q_min_g_s``, ``q_max_g_s``].
-* Forward model: :func:`swarmbus.plume_formula.gaussian_plume_g_m3` with the measured wind
+* Forward model: :func:`plume_atmosphere.plume_formula.gaussian_plume_g_m3` with the measured wind
   (the wind input, :mod:`agents.behaviors.wind`). Assumed known, as in most STE work: the
   stability class, the σ family and the release height — taken from the scenario's
   ``[plume]`` (its first source's height).
@@ -53,9 +53,9 @@ from agents.behaviors.detection import PLUME_THRESHOLD_G_M3
 from agents.behaviors.seeking import SeekingBehavior, SeekStep
 from agents.behaviors.steering import CrosswindSweep, fly, toward
 from agents.behaviors.wind import WindFrame
-from swarmbus.dispersion import DispersionCurves, dispersion_curves
+from plume_atmosphere.dispersion import DispersionCurves, dispersion_curves
+from plume_atmosphere.plume_formula import gaussian_plume_g_m3
 from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
-from swarmbus.plume_formula import gaussian_plume_g_m3
 
 FloatArray = npt.NDArray[np.float64]
 

@@ -11,7 +11,7 @@ wandering with the wind.
   and within the 99th (1.6–2.9 s) of ``meander_low``'s blank durations at a fixed point on the
   axis, and above the 90th percentile of ``meander_high``'s (0.8–1.5 s) (30, 50, 80 m
   downwind at the flight altitude, 10 Hz, threshold 0.001 g/m³, 600 s,
-  ``deploy/scenarios/gsl/statistics.json``, docs/plume.md). Longer blanks — ``meander_high``'s
+  ``swarmbus/scenarios/gsl/statistics.json``, docs/plume.md). Longer blanks — ``meander_high``'s
   99th percentile is 8.6–11.2 s — are the plume swinging away: for casting.
 * **Averaged wind** (``wind_average_s``): surging and casting steer in the frame of the wind
   averaged (exponentially, time constant 3 s) over the last seconds, not the instantaneous

@@ -17,9 +17,9 @@ from dataclasses import dataclass
 
 from agents.anemometer import Anemometer
 from agents.behavior import BehaviorContext
+from plume_atmosphere.plume_formula import downwind_unit
+from plume_atmosphere.wind import wind_from_scenario
 from swarmbus.messages import VehicleState
-from swarmbus.plume_formula import downwind_unit
-from swarmbus.wind import wind_from_scenario
 
 #: (east, north) air velocity in m/s at the vehicle, as an anemometer would measure it.
 WindReader = Callable[[VehicleState], tuple[float, float]]

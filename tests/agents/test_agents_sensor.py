@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from agents.sensor import ConcentrationSensor
-from swarmbus.gases import molar_mass_g_mol, ppm_per_g_m3
+from plume_atmosphere.gases import molar_mass_g_mol, ppm_per_g_m3
 from swarmbus.messages import PeerReading
 from swarmbus.scenario import Mox, Sensor
 

@@ -199,7 +199,7 @@ def fly_on_together(
 
 
 def test_every_gsl_algorithm_is_among_the_behaviours_checked() -> None:
-    from experiments.gsl_registry import BUILTIN_ALGORITHMS as ALGORITHMS
+    from plumeswarm.gsl.registry import BUILTIN_ALGORITHMS as ALGORITHMS
 
     assert {a.behavior for a in ALGORITHMS.values()} <= set(BEHAVIORS)
     assert len(BEHAVIORS) >= 6

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from agents.anemometer import Anemometer
+from plume_atmosphere.wind import wind_from_scenario
 from sim_world.world import GRAVITY_M_S2, World
 from swarmbus.scenario import AnemometerSpec, parse_scenario
 from swarmbus.vehicle_types import load_vehicle_type
-from swarmbus.wind import wind_from_scenario
 
 MEANDER = """
 [world]

@@ -21,10 +21,10 @@ from agents.behaviors.surge_cast import SurgeCast
 from agents.behaviors.tracking import AveragedWind
 from agents.behaviors.wind import WindFrame
 from agents.sensor import ConcentrationSensor
+from plume_atmosphere.dispersion import dispersion_curves
+from plume_atmosphere.plume_formula import gaussian_plume_g_m3, plume_frame
 from plume_service import GaussianPlume
-from swarmbus.dispersion import dispersion_curves
 from swarmbus.messages import PeerReading, Setpoint, VehicleState
-from swarmbus.plume_formula import gaussian_plume_g_m3, plume_frame
 from swarmbus.scenario import Scenario, Sensor, load_scenario
 from tests.support.messages_samples import reading as noiseless_reading
 from tests.support.messages_samples import vehicle_state

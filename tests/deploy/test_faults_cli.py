@@ -1,6 +1,6 @@
 """Bad input at the command line: every ``plumeswarm`` command given a missing, unreadable
 (a directory, binary garbage) or malformed file answers one clear line and a non-zero exit —
-never a traceback. Real subprocesses (``python -m deploy ...``), each bounded."""
+never a traceback. Real subprocesses (``python -m plumeswarm ...``), each bounded."""
 
 from __future__ import annotations
 

@@ -32,7 +32,7 @@ def test_up_status_viewer_and_clean_stop(tmp_path: Path) -> None:
             [
                 sys.executable,
                 "-m",
-                "deploy",
+                "plumeswarm",
                 "up",
                 "--roles",
                 ",".join(roles),
@@ -71,7 +71,7 @@ def test_up_status_viewer_and_clean_stop(tmp_path: Path) -> None:
                 [
                     sys.executable,
                     "-m",
-                    "deploy",
+                    "plumeswarm",
                     "demo",
                     "--attach",
                     endpoint,

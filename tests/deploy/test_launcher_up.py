@@ -74,10 +74,14 @@ def test_a_role_whose_package_is_missing_fails_before_anything_starts(
 ) -> None:
     from deploy import launcher, roles
     from swarmbus.scenario import load_scenario
+    from tests.support.procs import NODE_COMMAND
 
     monkeypatch.setitem(roles.ROLES, "plume", "no_such_package.service:main")
     opts = launcher.LaunchOptions(
-        scenario_path=Path("novak2018.toml"), roles=("router", "plume"), run_dir=tmp_path
+        node_command=NODE_COMMAND,
+        scenario_path=Path("novak2018.toml"),
+        roles=("router", "plume"),
+        run_dir=tmp_path,
     )
     with pytest.raises(launcher.LaunchError) as info:
         launcher.Launcher(load_scenario(), opts).start()

@@ -157,7 +157,7 @@ def test_a_real_autopilot_process_serves_its_vehicle_under_its_own_identity(
     cmd = [
         sys.executable,
         "-m",
-        "deploy",
+        "plumeswarm",
         "node",
         "autopilot",
         "--vehicle",
@@ -231,7 +231,7 @@ def test_a_vehicle_identity_cannot_answer_for_another_vehicle_in_its_own_batch(
     scenario.write_text(SCENARIO)
     router = NetworkConfig(mode="router", connect=[], listen=[dep.router])
     cmd = [
-        sys.executable, "-m", "deploy", "node", "physics", "--scenario", str(scenario),
+        sys.executable, "-m", "plumeswarm", "node", "physics", "--scenario", str(scenario),
         "--hosts", str(tmp / "hosts.toml"), "--host", "sim", "--listen", "tls/127.0.0.1:0",
     ]  # fmt: skip
     ticks: list[int] = []

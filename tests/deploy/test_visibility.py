@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from deploy.visibility import floor_multiple, visibility
-from swarmbus.dispersion import dispersion_curves
+from plume_atmosphere.dispersion import dispersion_curves
 from swarmbus.scenario import Scenario, Sensor, load_scenario, resolve_scenario_path
 from tests.support.procs import run_cli
 

@@ -15,11 +15,12 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
+from plume_atmosphere.calibration import derive_calibration, taylor_variance
+from plume_atmosphere.wind import ColouredNoise
 from plume_service.field import ConcentrationField, FloatArray
 from plume_service.filament import FilamentPlume
 from plume_service.from_scenario import field_from_scenario
 from plume_service.statistics import intermittency, time_averaged_widths, warmup_s
-from swarmbus.calibration import derive_calibration, taylor_variance
 from swarmbus.scenario import (
     GSL_ENVIRONMENTS_DIR,
     ScenarioError,
@@ -28,7 +29,6 @@ from swarmbus.scenario import (
     load_scenario,
     parse_scenario,
 )
-from swarmbus.wind import ColouredNoise
 from tests.support.procs import run_cli
 
 # McMullen (1975), JAPCA 25(10):1057, class D: σ = exp(I + J ln x + K (ln x)²), x in m.

@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from plume_atmosphere.wind import wind_from_scenario
 from plume_service.from_scenario import field_from_scenario
 from plume_service.service import StatePublisher
 from recorder.foxglove.channels import (
@@ -15,7 +16,6 @@ from recorder.foxglove.channels import (
 from recorder.reader import Recording
 from swarmbus.messages import AnemometerReading, ConcentrationReading, PlumeState
 from swarmbus.scenario import SCENARIOS_DIR, load_scenario
-from swarmbus.wind import wind_from_scenario
 from tests.support.foxglove_decode import topic_messages
 from tests.support.procs import run_cli
 

@@ -56,7 +56,7 @@ def test_info_names_the_model_the_wind_and_time_dependence() -> None:
 
 
 def test_info_says_when_a_sigma_fit_is_used_outside_its_range() -> None:
-    scenario = load_scenario("deploy/scenarios/novak2018.toml")
+    scenario = load_scenario("swarmbus/scenarios/novak2018.toml")
     service = PlumeService(field_from_scenario(scenario), scenario)
     assert service.info(PlumeInfoQuery()).sigma_validity == []
     service.concentration(PlumeQuery(points_enu_m=[(500.0, 0.0, 10.0)]))

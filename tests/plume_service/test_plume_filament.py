@@ -13,11 +13,11 @@ import math
 import numpy as np
 import pytest
 
+from plume_atmosphere.wind import wind_model
 from plume_service.field import PlumeField
 from plume_service.filament import FilamentPlume, filament_concentration
 from plume_service.from_scenario import field_from_scenario
 from swarmbus.scenario import PlumeFilament, Wind, WindMeander, parse_scenario
-from swarmbus.wind import wind_model
 
 R0_2, GAMMA, K = 0.001, 0.001, 0.02
 

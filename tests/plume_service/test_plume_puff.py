@@ -13,10 +13,10 @@ import numpy as np
 import numpy.typing as npt
 import pytest
 
+from plume_atmosphere.wind import SteadyWind, WindModel, wind_model, wind_vector_enu
 from plume_service.from_scenario import field_from_scenario
 from plume_service.puff import PuffPlume
 from swarmbus.scenario import PlumePuff, Wind, parse_scenario
-from swarmbus.wind import SteadyWind, WindModel, wind_model, wind_vector_enu
 
 Q, U, H = 10.0, 6.0, 10.0
 

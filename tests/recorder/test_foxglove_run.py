@@ -31,7 +31,7 @@ from swarmbus.messages import Arm, MissionStart, MissionUpload, SimTick
 from swarmbus.scenario import load_scenario, resolve_scenario_path
 from swarmbus.session import NetworkConfig, free_tcp_port, open_session
 from tests.support.foxglove_decode import ChannelDecoder
-from tests.support.procs import keys_for, run_cli
+from tests.support.procs import NODE_COMMAND, keys_for, run_cli
 from tests.support.upstack import plumeswarm_up
 
 SUBPROTOCOL = "foxglove.sdk.v1"  # the Foxglove WebSocket protocol (v1) as the SDK's server names it
@@ -242,10 +242,11 @@ def test_a_bad_option_is_one_clear_error() -> None:
 def test_up_runs_the_foxglove_role_only_when_asked() -> None:
     path = resolve_scenario_path(None)
     sc = load_scenario(path)
-    off = plan(sc, LaunchOptions(scenario_path=path, headless=True))
+    off = plan(sc, LaunchOptions(node_command=NODE_COMMAND, scenario_path=path, headless=True))
     assert "foxglove" not in {s.role for s in off}
-    on = plan(sc, LaunchOptions(scenario_path=path, foxglove=True, node_options={
-        "foxglove": ("port=9876",)
-    }))  # fmt: skip
+    on = plan(sc, LaunchOptions(
+        node_command=NODE_COMMAND, scenario_path=path, foxglove=True,
+        node_options={"foxglove": ("port=9876",)},
+    ))  # fmt: skip
     spec = next(s for s in on if s.role == "foxglove")
     assert spec.argv[-2:] == ("--set", "port=9876") and not spec.critical

@@ -96,7 +96,16 @@ def test_record_command_closes_cleanly_on_sigint(
     net, _ = network
     out = tmp_path / "cli.mcap"
     env = dict(os.environ, PYTHONPATH=str(REPO))
-    cmd = [sys.executable, "-m", "deploy", "record", "--connect", net.endpoint, "--out", str(out)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "plumeswarm",
+        "record",
+        "--connect",
+        net.endpoint,
+        "--out",
+        str(out),
+    ]
     proc = subprocess.Popen(cmd, cwd=REPO, env=env, stderr=subprocess.PIPE, start_new_session=True)
     try:
         published = run_publisher(net, tmp_path / "pub.json", "--steps", "20")

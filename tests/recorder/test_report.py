@@ -116,9 +116,9 @@ def test_map_field_is_the_plume_services_gaussian(lid_m: float | None) -> None:
     """The report draws the plume the service serves: two sources, a lid or none, with points
     far downwind where σz outgrows the lid (the service sums its images in Fourier form; the
     report's bounded image sum is then within 1e-5 of the map's maximum)."""
+    from plume_atmosphere.dispersion import dispersion_curves
     from plume_service import GaussianPlume, PlumeField
     from recorder.plume_map import SteadyPlume
-    from swarmbus.dispersion import dispersion_curves
 
     sources = [(0.0, 0.0, 10.0, 10.0), (30.0, -20.0, 5.0, 2.0)]
     rng = np.random.default_rng(7)

@@ -22,7 +22,7 @@ def test_importing_the_world_prints_nothing() -> None:
 def test_an_environment_episode_step_prints_nothing_but_the_script() -> None:
     code = (
         "import gymnasium\n"
-        "env = gymnasium.make('experiments.envs:plumeswarm/PlumeSource-v0')\n"
+        "env = gymnasium.make('plumeswarm.envs:plumeswarm/PlumeSource-v0')\n"
         "obs, _ = env.reset(seed=0)\n"
         "env.step(env.action_space.sample())\n"
         "env.close()\n"
@@ -38,7 +38,7 @@ def test_pybullet_is_imported_only_through_the_quiet_helper() -> None:
     helper = REPO / "sim_world" / "pybullet_quiet.py"
     offenders = [
         str(path.relative_to(REPO))
-        for pkg in [*CORE_PACKAGES, "experiments", "bench"]
+        for pkg in [*CORE_PACKAGES, "plumeswarm"]
         for path in (REPO / pkg).rglob("*.py")
         if path != helper and pattern.search(path.read_text())
     ]

@@ -4,7 +4,8 @@ It is the autopilot of one parked scenario vehicle (its liveliness token ``autop
 motors always off), so the physics waits for it every tick. It answers tick ``k`` only when
 told, and only once every other vehicle's autopilot has answered ``k``: a command given while it
 holds tick ``k`` takes effect at tick ``k + 1``, exactly where
-:meth:`experiments.fused.FusedRunner.command` puts it — in the plain lockstep mode, without the
+:meth:`plumeswarm.experiments.fused.FusedRunner.command` puts it — in the plain lockstep mode,
+without the
 stepped clock's code.
 """
 
@@ -17,7 +18,7 @@ from collections.abc import Callable, Sequence
 import zenoh
 
 from agents import SwarmError, VehicleCommander
-from experiments.demo import StateDigest
+from plumeswarm.experiments.demo import StateDigest
 from swarmbus.codec import MessageError, decode, encode
 from swarmbus.keys import Keys, autopilot_node
 from swarmbus.messages import ActuatorBatch, ActuatorCommand, Command, SimTick, VehicleState

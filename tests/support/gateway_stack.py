@@ -43,7 +43,17 @@ def stop(proc: subprocess.Popen[bytes]) -> None:
 
 def node(net: Network, role: str, scenario: Path, log: Path, *args: str) -> subprocess.Popen[bytes]:
     return spawn(
-        ["-m", "deploy", "-v", "node", role, *net.cli_args(), "--scenario", str(scenario), *args],
+        [
+            "-m",
+            "plumeswarm",
+            "-v",
+            "node",
+            role,
+            *net.cli_args(),
+            "--scenario",
+            str(scenario),
+            *args,
+        ],
         log,
     )
 

@@ -52,7 +52,7 @@ def scenario_text(
     signing_key_file: Path | None = None,
 ) -> str:
     """The novak2018 scenario with test ports and ``vehicles`` Iris quads in a row."""
-    base = (REPO / "deploy" / "scenarios" / "novak2018.toml").read_text()
+    base = (REPO / "swarmbus" / "scenarios" / "novak2018.toml").read_text()
     head = base.split("[gateway]")[0]
     lines = [
         head,

@@ -4,7 +4,7 @@ vehicle's state, status and reading for tests (:func:`vehicle_state`, :func:`veh
 
 from __future__ import annotations
 
-from bench.codec import STATE as STATE  # the sample state, shared with the codec bench
+from plumeswarm.bench.codec import STATE as STATE  # the sample state, shared with the codec bench
 from swarmbus import messages as m
 
 Vec3 = tuple[float, float, float]

@@ -99,7 +99,7 @@ class NodeProcs:
         self.procs: list[tuple[str, subprocess.Popen[bytes]]] = []
 
     def start(self, role: str, *args: str, name: str | None = None) -> subprocess.Popen[bytes]:
-        cmd = ["deploy", "node", role, *self.net.cli_args()]
+        cmd = ["plumeswarm", "node", role, *self.net.cli_args()]
         if self.scenario is not None:
             cmd += ["--scenario", self.scenario]
         label = name or "-".join([role, *[a for a in args if not a.startswith("-")]])
@@ -176,7 +176,9 @@ def keys_for(world: str = "default") -> Keys:
 # Our packages (docs/architecture.md, "Layers"): the process packages (roles) and the core the
 # distribution installs.
 PROCESS_PACKAGES = ["sim_world", "agents", "plume_service", "gcs_bridge", "recorder", "ros2_bridge"]
-CORE_PACKAGES = ["swarmbus", *PROCESS_PACKAGES, "deploy"]
+CORE_PACKAGES = ["swarmbus", "plume_atmosphere", *PROCESS_PACKAGES, "deploy"]
+# How the launcher starts a node (the user layer's CLI); LaunchOptions.node_command.
+NODE_COMMAND: tuple[str, ...] = (sys.executable, "-m", "plumeswarm")
 
 
 def run_python(code: str, timeout_s: float = 120.0) -> subprocess.CompletedProcess[str]:
@@ -192,10 +194,10 @@ def run_python(code: str, timeout_s: float = 120.0) -> subprocess.CompletedProce
 
 
 def run_cli(args: Sequence[str], timeout_s: float = 120.0) -> subprocess.CompletedProcess[str]:
-    """Run ``python -m deploy ARGS`` to completion (bounded)."""
+    """Run ``python -m plumeswarm ARGS`` to completion (bounded)."""
     env = dict(os.environ, PYTHONPATH=str(REPO))
     return subprocess.run(
-        [sys.executable, "-m", "deploy", *args],
+        [sys.executable, "-m", "plumeswarm", *args],
         cwd=REPO,
         env=env,
         capture_output=True,

@@ -72,7 +72,7 @@ def spawn_up(args: Sequence[str], out: Path) -> subprocess.Popen[bytes]:
     env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONUNBUFFERED="1")
     with open(out / "console.txt", "wb") as console:
         return subprocess.Popen(
-            [sys.executable, "-m", "deploy", "up", "--out", str(out / "run"), *args],
+            [sys.executable, "-m", "plumeswarm", "up", "--out", str(out / "run"), *args],
             cwd=REPO, env=env, stdout=console, stderr=subprocess.STDOUT, start_new_session=True,
         )  # fmt: skip
 

@@ -12,7 +12,7 @@ import pytest
 import zenoh
 
 from agents import CommandRejected, Swarm, VehicleCommander
-from experiments.demo import DemoError, start_missions
+from plumeswarm.experiments.demo import DemoError, start_missions
 from swarmbus.codec import encode
 from swarmbus.keys import Keys
 from swarmbus.messages import (

@@ -145,7 +145,7 @@ def test_a_role_process_refuses_a_bad_option_in_one_line(
     the process joins any bus (so no network is needed and nothing is left running)."""
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     proc = subprocess.run(
-        [sys.executable, "-m", "deploy", "node", role, *extra, "--set", item],
+        [sys.executable, "-m", "plumeswarm", "node", role, *extra, "--set", item],
         capture_output=True,
         text=True,
         timeout=120,

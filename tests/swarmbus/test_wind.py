@@ -1,4 +1,5 @@
-"""The scenario's one wind (swarmbus.wind): steady equivalence, the meander SDE, the grid wind."""
+"""The scenario's one wind (plume_atmosphere.wind): steady equivalence, the meander SDE, the grid
+wind."""
 
 from __future__ import annotations
 
@@ -8,8 +9,8 @@ from typing import Literal
 import numpy as np
 import pytest
 
+from plume_atmosphere.wind import ColouredNoise, SteadyWind, wind_model
 from swarmbus.scenario import Wind, WindField, WindMeander, parse_scenario
-from swarmbus.wind import ColouredNoise, SteadyWind, wind_model
 
 VEHICLE = '[[vehicles]]\nid = "a"\n'
 

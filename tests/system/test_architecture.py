@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+import re
 import tomllib
 from collections.abc import Mapping
 from pathlib import Path
@@ -12,18 +13,21 @@ import pytest
 from tests.support.procs import PROCESS_PACKAGES, REPO, run_cli
 
 # Layers, lowest first (docs/architecture.md, "Layers"): a module imports only from its own
-# layer or below, and a role never imports another role. The CLI (``deploy.cli``, started by
-# ``python -m deploy``) is the top layer although it sits inside ``deploy``.
+# layer or below, by an import statement or by naming a module in a string (``"pkg.mod:main"``,
+# ``importlib.import_module("pkg.mod")``), and a role never imports another role. The shared
+# models sit at the very bottom, beside the contract: pure science that imports nothing of ours.
 LAYERS: list[tuple[str, list[str]]] = [
+    ("models", ["plume_atmosphere"]),
     ("contract", ["swarmbus"]),
     ("roles", PROCESS_PACKAGES),
     ("orchestration", ["deploy"]),
-    ("experiments", ["experiments"]),
-    ("benchmarks", ["bench"]),
-    ("cli", ["deploy.cli", "deploy.__main__"]),
+    ("experiments", ["plumeswarm.experiments", "plumeswarm.envs", "plumeswarm.gsl"]),
+    ("benchmarks", ["plumeswarm.bench"]),
+    ("user", ["plumeswarm"]),
 ]
 COMPOSITION = "deploy"
-PACKAGES = ["swarmbus", *PROCESS_PACKAGES, COMPOSITION, "experiments", "bench"]
+USER = "plumeswarm"
+PACKAGES = ["plume_atmosphere", "swarmbus", *PROCESS_PACKAGES, COMPOSITION, USER]
 # Ours too, but never imported by the packages: the tests.
 TOOLS = ["tests"]
 
@@ -79,26 +83,65 @@ def test_every_package_is_covered() -> None:
 
 def test_layer_violations_sees_an_upward_import_and_a_role_importing_a_role() -> None:
     assert layer_violations({"deploy.launcher": {"swarmbus.keys", "sim_world.world"}}) == []
-    assert layer_violations({"deploy.cli.main": {"bench.scale", "experiments.demo"}}) == []
-    assert layer_violations({"deploy.launcher": {"experiments.demo"}}) == [
-        "deploy.launcher (orchestration) imports experiments.demo"
+    assert layer_violations({"swarmbus.scenario": {"plume_atmosphere.calibration"}}) == []
+    assert layer_violations({"plumeswarm.cli.main": {"plumeswarm.bench.scale"}}) == []
+    assert layer_violations({"plumeswarm": {"plumeswarm.experiments.fused"}}) == []
+    assert layer_violations({"deploy.launcher": {"plumeswarm.experiments.demo"}}) == [
+        "deploy.launcher (orchestration) imports plumeswarm.experiments.demo"
     ]
-    assert layer_violations({"experiments.fused": {"bench.scale"}}) == [
-        "experiments.fused (experiments) imports bench.scale"
+    assert layer_violations({"plumeswarm.experiments.fused": {"plumeswarm.bench.scale"}}) == [
+        "plumeswarm.experiments.fused (experiments) imports plumeswarm.bench.scale"
+    ]
+    assert layer_violations({"plumeswarm.gsl.bench": {"plumeswarm"}}) == [
+        "plumeswarm.gsl.bench (experiments) imports plumeswarm"
     ]
     assert layer_violations({"agents.swarm": {"sim_world.world"}}) == [
         "agents.swarm (roles) imports sim_world.world"
     ]
-    assert layer_violations({"swarmbus.wind": {"agents.sensor"}}) == [
-        "swarmbus.wind (contract) imports agents.sensor"
+    assert layer_violations({"swarmbus.keys": {"agents.sensor"}}) == [
+        "swarmbus.keys (contract) imports agents.sensor"
+    ]
+    assert layer_violations({"plume_atmosphere.wind": {"swarmbus.scenario"}}) == [
+        "plume_atmosphere.wind (models) imports swarmbus.scenario"
     ]
 
 
 def test_no_module_imports_a_higher_layer_or_another_role() -> None:
-    """Every import of every module of ours, also inside functions, by the layers above."""
+    """Every import of every module of ours, also inside functions, and every module named in a
+    string, by the layers above."""
     graph = import_graph(PACKAGES)
     assert len(graph) > 100
     assert layer_violations(graph) == []
+
+
+def test_a_module_named_in_a_string_counts_as_an_import(tmp_path: Path) -> None:
+    """``"pkg.mod:func"`` entries and ``import_module("pkg.mod")`` are edges of the graph, so a
+    string reference upwards fails the layer test as an import would."""
+    src = tmp_path / "roles.py"
+    src.write_text('ROLES = {"x": "plumeswarm.bench.scale:main"}\nM = "plumeswarm.gsl"\n')
+    modules = {"plumeswarm.bench.scale": src, "plumeswarm.gsl": src, "deploy.roles": src}
+    assert _import_targets("deploy.roles", src, modules) == {
+        "plumeswarm.bench.scale",
+        "plumeswarm.gsl",
+    }
+    assert layer_violations({"deploy.roles": _import_targets("deploy.roles", src, modules)}) == [
+        "deploy.roles (orchestration) imports plumeswarm.bench.scale",
+        "deploy.roles (orchestration) imports plumeswarm.gsl",
+    ]
+    src.write_text(
+        '"""A docstring that names plumeswarm.gsl in passing."""\nKEY = "plumeswarm/x"\n'
+    )
+    assert _import_targets("deploy.roles", src, modules) == set()
+
+
+def test_the_models_import_nothing_of_ours() -> None:
+    for path in sorted((REPO / "plume_atmosphere").rglob("*.py")):
+        assert not (_imports(path) & (set(PACKAGES) - {"plume_atmosphere"})), path
+
+
+def test_no_top_level_experiments_or_bench_remains() -> None:
+    assert not (REPO / "experiments").exists()
+    assert not (REPO / "bench").exists()
 
 
 @pytest.mark.parametrize(
@@ -111,7 +154,7 @@ def test_deploy_holds_no_experiment_or_benchmark(name: str) -> None:
 
 @pytest.mark.parametrize("package", PROCESS_PACKAGES)
 def test_process_packages_do_not_import_each_other(package: str) -> None:
-    others = {*PROCESS_PACKAGES, COMPOSITION, "experiments", "bench"} - {package}
+    others = {*PROCESS_PACKAGES, COMPOSITION, USER} - {package}
     bad = []
     for path in sorted((REPO / package).rglob("*.py")):
         hits = _imports(path) & others
@@ -122,7 +165,7 @@ def test_process_packages_do_not_import_each_other(package: str) -> None:
 
 def test_swarmbus_imports_no_process_package() -> None:
     for path in sorted((REPO / "swarmbus").rglob("*.py")):
-        assert not (_imports(path) & (set(PACKAGES) - {"swarmbus"})), path
+        assert not (_imports(path) & (set(PACKAGES) - {"swarmbus", "plume_atmosphere"})), path
 
 
 @pytest.mark.parametrize("package", PACKAGES)
@@ -152,7 +195,7 @@ def test_the_benches_do_not_use_the_tests() -> None:
     start their modules (``python -m tests.…``)."""
     bad = [
         f"{path.relative_to(REPO)}: {hits}"
-        for path in sorted((REPO / "bench").rglob("*.py"))
+        for path in sorted((REPO / "plumeswarm" / "bench").rglob("*.py"))
         if (hits := _uses_of(path, "tests"))
     ]
     assert not bad, bad
@@ -189,7 +232,26 @@ def _import_targets(name: str, path: Path, modules: Mapping[str, Path]) -> set[s
                     out.add(f"{module}.{alias.name}")
                 elif module in modules:
                     out.add(module)
+    out.update(_named_modules(path, modules))
     out.discard(name)
+    return out
+
+
+_MODULE_PATH = re.compile(
+    r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)+(:[A-Za-z_]\w*)?|[A-Za-z_]\w*:[A-Za-z_]\w*"
+)
+
+
+def _named_modules(path: Path, modules: Mapping[str, Path]) -> set[str]:
+    """The modules of ours that a string constant of ``path`` names in full (``"pkg.mod"``,
+    ``"pkg.mod:func"``): entry-point tables and imports by name."""
+    out: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+        value = node.value if isinstance(node, ast.Constant) else None
+        if isinstance(value, str) and _MODULE_PATH.fullmatch(value):
+            module = value.partition(":")[0]
+            if module in modules:
+                out.add(module)
     return out
 
 
@@ -239,7 +301,7 @@ def test_find_cycle_finds_a_cycle_and_only_a_cycle() -> None:
 
 def test_import_graph_sees_each_kind_of_import() -> None:
     graph = import_graph(PACKAGES)
-    assert "deploy.cli.common" in graph["deploy.cli.plume"]  # inside a function
+    assert "plumeswarm.cli.common" in graph["plumeswarm.cli.plume"]  # inside a function
     assert "recorder.schema" in graph["recorder.reader"]  # from package import submodule
     assert "swarmbus.codec" in graph["swarmbus.node"]
 
@@ -252,21 +314,22 @@ def test_the_import_graph_has_no_cycle() -> None:
 
 def test_only_the_cli_parses_arguments_and_nothing_calls_back_into_it() -> None:
     """Tools (demo, benches, status, the recorder's commands) are library functions the CLI
-    calls: only ``deploy.cli`` uses click, and only ``python -m deploy`` imports the CLI."""
+    calls: only ``plumeswarm.cli`` uses click, and only ``python -m plumeswarm`` imports the CLI."""
     graph = import_graph(PACKAGES)
     callers = sorted(
         name
         for name, targets in graph.items()
-        if not name.startswith("deploy.cli") and any(t.startswith("deploy.cli") for t in targets)
+        if not name.startswith("plumeswarm.cli")
+        and any(t.startswith("plumeswarm.cli") for t in targets)
     )
-    assert callers == ["deploy.__main__"]
+    assert callers == ["plumeswarm.__main__"]
     clicks = sorted(
         str(path.relative_to(REPO))
         for package in PACKAGES
         for path in (REPO / package).rglob("*.py")
         if "click" in _imports(path)
     )
-    assert clicks and all(c.startswith("deploy/cli/") for c in clicks), clicks
+    assert clicks and all(c.startswith("plumeswarm/cli/") for c in clicks), clicks
 
 
 def test_key_expressions_are_built_only_in_swarmbus_keys() -> None:

@@ -22,7 +22,7 @@ from swarmbus.messages import FlightMode, NodeHealth, VehicleState, VehicleStatu
 from swarmbus.scenario import load_scenario
 from swarmbus.session import free_tcp_port
 from tests.support.mavclient import write_scenario
-from tests.support.procs import wait_until
+from tests.support.procs import NODE_COMMAND, wait_until
 from tests.system import test_faults_stack
 
 VEHICLES = test_faults_stack.VEHICLES
@@ -153,6 +153,7 @@ def test_a_new_run_starts_from_spawn_not_from_a_checkpoint_left_in_its_directory
     path, _, _ = write_scenario(tmp_path / "scenario.toml", 1)
     scenario = load_scenario(path)
     opts = LaunchOptions(
+        node_command=NODE_COMMAND,
         scenario_path=path,
         headless=True,
         run_dir=tmp_path / "run",

@@ -16,11 +16,11 @@ import msgspec
 import pytest
 import zenoh
 
-from bench.scale import drive
 from deploy.busview import BusView
 from deploy.scaling import write_scenario
 from gcs_bridge.dialect import mavlink
 from gcs_bridge.modes import Px4AutoSub, Px4Main
+from plumeswarm.bench.scale import drive
 from recorder.reader import Recording, segment_end
 from recorder.schema import SegmentGap
 from swarmbus.codec import decode

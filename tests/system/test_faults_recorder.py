@@ -24,7 +24,7 @@ from swarmbus.messages import SimTick, VehicleState
 from swarmbus.scenario import load_scenario
 from swarmbus.session import free_tcp_port
 from tests.support.mavclient import write_scenario
-from tests.support.procs import keys_for, wait_until
+from tests.support.procs import NODE_COMMAND, keys_for, wait_until
 
 VEHICLES = ("uav1", "uav2", "uav3")
 
@@ -33,6 +33,7 @@ def test_recorder_killed_nothing_it_received_is_lost(tmp_path: Path) -> None:
     path, _, _ = write_scenario(tmp_path / "scenario.toml", len(VEHICLES))
     scenario = load_scenario(path)
     opts = LaunchOptions(
+        node_command=NODE_COMMAND,
         scenario_path=path,
         headless=True,
         record=True,

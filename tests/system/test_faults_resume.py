@@ -29,7 +29,7 @@ import pytest
 import zenoh
 
 from deploy.launcher import Launcher, LaunchOptions
-from experiments.chaos import keep_state
+from plumeswarm.experiments.chaos import keep_state
 from swarmbus.codec import decode
 from swarmbus.messages import (
     Arm,
@@ -43,7 +43,7 @@ from swarmbus.reqrep import request
 from swarmbus.scenario import load_scenario
 from swarmbus.session import free_tcp_port
 from tests.support.mavclient import write_scenario
-from tests.support.procs import REPO, keys_for, wait_until
+from tests.support.procs import NODE_COMMAND, REPO, keys_for, wait_until
 
 VEHICLES = ("uav1", "uav2", "uav3")
 GATE = "uav4"  # parked, scripted: holds START_TICK until the missions are started
@@ -143,6 +143,7 @@ def flight(tmp: Path, per_process: int = 1, network_mode: str | None = None) -> 
     scenario = load_scenario(path)
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     opts = LaunchOptions(
+        node_command=NODE_COMMAND,
         scenario_path=path,
         headless=True,
         run_dir=tmp / "run",

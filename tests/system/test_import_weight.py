@@ -27,7 +27,7 @@ def test_a_node_process_does_not_import_heavy_optional_modules(
 ) -> None:
     # What `plumeswarm node ROLE` imports: the command line, then the role's entry module.
     code = (
-        f"import sys, deploy.cli, {entry}\n"
+        f"import sys, plumeswarm.cli, {entry}\n"
         f"print(' '.join(m for m in {HEAVY!r} if m in sys.modules and m not in {allowed!r}))"
     )
     out = subprocess.run(

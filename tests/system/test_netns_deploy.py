@@ -135,7 +135,7 @@ class Hosts:
                     self.ns[host],
                     sys.executable,
                     "-m",
-                    "deploy",
+                    "plumeswarm",
                     "up",
                     "--hosts",
                     str(self.hosts_file),
@@ -168,7 +168,7 @@ class Hosts:
         return json.loads(pids_file.read_text())
 
     def run(
-        self, host: str, *args: str, timeout_s: float, module: str = "deploy"
+        self, host: str, *args: str, timeout_s: float, module: str = "plumeswarm"
     ) -> subprocess.CompletedProcess[str]:
         """``python -m MODULE ARGS`` inside ``host``'s namespace, to completion."""
         return subprocess.run(

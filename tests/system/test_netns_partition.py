@@ -23,7 +23,7 @@ GRACE_S = 10.0
 
 def seed_scenario(tmp: Path, old: str, new: str) -> Path:
     """The seed scenario with ``old`` replaced by ``new`` (once), in ``tmp``."""
-    base = (REPO / "deploy" / "scenarios" / "novak2018.toml").read_text()
+    base = (REPO / "swarmbus" / "scenarios" / "novak2018.toml").read_text()
     scenario = tmp / "scenario.toml"
     scenario.write_text(base.replace(old, new, 1))
     return scenario

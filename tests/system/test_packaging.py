@@ -18,7 +18,7 @@ from swarmbus.extras import EXTRA_OF_MODULE
 from tests.support.procs import CORE_PACKAGES, REPO, run_python
 
 PROJECT = tomllib.loads((REPO / "pyproject.toml").read_text())["project"]
-OURS = {*CORE_PACKAGES, "experiments", "bench", "tests"}
+OURS = {*CORE_PACKAGES, "plumeswarm", "tests"}
 
 
 def names(requirements: list[str]) -> set[str]:
@@ -74,7 +74,7 @@ def run_without(module: str, code: str) -> subprocess.CompletedProcess[str]:
 def test_a_cli_command_without_its_extra_is_one_line_naming_it() -> None:
     res = run_without(
         "matplotlib",
-        "from deploy.cli.main import main\n"
+        "from plumeswarm.cli.main import main\n"
         "sys.argv = ['plumeswarm', 'report', 'missing.mcap', '--out', 'r']\nmain()",
     )
     assert res.returncode == 2 and res.stdout == ""
@@ -85,10 +85,10 @@ def test_a_cli_command_without_its_extra_is_one_line_naming_it() -> None:
 
 
 def test_the_environments_without_the_rl_extra_name_it() -> None:
-    res = run_without("gymnasium", "import experiments.envs")
+    res = run_without("gymnasium", "import plumeswarm.envs")
     assert res.returncode == 1
     last = res.stderr.strip().splitlines()[-1]
     assert last == (
-        "swarmbus.extras.MissingExtra: experiments.envs needs gymnasium, from the 'rl' extra: "
+        "swarmbus.extras.MissingExtra: plumeswarm.envs needs gymnasium, from the 'rl' extra: "
         "pip install 'plumeswarm[rl]'"
     )

@@ -22,8 +22,8 @@ import psutil
 import pytest
 import zenoh
 
-from bench.scale import drive
 from deploy.scaling import scale_scenario, write_scenario
+from plumeswarm.bench.scale import drive
 from swarmbus.codec import MessageError, decode
 from swarmbus.keys import Keys
 from swarmbus.messages import (
@@ -122,7 +122,7 @@ def rss_of(pid: int) -> int:
 
 def test_soak_32_vehicles_ten_sim_minutes(tmp_path: Path) -> None:
     sim_s = float(os.environ.get("PLUMESWARM_SOAK_SIM_S", SIM_S))
-    base = load_scenario(REPO / "deploy" / "scenarios" / "novak2018.toml")
+    base = load_scenario(REPO / "swarmbus" / "scenarios" / "novak2018.toml")
     sc = scale_scenario(base, VEHICLES)
     sc = msgspec.structs.replace(
         sc, time=msgspec.structs.replace(sc.time, startup_timeout_s=180.0, duration_s=0.0)

@@ -1,0 +1,3 @@
+from plumeswarm.cli.main import main
+
+main()

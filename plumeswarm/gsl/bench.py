@@ -1,0 +1,526 @@
+"""``plumeswarm bench gsl``: source-seeking algorithms × environments × sensors, N seeded runs.
+
+Every cell runs the same N starts (:func:`plumeswarm.gsl.episode.start_point`), spread over the
+worker processes; the episodes are independent and seeded from (seed, run, vehicle), so
+``gsl.md``, ``gsl.json``, ``paired.json`` and ``runs.csv`` are the same bytes for the same
+arguments whatever the number of workers. The random walk (floor) and the oracle (ceiling)
+run in every cell. Columns, definitions and the seed rule: docs/gsl.md "The protocol".
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import itertools
+import json
+import math
+import multiprocessing
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from deploy.visibility import floor_multiple
+from plume_atmosphere.plume_formula import downwind_unit
+from plumeswarm.gsl.episode import (
+    RADII_M,
+    START_ALONG_M,
+    START_ALTITUDE_M,
+    EpisodeSpec,
+    Outcome,
+    run_episode,
+)
+from plumeswarm.gsl.registry import (
+    CEILING,
+    FLOOR,
+    SENSORS,
+    Algorithm,
+    GslError,
+    environment_names,
+    load_environment,
+    registered_algorithms,
+    resolve_algorithm,
+)
+from plumeswarm.gsl.stats import Z_95, mcnemar_exact, summarise, wilson_interval
+
+__all__ = ["Z_95", "GslError", "wilson_interval"]
+
+DYNAMICS = ("kinematic", "full")
+FULL_SENSOR_HZ = 10  # with full dynamics a reading every control_hz / 10 ticks
+TUNING_SEED_MIN = 1000  # tuning uses seeds >= this; the published tables seeds 0–99
+#: Below this mean-over-floor at the farthest start a cell is flagged: the sensor cannot see
+#: the plume there.
+VISIBLE_FLOOR_MULTIPLE = 3.0
+VISIBILITY_NOTE = (
+    "the sensor cannot see the plume at the farthest starts: the cell measures visibility, "
+    "not the algorithm"
+)
+
+
+@dataclass(frozen=True)
+class GslOptions:
+    algorithms: tuple[str, ...]  # names, floor first and ceiling last
+    environments: tuple[str, ...]  # names or paths
+    sensors: tuple[str, ...]
+    runs: int = 30
+    seed: int = 0
+    time_limit_s: float = 300.0
+    control_hz: int = 20
+    sensor_period_ticks: int = 2
+    dynamics: str = "kinematic"
+    jobs: int = 2
+    configs: tuple[Algorithm, ...] = ()  # per algorithm
+    asked: tuple[str, ...] = ()  # --algorithms as given, for the command line
+
+    def config(self, algorithm: str) -> Algorithm:
+        return self.configs[self.algorithms.index(algorithm)]
+
+
+def _algorithms(asked: Sequence[str]) -> tuple[tuple[str, ...], tuple[Algorithm, ...]]:
+    """The asked algorithms (none or "all": every registered one), with the floor first and
+    the ceiling last."""
+    texts = [t for t in asked if t != "all"] or list(registered_algorithms())
+    resolved = dict(resolve_algorithm(t) for t in texts)
+    for name in (FLOOR, CEILING):
+        resolved.setdefault(name, resolve_algorithm(name)[1])
+    middle = [n for n in resolved if n not in (FLOOR, CEILING)]
+    names = (FLOOR, *middle, CEILING)
+    return names, tuple(resolved[n] for n in names)
+
+
+def _sensors(asked: Sequence[str]) -> tuple[str, ...]:
+    if not asked or list(asked) == ["all"]:
+        return tuple(k for k, v in SENSORS.items() if v.missing is None)
+    for name in asked:
+        if name not in SENSORS:
+            raise GslError(f"--sensors {name!r}: unknown; valid: {', '.join(SENSORS)}")
+        missing = SENSORS[name].missing
+        if missing is not None:
+            raise GslError(f"--sensors {name!r}: unavailable in this build (needs {missing})")
+    return tuple(asked)
+
+
+def _environments(asked: Sequence[str]) -> tuple[str, ...]:
+    if not asked or list(asked) == ["all"]:
+        return tuple(environment_names())
+    for name in asked:
+        load_environment(name)  # GslError: unknown, or not a valid scenario
+    return tuple(asked)
+
+
+def make_options(
+    algorithms: Sequence[str],
+    environments: Sequence[str],
+    sensors: Sequence[str],
+    **kwargs: Any,
+) -> GslOptions:
+    """Validated options; :class:`GslError` names the bad option."""
+    dynamics = kwargs.get("dynamics", "kinematic")
+    if dynamics not in DYNAMICS:
+        raise GslError(f"--dynamics {dynamics!r}: valid: {', '.join(DYNAMICS)}")
+    envs = _environments(environments)
+    if dynamics == "full":  # the real controller runs at the scenario's rates
+        hz = load_environment(envs[0]).scenario.time.control_hz
+        kwargs["control_hz"] = hz
+        kwargs["sensor_period_ticks"] = max(1, hz // FULL_SENSOR_HZ)
+    names, configs = _algorithms(algorithms)
+    asked = tuple(a for a in algorithms if a != "all")
+    return GslOptions(
+        algorithms=names,
+        environments=envs,
+        sensors=_sensors(sensors),
+        configs=configs,
+        asked=asked,
+        **kwargs,
+    )
+
+
+def availability_lines() -> list[str]:
+    """Which environments and sensors this build can simulate, and what the others need."""
+    lines = [f"environments available: {', '.join(environment_names())} (or a scenario path)"]
+    have = [k for k, v in SENSORS.items() if v.missing is None]
+    lines.append(f"sensors available: {', '.join(have)}")
+    for name, value in SENSORS.items():
+        if value.missing is not None:
+            lines.append(
+                f"sensors unavailable: {name} ({value.description}; needs {value.missing})"
+            )
+    return lines
+
+
+def specs_of(opts: GslOptions, **fields: Any) -> list[EpisodeSpec]:
+    """Every episode of the options (``fields``: more :class:`EpisodeSpec` fields for all)."""
+    specs = []
+    for e in opts.environments:
+        hz, period = opts.control_hz, opts.sensor_period_ticks
+        if opts.dynamics == "full":
+            hz = load_environment(e).scenario.time.control_hz
+            period = max(1, hz // FULL_SENSOR_HZ)
+        for s, (a, algo), run in itertools.product(
+            opts.sensors, zip(opts.algorithms, opts.configs, strict=True), range(opts.runs)
+        ):
+            spec = EpisodeSpec(
+                algorithm=a,
+                environment=e,
+                sensor=s,
+                run=run,
+                seed=opts.seed,
+                time_limit_s=opts.time_limit_s,
+                control_hz=hz,
+                sensor_period_ticks=period,
+                keep_trajectory=run == 0,
+                dynamics=opts.dynamics,
+                behavior=algo.behavior,
+                vehicles=algo.vehicles,
+            )
+            specs.append(replace(spec, **fields))
+    return specs
+
+
+def run_specs(
+    specs: Sequence[EpisodeSpec], jobs: int, progress: Callable[[int, int], None] | None = None
+) -> list[Outcome]:
+    """Every episode's outcome, in spec order (the order the workers finish in does not
+    matter); a spec given twice is flown once."""
+    unique = list(dict.fromkeys(specs))
+    done: dict[EpisodeSpec, Outcome] = {}
+    if jobs <= 1:
+        for spec in unique:
+            done[spec] = run_episode(spec)
+            if progress:
+                progress(len(done), len(unique))
+    else:
+        ctx = multiprocessing.get_context("fork")
+        with ctx.Pool(jobs) as pool:
+            for outcome in pool.imap_unordered(run_episode, unique, chunksize=1):
+                done[outcome.spec] = outcome
+                if progress:
+                    progress(len(done), len(unique))
+    return [done[spec] for spec in specs]
+
+
+def run_all(opts: GslOptions, progress: Callable[[int, int], None] | None = None) -> list[Outcome]:
+    return run_specs(specs_of(opts), opts.jobs, progress)
+
+
+Cell = tuple[str, str, str]  # environment, sensor, algorithm
+
+
+def cells_of(outcomes: Sequence[Outcome]) -> dict[Cell, list[Outcome]]:
+    cells: dict[Cell, list[Outcome]] = {}
+    for o in outcomes:
+        cells.setdefault((o.spec.environment, o.spec.sensor, o.spec.algorithm), []).append(o)
+    return cells
+
+
+def floor_multiple_at_farthest_start(
+    environment: str, sensor: str, overrides: tuple[tuple[str, Any], ...] = ()
+) -> float | None:
+    """The environment's mean concentration (its steady Gaussian plume: the time average of
+    the same atmosphere) at the farthest start — ``START_ALONG_M[1]`` downwind of the first
+    source, on its axis, at ``START_ALTITUDE_M`` — over ``sensor``'s detection floor, rounded
+    to 3 decimals; ``None`` for a sensor without a floor (it sees any gas)."""
+    scenario = load_environment(environment, overrides).scenario
+    source = scenario.plume.sources[0]
+    ux, uy = downwind_unit(scenario.wind.from_deg)
+    along = START_ALONG_M[1]
+    point = (source.x_m + along * ux, source.y_m + along * uy, START_ALTITUDE_M)
+    multiple = floor_multiple(scenario, SENSORS[sensor].config, point)
+    return None if math.isinf(multiple) else round(multiple, 3)
+
+
+def row_of(outcomes: Sequence[Outcome]) -> dict[str, Any]:
+    """One table row: the cell's names, its environment's identity, its statistics."""
+    spec = outcomes[0].spec
+    env = load_environment(spec.environment, spec.overrides)
+    return {
+        "algorithm": spec.algorithm,
+        "environment": env.name,
+        "time_dependent": env.time_dependent,
+        "scenario_sha256": env.sha256,
+        "sensor": spec.sensor,
+        "floor_multiple_at_farthest_start": floor_multiple_at_farthest_start(
+            spec.environment, spec.sensor, spec.overrides
+        ),
+        "dynamics": spec.dynamics,
+        "vehicles": spec.vehicles or spec.algorithm_config().vehicles,
+        **summarise(outcomes),
+    }
+
+
+def visibility_table(rows: Sequence[dict[str, Any]]) -> str:
+    """Per (environment, sensor): the mean at the farthest start over the sensor's floor, and
+    the flag where it is below :data:`VISIBLE_FLOOR_MULTIPLE`."""
+    head = (
+        f"| environment | sensor | mean at the farthest start ({START_ALONG_M[1]:g} m) / "
+        "sensor floor | |\n|---|---|---|---|\n"
+    )
+    seen: dict[tuple[str, str], float | None] = {}
+    for r in rows:
+        seen.setdefault((r["environment"], r["sensor"]), r["floor_multiple_at_farthest_start"])
+    lines = []
+    for (env, sensor), multiple in seen.items():
+        value = "no floor" if multiple is None else f"{multiple:.2f}"
+        flag = VISIBILITY_NOTE if multiple is not None and multiple < VISIBLE_FLOOR_MULTIPLE else ""
+        lines.append(f"| {env} | {sensor} | {value} | {flag} |")
+    return head + "\n".join(lines) + "\n"
+
+
+def rows_of(opts: GslOptions, outcomes: Sequence[Outcome]) -> list[dict[str, Any]]:
+    return [row_of(cell) for cell in cells_of(outcomes).values()]
+
+
+def paired_rows(outcomes: Sequence[Outcome]) -> list[dict[str, Any]]:
+    """McNemar's exact test on success (declared within 2 m) for every pair of algorithms in
+    every (environment, sensor): run k of both had the same start."""
+    by_pair: dict[tuple[str, str], dict[str, list[Outcome]]] = {}
+    for (env, sensor, algorithm), cell in cells_of(outcomes).items():
+        by_pair.setdefault((env, sensor), {})[algorithm] = cell
+    rows = []
+    for (env, sensor), algos in by_pair.items():
+        for a, b in itertools.combinations(algos, 2):
+            runs_a = {o.spec.run: o.success for o in algos[a]}
+            runs_b = {o.spec.run: o.success for o in algos[b]}
+            shared = sorted(runs_a.keys() & runs_b.keys())
+            only_a, only_b, p = mcnemar_exact(
+                [runs_a[k] for k in shared], [runs_b[k] for k in shared]
+            )
+            rows.append(
+                {
+                    "environment": load_environment(env).name,
+                    "sensor": sensor,
+                    "a": a,
+                    "b": b,
+                    "runs": len(shared),
+                    "a_only": only_a,
+                    "b_only": only_b,
+                    "p_exact": round(p, 4),
+                }
+            )
+    return rows
+
+
+def _fmt(value: float | None, digits: int) -> str:
+    return "–" if value is None else f"{value:.{digits}f}"
+
+
+def _pct(row: dict[str, Any], key: str, ci: bool = True) -> str:
+    value = row[key]
+    if not ci:
+        return f"{100 * value:.0f}"
+    low, high = row["success_ci95" if key == "success_rate" else f"{key}_ci95"]
+    return f"{100 * value:.0f} ({100 * low:.0f}–{100 * high:.0f})"
+
+
+def markdown_table(rows: Sequence[dict[str, Any]]) -> str:
+    radii = [f"{r:g}m" for r in RADII_M]
+    head = (
+        "| algorithm | environment | sensor | runs | success % (95 % CI) "
+        + "".join(f"| declared ≤ {t[:-1]} m % " for t in radii[1:])
+        + "".join(f"| reached ≤ {t[:-1]} m % " for t in radii)
+        + "| false declarations % (95 % CI) | median time s (IQR) | path / initial distance "
+        "| final error m | detections / min |\n"
+    )
+    head += "|---" * (head.count("|") - 1) + "|\n"
+    lines = []
+    for r in rows:
+        q1, q3 = r["time_iqr_s"]
+        time_cell = (
+            "–"
+            if r["median_time_s"] is None
+            else f"{r['median_time_s']:.1f} ({_fmt(q1, 1)}–{_fmt(q3, 1)})"
+        )
+        cells = [
+            r["algorithm"],
+            r["environment"],
+            r["sensor"],
+            str(r["runs"]),
+            _pct(r, "success_rate"),
+            *(_pct(r, f"declared_{t}_rate") for t in radii[1:]),
+            *(_pct(r, f"reached_{t}_rate") for t in radii),
+            _pct(r, "false_declaration_rate"),
+            time_cell,
+            _fmt(r["path_ratio"], 2),
+            _fmt(r["final_error_m"], 2),
+            _fmt(r["detections_per_min"], 0),
+        ]
+        lines.append("| " + " | ".join(cells) + " |")
+    return head + "\n".join(lines) + "\n"
+
+
+def paired_table(rows: Sequence[dict[str, Any]]) -> str:
+    head = (
+        "| environment | sensor | A | B | runs | only A succeeds | only B succeeds "
+        "| p (McNemar exact) |\n|---|---|---|---|---|---|---|---|\n"
+    )
+    lines = [
+        f"| {r['environment']} | {r['sensor']} | {r['a']} | {r['b']} | {r['runs']} "
+        f"| {r['a_only']} | {r['b_only']} | {r['p_exact']:.4f} |"
+        for r in rows
+    ]
+    return head + "\n".join(lines) + "\n"
+
+
+def command_line(opts: GslOptions, sub: str = "") -> str:
+    """The command that produces the tables (without --jobs and --out, which do not change
+    them)."""
+    parts = ["plumeswarm bench gsl", *([sub] if sub else [])]
+    if opts.asked:
+        parts.append(f"--algorithms {','.join(opts.asked)}")
+    parts.append(f"--environments {','.join(opts.environments)}")
+    parts.append(f"--sensors {','.join(opts.sensors)}")
+    parts.append(f"--runs {opts.runs} --seed {opts.seed}")
+    if opts.time_limit_s != 300.0:
+        parts.append(f"--time-limit {opts.time_limit_s:g}")
+    parts.append(f"--dynamics {opts.dynamics}")
+    if opts.dynamics == "kinematic" and (opts.control_hz, opts.sensor_period_ticks) != (20, 2):
+        parts.append(
+            f"--control-hz {opts.control_hz} --sensor-period-ticks {opts.sensor_period_ticks}"
+        )
+    return " ".join(parts)
+
+
+def seed_note(opts: GslOptions) -> str:
+    if opts.seed >= TUNING_SEED_MIN:
+        return f"Seed {opts.seed}: tuning seeds (≥ {TUNING_SEED_MIN}), not a published table."
+    return f"Seed {opts.seed}: test seeds (the published tables use seed 0, runs 0–99)."
+
+
+def protocol_line(opts: GslOptions) -> str:
+    return (
+        f"{opts.runs} runs per cell, seed {opts.seed}, dynamics {opts.dynamics} "
+        f"(control {opts.control_hz} Hz, sensor every {opts.sensor_period_ticks} ticks), "
+        f"limit {opts.time_limit_s:g} s, starts 30–80 m downwind and ±20 m crosswind at 10 m "
+        "(run k: the same start for every algorithm), a time-dependent release running "
+        "max(60 s, 1.5 × 80 m / wind speed) before; success: a declaration within 2 m of the "
+        "source."
+    )
+
+
+def environment_lines(opts: GslOptions) -> list[str]:
+    lines = []
+    for name in opts.environments:
+        env = load_environment(name)
+        kind = "time-dependent" if env.time_dependent else "steady"
+        lines.append(
+            f"- environment `{env.name}` ({kind}; sha256 {env.sha256[:12]}…): {env.description}"
+        )
+    return lines
+
+
+def report_text(
+    opts: GslOptions, rows: Sequence[dict[str, Any]], paired: Sequence[dict[str, Any]] = ()
+) -> str:
+    """The Markdown report: the command, protocol, environments, tables. No wall-clock
+    content."""
+    avail = "\n".join(f"- {line}" for line in availability_lines())
+    text = (
+        f"```\n{command_line(opts)}\n```\n\n{protocol_line(opts)} {seed_note(opts)}\n\n"
+        + "\n".join(environment_lines(opts))
+        + f"\n{avail}\n\n{markdown_table(rows)}"
+        + "\nSensor visibility: the time-averaged plume at the farthest start in multiples of "
+        f"the sensor's detection floor; below {VISIBLE_FLOOR_MULTIPLE:g}, flagged.\n\n"
+        + visibility_table(rows)
+    )
+    if paired:
+        text += (
+            "\nPaired comparisons on the same starts (success = declared within 2 m; "
+            "two-sided exact p):\n\n" + paired_table(paired)
+        )
+    return text
+
+
+RUN_COLUMNS = (
+    "algorithm",
+    "environment",
+    "sensor",
+    "dynamics",
+    "run",
+    "seed",
+    "start_x_m",
+    "start_y_m",
+    "initial_distance_m",
+    "declared",
+    "declared_s",
+    "estimate_x_m",
+    "estimate_y_m",
+    "final_error_m",
+    "success",
+    "min_distance_m",
+    *(f"first_within_{r:g}m_s" for r in RADII_M),
+    "path_length_m",
+    "path_ratio",
+    "detections_per_min",
+)
+
+
+def _cell(value: Any) -> str:
+    if value is None:
+        return ""
+    if isinstance(value, bool):
+        return "1" if value else "0"
+    if isinstance(value, float):
+        return f"{value:.4f}"
+    return str(value)
+
+
+def runs_csv(outcomes: Sequence[Outcome]) -> str:
+    """Every episode, one line each (``RUN_COLUMNS``)."""
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(RUN_COLUMNS)
+    for o in outcomes:
+        s = o.spec
+        writer.writerow(
+            _cell(v)
+            for v in (
+                s.algorithm,
+                load_environment(s.environment).name,
+                s.sensor,
+                s.dynamics,
+                s.run,
+                s.seed,
+                o.start_xy[0],
+                o.start_xy[1],
+                o.initial_distance_m,
+                o.declared,
+                o.declared_s,
+                o.estimate_xy[0],
+                o.estimate_xy[1],
+                o.final_error_m,
+                o.success,
+                o.min_distance_m,
+                *o.first_within_s,
+                o.path_length_m,
+                o.path_length_m / o.initial_distance_m,
+                o.detections_per_min,
+            )
+        )
+    return buf.getvalue()
+
+
+def write_outputs(
+    out: Path, opts: GslOptions, rows: Sequence[dict[str, Any]], outcomes: Sequence[Outcome]
+) -> list[Path]:
+    out.mkdir(parents=True, exist_ok=True)
+    paired = paired_rows(outcomes)
+    files = {
+        "gsl.md": report_text(opts, rows, paired),
+        "gsl.json": json.dumps(list(rows), indent=1, ensure_ascii=False) + "\n",
+        "paired.json": json.dumps(paired, indent=1, ensure_ascii=False) + "\n",
+        "runs.csv": runs_csv(outcomes),
+    }
+    written = []
+    for name, text in files.items():
+        (out / name).write_text(text)
+        written.append(out / name)
+    # matplotlib only when writing figures
+    from plumeswarm.gsl.figure import plot_errors, plot_success, plot_trajectories
+
+    written.append(plot_success(out / "success.png", rows))
+    written.append(plot_errors(out / "final_error.png", outcomes))
+    for env in opts.environments:
+        samples = [o for o in outcomes if o.spec.environment == env and o.trajectories]
+        name = load_environment(env).name
+        written.append(plot_trajectories(out / f"trajectories_{name}.png", samples))
+    return written

@@ -1,0 +1,178 @@
+"""``plumeswarm bench gsl sweep PARAM=v1,v2,…``: how the table changes with one parameter.
+
+A parameter is one of
+
+- ``behavior.NAME`` — a class attribute of the behaviours (``behavior.lost_s``): set on every
+  algorithm that has it (the others, the floor and ceiling among them, run unchanged);
+- ``start.along_m`` — every start this far downwind of the source (the crosswind spread
+  stays the protocol's);
+- ``section.key`` — any field of the environment's scenario (``wind.meander.preset``,
+  ``plume.sources.release_rate_g_s``: a key under a list of sections is set in each).
+
+Each value runs the whole grid on the same starts; one table per parameter. Sweeps are for
+tuning, so they refuse the test seeds (< 1000) unless told otherwise, and then say so loudly in
+``sweep.md`` and ``sweep.json``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from plumeswarm.gsl.bench import (
+    TUNING_SEED_MIN,
+    GslOptions,
+    cells_of,
+    command_line,
+    protocol_line,
+    row_of,
+    run_specs,
+    specs_of,
+)
+from plumeswarm.gsl.episode import EpisodeSpec
+from plumeswarm.gsl.registry import (
+    GslError,
+    load_environment,
+    parse_value,
+    tuned_behavior,
+)
+
+START_PARAM = "start.along_m"
+
+
+@dataclass(frozen=True)
+class SweepParam:
+    name: str
+    values: tuple[Any, ...]
+
+
+def parse_sweep(text: str) -> SweepParam:
+    """``NAME=v1,v2,…`` → the parameter; :class:`GslError` if malformed."""
+    name, sep, values = text.partition("=")
+    parts = [v.strip() for v in values.split(",") if v.strip()]
+    if not sep or not name or "." not in name or not parts:
+        raise GslError(f"sweep {text!r}: expected SECTION.KEY=v1,v2,… (e.g. behavior.lost_s=0.5,1)")
+    return SweepParam(name, tuple(parse_value(p) for p in parts))
+
+
+def seed_warning(opts: GslOptions, allow_test_seeds: bool) -> str | None:
+    """None for tuning seeds; a warning when test seeds were allowed; else GslError."""
+    if opts.seed >= TUNING_SEED_MIN:
+        return None
+    if not allow_test_seeds:
+        raise GslError(
+            f"--seed {opts.seed}: a sweep tunes, and tuning uses seeds >= {TUNING_SEED_MIN} "
+            "(the published tables use seed 0); --allow-test-seeds to sweep them anyway"
+        )
+    return (
+        f"WARNING: this sweep used test seeds (seed {opts.seed} < {TUNING_SEED_MIN}): "
+        "parameters chosen from it are tuned on the published tables' starts"
+    )
+
+
+def value_specs(opts: GslOptions, name: str, value: Any) -> list[EpisodeSpec]:
+    if name.startswith("behavior."):
+        key = name.removeprefix("behavior.")
+        configs, tuned = [], 0
+        for algo in opts.configs:
+            try:
+                behavior = tuned_behavior(algo.behavior, {key: value})
+                tuned += 1
+            except GslError:
+                behavior = algo.behavior
+            configs.append(dataclasses.replace(algo, behavior=behavior))
+        if not tuned:
+            # the error of the first asked algorithm names the parameters it has
+            tuned_behavior(opts.configs[min(1, len(opts.configs) - 1)].behavior, {key: value})
+        return specs_of(dataclasses.replace(opts, configs=tuple(configs)))
+    if name == START_PARAM:
+        if not isinstance(value, int | float) or not 0 < value <= 1000:
+            raise GslError(f"{START_PARAM}={value!r}: metres downwind, in (0, 1000]")
+        return specs_of(opts, start_along_m=(float(value), float(value)))
+    overrides = ((name, value),)
+    for env in opts.environments:
+        load_environment(env, overrides)  # GslError: no such field, or a bad value
+    return specs_of(opts, overrides=overrides)
+
+
+def run_sweep(
+    opts: GslOptions,
+    params: Sequence[SweepParam],
+    progress: Callable[[int, int], None] | None = None,
+) -> list[dict[str, Any]]:
+    """Every parameter's table: ``{"parameter", "values", "rows"}``; the rows of each value
+    carry ``value``. All episodes share the worker pool."""
+    groups = [(p, v, value_specs(opts, p.name, v)) for p in params for v in p.values]
+    outcomes = run_specs([s for _, _, specs in groups for s in specs], opts.jobs, progress)
+    tables: dict[str, dict[str, Any]] = {}
+    at = 0
+    for param, value, specs in groups:
+        mine = outcomes[at : at + len(specs)]
+        at += len(specs)
+        table = tables.setdefault(
+            param.name, {"parameter": param.name, "values": list(param.values), "rows": []}
+        )
+        for cell in cells_of(mine).values():
+            row = row_of(cell)
+            row["tuned"] = "?" in cell[0].spec.behavior or not param.name.startswith("behavior.")
+            table["rows"].append({"parameter": param.name, "value": value, **row})
+    return list(tables.values())
+
+
+def _pct(rate: float, ci: Sequence[float]) -> str:
+    return f"{100 * rate:.0f} ({100 * ci[0]:.0f}–{100 * ci[1]:.0f})"
+
+
+def sweep_table(table: dict[str, Any]) -> str:
+    head = (
+        f"| algorithm | environment | sensor | {table['parameter']} | success % (95 % CI) "
+        "| false declarations % | reached ≤ 2 m % | median time s | final error m |\n"
+        "|---|---|---|---|---|---|---|---|---|\n"
+    )
+    lines = []
+    for r in table["rows"]:
+        value = json.dumps(r["value"]) if r["tuned"] else f"({json.dumps(r['value'])}: n/a)"
+        time = "–" if r["median_time_s"] is None else f"{r['median_time_s']:.1f}"
+        lines.append(
+            f"| {r['algorithm']} | {r['environment']} | {r['sensor']} | {value} "
+            f"| {_pct(r['success_rate'], r['success_ci95'])} "
+            f"| {100 * r['false_declaration_rate']:.0f} | {100 * r['reached_2m_rate']:.0f} "
+            f"| {time} | {r['final_error_m']:.2f} |"
+        )
+    return head + "\n".join(lines) + "\n"
+
+
+def sweep_report(
+    opts: GslOptions,
+    params: Sequence[SweepParam],
+    tables: Sequence[dict[str, Any]],
+    warning: str | None,
+) -> str:
+    args = " ".join(f"{p.name}={','.join(json.dumps(v) for v in p.values)}" for p in params)
+    command = command_line(opts, "sweep").replace(" sweep", f" sweep {args}", 1)
+    text = f"```\n{command}\n```\n\n"
+    if warning:
+        text += f"**{warning}**\n\n"
+    text += f"{protocol_line(opts)}\n"
+    for table in tables:
+        text += f"\n### {table['parameter']}\n\n{sweep_table(table)}"
+    return text
+
+
+def write_sweep(
+    out: Path,
+    opts: GslOptions,
+    params: Sequence[SweepParam],
+    tables: Sequence[dict[str, Any]],
+    warning: str | None,
+) -> list[Path]:
+    out.mkdir(parents=True, exist_ok=True)
+    md, js = out / "sweep.md", out / "sweep.json"
+    md.write_text(sweep_report(opts, params, tables, warning))
+    document = {"seed": opts.seed, "runs": opts.runs, "warning": warning, "tables": list(tables)}
+    js.write_text(json.dumps(document, indent=1, ensure_ascii=False) + "\n")
+    return [md, js]

@@ -1,0 +1,240 @@
+"""The fused runner against the distributed stack: the same state stream, bit for bit.
+
+Both sides get the same scenario and the same commands at the same tick boundaries. The
+distributed side is held between ticks either by the stepped clock (``time.mode = "stepped"``,
+stepped by a ``Swarm`` client: the scenario itself, unchanged) or by a clock holder in the test
+process (a parked extra vehicle's lockstep participant, tests/support/clock_holder.py: the plain
+lockstep, without the stepped clock's code). Each side's digest covers every vehicle's state of
+every tick from 0.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from functools import partial
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from agents import CommandRejected, CommandTimeout, Swarm, VehicleCommander
+from plumeswarm.experiments.demo import StateDigest
+from plumeswarm.experiments.fused import FusedRunner
+from swarmbus.codec import decode, encode
+from swarmbus.keys import Keys
+from swarmbus.messages import (
+    Arm,
+    Command,
+    CommandReply,
+    FlightMode,
+    MissionStart,
+    PlumeQuery,
+    PlumeValues,
+    SetMode,
+    SimTick,
+    Takeoff,
+    VehicleState,
+)
+from swarmbus.scenario import DEFAULT_SCENARIO, Scenario, load_scenario
+from tests.support.clock_holder import ClockHolder
+from tests.support.procs import NodeProcs, wait_for_queryable, wait_until, zenoh_network
+
+CLOCK = "clock"
+FLYERS = ("uav1", "uav2", "uav3")
+CLOCK_VEHICLE = f"""
+[[vehicles]]
+id = "{CLOCK}"
+spawn_enu_m = [-300.0, 0.0, 0.0]
+"""
+BEHAVIOUR = 'behavior = "agents.behaviors.casting:Casting"\n'
+
+Boundary = dict[int, list[tuple[str, Command]]]
+
+
+def default_with_clock(tmp_path: Path, noisy_casting: bool = False) -> Path:
+    """The default scenario and a parked vehicle far upwind whose participant holds the clock;
+    ``noisy_casting``: every flyer has the casting behaviour and the sensor is noisy and slow."""
+    text = DEFAULT_SCENARIO.read_text()
+    if noisy_casting:
+        text = text.replace("noise_std_g_m3 = 0.0", "noise_std_g_m3 = 0.02")
+        text = text.replace("time_constant_s = 0.0", "time_constant_s = 0.3")
+        text = text.replace('type = "iris"\n', f'type = "iris"\n{BEHAVIOUR}')
+    path = tmp_path / "scenario.toml"
+    path.write_text(text + CLOCK_VEHICLE)
+    return path
+
+
+def fused_stream(
+    scenario: Scenario, last_tick: int, boundary: Boundary
+) -> tuple[dict, FusedRunner]:
+    digest = StateDigest()
+    maxima: dict[str, float] = {}
+
+    def observe(states: Sequence[VehicleState]) -> None:
+        for s in states:
+            digest.add(encode(s))
+            maxima[s.vehicle_id] = max(maxima.get(s.vehicle_id, 0.0), s.position_enu_m[2])
+
+    runner = FusedRunner(scenario, on_states=observe)
+    for k in range(last_tick + 1):
+        for vid, command in boundary.get(k, []):
+            reply = runner.command(vid, command)
+            assert reply.accepted, (k, vid, command, reply)
+        if k < last_tick:
+            runner.step()
+    assert all(maxima[v] > 5.0 for v in FLYERS), f"the flyers should have climbed: {maxima}"
+    return digest.result(), runner
+
+
+def start_plume_and_autopilots(procs: NodeProcs, session: zenoh.Session, keys: Keys) -> None:
+    """The plume first and answering (the first sensor ticks must find it), then the flyers."""
+    procs.start("plume")
+    wait_for_queryable(
+        session,
+        keys.plume_concentration(),
+        PlumeQuery(points_enu_m=[(30.0, 0.0, 10.0)], sim_time_s=0.0),
+        PlumeValues,
+        60.0,
+        "the plume service",
+    )
+    for vid in FLYERS:
+        procs.start("autopilot", "--vehicle", vid)
+
+
+def distributed_stream(
+    path: Path, scenario: Scenario, last_tick: int, boundary: Boundary, log_dir: Path
+) -> dict:
+    keys = Keys(scenario.world.name)
+    with zenoh_network() as (net, session), NodeProcs(net, path, log_dir) as procs:
+        start_plume_and_autopilots(procs, session, keys)
+        holder = ClockHolder(session, keys, CLOCK, FLYERS, rotor_count=4)
+        try:
+            procs.start("physics")
+            holder.run(last_tick, lambda k: boundary.get(k, []))
+            return holder.digest.result()
+        finally:
+            holder.close()
+
+
+def stepped_stream(
+    path: Path, scenario: Scenario, last_tick: int, boundary: Boundary, log_dir: Path
+) -> dict:
+    """The distributed stack in stepped mode, stepped by a Swarm client between boundaries."""
+    keys = Keys(scenario.world.name)
+    digest = StateDigest()
+
+    def on_tick(sample: zenoh.Sample) -> None:
+        for state in decode(sample.payload.to_bytes(), SimTick).states:
+            digest.add(encode(state))
+
+    with zenoh_network() as (net, session), NodeProcs(net, path, log_dir) as procs:
+        sub = session.declare_subscriber(keys.tick(), on_tick)
+        start_plume_and_autopilots(procs, session, keys)
+        procs.start("physics")
+        with Swarm.connect(scenario.world.name, [net.endpoint], command_timeout_s=20.0) as sw:
+            tick = 0
+            for k in sorted(boundary):
+                if k > tick:
+                    tick = sw.step(k - tick).tick
+                for vid, command in boundary[k]:
+                    # paused at tick k: an autopilot that has not seen tick 0 yet refuses (no
+                    # state), and nothing moves until the next step however long this takes
+                    reply = wait_until(
+                        partial(_accepted, session, keys, vid, command),
+                        60.0,
+                        f"{vid} to accept {command}",
+                    )
+                    assert reply.accepted
+            if last_tick > tick:
+                sw.step(last_tick - tick)
+        sub.undeclare()
+    return digest.result()
+
+
+def _accepted(
+    session: zenoh.Session, keys: Keys, vid: str, command: Command
+) -> CommandReply | None:
+    try:
+        return VehicleCommander(session, keys, vid, 5.0).send(command)
+    except CommandTimeout:
+        return None
+    except CommandRejected as exc:
+        if "no vehicle state" in exc.reason:
+            return None
+        raise AssertionError(f"{vid} refused {command}: {exc.reason}") from None
+
+
+def stepped_scenario(tmp_path: Path, noisy_casting: bool = False) -> Path:
+    """The default scenario (or its casting variant) on the stepped clock, nothing added."""
+    text = default_with_clock(tmp_path, noisy_casting).read_text().replace(CLOCK_VEHICLE, "")
+    text = text.replace('mode = "lockstep"', 'mode = "stepped"')
+    path = tmp_path / "stepped.toml"
+    path.write_text(text)
+    assert load_scenario(path).time.mode == "stepped"
+    return path
+
+
+def assert_same_stream(
+    tmp_path: Path, path: Path, last_tick: int, boundary: Boundary, stepped: bool
+) -> FusedRunner:
+    scenario = load_scenario(path)
+    fused, runner = fused_stream(scenario, last_tick, boundary)
+    run = stepped_stream if stepped else distributed_stream
+    distributed = run(path, scenario, last_tick, boundary, tmp_path)
+    runner.close()
+    vehicles = len(scenario.vehicles)
+    assert fused["messages"] == distributed["messages"] == (last_tick + 1) * vehicles
+    assert distributed["missing"] == distributed["conflicts"] == 0
+    assert fused["sha256"] == distributed["sha256"]
+    return runner
+
+
+CLOCKS = pytest.mark.parametrize("clock", ["stepped", "holder"])
+
+
+def scenario_for(tmp_path: Path, clock: str, noisy_casting: bool = False) -> Path:
+    if clock == "stepped":
+        return stepped_scenario(tmp_path, noisy_casting)
+    return default_with_clock(tmp_path, noisy_casting)
+
+
+@CLOCKS
+def test_default_scenario_missions_give_the_same_states_fused_and_distributed(
+    tmp_path: Path, clock: str
+) -> None:
+    boundary: Boundary = {0: [(v, c) for v in FLYERS for c in (Arm(), MissionStart())]}
+    path = scenario_for(tmp_path, clock)
+    assert_same_stream(tmp_path, path, 1200, boundary, stepped=clock == "stepped")
+
+
+@CLOCKS
+def test_casting_in_offboard_with_a_noisy_sensor_gives_the_same_states(
+    tmp_path: Path, clock: str
+) -> None:
+    # Casting has no collision avoidance and every flyer homes in on the same plume axis: each
+    # holds its own altitude, 2 m apart (the offboard switch waits for the highest take-off),
+    # so that whichever the noise, the behaviours fly on instead of into each other.
+    altitude_m = {"uav1": 8.0, "uav2": 10.0, "uav3": 12.0}
+    boundary: Boundary = {
+        0: [(v, c) for v in FLYERS for c in (Arm(), Takeoff(altitude_m=altitude_m[v]))],
+        600: [(v, SetMode(mode=FlightMode.OFFBOARD)) for v in FLYERS],
+    }
+    path = scenario_for(tmp_path, clock, noisy_casting=True)
+    runner = assert_same_stream(tmp_path, path, 1440, boundary, stepped=clock == "stepped")
+    # Not a vacuous comparison: the behaviours flew on noisy readings of real gas.
+    for vid in FLYERS:
+        assert runner.flights[vid].autopilot.modes.mode == FlightMode.OFFBOARD, vid
+    readings = [r for r in runner.latest_readings.values() if r.true_g_m3 is not None]
+    assert readings and any(r.reported_g_m3 != r.true_g_m3 for r in readings)
+
+
+def test_the_docs_example_of_the_runner_flies_the_missions() -> None:
+    text = (Path(__file__).resolve().parents[2] / "docs" / "envs.md").read_text()
+    section = text.split("## The fused runner without an environment", 1)[1]
+    code = section.split("```python\n", 1)[1].split("```", 1)[0]
+    scope: dict[str, object] = {}
+    exec(code, scope)
+    states = scope["states"]
+    assert isinstance(states, list) and len(states) == 3
+    # 10 s after the start the missions' take-off to 10 m is done and the legs are being flown
+    assert all(abs(s.position_enu_m[2] - 10.0) < 1.0 for s in states)
