@@ -15,7 +15,7 @@ from plume_atmosphere.gases import ppm_per_g_m3
 from swarmbus.messages import MissionItem
 from swarmbus.session import NetworkConfig
 
-SCENARIOS_DIR = Path(__file__).resolve().parent.parent / "swarmbus" / "scenarios"
+SCENARIOS_DIR = Path(__file__).resolve().with_name("scenarios")
 DEFAULT_SCENARIO = SCENARIOS_DIR / "novak2018.toml"
 #: The gas-source-localisation benchmark's environments, one scenario file each.
 GSL_ENVIRONMENTS_DIR = SCENARIOS_DIR / "gsl"

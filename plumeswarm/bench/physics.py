@@ -122,7 +122,7 @@ def process_row(n: int, hovering: bool, seconds: float, tmp: Path) -> dict[str, 
                 [
                     sys.executable,
                     "-m",
-                    "deploy",
+                    "plumeswarm",
                     "node",
                     "physics",
                     "--scenario",
