@@ -1,8 +1,6 @@
 """What a ``pip install plumeswarm`` gets: the core dependencies cover every module the core
 imports, each optional module is in the extra its error names, and a missing extra is one line.
-
-(The wheel itself, installed into a clean venv, ran ``plumeswarm demo`` by hand: building it
-needs PyPI for the build backend, which a test does not reach.)
+(The wheel itself, in an environment of its own: tests/system/test_wheel.py.)
 """
 
 from __future__ import annotations
