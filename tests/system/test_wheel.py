@@ -95,6 +95,22 @@ def test_the_wheel_installs_our_top_level_packages_and_no_generic_others(wheel: 
     assert listed == TOP_LEVEL
     assert {t for t in tops if not t.endswith((".dist-info", ".data"))} == TOP_LEVEL
     assert "experiments" not in listed and "bench" not in listed and "tests" not in listed
+    # every package of the tree is in the wheel (a folder without __init__.py would be left out)
+    packages = {
+        str(init.parent.relative_to(REPO))
+        for top in TOP_LEVEL
+        for init in (REPO / top).rglob("__init__.py")
+    }
+    modules = {
+        str(path.relative_to(REPO))
+        for top in TOP_LEVEL
+        for path in (REPO / top).rglob("*.py")
+        if "__pycache__" not in path.parts
+    }
+    with zipfile.ZipFile(wheel) as whl:
+        in_wheel = {n for n in whl.namelist() if n.endswith(".py")}
+    assert modules <= in_wheel, sorted(modules - in_wheel)[:5]
+    assert {f"{p}/__init__.py" for p in packages} <= in_wheel
 
 
 def test_import_plumeswarm_from_the_wheel(venv: Path, tmp_path: Path) -> None:
