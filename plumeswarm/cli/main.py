@@ -497,10 +497,9 @@ def export() -> None:
 )
 def export_foxglove(src: str, dst: Path, layout_file: Path | None) -> None:
     """Write OUT: recording IN with its Foxglove channels (3D scene, map, plots) made anew."""
-    from recorder.foxglove.export import ExportError
     from recorder.foxglove.export import export_foxglove as run_export
     from recorder.foxglove.layout import layout_json
-    from recorder.reader import RecordingError
+    from recorder.reader import ExportError, RecordingError
 
     try:
         done = run_export(src, dst, lambda n: click.echo(f"  {n} messages", err=True))
@@ -524,9 +523,8 @@ def export_foxglove(src: str, dst: Path, layout_file: Path | None) -> None:
 def export_ros2(src: str, dst: Path) -> None:
     """Write OUT_DIR: recording IN as a rosbag2 (MCAP storage) with the ROS 2 bridge's topics,
     stamped in sim time (docs/ros2.md)."""
-    from deploy.ros2_export import ExportError
     from deploy.ros2_export import export_ros2 as run_export
-    from recorder.reader import RecordingError
+    from recorder.reader import ExportError, RecordingError
 
     try:
         done = run_export(src, dst)
