@@ -22,6 +22,7 @@ from plumeswarm.cli.common import (
     scenario_from,
     vehicles_per_process_option,
 )
+from swarmbus.errors import PlumeswarmError
 from swarmbus.extras import missing_extra_message
 from swarmbus.scenario import Scenario
 from swarmbus.session import NetworkConfig
@@ -553,6 +554,8 @@ _register_groups()
 def main() -> None:
     try:
         cli(prog_name="plumeswarm")
+    except PlumeswarmError as exc:  # any error of ours a command let through: its one line
+        fail(" ".join(str(exc).split()) or type(exc).__name__)
     except ModuleNotFoundError as exc:  # an optional extra's module: one line naming the extra
         message = missing_extra_message(exc.name or "")
         if message is None:
