@@ -110,13 +110,13 @@ def rootless_classes(module: types.ModuleType) -> list[str]:
 
 
 def rootless_in_source(source: str, where: str) -> list[str]:
-    """For a module that cannot be imported here: its classes built straight on a built-in
-    exception without the root."""
+    """The classes of ``source`` built on built-in exceptions alone, without the root (read as
+    text: for a module that cannot be imported here, and for classes defined in functions)."""
     found = []
     for node in ast.walk(ast.parse(source)):
-        if isinstance(node, ast.ClassDef):
-            bases = {b.id for b in node.bases if isinstance(b, ast.Name)}
-            if bases & BUILTIN_EXCEPTIONS and "PlumeswarmError" not in bases:
+        if isinstance(node, ast.ClassDef) and node.bases:
+            bases = {b.id if isinstance(b, ast.Name) else "" for b in node.bases}
+            if bases <= BUILTIN_EXCEPTIONS and f"{where}.{node.name}" != ROOT:
                 found.append(f"{where}.{node.name}")
     return found
 
@@ -134,12 +134,12 @@ def scan() -> dict[str, Any]:
     rootless: list[str] = []
     unimported: list[str] = []
     for name in our_modules():
+        rootless += rootless_in_source(source_of(name), name)  # nested classes too
         module = import_ours(name)
         if module is None:
             unimported.append(name)
-            rootless += rootless_in_source(source_of(name), name)
             continue
-        rootless += rootless_classes(module)
+        rootless += [n for n in rootless_classes(module) if n not in rootless]
         for attr, value in vars(module).items():
             ours = inspect.isclass(value) and value.__module__ == name
             if ours and issubclass(value, BaseException):
@@ -200,8 +200,14 @@ def test_the_check_flags_a_class_without_the_root() -> None:
         vars(module),
     )
     assert rootless_classes(module) == ["plumeswarm.example_errors.Loose"]
-    source = "class Loose(RuntimeError): pass\nclass Rooted(PlumeswarmError, TimeoutError): pass\n"
-    assert rootless_in_source(source, "m") == ["m.Loose"]
+    source = (
+        "class Loose(RuntimeError): pass\n"
+        "class Rooted(PlumeswarmError, TimeoutError): pass\n"
+        "def f():\n"
+        "    class Nested(ValueError, KeyError): pass\n"
+        "    class OfOurs(Rooted, KeyError): pass\n"
+    )
+    assert rootless_in_source(source, "m") == ["m.Loose", "m.Nested"]
 
 
 # The real command line with three commands added that fail as a command body can: an error of
