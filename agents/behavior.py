@@ -20,6 +20,7 @@ from typing import Protocol
 
 import numpy as np
 
+from swarmbus.errors import PlumeswarmError
 from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
 from swarmbus.scenario import Scenario
 
@@ -54,7 +55,7 @@ class Behavior(Protocol):
     ) -> Setpoint | None: ...
 
 
-class BehaviorError(RuntimeError):
+class BehaviorError(PlumeswarmError, RuntimeError):
     pass
 
 

@@ -16,8 +16,10 @@ from typing import Any
 
 import msgspec
 
+from swarmbus.errors import PlumeswarmError
 
-class SnapshotError(ValueError):
+
+class SnapshotError(PlumeswarmError, ValueError):
     """A snapshot that cannot be taken, read or restored; the message says which and why."""
 
 

@@ -14,6 +14,7 @@ import numpy as np
 import numpy.typing as npt
 import zenoh
 
+from swarmbus.errors import PlumeswarmError
 from swarmbus.keys import AUTOPILOT_PREFIX, Keys
 from swarmbus.messages import (
     Arm,
@@ -49,7 +50,7 @@ M = TypeVar("M", bound=Message)
 ROUTE_RETRY_S = 0.05
 
 
-class SwarmError(Exception):
+class SwarmError(PlumeswarmError):
     """Base of the Swarm client's errors."""
 
 

@@ -26,11 +26,13 @@ from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
+from swarmbus.errors import PlumeswarmError
+
 OPERATOR = "operator"
 CA_NAME = "plumeswarm deployment CA"
 
 
-class CertError(ValueError):
+class CertError(PlumeswarmError, ValueError):
     """A certificate could not be written or read: one line saying which file and why."""
 
 

@@ -17,12 +17,13 @@ from typing import Annotated
 import msgspec
 
 from deploy.launcher import ALL_ROLES, LaunchOptions
+from swarmbus.errors import PlumeswarmError
 from swarmbus.session import Endpoint
 
 RoleName = Annotated[str, msgspec.Meta(pattern="^(" + "|".join(ALL_ROLES) + ")$")]
 
 
-class HostsError(ValueError):
+class HostsError(PlumeswarmError, ValueError):
     pass
 
 

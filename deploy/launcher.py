@@ -39,6 +39,7 @@ from deploy.supervisor import (
 from sim_world import checkpoint
 from swarmbus.closeable import Closeable
 from swarmbus.codec import encode
+from swarmbus.errors import PlumeswarmError
 from swarmbus.keys import Keys, process_node
 from swarmbus.messages import RestartNotice
 from swarmbus.scenario import Scenario
@@ -85,7 +86,7 @@ RESTART = {
 NOT_CRITICAL = {"viewer", "foxglove", "ros2"}
 
 
-class LaunchError(RuntimeError):
+class LaunchError(PlumeswarmError, RuntimeError):
     """The run could not start: one line saying why."""
 
 

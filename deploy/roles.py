@@ -9,6 +9,7 @@ from __future__ import annotations
 import importlib
 from collections.abc import Callable
 
+from swarmbus.errors import PlumeswarmError
 from swarmbus.node import NodeContext
 
 RoleMain = Callable[[NodeContext], int]
@@ -36,7 +37,7 @@ BENCH_ROLES: dict[str, str] = {
 }
 
 
-class RoleUnavailable(RuntimeError):
+class RoleUnavailable(PlumeswarmError, RuntimeError):
     pass
 
 

@@ -23,7 +23,7 @@ from typing import Any, Final
 from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
 
 from recorder.flight_log import scenario_of
-from recorder.reader import Recording
+from recorder.reader import ExportError, Recording
 from ros2_bridge import convert as cv
 from ros2_bridge import wire
 from swarmbus.messages import (
@@ -37,10 +37,6 @@ from swarmbus.scenario import Scenario, load_scenario, resolve_scenario_path
 
 log = logging.getLogger(__name__)
 BAG_VERSION: Final = 9  # rosbag2's metadata version of Jazzy and Kilted
-
-
-class ExportError(RuntimeError):
-    """The bag could not be written: one line saying why."""
 
 
 @dataclass(frozen=True)

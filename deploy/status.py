@@ -8,13 +8,14 @@ from collections.abc import Sequence
 import msgspec
 
 from deploy.busview import BusView, Snapshot
+from swarmbus.errors import PlumeswarmError
 from swarmbus.keys import Keys, autopilot_node
 from swarmbus.session import NetworkConfig, open_session
 
 PRESENCE_WAIT_S = 2.0
 
 
-class NothingRunning(RuntimeError):
+class NothingRunning(PlumeswarmError, RuntimeError):
     pass
 
 

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 
 from gcs_bridge.dialect import mavlink
 from gcs_bridge.frames import enu_to_geodetic, geodetic_to_enu
+from swarmbus.errors import PlumeswarmError
 from swarmbus.messages import MAX_MISSION_ITEMS, MissionCommand, MissionFrame, MissionItem
 from swarmbus.scenario import Origin
 
@@ -100,7 +101,7 @@ class Converted:
     wire: list[WireItem]  # what the GCS sent (returned verbatim on download)
 
 
-class MissionError(ValueError):
+class MissionError(PlumeswarmError, ValueError):
     def __init__(self, result: Result, seq: int, reason: str) -> None:
         self.result = result
         self.seq = seq

@@ -16,6 +16,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from gcs_bridge.dialect import mavlink
+from swarmbus.errors import PlumeswarmError
 from swarmbus.messages import COM_OBL_ACT_CODES, NAV_DLL_ACT_CODES
 from swarmbus.scenario import Failsafe
 from swarmbus.vehicle_types import VehicleType
@@ -24,7 +25,7 @@ REAL32 = int(mavlink.MAV_PARAM_TYPE_REAL32)
 INT32 = int(mavlink.MAV_PARAM_TYPE_INT32)
 
 
-class ParamError(ValueError):
+class ParamError(PlumeswarmError, ValueError):
     """A PARAM_SET the gateway refuses before asking the autopilot (field and reason)."""
 
     def __init__(self, name: str, reason: str) -> None:

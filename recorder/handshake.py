@@ -17,12 +17,13 @@ from collections.abc import Callable
 import zenoh
 
 from swarmbus.codec import MessageError, decode
+from swarmbus.errors import PlumeswarmError
 from swarmbus.keys import Keys
 from swarmbus.messages import NodeHealth, NodeState
 from swarmbus.session import Presence
 
 
-class RecorderNotListening(TimeoutError):
+class RecorderNotListening(PlumeswarmError, TimeoutError):
     """The recorder did not acknowledge in time."""
 
 

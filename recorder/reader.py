@@ -24,6 +24,7 @@ from mcap.stream_reader import StreamReader
 from recorder import schema as sch
 from recorder.schema import SegmentGap, gap_from_json
 from recorder.segments import SegmentError, recording_files
+from swarmbus.errors import PlumeswarmError
 from swarmbus.messages import Message as BusMessage
 from swarmbus.messages import SimTick
 
@@ -32,8 +33,13 @@ log = logging.getLogger(__name__)
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 
 
-class RecordingError(RuntimeError):
+class RecordingError(PlumeswarmError, RuntimeError):
     """A recording that cannot be read: missing, not MCAP, or damaged."""
+
+
+class ExportError(PlumeswarmError, RuntimeError):
+    """A recording that cannot be converted for another tool (Foxglove, rosbag2): one line
+    saying why."""
 
 
 @dataclass(frozen=True)

@@ -21,6 +21,7 @@ import zenoh
 from recorder.handshake import RecorderNotListening, wait_until_recorded
 from recorder.reader import Recorded, Recording, RecordingError
 from swarmbus.codec import encode
+from swarmbus.errors import PlumeswarmError
 from swarmbus.keys import KeyNameError, Keys
 from swarmbus.messages import NodeState
 from swarmbus.node import NodeContext, NodeRuntime
@@ -30,7 +31,7 @@ from swarmbus.session import Presence
 log = logging.getLogger(__name__)
 
 
-class ReplayError(RuntimeError):
+class ReplayError(PlumeswarmError, RuntimeError):
     """A replay that cannot start or finish: one line for the user."""
 
 

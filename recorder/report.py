@@ -26,6 +26,7 @@ from recorder.flight_log import READING_FIELDS, TRACK_FIELDS, FlightLog, load_fl
 from recorder.plume_map import plume_map
 from recorder.reader import Recording
 from recorder.schema import EventKind
+from swarmbus.errors import PlumeswarmError
 
 log = logging.getLogger(__name__)
 
@@ -34,7 +35,7 @@ READING_COLUMNS = (*READING_FIELDS, "error_g_m3")
 _INT_COLUMNS = {"tick", "on_ground", "available"}
 
 
-class ReportError(RuntimeError):
+class ReportError(PlumeswarmError, RuntimeError):
     """A report that cannot be made: one line for the user."""
 
 

@@ -11,11 +11,13 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
+from swarmbus.errors import PlumeswarmError
+
 SUFFIX = ".mcap"
 _SEGMENT = re.compile(r"^(?P<stem>.+)\.(?P<n>[1-9][0-9]*)\.mcap$")
 
 
-class SegmentError(ValueError):
+class SegmentError(PlumeswarmError, ValueError):
     """A path that does not name one recording."""
 
 

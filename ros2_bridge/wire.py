@@ -30,6 +30,8 @@ import zenoh.ext
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
 
+from swarmbus.errors import PlumeswarmError
+
 DISTRIBUTION = "kilted"
 ADMIN_SPACE = "@ros2_lv"
 # The QoS of a token whose every policy is rmw_zenoh's default (reliable, volatile, keep last
@@ -37,7 +39,7 @@ ADMIN_SPACE = "@ros2_lv"
 DEFAULT_QOS = "::,:,:,:,,"
 
 
-class WireError(ValueError):
+class WireError(PlumeswarmError, ValueError):
     """A payload that is not a valid message of the topic's type."""
 
 

@@ -31,6 +31,7 @@ from pathlib import Path
 import msgspec
 
 from swarmbus.closeable import Closeable
+from swarmbus.errors import PlumeswarmError
 from swarmbus.messages import PlumeSample
 
 log = logging.getLogger(__name__)
@@ -41,7 +42,7 @@ _SCRATCH_DIR = "/dev/shm" if os.path.isdir("/dev/shm") else None
 _MARKER = struct.Struct("<qq")  # last published tick, time.monotonic_ns() at publication
 
 
-class CheckpointError(ValueError):
+class CheckpointError(PlumeswarmError, ValueError):
     """A checkpoint file that cannot be read, or that belongs to another world."""
 
 

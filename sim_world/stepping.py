@@ -16,10 +16,12 @@ from __future__ import annotations
 
 from typing import Generic, TypeVar
 
+from swarmbus.errors import PlumeswarmError
+
 Q = TypeVar("Q")
 
 
-class StepRefused(Exception):
+class StepRefused(PlumeswarmError):
     """A grant the clock cannot take: ``field`` of the request and the reason, one line."""
 
     def __init__(self, field: str, reason: str) -> None:

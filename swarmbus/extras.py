@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import importlib.util
 
+from swarmbus.errors import PlumeswarmError
+
 # Top-level module -> the extra that installs it (pyproject.toml [project.optional-dependencies]).
 EXTRA_OF_MODULE: dict[str, str] = {
     "gymnasium": "rl",
@@ -18,7 +20,7 @@ EXTRA_OF_MODULE: dict[str, str] = {
 }
 
 
-class MissingExtra(ImportError):
+class MissingExtra(PlumeswarmError, ImportError):
     """An optional dependency is not installed; the message names the extra."""
 
 

@@ -10,6 +10,8 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from swarmbus.errors import PlumeswarmError
+
 ROOT = "plumeswarm"
 # Outside every world: the liveliness query by which a new peer flushes its new links
 # (swarmbus.session.join_peers; no token lives there), and a router's admin-space entry.
@@ -18,7 +20,7 @@ ROUTER_ADMIN = "@/*/router"
 _NAME_RE = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}$")
 
 
-class KeyNameError(ValueError):
+class KeyNameError(PlumeswarmError, ValueError):
     """A world, vehicle or node name that cannot be part of a key expression."""
 
 

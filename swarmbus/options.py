@@ -29,6 +29,8 @@ from typing import TYPE_CHECKING, Any, Self, TypeVar
 import msgspec
 from msgspec import inspect as mi
 
+from swarmbus.errors import PlumeswarmError
+
 if TYPE_CHECKING:  # the node runtime opens Zenoh; a role's options need not
     from swarmbus.node import NodeContext
     from swarmbus.scenario import Scenario
@@ -39,7 +41,7 @@ _TRUE = ("true", "on", "yes", "1")
 _FALSE = ("false", "off", "no", "0")
 
 
-class OptionError(ValueError):
+class OptionError(PlumeswarmError, ValueError):
     """A role option that is malformed, out of range or unknown (the message names it)."""
 
 

@@ -14,6 +14,7 @@ from typing import Any, Generic, TypeVar
 import zenoh
 
 from swarmbus.codec import MessageError, decode, encode
+from swarmbus.errors import PlumeswarmError
 from swarmbus.messages import CommandReply, ErrorReply, RejectCode
 
 log = logging.getLogger(__name__)
@@ -26,7 +27,7 @@ MAX_REASON_CHARS = 1000  # ErrorReply.reason's bound
 FINALISE_MARGIN_S = 5.0
 
 
-class RequestError(Exception):
+class RequestError(PlumeswarmError):
     """A request that got no usable reply; ``key`` is where it was sent."""
 
     def __init__(self, key: str, message: str) -> None:

@@ -21,6 +21,7 @@ from typing import Annotated, Any, Literal
 import msgspec
 import zenoh
 
+from swarmbus.errors import PlumeswarmError
 from swarmbus.keys import JOIN_FLUSH, ROUTER_ADMIN, Keys
 
 log = logging.getLogger(__name__)
@@ -43,7 +44,7 @@ CONNECT_RETRY = {"period_init_ms": 100, "period_max_ms": 1000, "period_increase_
 Endpoint = Annotated[str, msgspec.Meta(pattern=r"^(tcp|udp|tls|quic|unixsock-stream)/.+$")]
 
 
-class NetworkConfigError(ValueError):
+class NetworkConfigError(PlumeswarmError, ValueError):
     """The network configuration cannot be used (e.g. a TLS file is missing): one line why."""
 
 

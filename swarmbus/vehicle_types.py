@@ -14,6 +14,8 @@ from typing import Annotated, Literal
 
 import msgspec
 
+from swarmbus.errors import PlumeswarmError
+
 PositiveF = Annotated[float, msgspec.Meta(gt=0.0, le=1e6)]
 FiniteF = Annotated[float, msgspec.Meta(ge=-1e6, le=1e6)]
 NonNegF = Annotated[float, msgspec.Meta(ge=0.0, le=1e6)]
@@ -67,7 +69,7 @@ class VehicleType(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
         return len(self.rotors) * self.thrust_coeff_n_per_rad2_s2 * self.max_rotor_speed_rad_s**2
 
 
-class VehicleTypeError(ValueError):
+class VehicleTypeError(PlumeswarmError, ValueError):
     pass
 
 

@@ -53,6 +53,7 @@ from agents.behaviors.infotaxis_core import (
     isotropic_mean_hits,
     mu0_poisson,
 )
+from swarmbus.errors import PlumeswarmError
 
 #: An episode succeeds once the probability of not having found the source is below this.
 STOP_P = 1e-6
@@ -62,7 +63,7 @@ P_SOURCE_OUT = 1e-3
 STUCK_REPEATS = 8
 
 
-class PomdpError(ValueError):
+class PomdpError(PlumeswarmError, ValueError):
     """A bad option of ``plumeswarm bench pomdp``."""
 
 

@@ -28,13 +28,14 @@ from pathlib import Path
 from typing import Any
 
 from plumeswarm.bench.scale import ScaleError, ScaleOptions, run_case
+from swarmbus.errors import PlumeswarmError
 from swarmbus.scenario import load_scenario, resolve_scenario_path
 
 HERE = Path(__file__).resolve().parent
 PYFLYT = "pyflyt==0.29.0"
 
 
-class BenchError(RuntimeError):
+class BenchError(PlumeswarmError, RuntimeError):
     pass
 
 

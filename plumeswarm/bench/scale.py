@@ -33,6 +33,7 @@ from deploy.scaling import (
 from deploy.up import stop_on_signals
 from plumeswarm.experiments.driver import BusDriver, Driver, DriverError
 from swarmbus.codec import MessageError, decode
+from swarmbus.errors import PlumeswarmError
 from swarmbus.keys import KeyNameError, Keys
 from swarmbus.messages import (
     Arm,
@@ -55,7 +56,7 @@ AIRBORNE_M = 1.0
 COMMAND_TIMEOUT_S = 5.0  # one command's answer
 
 
-class ScaleError(RuntimeError):
+class ScaleError(PlumeswarmError, RuntimeError):
     pass
 
 

@@ -22,6 +22,7 @@ from plumeswarm.cli.common import (
     scenario_from,
     vehicles_per_process_option,
 )
+from swarmbus.errors import PlumeswarmError
 from swarmbus.extras import missing_extra_message
 from swarmbus.scenario import Scenario
 from swarmbus.session import NetworkConfig
@@ -497,10 +498,9 @@ def export() -> None:
 )
 def export_foxglove(src: str, dst: Path, layout_file: Path | None) -> None:
     """Write OUT: recording IN with its Foxglove channels (3D scene, map, plots) made anew."""
-    from recorder.foxglove.export import ExportError
     from recorder.foxglove.export import export_foxglove as run_export
     from recorder.foxglove.layout import layout_json
-    from recorder.reader import RecordingError
+    from recorder.reader import ExportError, RecordingError
 
     try:
         done = run_export(src, dst, lambda n: click.echo(f"  {n} messages", err=True))
@@ -524,9 +524,8 @@ def export_foxglove(src: str, dst: Path, layout_file: Path | None) -> None:
 def export_ros2(src: str, dst: Path) -> None:
     """Write OUT_DIR: recording IN as a rosbag2 (MCAP storage) with the ROS 2 bridge's topics,
     stamped in sim time (docs/ros2.md)."""
-    from deploy.ros2_export import ExportError
     from deploy.ros2_export import export_ros2 as run_export
-    from recorder.reader import RecordingError
+    from recorder.reader import ExportError, RecordingError
 
     try:
         done = run_export(src, dst)
@@ -555,6 +554,8 @@ _register_groups()
 def main() -> None:
     try:
         cli(prog_name="plumeswarm")
+    except PlumeswarmError as exc:  # any error of ours a command let through: its one line
+        fail(" ".join(str(exc).split()) or type(exc).__name__)
     except ModuleNotFoundError as exc:  # an optional extra's module: one line naming the extra
         message = missing_extra_message(exc.name or "")
         if message is None:

@@ -36,6 +36,7 @@ from deploy.launcher import Launcher, LaunchError, LaunchOptions
 from deploy.scaling import local_stack_scenario
 from plumeswarm.experiments.demo import DemoError, start_missions
 from plumeswarm.experiments.launch import NODE_COMMAND
+from swarmbus.errors import PlumeswarmError
 from swarmbus.keys import Keys
 from swarmbus.scenario import Scenario
 from swarmbus.views import state_key_decoder
@@ -47,7 +48,7 @@ STEP_S = 0.1  # sim seconds per step between fault checks
 BACK_TIMEOUT_S = 120.0  # wall: a killed process must be back within this
 
 
-class ChaosError(RuntimeError):
+class ChaosError(PlumeswarmError, RuntimeError):
     """The chaos run could not be carried out: one line why."""
 
 

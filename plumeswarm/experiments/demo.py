@@ -37,6 +37,7 @@ from deploy.launcher import LaunchError, missing_roles
 from deploy.scaling import local_stack_scenario, scale_scenario, write_scenario
 from plumeswarm.experiments.driver import BusDriver, DriverError
 from swarmbus.codec import encode
+from swarmbus.errors import PlumeswarmError
 from swarmbus.keys import Keys
 from swarmbus.messages import (
     Arm,
@@ -62,7 +63,7 @@ AIRBORNE_M = 1.0
 ModelFn = Callable[[npt.NDArray[np.float64], Sequence[float]], npt.NDArray[np.float64]]
 
 
-class DemoError(RuntimeError):
+class DemoError(PlumeswarmError, RuntimeError):
     pass
 
 

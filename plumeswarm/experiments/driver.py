@@ -37,6 +37,7 @@ from deploy.scaling import local_stack_scenario
 from plumeswarm.experiments.fused import FusedRunner, StatesObserver
 from plumeswarm.experiments.launch import NODE_COMMAND
 from swarmbus.codec import MessageError, decode
+from swarmbus.errors import PlumeswarmError
 from swarmbus.keys import Keys
 from swarmbus.messages import (
     Command,
@@ -57,7 +58,7 @@ ATTACH_TICK_S = 2.0  # a running world ticks within this; a paused stepped one p
 BUS_ROLES = ("router", "plume", "physics", "autopilot")
 
 
-class DriverError(RuntimeError):
+class DriverError(PlumeswarmError, RuntimeError):
     pass
 
 

@@ -34,6 +34,7 @@ from typing import Any
 import msgspec
 
 from swarmbus.codec import split_validation_error
+from swarmbus.errors import PlumeswarmError
 from swarmbus.scenario import (
     GSL_ENVIRONMENTS_DIR,
     SENSOR_PRESETS,
@@ -50,7 +51,7 @@ ENVIRONMENTS_DIR = GSL_ENVIRONMENTS_DIR
 TUNED_MODULE = "plumeswarm.gsl.tuned"
 
 
-class GslError(ValueError):
+class GslError(PlumeswarmError, ValueError):
     """A bad option: one line naming it and the bad value."""
 
 

@@ -19,16 +19,12 @@ from recorder.flight_log import scenario_of
 from recorder.foxglove.scene import (
     FoxgloveScene,
 )
-from recorder.reader import Recording, RecordingError
+from recorder.reader import ExportError, Recording, RecordingError
 from recorder.sink import McapSink
 
 log = logging.getLogger(__name__)
 
 Progress = Callable[[int], None]
-
-
-class ExportError(RuntimeError):
-    """The export could not be made: one line saying why."""
 
 
 @dataclass(frozen=True)

@@ -33,12 +33,13 @@ from recorder.foxglove.channels import (
     encode,
     location_topic,
 )
-from recorder.foxglove.export import ExportError, export_foxglove
+from recorder.foxglove.export import export_foxglove
 from recorder.foxglove.layout import layout_json
 from recorder.foxglove.live import LiveChannels, convert
 from recorder.foxglove.scene import (
     FoxgloveScene,
 )
+from recorder.reader import ExportError
 from recorder.sink import McapSink
 from swarmbus import codec
 from swarmbus.keys import Keys
