@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from plume_atmosphere.dispersion import DispersionCurves, dispersion_curves
-from plume_atmosphere.plume_formula import gaussian_plume_into
+from plume_atmosphere.plume_formula import downwind_unit, gaussian_plume_into
 from plume_service.field import CHUNK_POINTS, ConcentrationField, FloatArray
 
 _SCRATCH = threading.local()
@@ -97,10 +97,9 @@ class GaussianPlume(ConcentrationField):
                     f"got {mixing_height!r}"
                 )
             self.mixing_height_m = lid
-        # Unit vector the wind blows toward, in ENU: bearing (from + 180°) → (sin, cos).
-        toward = math.radians(self.wind_from_deg + 180.0)
         # Snap the 1e-16 residues of sin/cos at multiples of 90° so cardinal winds are exact.
-        self.downwind_unit = (_snap(math.sin(toward)), _snap(math.cos(toward)))
+        toward_e, toward_n = downwind_unit(self.wind_from_deg)
+        self.downwind_unit = (_snap(toward_e), _snap(toward_n))
         self.preset_name: str | None = None
 
     @classmethod
