@@ -192,7 +192,7 @@ def facts(**kw: object) -> Facts:
         home_enu=(0.0, 0.0, 0.0),
         position_enu=(5.0, 6.0, 0.0),
         landed=True,
-        takeoff_alt_m=10.0,
+        takeoff_altitude_m=10.0,
         mission_seqs=[0, 2, 3],
     )
     base.update(kw)
