@@ -67,7 +67,7 @@ _PARAMS: dict[str, str] = {
     "COM_OBL_ACT": "offboard_loss_action",
     "COM_OF_LOSS_T": "offboard_timeout_s",
     "RTL_RETURN_ALT": "rtl_altitude_m",
-    "GF_MAX_VER_DIST": "geofence_max_alt_m",
+    "GF_MAX_VER_DIST": "geofence_max_altitude_m",
     "GF_MAX_HOR_DIST": "geofence_max_distance_m",
     "MIS_TAKEOFF_ALT": "takeoff_altitude_m",
 }

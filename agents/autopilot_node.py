@@ -22,10 +22,16 @@ import zenoh
 from agents.anemometer import Anemometer
 from agents.behavior import BehaviorError
 from agents.build import AutopilotOptions, build_flight, vehicle_index
+from agents.checkpoint import (
+    CheckpointError,
+    PendingCheckpoint,
+    ProcessCheckpoint,
+    capture,
+    restore,
+)
 from agents.flight import take_readings
 from agents.node_events import Idle, Inbox, PendingSensor, Tick, TickArrived
 from agents.resume import StateKeeper
-from agents.snapshot import PendingSnapshot, ProcessSnapshot, SnapshotError, capture, restore
 from plume_atmosphere.wind import WindModel, wind_from_scenario
 from swarmbus.catchup import CatchUpPublisher, RouterOutage, watch_router
 from swarmbus.codec import MessageError, decode, encode
@@ -174,12 +180,12 @@ class AutopilotNode:
         self._declared: list[Any] = []  # subscribers and queryables, undeclared on close
         self._tokens: list[zenoh.LivelinessToken] = []
         self.router_outage = RouterOutage()  # readings are put again for subscribers back after it
-        # Snapshots (agents.resume): the keeper, and the tick part of the latest snapshot.
+        # Checkpoints (agents.resume): the keeper, and the tick part of the latest checkpoint.
         self.keeper: StateKeeper | None = None
         if options.checkpoint:
             period = ctx.scenario.time.checkpoint_period_s * ctx.scenario.time.control_hz
             self.keeper = StateKeeper(Path(options.checkpoint), round(period))
-        self._snap_pending: PendingSnapshot | None = None
+        self._snap_pending: PendingCheckpoint | None = None
         self._snap_tick = -1  # the tick of the state (last_tick runs ahead while resuming)
         self.node_name = ctx.name
         # Realtime: the vehicles that landed for want of ticks (docs/agents.md)
@@ -190,7 +196,7 @@ class AutopilotNode:
     def declare(self, node_name: str) -> None:
         """Subscriber and queryables first, then the participants' tokens."""
         if self.keeper is not None:
-            self.keeper.open(self._snapshot())
+            self.keeper.open(self._checkpoint())
         self._declared.append(watch_router(self.session, self.keys, self.router_outage))
         self._declared.append(
             self.session.declare_subscriber(self.keys.tick(), self._on_tick_sample)
@@ -364,7 +370,7 @@ class AutopilotNode:
             self.keeper.before_tick(tick.tick)
 
     def _answer(self, tick: Tick, commands: list[ActuatorCommand], sensing: bool) -> None:
-        """Snapshot, then the batch of commands, then the statuses."""
+        """Checkpoint, then the batch of commands, then the statuses."""
         if commands:
             self.last_batch = encode(ActuatorBatch(tick=tick.tick, commands=commands))
         self._snap_tick = tick.tick
@@ -376,8 +382,8 @@ class AutopilotNode:
         for served in self.served.values():
             served.publish_status(force=False, period_s=self.status_period_s)
 
-    # ------------------------------------------------------------------ snapshots
-    def _pending_after(self, tick: Tick, sensing: bool) -> PendingSnapshot | None:
+    # ------------------------------------------------------------------ checkpoints
+    def _pending_after(self, tick: Tick, sensing: bool) -> PendingCheckpoint | None:
         """The sensor tick awaited once ``tick`` is handled (see on_tick's end)."""
         p = self.pending
         if sensing:
@@ -391,17 +397,17 @@ class AutopilotNode:
             heads, sim_time, tick_no, by_physics = p.states, p.sim_time_s, p.tick, p.by_physics
         else:
             return None
-        return PendingSnapshot(
+        return PendingCheckpoint(
             tick=tick_no,
             sim_time_s=sim_time,
             heads=[(h.vehicle_id, h.position_enu_m) for h in heads],
             by_physics=by_physics,
         )
 
-    def _snapshot(self) -> bytes:
+    def _checkpoint(self) -> bytes:
         """The process's state now."""
         served = list(self.served.values())
-        snap = ProcessSnapshot(
+        snap = ProcessCheckpoint(
             node=self.node_name,
             tick=self._snap_tick,
             vehicles=[capture(s.autopilot, s.sensor, s.flight.behavior_rng) for s in served],
@@ -417,16 +423,16 @@ class AutopilotNode:
         if keeper is None:
             return
         try:
-            keeper.save(self._snapshot())
-        except (SnapshotError, OSError) as exc:
-            log.error("snapshots off: %s", exc)
+            keeper.save(self._checkpoint())
+        except (CheckpointError, OSError) as exc:
+            log.error("checkpoints off: %s", exc)
             self.keeper = None
-        except Exception:  # a snapshot must never cost the vehicle its ticks
-            log.exception("snapshots off: a snapshot failed")
+        except Exception:  # a checkpoint must never cost the vehicle its ticks
+            log.exception("checkpoints off: a checkpoint failed")
             self.keeper = None
 
     def _resume(self, tick: Tick) -> None:
-        """Restore a snapshot when this tick calls for one (agents.resume)."""
+        """Restore a checkpoint when this tick calls for one (agents.resume)."""
         keeper = self.keeper
         assert keeper is not None
         if self.last_tick < 0:
@@ -448,10 +454,10 @@ class AutopilotNode:
             how,
         )
 
-    def _restore(self, snap: ProcessSnapshot) -> None:
+    def _restore(self, snap: ProcessCheckpoint) -> None:
         served = list(self.served.values())
         if [v.vehicle_id for v in snap.vehicles] != list(self.served):
-            log.error("snapshot of %s, not of this process's vehicles: not restored", snap.node)
+            log.error("checkpoint of %s, not of this process's vehicles: not restored", snap.node)
             return
         for s, v, when in zip(served, snap.vehicles, snap.status_times_s, strict=True):
             restore(s.autopilot, s.sensor, v, s.flight.behavior_rng)

@@ -1,11 +1,11 @@
-"""The state codec of behaviour plug-ins: what a snapshot saves of a behaviour, bit for bit.
+"""The state codec of behaviour plug-ins: what a checkpoint saves of a behaviour, bit for bit.
 
 A behaviour (and each helper it keeps, such as
 :class:`agents.behaviors.steering.CrosswindSweep`) derives from :class:`SavesState` and lists
-its state attributes in ``state_attributes``; its ``snapshot()`` / ``restore(data)`` save and
+its state attributes in ``state_attributes``; its ``checkpoint()`` / ``restore(data)`` save and
 put back exactly those (numpy arrays and generators bit for bit), never its configuration or
 the callables it was built with (a wind reader), so a restarted autopilot's behaviour flies on
-with the same bits. :mod:`agents.snapshot` stores the data with the rest of the autopilot.
+with the same bits. :mod:`agents.checkpoint` stores the data with the rest of the autopilot.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from agents.behavior import SourceEstimate
 
 
 class SavesState:
-    """``snapshot()`` / ``restore(data)`` over the attributes named in ``state_attributes``.
+    """``checkpoint()`` / ``restore(data)`` over the attributes named in ``state_attributes``.
 
     The data is plain msgpack-encodable values; tuples, deques, numpy arrays (dtype, shape
     and bytes), generators (their ``bit_generator.state``), :class:`SourceEstimate` and
@@ -32,13 +32,13 @@ class SavesState:
 
     state_attributes: ClassVar[tuple[str, ...]] = ()
 
-    def snapshot(self) -> dict[str, Any]:
+    def checkpoint(self) -> dict[str, Any]:
         return {name: encode_state(getattr(self, name)) for name in self.state_attributes}
 
     def restore(self, data: dict[str, Any]) -> None:
         for name in self.state_attributes:
             if name not in data:
-                raise ValueError(f"{type(self).__name__} snapshot: no {name!r} in it")
+                raise ValueError(f"{type(self).__name__} checkpoint: no {name!r} in it")
             setattr(self, name, decode_state(data[name], getattr(self, name)))
 
 
@@ -55,7 +55,7 @@ def _tagged(tag: str, value: Any) -> dict[str, Any]:
 _ENCODERS: tuple[tuple[type | tuple[type, ...], Callable[[Any], Any]], ...] = (
     ((bool, str, float, type(None)), lambda v: v),
     (int, _encode_int),
-    (SavesState, lambda v: _tagged("state", v.snapshot())),
+    (SavesState, lambda v: _tagged("state", v.checkpoint())),
     (np.ndarray, lambda v: _tagged("ndarray", [v.dtype.str, list(v.shape), v.tobytes()])),
     (np.random.Generator, lambda v: _tagged("generator", encode_state(v.bit_generator.state))),
     (SourceEstimate, lambda v: _tagged("estimate", encode_state(dataclasses.asdict(v)))),
@@ -113,5 +113,5 @@ def decode_state(data: Any, current: Any = None) -> Any:
     tag, v = data["$"], data["v"]
     decoder = _DECODERS.get(tag)
     if decoder is None:
-        raise ValueError(f"behaviour snapshot: unknown value kind {tag!r}")
+        raise ValueError(f"behaviour checkpoint: unknown value kind {tag!r}")
     return decoder(v, current)

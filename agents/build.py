@@ -34,7 +34,7 @@ class AutopilotOptions(RoleOptions, frozen=True, kw_only=True):
     velocity_noise_m_s: NonNegative = 0.0
     """Standard deviation of the velocity estimate's noise (0: the physics' truth)."""
     checkpoint: str = ""
-    """File of the process's snapshots (:mod:`agents.resume`): a restarted process, or a
+    """File of the process's checkpoints (:mod:`agents.resume`): a restarted process, or a
     physics resumed from its checkpoint, carries on with the same bits. Empty: none."""
 
 

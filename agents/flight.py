@@ -34,7 +34,7 @@ class Located(Protocol):
 
 class Flight:
     """One vehicle's autopilot and sensor, and the readings its next step will see
-    (``behavior_rng``: the generator its behaviour draws from, kept for snapshots)."""
+    (``behavior_rng``: the generator its behaviour draws from, kept for checkpoints)."""
 
     def __init__(
         self,

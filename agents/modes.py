@@ -99,7 +99,7 @@ class FlightModes:
         self._offboard_tick_s = -math.inf
         self._item_seen = -1
         self._land_descending = False
-        self._climb_alt_m: float | None = None  # a mission started on the ground climbs first
+        self._climb_altitude_m: float | None = None  # a mission started on the ground climbs first
         self._guidance: dict[FlightMode, Callable[[Estimate, float], Target | None]] = {
             M.DISARMED: lambda est, now: None,
             M.ARMED: lambda est, now: None,
@@ -130,7 +130,7 @@ class FlightModes:
         self.mode = mode
         self._touchdown_since = None
         if mode != M.MISSION:
-            self._climb_alt_m = None
+            self._climb_altitude_m = None
         if mode in (M.HOLD, M.TAKEOFF, M.OFFBOARD):
             self._yaw = yaw_of(est.attitude_xyzw)
 
@@ -143,8 +143,8 @@ class FlightModes:
         """Which geofence limit a point breaks, named by its PX4 parameter (0 = off, as PX4)."""
         fs = self.failsafe
         hx, hy, hz = self.home
-        if fs.geofence_max_alt_m > 0.0 and z - hz > fs.geofence_max_alt_m:
-            return f"GF_MAX_VER_DIST {fs.geofence_max_alt_m:g} m: {z - hz:.1f} m above home"
+        if fs.geofence_max_altitude_m > 0.0 and z - hz > fs.geofence_max_altitude_m:
+            return f"GF_MAX_VER_DIST {fs.geofence_max_altitude_m:g} m: {z - hz:.1f} m above home"
         dist = math.hypot(x - hx, y - hy)
         if fs.geofence_max_distance_m > 0.0 and dist > fs.geofence_max_distance_m:
             return f"GF_MAX_HOR_DIST {fs.geofence_max_distance_m:g} m: {dist:.1f} m from home"
@@ -299,22 +299,22 @@ class FlightModes:
         index = start_index if start_index is not None else max(mission.index, 0)
         if start_index is None and mission.finished:
             return denied("mission finished: start it again with a start index")
-        climb_alt_m = None
+        climb_altitude_m = None
         first = mission.resolved[index]
         if self.mode == M.ARMED and first.command != MissionCommand.TAKEOFF:
             # PX4: a mission started on the ground without a takeoff item climbs vertically to
             # the first item's altitude, at least MIS_TAKEOFF_ALT above home, then flies it.
-            climb_alt_m = max(first.z, self.home[2] + self.failsafe.takeoff_altitude_m)
+            climb_altitude_m = max(first.z, self.home[2] + self.failsafe.takeoff_altitude_m)
             x, y, _ = est.position
-            fence = self.fence_violation(x, y, climb_alt_m)
+            fence = self.fence_violation(x, y, climb_altitude_m)
             if fence is not None:
                 return invalid(f"mission takeoff: {fence}")
         if start_index is not None:
             mission.start(start_index)
         self._item_seen = -1
         self._set_mode(to, est)
-        if climb_alt_m is not None:
-            self._climb_alt_m = climb_alt_m
+        if climb_altitude_m is not None:
+            self._climb_altitude_m = climb_altitude_m
             self._target = est.position
         return None
 
@@ -461,11 +461,11 @@ class FlightModes:
             self._hold_here(est)
             self._set_mode(M.HOLD, est)
             return self._position_target()
-        if self._climb_alt_m is not None:
-            if est.position[2] < self._climb_alt_m - TAKEOFF_DONE_M:
+        if self._climb_altitude_m is not None:
+            if est.position[2] < self._climb_altitude_m - TAKEOFF_DONE_M:
                 tx, ty, _ = self._target
-                return Target((tx, ty), self._climb_alt_m, self._yaw)
-            self._climb_alt_m = None
+                return Target((tx, ty), self._climb_altitude_m, self._yaw)
+            self._climb_altitude_m = None
         if mission.index != self._item_seen:
             self._start_item(item, est)
         if item.command == MissionCommand.RTL:

@@ -1,4 +1,4 @@
-"""Where an autopilot process keeps its snapshots (``--set checkpoint=PATH``) and which one a tick
+"""Where an autopilot process keeps its checkpoints (``--set checkpoint=PATH``) and which one a tick
 resumes from (:class:`StateKeeper`). See docs/agents.md ("Restarts: the autopilot resumes where
 it was").
 """
@@ -8,15 +8,15 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-from agents.snapshot import ProcessSnapshot, decode_process, missing_lists
-from agents.snapshot_store import BlobLog, SnapshotError, SnapshotSlots
+from agents.checkpoint import ProcessCheckpoint, decode_process, missing_lists
+from agents.checkpoint_store import BlobLog, CheckpointError, CheckpointSlots
 
 log = logging.getLogger(__name__)
 
 
-def snapshot_paths(path: Path) -> list[Path]:
+def checkpoint_paths(path: Path) -> list[Path]:
     """Every file a keeper at ``path`` writes (the launcher removes them for a fresh run)."""
-    return [*SnapshotSlots(path).paths(), *SnapshotSlots(_ckpt(path)).paths(), _blobs(path)]
+    return [*CheckpointSlots(path).paths(), *CheckpointSlots(_ckpt(path)).paths(), _blobs(path)]
 
 
 def _ckpt(path: Path) -> Path:
@@ -28,33 +28,33 @@ def _blobs(path: Path) -> Path:
 
 
 class StateKeeper:
-    """The snapshots of one autopilot process (see the module doc)."""
+    """The checkpoints of one autopilot process (see the module doc)."""
 
     def __init__(self, path: Path, period_ticks: int) -> None:
         self.path = path
         self.period_ticks = period_ticks
-        self._slots = SnapshotSlots(path)
-        self._ckpt = SnapshotSlots(_ckpt(path))
+        self._slots = CheckpointSlots(path)
+        self._ckpt = CheckpointSlots(_ckpt(path))
         self._blobs = BlobLog(_blobs(path))
-        self._found: list[ProcessSnapshot] = []  # what a killed predecessor left
-        self._last = b""  # the latest snapshot (not necessarily written yet)
-        self._at_checkpoint: dict[int, bytes] = {}  # tick → snapshot, the latest two
+        self._found: list[ProcessCheckpoint] = []  # what a killed predecessor left
+        self._last = b""  # the latest checkpoint (not necessarily written yet)
+        self._at_checkpoint: dict[int, bytes] = {}  # tick → checkpoint, the latest two
 
     def open(self, initial: bytes) -> None:
         """Read what a predecessor left, then open the files; ``initial`` is the fresh
-        process's own snapshot (tick -1: the state before tick 0)."""
-        self._blobs.open()  # the lists the snapshots found refer to
+        process's own checkpoint (tick -1: the state before tick 0)."""
+        self._blobs.open()  # the lists the checkpoints found refer to
         for slots in (self._slots, self._ckpt):
             for _, payload in slots.read_all():
                 try:
                     self._found.append(decode_process(payload))
-                except SnapshotError as exc:
+                except CheckpointError as exc:
                     log.warning("ignoring %s: %s", slots.path, exc)
             slots.open()
         self._last = initial
         if self._found:
             ticks = sorted({s.tick for s in self._found})
-            log.info("snapshots of ticks %s found in %s*", ticks, self.path)
+            log.info("checkpoints of ticks %s found in %s*", ticks, self.path)
 
     def close(self) -> None:
         self._slots.close()
@@ -76,8 +76,8 @@ class StateKeeper:
             for old in sorted(self._at_checkpoint)[:-2]:
                 del self._at_checkpoint[old]
 
-    def for_restart(self, tick: int) -> ProcessSnapshot | None:
-        """A restarted process's first tick: the predecessor's snapshot of ``tick - 1`` (or of
+    def for_restart(self, tick: int) -> ProcessCheckpoint | None:
+        """A restarted process's first tick: the predecessor's checkpoint of ``tick - 1`` (or of
         ``tick``, already answered), or None."""
         found = self._found
         for want in (tick - 1, tick):
@@ -86,13 +86,13 @@ class StateKeeper:
                 return _complete(match)
         if found:
             log.warning(
-                "no snapshot for tick %d (found ticks %s): not restored",
+                "no checkpoint for tick %d (found ticks %s): not restored",
                 tick,
                 sorted({s.tick for s in found}),
             )
         return None
 
-    def for_rewind(self, tick: int) -> ProcessSnapshot | None:
+    def for_rewind(self, tick: int) -> ProcessCheckpoint | None:
         """The tick went back to ``tick`` (a physics checkpoint): the state before it."""
         payload = self._at_checkpoint.get(tick)
         if payload is not None:
@@ -101,12 +101,12 @@ class StateKeeper:
         return None if match is None else _complete(match)
 
 
-def _complete(snap: ProcessSnapshot) -> ProcessSnapshot | None:
+def _complete(snap: ProcessCheckpoint) -> ProcessCheckpoint | None:
     """``snap``, or None when a list it refers to is missing (it cannot be restored)."""
     missing = missing_lists(snap)
     if missing:
         log.warning(
-            "snapshot of tick %d refers to %d missing mission/fence lists (%s): not restored",
+            "checkpoint of tick %d refers to %d missing mission/fence lists (%s): not restored",
             snap.tick,
             len(missing),
             missing[0],

@@ -6,6 +6,7 @@ Swarm`` gives them (``Swarm.command(id)``, ``Swarm.plume``); see docs/agents.md 
 from __future__ import annotations
 
 import time
+import warnings
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any, TypeVar
 
@@ -129,8 +130,10 @@ class VehicleCommander:
     def disarm(self, force: bool = False) -> None:
         self.send(Disarm(force=force))
 
-    def takeoff(self, alt_m: float) -> None:
-        self.send(Takeoff(altitude_m=alt_m))
+    def takeoff(self, altitude_m: float | None = None, *, alt_m: float | None = None) -> None:
+        """Take off to ``altitude_m`` above home; ``alt_m=`` is its old name (deprecated: a
+        DeprecationWarning, then the same command)."""
+        self.send(Takeoff(altitude_m=takeoff_altitude(altitude_m, alt_m)))
 
     def land(self) -> None:
         self.send(Land())
@@ -232,3 +235,19 @@ class PlumeClient:
             ) from None
         except BadReply as exc:
             raise PlumeError(str(exc)) from None
+
+
+def takeoff_altitude(altitude_m: float | None, alt_m: float | None) -> float:
+    """The take-off altitude of :meth:`VehicleCommander.takeoff` from its name or its old one."""
+    if alt_m is None:
+        if altitude_m is None:
+            raise TypeError("takeoff() needs altitude_m, the height above home (m)")
+        return altitude_m
+    if altitude_m is not None:
+        raise TypeError("takeoff(): give altitude_m only (alt_m is its old name)")
+    warnings.warn(
+        "takeoff(alt_m=...) is deprecated: use takeoff(altitude_m=...)",
+        DeprecationWarning,
+        stacklevel=3,
+    )
+    return alt_m

@@ -25,7 +25,7 @@ from pathlib import Path
 import msgspec
 import zenoh
 
-from agents.resume import snapshot_paths
+from agents.resume import checkpoint_paths
 from deploy.busview import BusView, status_line
 from deploy.roles import ROLES
 from deploy.supervisor import (
@@ -218,7 +218,7 @@ def checkpoint_path(opts: LaunchOptions) -> Path:
 
 
 def autopilot_state_path(opts: LaunchOptions, node_name: str) -> Path:
-    """Where an autopilot process keeps its snapshots (``agents.resume``)."""
+    """Where an autopilot process keeps its checkpoints (``agents.resume``)."""
     return opts.run_dir / f"{node_name}.state"
 
 
@@ -286,7 +286,7 @@ class Launcher(Closeable):
             checkpoint.remove(checkpoint_path(self.opts))  # an earlier run's: start from spawn
         for spec in self.specs:
             if spec.role == "autopilot":  # likewise: autopilots start fresh
-                for path in snapshot_paths(autopilot_state_path(self.opts, spec.name)):
+                for path in checkpoint_paths(autopilot_state_path(self.opts, spec.name)):
                     path.unlink(missing_ok=True)
         timeout = self.scenario.time.startup_timeout_s
         first = [s.name for s in self.specs if s.role == "router"]

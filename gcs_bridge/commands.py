@@ -106,7 +106,7 @@ class Facts:
     home_enu: Vec3 | None
     position_enu: Vec3 | None
     landed: bool
-    takeoff_alt_m: float  # MIS_TAKEOFF_ALT
+    takeoff_altitude_m: float  # MIS_TAKEOFF_ALT
     mission_seqs: list[int]
     cruise_m_s: float = 0.0  # MPC_XY_CRUISE
 
@@ -148,7 +148,7 @@ def _takeoff(req: CommandRequest, facts: Facts) -> Translation:
         return refuse(TEMPORARILY_REJECTED, "no home position yet")
     z = req.z
     if math.isnan(z):  # "absent" (MAVSDK): MIS_TAKEOFF_ALT
-        altitude = facts.takeoff_alt_m
+        altitude = facts.takeoff_altitude_m
     elif not _finite(z):
         return refuse(DENIED, f"takeoff altitude {z} is not usable")
     elif req.frame in _RELATIVE:
@@ -231,7 +231,7 @@ def _reposition(req: CommandRequest, facts: Facts) -> Translation:
 def mode_command(mode: FlightMode, facts: Facts) -> Command:
     """The bus command that puts the vehicle in ``mode``."""
     if mode == FlightMode.TAKEOFF:
-        return Takeoff(altitude_m=facts.takeoff_alt_m)
+        return Takeoff(altitude_m=facts.takeoff_altitude_m)
     if mode == FlightMode.HOLD:
         return Hold()
     if mode == FlightMode.LAND:

@@ -70,7 +70,7 @@ def facts_of(v: Vehicle) -> Facts:
         home_enu=v.home_enu,
         position_enu=v.state.position_enu_m if v.state is not None else None,
         landed=v.status.landed if v.status is not None else True,
-        takeoff_alt_m=v.params.value("MIS_TAKEOFF_ALT"),
+        takeoff_altitude_m=v.params.value("MIS_TAKEOFF_ALT"),
         mission_seqs=v.seqs(),
         cruise_m_s=v.params.value("MPC_XY_CRUISE"),
     )

@@ -34,8 +34,8 @@ from gcs_bridge.handle_offboard import OffboardHandlers
 from gcs_bridge.handle_params import ParamHandlers
 from gcs_bridge.links import Link, LinkSet
 from gcs_bridge.options import GatewayOptions, signing_key
-from gcs_bridge.telemetry import wind_enu
 from gcs_bridge.vehicle import Vehicle
+from plume_atmosphere.wind import wind_vector_enu
 from swarmbus.closeable import Closeable
 from swarmbus.codec import MessageError, decode
 from swarmbus.keys import Keys
@@ -99,7 +99,7 @@ class Gateway(Closeable):
         keys: Keys,
     ) -> None:
         self.options = options
-        wind = wind_enu(scenario.wind.speed_m_s, scenario.wind.from_deg)
+        wind = wind_vector_enu(scenario.wind.speed_m_s, scenario.wind.from_deg)
         index_of = {v.id: i for i, v in enumerate(scenario.vehicles)}
         off_mavlink = set(scenario.not_on_mavlink(vehicle_ids))
         if off_mavlink:

@@ -100,7 +100,7 @@ SPECS: tuple[ParamSpec, ...] = (
         REAL32,
         0.0,
         10000.0,
-        lambda f, t: f.geofence_max_alt_m,
+        lambda f, t: f.geofence_max_altitude_m,
         "geofence: maximum altitude above home (m); 0: off",
     ),
     ParamSpec(

@@ -343,9 +343,3 @@ BUILDERS: dict[int, Callable[[View], Msg | None]] = {
     ID_BATTERY_STATUS: battery_status,
     ID_NAMED_VALUE_FLOAT: named_value_float,
 }
-
-
-def wind_enu(speed_m_s: float, from_deg: float) -> Vec3:
-    """The air's velocity (ENU) of a meteorological wind (FROM ``from_deg``, clockwise from N)."""
-    toward = math.radians(from_deg + 180.0)
-    return (speed_m_s * math.sin(toward), speed_m_s * math.cos(toward), 0.0)

@@ -4,7 +4,7 @@ Every consumer (the physics' vehicle drag, the plume's advection, each vehicle's
 builds the same :class:`WindModel` from the scenario with :func:`wind_from_scenario` and gets
 the same value at the same (position, sim time), whichever process asks and in whatever order:
 the random parts are drawn in fixed blocks of internal steps from generators seeded by the
-scenario seed and the block's index, and state is recomputed from the start or a kept snapshot
+scenario seed and the block's index, and state is recomputed from the start or a kept checkpoint
 when an earlier time is asked for (a physics restart).
 
 Models (``[wind] model``):
@@ -117,20 +117,20 @@ def step_index(t: float, step_s: float) -> tuple[int, float]:
     return k, max(scaled - k, 0.0)
 
 
-#: Snapshots of stepped state kept at every block for the newest RECENT_SNAPSHOTS blocks, older
+#: Checkpoints of stepped state kept at every block for the newest RECENT_CHECKPOINTS blocks, older
 #: ones only every THIN_EVERY-th block: memory grows slowly over long runs while going back a
 #: few seconds (a physics restart) stays cheap.
-RECENT_SNAPSHOTS = 32
+RECENT_CHECKPOINTS = 32
 THIN_EVERY = 16
 
 
-def thin_snapshots(snapshots: dict[int, Any], newest: int, block_steps: int) -> None:
-    """Drop the snapshots (keyed by step) that :data:`RECENT_SNAPSHOTS` and
-    :data:`THIN_EVERY` do not keep; ``newest`` is the newest snapshot's step."""
-    recent = newest - RECENT_SNAPSHOTS * block_steps
-    for k in [k for k in snapshots if k < recent]:
+def thin_checkpoints(checkpoints: dict[int, Any], newest: int, block_steps: int) -> None:
+    """Drop the checkpoints (keyed by step) that :data:`RECENT_CHECKPOINTS` and
+    :data:`THIN_EVERY` do not keep; ``newest`` is the newest checkpoint's step."""
+    recent = newest - RECENT_CHECKPOINTS * block_steps
+    for k in [k for k in checkpoints if k < recent]:
         if (k // block_steps) % THIN_EVERY:
-            del snapshots[k]
+            del checkpoints[k]
 
 
 class WindModel(ABC):
@@ -312,8 +312,8 @@ class MeanderWind(WindModel):
         }
 
 
-#: Grid snapshots kept every this many internal steps (going back in time restarts there).
-FIELD_SNAPSHOT_STEPS = 64
+#: Grid checkpoints kept every this many internal steps (going back in time restarts there).
+FIELD_CHECKPOINT_STEPS = 64
 
 
 class GridWind(WindModel):
@@ -336,10 +336,10 @@ class GridWind(WindModel):
         if cfg.diffusivity_m2_s > 0.0:
             limit = min(limit, 0.2 * self.dx_m**2 / cfg.diffusivity_m2_s)
         self.substeps = max(1, math.ceil(self.step_s / limit))
-        self._snapshots: dict[int, FloatArray] = {}
+        self._checkpoints: dict[int, FloatArray] = {}
         self._k = 0
         self._grid = self._boundary_frame(0, np.zeros((2, cells + 1, cells + 1)), fill=True)
-        self._snapshots[0] = self._grid.copy()
+        self._checkpoints[0] = self._grid.copy()
         self._lock = threading.Lock()
 
     def _boundary_frame(self, k: int, grid: FloatArray, fill: bool = False) -> FloatArray:
@@ -385,15 +385,15 @@ class GridWind(WindModel):
             g[:, 1:-1, 1:-1] = inner + h * (-ux * ddx - uy * ddy + kappa * lap)
         self._k += 1
         self._boundary_frame(self._k, g)
-        if self._k % FIELD_SNAPSHOT_STEPS == 0:
-            self._snapshots[self._k] = g.copy()
-            thin_snapshots(self._snapshots, self._k, FIELD_SNAPSHOT_STEPS)
+        if self._k % FIELD_CHECKPOINT_STEPS == 0:
+            self._checkpoints[self._k] = g.copy()
+            thin_checkpoints(self._checkpoints, self._k, FIELD_CHECKPOINT_STEPS)
 
     def grid_at_step(self, k: int) -> FloatArray:
         """The perturbation grid (2, nx, ny) at internal step k (a view; do not modify)."""
         if k < self._k:
-            base = max(s for s in self._snapshots if s <= k)
-            self._grid = self._snapshots[base].copy()
+            base = max(s for s in self._checkpoints if s <= k)
+            self._grid = self._checkpoints[base].copy()
             self._k = base
         while self._k < k:
             self._advance()

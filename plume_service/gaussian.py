@@ -1,14 +1,9 @@
 """Steady-state Gaussian plume of one continuous point source (Beychok's complete equation).
 
-In the plume frame (x downwind of the source, y crosswind to the left, z height above ground)
-
-    C = Q/u · f/(σy√2π) · g/(σz√2π),   f = exp(−y²/2σy²),
-    g = exp(−(z−H)²/2σz²) + exp(−(z+H)²/2σz²)                      (ground reflection)
-
-(Beychok, M. R., *Fundamentals of Stack Gas Dispersion*, 4th ed., 2005, ch. 8). With a mixing
-height L the lid reflects too, and g becomes the sum over the images ±H + 2kL, k ∈ ℤ; it is
-evaluated as a truncated image sum while σz ≤ L and by its Poisson-summed (Fourier) form when
-σz > L, which tends to √(2π)·σz/L, i.e. C → Q/(√(2π)·σy·L·u), far downwind.
+The equation (ground reflection, and the images of a mixing lid) is written once, in
+:mod:`plume_atmosphere.plume_formula`; :class:`GaussianPlume` holds the plume's parameters,
+checks them, turns world points into the plume frame and hands them to that module's in-place
+kernel, chunk by chunk, in reused work arrays.
 
 Conventions and guards (docs/plume.md):
 
@@ -28,15 +23,8 @@ from typing import Any
 import numpy as np
 
 from plume_atmosphere.dispersion import DispersionCurves, dispersion_curves
+from plume_atmosphere.plume_formula import downwind_unit, gaussian_plume_into
 from plume_service.field import CHUNK_POINTS, ConcentrationField, FloatArray
-
-_SQRT_2PI = math.sqrt(2.0 * math.pi)
-_SQRT_HALF = math.sqrt(0.5)
-
-# Image sum while σz ≤ L: images farther than |z ± H| + 9σz contribute < exp(−40) relative.
-_IMAGE_SIGMAS = 9.0
-# Fourier form while σz > L: the n-th term carries exp(−π²n²σz²/2L²) ≤ exp(−4.93 n²).
-_FOURIER_TERMS = 4
 
 _SCRATCH = threading.local()
 
@@ -109,10 +97,9 @@ class GaussianPlume(ConcentrationField):
                     f"got {mixing_height!r}"
                 )
             self.mixing_height_m = lid
-        # Unit vector the wind blows toward, in ENU: bearing (from + 180°) → (sin, cos).
-        toward = math.radians(self.wind_from_deg + 180.0)
         # Snap the 1e-16 residues of sin/cos at multiples of 90° so cardinal winds are exact.
-        self.downwind_unit = (_snap(math.sin(toward)), _snap(math.cos(toward)))
+        toward_e, toward_n = downwind_unit(self.wind_from_deg)
+        self.downwind_unit = (_snap(toward_e), _snap(toward_n))
         self.preset_name: str | None = None
 
     @classmethod
@@ -161,8 +148,8 @@ class GaussianPlume(ConcentrationField):
             elif count <= n // 2:
                 # Mostly outside the plume: evaluate only the points inside it.
                 values = np.empty(count)
-                work = [np.empty(count) for _ in range(4)]
-                self._kernel(x[keep], y[keep], z[keep], values, *work)
+                work = (np.empty(count), np.empty(count), np.empty(count), np.empty(count))
+                self._kernel(x[keep], y[keep], z[keep], values, work)
                 out.fill(0.0)
                 out[keep] = values
             else:
@@ -170,7 +157,7 @@ class GaussianPlume(ConcentrationField):
                 drop = ~keep if count < n else None
                 if drop is not None:
                     np.copyto(x, 1.0, where=drop)
-                self._kernel(x, y, z, out, w0, w1, w2, w3)
+                self._kernel(x, y, z, out, (w0, w1, w2, w3))
                 if drop is not None:
                     np.copyto(out, 0.0, where=drop)
 
@@ -201,70 +188,21 @@ class GaussianPlume(ConcentrationField):
         y: FloatArray,
         z: FloatArray,
         out: FloatArray,
-        w0: FloatArray,
-        w1: FloatArray,
-        w2: FloatArray,
-        w3: FloatArray,
+        work: tuple[FloatArray, FloatArray, FloatArray, FloatArray],
     ) -> None:
-        """C at plume-frame points with x > 0, written into ``out``; y and w* are overwritten."""
-        sigma_y, sigma_z = self.dispersion.sigmas(x, out_y=w1, out_z=w2, ln_x=w0)
-        # r = 1/(σ√2), so that exp(−a²/2σ²) = exp(−(a·r)²): multiplications, not divisions.
-        r_y = np.divide(_SQRT_HALF, sigma_y, out=sigma_y)
-        r_z = np.divide(_SQRT_HALF, sigma_z, out=sigma_z)
-        ln_f = y
-        ln_f *= r_y
-        ln_f *= ln_f
-        np.negative(ln_f, out=ln_f)
-        if self.mixing_height_m is None:
-            below = np.subtract(z, self.release_height_m, out=w0)
-            image = np.add(z, self.release_height_m, out=w3)
-            value = _gauss_pair(below, image, r_z, ln_f)
-        else:
-            value = self._vertical_with_lid(z, r_z, ln_f, self.mixing_height_m)
-        value *= r_y
-        value *= r_z
-        # Q/(2π u σy σz) = Q/(π u) · r_y · r_z
-        np.multiply(value, self.release_rate_g_s / (math.pi * self.wind_speed_m_s), out=out)
-
-    def _vertical_with_lid(
-        self, z: FloatArray, r_z: FloatArray, ln_f: FloatArray, lid: float
-    ) -> FloatArray:
-        """f·g with ground and lid reflections; ``r_z`` = 1/(σz√2), ``ln_f`` = −y²/2σy²."""
-        value = np.empty_like(z)
-        narrow = r_z * lid >= _SQRT_HALF  # σz ≤ L
-        if narrow.any():
-            value[narrow] = self._image_sum(z[narrow], r_z[narrow], ln_f[narrow], lid)
-        wide = ~narrow
-        if wide.any():
-            value[wide] = self._fourier_sum(z[wide], r_z[wide], ln_f[wide], lid)
-        return value
-
-    def _image_sum(
-        self, z: FloatArray, r_z: FloatArray, ln_f: FloatArray, lid: float
-    ) -> FloatArray:
-        height = self.release_height_m
-        sigma_max = _SQRT_HALF / float(r_z.min())
-        reach = 2.0 * lid + _IMAGE_SIGMAS * sigma_max
-        images = math.ceil(reach / (2.0 * lid))
-        value = np.zeros_like(z)
-        for k in range(-images, images + 1):
-            shift = 2.0 * k * lid
-            value += _gauss_pair(z - height - shift, z + height - shift, r_z, ln_f)
-        return value
-
-    def _fourier_sum(
-        self, z: FloatArray, r_z: FloatArray, ln_f: FloatArray, lid: float
-    ) -> FloatArray:
-        # Poisson summation of the image sum: Σ_k exp(−(a − 2kL)²/2σ²)
-        #   = √(2π)σ/2L · [1 + 2 Σ_n exp(−π²n²σ²/2L²) cos(πna/L)], applied to a = z ∓ H.
-        height = self.release_height_m
-        ratio = _SQRT_HALF / (r_z * lid)  # σz / L
-        series = np.ones_like(z)
-        for n in range(1, _FOURIER_TERMS + 1):
-            weight = np.exp(-0.5 * (math.pi * n * ratio) ** 2)
-            phase = math.pi * n / lid
-            series += weight * 2.0 * np.cos(phase * z) * math.cos(phase * height)
-        return np.exp(ln_f) * _SQRT_2PI * ratio * series
+        """C at plume-frame points with x > 0 into ``out``; y and ``work`` are overwritten."""
+        gaussian_plume_into(
+            x,
+            y,
+            z,
+            out,
+            work,
+            self.release_rate_g_s,
+            self.wind_speed_m_s,
+            self.release_height_m,
+            self.dispersion,
+            self.mixing_height_m,
+        )
 
     def info(self) -> dict[str, Any]:
         return {
@@ -301,14 +239,3 @@ def _scratch(n: int) -> list[FloatArray]:
 
 def _snap(component: float) -> float:
     return 0.0 if abs(component) < 1e-12 else component
-
-
-def _gauss_pair(a: FloatArray, b: FloatArray, r: FloatArray, ln_f: FloatArray) -> FloatArray:
-    """exp(ln f − (a·r)²) + exp(ln f − (b·r)²), computed in place on a and b."""
-    for term in (a, b):
-        term *= r
-        term *= term
-        np.subtract(ln_f, term, out=term)
-        np.exp(term, out=term)
-    a += b
-    return a

@@ -2,8 +2,8 @@
 
 The state at internal step k is a deterministic function of the model's parameters, its seed
 and k: the random numbers of steps [b·B, (b+1)·B) come from one generator seeded with
-(seed, stream, b), and a snapshot of the state is kept at every block boundary, so asking for
-an earlier time (a physics restart) restores the snapshot at or before it and steps forward
+(seed, stream, b), and a checkpoint of the state is kept at every block boundary, so asking for
+an earlier time (a physics restart) restores the checkpoint at or before it and steps forward
 again: the same bits as the first time. A query at sim time t sees the state of step
 ⌊t / step_s⌋ (held between steps).
 """
@@ -16,13 +16,13 @@ from typing import Any, Generic, TypeVar
 
 import numpy as np
 
-from plume_atmosphere.wind import WindModel, step_index, thin_snapshots
+from plume_atmosphere.wind import WindModel, step_index, thin_checkpoints
 from plume_service.field import ConcentrationField
 
 State = TypeVar("State")
 
-#: Internal steps that share one seeded generator, and the spacing of kept snapshots (thinned
-#: by :func:`plume_atmosphere.wind.thin_snapshots`).
+#: Internal steps that share one seeded generator, and the spacing of kept checkpoints (thinned
+#: by :func:`plume_atmosphere.wind.thin_checkpoints`).
 BLOCK_STEPS = 64
 
 
@@ -51,7 +51,7 @@ class TimeSteppedField(ConcentrationField, Generic[State]):
         self._lock = threading.RLock()
         self._k = 0
         self._state = self.initial_state()
-        self._snapshots: dict[int, State] = {0: self.copy_state(self._state)}
+        self._checkpoints: dict[int, State] = {0: self.copy_state(self._state)}
         self._rng = self._block_rng(0)
 
     def _block_rng(self, block: int) -> np.random.Generator:
@@ -64,7 +64,7 @@ class TimeSteppedField(ConcentrationField, Generic[State]):
 
     @abstractmethod
     def copy_state(self, state: State) -> State:
-        """An independent copy (kept as a snapshot)."""
+        """An independent copy (kept as a checkpoint)."""
 
     @abstractmethod
     def advance(self, state: State, k: int, rng: np.random.Generator) -> State:
@@ -75,8 +75,8 @@ class TimeSteppedField(ConcentrationField, Generic[State]):
         k, _ = step_index(t, self.step_s)
         with self._lock:
             if k < self._k:
-                base = max(s for s in self._snapshots if s <= k)
-                self._state = self.copy_state(self._snapshots[base])
+                base = max(s for s in self._checkpoints if s <= k)
+                self._state = self.copy_state(self._checkpoints[base])
                 self._k = base
                 self._rng = self._block_rng(base // BLOCK_STEPS)
             while self._k < k:
@@ -84,9 +84,9 @@ class TimeSteppedField(ConcentrationField, Generic[State]):
                 self._k += 1
                 if self._k % BLOCK_STEPS == 0:
                     self._rng = self._block_rng(self._k // BLOCK_STEPS)
-                    if self._k not in self._snapshots:
-                        self._snapshots[self._k] = self.copy_state(self._state)
-                        thin_snapshots(self._snapshots, self._k, BLOCK_STEPS)
+                    if self._k not in self._checkpoints:
+                        self._checkpoints[self._k] = self.copy_state(self._state)
+                        thin_checkpoints(self._checkpoints, self._k, BLOCK_STEPS)
             return self._k, self._state
 
     def time_info(self) -> dict[str, Any]:

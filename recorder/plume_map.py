@@ -3,31 +3,29 @@
 The plume's parameters come from the ``plume/info`` reply the recorder asked for, else from the
 scenario stored in the recording; the field is the steady Gaussian plume of
 :mod:`plume_atmosphere.plume_formula` (ground reflection, and the images of a mixing lid when there
-is
-one), the equation the plume service serves. A time-dependent plume (filaments, puffs) has no
+is one), the equation the plume service serves. A time-dependent plume (filaments, puffs) has no
 steady map, and without parameters there is none either: the report then colours the readings.
 """
 
 from __future__ import annotations
 
 import logging
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from plume_atmosphere.dispersion import DispersionCurves, dispersion_curves
-from plume_atmosphere.plume_formula import gaussian_plume_g_m3, plume_frame
+from plume_atmosphere.plume_formula import (
+    gaussian_plume_g_m3,
+    gaussian_plume_images_g_m3,
+    plume_frame,
+)
 from recorder.flight_log import FlightLog, FloatArray
 
 log = logging.getLogger(__name__)
 
 FLOOR_G_M3 = 1e-3
 PIXELS = 220
-# Lid images farther than 9 σz from a point add less than exp(−40) of its value; a side has at
-# most 256 (σz ≫ L: class A 3 km downwind of a 40 m lid is then within 1e-6 of the full sum).
-_IMAGE_SIGMAS = 9.0
-_MAX_IMAGES = 256
 
 
 @dataclass(frozen=True)
@@ -66,18 +64,10 @@ class SteadyPlume:
     def _source(
         self, x: FloatArray, y: FloatArray, z: FloatArray, rate: float, height: float
     ) -> FloatArray:
-        lid = self.mixing_height_m
         args = (rate, self.wind_speed_m_s, height, self.curves)
-        if lid is None:
+        if self.mixing_height_m is None:
             return gaussian_plume_g_m3(x, y, z, *args)
-        # The lid reflects too: the images ±H + 2kL, each pair one formula at z − 2kL.
-        downwind = x[x > 0.0]
-        sigma_z = float(self.curves.sigmas(downwind)[1].max()) if downwind.size else 0.0
-        images = min(_MAX_IMAGES, math.ceil((2.0 * lid + _IMAGE_SIGMAS * sigma_z) / (2.0 * lid)))
-        value = np.zeros(x.shape)
-        for k in range(-images, images + 1):
-            value += gaussian_plume_g_m3(x, y, z - 2.0 * k * lid, *args)
-        return np.where((z >= 0.0) & (z <= lid), value, 0.0)
+        return gaussian_plume_images_g_m3(x, y, z, *args, self.mixing_height_m)
 
 
 def plume_field(flight: FlightLog) -> SteadyPlume | None:

@@ -7,9 +7,10 @@ A bad file gives one line naming the file, the field and what is wrong
 
 from __future__ import annotations
 
+import logging
 import re
 import tomllib
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 import msgspec
@@ -23,6 +24,7 @@ from swarmbus.scenario_spec import (
     GSL_ENVIRONMENTS_DIR,
     MAVLINK_MAX_SYSID,
     MAX_VEHICLES,
+    RENAMED_KEYS,
     SCENARIOS_DIR,
     SENSOR_PRESETS,
     AnemometerSpec,
@@ -56,6 +58,7 @@ __all__ = [
     "GSL_ENVIRONMENTS_DIR",
     "MAVLINK_MAX_SYSID",
     "MAX_VEHICLES",
+    "RENAMED_KEYS",
     "SCENARIOS_DIR",
     "SENSOR_PRESETS",
     "AnemometerSpec",
@@ -87,9 +90,13 @@ __all__ = [
     "not_on_mavlink_note",
     "parse_override_value",
     "parse_scenario",
+    "read_renamed_keys",
+    "renamed_override",
     "resolve_scenario_path",
     "scenario_calibration",
 ]
+
+log = logging.getLogger(__name__)
 
 
 class ScenarioError(FieldError):
@@ -200,6 +207,52 @@ def apply_overrides(raw: dict[str, object], overrides: Iterable[str], source: st
         table[name] = parse_override_value(value.strip())
 
 
+def read_renamed_keys(raw: dict[str, object], source: str) -> None:
+    """Move every old key of :data:`RENAMED_KEYS` in the raw TOML table ``raw`` to its new
+    name, logging one line per renamed key; both names in one table is an error."""
+    seen: set[str] = set()
+    for path, table in _tables(raw, ""):
+        for old, new in RENAMED_KEYS.get(path.rpartition(".")[2], {}).items():
+            if old not in table:
+                continue
+            if new in table:
+                raise ScenarioError(source, f"{path}.{old}", f"renamed {new}: give only {new}")
+            table[new] = table.pop(old)
+            where = re.sub(r"\[\d+\]", "", path)
+            if f"{where}.{old}" not in seen:
+                seen.add(f"{where}.{old}")
+                _deprecated(source, f"{where}.{old}", f"{where}.{new}")
+
+
+def _tables(table: dict[str, object], path: str) -> Iterator[tuple[str, dict[str, object]]]:
+    """Every table in ``table`` (itself included) with its dotted path (lists as ``[i]``)."""
+    yield path, table
+    for key, value in table.items():
+        inner = f"{path}.{key}" if path else key
+        items = enumerate(value) if isinstance(value, list) else [(None, value)]
+        for i, item in items:
+            if isinstance(item, dict):
+                yield from _tables(item, inner if i is None else f"{inner}[{i}]")
+
+
+def renamed_override(item: str, source: str) -> str:
+    """A ``--set section.key=value`` with an old key of :data:`RENAMED_KEYS` given its new
+    name (one line logged), any other unchanged."""
+    key, eq, value = item.partition("=")
+    *sections, name = key.strip().split(".")
+    new = RENAMED_KEYS.get(sections[-1], {}).get(name) if sections and eq else None
+    if new is None:
+        return item
+    _deprecated(source, f"--set {key.strip()}", f"--set {'.'.join([*sections, new])}")
+    return f"{'.'.join([*sections, new])}={value}"
+
+
+def _deprecated(source: str, old: str, new: str) -> None:
+    log.warning(
+        "%s: %s is deprecated, read as %s (the old name goes in the next release)", source, old, new
+    )
+
+
 def parse_scenario(
     text: str, source: str = "<scenario>", overrides: Iterable[str] = ()
 ) -> Scenario:
@@ -207,7 +260,8 @@ def parse_scenario(
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(source, "", f"not valid TOML: {exc}") from None
-    overrides = tuple(overrides)
+    read_renamed_keys(raw, source)
+    overrides = tuple(renamed_override(item, source) for item in overrides)
     if overrides:
         apply_overrides(raw, overrides, source)
     if raw.get("plume", {}).get("preset") == "novak2018":

@@ -28,6 +28,13 @@ Fin = Annotated[float, msgspec.Meta(ge=-1e7, le=1e7)]
 Name = Annotated[str, msgspec.Meta(pattern=r"^[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}$")]
 Degrees = Annotated[float, msgspec.Meta(ge=-360.0, le=360.0)]
 
+#: Keys renamed in this release, by the name of the table that holds them: old key → new key.
+#: A file or a ``--set`` with an old key still loads, to the same value, and one line is
+#: logged naming the old key and the new one; the old names go in the next release.
+RENAMED_KEYS: dict[str, dict[str, str]] = {
+    "failsafe": {"geofence_max_alt_m": "geofence_max_altitude_m"},
+}
+
 
 class _Section(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     pass
@@ -295,7 +302,7 @@ class Failsafe(_Section, frozen=True, kw_only=True):
     datalink_required: bool = False  # only armed once a GCS heartbeat was seen
     offboard_loss_action: Literal["hold", "land", "rtl"] = "hold"
     offboard_timeout_s: Pos = 0.5
-    geofence_max_alt_m: NonNeg = 120.0  # above home; 0: off (PX4's GF_MAX_VER_DIST)
+    geofence_max_altitude_m: NonNeg = 120.0  # above home; 0: off (PX4's GF_MAX_VER_DIST)
     geofence_max_distance_m: NonNeg = 0.0  # from home; 0: off, PX4's GF_MAX_HOR_DIST default
     rtl_altitude_m: Pos = 15.0
     takeoff_altitude_m: Pos = 2.5

@@ -93,7 +93,7 @@ class GradientSwarm(SeekingBehavior):
         super().__init__(ctx)
         self.vehicle_id = ctx.vehicle_id
         self.scenario = ctx.scenario
-        # each peer's sensor model, and its lag history (the state a snapshot keeps)
+        # each peer's sensor model, and its lag history (the state a checkpoint keeps)
         self.peer_sensors: dict[str, ConcentrationSensor] = {}
         self.peer_lags: dict[str, deque[tuple[float, float]]] = {}
         self.gradient: tuple[float, float] | None = None

@@ -259,9 +259,9 @@ class ParticleFilter(SeekingBehavior):
             self.probe_side = -self.probe_side
         return toward(own, tx, ty, self.speed_m_s)
 
-    def snapshot(self) -> dict[str, Any]:
-        data = super().snapshot()
-        data["filter"] = None if self.filter is None else self.filter.snapshot()
+    def checkpoint(self) -> dict[str, Any]:
+        data = super().checkpoint()
+        data["filter"] = None if self.filter is None else self.filter.checkpoint()
         return data
 
     def restore(self, data: dict[str, Any]) -> None:

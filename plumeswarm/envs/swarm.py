@@ -378,7 +378,7 @@ class PlumeSwarmEnv(ParallelEnv[str, Obs, Action]):  # type: ignore[misc]
         x, y, z = state.position_enu_m
         return bool(
             math.hypot(x - hx, y - hy) > fence.geofence_max_distance_m
-            or z - hz > fence.geofence_max_alt_m
+            or z - hz > fence.geofence_max_altitude_m
         )
 
     def _info(self, state: VehicleState, success: bool) -> dict[str, Any]:

@@ -245,7 +245,7 @@ def refused(ap: Autopilot, cmd: object, words: str, code: str = "denied") -> Non
 
 
 def test_commands_are_refused_with_the_right_reason() -> None:
-    w, aps = world(scenario(geofence_max_alt_m=50.0), ["uav1"])
+    w, aps = world(scenario(geofence_max_altitude_m=50.0), ["uav1"])
     ap = aps["uav1"]
     refused(ap, Takeoff(altitude_m=5.0), "disarmed: arm before taking off")
     refused(ap, Land(), "disarmed")

@@ -4,8 +4,11 @@ from __future__ import annotations
 
 import inspect
 
+import pytest
+
 import agents
 from agents import Swarm, VehicleCommander
+from agents.swarm_clients import takeoff_altitude
 
 
 def test_exports() -> None:
@@ -53,4 +56,16 @@ def test_vehicle_commands() -> None:
     }
     assert wanted <= {n for n in dir(VehicleCommander) if not n.startswith("_")}
     assert list(inspect.signature(VehicleCommander.goto).parameters)[1:4] == ["x", "y", "z"]
-    assert list(inspect.signature(VehicleCommander.takeoff).parameters)[1:] == ["alt_m"]
+    takeoff = inspect.signature(VehicleCommander.takeoff).parameters
+    assert list(takeoff)[1:] == ["altitude_m", "alt_m"]
+    assert takeoff["alt_m"].kind is inspect.Parameter.KEYWORD_ONLY  # the old name, deprecated
+
+
+def test_takeoff_takes_its_old_keyword_with_a_deprecation_warning() -> None:
+    assert takeoff_altitude(7.5, None) == 7.5
+    with pytest.warns(DeprecationWarning, match=r"alt_m=.*altitude_m="):
+        assert takeoff_altitude(None, 7.5) == 7.5
+    with pytest.raises(TypeError, match="altitude_m only"):
+        takeoff_altitude(7.5, 7.5)
+    with pytest.raises(TypeError, match="needs altitude_m"):
+        takeoff_altitude(None, None)

@@ -290,9 +290,9 @@ def test_the_swarm_fits_its_peers_sensor_outputs_not_their_true_values() -> None
     peer = PeerReading(vehicle_id="uav2", position_enu_m=(40.0, 0.0, 10.0), true_g_m3=0.8)
     assert member.peer_output(peer, 1.0) == 0.0
     assert member.peer_output(peer, 1.5) == pytest.approx(0.8 * -math.expm1(-0.5), rel=1e-12)
-    # a snapshot keeps the peers' sensor memory: the restored member goes on the same
+    # a checkpoint keeps the peers' sensor memory: the restored member goes on the same
     twin = GradientSwarm(ctx(0, scenario=lagging))
-    twin.restore(member.snapshot())
+    twin.restore(member.checkpoint())
     third = member.peer_output(peer, 2.0)
     assert third == pytest.approx(0.8 * -math.expm1(-1.0), rel=1e-12)
     assert twin.peer_output(peer, 2.0) == third

@@ -220,7 +220,7 @@ def test_the_px4_scenario_carries_px4_sitls_defaults() -> None:
     assert (origin.lat_deg, origin.lon_deg, origin.alt_m) == (47.397742, 8.545594, 488.0)
     fs = sc.failsafe
     assert fs.takeoff_altitude_m == 2.5 and fs.rtl_altitude_m == 60.0
-    assert fs.geofence_max_distance_m == 0.0 and fs.geofence_max_alt_m == 0.0
+    assert fs.geofence_max_distance_m == 0.0 and fs.geofence_max_altitude_m == 0.0
     assert fs.datalink_loss_action == "none" and fs.offboard_timeout_s == 1.0
     assert sc.gateway.api_port_base == 14540 and sc.gateway.gcs_port == 14550
     assert sc.time.mode == "realtime"

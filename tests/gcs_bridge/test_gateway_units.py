@@ -40,7 +40,7 @@ from gcs_bridge.modes import (
 )
 from gcs_bridge.offboard import Here
 from gcs_bridge.params import INT32, ParamError, ParamTable, float_bits_of_int
-from gcs_bridge.telemetry import StreamSchedule, landed_state_of, wind_enu
+from gcs_bridge.telemetry import StreamSchedule, landed_state_of
 from swarmbus.messages import (
     Arm,
     CommandReply,
@@ -143,11 +143,6 @@ def test_geodetic_round_trip_near_the_origin() -> None:
     assert (e, n, u) == pytest.approx((100.0, -50.0, 10.0), abs=1e-6)
 
 
-def test_wind_from_west_blows_toward_east() -> None:
-    assert wind_enu(6.0, 270.0) == pytest.approx((6.0, 0.0, 0.0), abs=1e-9)
-    assert wind_enu(2.0, 0.0) == pytest.approx((0.0, -2.0, 0.0), abs=1e-9)
-
-
 # ----------------------------------------------------------------------------- params
 def table() -> ParamTable:
     return ParamTable(
@@ -197,7 +192,7 @@ def facts(**kw: object) -> Facts:
         home_enu=(0.0, 0.0, 0.0),
         position_enu=(5.0, 6.0, 0.0),
         landed=True,
-        takeoff_alt_m=10.0,
+        takeoff_altitude_m=10.0,
         mission_seqs=[0, 2, 3],
     )
     base.update(kw)

@@ -32,14 +32,16 @@ def latlon(east_m: float, north_m: float) -> tuple[float, float]:
     return lat, lon
 
 
-async def take_off(system: Any, alt_m: float) -> None:
+async def take_off(system: Any, altitude_m: float) -> None:
     tel, act = TelemetryAsync(system), ActionAsync(system)
     await first(tel.subscribe_health(), lambda h: h.is_armable, "ready to arm")
-    await act.set_takeoff_altitude(alt_m)
+    await act.set_takeoff_altitude(altitude_m)
     await act.arm()
     await act.takeoff()
     await first(
-        tel.subscribe_position(), lambda p: p.relative_altitude_m > alt_m - 0.5, f"at {alt_m} m"
+        tel.subscribe_position(),
+        lambda p: p.relative_altitude_m > altitude_m - 0.5,
+        f"at {altitude_m} m",
     )
 
 

@@ -246,3 +246,74 @@ def test_sensor_snippets_in_the_docs_are_valid_scenarios() -> None:
     assert len(snippets) >= 2
     for text in snippets:
         parse_scenario(text + GOOD_VEHICLE, "docs/agents.md")
+
+
+def _with_old_geofence_key(value: float) -> str:
+    text = DEFAULT_SCENARIO.read_text()
+    assert "\ngeofence_max_altitude_m = 120.0\n" in text
+    return text.replace("\ngeofence_max_altitude_m = 120.0\n", f"\ngeofence_max_alt_m = {value}\n")
+
+
+def test_a_renamed_key_still_loads_to_the_same_value_with_one_deprecation_line(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    text = _with_old_geofence_key(77.0)
+    new = parse_scenario(text.replace("geofence_max_alt_m", "geofence_max_altitude_m"), "new")
+    assert not caplog.records
+    old = parse_scenario(text, "old.toml")
+    assert old.failsafe.geofence_max_altitude_m == 77.0
+    assert old == new
+    lines = [r.getMessage() for r in caplog.records]
+    assert lines == [
+        "old.toml: failsafe.geofence_max_alt_m is deprecated, read as "
+        "failsafe.geofence_max_altitude_m (the old name goes in the next release)"
+    ]
+
+
+def test_a_renamed_key_in_every_vehicle_is_one_line(caplog: pytest.LogCaptureFixture) -> None:
+    vehicles = "".join(
+        f'[[vehicles]]\nid = "v{i}"\nspawn_enu_m = [{i}.0, 0.0, 0.0]\n'
+        f"failsafe = {{ geofence_max_alt_m = {10 + i}.0 }}\n"
+        for i in range(3)
+    )
+    scenario = parse_scenario(vehicles, "fleet.toml")
+    assert [scenario.failsafe_for(f"v{i}").geofence_max_altitude_m for i in range(3)] == [
+        10.0,
+        11.0,
+        12.0,
+    ]
+    assert len(caplog.records) == 1
+    assert "vehicles.failsafe.geofence_max_alt_m" in caplog.records[0].getMessage()
+    assert "vehicles.failsafe.geofence_max_altitude_m" in caplog.records[0].getMessage()
+
+
+def test_a_renamed_key_in_a_set_override_is_read_under_its_new_name(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    scenario = load_scenario(DEFAULT_SCENARIO, ["failsafe.geofence_max_alt_m=33"])
+    assert scenario.failsafe.geofence_max_altitude_m == 33.0
+    assert len(caplog.records) == 1
+    message = caplog.records[0].getMessage()
+    assert "--set failsafe.geofence_max_alt_m" in message
+    assert "--set failsafe.geofence_max_altitude_m" in message
+
+
+def test_both_the_old_and_the_new_name_is_an_error() -> None:
+    text = _with_old_geofence_key(77.0).replace(
+        "geofence_max_alt_m = 77.0", "geofence_max_alt_m = 77.0\ngeofence_max_altitude_m = 70.0"
+    )
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario(text, "both.toml")
+    assert err.value.field == "failsafe.geofence_max_alt_m"
+    assert "geofence_max_altitude_m" in err.value.reason
+
+
+def test_cli_check_prints_the_deprecation_line_and_passes(tmp_path: Path) -> None:
+    old = tmp_path / "old.toml"
+    old.write_text(_with_old_geofence_key(90.0))
+    res = run_cli(["scenario", "check", str(old)])
+    assert res.returncode == 0, res.stderr
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1, res.stderr
+    assert "failsafe.geofence_max_alt_m is deprecated" in lines[0]
+    assert "failsafe.geofence_max_altitude_m" in lines[0]

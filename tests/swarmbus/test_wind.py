@@ -87,7 +87,7 @@ def test_grid_wind_is_deterministic_after_going_back_in_time() -> None:
     points = [[0.0, 0.0, 5.0], [-90.0, 40.0, 5.0], [500.0, 0.0, 0.0]]
     one = wind_model(config, seed=5)
     late = one.velocity(points, 30.0)
-    early = one.velocity(points, 4.0)  # going back: restored from a snapshot
+    early = one.velocity(points, 4.0)  # going back: restored from a checkpoint
     fresh = wind_model(config, seed=5)
     assert fresh.velocity(points, 4.0).tobytes() == early.tobytes()
     assert fresh.velocity(points, 30.0).tobytes() == late.tobytes()
@@ -96,9 +96,9 @@ def test_grid_wind_is_deterministic_after_going_back_in_time() -> None:
     assert np.all(np.abs(late[:, :2] - [6.0, 0.0]) < 5.0)
 
 
-def test_grid_wind_goes_back_past_thinned_snapshots() -> None:
-    """Old snapshots are thinned (newest 32 blocks kept, then every 16th block): going back
-    to before a dropped snapshot restarts from an older one and gives the same bits."""
+def test_grid_wind_goes_back_past_thinned_checkpoints() -> None:
+    """Old checkpoints are thinned (newest 32 blocks kept, then every 16th block): going back
+    to before a dropped checkpoint restarts from an older one and gives the same bits."""
     config = Wind(
         model="field",
         meander=WindMeander(preset="small", step_s=0.5),

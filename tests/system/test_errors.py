@@ -43,7 +43,7 @@ BUILTIN_OF: dict[str, type[BaseException]] = {
     "swarmbus.codec.MessageError": ValueError,
     "sim_world.checkpoint.CheckpointError": ValueError,
     "agents.behavior.BehaviorError": RuntimeError,
-    "agents.snapshot_store.SnapshotError": ValueError,
+    "agents.checkpoint_store.CheckpointError": ValueError,
     "agents.swarm_clients.CommandTimeout": TimeoutError,
     "agents.swarm_clients.WaitTimeout": TimeoutError,
     "agents.mission.MissionError": ValueError,

@@ -1,6 +1,6 @@
-"""Where autopilot snapshots are kept: the by-reference mission and fence lists in memory
-(:class:`Blobs`, :data:`BLOBS`) and on disk (:class:`BlobLog`), and the two-slot snapshot
-files (:class:`SnapshotSlots`). :mod:`agents.snapshot` makes and reads the snapshots.
+"""Where autopilot checkpoints are kept: the by-reference mission and fence lists in memory
+(:class:`Blobs`, :data:`BLOBS`) and on disk (:class:`BlobLog`), and the two-slot checkpoint
+files (:class:`CheckpointSlots`). :mod:`agents.checkpoint` makes and reads the checkpoints.
 """
 
 from __future__ import annotations
@@ -19,8 +19,8 @@ import msgspec
 from swarmbus.errors import PlumeswarmError
 
 
-class SnapshotError(PlumeswarmError, ValueError):
-    """A snapshot that cannot be taken, read or restored; the message says which and why."""
+class CheckpointError(PlumeswarmError, ValueError):
+    """A checkpoint that cannot be taken, read or restored; the message says which and why."""
 
 
 class Blobs:
@@ -29,7 +29,7 @@ class Blobs:
     once while it is in use: a cache by the list's identity (holding the list keeps its id from
     being reused while it is cached) answers every later tick. Least recently used first out:
     the lists a process's vehicles fly are asked for every tick and stay; a replaced one is
-    never asked for again and goes first. The encodings themselves stay (a snapshot kept for a
+    never asked for again and goes first. The encodings themselves stay (a checkpoint kept for a
     rewind may still refer to one); they grow with uploads only."""
 
     def __init__(self, cache_size: int = 1024) -> None:
@@ -64,7 +64,7 @@ class Blobs:
     def get(self, key: str, what: str) -> msgspec.Raw:
         raw = self.by_key.get(key)
         if raw is None:
-            raise SnapshotError(f"{what}: the saved list {key} is missing") from None
+            raise CheckpointError(f"{what}: the saved list {key} is missing") from None
         return raw
 
 
@@ -76,7 +76,7 @@ _HEAD = struct.Struct("<4sIIq")  # magic, CRC-32 of the payload, payload length,
 _MAGIC = b"APS1"
 
 
-class SnapshotSlots:
+class CheckpointSlots:
     """The latest two records of one writer, in ``<path>.0`` and ``<path>.1`` in turn.
 
     A record is ``(sequence, payload)``; each write is one ``pwritev`` of a header (with a
@@ -101,8 +101,8 @@ class SnapshotSlots:
         try:
             self._fds = [os.open(p, os.O_RDWR | os.O_CREAT, 0o644) for p in self.paths()]
         except OSError as exc:
-            raise SnapshotError(
-                f"cannot write snapshot {self.path}: {exc.strerror or exc}"
+            raise CheckpointError(
+                f"cannot write checkpoint {self.path}: {exc.strerror or exc}"
             ) from None
         self._seq = max((seq for seq, _ in self.read_all()), default=0)
 
@@ -144,7 +144,7 @@ _BLOB_MAGIC = b"APB1"
 
 class BlobLog:
     """The encoded lists of :data:`BLOBS` (missions, fence zones) on disk: each appended once,
-    in one write, before a snapshot that refers to it is written (:meth:`flush`). A record
+    in one write, before a checkpoint that refers to it is written (:meth:`flush`). A record
     whose digest does not match (a write cut short by a kill) ends the log: it is cut off
     there when the log is opened again."""
 
@@ -163,7 +163,7 @@ class BlobLog:
         except FileNotFoundError:
             data = b""
         except OSError as exc:
-            raise SnapshotError(f"cannot read {self.path}: {exc.strerror or exc}") from None
+            raise CheckpointError(f"cannot read {self.path}: {exc.strerror or exc}") from None
         for key, payload, after in _blob_records(data):
             self.blobs.add(payload)
             self._written.add(key)
@@ -173,7 +173,7 @@ class BlobLog:
             os.ftruncate(self._fd, end)  # a torn last record
             os.lseek(self._fd, end, os.SEEK_SET)
         except OSError as exc:
-            raise SnapshotError(f"cannot write {self.path}: {exc.strerror or exc}") from None
+            raise CheckpointError(f"cannot write {self.path}: {exc.strerror or exc}") from None
         self._next = 0
 
     def flush(self) -> None:

@@ -1,11 +1,12 @@
-"""Snapshots of an autopilot process's state (:func:`capture`, :func:`restore`), so a restarted
-autopilot carries on with the same bits; :mod:`agents.snapshot_store` keeps them (the two-slot
+"""Checkpoints of an autopilot process's state (:func:`capture`, :func:`restore`), so a restarted
+autopilot carries on with the same bits; :mod:`agents.checkpoint_store` keeps them (the two-slot
 files, the by-reference mission and fence lists). See docs/agents.md ("Restarts: the autopilot
 resumes where it was").
 """
 
 from __future__ import annotations
 
+import logging
 import typing
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, Generic, TypeVar
@@ -13,10 +14,10 @@ from typing import TYPE_CHECKING, Any, Generic, TypeVar
 import msgspec
 import numpy as np
 
+from agents.checkpoint_store import BLOBS
+from agents.checkpoint_store import CheckpointError as CheckpointError  # raised here too
 from agents.control import Estimate
 from agents.mode_table import RtlPhase
-from agents.snapshot_store import BLOBS
-from agents.snapshot_store import SnapshotError as SnapshotError  # raised here too
 from swarmbus.messages import FenceZone, FlightMode, MissionItem, Orbit, Setpoint, VehicleState
 from swarmbus.scenario import Failsafe
 
@@ -24,7 +25,9 @@ if TYPE_CHECKING:
     from agents.autopilot import Autopilot
     from agents.sensor import ConcentrationSensor
 
-FORMAT = "autopilot_snapshot/v3"
+log = logging.getLogger(__name__)
+
+FORMAT = "autopilot_checkpoint/v4"
 Vec3 = tuple[float, float, float]
 S = TypeVar("S", bound=msgspec.Struct)
 
@@ -41,7 +44,7 @@ class RngState(msgspec.Struct, frozen=True, array_like=True):
 def rng_state(rng: np.random.Generator) -> RngState:
     st = rng.bit_generator.state
     if st["bit_generator"] != "PCG64":
-        raise SnapshotError(f"cannot save a {st['bit_generator']} generator (PCG64 only)")
+        raise CheckpointError(f"cannot save a {st['bit_generator']} generator (PCG64 only)")
     return RngState(
         str(st["state"]["state"]), str(st["state"]["inc"]), st["has_uint32"], st["uinteger"]
     )
@@ -56,14 +59,14 @@ def set_rng_state(rng: np.random.Generator, saved: RngState) -> None:
     }
 
 
-class ControllerSnapshot(msgspec.Struct, frozen=True, kw_only=True):
+class ControllerCheckpoint(msgspec.Struct, frozen=True, kw_only=True):
     vel_integral: list[float]
     rate_integral: list[float]
     velocity_prev: Vec3 | None
     rates_prev: Vec3 | None
 
 
-class MissionSnapshot(msgspec.Struct, frozen=True, kw_only=True):
+class MissionCheckpoint(msgspec.Struct, frozen=True, kw_only=True):
     items: str  # list[MissionItem], by reference (BLOBS)
     index: int
     items_reached: int
@@ -71,7 +74,7 @@ class MissionSnapshot(msgspec.Struct, frozen=True, kw_only=True):
     hold_started_s: float | None
 
 
-class ModesSnapshot(msgspec.Struct, frozen=True, kw_only=True):
+class ModesCheckpoint(msgspec.Struct, frozen=True, kw_only=True):
     mode: FlightMode
     failsafe: Failsafe
     home: Vec3
@@ -81,21 +84,21 @@ class ModesSnapshot(msgspec.Struct, frozen=True, kw_only=True):
     speed_m_s: float
     touchdown_since_s: float | None
     rtl_phase: str
-    rtl_alt_m: float
+    rtl_altitude_m: float
     setpoint: Setpoint | None
     setpoint_time_s: float
     item_seen: int
     land_descending: bool
-    mission: MissionSnapshot
+    mission: MissionCheckpoint
     fence_zones: str  # list[FenceZone], by reference (BLOBS)
     rally_points: list[Vec3]
     rtl_dest: Vec3
     offboard_tick_s: float
-    climb_alt_m: float | None
+    climb_altitude_m: float | None
     orbit: Orbit | None
 
 
-class MonitorSnapshot(msgspec.Struct, frozen=True, kw_only=True):
+class MonitorCheckpoint(msgspec.Struct, frozen=True, kw_only=True):
     gcs_seen: bool
     last_gcs_s: float
     datalink_lost: bool
@@ -103,7 +106,7 @@ class MonitorSnapshot(msgspec.Struct, frozen=True, kw_only=True):
     crashed: bool
 
 
-class SensorSnapshot(msgspec.Struct, frozen=True, kw_only=True):
+class SensorCheckpoint(msgspec.Struct, frozen=True, kw_only=True):
     """The sensor's state, whichever of these its model keeps (the others are None)."""
 
     lagged_g_m3: float | None
@@ -112,12 +115,12 @@ class SensorSnapshot(msgspec.Struct, frozen=True, kw_only=True):
     history: list[tuple[float, float]] | None = None  # (sim time, lag state) of recent samples
 
 
-class BehaviorSnapshot(msgspec.Struct, frozen=True, kw_only=True):
-    data: msgspec.Raw  # the behaviour's snapshot() or its attributes, msgpack
+class BehaviorCheckpoint(msgspec.Struct, frozen=True, kw_only=True):
+    data: msgspec.Raw  # the behaviour's checkpoint() or its attributes, msgpack
     rng: RngState | None
 
 
-class VehicleSnapshot(msgspec.Struct, frozen=True, kw_only=True):
+class VehicleCheckpoint(msgspec.Struct, frozen=True, kw_only=True):
     vehicle_id: str
     now_s: float
     state: VehicleState | None
@@ -125,22 +128,22 @@ class VehicleSnapshot(msgspec.Struct, frozen=True, kw_only=True):
     scenario_mission: str  # list[MissionItem], by reference (BLOBS)
     behavior_error: str
     sensor_health: str
-    modes: ModesSnapshot
-    monitor: MonitorSnapshot
-    controller: ControllerSnapshot
+    modes: ModesCheckpoint
+    monitor: MonitorCheckpoint
+    controller: ControllerCheckpoint
     estimator_rng: RngState | None  # None: no noise, the generator is never drawn from
-    sensor: SensorSnapshot
-    behavior: BehaviorSnapshot | None
+    sensor: SensorCheckpoint
+    behavior: BehaviorCheckpoint | None
 
 
 # ---------------------------------------------------------------------------- field tables
 class _Part(Generic[S]):
-    """How one part of the autopilot is saved: each field of its snapshot struct ``kind`` (but
+    """How one part of the autopilot is saved: each field of its checkpoint struct ``kind`` (but
     the ``special`` ones, saved otherwise) holds the attribute of the same name, or the one
-    ``renamed`` gives. List fields are copied both ways, so that a snapshot never shares a
+    ``renamed`` gives. List fields are copied both ways, so that a checkpoint never shares a
     list with the running autopilot.
 
-    A snapshot is taken every tick, so ``save`` is compiled once from the struct's fields and
+    A checkpoint is taken every tick, so ``save`` is compiled once from the struct's fields and
     the table (identifiers only) into one keyword call, as dataclasses compile their
     ``__init__``: a loop over the fields made a capture two to three times as slow (≈ 6 →
     15–30 µs a vehicle on a loaded machine); compiled, it is within ≈ 1 µs of spelled-out
@@ -167,9 +170,9 @@ class _Part(Generic[S]):
             setattr(part, attribute, list(value) if name in self.lists else value)
 
 
-_MONITOR = _Part(MonitorSnapshot)
+_MONITOR = _Part(MonitorCheckpoint)
 _CONTROLLER = _Part(
-    ControllerSnapshot,
+    ControllerCheckpoint,
     {
         "vel_integral": "_vi",
         "rate_integral": "_ri",
@@ -177,22 +180,22 @@ _CONTROLLER = _Part(
         "rates_prev": "_w_prev",
     },
 )
-_MISSION = _Part(MissionSnapshot, {"hold_started_s": "_hold_started_s"}, special=("items",))
+_MISSION = _Part(MissionCheckpoint, {"hold_started_s": "_hold_started_s"}, special=("items",))
 _MODES = _Part(
-    ModesSnapshot,
+    ModesCheckpoint,
     {
         "target": "_target",
         "yaw_rad": "_yaw",
         "speed_m_s": "_speed",
         "touchdown_since_s": "_touchdown_since",
-        "rtl_alt_m": "_rtl_alt",
+        "rtl_altitude_m": "_rtl_alt",
         "setpoint": "_setpoint",
         "setpoint_time_s": "_setpoint_time_s",
         "item_seen": "_item_seen",
         "land_descending": "_land_descending",
         "rtl_dest": "_rtl_dest",
         "offboard_tick_s": "_offboard_tick_s",
-        "climb_alt_m": "_climb_alt_m",
+        "climb_altitude_m": "_climb_altitude_m",
         "orbit": "_orbit",
     },
     special=("mission", "rtl_phase", "fence_zones"),
@@ -219,7 +222,7 @@ def _decoded(decoder: msgspec.msgpack.Decoder[list[Any]], key: str, what: str) -
     try:
         return decoder.decode(BLOBS.get(key, what))
     except (msgspec.ValidationError, msgspec.DecodeError) as exc:
-        raise SnapshotError(f"{what}: {exc}") from None
+        raise CheckpointError(f"{what}: {exc}") from None
 
 
 def _items_of(key: str) -> list[MissionItem]:
@@ -234,10 +237,10 @@ def capture(
     ap: Autopilot,
     sensor: ConcentrationSensor,
     behavior_rng: np.random.Generator | None = None,
-) -> VehicleSnapshot:
+) -> VehicleCheckpoint:
     """Everything of ``ap`` (and its sensor) that influences its future, as of now."""
     m = ap.modes
-    return VehicleSnapshot(
+    return VehicleCheckpoint(
         vehicle_id=ap.vehicle_id,
         now_s=ap.now,
         state=ap.state,
@@ -254,25 +257,25 @@ def capture(
         monitor=_MONITOR.save(ap.monitor),
         controller=_CONTROLLER.save(ap.controller),
         estimator_rng=_estimator_rng(ap),
-        sensor=_sensor_snapshot(sensor),
-        behavior=_behavior_snapshot(ap, behavior_rng),
+        sensor=_sensor_checkpoint(sensor),
+        behavior=_behavior_checkpoint(ap, behavior_rng),
     )
 
 
 def _estimator_rng(ap: Autopilot) -> RngState | None:
-    # Reading a generator's state costs more than the rest of a snapshot: skip unused ones.
+    # Reading a generator's state costs more than the rest of a checkpoint: skip unused ones.
     est = ap.estimator
     noisy = est.position_noise_m > 0.0 or est.velocity_noise_m_s > 0.0
     return rng_state(est._rng) if noisy else None
 
 
-def _sensor_snapshot(sensor: ConcentrationSensor) -> SensorSnapshot:
+def _sensor_checkpoint(sensor: ConcentrationSensor) -> SensorCheckpoint:
     # The sensor model keeps its lag as a last value and time, or as a short history of
     # samples; its noise from a running generator, or keyed by sample time (no state).
     rng = getattr(sensor, "_rng", None)
     noisy = getattr(sensor.config, "noise_std_g_m3", 0.0) > 0.0
     history = getattr(sensor, "_history", None)
-    return SensorSnapshot(
+    return SensorCheckpoint(
         lagged_g_m3=getattr(sensor, "_lagged", None),
         last_time_s=getattr(sensor, "_last_time_s", None),
         rng=rng_state(rng) if noisy and isinstance(rng, np.random.Generator) else None,
@@ -283,11 +286,16 @@ def _sensor_snapshot(sensor: ConcentrationSensor) -> SensorSnapshot:
 _SKIP = (np.random.Generator,)  # a behaviour's generator is the context's: saved on its own
 
 
-def _behavior_snapshot(ap: Autopilot, rng: np.random.Generator | None) -> BehaviorSnapshot | None:
+def _behavior_checkpoint(
+    ap: Autopilot, rng: np.random.Generator | None
+) -> BehaviorCheckpoint | None:
     behavior = ap.behavior
     if behavior is None:
         return None
-    own = getattr(behavior, "snapshot", None)
+    own = getattr(behavior, "checkpoint", None)
+    if callable(old := getattr(behavior, "snapshot", None)):  # its own, under the former name
+        own = old
+        _deprecated_snapshot(type(behavior))
     try:
         if callable(own):
             data = own()
@@ -295,23 +303,37 @@ def _behavior_snapshot(ap: Autopilot, rng: np.random.Generator | None) -> Behavi
             data = {k: v for k, v in vars(behavior).items() if not isinstance(v, _SKIP)}
         raw = msgspec.msgpack.encode(data)
     except (TypeError, OverflowError) as exc:
-        raise SnapshotError(
+        raise CheckpointError(
             f"{ap.vehicle_id}: the state of behaviour {type(behavior).__name__} cannot be "
-            f"saved ({exc}); give it snapshot() and restore(data) methods"
+            f"saved ({exc}); give it checkpoint() and restore(data) methods"
         ) from None
-    return BehaviorSnapshot(data=msgspec.Raw(raw), rng=rng_state(rng) if rng else None)
+    return BehaviorCheckpoint(data=msgspec.Raw(raw), rng=rng_state(rng) if rng else None)
+
+
+_WARNED: set[type] = set()
+
+
+def _deprecated_snapshot(kind: type) -> None:
+    """A behaviour with the former ``snapshot()``: one line per class."""
+    if kind not in _WARNED:
+        _WARNED.add(kind)
+        log.warning(
+            "behaviour %s: snapshot() is deprecated, name it checkpoint(); it is called as "
+            "checkpoint() until the next release",
+            kind.__name__,
+        )
 
 
 # ---------------------------------------------------------------------------- restore
 def restore(
     ap: Autopilot,
     sensor: ConcentrationSensor,
-    snap: VehicleSnapshot,
+    snap: VehicleCheckpoint,
     behavior_rng: np.random.Generator | None = None,
 ) -> None:
     """Put ``snap`` into a freshly built autopilot (and sensor) of the same vehicle."""
     if snap.vehicle_id != ap.vehicle_id:
-        raise SnapshotError(f"snapshot of {snap.vehicle_id} given to {ap.vehicle_id}")
+        raise CheckpointError(f"checkpoint of {snap.vehicle_id} given to {ap.vehicle_id}")
     ap.now = snap.now_s
     ap.state = snap.state
     ap.est = snap.estimate
@@ -328,7 +350,7 @@ def restore(
         _restore_behavior(ap.behavior, snap.behavior, behavior_rng)
 
 
-def _restore_sensor(sensor: ConcentrationSensor, snap: SensorSnapshot) -> None:
+def _restore_sensor(sensor: ConcentrationSensor, snap: SensorCheckpoint) -> None:
     for name, value in (("_lagged", snap.lagged_g_m3), ("_last_time_s", snap.last_time_s)):
         if hasattr(sensor, name):
             setattr(sensor, name, value)
@@ -341,7 +363,7 @@ def _restore_sensor(sensor: ConcentrationSensor, snap: SensorSnapshot) -> None:
         set_rng_state(rng, snap.rng)
 
 
-def _restore_modes(ap: Autopilot, s: ModesSnapshot) -> None:
+def _restore_modes(ap: Autopilot, s: ModesCheckpoint) -> None:
     m = ap.modes
     m.mission.upload(_items_of(s.mission.items), m.origin)  # resolves the items again
     _MISSION.put_back(m.mission, s.mission)
@@ -351,7 +373,7 @@ def _restore_modes(ap: Autopilot, s: ModesSnapshot) -> None:
 
 
 def _restore_behavior(
-    behavior: Any, snap: BehaviorSnapshot, rng: np.random.Generator | None
+    behavior: Any, snap: BehaviorCheckpoint, rng: np.random.Generator | None
 ) -> None:
     data = msgspec.msgpack.decode(snap.data)
     own = getattr(behavior, "restore", None)
@@ -367,7 +389,7 @@ def _restore_behavior(
 
 
 # ---------------------------------------------------------------------------- a process
-class PendingSnapshot(msgspec.Struct, frozen=True, kw_only=True):
+class PendingCheckpoint(msgspec.Struct, frozen=True, kw_only=True):
     """The sensor tick whose plume values a process awaits (they come in a later tick;
     ``by_physics``: that tick waited for the plume's sample, ``SimTick.plume_queried``)."""
 
@@ -377,23 +399,23 @@ class PendingSnapshot(msgspec.Struct, frozen=True, kw_only=True):
     by_physics: bool
 
 
-class ProcessSnapshot(msgspec.Struct, frozen=True, kw_only=True):
+class ProcessCheckpoint(msgspec.Struct, frozen=True, kw_only=True):
     """An autopilot process after handling tick ``tick`` (and any command since)."""
 
     format: str = FORMAT
     node: str
     tick: int  # -1: before the first tick
-    vehicles: list[VehicleSnapshot]
+    vehicles: list[VehicleCheckpoint]
     commands: list[bytes]  # one per vehicle, empty: the process answers with ``batch``
     batch: bytes = b""  # the process's ActuatorBatch for ``tick`` (resent if it repeats)
     status_times_s: list[float]
-    pending: PendingSnapshot | None
+    pending: PendingCheckpoint | None
 
 
-_process_decoder = msgspec.msgpack.Decoder(ProcessSnapshot)
+_process_decoder = msgspec.msgpack.Decoder(ProcessCheckpoint)
 
 
-def missing_lists(snap: ProcessSnapshot) -> list[str]:
+def missing_lists(snap: ProcessCheckpoint) -> list[str]:
     """The mission and fence lists ``snap`` refers to that :data:`BLOBS` does not hold."""
     keys = [
         key
@@ -403,11 +425,11 @@ def missing_lists(snap: ProcessSnapshot) -> list[str]:
     return sorted({k for k in keys if k not in BLOBS.by_key})
 
 
-def decode_process(payload: bytes) -> ProcessSnapshot:
+def decode_process(payload: bytes) -> ProcessCheckpoint:
     try:
         snap = _process_decoder.decode(payload)
     except (msgspec.ValidationError, msgspec.DecodeError) as exc:
-        raise SnapshotError(f"not an autopilot snapshot: {exc}") from None
+        raise CheckpointError(f"not an autopilot checkpoint: {exc}") from None
     if snap.format != FORMAT:
-        raise SnapshotError(f"snapshot format {snap.format!r}, not {FORMAT}")
+        raise CheckpointError(f"checkpoint format {snap.format!r}, not {FORMAT}")
     return snap

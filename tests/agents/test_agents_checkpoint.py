@@ -1,4 +1,4 @@
-"""Autopilot snapshots: a fresh autopilot restored from one is the same autopilot, attribute
+"""Autopilot checkpoints: a fresh autopilot restored from one is the same autopilot, attribute
 for attribute, and flies on with the same bits (toy dynamics); the slot files survive a torn
 write."""
 
@@ -22,9 +22,9 @@ import pytest
 import agents.behaviors
 from agents.autopilot import Autopilot
 from agents.build import AutopilotOptions, behavior_rng, build_autopilot
+from agents.checkpoint import CheckpointError, VehicleCheckpoint, capture, restore
+from agents.checkpoint_store import CheckpointSlots
 from agents.sensor import ConcentrationSensor
-from agents.snapshot import SnapshotError, VehicleSnapshot, capture, restore
-from agents.snapshot_store import SnapshotSlots
 from plume_service import GaussianPlume
 from swarmbus.messages import (
     Arm,
@@ -130,7 +130,7 @@ def fly_px4(w: ToyWorld, ap: Autopilot) -> None:
     for start in (Arm(), MissionStart(start_index=0)):
         assert ap.handle(start).accepted
     w.run(10.0, until=lambda: w.vehicles["uav1"].p[2] > 3.0)
-    assert ap.modes.mode == FlightMode.MISSION and ap.modes._climb_alt_m is not None
+    assert ap.modes.mode == FlightMode.MISSION and ap.modes._climb_altitude_m is not None
 
 
 def casting_scenario(behavior: str = "agents.behaviors.casting:Casting") -> Scenario:
@@ -170,7 +170,7 @@ def test_a_restored_autopilot_is_the_same_and_flies_the_same_bits(flight: str) -
     rng = ap.behavior.__dict__.get("rng") if ap.behavior else None  # Casting keeps none
     snap = capture(ap, sensor, rng)
     wire = msgspec.msgpack.encode(snap)
-    back = msgspec.msgpack.decode(wire, type=VehicleSnapshot)
+    back = msgspec.msgpack.decode(wire, type=VehicleCheckpoint)
 
     fresh_rng = behavior_rng(sc, "uav1")
     fresh = build_autopilot(sc, "uav1", NOISY, fresh_rng)
@@ -216,7 +216,7 @@ def test_every_behaviour_is_restored_and_flies_on_with_the_same_bits(spec: str) 
     gens = [v for v in vars(ap.behavior).values() if isinstance(v, np.random.Generator)]
     rng = gens[0] if gens else None  # the context's generator, if the behaviour draws from it
     wire = msgspec.msgpack.encode(capture(ap, sensor, rng))
-    snap = msgspec.msgpack.decode(wire, type=VehicleSnapshot)
+    snap = msgspec.msgpack.decode(wire, type=VehicleCheckpoint)
     assert snap.behavior is not None
     saved = msgspec.msgpack.decode(snap.behavior.data)
     assert "read_wind" not in saved  # the wind input is wiring, not state
@@ -233,7 +233,7 @@ def test_every_behaviour_is_restored_and_flies_on_with_the_same_bits(spec: str) 
 
 
 class HoldsAFunction:
-    """A behaviour without snapshot() whose attributes are not plain data."""
+    """A behaviour without checkpoint() whose attributes are not plain data."""
 
     def __init__(self) -> None:
         self.read_wind = lambda own: (5.0, 0.0)
@@ -246,17 +246,81 @@ def test_a_behaviour_whose_state_cannot_be_saved_is_named() -> None:
     sc = casting_scenario()
     ap = build_autopilot(sc, "uav1", AutopilotOptions())
     ap.behavior = HoldsAFunction()
-    with pytest.raises(SnapshotError, match=r"HoldsAFunction.*snapshot\(\) and restore"):
+    with pytest.raises(CheckpointError, match=r"HoldsAFunction.*checkpoint\(\) and restore"):
         capture(ap, ConcentrationSensor(sc.sensor, 0, 0))
     ap.behavior = build_autopilot(sc, "uav1", AutopilotOptions()).behavior
     ap.behavior.opaque = object()
-    with pytest.raises(SnapshotError, match=r"Casting.*snapshot\(\) and restore"):
+    with pytest.raises(CheckpointError, match=r"Casting.*checkpoint\(\) and restore"):
         ap.behavior.state_attributes = ("opaque",)
         capture(ap, ConcentrationSensor(sc.sensor, 0, 0))
 
 
+class SavesWithTheOldName:
+    """A behaviour written against the old plug-in names: snapshot() / restore(data)."""
+
+    def __init__(self) -> None:
+        self.count = 7
+
+    def step(self, *args: Any) -> None:
+        return None
+
+    def snapshot(self) -> dict[str, Any]:
+        return {"count": self.count}
+
+    def restore(self, data: dict[str, Any]) -> None:
+        self.count = data["count"]
+
+
+def test_a_behaviours_old_snapshot_method_is_still_saved_with_one_deprecation_line(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    sc = casting_scenario()
+    ap = build_autopilot(sc, "uav1", AutopilotOptions())
+    ap.behavior = SavesWithTheOldName()
+    sensor = ConcentrationSensor(sc.sensor, 0, 0)
+    saved = [capture(ap, sensor) for _ in range(3)]
+    assert all(s.behavior is not None for s in saved)
+    assert msgspec.msgpack.decode(saved[0].behavior.data) == {"count": 7}  # type: ignore[union-attr]
+    lines = [r.getMessage() for r in caplog.records if "SavesWithTheOldName" in r.getMessage()]
+    assert lines == [
+        "behaviour SavesWithTheOldName: snapshot() is deprecated, name it checkpoint(); it is "
+        "called as checkpoint() until the next release"
+    ]
+    fresh = build_autopilot(sc, "uav1", AutopilotOptions())
+    fresh.behavior = SavesWithTheOldName()
+    fresh.behavior.count = 0
+    restore(fresh, ConcentrationSensor(sc.sensor, 0, 0), saved[0])
+    assert fresh.behavior.count == 7
+
+
+def test_an_old_snapshot_override_on_saves_state_is_not_bypassed(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    from agents.behavior_state import SavesState
+
+    class AddsToItsState(SavesState):
+        state_attributes = ("count",)
+
+        def __init__(self) -> None:
+            self.count = 3
+
+        def step(self, *args: Any) -> None:
+            return None
+
+        def snapshot(self) -> dict[str, Any]:
+            return {**self.checkpoint(), "extra": 1}
+
+    sc = casting_scenario()
+    ap = build_autopilot(sc, "uav1", AutopilotOptions())
+    ap.behavior = AddsToItsState()
+    saved = capture(ap, ConcentrationSensor(sc.sensor, 0, 0))
+    assert saved.behavior is not None
+    assert msgspec.msgpack.decode(saved.behavior.data) == {"count": 3, "extra": 1}
+    assert any("AddsToItsState: snapshot() is deprecated" in r.getMessage() for r in caplog.records)
+
+
 def test_slots_keep_the_previous_record_when_the_newest_is_torn(tmp_path: Path) -> None:
-    slots = SnapshotSlots(tmp_path / "ap.state")
+    slots = CheckpointSlots(tmp_path / "ap.state")
     slots.open()
     for k in range(5):
         slots.write(f"record {k}".encode() * (k + 1))
@@ -267,7 +331,7 @@ def test_slots_keep_the_previous_record_when_the_newest_is_torn(tmp_path: Path) 
     newest.write_bytes(bytes(data))
     assert [p for _, p in slots.read_all()] == [b"record 3" * 4]
     slots.close()
-    again = SnapshotSlots(tmp_path / "ap.state")
+    again = CheckpointSlots(tmp_path / "ap.state")
     again.open()  # a restarted writer goes on after the records it found
     again.write(b"next")
     assert next(p for _, p in again.read_all()) == b"next"
@@ -301,7 +365,7 @@ def test_saved_state_comes_back_with_the_same_types_and_bits() -> None:
     a.estimate = SourceEstimate(x_m=1.5, y_m=-2.0, sim_time_s=3.0, spread_m=0.25)
     a.sweep.side, a.sweep.anchor_across_m, a.sweep.half_width_m = -1.0, 4.0, 8.0
     a.counts = {"hits": [1, 2]}
-    data = msgspec.msgpack.decode(msgspec.msgpack.encode(a.snapshot()))
+    data = msgspec.msgpack.decode(msgspec.msgpack.encode(a.checkpoint()))
     b = Holder(99, 2.0)
     b.restore(data)
     assert b.speed == 2.0
@@ -316,10 +380,10 @@ def test_saved_state_comes_back_with_the_same_types_and_bits() -> None:
 
 
 def test_each_mission_is_encoded_once_however_many_vehicles_a_process_serves() -> None:
-    """Every tick's snapshot holds each served vehicle's mission; a mission list (replaced on
+    """Every tick's checkpoint holds each served vehicle's mission; a mission list (replaced on
     upload, never changed in place) is encoded once while it is in use — here 300 vehicles'
     missions asked for in turn, tick after tick, each answered with its first encoding."""
-    from agents.snapshot import _items_raw
+    from agents.checkpoint import _items_raw
 
     missions = [[MissionItem(x=float(v), y=float(i), z=10.0) for i in range(5)] for v in range(300)]
     first = [_items_raw(items) for items in missions]
@@ -343,8 +407,8 @@ def _uploaded(items: int, vertices: int) -> Autopilot:
     return ap
 
 
-def test_a_ticks_snapshot_does_not_grow_with_the_mission_or_the_fence() -> None:
-    """Missions and fences are saved by reference: a vehicle's snapshot with 1000 mission
+def test_a_ticks_checkpoint_does_not_grow_with_the_mission_or_the_fence() -> None:
+    """Missions and fences are saved by reference: a vehicle's checkpoint with 1000 mission
     items and a 200-vertex fence is as long as one with 2 items and a triangle (it was
     ≈ 60 kB longer when the lists were in every tick's record)."""
     sc = load_scenario()
@@ -356,7 +420,7 @@ def test_a_ticks_snapshot_does_not_grow_with_the_mission_or_the_fence() -> None:
     assert size[1] == size[0]
     back = msgspec.msgpack.decode(
         msgspec.msgpack.encode(capture(large, ConcentrationSensor(sc.sensor, 0, 0))),
-        type=VehicleSnapshot,
+        type=VehicleCheckpoint,
     )
     fresh = build_autopilot(sc, "uav1", AutopilotOptions())
     restore(fresh, ConcentrationSensor(sc.sensor, 0, 0), back)
@@ -370,7 +434,7 @@ def test_the_blob_log_gives_a_restarted_process_its_lists_and_survives_a_torn_ap
 ) -> None:
     """A new process (its own Blobs) reads the lists back by their keys; an append cut short
     by a kill is cut off, and what is appended after it reads back."""
-    from agents.snapshot_store import BlobLog, Blobs
+    from agents.checkpoint_store import BlobLog, Blobs
 
     path = tmp_path / "ap.state.blobs"
     first = Blobs()
@@ -405,16 +469,16 @@ def test_the_blob_log_gives_a_restarted_process_its_lists_and_survives_a_torn_ap
     assert set(third.by_key) == {*keys, late}
 
 
-def test_a_restarted_keeper_restores_only_snapshots_whose_lists_it_has(tmp_path: Path) -> None:
+def test_a_restarted_keeper_restores_only_checkpoints_whose_lists_it_has(tmp_path: Path) -> None:
+    from agents.checkpoint import ProcessCheckpoint
     from agents.resume import StateKeeper
-    from agents.snapshot import ProcessSnapshot
 
     sc = load_scenario()
     v = capture(_uploaded(300, 12), ConcentrationSensor(sc.sensor, 0, 0))
     lost = msgspec.structs.replace(v, scenario_mission="0" * 32)  # a list never saved
 
-    def record(tick: int, vehicle: VehicleSnapshot) -> bytes:
-        snap = ProcessSnapshot(
+    def record(tick: int, vehicle: VehicleCheckpoint) -> bytes:
+        snap = ProcessCheckpoint(
             node="ap",
             tick=tick,
             vehicles=[vehicle],
