@@ -280,7 +280,7 @@ def test_a_behaviours_old_snapshot_method_is_still_saved_with_one_deprecation_li
     sensor = ConcentrationSensor(sc.sensor, 0, 0)
     saved = [capture(ap, sensor) for _ in range(3)]
     assert all(s.behavior is not None for s in saved)
-    assert msgspec.msgpack.decode(saved[0].behavior.data) == {"count": 7}  # type: ignore[union-attr]
+    assert msgspec.msgpack.decode(saved[0].behavior.data) == {"count": 7}
     lines = [r.getMessage() for r in caplog.records if "SavesWithTheOldName" in r.getMessage()]
     assert lines == [
         "behaviour SavesWithTheOldName: snapshot() is deprecated, name it checkpoint(); it is "
