@@ -34,7 +34,7 @@ from agents.node_events import Idle, Inbox, PendingSensor, Tick, TickArrived
 from agents.resume import StateKeeper
 from plume_atmosphere.wind import WindModel, wind_from_scenario
 from swarmbus.catchup import CatchUpPublisher, RouterOutage, watch_router
-from swarmbus.codec import MessageError, decode, encode
+from swarmbus.codec import MessageError, decode, encode, refusals
 from swarmbus.keys import Keys, autopilot_node
 from swarmbus.messages import (
     ActuatorBatch,
@@ -262,7 +262,8 @@ class AutopilotNode:
                 # (the partial view leaves the other vehicles' states unchecked).
                 decode(data, SimTick)
         except MessageError as exc:
-            log.warning("ignoring bad tick: %s", exc)
+            key = self.keys.tick()
+            refusals(log).refuse(key, f"bad tick on {key}", exc)
             return
         try:
             self.on_tick(tick)

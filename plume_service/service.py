@@ -332,7 +332,9 @@ def _start_state_publisher(
     publisher = rt.session.declare_publisher(rt.keys.plume_state())
 
     def on_clock(sample: zenoh.Sample) -> None:
-        clock = decode_or_none(sample.payload.to_bytes(), Clock, "a clock message", log)
+        clock = decode_or_none(
+            sample.payload.to_bytes(), Clock, "a clock message", log, str(sample.key_expr)
+        )
         if clock is None:
             return
         states.on_clock(clock.sim_time_s)

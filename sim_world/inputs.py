@@ -188,8 +188,10 @@ class LockstepInputs:
 
     def _on_restart_notice(self, sample: zenoh.Sample) -> None:
         """The launcher's word on a process that ended: hold or drop its vehicles."""
-        what = f"restart notice on {sample.key_expr}"
-        notice = decode_or_none(sample.payload.to_bytes(), RestartNotice, what, log)
+        key = str(sample.key_expr)
+        notice = decode_or_none(
+            sample.payload.to_bytes(), RestartNotice, "restart notice", log, key
+        )
         if notice is None:
             return
         holds = self.holds
