@@ -61,6 +61,8 @@ class RecorderOptions(RoleOptions, frozen=True, kw_only=True):
     chunk_bytes: Annotated[int, msgspec.Meta(ge=1, le=2**31)] = DEFAULT_CHUNK_BYTES
     max_backlog: Annotated[int, msgspec.Meta(ge=1, le=10**9)] = 2_000_000
     """Hard limit of queued messages (memory), then drop and count."""
+    max_backlog_bytes: Annotated[int, msgspec.Meta(ge=2**20, le=2**40)] = 256 * 2**20
+    """Hard limit of queued payload bytes (memory), then drop and count."""
     behind_backlog: Annotated[int, msgspec.Meta(ge=1, le=10**9)] = 50_000
     """Falling behind above this many queued messages …"""
     behind_age_s: Annotated[float, msgspec.Meta(gt=0.0, le=3600.0)] = 2.0
@@ -150,6 +152,7 @@ class Recorder:
         self._dropped_total = 0
         self._taken_total = 0
         self._dropped_reported = 0
+        self._queued_bytes = 0  # payload bytes queued, not yet written
         self._behind = False
         self._stopping = threading.Event()
         self._thread = threading.Thread(target=self._run, name="recorder-writer", daemon=True)
@@ -180,7 +183,10 @@ class Recorder:
             self._on_backfill(original, sample, now)
             return
         with self._lock:
-            if self._received_total - self._taken_total >= self._opts.max_backlog:
+            if (
+                self._received_total - self._taken_total >= self._opts.max_backlog
+                or self._queued_bytes + len(sample.payload) > self._opts.max_backlog_bytes
+            ):
                 self.dropped[key] += 1
                 self._dropped_total += 1
                 return
@@ -194,6 +200,7 @@ class Recorder:
         """Stamp, spool and queue one message (the caller holds the lock: one order for all)."""
         self._last_log_ns = now_ns = max(now_ns, self._last_log_ns + 1)
         item = (key, payload, now_ns, publish_ns, is_reply)
+        self._queued_bytes += len(payload)
         if self._spool is not None:
             self._spool.append(item)
         self._queue.put(item)
@@ -331,6 +338,8 @@ class Recorder:
     def _write(self, item: Item) -> None:
         key, payload, log_time_ns, publish_ns, is_reply = item
         self._written_ns = log_time_ns
+        with self._lock:
+            self._queued_bytes -= len(payload)
         if is_reply:
             reply = sch.decode_bus(payload)
             self._sink.write_reply(key, reply, log_time_ns)
@@ -408,7 +417,10 @@ class Recorder:
         with self._lock:
             dropped = self._dropped_total
         if dropped > self._dropped_reported:
-            detail = f"{dropped - self._dropped_reported} messages dropped (queue full)"
+            detail = (
+                f"{dropped - self._dropped_reported} messages dropped (queue full: at most "
+                f"{self._opts.max_backlog} messages, {self._opts.max_backlog_bytes} bytes)"
+            )
             log.error("RECORDER DROPPED MESSAGES: %s; %d in total", detail, dropped)
             self._sink.write_event(self._event(sch.EventKind.DROPPED, detail))
             self._dropped_reported = dropped
