@@ -18,9 +18,10 @@ from pathlib import Path
 import zenoh
 
 from deploy.busview import BusView
+from deploy.launcher import LaunchOptions
 from swarmbus.keys import Keys
 from swarmbus.session import free_tcp_port
-from tests.support.procs import REPO, wait_until
+from tests.support.procs import NODE_COMMAND, REPO, wait_until
 
 
 @dataclass
@@ -65,6 +66,20 @@ class StackOnBus:
     view: BusView
     gcs_port: int
     lock: threading.Lock = field(default_factory=threading.Lock)
+
+
+def recording_stack(scenario_path: Path, run_dir: Path, endpoint: str) -> LaunchOptions:
+    """The launcher's options for a headless stack under ``--record`` on ``endpoint``: router,
+    recorder, plume, physics and the autopilots (no gateway, no viewer)."""
+    return LaunchOptions(
+        node_command=NODE_COMMAND,
+        scenario_path=scenario_path,
+        headless=True,
+        record=True,
+        run_dir=run_dir,
+        connect=(endpoint,),
+        roles=("router", "recorder", "plume", "physics", "autopilot"),
+    )
 
 
 def spawn_up(args: Sequence[str], out: Path) -> subprocess.Popen[bytes]:
