@@ -20,6 +20,7 @@ from typing import Protocol
 
 import numpy as np
 
+from agents.peer_link import Mailbox
 from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
 from swarmbus.scenario import Scenario
 
@@ -38,11 +39,16 @@ class SourceEstimate:
 
 @dataclass(frozen=True)
 class BehaviorContext:
+    """What a behaviour is built with. ``mailbox``: its end of the radio to its peers
+    (:class:`agents.peer_link.Mailbox`: publish a small typed message, read theirs), where the
+    runner carries peer messages; ``None`` where it does not."""
+
     vehicle_id: str
     vehicle_index: int
     scenario: Scenario
     control_dt_s: float
     rng: np.random.Generator
+    mailbox: Mailbox | None = None
 
 
 class Behavior(Protocol):

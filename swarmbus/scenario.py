@@ -18,6 +18,7 @@ from plume_atmosphere.calibration import AtmosphereCalibration, derive_calibrati
 from plume_atmosphere.gases import FORMULAS
 from swarmbus.codec import split_validation_error
 from swarmbus.errors import FieldError
+from swarmbus.radio import RadioSpec
 from swarmbus.scenario_spec import (
     DEFAULT_SCENARIO,
     GSL_ENVIRONMENTS_DIR,
@@ -69,6 +70,7 @@ __all__ = [
     "PlumeFilament",
     "PlumeModel",
     "PlumePuff",
+    "RadioSpec",
     "Scenario",
     "ScenarioError",
     "Sensor",
