@@ -20,7 +20,7 @@ import msgspec
 import zenoh
 
 from agents.anemometer import Anemometer
-from agents.behavior import BehaviorError
+from agents.behavior import BehaviorError, talks
 from agents.build import AutopilotOptions, build_flight, vehicle_index
 from agents.flight import take_readings
 from agents.node_events import Idle, Inbox, PendingSensor, Tick, TickArrived
@@ -518,6 +518,21 @@ def main(ctx: NodeContext) -> int:
             radio.latency_ticks,
         )
         return 2
+    for vid in ctx.vehicle_ids:
+        spec = ctx.scenario.vehicle(vid).behavior
+        try:
+            talking = spec is not None and talks(spec)
+        except BehaviorError as exc:
+            log.error("autopilot: %s", exc)
+            return 2
+        if talking:
+            log.error(
+                "autopilot: %s: behavior %r talks to its peers over the radio, which this "
+                "process does not carry; fly it in the fused runner or bench gsl",
+                vid,
+                spec,
+            )
+            return 2
     # Before the session opens (Zenoh reads it once, when its runtime starts); an operator's
     # own ZENOH_RUNTIME wins.
     os.environ.setdefault("ZENOH_RUNTIME", SINGLE_THREAD_RUNTIME)

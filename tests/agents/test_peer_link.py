@@ -145,15 +145,28 @@ def test_a_lossy_radio_changes_what_the_swarm_sees_and_the_same_spec_repeats() -
     assert a.estimate_xy != b.estimate_xy
 
 
-def test_the_autopilot_process_refuses_a_lossy_radio_for_a_behaviour(tmp_path: Path) -> None:
-    path = tmp_path / "lossy.toml"
-    path.write_text(
-        '[radio]\nloss = 0.2\n\n[[vehicles]]\nid = "uav1"\n'
-        'behavior = "agents.behaviors.casting:Casting"\n'
-    )
+@pytest.mark.parametrize(
+    ("radio", "behavior", "says"),
+    [
+        (
+            "[radio]\nloss = 0.2\n\n",
+            "casting:Casting",
+            "[radio] range_m=0 loss=0.2 latency_ticks=0",
+        ),
+        ("", "coop_surge_cast:CooperativeSurgeCast", "talks to its peers over the radio"),
+    ],
+    ids=["lossy-radio", "talking-behaviour"],
+)
+def test_the_autopilot_process_refuses_what_it_cannot_carry(
+    tmp_path: Path, radio: str, behavior: str, says: str
+) -> None:
+    """The process hands peers over a perfect link and carries no behaviour messages: a lossy
+    radio or a behaviour that talks is refused in one line, before it joins the bus."""
+    path = tmp_path / "scenario.toml"
+    path.write_text(f'{radio}[[vehicles]]\nid = "uav1"\nbehavior = "agents.behaviors.{behavior}"\n')
     res = run_cli(["node", "autopilot", "-s", str(path), "--vehicle", "uav1"], timeout_s=60)
     assert res.returncode == 2
-    assert "[radio] range_m=0 loss=0.2 latency_ticks=0" in res.stderr
+    assert says in res.stderr
     assert "Traceback" not in res.stderr
 
 
