@@ -7,14 +7,15 @@ import sys
 import types
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import msgspec
 import pytest
 
-from agents.peer_link import PeerLink, RadioError, Received
+from agents.peer_link import MESSAGE_INDEX, PeerLink, RadioError, Received
+from plumeswarm.experiments.fused import FusedRunner
 from plumeswarm.gsl.episode import EpisodeSpec, kinematic_episode
-from swarmbus.messages import PeerReading, VehicleState
+from swarmbus.messages import Arm, FlightMode, PeerReading, SetMode, Setpoint, VehicleState
 from swarmbus.radio import Radio, RadioSpec
 from swarmbus.scenario import Scenario, VehicleSpec
 from tests.support.messages_samples import reading, vehicle_state
@@ -195,3 +196,69 @@ def test_the_docs_example_behaviour_talks_to_its_peers_in_an_episode() -> None:
     assert heard, "no vehicle heard a peer's detection"
     assert {type(r.message).__name__ for r in heard} == {"Detection"}
     assert len({r.sender for r in heard}) >= 2
+
+
+class Chatter:
+    """A behaviour that holds where it is, says its tick each step, and keeps what it saw."""
+
+    seen: ClassVar[dict[str, list[tuple[int, list[tuple[str, int]], list[Received]]]]] = {}
+
+    def __init__(self, ctx: Any) -> None:
+        self.vid, self.mailbox = ctx.vehicle_id, ctx.mailbox
+        Chatter.seen[self.vid] = []
+
+    def step(self, own: VehicleState, peers: Any, readings: Any) -> Setpoint:
+        inbox = list(self.mailbox.inbox)
+        Chatter.seen[self.vid].append((own.tick, [(p.vehicle_id, p.tick) for p in peers], inbox))
+        self.mailbox.publish(Tick(tick=own.tick))
+        return Setpoint(position_enu_m=own.position_enu_m)
+
+
+class Tick(msgspec.Struct, frozen=True):
+    tick: int
+
+
+def test_the_fused_runner_hands_peers_and_messages_over_the_radio() -> None:
+    """Three vehicles armed in offboard with a behaviour: each step's peers are the newest
+    states the radio delivered (its own decisions, asked here independently) and each
+    message arrives 1 + latency ticks after the step that published it, if delivered."""
+    spec = RadioSpec(loss=0.4, latency_ticks=3)
+    base = scenario(spec, seed=4)
+    behavior = "tests.agents.test_peer_link:Chatter"
+    sc = msgspec.structs.replace(
+        base,
+        vehicles=[
+            VehicleSpec(id=v, behavior=behavior, spawn_enu_m=(5.0 * i, 0.0, 0.0))
+            for i, v in enumerate(IDS)
+        ],
+    )
+    with FusedRunner(sc) as runner:
+        for vid in IDS:
+            assert runner.command(vid, Arm()).accepted
+            assert runner.command(vid, SetMode(mode=FlightMode.OFFBOARD)).accepted
+        runner.step(30)
+    radio = Radio(spec, seed=4)
+    for receiver in IDS:
+        steps = Chatter.seen[receiver]
+        assert [t for t, _, _ in steps] == list(range(1, 31))
+        for tick, peers, inbox in steps:
+            expected_peers = []
+            for sender in IDS:
+                sent = [
+                    t
+                    for t in range(tick - spec.latency_ticks + 1)
+                    if sender != receiver and radio.delivers(t, sender, receiver)
+                ]
+                if sent:
+                    expected_peers.append((sender, sent[-1]))
+            assert peers == expected_peers
+            sent_tick = tick - 1 - spec.latency_ticks
+            expected_inbox = [
+                (s, sent_tick)
+                for s in IDS
+                if s != receiver
+                and sent_tick >= 1
+                and radio.delivers(sent_tick, s, receiver, MESSAGE_INDEX)
+            ]
+            assert sorted((r.sender, r.sent_tick) for r in inbox) == expected_inbox
+            assert all(r.message == Tick(tick=r.sent_tick) for r in inbox)
