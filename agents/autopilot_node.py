@@ -20,7 +20,7 @@ import msgspec
 import zenoh
 
 from agents.anemometer import Anemometer
-from agents.behavior import BehaviorError
+from agents.behavior import BehaviorError, talks
 from agents.build import AutopilotOptions, build_flight, vehicle_index
 from agents.checkpoint import (
     CheckpointError,
@@ -513,6 +513,32 @@ def main(ctx: NodeContext) -> int:
     except (OptionError, KeyError) as exc:
         log.error("autopilot: %s", exc)
         return 2
+    radio = ctx.scenario.radio
+    if not radio.perfect and any(ctx.scenario.vehicle(v).behavior for v in ctx.vehicle_ids):
+        log.error(
+            "autopilot: [radio] range_m=%g loss=%g latency_ticks=%d: this process hands its "
+            "behaviours their peers over a perfect link only; valid here: range_m=0 loss=0 "
+            "latency_ticks=0 (a lossy radio runs in the fused runner and bench gsl)",
+            radio.range_m,
+            radio.loss,
+            radio.latency_ticks,
+        )
+        return 2
+    for vid in ctx.vehicle_ids:
+        spec = ctx.scenario.vehicle(vid).behavior
+        try:
+            talking = spec is not None and talks(spec)
+        except BehaviorError as exc:
+            log.error("autopilot: %s", exc)
+            return 2
+        if talking:
+            log.error(
+                "autopilot: %s: behavior %r talks to its peers over the radio, which this "
+                "process does not carry; fly it in the fused runner or bench gsl",
+                vid,
+                spec,
+            )
+            return 2
     # Before the session opens (Zenoh reads it once, when its runtime starts); an operator's
     # own ZENOH_RUNTIME wins.
     os.environ.setdefault("ZENOH_RUNTIME", SINGLE_THREAD_RUNTIME)

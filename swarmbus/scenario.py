@@ -19,6 +19,7 @@ from plume_atmosphere.calibration import AtmosphereCalibration, derive_calibrati
 from plume_atmosphere.gases import FORMULAS
 from swarmbus.codec import split_validation_error
 from swarmbus.errors import FieldError
+from swarmbus.radio import RadioSpec
 from swarmbus.scenario_spec import (
     DEFAULT_SCENARIO,
     GSL_ENVIRONMENTS_DIR,
@@ -72,6 +73,7 @@ __all__ = [
     "PlumeFilament",
     "PlumeModel",
     "PlumePuff",
+    "RadioSpec",
     "Scenario",
     "ScenarioError",
     "Sensor",

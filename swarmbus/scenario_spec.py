@@ -13,6 +13,7 @@ import msgspec
 
 from plume_atmosphere.gases import ppm_per_g_m3
 from swarmbus.messages import MissionItem
+from swarmbus.radio import RadioSpec
 from swarmbus.session import NetworkConfig
 
 SCENARIOS_DIR = Path(__file__).resolve().with_name("scenarios")
@@ -358,6 +359,7 @@ class Scenario(_Section, frozen=True, kw_only=True):
     failsafe: Failsafe = Failsafe()
     gateway: GatewaySpec = GatewaySpec()
     env: Env = Env()
+    radio: RadioSpec = RadioSpec()  # the link between vehicles (default: perfect)
     vehicles: Annotated[list[VehicleSpec], msgspec.Meta(min_length=1, max_length=MAX_VEHICLES)]
 
     def vehicle(self, vehicle_id: str) -> VehicleSpec:

@@ -71,6 +71,13 @@ class GslOptions:
     jobs: int = 2
     configs: tuple[Algorithm, ...] = ()  # per algorithm
     asked: tuple[str, ...] = ()  # --algorithms as given, for the command line
+    vehicles: int = 0  # how many fly each algorithm; 0: its own number
+    radio: tuple[tuple[str, Any], ...] = ()  # "radio.key" overrides of every environment
+
+    def radio_text(self) -> str:
+        """``--radio`` as given to :func:`parse_radio` ("" for the default link)."""
+        names = {v: k for k, v in RADIO_KEYS.items()}
+        return ",".join(f"{names[k]}={v:g}" for k, v in self.radio)
 
     def config(self, algorithm: str) -> Algorithm:
         return self.configs[self.algorithms.index(algorithm)]
@@ -108,6 +115,34 @@ def _environments(asked: Sequence[str]) -> tuple[str, ...]:
     return tuple(asked)
 
 
+#: ``--radio`` keys and the ``[radio]`` fields they set (docs/agents.md, "The radio").
+RADIO_KEYS = {
+    "range": "radio.range_m",
+    "loss": "radio.loss",
+    "latency": "radio.latency_ticks",
+    "bytes": "radio.max_message_bytes",
+}
+
+
+def parse_radio(text: str) -> tuple[tuple[str, Any], ...]:
+    """``loss=0.2,latency=12,range=80,bytes=255`` as ``[radio]`` overrides; :class:`GslError`
+    names a bad key or value."""
+    out: list[tuple[str, Any]] = []
+    for part in (p.strip() for p in text.split(",") if p.strip()):
+        key, sep, value = part.partition("=")
+        if not sep or key.strip() not in RADIO_KEYS:
+            raise GslError(
+                f"--radio {part!r}: expected KEY=VALUE, KEY one of {', '.join(RADIO_KEYS)}"
+            )
+        field = RADIO_KEYS[key.strip()]
+        try:
+            number: Any = int(value) if field.endswith(("_ticks", "_bytes")) else float(value)
+        except ValueError:
+            raise GslError(f"--radio {part!r}: {value!r} is not a number") from None
+        out.append((field, number))
+    return tuple(out)
+
+
 def make_options(
     algorithms: Sequence[str],
     environments: Sequence[str],
@@ -125,6 +160,13 @@ def make_options(
         kwargs["sensor_period_ticks"] = max(1, hz // FULL_SENSOR_HZ)
     names, configs = _algorithms(algorithms)
     asked = tuple(a for a in algorithms if a != "all")
+    radio = kwargs.get("radio", ())
+    if isinstance(radio, str):
+        kwargs["radio"] = radio = parse_radio(radio)
+    if radio:
+        load_environment(envs[0], radio)  # GslError: a value out of range
+    if kwargs.get("vehicles") is None:
+        kwargs["vehicles"] = 0
     return GslOptions(
         algorithms=names,
         environments=envs,
@@ -171,7 +213,8 @@ def specs_of(opts: GslOptions, **fields: Any) -> list[EpisodeSpec]:
                 keep_trajectory=run == 0,
                 dynamics=opts.dynamics,
                 behavior=algo.behavior,
-                vehicles=algo.vehicles,
+                vehicles=opts.vehicles or algo.vehicles,
+                overrides=opts.radio,
             )
             specs.append(replace(spec, **fields))
     return specs
@@ -244,6 +287,7 @@ def row_of(outcomes: Sequence[Outcome]) -> dict[str, Any]:
         ),
         "dynamics": spec.dynamics,
         "vehicles": spec.vehicles or spec.algorithm_config().vehicles,
+        **({"radio": dict(spec.overrides)} if spec.overrides else {}),
         **summarise(outcomes),
     }
 
@@ -370,6 +414,10 @@ def command_line(opts: GslOptions, sub: str = "") -> str:
     parts.append(f"--environments {','.join(opts.environments)}")
     parts.append(f"--sensors {','.join(opts.sensors)}")
     parts.append(f"--runs {opts.runs} --seed {opts.seed}")
+    if opts.vehicles:
+        parts.append(f"--vehicles {opts.vehicles}")
+    if opts.radio:
+        parts.append(f"--radio {opts.radio_text()}")
     if opts.time_limit_s != 300.0:
         parts.append(f"--time-limit {opts.time_limit_s:g}")
     parts.append(f"--dynamics {opts.dynamics}")
@@ -387,8 +435,11 @@ def seed_note(opts: GslOptions) -> str:
 
 
 def protocol_line(opts: GslOptions) -> str:
+    swarm = f"{opts.vehicles} vehicles per algorithm, " if opts.vehicles else ""
+    radio = f"radio {opts.radio_text()} (docs/agents.md), " if opts.radio else ""
     return (
-        f"{opts.runs} runs per cell, seed {opts.seed}, dynamics {opts.dynamics} "
+        f"{opts.runs} runs per cell, {swarm}{radio}"
+        f"seed {opts.seed}, dynamics {opts.dynamics} "
         f"(control {opts.control_hz} Hz, sensor every {opts.sensor_period_ticks} ticks), "
         f"limit {opts.time_limit_s:g} s, starts 30–80 m downwind and ±20 m crosswind at 10 m "
         "(run k: the same start for every algorithm), a time-dependent release running "

@@ -79,6 +79,11 @@ BUILTIN_ALGORITHMS: dict[str, Algorithm] = {
     "particle_filter": Algorithm(
         "agents.behaviors.particle_filter:ParticleFilter", 1, "Hutchinson, Oh & Chen 2017"
     ),
+    "coop_surge_cast": Algorithm(
+        "agents.behaviors.coop_surge_cast:CooperativeSurgeCast",
+        3,
+        "Lochmatter & Martinoli 2008; detections shared over the radio",
+    ),
     "oracle": Algorithm("agents.behaviors.oracle:Oracle", 1, "knows the source (ceiling)"),
 }
 

@@ -93,7 +93,7 @@ def value_specs(opts: GslOptions, name: str, value: Any) -> list[EpisodeSpec]:
         if not isinstance(value, int | float) or not 0 < value <= 1000:
             raise GslError(f"{START_PARAM}={value!r}: metres downwind, in (0, 1000]")
         return specs_of(opts, start_along_m=(float(value), float(value)))
-    overrides = ((name, value),)
+    overrides = (*opts.radio, (name, value))
     for env in opts.environments:
         load_environment(env, overrides)  # GslError: no such field, or a bad value
     return specs_of(opts, overrides=overrides)
