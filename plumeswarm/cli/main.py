@@ -162,14 +162,35 @@ def scenario_schema() -> None:
 
 
 # ---------------------------------------------------------------------------- node
-@cli.command()
-@click.argument("role", type=click.Choice([*sorted(ROLES), *sorted(BENCH_ROLES)]))
+class RoleChoice(click.Choice[str]):
+    """The roles: the public ones in help, completion and errors; the bench's stand-ins
+    (``ceiling-*``, internal) accepted when given but never shown."""
+
+    def __init__(self, shown: list[str], hidden: list[str]) -> None:
+        super().__init__(shown)
+        self.hidden = frozenset(hidden)
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Any:
+        if value in self.hidden:
+            return value
+        return super().convert(value, param, ctx)
+
+
+@cli.command(
+    help=f"Run one ROLE alone (for deployments across machines). ROLE: {', '.join(sorted(ROLES))}."
+)
+@click.argument("role", metavar="ROLE", type=RoleChoice(sorted(ROLES), sorted(BENCH_ROLES)))
 @SCENARIO_OPT
 @click.option("--vehicle", "vehicles", multiple=True, help="Vehicle id(s) this node serves.")
 @click.option("--name", default=None, help="Node name on the bus (default: derived from role).")
 @connect_option
 @click.option("--listen", multiple=True, help="Zenoh endpoint to listen on (repeatable).")
-@click.option("--mode", type=click.Choice(["peer", "client", "router"]), default=None)
+@click.option(
+    "--mode",
+    type=click.Choice(["peer", "client", "router"]),
+    default=None,
+    help="Zenoh mode of this node (default: the scenario's network.mode).",
+)
 @click.option("--set", "options", multiple=True, metavar="KEY=VALUE", help="Role option.")
 @HOSTS_FILE_OPT
 @HOST_OPT
@@ -185,7 +206,6 @@ def node(
     hosts_file: Path | None,
     host_name: str | None,
 ) -> None:
-    """Run one ROLE alone (for deployments across machines)."""
     from swarmbus.keys import KeyNameError, check_name, process_node
     from swarmbus.node import NodeContext
     from swarmbus.options import OptionError, split_settings
@@ -254,8 +274,8 @@ def _optional_role(flag: tuple[str, str, str], value: tuple[str, click.IntRange,
 @click.option("--listen", multiple=True, help="Endpoint every node listens on.")
 @click.option("--roles", default=None, help="Only these roles, comma-separated (one host of many).")
 @click.option("--no-router", is_flag=True, help="Do not start a router (another host runs it).")
-@click.option("--hosts", "hosts_file", type=click.Path(path_type=Path), default=None)
-@click.option("--host", "host_name", default=None, help="This host's entry in --hosts.")
+@HOSTS_FILE_OPT
+@HOST_OPT
 @vehicles_per_process_option("Vehicles each autopilot process serves.")
 @click.option(
     "--stepped",
@@ -354,7 +374,14 @@ def _up_node_options(
 @SCENARIO_OPT
 @click.option("--vehicles", type=click.IntRange(1, 1024), default=None, help="Scale to N vehicles.")
 @click.option("--out", type=click.Path(path_type=Path), default=None, help="Run directory.")
-@click.option("--timeout", "timeout_s", type=float, default=900.0, show_default=True)
+@click.option(
+    "--timeout",
+    "timeout_s",
+    type=float,
+    default=900.0,
+    show_default=True,
+    help="Wall seconds the flight may take; past them the demo stops and reports what it flew.",
+)
 @click.option("--attach", multiple=True, metavar="EP", help="Fly a stack already running here.")
 @click.option(
     "--record/--no-record", default=True, help="Record the run (when the recorder exists)."
@@ -410,7 +437,14 @@ def demo(
 @SCENARIO_OPT
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
 @click.option("--connect", multiple=True, help="Router endpoint (default: the scenario's).")
-@click.option("--timeout", "timeout_s", type=float, default=5.0, show_default=True)
+@click.option(
+    "--timeout",
+    "timeout_s",
+    type=float,
+    default=5.0,
+    show_default=True,
+    help="Wall seconds to wait for answers from the bus.",
+)
 @HOSTS_FILE_OPT
 @HOST_OPT
 def status(
@@ -440,7 +474,12 @@ def status(
 @cli.command()
 @SCENARIO_OPT
 @connect_option
-@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None)
+@click.option(
+    "--out",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="MCAP file to write (default: recording.mcap in the current directory).",
+)
 def record(scenario: str | None, connect: tuple[str, ...], out: Path | None) -> None:
     """Record everything on the bus to an MCAP file (until Ctrl-C)."""
     from plumeswarm.cli import recording as commands
@@ -472,7 +511,12 @@ def replay(
 
 @cli.command()
 @click.argument("file")
-@click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path))
+@click.option(
+    "--out",
+    required=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Directory to write the plots, CSV and report to.",
+)
 def report(file: str, out: Path) -> None:
     """Plots, CSV and a one-page report from a recording."""
     from plumeswarm.cli import recording as commands
