@@ -172,3 +172,32 @@ def test_a_bad_set_is_one_line_naming_the_key(tmp_path: Path, command: str, case
     assert len(lines) == 1 and lines[0].startswith("plumeswarm: error: "), shown
     assert named in lines[0], shown
     assert not (tmp_path / "run").exists() or not any((tmp_path / "run").iterdir()), shown
+
+
+def _properties(node: object, where: str) -> list[tuple[str, dict[str, object]]]:
+    """Every ``properties`` entry anywhere in a JSON Schema, with where it is."""
+    found: list[tuple[str, dict[str, object]]] = []
+    if isinstance(node, dict):
+        for key, prop in (node.get("properties") or {}).items():
+            found.append((f"{where}.{key}", prop))
+        for key, value in node.items():
+            found += _properties(value, f"{where}/{key}")
+    elif isinstance(node, list):
+        for i, value in enumerate(node):
+            found += _properties(value, f"{where}[{i}]")
+    return found
+
+
+def test_schema_describes_every_field_and_every_section() -> None:
+    res = run_cli(["scenario", "schema"], timeout_s=60)
+    assert res.returncode == 0, res.stderr
+    schema = json.loads(res.stdout)
+    props = _properties(schema, "")
+    # every section of a file is in it (the walk reaches them), with its fields
+    raw = tomllib.loads((SCENARIOS_DIR / "filament.toml").read_text())
+    named = {where.rsplit(".", 1)[1] for where, _ in props}
+    assert set(raw) <= named and set(raw["wind"]) <= named, sorted(named)
+    bare = [where for where, prop in props if not str(prop.get("description", "")).strip()]
+    assert bare == [], f"fields without a description: {', '.join(bare)}"
+    sections = [name for name, d in schema["$defs"].items() if not d.get("description")]
+    assert sections == [], f"sections without a description: {', '.join(sections)}"
