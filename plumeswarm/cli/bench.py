@@ -193,8 +193,8 @@ def _gsl_options(seed_default: int) -> Callable[[Callable[..., None]], Callable[
     rows: list[tuple[str, Any, object, str | None]] = [
         ("--algorithms", None, "all", "Comma-separated names, name=module:Class, or 'all'; "
          "random_walk and oracle always run."),
-        ("--environments", None, "all", "Comma-separated names (swarmbus/scenarios/gsl) or "
-         "scenario paths, or 'all'."),
+        ("--environments", None, "all", "Comma-separated names (NAME or gsl/NAME, as "
+         "`plumeswarm scenario list` shows them), scenario paths, or 'all'."),
         ("--sensors", None, "all", "Comma-separated, or 'all' available."),
         ("--runs", click.IntRange(min=1), 30, "Seeded runs per cell (algorithm × environment "
          "× sensor)."),
