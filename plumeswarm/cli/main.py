@@ -111,8 +111,8 @@ def scenario() -> None:
 @click.argument("file", metavar="FILE|NAME", type=click.Path(dir_okay=True, path_type=Path))
 @SET_OPT
 def scenario_check(file: Path, scenario_overrides: tuple[str, ...]) -> None:
-    """Validate FILE (or a bundled scenario's NAME); print a one-line summary, or one line
-    naming the bad field."""
+    """Validate FILE (or a bundled scenario's NAME, as `scenario list` shows it); print a
+    one-line summary, or one line naming the bad field, its value and the valid values."""
     sc = scenario_from(str(file), scenario_overrides)
     click.echo(
         f"{file}: ok — world {sc.world.name!r}, {len(sc.vehicles)} vehicle(s), "
@@ -130,7 +130,8 @@ def scenario_check(file: Path, scenario_overrides: tuple[str, ...]) -> None:
     help="List the scenario files (*.toml) of this directory instead of the bundled ones.",
 )
 def scenario_list(directory: Path | None) -> None:
-    """The bundled scenarios (or DIR's), one a line: name, vehicles, plume, first comment line."""
+    """The bundled scenarios, then the benchmark environments as gsl/NAME (NAME alone also
+    names one), or DIR's scenarios: one a line, name, vehicles, plume, first comment line."""
     from deploy.scenario_catalog import catalog
 
     try:
