@@ -2,8 +2,10 @@
 
 msgspec says ``Invalid enum value 'turbulent'`` or ``Object contains unknown field `sped` ``;
 :func:`explain` turns that into ``wind.model``, ``invalid choice, got 'turbulent'; valid:
-field, meander, steady`` (the choices read from the schema's type annotations) and a
-``did you mean 'speed_m_s'?`` for a key close to one of its section's.
+field, meander, steady`` (the choices read from the schema's type annotations: a ``Literal``,
+an ``Enum``, or a pattern of alternatives ``^(a|b)$``) and a ``did you mean 'speed_m_s'?`` for
+a key or a choice close to a valid one. Any msgspec-typed file can use it (scenarios, hosts
+files).
 """
 
 from __future__ import annotations
@@ -135,6 +137,9 @@ def explain(exc: msgspec.ValidationError, raw: object, root: type) -> tuple[str,
     found, value = _value_at(raw, field)
     choices = _choices(_type_at(root, field))
     got = f", got {toml_value(value)}" if found else ""
+    if m := re.fullmatch(r"Expected `str` matching regex '\^\(([\w|-]+)\)\$'", reason):
+        choices = m[1].split("|")  # a pattern of alternatives is a choice too
+        reason = "Invalid enum value"
     if reason.startswith("Invalid enum value"):
         hint = did_you_mean(str(value), choices) if found else ""
         return field, f"invalid choice{got}{hint}; valid: {', '.join(choices)}"
