@@ -18,6 +18,7 @@ import msgspec
 
 from deploy.launcher import ALL_ROLES, LaunchOptions
 from swarmbus.errors import PlumeswarmError
+from swarmbus.scenario_errors import explain
 from swarmbus.session import Endpoint
 
 RoleName = Annotated[str, msgspec.Meta(pattern="^(" + "|".join(ALL_ROLES) + ")$")]
@@ -83,9 +84,13 @@ class Deployment(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
 def load_deployment(path: Path) -> Deployment:
     try:
         raw = tomllib.loads(path.read_text())
-        dep = msgspec.convert(raw, Deployment)
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError, msgspec.ValidationError) as exc:
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
         raise HostsError(f"{path}: {exc}") from None
+    try:
+        dep = msgspec.convert(raw, Deployment)
+    except msgspec.ValidationError as exc:  # the key, the bad value, the valid values
+        field, reason = explain(exc, raw, Deployment)
+        raise HostsError(f"{path}: {field}: {reason}" if field else f"{path}: {reason}") from None
     owners = [h.name for h in dep.hosts if "router" in h.roles]
     if len(owners) != 1:
         raise HostsError(f"{path}: exactly one host must run the router, got {owners or 'none'}")

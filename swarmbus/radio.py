@@ -45,10 +45,22 @@ class RadioError(PlumeswarmError, ValueError):
 class RadioSpec(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """``[radio]``: the link between every two vehicles (the default: a perfect link)."""
 
-    range_m: Annotated[float, msgspec.Meta(ge=0.0, le=1e9)] = 0.0  # 0: unlimited
-    loss: Annotated[float, msgspec.Meta(ge=0.0, le=1.0)] = 0.0
-    latency_ticks: Annotated[int, msgspec.Meta(ge=0, le=1_000_000)] = 0
-    max_message_bytes: Annotated[int, msgspec.Meta(ge=1, le=1_000_000)] = DEFAULT_MAX_MESSAGE_BYTES
+    range_m: Annotated[
+        float,
+        msgspec.Meta(ge=0.0, le=1e9, description="Farthest distance a message reaches, m; 0: any."),
+    ] = 0.0
+    loss: Annotated[
+        float,
+        msgspec.Meta(ge=0.0, le=1.0, description="Probability that a message between two is lost."),
+    ] = 0.0
+    latency_ticks: Annotated[
+        int,
+        msgspec.Meta(ge=0, le=1_000_000, description="Control ticks a message takes to arrive."),
+    ] = 0
+    max_message_bytes: Annotated[
+        int,
+        msgspec.Meta(ge=1, le=1_000_000, description="Largest encoded message a vehicle may send."),
+    ] = DEFAULT_MAX_MESSAGE_BYTES
 
     @property
     def perfect(self) -> bool:

@@ -63,10 +63,28 @@ def _int_list(ctx: click.Context, param: click.Parameter, value: str) -> tuple[i
 
 @bench.command("scale")
 @SCENARIO_OPT
-@click.option("--vehicles", default="1,2,4,8,16,32,64", callback=_int_list, show_default=True)
-@vehicles_per_process_option()
-@click.option("--state", "states", default="grounded,hovering,flying", show_default=True)
-@click.option("--seconds", type=click.FloatRange(min=0.5), default=8.0, show_default=True)
+@click.option(
+    "--vehicles",
+    default="1,2,4,8,16,32,64",
+    callback=_int_list,
+    show_default=True,
+    help="Comma-separated vehicle counts: one row each (the scenario scaled to each).",
+)
+@vehicles_per_process_option("Vehicles each autopilot process serves.")
+@click.option(
+    "--state",
+    "states",
+    default="grounded,hovering,flying",
+    show_default=True,
+    help="Comma-separated states the swarm is measured in: grounded, hovering, flying.",
+)
+@click.option(
+    "--seconds",
+    type=click.FloatRange(min=0.5),
+    default=8.0,
+    show_default=True,
+    help="Wall seconds each row is measured over, once the swarm is in its state.",
+)
 @click.option("--no-gateway", is_flag=True, help="Leave the MAVLink gateway out.")
 @click.option(
     "--sensor-period-ticks",
@@ -87,7 +105,7 @@ def _int_list(ctx: click.Context, param: click.Parameter, value: str) -> tuple[i
     help="Also run the ROS 2 bridge: with no ROS 2 subscriber (idle) or with one subscribed to "
     "every topic it publishes (subscribed).",
 )
-@out_dir_option()
+@out_dir_option("Directory for scale.json (default: runs/bench-scale-<time>/).")
 @SET_OPT
 def bench_scale(
     scenario: str | None,
@@ -175,10 +193,11 @@ def _gsl_options(seed_default: int) -> Callable[[Callable[..., None]], Callable[
     rows: list[tuple[str, Any, object, str | None]] = [
         ("--algorithms", None, "all", "Comma-separated names, name=module:Class, or 'all'; "
          "random_walk and oracle always run."),
-        ("--environments", None, "all", "Comma-separated names (swarmbus/scenarios/gsl) or "
-         "scenario paths, or 'all'."),
+        ("--environments", None, "all", "Comma-separated names (NAME or gsl/NAME, as "
+         "`plumeswarm scenario list` shows them), scenario paths, or 'all'."),
         ("--sensors", None, "all", "Comma-separated, or 'all' available."),
-        ("--runs", click.IntRange(min=1), 30, None),
+        ("--runs", click.IntRange(min=1), 30, "Seeded runs per cell (algorithm × environment "
+         "× sensor)."),
         ("--seed", click.IntRange(min=0, max=2**31 - 1), seed_default,
          "Published tables: 0; tuning: >= 1000."),
         ("--time-limit", click.FloatRange(min=1.0), 300.0, "Seconds of simulated time per run."),
@@ -319,8 +338,16 @@ def bench_gsl_sweep(params: tuple[str, ...], allow_test_seeds: bool, **kwargs: A
 @click.option("--dims", type=int, default=2, show_default=True, help="Space dimensions: 1, 2 or 3.")
 @click.option("--lambda-over-dx", type=float, default=2.0, show_default=True, help="λ/Δx, >= 1.")
 @click.option("--r-dt", type=float, default=2.0, show_default=True, help="R·Δt, > 0.")
-@click.option("--episodes", type=int, default=1000, show_default=True)
-@click.option("--seed", type=int, default=0, show_default=True)
+@click.option(
+    "--episodes", type=int, default=1000, show_default=True, help="Episodes to average over."
+)
+@click.option(
+    "--seed",
+    type=int,
+    default=0,
+    show_default=True,
+    help="Seed of the episodes' hits (each episode's own stream derives from it).",
+)
 @out_dir_option("Directory for pomdp.json (default runs/bench-pomdp-<time>/).")
 def bench_pomdp(
     dims: int,

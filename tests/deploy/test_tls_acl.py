@@ -200,3 +200,22 @@ def test_tls_endpoints_and_section_go_together(
 def test_certs_generate_with_a_bad_hosts_file_is_one_line(tmp_path: Path, kind: str) -> None:
     f = bad_file(tmp_path, kind, ".toml")
     assert_one_clear_line(["certs", "generate", "--hosts", f, "--out", str(tmp_path / "c")])
+
+
+@pytest.mark.parametrize(
+    ("host", "error"),
+    [
+        ('rols = ["router"]', "hosts[0].rols: unknown key (did you mean 'roles'?); valid: name, "),
+        ('roles = ["routr"]', "hosts[0].roles[0]: invalid choice, got 'routr' (did you mean "
+         "'router'?); valid: "),
+    ],
+)  # fmt: skip
+def test_a_bad_hosts_file_key_or_role_names_it_and_the_valid_ones(
+    tmp_path: Path, host: str, error: str
+) -> None:
+    (tmp_path / "hosts.toml").write_text(
+        f'router = "tcp/127.0.0.1:7447"\n[[hosts]]\nname = "sim"\n{host}\n'
+    )
+    with pytest.raises(HostsError) as info:
+        load_deployment(tmp_path / "hosts.toml")
+    assert str(info.value).startswith(f"{tmp_path / 'hosts.toml'}: {error}"), info.value
