@@ -301,9 +301,12 @@ class Failsafe(_Section, frozen=True, kw_only=True):
     takeoff_altitude_m: Pos = 2.5
     crash_speed_m_s: Pos = 3.0
     # Realtime mode, a link to the physics lost (docs/reliability.md, "Partitions"): the
-    # autopilot lands after this long without a tick (never less than time.participant_timeout_s);
-    # the physics lands a vehicle without commands at this speed (PX4's MPC_LAND_SPEED).
+    # autopilot lands after this long without a tick (never less than time.participant_timeout_s).
     state_loss_timeout_s: Pos = 3.0
+    # Any clock mode, a vehicle without commands (its autopilot dropped or late past the tick's
+    # deadline): the physics holds it this long (PX4's COM_FAIL_ACT_T), then lands it at this
+    # speed (PX4's MPC_LAND_SPEED).
+    hold_s: NonNeg = 5.0
     descend_speed_m_s: Pos = 0.7
 
 
