@@ -365,9 +365,28 @@ class AutopilotNode:
                 (self.last_tick - tick.tick) * self.control_dt_s,
             )
             self.pending = None  # the sensor tick of a tick that is being replayed
+        elif not self._realtime and 0 <= self.last_tick < tick.tick - 1:
+            self._world_went_on(tick)
         self.last_tick = tick.tick
         if self.keeper is not None:
             self.keeper.before_tick(tick.tick)
+
+    def _world_went_on(self, tick: Tick) -> None:
+        """Lockstep and stepped mode: ticks this process never answered were stepped, so the
+        physics dropped it and flew its vehicles under its failsafe (hold, then land): land, as
+        in realtime after a state loss; the mode stays until the pilot changes it."""
+        missed = tick.tick - self.last_tick - 1
+        log.warning(
+            "tick %d after tick %d: %d ticks (%.2f s sim) were stepped without this autopilot "
+            "(dropped): its vehicles were under the physics' failsafe; landing",
+            tick.tick,
+            self.last_tick,
+            missed,
+            missed * self.control_dt_s,
+        )
+        for served in self.served.values():
+            served.autopilot.state_lost(missed * self.control_dt_s)
+            served.publish_status(force=True, period_s=0.0)
 
     def _answer(self, tick: Tick, commands: list[ActuatorCommand], sensing: bool) -> None:
         """Checkpoint, then the batch of commands, then the statuses."""

@@ -597,8 +597,7 @@ class Failsafe(_Section, frozen=True, kw_only=True):
     ] = 2.5
     crash_speed_m_s: Annotated[Pos, _doc("Ground contact faster than this is a crash, m/s.")] = 3.0
     # Realtime mode, a link to the physics lost (docs/reliability.md, "Partitions"): the
-    # autopilot lands after this long without a tick (never less than time.participant_timeout_s);
-    # the physics lands a vehicle without commands at this speed (PX4's MPC_LAND_SPEED).
+    # autopilot lands after this long without a tick (never less than time.participant_timeout_s).
     state_loss_timeout_s: Annotated[
         Pos,
         _doc(
@@ -606,10 +605,17 @@ class Failsafe(_Section, frozen=True, kw_only=True):
             "physics, s (never less than time.participant_timeout_s)."
         ),
     ] = 3.0
+    hold_s: Annotated[
+        NonNeg,
+        _doc(
+            "Any clock mode: the physics holds a vehicle without commands (its autopilot dropped, "
+            "or late past the tick's deadline) this long, s, then lands it (PX4's COM_FAIL_ACT_T)."
+        ),
+    ] = 5.0
     descend_speed_m_s: Annotated[
         Pos,
         _doc(
-            "Realtime mode: the physics lands a vehicle without commands at this speed, m/s "
+            "Any clock mode: the physics lands a vehicle without commands at this speed, m/s "
             "(PX4's MPC_LAND_SPEED)."
         ),
     ] = 0.7
