@@ -33,7 +33,13 @@ from gcs_bridge.handle_missions import MissionHandlers
 from gcs_bridge.handle_offboard import OffboardHandlers
 from gcs_bridge.handle_params import ParamHandlers
 from gcs_bridge.links import Link, LinkSet
-from gcs_bridge.options import GatewayOptions, signing_key
+from gcs_bridge.options import (
+    GatewayOptions,
+    exposure_note,
+    peer_host,
+    signing_key,
+    unsigned_exposed,
+)
 from gcs_bridge.telemetry import wind_enu
 from gcs_bridge.vehicle import Vehicle
 from swarmbus.closeable import Closeable
@@ -55,14 +61,16 @@ def open_links(section: GatewaySpec, o: GatewayOptions, vehicles: list[Vehicle])
     """The shared GCS link (every vehicle) and, unless turned off, each vehicle's API link;
     :class:`OptionError` for a bad option or key file."""
     key = signing_key(section)
-    bind_host = o.bind_host_for(section)
+    exposed = unsigned_exposed(section, o)
+    if exposed:
+        log.warning("%s", exposure_note(exposed))
     links = LinkSet(o.rates_hz(), [v.sysid for v in vehicles])
     try:
         links.add(
             Link(
                 "gcs",
-                (bind_host, o.gcs_bind_port),
-                (section.host, section.gcs_port),
+                (o.bind_host_for(section, "gcs"), o.gcs_bind_port),
+                (peer_host(section, "gcs"), section.gcs_port),
                 [v.sysid for v in vehicles],
                 key if o.signs("gcs") else None,
                 link_id=0,
@@ -74,8 +82,8 @@ def open_links(section: GatewaySpec, o: GatewayOptions, vehicles: list[Vehicle])
             bind_port = o.api_bind_port_base + v.index if o.api_bind_port_base else 0
             link = Link(
                 f"api-{v.id}",
-                (bind_host, bind_port),
-                (section.host, section.api_port_base + v.index),
+                (o.bind_host_for(section, "api"), bind_port),
+                (peer_host(section, "api"), section.api_port_base + v.index),
                 [v.sysid],
                 key if o.signs("api") else None,
                 link_id=(v.index + 1) % 256,
@@ -128,7 +136,9 @@ class Gateway(Closeable):
         self.feed = TelemetryFeed(
             vehicles, self.links, self.out, self.autopilots, self.gcs, self._streams
         )
-        self.commands = CommandHandlers(self.links, self.out, self.autopilots)
+        self.commands = CommandHandlers(
+            self.links, self.out, self.autopilots, options.refuse_broadcast_disarm
+        )
         self.params = ParamHandlers(self.out, self.autopilots)
         self.missions = MissionHandlers(self.out, self.autopilots)
         self._handlers: dict[str, Handler] = {

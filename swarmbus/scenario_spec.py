@@ -320,12 +320,16 @@ class VehicleSpec(_Section, frozen=True, kw_only=True):
 
 
 class GatewaySpec(_Section, frozen=True, kw_only=True):
-    host: str = "127.0.0.1"
+    host: str = "127.0.0.1"  # where the ground station listens (the GCS link's peer)
+    # where the API clients (MAVSDK, offboard programs) listen; empty: `host`
+    api_host: Annotated[str, msgspec.Meta(max_length=253)] = ""
     gcs_port: Annotated[int, msgspec.Meta(ge=1, le=65535)] = 14550
     api_port_base: Annotated[int, msgspec.Meta(ge=1, le=65535)] = 14540
     signing_key_hex: Annotated[str, msgspec.Meta(pattern=r"^[0-9a-fA-F]{64}$")] | None = None
     signing_key_file: Annotated[str, msgspec.Meta(min_length=1, max_length=4096)] | None = None
     telemetry_hz: Annotated[float, msgspec.Meta(gt=0.0, le=100.0)] = 4.0
+    # refuse a force disarm sent to every system (target_system 0), which is always logged
+    refuse_broadcast_disarm: bool = False
 
 
 class Env(_Section, frozen=True, kw_only=True):
