@@ -51,6 +51,10 @@ class GatewayOptions(RoleOptions, frozen=True, kw_only=True):
     cmd_timeout_s: Annotated[float, msgspec.Meta(ge=0.01, le=60.0)] = 1.5
     """How long a command waits for the autopilot's reply (MAVSDK gives up after 3 x 0.5 s,
     QGC after about 3 s)."""
+    signing_state: str = ""
+    """File that keeps each signed stream's newest timestamp across restarts, so a frame
+    accepted before a restart is refused after it (empty: in memory only; ``plumeswarm up``
+    gives ``<run dir>/mavlink-signing.state``)."""
     refuse_broadcast_disarm: bool = False
     """Answer a force disarm to every system (target_system 0) with DENIED (default:
     ``[gateway] refuse_broadcast_disarm``); it is logged either way."""
