@@ -9,6 +9,7 @@ hosts with the real processes flying.
 
 from __future__ import annotations
 
+import itertools
 import re
 import shutil
 from collections.abc import Iterator
@@ -22,12 +23,12 @@ import zenoh
 from deploy import certs
 from deploy.certs import common_name_of
 from deploy.hosts import Deployment, HostsError, load_deployment
-from deploy.security import access_control, host_identities, secure_network
+from deploy.security import ROLE_PLANES, access_control, host_identities, secure_network
 from swarmbus.keys import Keys
 from swarmbus.session import NetworkConfig, free_tcp_port, open_session
 from tests.deploy.test_faults_cli import assert_one_clear_line, bad_file
 from tests.support.hosts import write_hosts
-from tests.support.procs import run_cli
+from tests.support.procs import REPO, run_cli
 from tests.support.tls_probe import (
     door,
     forbidden_keys,
@@ -232,3 +233,17 @@ def test_tls_endpoints_and_section_go_together(
 def test_certs_generate_with_a_bad_hosts_file_is_one_line(tmp_path: Path, kind: str) -> None:
     f = bad_file(tmp_path, kind, ".toml")
     assert_one_clear_line(["certs", "generate", "--hosts", f, "--out", str(tmp_path / "c")])
+
+
+def test_the_role_table_of_the_docs_is_the_one_the_acl_is_made_from() -> None:
+    """docs/deploy.md's table of roles and planes lists every role with the planes of
+    :data:`deploy.security.ROLE_PLANES` (the defaults of ``[acl]``)."""
+    lines = (REPO / "docs" / "deploy.md").read_text().splitlines()
+    start = lines.index("| role | planes | may send (put/delete unless said) |") + 2
+    documented: dict[str, tuple[str, ...]] = {}
+    for line in itertools.takewhile(lambda ln: ln.startswith("|"), lines[start:]):
+        roles, planes, _ = (c.strip() for c in line.strip("|").split("|"))
+        named = () if planes == "none" else tuple(p.strip() for p in planes.split(","))
+        for role in roles.split("(")[0].split(","):
+            documented[role.strip()] = named
+    assert documented == ROLE_PLANES
