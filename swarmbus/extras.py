@@ -15,6 +15,7 @@ EXTRA_OF_MODULE: dict[str, str] = {
     "matplotlib": "report",
     "rosbags": "ros2",
     "stable_baselines3": "train",
+    "ray": "cluster",
 }
 
 
