@@ -168,15 +168,7 @@ class Journal:
             path.write_text(json.dumps({"grid": header}, sort_keys=True) + "\n")
             return Journal(path, header, {})
         if journal.header != header:
-            theirs, ours = journal.header, header
-            why = (
-                f"{_shard_text(theirs)}, not {_shard_text(ours)}"
-                if theirs.get("command") == ours.get("command")
-                and theirs.get("digest") == ours.get("digest")
-                else f"`{theirs.get('command')}`, not `{ours.get('command')}`"
-                if theirs.get("command") != ours.get("command")
-                else "the same command over other episodes (the algorithms or environments changed)"
-            )
+            why = _difference(journal.header, header)
             raise GslError(
                 f"--out {out}: holds episodes of {why}; resume with the options that made it "
                 "or give another --out"
@@ -197,6 +189,15 @@ class Journal:
             os.fsync(f.fileno())
         self.records[record["key"]] = record["outcome"]
         self.names[record["key"]] = record["episode"]
+
+
+def _difference(theirs: dict[str, Any], ours: dict[str, Any]) -> str:
+    """How the grid a journal holds differs from ours, for people."""
+    if theirs.get("command") != ours.get("command"):
+        return f"`{theirs.get('command')}`, not `{ours.get('command')}`"
+    if theirs.get("digest") != ours.get("digest"):
+        return "the same command over other episodes (the algorithms or environments changed)"
+    return f"{_shard_text(theirs)}, not {_shard_text(ours)}"
 
 
 def _shard_text(header: dict[str, Any]) -> str:
