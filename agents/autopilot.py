@@ -192,8 +192,9 @@ class Autopilot:
                 log.warning("%s: behaviour setpoint refused: %s", self.vehicle_id, refusal.reason)
 
     def state_lost(self, silent_s: float) -> None:
-        """Realtime mode: no tick, so no vehicle state, for ``silent_s`` wall seconds (the link
-        to the physics is down): land, as PX4 does when it loses its position estimate in the
+        """No tick, so no vehicle state, for ``silent_s`` seconds (realtime: wall seconds with
+        the link to the physics down; lockstep and stepped: sim seconds the world stepped
+        without this autopilot): land, as PX4 does when it loses its position estimate in the
         air. The mode stays after the ticks come back, until the pilot changes it."""
         if self.est is not None and self.modes.mode in AIRBORNE:
             reason = f"{STATE_LOST}: no tick for {silent_s:.1f} s"

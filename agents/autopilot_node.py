@@ -20,7 +20,7 @@ import msgspec
 import zenoh
 
 from agents.anemometer import Anemometer
-from agents.behavior import BehaviorError
+from agents.behavior import BehaviorError, talks
 from agents.build import AutopilotOptions, build_flight, vehicle_index
 from agents.checkpoint import (
     CheckpointError,
@@ -370,9 +370,28 @@ class AutopilotNode:
                 (self.last_tick - tick.tick) * self.control_dt_s,
             )
             self.pending = None  # the sensor tick of a tick that is being replayed
+        elif not self._realtime and 0 <= self.last_tick < tick.tick - 1:
+            self._world_went_on(tick)
         self.last_tick = tick.tick
         if self.keeper is not None:
             self.keeper.before_tick(tick.tick)
+
+    def _world_went_on(self, tick: Tick) -> None:
+        """Lockstep and stepped mode: ticks this process never answered were stepped, so the
+        physics dropped it and flew its vehicles under its failsafe (hold, then land): land, as
+        in realtime after a state loss; the mode stays until the pilot changes it."""
+        missed = tick.tick - self.last_tick - 1
+        log.warning(
+            "tick %d after tick %d: %d ticks (%.2f s sim) were stepped without this autopilot "
+            "(dropped): its vehicles were under the physics' failsafe; landing",
+            tick.tick,
+            self.last_tick,
+            missed,
+            missed * self.control_dt_s,
+        )
+        for served in self.served.values():
+            served.autopilot.state_lost(missed * self.control_dt_s)
+            served.publish_status(force=True, period_s=0.0)
 
     def _answer(self, tick: Tick, commands: list[ActuatorCommand], sensing: bool) -> None:
         """Checkpoint, then the batch of commands, then the statuses."""
@@ -518,6 +537,32 @@ def main(ctx: NodeContext) -> int:
     except (OptionError, KeyError) as exc:
         log.error("autopilot: %s", exc)
         return 2
+    radio = ctx.scenario.radio
+    if not radio.perfect and any(ctx.scenario.vehicle(v).behavior for v in ctx.vehicle_ids):
+        log.error(
+            "autopilot: [radio] range_m=%g loss=%g latency_ticks=%d: this process hands its "
+            "behaviours their peers over a perfect link only; valid here: range_m=0 loss=0 "
+            "latency_ticks=0 (a lossy radio runs in the fused runner and bench gsl)",
+            radio.range_m,
+            radio.loss,
+            radio.latency_ticks,
+        )
+        return 2
+    for vid in ctx.vehicle_ids:
+        spec = ctx.scenario.vehicle(vid).behavior
+        try:
+            talking = spec is not None and talks(spec)
+        except BehaviorError as exc:
+            log.error("autopilot: %s", exc)
+            return 2
+        if talking:
+            log.error(
+                "autopilot: %s: behavior %r talks to its peers over the radio, which this "
+                "process does not carry; fly it in the fused runner or bench gsl",
+                vid,
+                spec,
+            )
+            return 2
     # Before the session opens (Zenoh reads it once, when its runtime starts); an operator's
     # own ZENOH_RUNTIME wins.
     os.environ.setdefault("ZENOH_RUNTIME", SINGLE_THREAD_RUNTIME)

@@ -16,10 +16,11 @@ from __future__ import annotations
 import importlib
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
+from agents.peer_link import Mailbox
 from swarmbus.errors import PlumeswarmError
 from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
 from swarmbus.scenario import Scenario
@@ -39,11 +40,16 @@ class SourceEstimate:
 
 @dataclass(frozen=True)
 class BehaviorContext:
+    """What a behaviour is built with. ``mailbox``: its end of the radio to its peers
+    (:class:`agents.peer_link.Mailbox`: publish a small typed message, read theirs), where the
+    runner carries peer messages; ``None`` where it does not."""
+
     vehicle_id: str
     vehicle_index: int
     scenario: Scenario
     control_dt_s: float
     rng: np.random.Generator
+    mailbox: Mailbox | None = None
 
 
 class Behavior(Protocol):
@@ -59,16 +65,28 @@ class BehaviorError(PlumeswarmError, RuntimeError):
     pass
 
 
-def load_behavior(spec: str, ctx: BehaviorContext) -> Behavior:
-    """Import ``module:Class`` and build it with ``ctx``; :class:`BehaviorError` if it fails."""
+def behavior_class(spec: str) -> Any:
+    """The class ``module:Class`` names; :class:`BehaviorError` if it cannot be imported."""
     module_name, sep, class_name = spec.partition(":")
     if not sep or not module_name or not class_name:
         raise BehaviorError(f"behavior {spec!r}: expected 'module:Class'")
     try:
         module = importlib.import_module(module_name)
-        cls = getattr(module, class_name)
+        return getattr(module, class_name)
     except (ImportError, AttributeError) as exc:
         raise BehaviorError(f"behavior {spec!r}: {exc}") from None
+
+
+def talks(spec: str) -> bool:
+    """Whether the behaviour ``spec`` names talks to its peers over the radio (its class's
+    ``talks``: it needs a runner that carries behaviour messages)."""
+    return bool(getattr(behavior_class(spec), "talks", False))
+
+
+def load_behavior(spec: str, ctx: BehaviorContext) -> Behavior:
+    """Import ``module:Class`` and build it with ``ctx``; :class:`BehaviorError` if it fails."""
+    cls = behavior_class(spec)
+    class_name = spec.partition(":")[2]
     behavior = cls(ctx)
     if not callable(getattr(behavior, "step", None)):
         raise BehaviorError(f"behavior {spec!r}: {class_name} has no step() method")

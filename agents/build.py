@@ -17,6 +17,7 @@ from agents.autopilot import Autopilot
 from agents.behavior import BehaviorContext, load_behavior
 from agents.estimator import Estimator
 from agents.flight import Flight
+from agents.peer_link import Mailbox
 from agents.sensor import ConcentrationSensor
 from swarmbus.options import RoleOptions
 from swarmbus.scenario import Scenario
@@ -55,8 +56,10 @@ def build_autopilot(
     vehicle_id: str,
     options: AutopilotOptions,
     rng: np.random.Generator | None = None,
+    mailbox: Mailbox | None = None,
 ) -> Autopilot:
-    """``rng``: the behaviour's generator (default: :func:`behavior_rng`)."""
+    """``rng``: the behaviour's generator (default: :func:`behavior_rng`); ``mailbox``: the
+    behaviour's end of the radio, where the runner carries peer messages."""
     index = vehicle_index(scenario, vehicle_id)
     estimator = Estimator(
         options.position_noise_m,
@@ -72,14 +75,20 @@ def build_autopilot(
             scenario=scenario,
             control_dt_s=1.0 / scenario.time.control_hz,
             rng=rng if rng is not None else behavior_rng(scenario, vehicle_id),
+            mailbox=mailbox,
         )
         behavior = load_behavior(spec, ctx)
     return Autopilot(scenario, vehicle_id, estimator=estimator, behavior=behavior)
 
 
-def build_flight(scenario: Scenario, vehicle_id: str, options: AutopilotOptions) -> Flight:
+def build_flight(
+    scenario: Scenario,
+    vehicle_id: str,
+    options: AutopilotOptions,
+    mailbox: Mailbox | None = None,
+) -> Flight:
     """A vehicle's autopilot, sensor and behaviour's generator, seeded from the scenario and
-    the vehicle's index."""
+    the vehicle's index (``mailbox``: its behaviour's end of the radio)."""
     rng = behavior_rng(scenario, vehicle_id)
     sensor = ConcentrationSensor.for_vehicle(scenario, vehicle_index(scenario, vehicle_id))
-    return Flight(build_autopilot(scenario, vehicle_id, options, rng), sensor, rng)
+    return Flight(build_autopilot(scenario, vehicle_id, options, rng, mailbox), sensor, rng)

@@ -18,6 +18,7 @@ import msgspec
 
 from deploy.launcher import ALL_ROLES, LaunchOptions
 from swarmbus.errors import PlumeswarmError
+from swarmbus.scenario_errors import explain
 from swarmbus.session import Endpoint
 
 RoleName = Annotated[str, msgspec.Meta(pattern="^(" + "|".join(ALL_ROLES) + ")$")]
@@ -52,15 +53,21 @@ def _default_field() -> list[str]:
     return ["plume"]
 
 
+def _default_commands() -> list[str]:
+    return ["gateway"]
+
+
 class AclSection(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """Who may publish what (roles); everything else is open to every identity of the
-    deployment and closed to anybody else. Enforced only with ``[tls]`` (identities are the
-    certificates' common names)."""
+    """Which roles produce the planes that may move to other roles; the rest of what each role
+    may send is fixed by its role (``deploy.security.ROLE_PLANES``). Enforced only with
+    ``[tls]`` (identities are the certificates' common names)."""
 
     enabled: bool = True
     actuators: list[RoleName] = msgspec.field(default_factory=_default_actuators)
     world: list[RoleName] = msgspec.field(default_factory=_default_world)  # ticks, states, clock
     field: list[RoleName] = msgspec.field(default_factory=_default_field)  # plume samples, state
+    # Who may query vehicle/*/cmd and clock/step besides the operator and a vehicle's autopilot
+    commands: list[RoleName] = msgspec.field(default_factory=_default_commands)
     # One identity per autopilot process (one vehicle each), allowed to speak for its own
     # vehicle only (deploy.security); the hosts running autopilots then list their vehicles.
     per_vehicle: bool = False
@@ -83,9 +90,13 @@ class Deployment(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
 def load_deployment(path: Path) -> Deployment:
     try:
         raw = tomllib.loads(path.read_text())
-        dep = msgspec.convert(raw, Deployment)
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError, msgspec.ValidationError) as exc:
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
         raise HostsError(f"{path}: {exc}") from None
+    try:
+        dep = msgspec.convert(raw, Deployment)
+    except msgspec.ValidationError as exc:  # the key, the bad value, the valid values
+        field, reason = explain(exc, raw, Deployment)
+        raise HostsError(f"{path}: {field}: {reason}" if field else f"{path}: {reason}") from None
     owners = [h.name for h in dep.hosts if "router" in h.roles]
     if len(owners) != 1:
         raise HostsError(f"{path}: exactly one host must run the router, got {owners or 'none'}")

@@ -196,15 +196,21 @@ def plan(scenario: Scenario, opts: LaunchOptions) -> list[ProcessSpec]:
                 state = f"checkpoint={autopilot_state_path(opts, name)}"  # agents.resume
                 add(role, name, [a for vid in chunk for a in ("--vehicle", vid)] + net_args)
                 specs[-1] = replace(specs[-1], argv=(*specs[-1].argv, "--set", state))
-        elif role == "physics":
-            add(role, role, [*net_args, "--set", f"checkpoint={checkpoint_path(opts)}"])
-        elif role == "recorder":
-            out = opts.run_dir / "recording.mcap"
-            # resume: a restarted recorder continues in the next segment (recording.1.mcap …)
-            add(role, role, [*net_args, "--set", f"out={out}", "--set", "resume=true"])
         else:
-            add(role, role, net_args)
+            add(role, role, [*net_args, *run_dir_options(role, opts)])
     return specs
+
+
+def run_dir_options(role: str, opts: LaunchOptions) -> list[str]:
+    """The ``--set`` options that put what a role keeps across its restarts in the run
+    directory: the physics's checkpoint, the recording (a restarted recorder continues in the
+    next segment, recording.1.mcap …), the gateway's signed streams' timestamps."""
+    sets = {
+        "physics": [f"checkpoint={checkpoint_path(opts)}"],
+        "recorder": [f"out={opts.run_dir / 'recording.mcap'}", "resume=true"],
+        "gateway": [f"signing_state={opts.run_dir / 'mavlink-signing.state'}"],
+    }
+    return [a for item in sets.get(role, []) for a in ("--set", item)]
 
 
 def served_vehicles(spec: ProcessSpec) -> list[str]:

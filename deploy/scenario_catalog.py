@@ -4,7 +4,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from swarmbus.scenario import SCENARIOS_DIR, Scenario, ScenarioError, load_scenario
+from swarmbus.scenario import (
+    GSL_ENVIRONMENTS_DIR,
+    SCENARIOS_DIR,
+    Scenario,
+    ScenarioError,
+    load_scenario,
+)
 
 
 def summary(sc: Scenario) -> str:
@@ -25,20 +31,24 @@ def first_comment(path: Path) -> str:
 
 def catalog(directory: Path | None = None) -> list[str]:
     """``name  summary  — first comment line`` for every ``*.toml`` scenario of ``directory``
-    (default: the bundled ones); a file that does not validate is listed with its error."""
+    (default: the bundled ones, then the benchmark environments as ``gsl/<name>``); a file that
+    does not validate is listed with its error."""
     folder = SCENARIOS_DIR if directory is None else directory
     if not folder.is_dir():
         raise ValueError(f"--dir {folder}: not a directory")
     files = sorted(folder.glob("*.toml"))
+    if directory is None:
+        files += sorted(GSL_ENVIRONMENTS_DIR.glob("*.toml"))
     if not files:
         raise ValueError(f"--dir {folder}: no scenario files (*.toml)")
-    width = max(len(p.stem) for p in files)
+    names = [p.relative_to(folder).with_suffix("").as_posix() for p in files]
+    width = max(len(name) for name in names)
     lines = []
-    for p in files:
+    for name, p in zip(names, files, strict=True):
         try:
             text = summary(load_scenario(p))
         except ScenarioError as exc:
             text = f"invalid: {exc.field or '<file>'}: {exc.reason}"
         note = first_comment(p)
-        lines.append(f"{p.stem:<{width}}  {text}" + (f" — {note}" if note else ""))
+        lines.append(f"{name:<{width}}  {text}" + (f" — {note}" if note else ""))
     return lines

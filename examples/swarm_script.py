@@ -10,7 +10,7 @@ then run `python examples/swarm_script.py` (`--connect tcp/HOST:PORT` for anothe
 
 import argparse
 
-from agents import Swarm
+from plumeswarm import Swarm
 
 TARGETS = {"uav1": (40.0, -4.0, 10.0), "uav2": (40.0, 0.0, 10.0), "uav3": (40.0, 4.0, 10.0)}
 

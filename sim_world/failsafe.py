@@ -1,19 +1,22 @@
-"""Realtime mode: what the physics does with a flying vehicle whose autopilot is silent.
+"""What the physics does with a flying vehicle whose autopilot is silent, in every clock mode.
 
-In lockstep the physics waits for every command (docs/physics.md, "Lockstep"); in realtime the
-world cannot wait, and a vehicle whose autopilot missed a tick's deadline (a network partition
-between the hosts, a stalled or killed process) used to get its motors off and fall. It now
-lands where it is, as PX4's Land failsafe does: it stops horizontally (velocity held at zero
-against the wind's drag, within about 0.5 m/s in a 6 m/s wind) and descends at
-``failsafe.descend_speed_m_s`` (PX4's ``MPC_LAND_SPEED``, 0.7 m/s) until it touches the ground;
-then its motors stop. The controller uses the vehicle's true state of the tick,
-as the autopilot would its estimate, and the vehicle type's inertia, rotors and coefficients.
+In lockstep and stepped mode the physics waits for every command (docs/physics.md, "Lockstep")
+until its drop rules give a participant up (a partition longer than the grace, a restart
+limit); in realtime the world cannot wait past a tick's deadline. Either way a vehicle without
+its command is not left to fall: it holds where it is for ``failsafe.hold_s`` (PX4's
+``COM_FAIL_ACT_T``, 5 s: the Hold before a failsafe action), then lands there, as PX4's Land
+failsafe does: it stops horizontally (velocity held at zero against the wind's drag, within
+about 0.5 m/s in a 6 m/s wind) and descends at ``failsafe.descend_speed_m_s`` (PX4's
+``MPC_LAND_SPEED``, 0.7 m/s) until it touches the ground; then its motors stop. The controller
+uses the vehicle's true state of the tick, as the autopilot would its estimate, and the vehicle
+type's inertia, rotors and coefficients. The autopilot, back, finds that ticks were stepped
+without it and lands too (``agents.autopilot_node``), as in realtime after a state loss.
 
 The episodes are counted per vehicle (:class:`CommandGaps`): how many ticks went without the
 vehicle's command, in how many outages, how much sim time under the failsafe; the physics puts
 them in its health detail and its last log line ("the run reports what was late").
 
-See docs/physics.md ("Realtime mode: the physics' failsafe") and docs/reliability.md
+See docs/physics.md ("The physics' failsafe") and docs/reliability.md
 ("Partitions between hosts").
 """
 
@@ -38,6 +41,7 @@ log = logging.getLogger(__name__)
 # rate damping (1/s: damping ratio 1), yaw rate damping (1/s).
 VELOCITY_XY_P = 2.0
 VELOCITY_Z_P = 2.0
+ALTITUDE_P = 1.0  # hold: altitude error (m) → vertical speed (m/s), at most the descent speed
 TILT_P = 25.0
 RATE_D = 10.0
 YAW_RATE_D = 4.0
@@ -68,12 +72,19 @@ class LandController:
         )
         self._mix = np.linalg.pinv(a)
 
-    def _thrust_direction(self, state: VehicleState) -> tuple[float, float, float]:
-        """The specific force wanted (world, m/s²): stop horizontally, descend at the speed;
-        tilted at most MAX_TILT_RAD."""
+    def _thrust_direction(
+        self, state: VehicleState, hold_z_m: float | None
+    ) -> tuple[float, float, float]:
+        """The specific force wanted (world, m/s²): stop horizontally, descend at the speed (or
+        hold ``hold_z_m``); tilted at most MAX_TILT_RAD."""
         vx, vy, vz = state.velocity_enu_m_s
         ax, ay = -VELOCITY_XY_P * vx, -VELOCITY_XY_P * vy
-        az = GRAVITY_M_S2 - self.drag_accel_m_s2 + VELOCITY_Z_P * (-self.speed_m_s - vz)
+        if hold_z_m is None:
+            want_vz, drag = -self.speed_m_s, self.drag_accel_m_s2
+        else:
+            error = ALTITUDE_P * (hold_z_m - state.position_enu_m[2])
+            want_vz, drag = max(-self.speed_m_s, min(self.speed_m_s, error)), 0.0
+        az = GRAVITY_M_S2 - drag + VELOCITY_Z_P * (want_vz - vz)
         az = max(az, 0.1 * GRAVITY_M_S2)
         horizontal = math.hypot(ax, ay)
         limit = az * math.tan(MAX_TILT_RAD)
@@ -81,12 +92,13 @@ class LandController:
             ax, ay = ax * limit / horizontal, ay * limit / horizontal
         return ax, ay, az
 
-    def command(self, state: VehicleState) -> list[float] | None:
-        """The rotor commands of the tick; None once on the ground or crashed (motors off)."""
+    def command(self, state: VehicleState, hold_z_m: float | None = None) -> list[float] | None:
+        """The rotor commands of the tick (landing, or holding at ``hold_z_m``); None once on
+        the ground or crashed (motors off)."""
         if state.on_ground or state.crashed:
             return None
         q = state.attitude_xyzw
-        fx, fy, fz = self._thrust_direction(state)
+        fx, fy, fz = self._thrust_direction(state, hold_z_m)
         norm = math.sqrt(fx * fx + fy * fy + fz * fz)
         # body up and the wanted direction, both in the body frame
         dx, dy, dz = rotate_to_body(q, fx / norm, fy / norm, fz / norm)
@@ -119,17 +131,22 @@ class Gap:
     """One vehicle's command outages."""
 
     first_tick: int = -1  # of the outage under way; -1: commanded
+    hold_z_m: float = 0.0  # the altitude it holds at in the outage's first failsafe.hold_s
     ticks: int = 0  # in all
     outages: int = 0
     longest_ticks: int = 0
 
 
 class CommandGaps:
-    """Realtime mode: fills in the commands of the vehicles without one this tick (Land
-    while airborne, motors off on the ground) and counts the ticks they went without."""
+    """Fills in the commands of the vehicles without one this tick (Hold, then Land, while
+    airborne; motors off on the ground) and counts the ticks they went without."""
 
     def __init__(self, scenario: Scenario, vehicle_ids: Sequence[str]) -> None:
         self.control_dt_s = 1.0 / scenario.time.control_hz
+        self.hold_ticks = {
+            vid: round(scenario.failsafe_for(vid).hold_s * scenario.time.control_hz)
+            for vid in vehicle_ids
+        }
         self.controllers = {
             vid: LandController(
                 load_vehicle_type(scenario.vehicle(vid).type),
@@ -154,6 +171,7 @@ class CommandGaps:
                 continue
             if gap.first_tick < 0:
                 gap.first_tick = tick
+                gap.hold_z_m = state.position_enu_m[2]
                 gap.outages += 1
                 log.warning(
                     "tick %d: no command from %s: %s",
@@ -161,10 +179,12 @@ class CommandGaps:
                     vid,
                     "on the ground, motors off"
                     if state.on_ground
-                    else "the physics lands it (its failsafe)",
+                    else f"the physics holds it {self.hold_ticks[vid] * self.control_dt_s:g} s, "
+                    "then lands it (its failsafe)",
                 )
             gap.ticks += 1
-            rotor = self.controllers[vid].command(state)
+            holding = tick - gap.first_tick < self.hold_ticks[vid]
+            rotor = self.controllers[vid].command(state, gap.hold_z_m if holding else None)
             if rotor is not None:
                 out[vid] = rotor
         return out
@@ -206,4 +226,4 @@ class CommandGaps:
             )
         if not lines:
             return "every vehicle commanded on every tick"
-        return "ticks without a command (physics failsafe: land): " + "; ".join(lines)
+        return "ticks without a command (physics failsafe: hold, then land): " + "; ".join(lines)

@@ -118,8 +118,9 @@ class PhysicsNode:
             time.monotonic,
         )
         self.dropped_total = 0  # participants dropped for a missed deadline (health detail)
-        # Realtime: a vehicle without its command lands under the physics' failsafe.
-        self.gaps = CommandGaps(self.scenario, world.vehicle_ids) if realtime else None
+        # A vehicle without its command (realtime: late; lockstep, stepped: dropped) holds, then
+        # lands, under the physics' failsafe.
+        self.gaps = CommandGaps(self.scenario, world.vehicle_ids)
         self._states: list[VehicleState] = []  # the current tick's (the failsafe's input)
 
     def _step_refusal(self) -> str | None:
@@ -227,8 +228,7 @@ class PhysicsNode:
             abandoned = self.clock_gate.abandon()
         if abandoned is not None:
             abandoned.refuse("ticks", f"the world stopped at tick {self.tick}")
-        if self.gaps is not None:
-            log.info("%s", self.gaps.summary(self.tick))
+        log.info("%s", self.gaps.summary(self.tick))
         wall = self.pacer.elapsed_s()
         log.info(
             "physics stopped at tick %d, sim %.3f s after %.3f s wall (%.0f ticks/s)",
@@ -270,7 +270,7 @@ class PhysicsNode:
         held = self.barrier.held
         self.barrier.drop(dropped)
         self.dropped_total += len(dropped)
-        then = "motors off" if self.gaps is None else "the physics' failsafe"
+        then = "the physics' failsafe"
         report_dropped(self.tick, dropped, held, waited_s, self.holds.grace_s, then)
 
     # ------------------------------------------------------------------ stepped clock
@@ -321,8 +321,7 @@ class PhysicsNode:
         log.info("re-sent the last %d ticks to the new recorder", len(self.holds.recent))
 
     def _apply(self, commands: Mapping[str, Sequence[float]]) -> None:
-        if self.gaps is not None:
-            commands = self.gaps.fill(self.tick, commands, self._states)
+        commands = self.gaps.fill(self.tick, commands, self._states)
         for bad in self.world.apply_tick(commands):
             log.warning("tick %d: %s; motors off", self.tick, bad)
 
@@ -375,7 +374,7 @@ class PhysicsNode:
             detail = f"tick {self.tick} dropped {self.dropped_total} states {self.out.states_sent}"
             if self.inputs.intake.foreign_dropped:
                 detail += f" foreign commands {self.inputs.intake.foreign_dropped}"
-            if self.gaps is not None and (late := self.gaps.note()):
+            if late := self.gaps.note():
                 detail += f"; {late}"
             if self.checkpoints.note:
                 detail += f"; {self.checkpoints.note}"

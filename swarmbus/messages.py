@@ -189,6 +189,8 @@ class ConcentrationReading(Message, frozen=True, kw_only=True, tag=_tag("concent
 
 # --------------------------------------------------------------------------- commands
 class MissionFrame(enum.StrEnum):
+    """The frame of a mission item's x, y, z: the world's ENU metres, or geodetic."""
+
     ENU = "enu"
     GLOBAL = "global"  # x = latitude deg, y = longitude deg, z = altitude AMSL m
 
@@ -206,15 +208,40 @@ class MissionItem(msgspec.Struct, frozen=True, kw_only=True):
     """One mission item. ``frame = enu``: x, y, z metres in the world frame (z above origin);
     ``frame = global``: x latitude (deg), y longitude (deg), z altitude AMSL (m)."""
 
-    command: MissionCommand = MissionCommand.WAYPOINT
-    x: Finite
-    y: Finite
-    z: Finite
-    frame: MissionFrame = MissionFrame.ENU
-    acceptance_radius_m: Annotated[float, msgspec.Meta(gt=0.0, le=1000.0)] = 1.0
-    hold_s: Annotated[float, msgspec.Meta(ge=0.0, le=3600.0)] = 0.0
-    speed_m_s: Annotated[float, msgspec.Meta(ge=0.0, le=100.0)] = 0.0  # 0: vehicle default
-    yaw_deg: Annotated[float, msgspec.Meta(ge=-360.0, le=360.0)] | None = None
+    command: Annotated[
+        MissionCommand,
+        msgspec.Meta(description="What the item does: waypoint, takeoff, land or rtl."),
+    ] = MissionCommand.WAYPOINT
+    x: Annotated[Finite, msgspec.Meta(description="enu: east, m; global: latitude, degrees.")]
+    y: Annotated[Finite, msgspec.Meta(description="enu: north, m; global: longitude, degrees.")]
+    z: Annotated[
+        Finite,
+        msgspec.Meta(description="enu: height above the origin, m; global: altitude AMSL, m."),
+    ]
+    frame: Annotated[
+        MissionFrame,
+        msgspec.Meta(
+            description="enu: the world frame in metres; global: latitude, longitude, altitude."
+        ),
+    ] = MissionFrame.ENU
+    acceptance_radius_m: Annotated[
+        float,
+        msgspec.Meta(gt=0.0, le=1000.0, description="The item is reached within this distance, m."),
+    ] = 1.0
+    hold_s: Annotated[
+        float,
+        msgspec.Meta(ge=0.0, le=3600.0, description="Seconds to hold at the item once reached."),
+    ] = 0.0
+    speed_m_s: Annotated[
+        float,
+        msgspec.Meta(
+            ge=0.0, le=100.0, description="Speed towards the item, m/s; 0: the vehicle's default."
+        ),
+    ] = 0.0
+    yaw_deg: Annotated[
+        Annotated[float, msgspec.Meta(ge=-360.0, le=360.0)] | None,
+        msgspec.Meta(description="Heading at the item, degrees; unset: the vehicle's choice."),
+    ] = None
 
 
 class Arm(Message, frozen=True, kw_only=True, tag=_tag("cmd.arm")):

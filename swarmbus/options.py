@@ -30,6 +30,7 @@ import msgspec
 from msgspec import inspect as mi
 
 from swarmbus.errors import PlumeswarmError
+from swarmbus.scenario_errors import did_you_mean
 
 if TYPE_CHECKING:  # the node runtime opens Zenoh; a role's options need not
     from swarmbus.node import NodeContext
@@ -111,7 +112,12 @@ def parse_options(
         field = fields.get(name)
         is_map = field is not None and isinstance(_inner(field.type), mi.DictType)
         if field is None or bool(dot) != is_map or (is_map and not entry):
-            raise OptionError(f"--set {key}={text}: unknown option; known: {known_names(spec)}")
+            known = known_names(spec)
+            if is_map:  # rate=5 or rate.=5: a map's setting names its entry
+                hint = f" (did you mean '{name}.<KEY>'?)"
+            else:
+                hint = did_you_mean(key, [n for n in known.split(", ") if n != key])
+            raise OptionError(f"--set {key}={text}: unknown option{hint}; known: {known}")
         try:
             value = _convert(spec, field, entry if is_map else None, text)
         except msgspec.ValidationError:

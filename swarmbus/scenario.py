@@ -17,8 +17,9 @@ import msgspec
 
 from plume_atmosphere.calibration import AtmosphereCalibration, derive_calibration
 from plume_atmosphere.gases import FORMULAS
-from swarmbus.codec import split_validation_error
 from swarmbus.errors import FieldError
+from swarmbus.radio import RadioSpec
+from swarmbus.scenario_errors import did_you_mean, explain
 from swarmbus.scenario_spec import (
     DEFAULT_SCENARIO,
     GSL_ENVIRONMENTS_DIR,
@@ -72,6 +73,7 @@ __all__ = [
     "PlumeFilament",
     "PlumeModel",
     "PlumePuff",
+    "RadioSpec",
     "Scenario",
     "ScenarioError",
     "Sensor",
@@ -100,11 +102,14 @@ log = logging.getLogger(__name__)
 
 
 class ScenarioError(FieldError):
-    """One line: the file, the field and what is wrong."""
+    """One line: the file, the field and what is wrong (``<source>: <reason>`` when the whole
+    file is: not found, not TOML)."""
 
     def __init__(self, source: str, field: str, reason: str) -> None:
         self.source = source
-        super().__init__(source, field, reason, blank="<file>")
+        super().__init__(source, field, reason)
+        if not field:
+            self.args = (f"{source}: {reason}",)
 
 
 def _check(scenario: Scenario, source: str) -> None:
@@ -284,11 +289,7 @@ def parse_scenario(
     try:
         scenario = msgspec.convert(raw, Scenario)
     except msgspec.ValidationError as exc:
-        field, reason = split_validation_error(exc)
-        found, value = _value_at(raw, field)
-        if found and not isinstance(value, dict | list) and repr(value) not in reason:
-            reason = f"{reason}, got {value!r}"
-        raise ScenarioError(source, field, reason) from None
+        raise ScenarioError(source, *explain(exc, raw, Scenario)) from None
     _check(scenario, source)
     return calibrate_scenario(scenario, source)
 
@@ -346,50 +347,64 @@ def calibrate_scenario(scenario: Scenario, source: str = "<scenario>") -> Scenar
     return msgspec.structs.replace(scenario, wind=wind, plume=plume)
 
 
-def _value_at(raw: object, field: str) -> tuple[bool, object]:
-    """The raw TOML value at a msgspec error path (``a.b[0].c``): ``(found, value)``."""
-    node = raw
-    for name, index in re.findall(r"([^.\[\]]+)|\[(\d+)\]", field):
-        if name and isinstance(node, dict) and name in node:
-            node = node[name]
-        elif index and isinstance(node, list) and int(index) < len(node):
-            node = node[int(index)]
-        else:
-            return False, None
-    return bool(field), node
-
-
 def bundled_scenarios() -> list[str]:
-    """The names of the scenarios that ship with plumeswarm (``swarmbus/scenarios/*.toml``)."""
-    return sorted(p.stem for p in SCENARIOS_DIR.glob("*.toml"))
+    """The names of the scenarios that ship with plumeswarm: ``swarmbus/scenarios/*.toml`` by
+    their stem, then the source-seeking benchmark's environments as ``gsl/<name>``."""
+    gsl = GSL_ENVIRONMENTS_DIR.name
+    return sorted(p.stem for p in SCENARIOS_DIR.glob("*.toml")) + sorted(
+        f"{gsl}/{p.stem}" for p in GSL_ENVIRONMENTS_DIR.glob("*.toml")
+    )
+
+
+def _bundled_name(p: Path) -> str | None:
+    """The name of ``p`` if it is a bundled scenario's path (``novak2018``, ``gsl/lab_thread``)."""
+    if p.suffix != ".toml" or not p.is_relative_to(SCENARIOS_DIR):
+        return None
+    return p.relative_to(SCENARIOS_DIR).with_suffix("").as_posix()
+
+
+def _no_such_scenario(name: str) -> ScenarioError:
+    """One line: ``name`` is no bundled scenario, the nearest one and every valid name."""
+    names = bundled_scenarios()
+    bare = [n.rpartition("/")[2] for n in names]  # a benchmark environment by its bench name
+    hint = did_you_mean(name, names + bare)
+    valid = ", ".join(names)
+    return ScenarioError(name, "", f"no such scenario{hint}; valid: {valid}, or a file's path")
 
 
 def load_scenario(path: str | Path | None = None, overrides: Iterable[str] = ()) -> Scenario:
     """Load and validate a scenario file (default: ``swarmbus/scenarios/novak2018.toml``), with
     ``section.key=value`` overrides applied before validation."""
     p = Path(path) if path is not None else DEFAULT_SCENARIO
+    name = _bundled_name(p)
     try:
         text = p.read_text()
     except FileNotFoundError:
+        if name is not None:  # a name, not a path: no site-packages path in the message
+            raise _no_such_scenario(name) from None
         bundled = ", ".join(bundled_scenarios())
-        if p.parent == SCENARIOS_DIR:  # a name, not a path: no site-packages path in the message
-            raise ScenarioError(p.stem, "", f"no such scenario; bundled: {bundled}") from None
         raise ScenarioError(str(p), "", f"no such file (bundled scenarios: {bundled})") from None
     except IsADirectoryError:
         raise ScenarioError(str(p), "", "is a directory, not a scenario file") from None
     except (PermissionError, UnicodeDecodeError, OSError) as exc:
         raise ScenarioError(str(p), "", f"cannot read: {exc}") from None
-    source = p.stem if p.parent == SCENARIOS_DIR else str(p)  # a bundled one by its name
-    return parse_scenario(text, source, overrides)
+    return parse_scenario(text, name or str(p), overrides)  # a bundled one by its name
 
 
 def resolve_scenario_path(name_or_path: str | None) -> Path:
-    """A scenario path, or the name of a bundled scenario (``novak2018``, or a benchmark
-    environment such as ``gsl/meander_high``)."""
+    """A scenario path, or the name of a bundled scenario: ``novak2018``, or a benchmark
+    environment as ``gsl/meander_high`` or by its bench name alone, ``meander_high``. An unknown
+    name resolves to a bundled path that does not exist (:func:`load_scenario` says which
+    names are valid)."""
     if name_or_path is None:
         return DEFAULT_SCENARIO
     p = Path(name_or_path)
+    if p.exists() or p.suffix == ".toml":
+        return p
     bundled = SCENARIOS_DIR / f"{name_or_path}.toml"
-    if p.exists() or p.suffix == ".toml" or ("/" in name_or_path and not bundled.exists()):
+    environment = GSL_ENVIRONMENTS_DIR / f"{name_or_path}.toml"
+    if not bundled.is_file() and "/" not in name_or_path and environment.is_file():
+        return environment
+    if "/" in name_or_path and not name_or_path.startswith(f"{GSL_ENVIRONMENTS_DIR.name}/"):
         return p
     return bundled

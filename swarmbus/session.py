@@ -60,31 +60,63 @@ class TlsConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
     the CA that every peer's certificate must be signed by. The certificate's common name is
     the identity the access-control list matches on."""
 
-    root_ca: str
-    cert: str
-    key: str
-    verify_name: bool = True  # the certificate of the host connected to must name its address
+    root_ca: Annotated[
+        str,
+        msgspec.Meta(description="PEM file of the CA every peer's certificate must be signed by."),
+    ]
+    cert: Annotated[str, msgspec.Meta(description="PEM file of this process's certificate.")]
+    key: Annotated[str, msgspec.Meta(description="PEM file of this process's private key.")]
+    verify_name: Annotated[
+        bool,
+        msgspec.Meta(description="The certificate of the host connected to must name its address."),
+    ] = True
 
 
 class NetworkConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """How a process joins the Zenoh network."""
 
-    mode: Literal["peer", "client", "router"] = "peer"
-    connect: list[Endpoint] = msgspec.field(default_factory=lambda: [DEFAULT_ROUTER])
-    listen: list[Endpoint] = msgspec.field(default_factory=lambda: ["tcp/127.0.0.1:0"])
-    multicast_scouting: bool = False
-    low_latency: bool = False
-    # Zenoh's shared-memory transport between processes on one host (messages of 3 KB and
-    # more). Off, each process maps no other process's pool: far less resident memory with
-    # many processes on one host (docs/performance.md, "Wave 2, session 2").
-    shared_memory: bool = True
-    tls: TlsConfig | None = None
-    access_control: dict[str, Any] | None = None  # zenoh's access_control section, as is
-    # Messages larger than this are dropped by every session that receives them (a router
-    # relaying one too): see DEFAULT_MAX_MESSAGE_BYTES.
-    max_message_size_bytes: Annotated[int, msgspec.Meta(ge=MIN_MAX_MESSAGE_BYTES, le=2**30)] = (
-        DEFAULT_MAX_MESSAGE_BYTES
+    mode: Annotated[
+        Literal["peer", "client", "router"],
+        msgspec.Meta(description="Zenoh mode of the processes: peer, client or router."),
+    ] = "peer"
+    connect: Annotated[
+        list[Endpoint], msgspec.Meta(description="Zenoh endpoints to connect to (the router).")
+    ] = msgspec.field(default_factory=lambda: [DEFAULT_ROUTER])
+    listen: Annotated[list[Endpoint], msgspec.Meta(description="Zenoh endpoints to listen on.")] = (
+        msgspec.field(default_factory=lambda: ["tcp/127.0.0.1:0"])
     )
+    multicast_scouting: Annotated[
+        bool, msgspec.Meta(description="Find peers by multicast (off: only the endpoints given).")
+    ] = False
+    low_latency: Annotated[
+        bool, msgspec.Meta(description="Zenoh's low-latency transport (no batching).")
+    ] = False
+    shared_memory: Annotated[
+        bool,
+        msgspec.Meta(
+            description=(
+                "Zenoh's shared-memory transport between processes on one host (messages of 3 KB "
+                "and more); off: far less resident memory with many processes."
+            )
+        ),
+    ] = True
+    tls: Annotated[TlsConfig | None, msgspec.Meta(description="Mutual TLS on every tls/ link.")] = (
+        None
+    )
+    access_control: Annotated[
+        dict[str, Any] | None, msgspec.Meta(description="Zenoh's access_control section, as is.")
+    ] = None
+    max_message_size_bytes: Annotated[
+        int,
+        msgspec.Meta(
+            ge=MIN_MAX_MESSAGE_BYTES,
+            le=2**30,
+            description=(
+                "Largest message a session takes (bytes); a larger one is dropped by every "
+                "session that receives it, the router too."
+            ),
+        ),
+    ] = DEFAULT_MAX_MESSAGE_BYTES
 
     def with_overrides(
         self,

@@ -8,7 +8,8 @@ algorithm's own :meth:`~SeekingBehavior.seek`:
 3. read the wind (``self.read_wind``, the vehicle's anemometer by default,
    :func:`agents.behaviors.wind.anemometer_wind`) and its frame;
 4. ``seek(step)``: the algorithm's setpoint from what it has at this step (:class:`SeekStep`:
-   ``own``, ``peers``, ``readings``, ``wind``); if it declared the source during that call, the
+   ``own``, ``peers``, ``readings``, ``wind``, and ``inbox``: the peers' messages that reached
+   it for this step, :mod:`agents.peer_link`); if it declared the source during that call, the
    setpoint holds over the declaration instead.
 
 Its state (``altitude_m``, ``declaration``) is saved with the subclass's own
@@ -26,6 +27,7 @@ from agents.behavior import BehaviorContext, SourceEstimate
 from agents.behavior_state import SavesState
 from agents.behaviors.steering import hold_at, start_or_hold
 from agents.behaviors.wind import WindFrame, WindReader, anemometer_wind
+from agents.peer_link import Mailbox, Received
 from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
 
 
@@ -40,12 +42,14 @@ class Wind:
 @dataclass(frozen=True)
 class SeekStep:
     """What a source-seeking behaviour has at one control step: its vehicle's state, its
-    peers' states, the readings that reached it since the last step, and the wind read now."""
+    peers' states, the readings that reached it since the last step, the wind read now, and
+    the peers' messages that reached it for this step."""
 
     own: VehicleState
     peers: Sequence[VehicleState]
     readings: Sequence[ConcentrationReading]
     wind: Wind
+    inbox: Sequence[Received] = ()
 
 
 class SeekingBehavior(SavesState, ABC):
@@ -60,6 +64,7 @@ class SeekingBehavior(SavesState, ABC):
 
     def __init__(self, ctx: BehaviorContext) -> None:
         self.read_wind: WindReader = anemometer_wind(ctx)
+        self.mailbox: Mailbox | None = ctx.mailbox
         self.altitude_m: float | None = None
         self.declaration: SourceEstimate | None = None
 
@@ -73,7 +78,9 @@ class SeekingBehavior(SavesState, ABC):
         if held is not None:
             return held
         vector = self.read_wind(own)
-        setpoint = self.seek(SeekStep(own, peers, readings, Wind(vector, WindFrame.of(vector))))
+        inbox = self.mailbox.inbox if self.mailbox is not None else ()
+        wind = Wind(vector, WindFrame.of(vector))
+        setpoint = self.seek(SeekStep(own, peers, readings, wind, inbox))
         if self.declaration is not None:
             return hold_at(self.declaration.x_m, self.declaration.y_m, self.altitude_m)
         return setpoint

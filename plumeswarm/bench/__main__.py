@@ -1,7 +1,6 @@
 """``python -m plumeswarm.bench`` (``make bench``): run every benchmark script here, one table
-each, and a
-short grid of ``plumeswarm bench scale``. The library modules the CLI calls (``scale``,
-``ceiling``, ``envs``) are not scripts; they run through ``plumeswarm bench``."""
+each, and a short grid of ``plumeswarm bench scale``. The library modules the CLI calls
+(``scale``, ``envs``) are not scripts; they run through ``plumeswarm bench``."""
 
 from __future__ import annotations
 
@@ -28,8 +27,8 @@ def main() -> int:
     for name in names:
         if only and name not in only:
             continue
-        print(f"\n=== bench.{name} ===", flush=True)
-        res = subprocess.run([sys.executable, "-m", f"bench.{name}"], cwd=HERE.parent)
+        print(f"\n=== {__package__}.{name} ===", flush=True)
+        res = subprocess.run([sys.executable, "-m", f"{__package__}.{name}"])
         if res.returncode != 0:
             failed.append(name)
     if not only or "scale" in only:

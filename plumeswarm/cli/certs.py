@@ -17,9 +17,21 @@ def certs() -> None:
 
 
 @certs.command("generate")
-@click.option("--hosts", "hosts_file", required=True, type=click.Path(path_type=Path))
+@click.option(
+    "--hosts",
+    "hosts_file",
+    required=True,
+    type=click.Path(path_type=Path),
+    help="Hosts file of the deployment: its hosts and roles get one certificate each.",
+)
 @out_dir_option("Directory (default: the hosts file's [tls] certs).")
-@click.option("--days", type=click.IntRange(1, 3650), default=365, show_default=True)
+@click.option(
+    "--days",
+    type=click.IntRange(1, 3650),
+    default=365,
+    show_default=True,
+    help="Days the CA and the certificates are valid.",
+)
 def certs_generate(hosts_file: Path, out: Path | None, days: int) -> None:
     """A CA and one certificate per role and host (common name <role>.<host>)."""
     from deploy.certs import CertError, generate

@@ -81,7 +81,8 @@ SCENARIO_OPT = click.option(
     "scenario",
     default=None,
     metavar="FILE|NAME",
-    help="Scenario file or bundled scenario name (default: novak2018).",
+    help="Scenario file or bundled scenario name, as `plumeswarm scenario list` names them "
+    "(default: novak2018).",
 )
 
 

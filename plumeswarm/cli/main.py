@@ -112,8 +112,8 @@ def scenario() -> None:
 @click.argument("file", metavar="FILE|NAME", type=click.Path(dir_okay=True, path_type=Path))
 @SET_OPT
 def scenario_check(file: Path, scenario_overrides: tuple[str, ...]) -> None:
-    """Validate FILE (or a bundled scenario's NAME); print a one-line summary, or one line
-    naming the bad field."""
+    """Validate FILE (or a bundled scenario's NAME, as `scenario list` shows it); print a
+    one-line summary, or one line naming the bad field, its value and the valid values."""
     sc = scenario_from(str(file), scenario_overrides)
     click.echo(
         f"{file}: ok — world {sc.world.name!r}, {len(sc.vehicles)} vehicle(s), "
@@ -131,7 +131,8 @@ def scenario_check(file: Path, scenario_overrides: tuple[str, ...]) -> None:
     help="List the scenario files (*.toml) of this directory instead of the bundled ones.",
 )
 def scenario_list(directory: Path | None) -> None:
-    """The bundled scenarios (or DIR's), one a line: name, vehicles, plume, first comment line."""
+    """The bundled scenarios, then the benchmark environments as gsl/NAME (NAME alone also
+    names one), or DIR's scenarios: one a line, name, vehicles, plume, first comment line."""
     from deploy.scenario_catalog import catalog
 
     try:
@@ -163,14 +164,35 @@ def scenario_schema() -> None:
 
 
 # ---------------------------------------------------------------------------- node
-@cli.command()
-@click.argument("role", type=click.Choice([*sorted(ROLES), *sorted(BENCH_ROLES)]))
+class RoleChoice(click.Choice[str]):
+    """The roles: the public ones in help, completion and errors; the bench's stand-ins
+    (``ceiling-*``, internal) accepted when given but never shown."""
+
+    def __init__(self, shown: list[str], hidden: list[str]) -> None:
+        super().__init__(shown)
+        self.hidden = frozenset(hidden)
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Any:
+        if value in self.hidden:
+            return value
+        return super().convert(value, param, ctx)
+
+
+@cli.command(
+    help=f"Run one ROLE alone (for deployments across machines). ROLE: {', '.join(sorted(ROLES))}."
+)
+@click.argument("role", metavar="ROLE", type=RoleChoice(sorted(ROLES), sorted(BENCH_ROLES)))
 @SCENARIO_OPT
 @click.option("--vehicle", "vehicles", multiple=True, help="Vehicle id(s) this node serves.")
 @click.option("--name", default=None, help="Node name on the bus (default: derived from role).")
 @connect_option
 @click.option("--listen", multiple=True, help="Zenoh endpoint to listen on (repeatable).")
-@click.option("--mode", type=click.Choice(["peer", "client", "router"]), default=None)
+@click.option(
+    "--mode",
+    type=click.Choice(["peer", "client", "router"]),
+    default=None,
+    help="Zenoh mode of this node (default: the scenario's network.mode).",
+)
 @click.option("--set", "options", multiple=True, metavar="KEY=VALUE", help="Role option.")
 @HOSTS_FILE_OPT
 @HOST_OPT
@@ -186,7 +208,6 @@ def node(
     hosts_file: Path | None,
     host_name: str | None,
 ) -> None:
-    """Run one ROLE alone (for deployments across machines)."""
     from swarmbus.keys import KeyNameError, check_name, process_node
     from swarmbus.node import NodeContext
     from swarmbus.options import OptionError, split_settings
@@ -255,13 +276,18 @@ def _optional_role(flag: tuple[str, str, str], value: tuple[str, click.IntRange,
 @click.option("--listen", multiple=True, help="Endpoint every node listens on.")
 @click.option("--roles", default=None, help="Only these roles, comma-separated (one host of many).")
 @click.option("--no-router", is_flag=True, help="Do not start a router (another host runs it).")
-@click.option("--hosts", "hosts_file", type=click.Path(path_type=Path), default=None)
-@click.option("--host", "host_name", default=None, help="This host's entry in --hosts.")
+@HOSTS_FILE_OPT
+@HOST_OPT
 @vehicles_per_process_option("Vehicles each autopilot process serves.")
 @click.option(
     "--stepped",
     is_flag=True,
     help="Stepped clock: the world advances only when one client steps it (Swarm.step).",
+)
+@click.option(
+    "--insecure",
+    is_flag=True,
+    help="Start the gateway even with a MAVLink link beyond loopback and no signing key.",
 )
 @SET_OPT
 def up(
@@ -282,12 +308,13 @@ def up(
     host_name: str | None,
     vehicles_per_process: int,
     stepped: bool,
+    insecure: bool,
     scenario_overrides: tuple[str, ...],
 ) -> None:
     """Start the whole swarm (plume, physics, autopilots, gateway, viewer) and supervise it."""
     from deploy.console import Console
     from deploy.hosts import HostsError, load_deployment, options_for_host
-    from deploy.launcher import LaunchError, LaunchOptions, default_run_dir
+    from deploy.launcher import LaunchError, LaunchOptions, default_run_dir, selected_roles
     from deploy.security import secure_launch
     from deploy.up import run_up
     from plumeswarm.experiments.launch import NODE_COMMAND
@@ -335,9 +362,27 @@ def up(
         except HostsError as exc:
             fail(str(exc))
     try:
+        if "gateway" in selected_roles(opts):
+            _check_mavlink_exposure(sc, insecure)
         sys.exit(run_up(sc, opts, Console()))
     except LaunchError as exc:
         fail(str(exc), code=1)
+
+
+def _check_mavlink_exposure(sc: Scenario, insecure: bool) -> None:
+    """Refuse a gateway link beyond loopback without signing unless ``insecure`` (then one
+    warning line)."""
+    from gcs_bridge.options import GatewayOptions, exposure_note, unsigned_exposed
+    from swarmbus.options import OptionError
+
+    try:
+        exposed = unsigned_exposed(sc.gateway, GatewayOptions.defaults(sc))
+    except OptionError as exc:
+        fail(f"gateway: {exc}")
+    if exposed and not insecure:
+        fail(f"{exposure_note(exposed)} (or --insecure)")
+    if exposed:
+        click.echo(f"plumeswarm: warning: {exposure_note(exposed)}", err=True)
 
 
 def _up_node_options(
@@ -355,7 +400,14 @@ def _up_node_options(
 @SCENARIO_OPT
 @click.option("--vehicles", type=click.IntRange(1, 1024), default=None, help="Scale to N vehicles.")
 @click.option("--out", type=click.Path(path_type=Path), default=None, help="Run directory.")
-@click.option("--timeout", "timeout_s", type=float, default=900.0, show_default=True)
+@click.option(
+    "--timeout",
+    "timeout_s",
+    type=float,
+    default=900.0,
+    show_default=True,
+    help="Wall seconds the flight may take; past them the demo stops and reports what it flew.",
+)
 @click.option("--attach", multiple=True, metavar="EP", help="Fly a stack already running here.")
 @click.option(
     "--record/--no-record", default=True, help="Record the run (when the recorder exists)."
@@ -411,7 +463,14 @@ def demo(
 @SCENARIO_OPT
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
 @click.option("--connect", multiple=True, help="Router endpoint (default: the scenario's).")
-@click.option("--timeout", "timeout_s", type=float, default=5.0, show_default=True)
+@click.option(
+    "--timeout",
+    "timeout_s",
+    type=float,
+    default=5.0,
+    show_default=True,
+    help="Wall seconds to wait for answers from the bus.",
+)
 @HOSTS_FILE_OPT
 @HOST_OPT
 def status(
@@ -441,7 +500,12 @@ def status(
 @cli.command()
 @SCENARIO_OPT
 @connect_option
-@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None)
+@click.option(
+    "--out",
+    type=click.Path(dir_okay=False, path_type=Path),
+    default=None,
+    help="MCAP file to write (default: recording.mcap in the current directory).",
+)
 def record(scenario: str | None, connect: tuple[str, ...], out: Path | None) -> None:
     """Record everything on the bus to an MCAP file (until Ctrl-C)."""
     from plumeswarm.cli import recording as commands
@@ -473,7 +537,12 @@ def replay(
 
 @cli.command()
 @click.argument("file")
-@click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path))
+@click.option(
+    "--out",
+    required=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Directory to write the plots, CSV and report to.",
+)
 def report(file: str, out: Path) -> None:
     """Plots, CSV and a one-page report from a recording."""
     from plumeswarm.cli import recording as commands

@@ -68,6 +68,16 @@ preset_option = click.option(
 )
 
 
+FORMAT_OPT = click.option(
+    "--format",
+    "fmt",
+    type=click.Choice(["table", "json"]),
+    default="table",
+    show_default=True,
+    help="table: aligned columns for reading; json: one object for scripts.",
+)
+
+
 @click.group()
 def plume() -> None:
     """Sample, mesh and plot the plume field."""
@@ -77,7 +87,7 @@ def plume() -> None:
 @scenario_option
 @preset_option
 @click.argument("coords", nargs=-1, type=float, required=True)
-@click.option("--format", "fmt", type=click.Choice(["table", "json"]), default="table")
+@FORMAT_OPT
 @click.option(
     "--time",
     "time_s",
@@ -155,7 +165,12 @@ def mesh(
 @plume.command()
 @scenario_option
 @preset_option
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path), required=True)
+@click.option(
+    "--out",
+    type=click.Path(file_okay=False, path_type=Path),
+    required=True,
+    help="Directory to write the PNGs to (made if missing).",
+)
 @click.option("--height", type=float, default=None, help="Height of plan view/profiles (m).")
 @click.option(
     "--time",
@@ -211,7 +226,7 @@ MAX_SERIES_SAMPLES = 1_000_000
 )
 @click.option("--seconds", type=float, required=True, help="Sim seconds to cover, from t = 0.")
 @click.option("--every", type=float, required=True, help="Sim seconds between samples.")
-@click.option("--format", "fmt", type=click.Choice(["table", "json"]), default="table")
+@FORMAT_OPT
 def series(
     scenario_name: str,
     points: tuple[tuple[float, float, float], ...],
@@ -278,7 +293,7 @@ def _distance(value: float) -> str:
     help="Downwind distance (m) for a crosswind half-width (repeat; default 30, 50, 80).",
 )
 @click.option("--margin", type=float, default=1.0, show_default=True, help="Mean ≥ margin × floor.")
-@click.option("--format", "fmt", type=click.Choice(["table", "json"]), default="table")
+@FORMAT_OPT
 def visibility(
     scenario_name: str,
     sensor_name: str | None,

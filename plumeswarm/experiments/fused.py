@@ -10,6 +10,9 @@ the same scenario, seed and commands the state stream is the same, bit for bit. 
    answers that tick with its ``FieldSample``);
 2. each autopilot first takes the readings of the last sensor tick before ``k`` (the plume's
    answer arrives with tick ``k`` in the distributed stack), then steps on tick ``k``'s state;
+   What a vehicle learns of its peers (their states, their samples, their behaviours'
+   messages) passes through the scenario's ``[radio]`` (:class:`agents.peer_link.PeerLink`;
+   the default, perfect link hands every peer's state and sample over unchanged);
 3. the physics applies the rotor commands of tick ``k``, steps ``substeps`` physics steps and
    has tick ``k + 1``.
 
@@ -25,6 +28,7 @@ from collections.abc import Callable, Sequence
 
 from agents.build import AutopilotOptions, build_flight
 from agents.flight import Flight, take_readings
+from agents.peer_link import PeerLink
 from plume_service.from_scenario import field_from_scenario
 from plume_service.service import PlumeService
 from sim_world.world import World
@@ -56,8 +60,10 @@ class FusedRunner(Closeable):
         self.world = World(scenario)
         try:
             opts = options or AutopilotOptions()
+            self.link = PeerLink(scenario)
             self.flights: dict[str, Flight] = {
-                vid: build_flight(scenario, vid, opts) for vid in self.world.vehicle_ids
+                vid: build_flight(scenario, vid, opts, self.link.mailboxes[vid])
+                for vid in self.world.vehicle_ids
             }
         except BaseException:
             self.world.close()
@@ -114,19 +120,22 @@ class FusedRunner(Closeable):
     def _control(self) -> None:
         """The autopilots' half: last sensor tick's readings, then every vehicle's step."""
         states = self.states
+        link, tick = self.link, self.tick
+        link.before_step(tick)
+        everyone = link.peers(tick, states)
         pending, self._pending = self._pending, None
         if pending is not None:
             sensor_tick, sensor_time_s, located, values = pending
-            for flight, reading in take_readings(
-                self._flights, sensor_tick, sensor_time_s, located, values
-            ):
+            taken = take_readings(self._flights, sensor_tick, sensor_time_s, located, values)
+            heard = link.readings(tick, states, [r for _, r in taken])
+            for (flight, _), reading in zip(taken, heard, strict=True):
+                flight.new_readings[-1] = reading
                 self.latest_readings[flight.vehicle_id] = reading
         commands: dict[str, Sequence[float]] = {}
         for own, (flight, state) in enumerate(zip(self._flights, states, strict=True)):
-            peers = (
-                states[:own] + states[own + 1 :] if flight.autopilot.behavior is not None else []
-            )
+            peers = everyone[own] if flight.autopilot.behavior is not None else []
             commands[flight.vehicle_id] = flight.step(state, peers)
+        link.after_step(tick, states)
         self._commands = commands
         if self.tick % self._sensor_period == 0 and states:
             self._pending = (self.tick, self.world.sim_time_s, states, self._sample_plume(states))

@@ -14,7 +14,6 @@ import io
 import itertools
 import json
 import math
-import multiprocessing
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -28,8 +27,8 @@ from plumeswarm.gsl.episode import (
     START_ALTITUDE_M,
     EpisodeSpec,
     Outcome,
-    run_episode,
 )
+from plumeswarm.gsl.grid import Executor, Journal, Shard, run_episodes
 from plumeswarm.gsl.registry import (
     CEILING,
     FLOOR,
@@ -44,6 +43,8 @@ from plumeswarm.gsl.registry import (
 from plumeswarm.gsl.stats import Z_95, mcnemar_exact, summarise, wilson_interval
 
 __all__ = ["Z_95", "GslError", "wilson_interval"]
+
+LOCAL = Executor()
 
 DYNAMICS = ("kinematic", "full")
 FULL_SENSOR_HZ = 10  # with full dynamics a reading every control_hz / 10 ticks
@@ -71,6 +72,13 @@ class GslOptions:
     jobs: int = 2
     configs: tuple[Algorithm, ...] = ()  # per algorithm
     asked: tuple[str, ...] = ()  # --algorithms as given, for the command line
+    vehicles: int = 0  # how many fly each algorithm; 0: its own number
+    radio: tuple[tuple[str, Any], ...] = ()  # "radio.key" overrides of every environment
+
+    def radio_text(self) -> str:
+        """``--radio`` as given to :func:`parse_radio` ("" for the default link)."""
+        names = {v: k for k, v in RADIO_KEYS.items()}
+        return ",".join(f"{names[k]}={v:g}" for k, v in self.radio)
 
     def config(self, algorithm: str) -> Algorithm:
         return self.configs[self.algorithms.index(algorithm)]
@@ -108,6 +116,34 @@ def _environments(asked: Sequence[str]) -> tuple[str, ...]:
     return tuple(asked)
 
 
+#: ``--radio`` keys and the ``[radio]`` fields they set (docs/agents.md, "The radio").
+RADIO_KEYS = {
+    "range": "radio.range_m",
+    "loss": "radio.loss",
+    "latency": "radio.latency_ticks",
+    "bytes": "radio.max_message_bytes",
+}
+
+
+def parse_radio(text: str) -> tuple[tuple[str, Any], ...]:
+    """``loss=0.2,latency=12,range=80,bytes=255`` as ``[radio]`` overrides; :class:`GslError`
+    names a bad key or value."""
+    out: list[tuple[str, Any]] = []
+    for part in (p.strip() for p in text.split(",") if p.strip()):
+        key, sep, value = part.partition("=")
+        if not sep or key.strip() not in RADIO_KEYS:
+            raise GslError(
+                f"--radio {part!r}: expected KEY=VALUE, KEY one of {', '.join(RADIO_KEYS)}"
+            )
+        field = RADIO_KEYS[key.strip()]
+        try:
+            number: Any = int(value) if field.endswith(("_ticks", "_bytes")) else float(value)
+        except ValueError:
+            raise GslError(f"--radio {part!r}: {value!r} is not a number") from None
+        out.append((field, number))
+    return tuple(out)
+
+
 def make_options(
     algorithms: Sequence[str],
     environments: Sequence[str],
@@ -125,6 +161,13 @@ def make_options(
         kwargs["sensor_period_ticks"] = max(1, hz // FULL_SENSOR_HZ)
     names, configs = _algorithms(algorithms)
     asked = tuple(a for a in algorithms if a != "all")
+    radio = kwargs.get("radio", ())
+    if isinstance(radio, str):
+        kwargs["radio"] = radio = parse_radio(radio)
+    if radio:
+        load_environment(envs[0], radio)  # GslError: a value out of range
+    if kwargs.get("vehicles") is None:
+        kwargs["vehicles"] = 0
     return GslOptions(
         algorithms=names,
         environments=envs,
@@ -171,32 +214,46 @@ def specs_of(opts: GslOptions, **fields: Any) -> list[EpisodeSpec]:
                 keep_trajectory=run == 0,
                 dynamics=opts.dynamics,
                 behavior=algo.behavior,
-                vehicles=algo.vehicles,
+                vehicles=opts.vehicles or algo.vehicles,
+                overrides=opts.radio,
             )
             specs.append(replace(spec, **fields))
     return specs
 
 
 def run_specs(
-    specs: Sequence[EpisodeSpec], jobs: int, progress: Callable[[int, int], None] | None = None
+    specs: Sequence[EpisodeSpec],
+    jobs: int,
+    progress: Callable[[int, int], None] | None = None,
+    *,
+    executor: Executor = LOCAL,
+    journal: Journal | None = None,
+    shard: Shard | None = None,
+    log: Callable[[str], None] | None = None,
 ) -> list[Outcome]:
     """Every episode's outcome, in spec order (the order the workers finish in does not
-    matter); a spec given twice is flown once."""
-    unique = list(dict.fromkeys(specs))
+    matter); a spec given twice is flown once. With a ``journal``, the episodes it holds are
+    read back, not flown, and each one flown is appended to it as it finishes; with a
+    ``shard``, only the shard's episodes run and come back."""
+    mine = shard.of(specs) if shard is not None else list(dict.fromkeys(specs))
     done: dict[EpisodeSpec, Outcome] = {}
-    if jobs <= 1:
-        for spec in unique:
-            done[spec] = run_episode(spec)
-            if progress:
-                progress(len(done), len(unique))
-    else:
-        ctx = multiprocessing.get_context("fork")
-        with ctx.Pool(jobs) as pool:
-            for outcome in pool.imap_unordered(run_episode, unique, chunksize=1):
-                done[outcome.spec] = outcome
-                if progress:
-                    progress(len(done), len(unique))
-    return [done[spec] for spec in specs]
+    if journal is not None:
+        for spec in mine:
+            outcome = journal.outcome(spec)
+            if outcome is not None:
+                done[spec] = outcome
+    todo = [s for s in mine if s not in done]
+    if log is not None:
+        log(f"grid: {len(mine)} episodes, {len(done)} already done, {len(todo)} to run")
+    if progress and done:
+        progress(len(done), len(mine))
+    for outcome in run_episodes(todo, executor, jobs):
+        if journal is not None:
+            journal.append(outcome)
+        done[outcome.spec] = outcome
+        if progress:
+            progress(len(done), len(mine))
+    return [done[spec] for spec in (mine if shard is not None else specs)]
 
 
 def run_all(opts: GslOptions, progress: Callable[[int, int], None] | None = None) -> list[Outcome]:
@@ -244,6 +301,7 @@ def row_of(outcomes: Sequence[Outcome]) -> dict[str, Any]:
         ),
         "dynamics": spec.dynamics,
         "vehicles": spec.vehicles or spec.algorithm_config().vehicles,
+        **({"radio": dict(spec.overrides)} if spec.overrides else {}),
         **summarise(outcomes),
     }
 
@@ -370,6 +428,10 @@ def command_line(opts: GslOptions, sub: str = "") -> str:
     parts.append(f"--environments {','.join(opts.environments)}")
     parts.append(f"--sensors {','.join(opts.sensors)}")
     parts.append(f"--runs {opts.runs} --seed {opts.seed}")
+    if opts.vehicles:
+        parts.append(f"--vehicles {opts.vehicles}")
+    if opts.radio:
+        parts.append(f"--radio {opts.radio_text()}")
     if opts.time_limit_s != 300.0:
         parts.append(f"--time-limit {opts.time_limit_s:g}")
     parts.append(f"--dynamics {opts.dynamics}")
@@ -387,8 +449,11 @@ def seed_note(opts: GslOptions) -> str:
 
 
 def protocol_line(opts: GslOptions) -> str:
+    swarm = f"{opts.vehicles} vehicles per algorithm, " if opts.vehicles else ""
+    radio = f"radio {opts.radio_text()} (docs/agents.md), " if opts.radio else ""
     return (
-        f"{opts.runs} runs per cell, seed {opts.seed}, dynamics {opts.dynamics} "
+        f"{opts.runs} runs per cell, {swarm}{radio}"
+        f"seed {opts.seed}, dynamics {opts.dynamics} "
         f"(control {opts.control_hz} Hz, sensor every {opts.sensor_period_ticks} ticks), "
         f"limit {opts.time_limit_s:g} s, starts 30–80 m downwind and ±20 m crosswind at 10 m "
         "(run k: the same start for every algorithm), a time-dependent release running "

@@ -10,6 +10,8 @@ concentration field and its wind), one sensor model, one seeded start — all of
   not a controller's, make the result. The field is sampled at every vehicle's position every
   ``sensor_period_ticks``; each vehicle's reading goes through its sensor model and carries the
   field's values at its peers' positions, as on the bus, and reaches the behaviour that tick.
+  What a vehicle learns of its peers (their states, their samples, their behaviours' messages)
+  passes through the scenario's ``[radio]`` (:class:`agents.peer_link.PeerLink`).
 - ``full`` (:func:`fused_episode`): the scenario driven through the in-process driver
   (:class:`plumeswarm.experiments.driver.InProcessDriver`, the fused runner of
   :mod:`plumeswarm.experiments.fused`)
@@ -36,6 +38,7 @@ import numpy.typing as npt
 from agents.behavior import Behavior, BehaviorContext, SourceEstimate, load_behavior
 from agents.behaviors.detection import PLUME_THRESHOLD_G_M3
 from agents.build import behavior_rng
+from agents.peer_link import PeerLink
 from agents.sensor import ConcentrationSensor
 from plume_atmosphere.plume_formula import downwind_unit
 from plume_atmosphere.wind import WindModel, wind_from_scenario
@@ -231,13 +234,24 @@ def _state(
     )
 
 
-def episode_behaviors(spec: EpisodeSpec, scenario: Scenario) -> list[Behavior]:
+def episode_behaviors(
+    spec: EpisodeSpec, scenario: Scenario, link: PeerLink | None = None
+) -> list[Behavior]:
     """The episode's behaviours, built as an autopilot process builds them (same context,
-    same generator): each reads the wind from its vehicle's anemometer."""
+    same generator): each reads the wind from its vehicle's anemometer; with ``link``, each
+    gets its mailbox on that radio."""
     dt = 1.0 / spec.control_hz
     return [
         load_behavior(
-            v.behavior or "", BehaviorContext(v.id, i, scenario, dt, behavior_rng(scenario, v.id))
+            v.behavior or "",
+            BehaviorContext(
+                v.id,
+                i,
+                scenario,
+                dt,
+                behavior_rng(scenario, v.id),
+                link.mailboxes[v.id] if link is not None else None,
+            ),
         )
         for i, v in enumerate(scenario.vehicles)
     ]
@@ -348,7 +362,8 @@ def kinematic_episode(spec: EpisodeSpec, environment: Scenario | None = None) ->
     dt = 1.0 / spec.control_hz
     start_tick = round(start_s(scenario, spec.start_along_m) / dt)
     ids = [v.id for v in scenario.vehicles]
-    behaviors = episode_behaviors(spec, scenario)
+    link = PeerLink(scenario)
+    behaviors = episode_behaviors(spec, scenario, link)
     sensors = [ConcentrationSensor.for_vehicle(scenario, i) for i in range(len(ids))]
     positions = episode_starts(scenario, spec, len(ids))
     velocities = [(0.0, 0.0, 0.0)] * len(ids)
@@ -364,11 +379,16 @@ def kinematic_episode(spec: EpisodeSpec, environment: Scenario | None = None) ->
             for i, (vid, p) in enumerate(zip(ids, positions, strict=True))
         ]
         tally.observe(t, [s.position_enu_m for s in states])
-        readings = _sample(tally, sensors, states, concentration) if tick % period == 0 else None
+        link.before_step(tick)
+        peers = link.peers(tick, states)
+        readings = None
+        if tick % period == 0:
+            readings = link.readings(tick, states, _sample(tally, sensors, states, concentration))
         for i, b in enumerate(behaviors):
             own = [readings[i]] if readings is not None else []
-            setpoint = b.step(states[i], states[:i] + states[i + 1 :], own)
+            setpoint = b.step(states[i], peers[i], own)
             velocities[i] = _follow(setpoint, positions[i])
+        link.after_step(tick, states)
         for p, v in zip(positions, velocities, strict=True):
             p[0] += v[0] * dt
             p[1] += v[1] * dt

@@ -33,7 +33,6 @@ from typing import Any
 
 import msgspec
 
-from swarmbus.codec import split_validation_error
 from swarmbus.errors import PlumeswarmError
 from swarmbus.scenario import (
     GSL_ENVIRONMENTS_DIR,
@@ -43,6 +42,7 @@ from swarmbus.scenario import (
     Sensor,
     parse_scenario,
 )
+from swarmbus.scenario_errors import did_you_mean, explain
 
 log = logging.getLogger(__name__)
 
@@ -78,6 +78,11 @@ BUILTIN_ALGORITHMS: dict[str, Algorithm] = {
     ),
     "particle_filter": Algorithm(
         "agents.behaviors.particle_filter:ParticleFilter", 1, "Hutchinson, Oh & Chen 2017"
+    ),
+    "coop_surge_cast": Algorithm(
+        "agents.behaviors.coop_surge_cast:CooperativeSurgeCast",
+        3,
+        "Lochmatter & Martinoli 2008; detections shared over the radio",
     ),
     "oracle": Algorithm("agents.behaviors.oracle:Oracle", 1, "knows the source (ceiling)"),
 }
@@ -190,7 +195,8 @@ def _set(node: Any, keys: Sequence[str], value: Any, field: str) -> None:
     key = keys[0]
     if not isinstance(node, dict) or key not in node:
         valid = ", ".join(sorted(node)) if isinstance(node, dict) else "none"
-        raise GslError(f"{field}: no {key!r} there; valid: {valid}")
+        hint = did_you_mean(key, list(node)) if isinstance(node, dict) else ""
+        raise GslError(f"{field}: no {key!r} there{hint}; valid: {valid}")
     if len(keys) == 1:
         node[key] = value
     else:
@@ -209,7 +215,7 @@ def apply_overrides(scenario: Scenario, overrides: Sequence[tuple[str, Any]]) ->
     try:
         return msgspec.convert(raw, Scenario)
     except msgspec.ValidationError as exc:
-        where, reason = split_validation_error(exc)
+        where, reason = explain(exc, raw, Scenario)
         raise GslError(f"override {where}: {reason}") from None
 
 
@@ -241,6 +247,11 @@ def environment_names() -> list[str]:
 
 
 def environment_path(name_or_path: str) -> Path:
+    """The file of an environment: its name (``steady_gaussian``, or ``gsl/steady_gaussian`` as
+    ``plumeswarm scenario list`` shows it), or a scenario file's path."""
+    asked, listed = name_or_path, f"{ENVIRONMENTS_DIR.name}/"
+    if name_or_path.startswith(listed) and not Path(name_or_path).is_file():
+        name_or_path = name_or_path.removeprefix(listed)
     if "/" in name_or_path or name_or_path.endswith(".toml"):
         path = Path(name_or_path)
         if not path.is_file():
@@ -248,8 +259,10 @@ def environment_path(name_or_path: str) -> Path:
         return path
     path = ENVIRONMENTS_DIR / f"{name_or_path}.toml"
     if not path.is_file():
-        valid = ", ".join(environment_names())
-        raise GslError(f"--environments {name_or_path!r}: unknown; valid: {valid} or a path")
+        names = environment_names()
+        hint = did_you_mean(name_or_path, names)
+        valid = ", ".join(names)
+        raise GslError(f"--environments {asked!r}: unknown{hint}; valid: {valid} or a path")
     return path
 
 

@@ -139,6 +139,19 @@ def test_frame_stack_and_episode_statistics() -> None:
     env.close()
 
 
+def test_the_pettingzoo_module_and_its_metadata_name_are_one_name() -> None:
+    """PettingZoo's convention (``pistonball_v6``): ``metadata["name"]`` is the versioned
+    module's name, for the parallel and the AEC form alike."""
+    module = plumeswarm_v0.__name__.rsplit(".", 1)[1]
+    assert module == "plumeswarm_v0"
+    assert PlumeSwarmEnv.metadata["name"] == module
+    aec = plumeswarm_v0.env()
+    try:
+        assert aec.metadata["name"] == module
+    finally:
+        aec.close()
+
+
 # agents are the scenario's vehicle ids, not PettingZoo's recommended <name>_<number>
 @pytest.mark.filterwarnings("ignore:We recommend agents to be named")
 def test_pettingzoo_module_parallel_and_aec_pass_the_api_tests() -> None:

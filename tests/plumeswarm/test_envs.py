@@ -261,7 +261,7 @@ def test_bus_backend_attaches_to_a_running_stack_and_flies_it(tmp_path: Path) ->
         ("start_min_enu_m = [30.0, 0.0, 0.0]\nstart_max_enu_m = [40.0, 5.0, 9.0]",
          "env.start_min_enu_m", "must be > 0"),
         ("success_radius_m = 0.0", "env.success_radius_m", ""),
-        ("start_box = 3", "env", "unknown field `start_box`"),
+        ("start_box = 3", "env.start_box", "unknown key"),
     ],
 )  # fmt: skip
 def test_a_bad_env_section_names_its_field(env_section: str, field: str, words: str) -> None:

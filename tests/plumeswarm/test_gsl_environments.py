@@ -101,3 +101,18 @@ def _taylor_meander_std_m_s(share: float, u_m_s: float = 6.0, z_m: float = 10.0)
         t = x_m / u_m_s
         ratios.append(2.0 * t_l * (t - t_l * (1.0 - math.exp(-t / t_l))) / (share * sigma_y**2))
     return math.sqrt(sum(ratios) / sum(r * r for r in ratios))
+
+
+def test_an_environment_answers_to_its_listed_name_and_a_near_miss_gets_a_did_you_mean() -> None:
+    """``gsl/NAME`` (as ``plumeswarm scenario list`` shows it) is the file ``NAME`` names."""
+    import hashlib
+
+    from plumeswarm.gsl.registry import GslError, load_environment
+    from swarmbus.scenario import GSL_ENVIRONMENTS_DIR
+
+    data = (GSL_ENVIRONMENTS_DIR / "meander_low.toml").read_bytes()
+    listed = load_environment("gsl/meander_low")
+    assert listed.name == "meander_low"
+    assert listed.sha256 == hashlib.sha256(data).hexdigest()
+    with pytest.raises(GslError, match=r"did you mean 'meander_low'\?\); valid: .*puff_meander"):
+        load_environment("meandr_low")

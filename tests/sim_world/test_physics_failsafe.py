@@ -122,3 +122,36 @@ def test_the_ticks_without_a_command_are_counted_per_outage(
     assert "a commanded again after 15 ticks without (0.15 s sim" in caplog.text
     assert gaps.note() == "ticks without a command: a 20 in 2"
     assert "a: 20 ticks (0.20 s sim) in 2 outage(s), the longest 0.15 s" in gaps.summary(60)
+
+
+def test_a_vehicle_without_commands_holds_for_the_hold_time_then_lands() -> None:
+    """PX4's COM_FAIL_ACT_T: the Hold before the failsafe action. Through CommandGaps (what the
+    physics runs in every clock mode): for ``failsafe.hold_s`` the vehicle keeps its altitude,
+    then it descends at the landing speed; expected times from the setpoints (h / v)."""
+    height_m, hold_s, speed_m_s = 8.0, 2.0, 0.7
+    sc = parse_scenario(
+        f"[time]\nphysics_hz = {CONTROL_HZ * SUBSTEPS}\ncontrol_hz = {CONTROL_HZ}\n"
+        "[wind]\nspeed_m_s = 1e-9\nfrom_deg = 270.0\n"
+        f"[failsafe]\nhold_s = {hold_s}\ndescend_speed_m_s = {speed_m_s}\n"
+        f'[[vehicles]]\nid = "a"\nspawn_enu_m = [0.0, 0.0, {height_m}]\n'
+    )
+    gaps = CommandGaps(sc, ["a"])
+    states: list[VehicleState] = []
+    with World(sc) as world:
+        seconds = hold_s + height_m / speed_m_s + 4.0
+        for tick in range(round(seconds * CONTROL_HZ)):
+            s = world.states(tick)[0]
+            states.append(s)
+            world.apply_tick(gaps.fill(tick, {}, [s]))
+            world.step(SUBSTEPS)
+    held = states[round(0.5 * CONTROL_HZ) : round(hold_s * CONTROL_HZ)]
+    # spawned with motors off, it sags a little before the hold catches it, then keeps it
+    assert all(abs(s.position_enu_m[2] - height_m) < 0.3 for s in held)
+    assert abs(held[-1].velocity_enu_m_s[2]) < 0.1
+    descending = [s for s in states if s.sim_time_s > hold_s + 2.0 and not s.on_ground]
+    assert descending, "it never descended after the hold"
+    assert descending[-1].velocity_enu_m_s[2] == pytest.approx(-speed_m_s, abs=0.1)
+    landed = next(s for s in states if s.on_ground and s.sim_time_s > hold_s)
+    assert landed.sim_time_s == pytest.approx(hold_s + height_m / speed_m_s, abs=1.5)
+    assert states[-1].on_ground and not any(s.crashed for s in states)
+    assert gaps.gaps["a"].outages == 1

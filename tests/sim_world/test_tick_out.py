@@ -56,7 +56,12 @@ def test_ticks_sensor_ticks_states_and_backfill(network: tuple[Network, zenoh.Se
         out.put_tick()  # 8: a sensor tick
         out.set(9, b"tick 9", states)
         out.put_tick()
-        wait_until(lambda: len(ticks.got) == 2, 5.0, "ticks 8 and 9 on sim/tick")
+        # each subscriber's callback runs on its own: wait for both keys, not one
+        wait_until(
+            lambda: len(ticks.got) == 2 and len(sensor.got) >= 1,
+            5.0,
+            "ticks 8 and 9 on sim/tick, and the sensor tick 8",
+        )
         assert [p for _, p in ticks.taken()] == [b"tick 8", b"tick 9"]
         assert [p for _, p in sensor.taken()] == [b"tick 8"]
         assert all(k == KEYS.vehicle_state("b") for k, _ in state_b.taken())

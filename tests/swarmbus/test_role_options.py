@@ -106,11 +106,28 @@ def test_each_bad_value_is_named(item: str, message: str) -> None:
 KNOWN = "enabled, levels, links, max_ticks, mode, out, port, rate.<KEY>, tick_hz"
 
 
-@pytest.mark.parametrize("item", ["tick=5", "rate=5", "rate.=5", "port.x=1"])
-def test_unknown_options_are_refused_naming_the_known_ones(item: str) -> None:
+@pytest.mark.parametrize(
+    ("item", "meant"),
+    [
+        ("tick=5", "tick_hz"),
+        ("rate=5", "rate.<KEY>"),
+        ("rate.=5", "rate.<KEY>"),
+        ("port.x=1", "port"),
+    ],
+)
+def test_unknown_options_are_refused_naming_the_nearest_and_the_known_ones(
+    item: str, meant: str
+) -> None:
     with pytest.raises(OptionError) as info:
         parse_options(Sample, [item])
-    assert str(info.value) == f"--set {item}: unknown option; known: {KNOWN}"
+    hint = f" (did you mean {meant!r}?)"
+    assert str(info.value) == f"--set {item}: unknown option{hint}; known: {KNOWN}"
+
+
+def test_an_unknown_option_far_from_every_known_one_gets_no_guess() -> None:
+    with pytest.raises(OptionError) as info:
+        parse_options(Sample, ["zzzz=1"])
+    assert str(info.value) == f"--set zzzz=1: unknown option; known: {KNOWN}"
 
 
 def test_malformed_settings() -> None:

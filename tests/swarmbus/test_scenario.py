@@ -64,7 +64,7 @@ BROKEN: list[tuple[str, str]] = [
         '[[vehicles]]\nid = "a"\nmission = [{ x = 1.0, y = 2.0, z = inf }]\n',
         "vehicles[0].mission[0].z",
     ),
-    ('[[vehicles]]\nid = "a"\nmission = [{ x = 1.0, y = 2.0 }]\n', "vehicles[0].mission[0]"),
+    ('[[vehicles]]\nid = "a"\nmission = [{ x = 1.0, y = 2.0 }]\n', "vehicles[0].mission[0].z"),
     ('[[vehicles]]\nid = "a"\nbehavior = "nocolon"\n', "vehicles[0].behavior"),
     (
         "[sensor]\ndetection_limit_g_m3 = 0.5\nsaturation_g_m3 = 0.2\n" + GOOD_VEHICLE,
@@ -89,7 +89,7 @@ BROKEN: list[tuple[str, str]] = [
         '[failsafe]\ndatalink_loss_action = "explode"\n' + GOOD_VEHICLE,
         "failsafe.datalink_loss_action",
     ),
-    ("[unknown_section]\nx = 1\n" + GOOD_VEHICLE, ""),
+    ("[unknown_section]\nx = 1\n" + GOOD_VEHICLE, "unknown_section"),
     ("this is = = not toml", ""),
 ]
 
@@ -184,7 +184,88 @@ def test_vehicles_per_scenario_are_bounded() -> None:
 def test_unknown_section_is_reported_by_name() -> None:
     with pytest.raises(ScenarioError) as err:
         parse_scenario("[unknown_section]\nx = 1\n" + GOOD_VEHICLE, "s.toml")
-    assert "unknown_section" in err.value.reason
+    assert err.value.field == "unknown_section"
+    assert str(err.value).startswith("s.toml: unknown_section: unknown key")
+
+
+def _valid_list(line: str) -> list[str]:
+    """The names after ``; valid: `` of an error line."""
+    assert "; valid: " in line, line
+    return line.split("; valid: ", 1)[1].split(", ")
+
+
+def test_a_mistyped_key_gets_the_nearest_key_of_its_section() -> None:
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario("[wind]\nsped_m_s = 3.0\n" + GOOD_VEHICLE, "w.toml")
+    assert err.value.field == "wind.sped_m_s"
+    assert "did you mean 'speed_m_s'?" in err.value.reason
+    # the valid keys are the [wind] table's, as the docs list them
+    assert set(_valid_list(str(err.value))) == {
+        "speed_m_s",
+        "from_deg",
+        "model",
+        "meander",
+        "field",
+    }
+
+
+def test_a_mistyped_section_gets_the_nearest_section() -> None:
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario("[snesor]\nnoise_rel = 0.1\n" + GOOD_VEHICLE, "s.toml")
+    assert err.value.field == "snesor"
+    assert "did you mean 'sensor'?" in err.value.reason
+    assert {"sensor", "wind", "plume", "vehicles"} <= set(_valid_list(str(err.value)))
+
+
+@pytest.mark.parametrize(
+    ("text", "field", "choices"),
+    [
+        ('[wind]\nmodel = "turbulent"\n', "wind.model", {"steady", "meander", "field"}),
+        ('[plume]\nstability = "G"\n', "plume.stability", set("ABCDEF")),
+        ('[sensor]\npreset = "tgs2620"\n', "sensor.preset",
+         {"novak2018", "ideal", "mox-tgs2620", "pid", "pid-fast"}),
+        ("[sensor]\npreset = 3\n", "sensor.preset",
+         {"novak2018", "ideal", "mox-tgs2620", "pid", "pid-fast"}),
+        ('[failsafe]\noffboard_loss_action = "explode"\n', "failsafe.offboard_loss_action",
+         {"hold", "land", "rtl"}),
+        ('[plume]\nsources = [{ model = "gauss" }]\n', "plume.sources[0].model",
+         {"gaussian", "filament", "puff"}),
+        ('[network]\nmode = "mesh"\n', "network.mode", {"peer", "client", "router"}),
+    ],
+)  # fmt: skip
+def test_a_bad_enum_member_lists_the_choices(text: str, field: str, choices: set[str]) -> None:
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario(text + GOOD_VEHICLE, "e.toml")
+    line = str(err.value)
+    assert err.value.field == field
+    assert set(_valid_list(line)) == choices, line
+    assert "got " in line and line.count("got ") == 1, line
+
+
+def test_a_near_miss_enum_member_gets_a_did_you_mean() -> None:
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario('[wind]\nmodel = "meandre"\n' + GOOD_VEHICLE, "e.toml")
+    assert "got 'meandre'" in err.value.reason
+    assert "did you mean 'meander'?" in err.value.reason
+
+
+@pytest.mark.parametrize(
+    ("text", "field", "expected", "got"),
+    [
+        ('[wind]\nspeed_m_s = "fast"\n', "wind.speed_m_s", "float", "'fast'"),
+        ("[time]\nphysics_hz = 2.5\n", "time.physics_hz", "integer", "2.5"),
+        ("[time]\nphysics_hz = true\n", "time.physics_hz", "integer", "true"),
+        ('[sensor]\nsaturation_g_m3 = "x"\n', "sensor.saturation_g_m3", "float", "'x'"),
+        ("[plume]\nsources = { x_m = 1.0 }\n", "plume.sources", "array", "a table"),
+    ],
+)
+def test_a_wrong_type_says_the_expected_type_and_the_value_once(
+    text: str, field: str, expected: str, got: str
+) -> None:
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario(text + GOOD_VEHICLE, "t.toml")
+    assert err.value.field == field
+    assert err.value.reason == f"expected {expected}, got {got}"
 
 
 def test_cli_check_accepts_the_default() -> None:

@@ -1,8 +1,9 @@
 """Partitions between hosts in realtime mode: ``sim`` (router, physics, plume, and a driver that
 took the three vehicles off to 8 m) and ``agents`` (the autopilots) in their own namespaces, as in
 ``test_netns_partition``; the agents' veth is set down in ``sim`` and up again while the vehicles
-hold in the air. The world cannot wait: after the tick's deadline the physics lands each
-vehicle itself (its failsafe: level, 0.7 m/s down), each autopilot lands too once it has had no
+hold in the air. The world cannot wait: after the tick's deadline the physics holds each
+vehicle 5 s, then lands it itself (its failsafe: level, 0.7 m/s down), each autopilot lands too
+once it has had no
 tick for ``failsafe.state_loss_timeout_s``, both sides log what was late, and after the healing
 the autopilots command their vehicles again, in LAND, down to the ground. No vehicle crashes.
 Needs root. Measured numbers: docs/reliability.md, "Realtime mode: the vehicles follow their
@@ -30,6 +31,8 @@ VEHICLES = ("uav1", "uav2", "uav3")
 ALTITUDE_M = 8.0
 CONTROL_DT_S = 1.0 / 120.0
 DRIVER = "tests.support.rt_flight"
+# the physics' failsafe (failsafe.hold_s = 5 s by default: PX4's COM_FAIL_ACT_T)
+HOLD_THEN_LAND = r"the physics holds it 5 s, then lands it \(its failsafe\)"
 
 
 def _driver(h: Hosts, tmp: Path, out: Path) -> Path:
@@ -68,10 +71,16 @@ def _last_lines(out: Path) -> dict[str, dict[str, Any]]:
     return last
 
 
-def partition(tmp: Path, seconds: float) -> tuple[dict[str, str], list[dict[str, Any]]]:
-    """The logs (physics, each autopilot) and the flight records of a realtime run whose agents
-    host is cut off for ``seconds`` while the vehicles hold at 8 m."""
-    scenario = seed_scenario(tmp, 'mode = "lockstep"', 'mode = "realtime"')
+REALTIME = ('mode = "lockstep"', 'mode = "realtime"')
+
+
+def partition(
+    tmp: Path, seconds: float, change: tuple[str, str] = REALTIME
+) -> tuple[dict[str, str], list[dict[str, Any]]]:
+    """The logs (physics, each autopilot) and the flight records of a run (realtime, or the
+    seed scenario with ``change``) whose agents host is cut off for ``seconds`` while the
+    vehicles hold at 8 m."""
+    scenario = seed_scenario(tmp, *change)
     with three_namespaces() as ns:
         h = sim_and_agents(ns, tmp, scenario)
         physics = tmp / "sim" / "physics.log"
@@ -108,7 +117,7 @@ def check(
     print(re.findall(r".*(?:no command from|commanded again|without a command).*", physics))
     for vid in VEHICLES:
         # the physics' side: its failsafe took the vehicle while airborne, then gave it back
-        assert re.search(rf"no command from {vid}: the physics lands it \(its failsafe\)", physics)
+        assert re.search(rf"no command from {vid}: {HOLD_THEN_LAND}", physics)
         back = re.findall(rf"{vid} commanded again after (\d+) ticks without", physics)
         assert back, vid
         # the autopilot's side: no tick for its timeout (1 s), it landed, then ticks came back
@@ -127,7 +136,9 @@ def check(
             assert any(r["mode"] == "land" for r in lost), vid
         assert own[-1]["on_ground"] and not own[-1]["armed"] and not own[-1]["crashed"]
     # the run's summary counts the ticks; at least the partition less the tick's 2 s deadline
-    summary = re.search(r"ticks without a command \(physics failsafe: land\): (.*)", physics)
+    summary = re.search(
+        r"ticks without a command \(physics failsafe: hold, then land\): (.*)", physics
+    )
     assert summary, "no summary"
     for vid, n, sim_s in re.findall(r"(uav\d): (\d+) ticks \(([0-9.]+) s sim\)", summary[1]):
         assert int(n) * CONTROL_DT_S == pytest.approx(float(sim_s), abs=0.01)
@@ -145,7 +156,8 @@ def test_realtime_partition_of_5_s_the_physics_then_the_autopilots_land_the_vehi
 def test_realtime_partition_of_60_s_the_physics_lands_the_vehicles_and_the_autopilots_disarm(
     tmp_path: Path,
 ) -> None:
-    """The physics lands them within 13 s; the autopilots, back, find them down and disarm."""
+    """The physics holds them 5 s, then lands them within 13 s; the autopilots, back, find them
+    down and disarm."""
     logs, rows = partition(tmp_path, 60.0)
     check(logs, rows, 60.0, landing_seen=False)
     for vid in VEHICLES:
