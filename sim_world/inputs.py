@@ -22,7 +22,7 @@ from sim_world.stepping import SteppedClock, StepRefused
 from swarmbus.catchup import RouterOutage
 from swarmbus.codec import decode_or_none
 from swarmbus.keys import Keys, autopilot_node
-from swarmbus.messages import RestartNotice, StepRequest
+from swarmbus.messages import NodeHealth, NodeState, RestartNotice, StepRequest
 from swarmbus.reqrep import Incoming, serve_later
 from swarmbus.session import Presence
 
@@ -63,10 +63,15 @@ class LockstepInputs:
         self._restart_sub = session.declare_subscriber(
             keys.all_node_restart(), self._on_restart_notice
         )
+        self._recorder_failing = False  # the recorder's health says error
+        self._recorder_health_sub = session.declare_subscriber(
+            keys.node_health(RECORDER), self._on_recorder_health
+        )
         self.presence = Presence(session, keys, self._on_presence)
 
     def close(self) -> None:
         self.presence.close()
+        self._recorder_health_sub.undeclare()
         self._step_queryable.undeclare()
         self._restart_sub.undeclare()
         self._actuator_sub.undeclare()
@@ -104,6 +109,21 @@ class LockstepInputs:
                     break
                 self.cond.wait(min(remaining, STOP_POLL_S))
             return self.holds.end_recorder_wait()
+
+    def _on_recorder_health(self, sample: zenoh.Sample) -> None:
+        """A recorder that cannot write (disk full) holds the clock as a restarting one."""
+        health = decode_or_none(sample.payload.to_bytes(), NodeHealth, "recorder health", log)
+        if health is None or not self.holds.enabled:
+            return
+        failing = health.state is NodeState.ERROR
+        if failing == self._recorder_failing or health.state is NodeState.STOPPING:
+            return
+        self._recorder_failing = failing
+        with self.cond:
+            self.holds.recorder_error(failing)
+            self.cond.notify_all()
+        if failing:
+            log.warning("the recorder cannot write (%s): holding the clock for it", health.detail)
 
     def _on_presence(self, name: str, alive: bool) -> None:
         if is_plume(name):

@@ -529,6 +529,7 @@ class NodeState(enum.StrEnum):
     UP = "up"
     READY = "ready"
     STOPPING = "stopping"
+    ERROR = "error"  # alive but failing at its job (``detail`` says why), e.g. a full disk
 
 
 class NodeHealth(Message, frozen=True, kw_only=True, tag=_tag("node_health")):
