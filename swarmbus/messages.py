@@ -543,6 +543,9 @@ class NodeHealth(Message, frozen=True, kw_only=True, tag=_tag("node_health")):
     host: Text
     sim_time_s: SimTime | None = None
     detail: Text = ""
+    scenario: Text = ""  # the node's swarmbus.scenario.scenario_hash ("": not said)
+    vehicles: Annotated[list[Name], msgspec.Meta(max_length=MAX_BATCH_COMMANDS)] = []
+    """The vehicles the process serves (an autopilot's)."""
 
 
 # --------------------------------------------------------------------------- restarts
