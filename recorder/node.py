@@ -186,6 +186,7 @@ class Recorder:
         self.dropped: Counter[str] = Counter()
         self.tick_gaps: Counter[str] = Counter()  # messages missing from per-tick streams
         self._last_tick: dict[str, int] = {}
+        self._durable_tick: dict[str, int] = {}  # the newest tick of each key in a closed chunk
         self._gaps_reported = 0
         self._received_total = 0
         self._dropped_total = 0
@@ -489,9 +490,9 @@ class Recorder:
         self._gap_reason = reason
         self._first_log_ns, self._first_tick = None, None
         self._started_s = time.monotonic()
-        self._last_tick.clear()
         self._have.clear()
-        self._have_max.clear()
+        self._have_max = self._durable_tick  # re-sent ticks newer than these are taken
+        self._last_tick, self._durable_tick = {}, {}
         sink.write_event(sch.RecorderEvent(kind=sch.EventKind.STARTED, detail=self._name))
         sink.write_event(self._event(sch.EventKind.WRITE_ERROR, f"{old.name}: {reason}"))
         self._scan_thread = threading.Thread(
@@ -537,9 +538,11 @@ class Recorder:
     def _housekeeping(self, age_s: float = 0.0) -> None:
         if self._gap_pending:
             self._write_segment_gap()
-        if self._sink.maybe_close_chunk() and self._spool is not None:
-            with self._lock:
-                self._spool.rotate(self._written_ns)
+        if self._sink.maybe_close_chunk():
+            self._durable_tick = dict(self._last_tick)
+            if self._spool is not None:
+                with self._lock:
+                    self._spool.rotate(self._written_ns)
         self._watch_backlog(age_s)
         self._report_drops()
         now = time.monotonic()

@@ -20,7 +20,7 @@ import zenoh
 
 from deploy.launcher import Launcher
 from deploy.supervisor import ProcState
-from recorder.reader import Recording
+from recorder.reader import Recording, segment_end
 from swarmbus.codec import decode
 from swarmbus.messages import NodeState, SimTick
 from swarmbus.scenario import load_scenario
@@ -67,9 +67,11 @@ def fill(path: Path) -> None:
         os.close(fd)
 
 
+@pytest.mark.parametrize("spool", [True, False], ids=["spool", "mcap-writer"])
 def test_full_disk_is_reported_held_and_recovered(
-    tmp_path: Path, small_disk: Path, caplog: pytest.LogCaptureFixture
+    tmp_path: Path, small_disk: Path, caplog: pytest.LogCaptureFixture, spool: bool
 ) -> None:
+    """With the spool, its write fails first; without, the MCAP writer's chunk flush."""
     path, _, _ = write_scenario(tmp_path / "scenario.toml", 2)
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     out = small_disk / "recording.mcap"
@@ -77,7 +79,14 @@ def test_full_disk_is_reported_held_and_recovered(
         path,
         tmp_path / "run",
         endpoint,
-        node_options={"recorder": (f"out={out}", "resume_free_bytes=262144", "foxglove=false")},
+        node_options={
+            "recorder": (
+                f"out={out}",
+                "resume_free_bytes=262144",
+                "foxglove=false",
+                f"spool={str(spool).lower()}",
+            )
+        },
     )
     caplog.set_level("WARNING", logger="deploy.launcher")
     keys = keys_for()
@@ -107,7 +116,9 @@ def test_full_disk_is_reported_held_and_recovered(
     try:
         launcher.start(on_bus)
         wait_until(
-            lambda: last_tick() >= 200 and out.stat().st_size > 4096, 120.0, "a chunk written"
+            lambda: last_tick() >= 200 and segment_end(out).last_tick is not None,
+            120.0,
+            "ticks in a closed chunk",
         )
         pids = launcher.supervisor.pids()
         fill(small_disk / "fill")
@@ -119,6 +130,7 @@ def test_full_disk_is_reported_held_and_recovered(
         assert status.returncode == 0, status.stderr
         node = {n["name"]: n for n in json.loads(status.stdout)["nodes"]}["recorder"]
         assert node["state"] == "error" and "No space left" in node["detail"], node
+        assert ("spool of" in node["detail"]) == spool, node
         held = last_tick()
         time.sleep(1.0)
         assert last_tick() == held, "the clock did not hold for the recorder"
@@ -138,6 +150,10 @@ def test_full_disk_is_reported_held_and_recovered(
     assert gap.previous_segment == "recording.mcap" and "No space left" in gap.reason, gap
     recorded = [m.message().tick for m in recording.messages() if m.topic == keys.tick()]
     assert gap.first_tick is not None and gap.first_tick <= held + 1, (gap, held)
+    # without the spool the open chunk is lost, less the physics's last 256 ticks re-sent
+    assert gap.ticks_missing is not None and (
+        gap.ticks_missing == 0 if spool else gap.ticks_missing >= 0
+    ), gap
     assert max(recorded) >= held + 150, (held, max(recorded))
     assert "recorder reports an error: write error" in caplog.text
     print(f"\nfull at tick {filled_at}, held at {held}: {gap}")
