@@ -441,7 +441,11 @@ class Recorder:
             self._publish_health(self._failure_detail(), NodeState.ERROR)
         if now >= self._retry_at:
             self._retry_at = now + self._opts.retry_s
-            self._try_resume()
+            try:
+                self._try_resume()
+            except OSError as exc:  # the new segment failed at once: abandoned in turn
+                with self._lock:
+                    self._failure = f"{self._sink.path.name}: {exc.strerror or exc}"
         else:
             self._stopping.wait(0.05)
 
@@ -714,7 +718,11 @@ def main(ctx: NodeContext, opts: RecorderOptions) -> int:
             chunk_bytes=opts.chunk_bytes,
             metadata=metadata,
         )
-        return sink, Spool(path) if opts.spool else None
+        try:
+            return sink, Spool(path) if opts.spool else None
+        except OSError:
+            sink.abandon()
+            raise
 
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
