@@ -566,7 +566,7 @@ def main(ctx: NodeContext) -> int:
     # Before the session opens (Zenoh reads it once, when its runtime starts); an operator's
     # own ZENOH_RUNTIME wins.
     os.environ.setdefault("ZENOH_RUNTIME", SINGLE_THREAD_RUNTIME)
-    with NodeRuntime(ctx, role="autopilot") as rt:
+    with NodeRuntime(ctx, role="autopilot", check_scenario_of="physics") as rt:
         try:
             node = AutopilotNode(rt.session, ctx, options)
         except BehaviorError as exc:
@@ -578,4 +578,5 @@ def main(ctx: NodeContext) -> int:
             node.run(rt.stop)
         finally:
             node.close()
-    return 0
+        refused = rt.refusal is not None
+    return 2 if refused else 0

@@ -41,7 +41,7 @@ from swarmbus.closeable import Closeable
 from swarmbus.codec import encode
 from swarmbus.errors import PlumeswarmError
 from swarmbus.keys import Keys, process_node
-from swarmbus.messages import RestartNotice
+from swarmbus.messages import NodeState, RestartNotice
 from swarmbus.scenario import Scenario
 from swarmbus.session import DEFAULT_ROUTER, NetworkConfig, open_session
 
@@ -258,6 +258,7 @@ class Launcher(Closeable):
         self.supervisor = Supervisor(self.specs, self.run_dir, console=console)
         self._session: zenoh.Session | None = None
         self.view: BusView | None = None
+        self._errors: dict[str, str] = {}  # processes whose health says error: the detail
         self.started_at = time.monotonic()
 
     # ------------------------------------------------------------------ start
@@ -394,12 +395,29 @@ class Launcher(Closeable):
                 log.warning("%s exited with code %d", event.name, event.returncode)
         if self.supervisor.pids() != before:
             self.write_pids()
+        self._watch_errors()
         failed = self.supervisor.failed_for_good()
         if failed:
             sv = failed[0]
             raise LaunchError(
                 f"{sv.spec.name} exited with code {sv.returncode}: {_last_lines(sv.log_path)}"
             )
+
+    def _watch_errors(self) -> None:
+        """Log each of our processes that says on its health it is failing at its job (a
+        recorder on a full disk), and when it recovers; restarting would not help."""
+        if self.view is None:
+            return
+        health = self.view.snapshot().health
+        for name, sv in self.supervisor.procs.items():
+            h = health.get(name)
+            failing = h is not None and h.state is NodeState.ERROR
+            if failing and h is not None and name not in self._errors:
+                log.error("%s reports an error: %s", name, h.detail)
+                self._errors[name] = h.detail
+            elif not failing and name in self._errors and sv.state is ProcState.RUNNING:
+                del self._errors[name]
+                log.warning("%s recovered: %s", name, h.detail if h is not None else "")
 
     def _announce(self, event: ExitEvent) -> None:
         """Say on the bus that a process ended and whether it is being restarted: the physics

@@ -14,6 +14,7 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import zenoh
 
@@ -68,20 +69,6 @@ class StackOnBus:
     lock: threading.Lock = field(default_factory=threading.Lock)
 
 
-def recording_stack(scenario_path: Path, run_dir: Path, endpoint: str) -> LaunchOptions:
-    """The launcher's options for a headless stack under ``--record`` on ``endpoint``: router,
-    recorder, plume, physics and the autopilots (no gateway, no viewer)."""
-    return LaunchOptions(
-        node_command=NODE_COMMAND,
-        scenario_path=scenario_path,
-        headless=True,
-        record=True,
-        run_dir=run_dir,
-        connect=(endpoint,),
-        roles=("router", "recorder", "plume", "physics", "autopilot"),
-    )
-
-
 def spawn_up(args: Sequence[str], out: Path) -> subprocess.Popen[bytes]:
     """``plumeswarm up ARGS --out OUT/run`` in its own process group; console in OUT/console.txt."""
     env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONUNBUFFERED="1")
@@ -125,3 +112,18 @@ def plumeswarm_up(
         yield Up(proc, tmp / "run", endpoint, console)
     finally:
         stop_up(proc)
+
+
+def recording_launch(scenario: Path, run_dir: Path, endpoint: str, **kw: Any) -> LaunchOptions:
+    """Launch options of a headless recorded stack without gateway (router, recorder, plume,
+    physics, autopilots) on ``endpoint``; ``kw`` adds to them."""
+    return LaunchOptions(
+        node_command=NODE_COMMAND,
+        scenario_path=scenario,
+        headless=True,
+        record=True,
+        run_dir=run_dir,
+        connect=(endpoint,),
+        roles=("router", "recorder", "plume", "physics", "autopilot"),
+        **kw,
+    )

@@ -26,7 +26,7 @@ from swarmbus.scenario import load_scenario
 from swarmbus.session import NetworkConfig, free_tcp_port, open_session
 from tests.support.mavclient import write_scenario
 from tests.support.procs import keys_for, wait_until
-from tests.support.upstack import recording_stack
+from tests.support.upstack import recording_launch
 
 MIB = 2**20
 ROGUE_PAYLOAD = 64 * MIB
@@ -80,7 +80,7 @@ def _rogue_puts(rogue: zenoh.Session, targets: list[str]) -> list[zenoh.Publishe
 def test_64_mib_payloads_are_refused_the_stack_goes_on_memory_bounded(tmp_path: Path) -> None:
     path, _, _ = write_scenario(tmp_path / "scenario.toml", 3)
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
-    opts = recording_stack(path, tmp_path / "run", endpoint)
+    opts = recording_launch(path, tmp_path / "run", endpoint)
     keys = keys_for()
     targets = [
         keys.autopilot_actuators("autopilot-uav1"),  # the physics

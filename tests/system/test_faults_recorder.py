@@ -25,7 +25,7 @@ from swarmbus.scenario import load_scenario
 from swarmbus.session import free_tcp_port
 from tests.support.mavclient import write_scenario
 from tests.support.procs import keys_for, wait_until
-from tests.support.upstack import recording_stack
+from tests.support.upstack import recording_launch
 
 VEHICLES = ("uav1", "uav2", "uav3")
 
@@ -33,7 +33,7 @@ VEHICLES = ("uav1", "uav2", "uav3")
 def test_recorder_killed_nothing_it_received_is_lost(tmp_path: Path) -> None:
     path, _, _ = write_scenario(tmp_path / "scenario.toml", len(VEHICLES))
     scenario = load_scenario(path)
-    opts = recording_stack(path, tmp_path / "run", f"tcp/127.0.0.1:{free_tcp_port()}")
+    opts = recording_launch(path, tmp_path / "run", f"tcp/127.0.0.1:{free_tcp_port()}")
     keys = keys_for()
     lock = threading.Lock()
     seen: dict[tuple[str, int], bytes] = {}  # (key, tick) → payload, as the test received it
