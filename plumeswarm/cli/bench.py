@@ -262,11 +262,15 @@ def bench_gsl(ctx: click.Context, /, **kwargs: Any) -> None:
     """Source seeking: algorithms × environments × sensors, N seeded runs per cell."""
     if ctx.invoked_subcommand is not None:
         return
-    from plumeswarm.gsl.bench import rows_of, run_all, write_outputs
+    from plumeswarm.gsl.bench import rows_of, run_all, throughput_lines, write_outputs
 
     def run(opts: Any, directory: Path, progress: Any) -> list[Path]:
-        outcomes = run_all(opts, progress)
-        return write_outputs(directory, opts, rows_of(opts, outcomes), outcomes)
+        cpu_s: dict[Any, float] = {}
+        outcomes = run_all(opts, progress, cpu_s)
+        written = write_outputs(directory, opts, rows_of(opts, outcomes), outcomes)
+        for line in throughput_lines(cpu_s):
+            click.echo(line)
+        return written
 
     _gsl_run(kwargs, run)
 

@@ -15,6 +15,7 @@ import itertools
 import json
 import math
 import multiprocessing
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -177,30 +178,63 @@ def specs_of(opts: GslOptions, **fields: Any) -> list[EpisodeSpec]:
     return specs
 
 
+def _timed_episode(spec: EpisodeSpec) -> tuple[Outcome, float]:
+    """The episode's outcome and the CPU seconds its process spent on it."""
+    cpu0 = time.process_time()
+    outcome = run_episode(spec)
+    return outcome, time.process_time() - cpu0
+
+
 def run_specs(
-    specs: Sequence[EpisodeSpec], jobs: int, progress: Callable[[int, int], None] | None = None
+    specs: Sequence[EpisodeSpec],
+    jobs: int,
+    progress: Callable[[int, int], None] | None = None,
+    cpu_s: dict[EpisodeSpec, float] | None = None,
 ) -> list[Outcome]:
     """Every episode's outcome, in spec order (the order the workers finish in does not
-    matter); a spec given twice is flown once."""
+    matter); a spec given twice is flown once. ``cpu_s``: filled with each episode's CPU
+    seconds."""
     unique = list(dict.fromkeys(specs))
     done: dict[EpisodeSpec, Outcome] = {}
+    spent = cpu_s if cpu_s is not None else {}
     if jobs <= 1:
         for spec in unique:
-            done[spec] = run_episode(spec)
+            done[spec], spent[spec] = _timed_episode(spec)
             if progress:
                 progress(len(done), len(unique))
     else:
         ctx = multiprocessing.get_context("fork")
         with ctx.Pool(jobs) as pool:
-            for outcome in pool.imap_unordered(run_episode, unique, chunksize=1):
-                done[outcome.spec] = outcome
+            for outcome, cpu in pool.imap_unordered(_timed_episode, unique, chunksize=1):
+                done[outcome.spec], spent[outcome.spec] = outcome, cpu
                 if progress:
                     progress(len(done), len(unique))
     return [done[spec] for spec in specs]
 
 
-def run_all(opts: GslOptions, progress: Callable[[int, int], None] | None = None) -> list[Outcome]:
-    return run_specs(specs_of(opts), opts.jobs, progress)
+def run_all(
+    opts: GslOptions,
+    progress: Callable[[int, int], None] | None = None,
+    cpu_s: dict[EpisodeSpec, float] | None = None,
+) -> list[Outcome]:
+    return run_specs(specs_of(opts), opts.jobs, progress, cpu_s)
+
+
+def throughput_lines(cpu_s: dict[EpisodeSpec, float]) -> list[str]:
+    """Episodes per core-second and CPU seconds per episode of each algorithm and dynamics
+    (every episode's CPU time in its own process: what one idle core gives)."""
+    by: dict[tuple[str, str], list[float]] = {}
+    for spec, cpu in cpu_s.items():
+        by.setdefault((spec.algorithm, spec.dynamics), []).append(cpu)
+    lines = ["episodes per core-second (CPU s per episode: mean, max):"]
+    for (algorithm, dynamics), times in sorted(by.items()):
+        total = sum(times)
+        rate = len(times) / total if total > 0 else math.inf
+        lines.append(
+            f"  {algorithm:<16} {dynamics:<9} {rate:8.3f}  "
+            f"({total / len(times):.2f}, {max(times):.2f}; {len(times)} episodes)"
+        )
+    return lines
 
 
 Cell = tuple[str, str, str]  # environment, sensor, algorithm
