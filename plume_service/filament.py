@@ -181,7 +181,9 @@ class FilamentPlume(TimeSteppedField[Filaments]):
         if uniform is None:
             np.add(p[first:], self.wind.velocity(p, k * h)[first:] * h, out=moved)
         else:
-            np.add(p[first:], np.asarray(uniform) * h, out=moved)
+            step = np.asarray(uniform) * h
+            for axis in range(3):  # a column at a time: numpy broadcasts a 3-vector slowly
+                np.add(p[first:, axis], step[axis], out=moved[:, axis])
         ages = k - born[first:]
         np.minimum(ages, self._noise.shape[0] - 1, out=ages)
         moved += self._noise.take(ages, axis=0) * normal[first:]
