@@ -231,6 +231,12 @@ class Infotaxis(SeekingBehavior):
         reaches."""
         assert self.cells_xy is not None
         xy = self.cells_xy if cells is None else self.cells_xy[cells]
+        return self._sparse_at(xy, frame, x, y, dt_s)
+
+    def _sparse_at(
+        self, xy: FloatArray, frame: WindFrame, x: float, y: float, dt_s: float
+    ) -> SparseLikelihoods:
+        """:meth:`sparse_likelihoods` for the cells whose centres are ``xy``."""
         dx = x - xy[:, 0]
         dy = y - xy[:, 1]
         along = dx * frame.downwind[0] + dy * frame.downwind[1]
@@ -272,10 +278,9 @@ class Infotaxis(SeekingBehavior):
                 self.detecting_since_s = r.sim_time_s
         self.observed_xy = (sx, sy, n)
 
-    def _near(self, x: float, y: float, radius_m: float, cells: IntArray) -> np.ndarray:
-        """(models, cells): which of the ``cells`` lie within ``radius_m`` of (x, y)."""
-        assert self.cells_xy is not None
-        xy = self.cells_xy[cells]
+    def _near(self, xy: FloatArray, x: float, y: float, radius_m: float) -> np.ndarray:
+        """(models, cells): which of the cells centred at ``xy`` lie within ``radius_m`` of
+        (x, y)."""
         near = np.hypot(xy[:, 0] - x, xy[:, 1] - y) <= radius_m
         return np.broadcast_to(near, (len(self.models), len(near)))
 
@@ -287,6 +292,7 @@ class Infotaxis(SeekingBehavior):
         marginal = self.belief.sum(axis=0)
         cells = np.flatnonzero(marginal > SUPPORT_FLOOR * marginal.max())
         belief = self.belief[:, cells]
+        xy = self.cells_xy[cells]
         s = self.step_m
         places = [(x, y)]
         for a, c in _DIRECTIONS:
@@ -296,8 +302,8 @@ class Infotaxis(SeekingBehavior):
         scores = [
             expected_entropy_sparse(
                 belief,
-                self.sparse_likelihoods(frame, px, py, dt_s, cells),
-                self._near(px, py, 0.5 * self.cell_m, cells),
+                self._sparse_at(xy, frame, px, py, dt_s),
+                self._near(xy, px, py, 0.5 * self.cell_m),
             )
             for px, py in places
         ]
