@@ -90,6 +90,7 @@ from agents.behaviors.infotaxis_core import (
     IntArray,
     PlumeEncounterModel,
     PlumeHitStatistics,
+    SharedArrays,
     SparseLikelihoods,
     bayes_update,
     choose_move,
@@ -244,15 +245,19 @@ class Infotaxis(SeekingBehavior):
         # Only cells whose plume reaches (x, y) need the Poisson classes; the others see the
         # background's. The models that share a width share that support.
         background = np.array([self.background_hz * dt_s])
-        supports: dict[tuple[float, float], IntArray] = {}
+        # per width: its plume cells, their (along, across) and the models' shared arrays
+        supports: dict[tuple[float, float], tuple[IntArray, FloatArray, FloatArray, SharedArrays]]
+        supports = {}
         inside: list[IntArray] = []
         means: list[FloatArray] = []
         for m in self.models:
             width = (m.width_slope, m.width_min_m)
             if width not in supports:
-                supports[width] = np.flatnonzero(m.plume_cells(along, across))
-            inside.append(supports[width])
-            means.append(m.plume_mean_hits(along[inside[-1]], across[inside[-1]], dt_s))
+                cells = np.flatnonzero(m.plume_cells(along, across))
+                supports[width] = (cells, along[cells], across[cells], {})
+            cells, a, c, shared = supports[width]
+            inside.append(cells)
+            means.append(m.plume_mean_hits(a, c, dt_s, shared))
         # one call for every model's cells: the classes are computed point by point
         return SparseLikelihoods(
             background=hit_likelihoods(background, self.n_hits, self.miss_floor)[:, 0],

@@ -260,6 +260,10 @@ def choose_move(scores: Sequence[float]) -> int:
 
 
 # ------------------------------------------------------------------ an advected plume's hits
+#: Intermediate arrays of a computation at fixed points, by the parameters each depends on.
+SharedArrays = dict[tuple[object, ...], FloatArray]
+
+
 @dataclass(frozen=True)
 class PlumeEncounterModel:
     """Hit rate of a searcher at (along, across) of a source in a mean wind, along downwind:
@@ -312,16 +316,41 @@ class PlumeEncounterModel:
     def mean_hits(self, along_m: FloatArray, across_m: FloatArray, dt_s: float) -> FloatArray:
         return np.asarray(self.rate_hz(along_m, across_m) * dt_s)
 
-    def plume_mean_hits(self, along_m: FloatArray, across_m: FloatArray, dt_s: float) -> FloatArray:
+    def plume_mean_hits(
+        self,
+        along_m: FloatArray,
+        across_m: FloatArray,
+        dt_s: float,
+        shared: SharedArrays | None = None,
+    ) -> FloatArray:
         """:meth:`mean_hits` at points of :meth:`plume_cells` only (the same operations on
-        each point, without the masks that are all true there)."""
-        width = np.maximum(self.width_min_m, self.width_slope * along_m)
-        near = np.maximum(along_m, self.width_min_m)
-        axis = self.axis_rate_hz * (near / self.axis_ref_m) ** (-self.axis_decay)
+        each point, without the masks that are all true there). ``shared``: the intermediate
+        arrays of earlier calls at the same points, by the parameters each depends on (the
+        models of one width share the crosswind shape, of one axis law the distance factor);
+        filled here."""
+        memo: SharedArrays = {} if shared is None else shared
+        shape_key = ("shape", self.width_slope, self.width_min_m)
+        shape = memo.get(shape_key)
+        if shape is None:
+            width = np.maximum(self.width_min_m, self.width_slope * along_m)
+            u2 = (across_m / width) ** 2
+            shape = memo[shape_key] = np.exp(-0.5 * u2)
+        near_key = ("near", self.width_min_m)
+        near = memo.get(near_key)
+        if near is None:
+            near = memo[near_key] = np.maximum(along_m, self.width_min_m)
+        decay_key = ("decay", self.width_min_m, self.axis_ref_m, self.axis_decay)
+        decay = memo.get(decay_key)
+        if decay is None:
+            decay = memo[decay_key] = (near / self.axis_ref_m) ** (-self.axis_decay)
+        axis = self.axis_rate_hz * decay
         if self.near_source_m > 0.0:
-            axis = axis * np.maximum(1.0, self.near_source_m / near)
-        u2 = (across_m / width) ** 2
-        return np.asarray((axis * np.exp(-0.5 * u2) + self.background_hz) * dt_s)
+            boost_key = ("boost", self.width_min_m, self.near_source_m)
+            boost = memo.get(boost_key)
+            if boost is None:
+                boost = memo[boost_key] = np.maximum(1.0, self.near_source_m / near)
+            axis = axis * boost
+        return np.asarray((axis * shape + self.background_hz) * dt_s)
 
 
 @dataclass(frozen=True)
