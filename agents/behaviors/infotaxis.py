@@ -284,10 +284,8 @@ class Infotaxis(SeekingBehavior):
         self.observed_xy = (sx, sy, n)
 
     def _near(self, xy: FloatArray, x: float, y: float, radius_m: float) -> np.ndarray:
-        """(models, cells): which of the cells centred at ``xy`` lie within ``radius_m`` of
-        (x, y)."""
-        near = np.hypot(xy[:, 0] - x, xy[:, 1] - y) <= radius_m
-        return np.broadcast_to(near, (len(self.models), len(near)))
+        """Which of the cells centred at ``xy`` lie within ``radius_m`` of (x, y)."""
+        return np.asarray(np.hypot(xy[:, 0] - x, xy[:, 1] - y) <= radius_m)
 
     def _decide(self, frame: WindFrame, x: float, y: float, dt_s: float) -> tuple[float, float]:
         assert self.cells_xy is not None and self.belief is not None

@@ -233,12 +233,23 @@ def expected_entropy_sparse(
     models = belief.shape[0]
     if models > SEQUENTIAL_SUM_MAX:
         return expected_entropy(belief, likelihoods.dense(), here, nuisance_axes=1)
-    b = belief.ravel()
-    mask = None if here is None else np.broadcast_to(here, belief.shape).ravel()
-    p_end = float(b[mask].sum()) if mask is not None else 0.0
+    given = belief.copy()
+    p_end = 0.0
+    if here is not None:
+        # the cells of ``here`` for every model, in the order a mask over the belief takes them
+        if here.ndim == 1:
+            places = np.flatnonzero(here)
+            p_end = float(belief[:, places].ravel().sum())
+            given[:, places] = 0.0
+        else:
+            mask = np.broadcast_to(here, belief.shape)
+            p_end = float(belief[mask].sum())
+            given[mask] = 0.0
     if p_end > 1.0 - EPSILON:
         return -EPSILON
-    given = _given_not_in(b, mask).reshape(belief.shape)
+    total = given.ravel().sum()  # as the dense path sums it
+    if total > EPSILON:
+        given /= total
     background = likelihoods.background[:, None]
     joint = np.empty((len(likelihoods.background), belief.shape[1]))
     share = np.empty_like(joint)
