@@ -313,7 +313,7 @@ def _gsl_run(kind: str, kwargs: dict[str, Any]) -> None:
 
     from tqdm import tqdm
 
-    from plumeswarm.gsl.bench import GslError, availability_lines, run_specs
+    from plumeswarm.gsl.bench import GslError, availability_lines, run_specs, throughput_lines
     from plumeswarm.gsl.grid import (
         Journal,
         check_executor,
@@ -337,6 +337,7 @@ def _gsl_run(kind: str, kwargs: dict[str, Any]) -> None:
     for line in availability_lines():
         click.echo(line)
     started = time.monotonic()
+    cpu_s: dict[Any, float] = {}
     with tqdm(total=1, desc="episodes", unit="run", file=sys.stderr) as bar:
 
         def progress(done: int, total: int) -> None:
@@ -352,9 +353,12 @@ def _gsl_run(kind: str, kwargs: dict[str, Any]) -> None:
                 journal=journal,
                 shard=shard,
                 log=click.echo,
+                cpu_s=cpu_s,
             )
         except GslError as exc:
             fail(str(exc))
+    for line in throughput_lines(cpu_s) if cpu_s else []:
+        click.echo(line)
     workers = f"{kwargs['jobs']} worker process(es)" if executor.kind == "local" else executor
     click.echo(f"wall time {time.monotonic() - started:.0f} s on {workers}")
     if shard is not None:

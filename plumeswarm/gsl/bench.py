@@ -230,11 +230,13 @@ def run_specs(
     journal: Journal | None = None,
     shard: Shard | None = None,
     log: Callable[[str], None] | None = None,
+    cpu_s: dict[EpisodeSpec, float] | None = None,
 ) -> list[Outcome]:
     """Every episode's outcome, in spec order (the order the workers finish in does not
     matter); a spec given twice is flown once. With a ``journal``, the episodes it holds are
     read back, not flown, and each one flown is appended to it as it finishes; with a
-    ``shard``, only the shard's episodes run and come back."""
+    ``shard``, only the shard's episodes run and come back. ``cpu_s``: filled with the CPU
+    seconds of each episode flown (in its worker's process)."""
     mine = shard.of(specs) if shard is not None else list(dict.fromkeys(specs))
     done: dict[EpisodeSpec, Outcome] = {}
     if journal is not None:
@@ -247,17 +249,40 @@ def run_specs(
         log(f"grid: {len(mine)} episodes, {len(done)} already done, {len(todo)} to run")
     if progress and done:
         progress(len(done), len(mine))
-    for outcome in run_episodes(todo, executor, jobs):
+    for outcome, cpu in run_episodes(todo, executor, jobs):
         if journal is not None:
             journal.append(outcome)
         done[outcome.spec] = outcome
+        if cpu_s is not None:
+            cpu_s[outcome.spec] = cpu
         if progress:
             progress(len(done), len(mine))
     return [done[spec] for spec in (mine if shard is not None else specs)]
 
 
-def run_all(opts: GslOptions, progress: Callable[[int, int], None] | None = None) -> list[Outcome]:
-    return run_specs(specs_of(opts), opts.jobs, progress)
+def run_all(
+    opts: GslOptions,
+    progress: Callable[[int, int], None] | None = None,
+    cpu_s: dict[EpisodeSpec, float] | None = None,
+) -> list[Outcome]:
+    return run_specs(specs_of(opts), opts.jobs, progress, cpu_s=cpu_s)
+
+
+def throughput_lines(cpu_s: dict[EpisodeSpec, float]) -> list[str]:
+    """Episodes per core-second and CPU seconds per episode of each algorithm and dynamics
+    (every episode's CPU time in its own process: what one idle core gives)."""
+    by: dict[tuple[str, str], list[float]] = {}
+    for spec, cpu in cpu_s.items():
+        by.setdefault((spec.algorithm, spec.dynamics), []).append(cpu)
+    lines = ["episodes per core-second (CPU s per episode: mean, max):"]
+    for (algorithm, dynamics), times in sorted(by.items()):
+        total = sum(times)
+        rate = len(times) / total if total > 0 else math.inf
+        lines.append(
+            f"  {algorithm:<16} {dynamics:<9} {rate:8.3f}  "
+            f"({total / len(times):.2f}, {max(times):.2f}; {len(times)} episodes)"
+        )
+    return lines
 
 
 Cell = tuple[str, str, str]  # environment, sensor, algorithm

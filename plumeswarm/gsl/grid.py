@@ -18,6 +18,7 @@ import json
 import multiprocessing
 import os
 import socket
+import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -221,13 +222,20 @@ def grid_header(
     }
 
 
-def _local(specs: Sequence[EpisodeSpec], jobs: int) -> Iterator[Outcome]:
+def timed_episode(spec: EpisodeSpec) -> tuple[Outcome, float]:
+    """The episode's outcome and the CPU seconds its own process spent on it."""
+    cpu0 = time.process_time()
+    outcome = run_episode(spec)
+    return outcome, time.process_time() - cpu0
+
+
+def _local(specs: Sequence[EpisodeSpec], jobs: int) -> Iterator[tuple[Outcome, float]]:
     if jobs <= 1 or len(specs) <= 1:
-        yield from map(run_episode, specs)
+        yield from map(timed_episode, specs)
         return
     ctx = multiprocessing.get_context("fork")
     with ctx.Pool(min(jobs, len(specs))) as pool:
-        yield from pool.imap_unordered(run_episode, specs, chunksize=1)
+        yield from pool.imap_unordered(timed_episode, specs, chunksize=1)
 
 
 def _import_ray() -> Any:
@@ -253,7 +261,7 @@ def _reachable(address: str) -> None:
         ) from None
 
 
-def _ray(specs: Sequence[EpisodeSpec], address: str) -> Iterator[Outcome]:
+def _ray(specs: Sequence[EpisodeSpec], address: str) -> Iterator[tuple[Outcome, float]]:
     """Each episode a Ray task, retried (``RAY_MAX_RETRIES``) if its worker process dies;
     outcomes as they finish, each once."""
     ray = _import_ray()
@@ -272,7 +280,7 @@ def _ray(specs: Sequence[EpisodeSpec], address: str) -> Iterator[Outcome]:
             first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
             raise GslError(f"--executor ray={address}: cannot reach Ray ({first})") from None
     try:
-        task = ray.remote(max_retries=RAY_MAX_RETRIES, num_cpus=1)(run_episode)
+        task = ray.remote(max_retries=RAY_MAX_RETRIES, num_cpus=1)(timed_episode)
         pending = {task.remote(s): s for s in specs}
         while pending:
             ready, _ = ray.wait(list(pending), num_returns=1)
@@ -291,8 +299,11 @@ def _ray(specs: Sequence[EpisodeSpec], address: str) -> Iterator[Outcome]:
             ray.shutdown()
 
 
-def run_episodes(specs: Sequence[EpisodeSpec], executor: Executor, jobs: int) -> Iterator[Outcome]:
-    """Every spec's outcome, in the order they finish."""
+def run_episodes(
+    specs: Sequence[EpisodeSpec], executor: Executor, jobs: int
+) -> Iterator[tuple[Outcome, float]]:
+    """Every spec's outcome and the CPU seconds its worker spent on it, in the order they
+    finish."""
     if executor.kind == "ray":
         return _ray(specs, executor.address)
     return _local(specs, jobs)

@@ -67,7 +67,7 @@ def deployment(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Deployment]
 
 def identities(dep: Deployment) -> list[tuple[str, str, str | None]]:
     """(host, role, node) of every certificate the hosts file issues."""
-    out = []
+    out: list[tuple[str, str, str | None]] = []
     for h in host_identities(dep):
         for name in h.identities:
             role = name.partition(".")[0]

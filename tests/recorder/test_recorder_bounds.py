@@ -46,7 +46,7 @@ def test_a_queue_over_its_byte_bound_drops_counts_logs_and_records(
             "recorder",
             McapSink(out),
             opts,
-            healths.append,
+            lambda detail, _state: healths.append(detail),
             spool=Spool(out),
         )
         seen = threading.Semaphore(0)
