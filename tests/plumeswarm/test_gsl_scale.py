@@ -268,7 +268,7 @@ def _running_episode(head: Head) -> psutil.Process | None:
             cmdline = p.cmdline()
         except psutil.Error:
             continue
-        if cmdline and cmdline[0].startswith("ray::run_episode"):
+        if cmdline and cmdline[0].startswith("ray::timed_episode"):
             return p
     return None
 
