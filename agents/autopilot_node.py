@@ -68,6 +68,7 @@ READINGS_KEPT = 256
 # restarted, or that joined late).
 RADIO_KEPT = 64
 RADIO_QUERY_TIMEOUT_S = 1.0
+RADIO_ASK_AFTER_S = 0.1  # a held tick's missing batches are asked of their senders after this
 
 
 class _Served:
@@ -222,6 +223,8 @@ class AutopilotNode:
         self._radio_lock = threading.Lock()
         self._held: Tick | None = None  # a tick waiting for its peers' radio batches
         self._held_wall = 0.0
+        self._asked = -1  # the held tick whose missing batches were asked for
+        self._forcing = False  # step the held tick whatever is missing
         self._radio_wait_s = scenario.time.participant_timeout_s / 2
         self.batch_pub = session.declare_publisher(self.keys.autopilot_actuators(ctx.name))
         self.last_batch = b""  # the answer to last_tick (sent again if the tick repeats)
@@ -420,6 +423,16 @@ class AutopilotNode:
 
     def on_tick(self, tick: Tick) -> None:
         """Tick k: readings of the last sensor tick, each vehicle's step, one batch back."""
+        held = self._held
+        if held is not None and tick.tick > held.tick:
+            # the physics went on (it had this process's answer to the held tick from before
+            # a restart, or dropped it): the held tick first, with what can be had
+            self._ask_for_radio(then_step=False)
+            self._forcing = True
+            try:
+                self.on_tick(held)
+            finally:
+                self._forcing = False
         now = time.monotonic()
         if self._state_lost:
             self._ticks_back(tick, now - self.last_tick_wall)
@@ -436,6 +449,9 @@ class AutopilotNode:
             if self._held is None or self._held.tick != tick.tick:
                 self._held_wall = now
             self._held = tick
+            if now - self._held_wall >= RADIO_ASK_AFTER_S and self._asked != tick.tick:
+                self._asked = tick.tick  # once from here (the ticks re-sent meanwhile)
+                self._ask_for_radio()
             return
         self._held = None
         self._advance(tick)
@@ -531,13 +547,18 @@ class AutopilotNode:
     def _radio_missing(self, tick: Tick) -> list[str]:
         """The remote talkers whose radio batch of tick k - 1 tick k waits for (lockstep and
         stepped clock; none after ``participant_timeout_s`` / 2 of waiting)."""
-        if not self.remote_talkers or self._realtime or self.last_tick != tick.tick - 1:
+        if (
+            not self.remote_talkers
+            or self._realtime
+            or self.last_tick < 0
+            or self.last_tick != tick.tick - 1
+        ):
             return []
         got = self._radio_in.get(self.last_tick, {})
         missing = [vid for vid in self.remote_talkers if vid not in got]
         if missing and self._held is not None and self._held.tick == tick.tick:
             waited_s = time.monotonic() - self._held_wall
-            if waited_s > self._radio_wait_s:
+            if waited_s > self._radio_wait_s or self._forcing:
                 log.warning(
                     "tick %d: no radio batch of tick %d from %s after %.1f s: stepping without",
                     tick.tick,
@@ -564,17 +585,22 @@ class AutopilotNode:
         if batch.sender in self.remote_talkers and batch.tick >= self.last_tick - 1:
             self._radio_in.setdefault(batch.tick, {})[batch.sender] = batch
 
-    def _ask_for_radio(self) -> None:
-        """A held tick's missing batches, asked of their senders (kept there); the tick goes
-        on when they are all in, or after the wait."""
+    def _ask_for_radio(self, then_step: bool = True) -> None:
+        """A held tick's missing batches, asked of their senders (kept there); ``then_step``:
+        the tick goes on when they are all in, or after the wait."""
         held = self._held
         assert held is not None
         for vid in self._radio_missing(held):
-            replies = self.session.get(self.keys.vehicle_radio(vid), timeout=RADIO_QUERY_TIMEOUT_S)
+            replies = self.session.get(
+                self.keys.vehicle_radio(vid),
+                timeout=RADIO_QUERY_TIMEOUT_S,
+                consolidation=zenoh.ConsolidationMode.NONE,  # every kept batch, not the newest
+            )
             for reply in replies:
                 if reply.ok is not None:
                     self._keep_radio(reply.ok.payload.to_bytes())
-        self._run_tick(held)  # goes on if the batches are in, or it has waited enough
+        if then_step:
+            self._run_tick(held)  # goes on if the batches are in, or it has waited enough
 
     def _publish_radio(self, tick: int) -> None:
         """Each served talker's messages of ``tick`` (an empty batch too: the receivers know

@@ -27,6 +27,7 @@ from swarmbus.messages import (
     Command,
     CommandReply,
     FlightMode,
+    LinkStatus,
     MissionStart,
     PlumeQuery,
     PlumeValues,
@@ -34,6 +35,7 @@ from swarmbus.messages import (
     SimTick,
     Takeoff,
     VehicleState,
+    VehicleStatus,
 )
 from swarmbus.scenario import DEFAULT_SCENARIO, Scenario, load_scenario
 from tests.support.clock_holder import ClockHolder
@@ -93,6 +95,13 @@ def fused_stream(
 
 def start_plume_and_autopilots(procs: NodeProcs, session: zenoh.Session, keys: Keys) -> None:
     """The plume first and answering (the first sensor ticks must find it), then the flyers."""
+    start_plume(procs, session, keys)
+    for vid in FLYERS:
+        procs.start("autopilot", "--vehicle", vid)
+
+
+def start_plume(procs: NodeProcs, session: zenoh.Session, keys: Keys) -> None:
+    """The plume service, answering."""
     procs.start("plume")
     wait_for_queryable(
         session,
@@ -102,8 +111,6 @@ def start_plume_and_autopilots(procs: NodeProcs, session: zenoh.Session, keys: K
         60.0,
         "the plume service",
     )
-    for vid in FLYERS:
-        procs.start("autopilot", "--vehicle", vid)
 
 
 def distributed_stream(
@@ -284,3 +291,105 @@ def test_talking_behaviours_over_a_lossy_radio_give_the_same_states(
     dropped = sum(runner.link.counts[link].dropped for link in messages)
     delivered = sum(runner.link.counts[link].delivered for link in messages)
     assert dropped > 0 and abs(dropped / (dropped + delivered) - 0.3) < 0.02
+
+
+def _alive(session: zenoh.Session, key: str) -> bool:
+    return any(r.ok is not None for r in session.liveliness().get(key, timeout=2.0))
+
+
+def _gone(session: zenoh.Session, key: str) -> bool:
+    return not _alive(session, key)
+
+
+def test_a_restarted_talking_autopilot_carries_on_with_the_same_bits(tmp_path: Path) -> None:
+    """uav1's autopilot is killed while the clock holds a tick of the offboard flight (a peer's
+    message to it in flight over a lossy, slow radio) and restarted from its checkpoint: the
+    state stream is still the fused runner's, bit for bit (its link came back with it, and the
+    peers' messages of the tick it missed were asked of them)."""
+    path = default_with_clock(tmp_path, noisy_casting=True)
+    path.write_text(path.read_text().replace(BEHAVIOUR, COOP) + LOSSY_RADIO)
+    scenario = load_scenario(path)
+    altitude_m = {"uav1": 8.0, "uav2": 10.0, "uav3": 12.0}
+    boundary: Boundary = {
+        0: [(v, c) for v in FLYERS for c in (Arm(), Takeoff(altitude_m=altitude_m[v]))],
+        600: [(v, SetMode(mode=FlightMode.OFFBOARD)) for v in FLYERS],
+    }
+    last_tick, killed = 1200, "uav1"
+    heard_at: list[int] = []  # the ticks at which uav1's behaviour got peers' messages
+    counted: dict[int, list[LinkStatus]] = {}  # what the links into uav1 carried, by tick
+
+    def note(runner: FusedRunner) -> None:
+        if runner.link.mailboxes[killed].inbox:
+            heard_at.append(runner.tick)
+        counted[runner.tick] = runner.link.link_status(killed)
+
+    fused, runner = fused_stream(scenario, last_tick, boundary, note)
+    runner.close()
+    # killed two ticks before it hears a message: the message (sent 4 ticks before it is
+    # heard) is in flight at the kill, and only the checkpoint's link holds it
+    kill_at = next(t for t in heard_at if t >= 700) - 2
+    assert kill_at < last_tick - 100, heard_at
+    keys = Keys(scenario.world.name)
+    checkpoint = tmp_path / f"autopilot-{killed}.ckpt"
+    token = keys.node_health(f"autopilot-{killed}")
+    statuses: list[VehicleStatus] = []
+    last_s = (last_tick - scenario.time.control_hz) / scenario.time.control_hz  # the last second
+    with zenoh_network() as (net, session), NodeProcs(net, path, tmp_path) as procs:
+        on_status = partial(_keep_status, statuses)
+        sub = session.declare_subscriber(keys.vehicle_status(killed), on_status)
+        start_plume(procs, session, keys)
+        ap = {}
+        for vid in FLYERS:
+            extra = ["--set", f"checkpoint={checkpoint}"] if vid == killed else []
+            ap[vid] = procs.start("autopilot", "--vehicle", vid, *extra, name=f"autopilot-{vid}")
+        holder = ClockHolder(session, keys, CLOCK, FLYERS, rotor_count=4)
+        try:
+            procs.start("physics")
+            for k in range(last_tick + 1):
+                holder.wait_answered(k, 60.0)
+                for vid, command in boundary.get(k, []):
+                    assert VehicleCommander(session, keys, vid, 5.0).send(command).accepted
+                if k == kill_at:
+                    procs.kill(ap[killed])
+                    wait_until(partial(_gone, session, token), 30.0, "the token gone")
+                    again = f"autopilot-{killed}-again"
+                    procs.start("autopilot", "--vehicle", killed, "--set",
+                                f"checkpoint={checkpoint}", name=again)  # fmt: skip
+                    wait_until(partial(_alive, session, token), 60.0, "the restarted")
+                if k < last_tick:
+                    holder.release(k)
+            distributed = holder.digest.result()
+            wait_until(partial(_status_of, statuses, last_s), 30.0, "a last status")
+        finally:
+            holder.close()
+            sub.undeclare()
+    log = (tmp_path / f"autopilot-{killed}-again.log").read_text()
+    assert "restored the state of tick" in log
+    assert "stepping without" not in log  # it had every peer's messages of every tick
+    assert fused["messages"] == distributed["messages"] == (last_tick + 1) * 4
+    assert distributed["missing"] == distributed["conflicts"] == 0
+    assert fused["sha256"] == distributed["sha256"]
+    # Its status counts what the links into it carried over the whole run, the kill included
+    # (the checkpoint kept the counts): the tick's peer states and samples are counted when
+    # it steps, the behaviours' messages of a tick on the next, so the counts lie between
+    # the fused runner's after tick - 1 and after tick.
+    status = _status_of(statuses, last_s)
+    assert status is not None and status.radio
+    tick = round(status.sim_time_s * scenario.time.control_hz)
+    low = {c.sender: (c.delivered, c.dropped) for c in counted[tick - 1]}
+    high = {c.sender: (c.delivered, c.dropped) for c in counted[tick]}
+    got = {c.sender: (c.delivered, c.dropped) for c in status.radio}
+    assert set(got) == set(high) == {"uav2", "uav3", CLOCK}
+    for sender, (delivered, dropped) in got.items():
+        assert low[sender][0] <= delivered <= high[sender][0], (sender, got, low, high)
+        assert low[sender][1] <= dropped <= high[sender][1], (sender, got, low, high)
+
+
+def _keep_status(out: list[VehicleStatus], sample: zenoh.Sample) -> None:
+    out.append(decode(sample.payload.to_bytes(), VehicleStatus))
+
+
+def _status_of(statuses: list[VehicleStatus], since_s: float) -> VehicleStatus | None:
+    """The newest status from ``since_s`` (sim time) on."""
+    recent = [s for s in list(statuses) if s.sim_time_s >= since_s]
+    return max(recent, key=lambda s: s.sim_time_s) if recent else None
