@@ -48,6 +48,7 @@ CLOCK_VEHICLE = f"""
 id = "{CLOCK}"
 spawn_enu_m = [-300.0, 0.0, 0.0]
 """
+ONE_EACH = (("uav1",), ("uav2",), ("uav3",))  # one autopilot process per flyer
 BEHAVIOUR = 'behavior = "agents.behaviors.casting:Casting"\n'
 
 Boundary = dict[int, list[tuple[str, Command]]]
@@ -93,11 +94,17 @@ def fused_stream(
     return digest.result(), runner
 
 
-def start_plume_and_autopilots(procs: NodeProcs, session: zenoh.Session, keys: Keys) -> None:
-    """The plume first and answering (the first sensor ticks must find it), then the flyers."""
+def start_plume_and_autopilots(
+    procs: NodeProcs,
+    session: zenoh.Session,
+    keys: Keys,
+    groups: Sequence[Sequence[str]] = ONE_EACH,
+) -> None:
+    """The plume first and answering (the first sensor ticks must find it), then the flyers
+    (one autopilot process per group)."""
     start_plume(procs, session, keys)
-    for vid in FLYERS:
-        procs.start("autopilot", "--vehicle", vid)
+    for group in groups:
+        procs.start("autopilot", *(a for v in group for a in ("--vehicle", v)))
 
 
 def start_plume(procs: NodeProcs, session: zenoh.Session, keys: Keys) -> None:
@@ -114,11 +121,16 @@ def start_plume(procs: NodeProcs, session: zenoh.Session, keys: Keys) -> None:
 
 
 def distributed_stream(
-    path: Path, scenario: Scenario, last_tick: int, boundary: Boundary, log_dir: Path
+    path: Path,
+    scenario: Scenario,
+    last_tick: int,
+    boundary: Boundary,
+    log_dir: Path,
+    groups: Sequence[Sequence[str]] = ONE_EACH,
 ) -> dict:
     keys = Keys(scenario.world.name)
     with zenoh_network() as (net, session), NodeProcs(net, path, log_dir) as procs:
-        start_plume_and_autopilots(procs, session, keys)
+        start_plume_and_autopilots(procs, session, keys, groups)
         holder = ClockHolder(session, keys, CLOCK, FLYERS, rotor_count=4)
         try:
             procs.start("physics")
@@ -261,6 +273,19 @@ COOP = 'behavior = "agents.behaviors.coop_surge_cast:CooperativeSurgeCast"\n'
 LOSSY_RADIO = "\n[radio]\nloss = 0.3\nlatency_ticks = 3\n"
 
 
+def coop_over_lossy_radio(tmp_path: Path, clock: str) -> tuple[Path, Scenario, Boundary]:
+    """The casting scenario's flyers as cooperative surge-casters over a lossy, slow radio:
+    take-off to 8, 10 and 12 m, offboard at tick 600."""
+    path = scenario_for(tmp_path, clock, noisy_casting=True)
+    path.write_text(path.read_text().replace(BEHAVIOUR, COOP) + LOSSY_RADIO)
+    altitude_m = {"uav1": 8.0, "uav2": 10.0, "uav3": 12.0}
+    boundary: Boundary = {
+        0: [(v, c) for v in FLYERS for c in (Arm(), Takeoff(altitude_m=altitude_m[v]))],
+        600: [(v, SetMode(mode=FlightMode.OFFBOARD)) for v in FLYERS],
+    }
+    return path, load_scenario(path), boundary
+
+
 @CLOCKS
 def test_talking_behaviours_over_a_lossy_radio_give_the_same_states(
     tmp_path: Path, clock: str
@@ -268,15 +293,8 @@ def test_talking_behaviours_over_a_lossy_radio_give_the_same_states(
     # Three cooperative surge-casters share their detections over a radio that loses 30 % of
     # every message (peer states, peer samples, detections) and delays each by 3 ticks: the
     # distributed processes decide every delivery as the fused runner does.
-    path = scenario_for(tmp_path, clock, noisy_casting=True)
-    path.write_text(path.read_text().replace(BEHAVIOUR, COOP) + LOSSY_RADIO)
-    scenario = load_scenario(path)
+    path, scenario, boundary = coop_over_lossy_radio(tmp_path, clock)
     assert scenario.radio.loss == 0.3 and scenario.radio.latency_ticks == 3
-    altitude_m = {"uav1": 8.0, "uav2": 10.0, "uav3": 12.0}
-    boundary: Boundary = {
-        0: [(v, c) for v in FLYERS for c in (Arm(), Takeoff(altitude_m=altitude_m[v]))],
-        600: [(v, SetMode(mode=FlightMode.OFFBOARD)) for v in FLYERS],
-    }
     received: list[int] = []
 
     def count_inbox(runner: FusedRunner) -> None:
@@ -293,6 +311,20 @@ def test_talking_behaviours_over_a_lossy_radio_give_the_same_states(
     assert dropped > 0 and abs(dropped / (dropped + delivered) - 0.3) < 0.02
 
 
+def test_talking_behaviours_served_two_by_one_process_give_the_same_states(
+    tmp_path: Path,
+) -> None:
+    """uav1 and uav2 in one autopilot process (their messages to each other never leave it),
+    uav3 in another: the same state stream as the fused runner."""
+    path, scenario, boundary = coop_over_lossy_radio(tmp_path, "holder")
+    fused, runner = fused_stream(scenario, 1200, boundary)
+    runner.close()
+    groups = (("uav1", "uav2"), ("uav3",))
+    distributed = distributed_stream(path, scenario, 1200, boundary, tmp_path, groups)
+    assert distributed["missing"] == distributed["conflicts"] == 0
+    assert fused["sha256"] == distributed["sha256"]
+
+
 def _alive(session: zenoh.Session, key: str) -> bool:
     return any(r.ok is not None for r in session.liveliness().get(key, timeout=2.0))
 
@@ -306,14 +338,7 @@ def test_a_restarted_talking_autopilot_carries_on_with_the_same_bits(tmp_path: P
     message to it in flight over a lossy, slow radio) and restarted from its checkpoint: the
     state stream is still the fused runner's, bit for bit (its link came back with it, and the
     peers' messages of the tick it missed were asked of them)."""
-    path = default_with_clock(tmp_path, noisy_casting=True)
-    path.write_text(path.read_text().replace(BEHAVIOUR, COOP) + LOSSY_RADIO)
-    scenario = load_scenario(path)
-    altitude_m = {"uav1": 8.0, "uav2": 10.0, "uav3": 12.0}
-    boundary: Boundary = {
-        0: [(v, c) for v in FLYERS for c in (Arm(), Takeoff(altitude_m=altitude_m[v]))],
-        600: [(v, SetMode(mode=FlightMode.OFFBOARD)) for v in FLYERS],
-    }
+    path, scenario, boundary = coop_over_lossy_radio(tmp_path, "holder")
     last_tick, killed = 1200, "uav1"
     heard_at: list[int] = []  # the ticks at which uav1's behaviour got peers' messages
     counted: dict[int, list[LinkStatus]] = {}  # what the links into uav1 carried, by tick
