@@ -36,8 +36,8 @@ from agents.peer_link import Mailbox, PeerLink, RadioError
 from agents.resume import StateKeeper
 from agents.sensor import ConcentrationSensor
 from plume_atmosphere.wind import WindModel, wind_from_scenario
-from swarmbus.catchup import CatchUpPublisher, RouterOutage, watch_router
-from swarmbus.codec import MessageError, decode, encode
+from swarmbus.catchup import CatchUpPublisher, Resender, RouterOutage, watch_router
+from swarmbus.codec import MessageError, decode, encode, refusals
 from swarmbus.keys import Keys, autopilot_node
 from swarmbus.messages import (
     ActuatorBatch,
@@ -82,6 +82,7 @@ class _Served:
         vehicle_id: str,
         options: AutopilotOptions,
         wind: WindModel,
+        resender: Resender,
         mailbox: Mailbox,
     ) -> None:
         self.vehicle_id = vehicle_id
@@ -103,7 +104,7 @@ class _Served:
             scenario.time.participant_timeout_s,
         )
         self.readings_pub = CatchUpPublisher(
-            session, keys.vehicle_concentration(vehicle_id), READINGS_KEPT
+            session, keys.vehicle_concentration(vehicle_id), READINGS_KEPT, resender
         )
         self.last_status: VehicleStatus | None = None
         self.last_status_time_s = -1e9
@@ -190,12 +191,17 @@ class AutopilotNode:
         self.options = options
         self.inbox: Inbox[Event] = Inbox()
         wind = wind_from_scenario(ctx.scenario)  # one wind for every vehicle served here
+        # the readings put again after a router outage, off the loop's thread
+        self.resender = Resender("autopilot-catch-up")
         # The radio: the same decisions as in every other process and runner (the whole
         # swarm's link, fed with every vehicle's state, sample and message).
         scenario = ctx.scenario
         self.link = PeerLink(scenario)
+        boxes = self.link.mailboxes
         self.served = {
-            vid: _Served(session, self.keys, scenario, vid, options, wind, self.link.mailboxes[vid])
+            vid: _Served(
+                session, self.keys, scenario, vid, options, wind, self.resender, boxes[vid]
+            )
             for vid in ctx.vehicle_ids
         }
         self.talkers = [
@@ -284,6 +290,7 @@ class AutopilotNode:
             served.publish_status(force=True, period_s=self.status_period_s)
 
     def close(self) -> None:
+        self.resender.close()
         if self.keeper is not None:
             self.keeper.close()
         for token in self._tokens:
@@ -350,7 +357,8 @@ class AutopilotNode:
                 # (the partial view leaves the other vehicles' states unchecked).
                 decode(data, SimTick)
         except MessageError as exc:
-            log.warning("ignoring bad tick: %s", exc)
+            key = self.keys.tick()
+            refusals(log).refuse(key, f"bad tick on {key}", exc)
             return
         self._run_tick(tick)
 
@@ -378,7 +386,7 @@ class AutopilotNode:
         back; subscribers keep one reading per vehicle and sim time)."""
         for vid, served in self.served.items():
             if n := served.readings_pub.catch_up(self.router_outage):
-                log.info("%s: re-sent its last %d readings after the router's outage", vid, n)
+                log.info("%s: re-sending its last %d readings after the router's outage", vid, n)
 
     def _idle_statuses(self) -> None:
         """While no ticks arrive (physics not running), a status every IDLE_STATUS_PERIOD_S."""
@@ -580,7 +588,8 @@ class AutopilotNode:
         try:
             batch = decode(data, RadioBatch)
         except MessageError as exc:
-            log.warning("ignoring bad radio batch: %s", exc)
+            key = self.keys.all_vehicle_radio()
+            refusals(log).refuse(key, f"bad radio batch on {key}", exc)
             return
         if batch.sender in self.remote_talkers and batch.tick >= self.last_tick - 1:
             self._radio_in.setdefault(batch.tick, {})[batch.sender] = batch
@@ -802,7 +811,7 @@ def main(ctx: NodeContext) -> int:
     # Before the session opens (Zenoh reads it once, when its runtime starts); an operator's
     # own ZENOH_RUNTIME wins.
     os.environ.setdefault("ZENOH_RUNTIME", SINGLE_THREAD_RUNTIME)
-    with NodeRuntime(ctx, role="autopilot") as rt:
+    with NodeRuntime(ctx, role="autopilot", check_scenario_of="physics") as rt:
         try:
             node = AutopilotNode(rt.session, ctx, options)
         except BehaviorError as exc:
@@ -814,4 +823,5 @@ def main(ctx: NodeContext) -> int:
             node.run(rt.stop)
         finally:
             node.close()
-    return 0
+        refused = rt.refusal is not None
+    return 2 if refused else 0
