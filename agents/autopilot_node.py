@@ -10,7 +10,8 @@ import logging
 import os
 import threading
 import time
-from collections.abc import Callable
+from collections import deque
+from collections.abc import Callable, Sequence
 from contextlib import suppress
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,9 +30,11 @@ from agents.checkpoint import (
     capture,
     restore,
 )
-from agents.flight import take_readings
+from agents.flight import Flight, take_readings
 from agents.node_events import Idle, Inbox, PendingSensor, Tick, TickArrived
+from agents.peer_link import Mailbox, PeerLink, RadioError
 from agents.resume import StateKeeper
+from agents.sensor import ConcentrationSensor
 from plume_atmosphere.wind import WindModel, wind_from_scenario
 from swarmbus.catchup import CatchUpPublisher, Resender, RouterOutage, watch_router
 from swarmbus.codec import MessageError, decode, encode, refusals
@@ -41,8 +44,11 @@ from swarmbus.messages import (
     ActuatorCommand,
     Command,
     CommandReply,
+    ConcentrationReading,
     PlumeSample,
+    RadioBatch,
     SimTick,
+    VehicleState,
     VehicleStatus,
 )
 from swarmbus.node import NodeContext, NodeRuntime
@@ -58,6 +64,11 @@ IDLE_STATUS_PERIOD_S = 1.0  # wall clock: status while no ticks arrive (physics 
 # The readings kept per vehicle, put again for a subscriber back after a router outage
 # (swarmbus.catchup): 25.6 s of sim time at the default 10 Hz sensor.
 READINGS_KEPT = 256
+# A talking behaviour's last radio batches, answered to a receiver that missed some (one
+# restarted, or that joined late).
+RADIO_KEPT = 64
+RADIO_QUERY_TIMEOUT_S = 1.0
+RADIO_ASK_AFTER_S = 0.1  # a held tick's missing batches are asked of their senders after this
 
 
 class _Served:
@@ -72,11 +83,12 @@ class _Served:
         options: AutopilotOptions,
         wind: WindModel,
         resender: Resender,
+        mailbox: Mailbox,
     ) -> None:
         self.vehicle_id = vehicle_id
         # Where the physics puts this vehicle's state in a tick (checked on every use).
         self.index = vehicle_index(scenario, vehicle_id)
-        self.flight = build_flight(scenario, vehicle_id, options)
+        self.flight = build_flight(scenario, vehicle_id, options, mailbox)
         self.autopilot = self.flight.autopilot
         self.sensor = self.flight.sensor
         self.anemometer = Anemometer(scenario.anemometer, wind, scenario.world.seed, self.index)
@@ -96,9 +108,12 @@ class _Served:
         )
         self.last_status: VehicleStatus | None = None
         self.last_status_time_s = -1e9
+        self.link: PeerLink | None = None  # the radio (set when it is not a plain hand-over)
 
     def publish_status(self, force: bool, period_s: float) -> None:
         status = self.autopilot.status()
+        if self.link is not None:
+            status = msgspec.structs.replace(status, radio=self.link.link_status(self.vehicle_id))
         last = self.last_status
         changed = last is None or _status_key(last) != _status_key(status)
         if force or changed or status.sim_time_s - self.last_status_time_s >= period_s:
@@ -106,8 +121,12 @@ class _Served:
             self.last_status = status
             self.last_status_time_s = status.sim_time_s
 
-    def step(self, tick: Tick) -> ActuatorCommand | None:
-        """This vehicle's answer to ``tick`` (None: its state is not in the tick, or is bad)."""
+    def step(
+        self, tick: Tick, heard: dict[str, list[VehicleState]] | None
+    ) -> ActuatorCommand | None:
+        """This vehicle's answer to ``tick`` (None: its state is not in the tick, or is bad);
+        ``heard``: each vehicle's peers as the radio brought them (None: every peer's state
+        of the tick)."""
         vid = self.vehicle_id
         try:
             found = tick.state_of(vid, self.index)
@@ -115,7 +134,9 @@ class _Served:
                 return None
             own, state = found
             # Only a behaviour looks at the peers: decode them for it alone.
-            peers = tick.peers_of(own) if self.autopilot.behavior is not None else []
+            peers: list[VehicleState] = []
+            if self.autopilot.behavior is not None:
+                peers = tick.peers_of(own) if heard is None else heard.get(vid, [])
         except MessageError as exc:
             log.warning("%s: ignoring bad state in tick %d: %s", vid, tick.tick, exc)
             return None
@@ -151,7 +172,14 @@ class CommandArrived:
     incoming: Incoming[Command]
 
 
-Event = TickArrived | CommandArrived
+@dataclass(frozen=True, slots=True)
+class RadioArrived:
+    """A ``RadioBatch`` of another process's vehicle (still encoded)."""
+
+    data: bytes
+
+
+Event = TickArrived | CommandArrived | RadioArrived
 
 
 class AutopilotNode:
@@ -165,10 +193,45 @@ class AutopilotNode:
         wind = wind_from_scenario(ctx.scenario)  # one wind for every vehicle served here
         # the readings put again after a router outage, off the loop's thread
         self.resender = Resender("autopilot-catch-up")
+        # The radio: the same decisions as in every other process and runner (the whole
+        # swarm's link, fed with every vehicle's state, sample and message).
+        scenario = ctx.scenario
+        self.link = PeerLink(scenario)
+        boxes = self.link.mailboxes
         self.served = {
-            vid: _Served(session, self.keys, ctx.scenario, vid, options, wind, self.resender)
+            vid: _Served(
+                session, self.keys, scenario, vid, options, wind, self.resender, boxes[vid]
+            )
             for vid in ctx.vehicle_ids
         }
+        self.talkers = [
+            v.id for v in scenario.vehicles if v.behavior is not None and talks(v.behavior)
+        ]
+        self.remote_talkers = [v for v in self.talkers if v not in self.served]
+        self.served_talkers = [v for v in self.talkers if v in self.served]
+        # Off (peers and samples handed over as they are): a perfect radio no behaviour talks on
+        self.link_on = not self.link.perfect or bool(self.talkers)
+        if self.link_on:
+            for served in self.served.values():
+                served.link = self.link
+        self._sensors = [
+            ConcentrationSensor.for_vehicle(scenario, k) for k in range(len(scenario.vehicles))
+        ]
+        self._link_states: list[VehicleState] = []  # the states of last_tick (link on)
+        self._radio_in: dict[int, dict[str, RadioBatch]] = {}  # remote talkers' batches by tick
+        self._radio_kept: dict[str, deque[bytes]] = {
+            vid: deque(maxlen=RADIO_KEPT) for vid in self.served_talkers
+        }
+        self._radio_pubs = {
+            vid: session.declare_publisher(self.keys.vehicle_radio(vid))
+            for vid in self.served_talkers
+        }
+        self._radio_lock = threading.Lock()
+        self._held: Tick | None = None  # a tick waiting for its peers' radio batches
+        self._held_wall = 0.0
+        self._asked = -1  # the held tick whose missing batches were asked for
+        self._forcing = False  # step the held tick whatever is missing
+        self._radio_wait_s = scenario.time.participant_timeout_s / 2
         self.batch_pub = session.declare_publisher(self.keys.autopilot_actuators(ctx.name))
         self.last_batch = b""  # the answer to last_tick (sent again if the tick repeats)
         self.last_tick = -1
@@ -204,6 +267,15 @@ class AutopilotNode:
         self._declared.append(
             self.session.declare_subscriber(self.keys.tick(), self._on_tick_sample)
         )
+        if self.remote_talkers:
+            self._declared.append(
+                self.session.declare_subscriber(
+                    self.keys.all_vehicle_radio(), self._on_radio_sample
+                )
+            )
+        for vid in self.served_talkers:
+            key = self.keys.vehicle_radio(vid)
+            self._declared.append(self.session.declare_queryable(key, self._radio_query(vid)))
         for vid, served in self.served.items():
             key, handler = self.keys.vehicle_cmd(vid), self._command_handler(served)
             commands = serve_later(self.session, key, Command, handler)  # type: ignore[arg-type]
@@ -235,6 +307,21 @@ class AutopilotNode:
     def _on_tick_sample(self, sample: zenoh.Sample) -> None:
         self.inbox.put(TickArrived(sample.payload.to_bytes()))
 
+    def _on_radio_sample(self, sample: zenoh.Sample) -> None:
+        self.inbox.put(RadioArrived(sample.payload.to_bytes()))
+
+    def _radio_query(self, vehicle_id: str) -> Callable[[zenoh.Query], None]:
+        """Answer a query with the vehicle's last radio batches (on Zenoh's thread)."""
+
+        def answer(query: zenoh.Query) -> None:
+            with self._radio_lock:
+                kept = list(self._radio_kept[vehicle_id])
+            for data in kept:
+                query.reply(query.key_expr, data)
+            query.drop()
+
+        return answer
+
     def _command_handler(self, served: _Served) -> Callable[[Incoming[Command]], None]:
         def handle(incoming: Incoming[Command]) -> None:
             self.inbox.put(CommandArrived(served, incoming))
@@ -252,10 +339,14 @@ class AutopilotNode:
                     self._on_command(event)
                     self._idle_statuses()
                     self._watch_ticks()
+                case RadioArrived(data):
+                    self._on_radio(data)
                 case Idle():
                     self._idle_statuses()
                     self._watch_ticks()
                     self._catch_up()
+                    if self._held is not None:
+                        self._ask_for_radio()
 
     def _on_tick_data(self, data: bytes) -> None:
         try:
@@ -269,6 +360,9 @@ class AutopilotNode:
             key = self.keys.tick()
             refusals(log).refuse(key, f"bad tick on {key}", exc)
             return
+        self._run_tick(tick)
+
+    def _run_tick(self, tick: Tick) -> None:
         try:
             self.on_tick(tick)
         except Exception:  # never let one tick end the ticks; physics would drop us
@@ -337,6 +431,16 @@ class AutopilotNode:
 
     def on_tick(self, tick: Tick) -> None:
         """Tick k: readings of the last sensor tick, each vehicle's step, one batch back."""
+        held = self._held
+        if held is not None and tick.tick > held.tick:
+            # the physics went on (it had this process's answer to the held tick from before
+            # a restart, or dropped it): the held tick first, with what can be had
+            self._ask_for_radio(then_step=False)
+            self._forcing = True
+            try:
+                self.on_tick(held)
+            finally:
+                self._forcing = False
         now = time.monotonic()
         if self._state_lost:
             self._ticks_back(tick, now - self.last_tick_wall)
@@ -345,13 +449,24 @@ class AutopilotNode:
         if self.keeper is not None:
             self._resume(tick)
         if tick.tick == self.last_tick:  # the start handshake repeats a tick: same answer
+            self._held = None
             if self.last_batch:
                 self.batch_pub.put(self.last_batch)
             return
+        if self._radio_missing(tick):
+            if self._held is None or self._held.tick != tick.tick:
+                self._held_wall = now
+            self._held = tick
+            if now - self._held_wall >= RADIO_ASK_AFTER_S and self._asked != tick.tick:
+                self._asked = tick.tick  # once from here (the ticks re-sent meanwhile)
+                self._ask_for_radio()
+            return
+        self._held = None
         self._advance(tick)
+        heard = self._link_tick(tick)
         self._collect_readings(tick)
         sensing = bool(tick.raw) and any(s.sensor.due(tick.tick) for s in self.served.values())
-        commands = [c for s in self.served.values() if (c := s.step(tick)) is not None]
+        commands = [c for s in self.served.values() if (c := s.step(tick, heard)) is not None]
         self._answer(tick, commands, sensing)
         if sensing:
             self.pending = PendingSensor(
@@ -401,10 +516,109 @@ class AutopilotNode:
         if self.keeper is not None:  # saved before the answer goes out (agents.resume)
             self._snap_pending = self._pending_after(tick, sensing)
             self._save()
+        self._publish_radio(tick.tick)
         if commands:
             self.batch_pub.put(self.last_batch)
         for served in self.served.values():
             served.publish_status(force=False, period_s=self.status_period_s)
+
+    # ------------------------------------------------------------------ radio
+    def _link_tick(self, tick: Tick) -> dict[str, list[VehicleState]] | None:
+        """The radio's part of tick k, as the fused runner's: the behaviours' messages of
+        tick k - 1 go out, what arrives by k is delivered, the states of k are sent; each
+        vehicle's peers as heard (None: the link is off, every peer's state as it is)."""
+        if not self.link_on:
+            return None
+        link = self.link
+        states = tick.states()
+        prev = self._link_states
+        if prev and prev[0].tick == tick.tick - 1:
+            got = self._radio_in.get(tick.tick - 1, {})
+            for vid in self.remote_talkers:
+                batch = got.get(vid)
+                try:
+                    link.put_outbox(vid, batch.messages if batch is not None else [])
+                except RadioError as exc:
+                    log.warning("tick %d: radio batch of %s dropped: %s", tick.tick, vid, exc)
+                    link.put_outbox(vid, [])
+            link.after_step(tick.tick - 1, prev)
+        else:
+            for vid in link.ids:
+                link.mailboxes[vid].outbox = []
+        for old in [t for t in self._radio_in if t < tick.tick]:
+            del self._radio_in[old]
+        self._link_states = states
+        link.before_step(tick.tick)
+        everyone = link.peers(tick.tick, states)
+        return {s.vehicle_id: p for s, p in zip(states, everyone, strict=True)}
+
+    def _radio_missing(self, tick: Tick) -> list[str]:
+        """The remote talkers whose radio batch of tick k - 1 tick k waits for (lockstep and
+        stepped clock; none after ``participant_timeout_s`` / 2 of waiting)."""
+        if (
+            not self.remote_talkers
+            or self._realtime
+            or self.last_tick < 0
+            or self.last_tick != tick.tick - 1
+        ):
+            return []
+        got = self._radio_in.get(self.last_tick, {})
+        missing = [vid for vid in self.remote_talkers if vid not in got]
+        if missing and self._held is not None and self._held.tick == tick.tick:
+            waited_s = time.monotonic() - self._held_wall
+            if waited_s > self._radio_wait_s or self._forcing:
+                log.warning(
+                    "tick %d: no radio batch of tick %d from %s after %.1f s: stepping without",
+                    tick.tick,
+                    self.last_tick,
+                    ", ".join(missing),
+                    waited_s,
+                )
+                return []
+        return missing
+
+    def _on_radio(self, data: bytes) -> None:
+        self._keep_radio(data)
+        held = self._held
+        if held is not None and not self._radio_missing(held):
+            self._run_tick(held)
+
+    def _keep_radio(self, data: bytes) -> None:
+        """A remote talker's batch, kept for the tick after its own."""
+        try:
+            batch = decode(data, RadioBatch)
+        except MessageError as exc:
+            key = self.keys.all_vehicle_radio()
+            refusals(log).refuse(key, f"bad radio batch on {key}", exc)
+            return
+        if batch.sender in self.remote_talkers and batch.tick >= self.last_tick - 1:
+            self._radio_in.setdefault(batch.tick, {})[batch.sender] = batch
+
+    def _ask_for_radio(self, then_step: bool = True) -> None:
+        """A held tick's missing batches, asked of their senders (kept there); ``then_step``:
+        the tick goes on when they are all in, or after the wait."""
+        held = self._held
+        assert held is not None
+        for vid in self._radio_missing(held):
+            replies = self.session.get(
+                self.keys.vehicle_radio(vid),
+                timeout=RADIO_QUERY_TIMEOUT_S,
+                consolidation=zenoh.ConsolidationMode.NONE,  # every kept batch, not the newest
+            )
+            for reply in replies:
+                if reply.ok is not None:
+                    self._keep_radio(reply.ok.payload.to_bytes())
+        if then_step:
+            self._run_tick(held)  # goes on if the batches are in, or it has waited enough
+
+    def _publish_radio(self, tick: int) -> None:
+        """Each served talker's messages of ``tick`` (an empty batch too: the receivers know
+        then that they have all of them)."""
+        for vid in self.served_talkers:
+            data = encode(RadioBatch(sender=vid, tick=tick, messages=self.link.outbox(vid)))
+            with self._radio_lock:
+                self._radio_kept[vid].append(data)
+            self._radio_pubs[vid].put(data)
 
     # ------------------------------------------------------------------ checkpoints
     def _pending_after(self, tick: Tick, sensing: bool) -> PendingCheckpoint | None:
@@ -439,6 +653,8 @@ class AutopilotNode:
             batch=self.last_batch,
             status_times_s=[s.last_status_time_s for s in served],
             pending=self._snap_pending,
+            link=self.link.snapshot() if self.link_on else b"",
+            link_states=self._link_states if self.link_on else [],
         )
         return msgspec.msgpack.encode(snap)
 
@@ -489,6 +705,10 @@ class AutopilotNode:
             s.flight.new_readings = []
         self.last_batch = snap.batch
         self.last_tick = self._snap_tick = snap.tick
+        if self.link_on and snap.link:
+            self.link.restore(snap.link)
+            self._link_states = list(snap.link_states)
+            self._radio_in.clear()
         self._snap_pending = p = snap.pending
         self.pending = None
         if p is not None:
@@ -509,8 +729,51 @@ class AutopilotNode:
         values = self._values(pending, answer)
         flights = [served.flight for served in self.served.values()]
         taken = take_readings(flights, pending.tick, pending.sim_time_s, pending.states, values)
+        if self.link_on and not self.link.perfect:
+            taken = self._heard_readings(tick.tick, pending, values, taken)
         for flight, reading in taken:
             self.served[flight.vehicle_id].readings_pub.put(encode(reading))
+
+    def _heard_readings(
+        self,
+        tick: int,
+        pending: PendingSensor,
+        values: Sequence[float] | None,
+        taken: list[tuple[Flight, ConcentrationReading]],
+    ) -> list[tuple[Flight, ConcentrationReading]]:
+        """The readings ``taken`` with their peers' samples as the radio brought them: every
+        vehicle's sample of the sensor tick goes out (this process's readings, and the other
+        vehicles' from the plume's answer for every position), as the fused runner sends
+        them."""
+        mine = {flight.vehicle_id: (flight, reading) for flight, reading in taken}
+        located = {h.vehicle_id: (k, h) for k, h in reversed(list(enumerate(pending.states)))}
+        everyone: list[ConcentrationReading] = []
+        for vid, sensor in zip(self.link.ids, self._sensors, strict=True):
+            if vid in mine:
+                everyone.append(mine[vid][1])
+                continue
+            if vid not in located or not sensor.due(pending.tick):
+                continue
+            k, head = located[vid]
+            true = values[k] if values is not None else None
+            everyone.append(
+                ConcentrationReading(
+                    vehicle_id=vid,
+                    sim_time_s=pending.sim_time_s,
+                    position_enu_m=head.position_enu_m,
+                    available=true is not None,
+                    reported_g_m3=true,
+                    true_g_m3=true,
+                )
+            )
+        heard = self.link.readings(tick, self._link_states, everyone)
+        out = []
+        for reading in heard:
+            if reading.vehicle_id in mine:
+                flight = mine[reading.vehicle_id][0]
+                flight.new_readings[-1] = reading
+                out.append((flight, reading))
+        return out
 
     @staticmethod
     def _values(pending: PendingSensor, answer: PlumeSample | None) -> list[float] | None:
@@ -537,31 +800,13 @@ def main(ctx: NodeContext) -> int:
     except (OptionError, KeyError) as exc:
         log.error("autopilot: %s", exc)
         return 2
-    radio = ctx.scenario.radio
-    if not radio.perfect and any(ctx.scenario.vehicle(v).behavior for v in ctx.vehicle_ids):
-        log.error(
-            "autopilot: [radio] range_m=%g loss=%g latency_ticks=%d: this process hands its "
-            "behaviours their peers over a perfect link only; valid here: range_m=0 loss=0 "
-            "latency_ticks=0 (a lossy radio runs in the fused runner and bench gsl)",
-            radio.range_m,
-            radio.loss,
-            radio.latency_ticks,
-        )
-        return 2
     for vid in ctx.vehicle_ids:
         spec = ctx.scenario.vehicle(vid).behavior
         try:
-            talking = spec is not None and talks(spec)
+            if spec is not None:
+                talks(spec)
         except BehaviorError as exc:
             log.error("autopilot: %s", exc)
-            return 2
-        if talking:
-            log.error(
-                "autopilot: %s: behavior %r talks to its peers over the radio, which this "
-                "process does not carry; fly it in the fused runner or bench gsl",
-                vid,
-                spec,
-            )
             return 2
     # Before the session opens (Zenoh reads it once, when its runtime starts); an operator's
     # own ZENOH_RUNTIME wins.

@@ -410,6 +410,11 @@ class ProcessCheckpoint(msgspec.Struct, frozen=True, kw_only=True):
     batch: bytes = b""  # the process's ActuatorBatch for ``tick`` (resent if it repeats)
     status_times_s: list[float]
     pending: PendingCheckpoint | None
+    # The radio (agents.peer_link.PeerLink.snapshot: messages in flight, what each vehicle
+    # has heard, the counts, the messages of ``tick`` not yet sent) and the states of ``tick``
+    # it sends them with; empty when the link is off.
+    link: bytes = b""
+    link_states: list[VehicleState] = []
 
 
 _process_decoder = msgspec.msgpack.Decoder(ProcessCheckpoint)

@@ -58,10 +58,15 @@ class Tick:
                 raise MessageError("SimTick", "states", str(exc)) from None
         return self._heads
 
-    def peers_of(self, own: int) -> list[VehicleState]:
+    def states(self) -> list[VehicleState]:
+        """Every vehicle's state (decoded once)."""
         if self._states is None:
             self._states = [decode(r, VehicleState) for r in self.raw]
-        return self._states[:own] + self._states[own + 1 :]
+        return self._states
+
+    def peers_of(self, own: int) -> list[VehicleState]:
+        states = self.states()
+        return states[:own] + states[own + 1 :]
 
 
 @dataclass

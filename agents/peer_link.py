@@ -25,14 +25,21 @@ has and only routes behaviour messages (next tick, to everyone).
 
 from __future__ import annotations
 
+import functools
 import heapq
-import itertools
+import importlib
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import msgspec
 
-from swarmbus.messages import ConcentrationReading, PeerReading, VehicleState
+from swarmbus.messages import (
+    ConcentrationReading,
+    LinkStatus,
+    PeerReading,
+    RadioMessage,
+    VehicleState,
+)
 from swarmbus.radio import Radio, RadioError
 from swarmbus.scenario import Scenario
 
@@ -100,7 +107,7 @@ class PeerLink:
         self.counts: dict[tuple[str, str], LinkCount] = {}
         # (arrival tick, order, receiver, kind, sender, sent tick, payload)
         self._queue: list[tuple[int, int, str, int, str, int, object]] = []
-        self._order = itertools.count()
+        self._order = 0
         self._known: dict[str, dict[str, VehicleState]] = {vid: {} for vid in self.ids}
         self._arrived_readings: dict[str, dict[str, PeerReading]] = {vid: {} for vid in self.ids}
 
@@ -125,7 +132,8 @@ class PeerLink:
             count = self.counts.setdefault(link, LinkCount())
             if self.radio.delivers(tick, *link, index, sender.position_enu_m, r.position_enu_m):
                 count.delivered += 1
-                item = (arrival, next(self._order), r.vehicle_id, kind, sender.vehicle_id, tick)
+                item = (arrival, self._order, r.vehicle_id, kind, sender.vehicle_id, tick)
+                self._order += 1
                 heapq.heappush(self._queue, (*item, payload))
             else:
                 count.dropped += 1
@@ -201,3 +209,113 @@ class PeerLink:
                 self._send(tick, MESSAGE_INDEX + n, MESSAGE_INDEX, by_id[vid], states, message,
                            arrival)  # fmt: skip
             box.outbox = []
+
+    # ------------------------------------------------------------------ across processes
+    def outbox(self, vehicle_id: str) -> list[RadioMessage]:
+        """What ``vehicle_id``'s behaviour published in its last step, encoded for the bus."""
+        return [
+            RadioMessage(index=MESSAGE_INDEX + n, kind=message_kind(m), payload=_encode(m))
+            for n, m in enumerate(self.mailboxes[vehicle_id].outbox)
+        ]
+
+    def put_outbox(self, vehicle_id: str, messages: Sequence[RadioMessage]) -> None:
+        """What another process's ``vehicle_id`` published in a step, as if published here
+        (sent on :meth:`after_step`); :class:`RadioError` for a message of an unknown type."""
+        self.mailboxes[vehicle_id].outbox = [
+            msgspec.msgpack.decode(m.payload, type=message_type(m.kind))
+            for m in sorted(messages, key=lambda m: m.index)
+        ]
+
+    def link_status(self, receiver: str) -> list[LinkStatus]:
+        """What the links into ``receiver`` delivered and dropped, in scenario order."""
+        return [
+            LinkStatus(sender=sender, delivered=c.delivered, dropped=c.dropped)
+            for sender in self.ids
+            if (c := self.counts.get((sender, receiver))) is not None
+        ]
+
+    def snapshot(self) -> bytes:
+        """The link's state (messages in flight, what each vehicle knows, the counts and the
+        outboxes) for :meth:`restore`."""
+        queue = [
+            _Queued(arrival, order, receiver, kind, sender, sent, message_kind(p), _encode(p))
+            for arrival, order, receiver, kind, sender, sent, p in self._queue
+        ]
+        snap = _LinkSnapshot(
+            order=self._order,
+            queue=queue,
+            known={r: list(k.values()) for r, k in self._known.items()},
+            readings={r: list(k.values()) for r, k in self._arrived_readings.items()},
+            counts=[(s, r, c.delivered, c.dropped) for (s, r), c in self.counts.items()],
+            outboxes={vid: self.outbox(vid) for vid in self.ids},
+        )
+        return msgspec.msgpack.encode(snap)
+
+    def restore(self, data: bytes) -> None:
+        """Back to a :meth:`snapshot`."""
+        snap = msgspec.msgpack.decode(data, type=_LinkSnapshot)
+        self._order = snap.order
+        self._queue = [
+            (q.arrival, q.order, q.receiver, q.kind, q.sender, q.sent,
+             msgspec.msgpack.decode(q.payload, type=message_type(q.type)))
+            for q in snap.queue
+        ]  # fmt: skip
+        heapq.heapify(self._queue)
+        self._known = {vid: {} for vid in self.ids}
+        for r, states in snap.known.items():
+            self._known[r] = {s.vehicle_id: s for s in states}
+        self._arrived_readings = {vid: {} for vid in self.ids}
+        for r, readings in snap.readings.items():
+            self._arrived_readings[r] = {p.vehicle_id: p for p in readings}
+        self.counts = {(s, r): LinkCount(d, x) for s, r, d, x in snap.counts}
+        for vid in self.ids:
+            self.put_outbox(vid, snap.outboxes.get(vid, []))
+            self.mailboxes[vid].inbox = []
+
+
+class _Queued(msgspec.Struct, frozen=True, array_like=True):
+    arrival: int
+    order: int
+    receiver: str
+    kind: int
+    sender: str
+    sent: int
+    type: str
+    payload: bytes
+
+
+class _LinkSnapshot(msgspec.Struct, frozen=True, kw_only=True):
+    order: int
+    queue: list[_Queued]
+    known: dict[str, list[VehicleState]]
+    readings: dict[str, list[PeerReading]]
+    counts: list[tuple[str, str, int, int]]
+    outboxes: dict[str, list[RadioMessage]]
+
+
+_encoder = msgspec.msgpack.Encoder()
+
+
+def _encode(message: object) -> bytes:
+    return _encoder.encode(message)
+
+
+def message_kind(message: object) -> str:
+    """The ``module:QualName`` of a message's type (how a receiver decodes it)."""
+    cls = type(message)
+    return f"{cls.__module__}:{cls.__qualname__}"
+
+
+@functools.cache
+def message_type(kind: str) -> type[msgspec.Struct]:
+    """The ``msgspec.Struct`` type a :func:`message_kind` names; :class:`RadioError` if none."""
+    module, _, name = kind.partition(":")
+    try:
+        found: object = importlib.import_module(module)
+        for part in name.split("."):
+            found = getattr(found, part)
+    except (ImportError, AttributeError, ValueError) as exc:
+        raise RadioError(f"radio: message type {kind!r} not found: {exc}") from None
+    if not (isinstance(found, type) and issubclass(found, msgspec.Struct)):
+        raise RadioError(f"radio: message type {kind!r} is not a msgspec.Struct")
+    return found

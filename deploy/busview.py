@@ -85,6 +85,12 @@ class Snapshot:
                 "position": list(v.position) if v.position is not None else None,
                 "reading": reading.reported_g_m3 if reading is not None else None,
             }
+            if v.status is not None and v.status.radio:
+                # what the radio carried into this vehicle, by sender (a lossy or talking radio)
+                vehicles[vid]["radio"] = {
+                    link.sender: {"delivered": link.delivered, "dropped": link.dropped}
+                    for link in v.status.radio
+                }
         return {
             "sim_time": self.clock.sim_time_s if self.clock else None,
             "real_time_factor": self.clock.real_time_factor if self.clock else None,

@@ -112,6 +112,14 @@ class Keys:
     def vehicle_cmd(self, vehicle_id: str) -> str:
         return self._vehicle(vehicle_id, "cmd")
 
+    def vehicle_radio(self, vehicle_id: str) -> str:
+        """A talking behaviour's ``RadioBatch`` of each tick (subscribed), and its last ones
+        again (queryable, for a receiver that missed some)."""
+        return self._vehicle(vehicle_id, "radio")
+
+    def all_vehicle_radio(self) -> str:
+        return self._every("vehicle", "radio")
+
     def all_vehicle_states(self) -> str:
         return self._every("vehicle", "state")
 

@@ -142,6 +142,36 @@ class FlightMode(enum.StrEnum):
     FOLLOW = "follow"  # PX4's follow-me: setpoints computed from a moving target
 
 
+class LinkStatus(msgspec.Struct, frozen=True, kw_only=True):
+    """One radio link into a vehicle: the messages from ``sender`` (peer states, peer samples,
+    behaviour messages) the radio delivered and dropped so far."""
+
+    sender: Name
+    delivered: Annotated[int, msgspec.Meta(ge=0)]
+    dropped: Annotated[int, msgspec.Meta(ge=0)]
+
+
+class RadioMessage(msgspec.Struct, frozen=True, kw_only=True):
+    """One message a behaviour published (``ctx.mailbox.publish``): its place among its
+    sender's messages of the tick (``index``, from 2: the radio's message index), its type
+    (``kind``, ``module:QualName`` of a ``msgspec.Struct``) and its msgpack encoding."""
+
+    index: Annotated[int, msgspec.Meta(ge=0, le=2**31)]
+    kind: Text
+    payload: bytes
+
+
+class RadioBatch(Message, frozen=True, kw_only=True, tag=_tag("radio_batch")):
+    """``vehicle/<id>/radio``: what the behaviour of vehicle ``sender`` published in its step
+    of tick ``tick`` (one batch a tick from a talking behaviour, empty when it said nothing:
+    a receiver knows then that it has all of them). The receivers' radio decides who gets
+    which message, and when (docs/agents.md, "The radio between vehicles")."""
+
+    sender: Name
+    tick: Tick
+    messages: list[RadioMessage] = []
+
+
 class VehicleStatus(Message, frozen=True, kw_only=True, tag=_tag("vehicle_status")):
     """``vehicle/<id>/status``: the autopilot's view of its vehicle."""
 
@@ -158,6 +188,9 @@ class VehicleStatus(Message, frozen=True, kw_only=True, tag=_tag("vehicle_status
     home_enu_m: Vec3 = (0.0, 0.0, 0.0)
     failsafe: Text = ""
     health: Text = "ok"
+    #: What the radio carried into this vehicle, one entry per sending peer (empty: the
+    #: scenario's radio is perfect and no behaviour talks).
+    radio: list[LinkStatus] = []
 
 
 class PeerReading(msgspec.Struct, frozen=True, kw_only=True):
@@ -636,12 +669,14 @@ ALL_MESSAGES: tuple[type[Message], ...] = (
     PlumeState,
     FieldSample,
     AnemometerReading,
+    RadioBatch,
 )
 
 __all__ = [m.__name__ for m in ALL_MESSAGES] + [
     "Command",
     "FenceZone",
     "FlightMode",
+    "LinkStatus",
     "OrbitYaw",
     "MissionCommand",
     "MissionFrame",
@@ -649,6 +684,7 @@ __all__ = [m.__name__ for m in ALL_MESSAGES] + [
     "NodeState",
     "PeerReading",
     "PlumeSource",
+    "RadioMessage",
     "RejectCode",
     "SpeedMode",
     "Literal",

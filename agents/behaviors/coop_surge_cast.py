@@ -14,8 +14,7 @@ sweep to the left on an even index, to the right on an odd one).
 
 Detections that the radio loses or delays arrive late or not at all; one older than the
 member's last hit does not move the hit memory back. Where the runner carries no peer
-messages (``ctx.mailbox`` is ``None``) the member flies surge-cast alone; the autopilot
-process refuses it (:attr:`talks`). Use ``behavior =
+messages (``ctx.mailbox`` is ``None``) the member flies surge-cast alone. Use ``behavior =
 "agents.behaviors.coop_surge_cast:CooperativeSurgeCast"`` on every member.
 """
 

@@ -7,12 +7,14 @@ import os
 from collections.abc import Iterator
 from contextlib import ExitStack, contextmanager
 
+import msgspec
 import zenoh
 
 from swarmbus.codec import encode
 from swarmbus.messages import (
     Clock,
     FlightMode,
+    LinkStatus,
     SpeedMode,
     VehicleState,
 )
@@ -27,8 +29,9 @@ def state(vid: str, x: float) -> VehicleState:
 
 
 @contextmanager
-def stand_ins(net: Network) -> Iterator[None]:
-    """A 'physics' and an 'autopilot-uav1' node publishing until the block ends."""
+def stand_ins(net: Network, radio: list[LinkStatus] | None = None) -> Iterator[None]:
+    """A 'physics' and an 'autopilot-uav1' node publishing until the block ends (``radio``:
+    uav1's status carries these link counts)."""
     sc = load_scenario()
     with ExitStack() as stack:
         phys = stack.enter_context(
@@ -53,6 +56,8 @@ def stand_ins(net: Network) -> Iterator[None]:
             real_time_factor=7.5,
         )
         status = vehicle_status(sim_time_s=2.0, mode=FlightMode.MISSION, armed=True, landed=False)
+        if radio is not None:
+            status = msgspec.structs.replace(status, radio=radio)
 
         def publish() -> None:
             phys.session.put(keys.clock(), encode(clock))
@@ -88,6 +93,25 @@ def test_status_json_has_the_documented_shape(network: tuple[Network, zenoh.Sess
         "reading": 0.05,
     }
     assert data["vehicles"]["uav3"]["position"] == [22.0, 1.0, 10.0]
+
+
+def test_status_json_shows_what_each_radio_link_carried(
+    network: tuple[Network, zenoh.Session],
+) -> None:
+    net, _ = network
+    links = [
+        LinkStatus(sender="uav2", delivered=70, dropped=30),
+        LinkStatus(sender="uav3", delivered=68, dropped=32),
+    ]
+    with stand_ins(net, links):
+        result = run_cli(["status", "--json", "--connect", net.endpoint, "--timeout", "20"])
+    assert result.returncode == 0, result.stderr
+    uav1 = json.loads(result.stdout)["vehicles"]["uav1"]
+    assert uav1["radio"] == {
+        "uav2": {"delivered": 70, "dropped": 30},
+        "uav3": {"delivered": 68, "dropped": 32},
+    }
+    assert uav1["mode"] == "mission"
 
 
 def test_status_text_lists_nodes_and_vehicles(network: tuple[Network, zenoh.Session]) -> None:

@@ -10,7 +10,7 @@ every tick from 0.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from functools import partial
 from pathlib import Path
 
@@ -27,6 +27,7 @@ from swarmbus.messages import (
     Command,
     CommandReply,
     FlightMode,
+    LinkStatus,
     MissionStart,
     PlumeQuery,
     PlumeValues,
@@ -34,6 +35,7 @@ from swarmbus.messages import (
     SimTick,
     Takeoff,
     VehicleState,
+    VehicleStatus,
 )
 from swarmbus.scenario import DEFAULT_SCENARIO, Scenario, load_scenario
 from tests.support.clock_holder import ClockHolder
@@ -46,6 +48,7 @@ CLOCK_VEHICLE = f"""
 id = "{CLOCK}"
 spawn_enu_m = [-300.0, 0.0, 0.0]
 """
+ONE_EACH = (("uav1",), ("uav2",), ("uav3",))  # one autopilot process per flyer
 BEHAVIOUR = 'behavior = "agents.behaviors.casting:Casting"\n'
 
 Boundary = dict[int, list[tuple[str, Command]]]
@@ -65,7 +68,10 @@ def default_with_clock(tmp_path: Path, noisy_casting: bool = False) -> Path:
 
 
 def fused_stream(
-    scenario: Scenario, last_tick: int, boundary: Boundary
+    scenario: Scenario,
+    last_tick: int,
+    boundary: Boundary,
+    after_step: Callable[[FusedRunner], None] | None = None,
 ) -> tuple[dict, FusedRunner]:
     digest = StateDigest()
     maxima: dict[str, float] = {}
@@ -82,12 +88,27 @@ def fused_stream(
             assert reply.accepted, (k, vid, command, reply)
         if k < last_tick:
             runner.step()
+            if after_step is not None:
+                after_step(runner)
     assert all(maxima[v] > 5.0 for v in FLYERS), f"the flyers should have climbed: {maxima}"
     return digest.result(), runner
 
 
-def start_plume_and_autopilots(procs: NodeProcs, session: zenoh.Session, keys: Keys) -> None:
-    """The plume first and answering (the first sensor ticks must find it), then the flyers."""
+def start_plume_and_autopilots(
+    procs: NodeProcs,
+    session: zenoh.Session,
+    keys: Keys,
+    groups: Sequence[Sequence[str]] = ONE_EACH,
+) -> None:
+    """The plume first and answering (the first sensor ticks must find it), then the flyers
+    (one autopilot process per group)."""
+    start_plume(procs, session, keys)
+    for group in groups:
+        procs.start("autopilot", *(a for v in group for a in ("--vehicle", v)))
+
+
+def start_plume(procs: NodeProcs, session: zenoh.Session, keys: Keys) -> None:
+    """The plume service, answering."""
     procs.start("plume")
     wait_for_queryable(
         session,
@@ -97,16 +118,19 @@ def start_plume_and_autopilots(procs: NodeProcs, session: zenoh.Session, keys: K
         60.0,
         "the plume service",
     )
-    for vid in FLYERS:
-        procs.start("autopilot", "--vehicle", vid)
 
 
 def distributed_stream(
-    path: Path, scenario: Scenario, last_tick: int, boundary: Boundary, log_dir: Path
+    path: Path,
+    scenario: Scenario,
+    last_tick: int,
+    boundary: Boundary,
+    log_dir: Path,
+    groups: Sequence[Sequence[str]] = ONE_EACH,
 ) -> dict:
     keys = Keys(scenario.world.name)
     with zenoh_network() as (net, session), NodeProcs(net, path, log_dir) as procs:
-        start_plume_and_autopilots(procs, session, keys)
+        start_plume_and_autopilots(procs, session, keys, groups)
         holder = ClockHolder(session, keys, CLOCK, FLYERS, rotor_count=4)
         try:
             procs.start("physics")
@@ -175,10 +199,15 @@ def stepped_scenario(tmp_path: Path, noisy_casting: bool = False) -> Path:
 
 
 def assert_same_stream(
-    tmp_path: Path, path: Path, last_tick: int, boundary: Boundary, stepped: bool
+    tmp_path: Path,
+    path: Path,
+    last_tick: int,
+    boundary: Boundary,
+    stepped: bool,
+    after_step: Callable[[FusedRunner], None] | None = None,
 ) -> FusedRunner:
     scenario = load_scenario(path)
-    fused, runner = fused_stream(scenario, last_tick, boundary)
+    fused, runner = fused_stream(scenario, last_tick, boundary, after_step)
     run = stepped_stream if stepped else distributed_stream
     distributed = run(path, scenario, last_tick, boundary, tmp_path)
     runner.close()
@@ -238,3 +267,154 @@ def test_the_docs_example_of_the_runner_flies_the_missions() -> None:
     assert isinstance(states, list) and len(states) == 3
     # 10 s after the start the missions' take-off to 10 m is done and the legs are being flown
     assert all(abs(s.position_enu_m[2] - 10.0) < 1.0 for s in states)
+
+
+COOP = 'behavior = "agents.behaviors.coop_surge_cast:CooperativeSurgeCast"\n'
+LOSSY_RADIO = "\n[radio]\nloss = 0.3\nlatency_ticks = 3\n"
+
+
+def coop_over_lossy_radio(tmp_path: Path, clock: str) -> tuple[Path, Scenario, Boundary]:
+    """The casting scenario's flyers as cooperative surge-casters over a lossy, slow radio:
+    take-off to 8, 10 and 12 m, offboard at tick 600."""
+    path = scenario_for(tmp_path, clock, noisy_casting=True)
+    path.write_text(path.read_text().replace(BEHAVIOUR, COOP) + LOSSY_RADIO)
+    altitude_m = {"uav1": 8.0, "uav2": 10.0, "uav3": 12.0}
+    boundary: Boundary = {
+        0: [(v, c) for v in FLYERS for c in (Arm(), Takeoff(altitude_m=altitude_m[v]))],
+        600: [(v, SetMode(mode=FlightMode.OFFBOARD)) for v in FLYERS],
+    }
+    return path, load_scenario(path), boundary
+
+
+@CLOCKS
+def test_talking_behaviours_over_a_lossy_radio_give_the_same_states(
+    tmp_path: Path, clock: str
+) -> None:
+    # Three cooperative surge-casters share their detections over a radio that loses 30 % of
+    # every message (peer states, peer samples, detections) and delays each by 3 ticks: the
+    # distributed processes decide every delivery as the fused runner does.
+    path, scenario, boundary = coop_over_lossy_radio(tmp_path, clock)
+    assert scenario.radio.loss == 0.3 and scenario.radio.latency_ticks == 3
+    received: list[int] = []
+
+    def count_inbox(runner: FusedRunner) -> None:
+        received.append(sum(len(runner.link.mailboxes[v].inbox) for v in FLYERS))
+
+    runner = assert_same_stream(
+        tmp_path, path, 1440, boundary, stepped=clock == "stepped", after_step=count_inbox
+    )
+    # Not a vacuous comparison: detections went over the radio and arrived, some were lost.
+    assert sum(received) > 0
+    messages = [(s, r) for (s, r) in runner.link.counts if s in FLYERS and r in FLYERS]
+    dropped = sum(runner.link.counts[link].dropped for link in messages)
+    delivered = sum(runner.link.counts[link].delivered for link in messages)
+    assert dropped > 0 and abs(dropped / (dropped + delivered) - 0.3) < 0.02
+
+
+def test_talking_behaviours_served_two_by_one_process_give_the_same_states(
+    tmp_path: Path,
+) -> None:
+    """uav1 and uav2 in one autopilot process (their messages to each other never leave it),
+    uav3 in another: the same state stream as the fused runner."""
+    path, scenario, boundary = coop_over_lossy_radio(tmp_path, "holder")
+    fused, runner = fused_stream(scenario, 1200, boundary)
+    runner.close()
+    groups = (("uav1", "uav2"), ("uav3",))
+    distributed = distributed_stream(path, scenario, 1200, boundary, tmp_path, groups)
+    assert distributed["missing"] == distributed["conflicts"] == 0
+    assert fused["sha256"] == distributed["sha256"]
+
+
+def _alive(session: zenoh.Session, key: str) -> bool:
+    return any(r.ok is not None for r in session.liveliness().get(key, timeout=2.0))
+
+
+def _gone(session: zenoh.Session, key: str) -> bool:
+    return not _alive(session, key)
+
+
+def test_a_restarted_talking_autopilot_carries_on_with_the_same_bits(tmp_path: Path) -> None:
+    """uav1's autopilot is killed while the clock holds a tick of the offboard flight (a peer's
+    message to it in flight over a lossy, slow radio) and restarted from its checkpoint: the
+    state stream is still the fused runner's, bit for bit (its link came back with it, and the
+    peers' messages of the tick it missed were asked of them)."""
+    path, scenario, boundary = coop_over_lossy_radio(tmp_path, "holder")
+    last_tick, killed = 1200, "uav1"
+    heard_at: list[int] = []  # the ticks at which uav1's behaviour got peers' messages
+    counted: dict[int, list[LinkStatus]] = {}  # what the links into uav1 carried, by tick
+
+    def note(runner: FusedRunner) -> None:
+        if runner.link.mailboxes[killed].inbox:
+            heard_at.append(runner.tick)
+        counted[runner.tick] = runner.link.link_status(killed)
+
+    fused, runner = fused_stream(scenario, last_tick, boundary, note)
+    runner.close()
+    # killed two ticks before it hears a message: the message (sent 4 ticks before it is
+    # heard) is in flight at the kill, and only the checkpoint's link holds it
+    kill_at = next(t for t in heard_at if t >= 700) - 2
+    assert kill_at < last_tick - 100, heard_at
+    keys = Keys(scenario.world.name)
+    checkpoint = tmp_path / f"autopilot-{killed}.ckpt"
+    token = keys.node_health(f"autopilot-{killed}")
+    statuses: list[VehicleStatus] = []
+    last_s = (last_tick - scenario.time.control_hz) / scenario.time.control_hz  # the last second
+    with zenoh_network() as (net, session), NodeProcs(net, path, tmp_path) as procs:
+        on_status = partial(_keep_status, statuses)
+        sub = session.declare_subscriber(keys.vehicle_status(killed), on_status)
+        start_plume(procs, session, keys)
+        ap = {}
+        for vid in FLYERS:
+            extra = ["--set", f"checkpoint={checkpoint}"] if vid == killed else []
+            ap[vid] = procs.start("autopilot", "--vehicle", vid, *extra, name=f"autopilot-{vid}")
+        holder = ClockHolder(session, keys, CLOCK, FLYERS, rotor_count=4)
+        try:
+            procs.start("physics")
+            for k in range(last_tick + 1):
+                holder.wait_answered(k, 60.0)
+                for vid, command in boundary.get(k, []):
+                    assert VehicleCommander(session, keys, vid, 5.0).send(command).accepted
+                if k == kill_at:
+                    procs.kill(ap[killed])
+                    wait_until(partial(_gone, session, token), 30.0, "the token gone")
+                    again = f"autopilot-{killed}-again"
+                    procs.start("autopilot", "--vehicle", killed, "--set",
+                                f"checkpoint={checkpoint}", name=again)  # fmt: skip
+                    wait_until(partial(_alive, session, token), 60.0, "the restarted")
+                if k < last_tick:
+                    holder.release(k)
+            distributed = holder.digest.result()
+            wait_until(partial(_status_of, statuses, last_s), 30.0, "a last status")
+        finally:
+            holder.close()
+            sub.undeclare()
+    log = (tmp_path / f"autopilot-{killed}-again.log").read_text()
+    assert "restored the state of tick" in log
+    assert "stepping without" not in log  # it had every peer's messages of every tick
+    assert fused["messages"] == distributed["messages"] == (last_tick + 1) * 4
+    assert distributed["missing"] == distributed["conflicts"] == 0
+    assert fused["sha256"] == distributed["sha256"]
+    # Its status counts what the links into it carried over the whole run, the kill included
+    # (the checkpoint kept the counts): the tick's peer states and samples are counted when
+    # it steps, the behaviours' messages of a tick on the next, so the counts lie between
+    # the fused runner's after tick - 1 and after tick.
+    status = _status_of(statuses, last_s)
+    assert status is not None and status.radio
+    tick = round(status.sim_time_s * scenario.time.control_hz)
+    low = {c.sender: (c.delivered, c.dropped) for c in counted[tick - 1]}
+    high = {c.sender: (c.delivered, c.dropped) for c in counted[tick]}
+    got = {c.sender: (c.delivered, c.dropped) for c in status.radio}
+    assert set(got) == set(high) == {"uav2", "uav3", CLOCK}
+    for sender, (delivered, dropped) in got.items():
+        assert low[sender][0] <= delivered <= high[sender][0], (sender, got, low, high)
+        assert low[sender][1] <= dropped <= high[sender][1], (sender, got, low, high)
+
+
+def _keep_status(out: list[VehicleStatus], sample: zenoh.Sample) -> None:
+    out.append(decode(sample.payload.to_bytes(), VehicleStatus))
+
+
+def _status_of(statuses: list[VehicleStatus], since_s: float) -> VehicleStatus | None:
+    """The newest status from ``since_s`` (sim time) on."""
+    recent = [s for s in list(statuses) if s.sim_time_s >= since_s]
+    return max(recent, key=lambda s: s.sim_time_s) if recent else None

@@ -152,6 +152,15 @@ SAMPLES: dict[type[m.Message], m.Message] = {
         wind_enu_m_s=(6.1, -0.2, 0.05),
         true_wind_enu_m_s=(6.0, 0.0, 0.0),
     ),
+    m.RadioBatch: m.RadioBatch(
+        sender="uav2",
+        tick=120,
+        messages=[
+            m.RadioMessage(
+                index=2, kind="agents.behaviors.coop_surge_cast:Detection", payload=b"\x93\x01"
+            )
+        ],
+    ),
     m.PlumeMeshQuery: m.PlumeMeshQuery(level_g_m3=0.05, resolution_m=0.5),
     m.PlumeMesh: m.PlumeMesh(level_g_m3=0.05, vertices_f32=b"\x00" * 36, faces_i32=b"\x00" * 12),
     m.ErrorReply: m.ErrorReply(field="points_enu_m[0][2]", reason="Expected `float` <= 1e9"),
