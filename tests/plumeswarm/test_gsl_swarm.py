@@ -1,11 +1,31 @@
-"""``bench gsl --vehicles N --radio ...``: the options reach every episode and the command line."""
+"""``bench gsl --vehicles N --radio ...``: the options reach every episode and the command line;
+a swarm's starts, its columns and its speed-up."""
 
 from __future__ import annotations
 
+import itertools
+import math
+
 import pytest
 
-from plumeswarm.gsl.bench import GslError, command_line, make_options, parse_radio, specs_of
-from plumeswarm.gsl.episode import episode_scenario
+from plumeswarm.gsl.bench import (
+    GslError,
+    command_line,
+    make_options,
+    parse_radio,
+    runs_csv,
+    specs_of,
+)
+from plumeswarm.gsl.episode import (
+    EpisodeSpec,
+    Outcome,
+    Tally,
+    episode_scenario,
+    episode_starts,
+    start_point,
+)
+from plumeswarm.gsl.registry import load_environment
+from plumeswarm.gsl.stats import speedup
 from swarmbus.radio import RadioSpec
 
 
@@ -45,3 +65,75 @@ def test_without_the_options_each_algorithm_flies_its_own_vehicles_on_a_perfect_
     assert counts == {"random_walk": 1, "gradient_swarm": 3, "surge_cast": 1, "oracle": 1}
     assert all(episode_scenario(s).radio.perfect for s in specs_of(opts))
     assert "--vehicles" not in command_line(opts) and "--radio" not in command_line(opts)
+
+
+def test_a_swarm_starts_on_a_crosswind_line_centred_on_the_runs_start() -> None:
+    """Every environment's wind blows from 270° (toward +x): crosswind is ±y. The line is
+    across the wind, its points ``spacing`` apart, its centre the one-vehicle start."""
+    for spacing in (4.0, 2.5):
+        spec = EpisodeSpec("coop_declare", "meander_low", "ideal", 3, 1000, vehicles=5,
+                           start_spacing_m=spacing)  # fmt: skip
+        base = load_environment("meander_low").scenario
+        assert base.wind.from_deg == 270.0
+        sx, sy = start_point(base, 1000, 3)
+        starts = episode_starts(base, spec, 5)
+        assert [p[0] for p in starts] == pytest.approx([sx] * 5, abs=1e-9)
+        ys = sorted(p[1] for p in starts)
+        assert [b - a for a, b in itertools.pairwise(ys)] == pytest.approx([spacing] * 4)
+        assert sum(ys) / 5 == pytest.approx(sy)
+    # one vehicle: the run's start; the algorithm's own spacing; spacing 0: the 2 m circle
+    one = EpisodeSpec("coop_declare", "meander_low", "ideal", 3, 1000, vehicles=1)
+    assert episode_starts(base, one, 1) == [[sx, sy, 10.0]]
+    assert EpisodeSpec("coop_declare", "meander_low", "ideal", 3, 1000).spacing_m() == 4.0
+    for spec in (
+        EpisodeSpec("gradient_swarm", "meander_low", "ideal", 3, 1000, vehicles=3),
+        EpisodeSpec("coop_declare", "meander_low", "ideal", 3, 1000, vehicles=3,
+                    start_spacing_m=0.0),
+    ):  # fmt: skip
+        for p in episode_starts(base, spec, 3):
+            assert math.hypot(p[0] - sx, p[1] - sy) == pytest.approx(2.0)
+
+
+def test_vehicles_counts_are_cells_and_the_swarm_columns_appear_only_for_a_swarm() -> None:
+    opts = make_options(["surge_cast"], ["steady_gaussian"], ["ideal"], runs=2, vehicles="1,3",
+                        spacing=5.0)  # fmt: skip
+    assert opts.vehicles == (1, 3) and opts.swarm
+    assert [(s.algorithm, s.vehicles, s.run) for s in specs_of(opts)][:4] == [
+        ("random_walk", 1, 0), ("random_walk", 1, 1), ("random_walk", 3, 0), ("random_walk", 3, 1)
+    ]  # fmt: skip
+    assert all(s.start_spacing_m == 5.0 for s in specs_of(opts))
+    assert "--vehicles 1,3 --spacing 5" in command_line(opts)
+    assert not make_options(["surge_cast"], ["steady_gaussian"], ["ideal"], vehicles=1).swarm
+    for bad in ("0", "1,x", "65"):
+        with pytest.raises(GslError, match=r"--vehicles .*1 to 64"):
+            make_options(["surge_cast"], ["steady_gaussian"], ["ideal"], vehicles=bad)
+    spec = EpisodeSpec("a", "steady_gaussian", "ideal", 0, 0, vehicles=2)
+    outcome = Outcome(spec, True, 10.0, 5.0, 50.0, 0.5, 1.0, True, (0.0, 0.0),
+                      closest_approach_m=1.5, total_path_m=10.0)  # fmt: skip
+    plain, swarm = runs_csv([outcome]).splitlines(), runs_csv([outcome], swarm=True).splitlines()
+    assert swarm[0] == plain[0] + ",vehicles,closest_approach_m,total_path_m"
+    assert swarm[1] == plain[1] + ",2,1.5000,10.0000"
+
+
+def test_the_tally_counts_the_closest_approach_and_the_swarms_total_path() -> None:
+    spec = EpisodeSpec("a", "steady_gaussian", "ideal", 0, 0, vehicles=3)
+    tally = Tally(spec, 3, 0.05, 0.0, (0.0, 0.0), (100.0, 0.0))
+    tally.observe(0.0, [(0.0, 0.0, 10.0), (0.0, 4.0, 10.0), (0.0, -4.0, 10.0)])
+    tally.observe(0.05, [(3.0, 0.0, 10.0), (0.0, 1.0, 10.0), (0.0, -4.0, 12.0)])
+    outcome = tally.outcome(0.05, None)
+    assert outcome.closest_approach_m == pytest.approx(math.hypot(3.0, 1.0))
+    assert outcome.total_path_m == pytest.approx(3.0 + 3.0 + 0.0)  # horizontal path
+    assert outcome.path_length_m == pytest.approx(2.0)  # per vehicle, as before
+
+
+def test_the_speed_up_is_the_ratio_of_medians_with_a_paired_bootstrap_interval() -> None:
+    single = [100.0, 120.0, 130.0, 140.0, 150.0]
+    point, ci = speedup(single, [t / 2.0 for t in single])
+    assert point == pytest.approx(2.0) and ci == pytest.approx((2.0, 2.0))  # every pair: 2
+    point, ci = speedup(single, [50.0, 60.0, 70.0, 65.0, 80.0])
+    assert point == pytest.approx(130.0 / 65.0)
+    assert ci is not None and ci[0] <= point <= ci[1]
+    # a resample's ratio lies between the pairs' extreme ratios
+    ratios = [a / b for a, b in zip(single, [50.0, 60.0, 70.0, 65.0, 80.0], strict=True)]
+    assert min(ratios) <= ci[0] and ci[1] <= max(single) / min(50.0, 60.0, 70.0, 65.0, 80.0)
+    assert speedup([100.0, 90.0], [50.0, 45.0]) == (pytest.approx(2.0), None)
