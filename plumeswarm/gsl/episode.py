@@ -137,7 +137,8 @@ class Outcome:
     ``time_to_success_s`` its time from the episode's start. ``final_error_m``: the
     declaration's distance from the source, or (none) where the vehicles (their centroid)
     end. ``first_within_s[i]``: when the centroid first came within ``RADII_M[i]``.
-    ``closest_approach_m``: the least distance (3-D) between two vehicles at any tick."""
+    ``closest_approach_m``: the least distance (3-D) between two vehicles at any tick;
+    ``nearest_member_m``: the least horizontal distance of any one vehicle to the source."""
 
     spec: EpisodeSpec
     success: bool
@@ -155,6 +156,7 @@ class Outcome:
     declared_s: float | None = None
     closest_approach_m: float | None = None  # between two vehicles (None: one vehicle)
     total_path_m: float = 0.0  # every vehicle's path, summed
+    nearest_member_m: float = math.inf  # the closest any one vehicle came to the source
 
 
 def start_point(
@@ -302,6 +304,7 @@ class Tally:
         self.previous: list[tuple[float, float, float]] | None = None
         self.count = 0
         self.closest_m = math.inf
+        self.nearest_m = math.inf
 
     def observe(self, t: float, positions: Sequence[tuple[float, float, float]]) -> None:
         """Every vehicle's position at sim time ``t`` (one call per control tick)."""
@@ -320,6 +323,8 @@ class Tally:
         cy = sum(p[1] for p in positions) / self.n
         distance = math.dist((cx, cy), self.source)
         self.min_distance_m = min(self.min_distance_m, distance)
+        for p in positions:
+            self.nearest_m = min(self.nearest_m, math.dist((p[0], p[1]), self.source))
         for i, r in enumerate(RADII_M):
             if self.first_within_s[i] is None and distance <= r:
                 self.first_within_s[i] = t - self.t0
@@ -360,6 +365,7 @@ class Tally:
             declared_s=declared_s,
             closest_approach_m=self.closest_m if self.n > 1 else None,
             total_path_m=sum(self.path),
+            nearest_member_m=self.nearest_m,
         )
 
 

@@ -109,10 +109,10 @@ def test_vehicles_counts_are_cells_and_the_swarm_columns_appear_only_for_a_swarm
             make_options(["surge_cast"], ["steady_gaussian"], ["ideal"], vehicles=bad)
     spec = EpisodeSpec("a", "steady_gaussian", "ideal", 0, 0, vehicles=2)
     outcome = Outcome(spec, True, 10.0, 5.0, 50.0, 0.5, 1.0, True, (0.0, 0.0),
-                      closest_approach_m=1.5, total_path_m=10.0)  # fmt: skip
+                      closest_approach_m=1.5, total_path_m=10.0, nearest_member_m=0.5)  # fmt: skip
     plain, swarm = runs_csv([outcome]).splitlines(), runs_csv([outcome], swarm=True).splitlines()
-    assert swarm[0] == plain[0] + ",vehicles,closest_approach_m,total_path_m"
-    assert swarm[1] == plain[1] + ",2,1.5000,10.0000"
+    assert swarm[0] == plain[0] + ",vehicles,closest_approach_m,total_path_m,nearest_member_m"
+    assert swarm[1] == plain[1] + ",2,1.5000,10.0000,0.5000"
 
 
 def test_the_tally_counts_the_closest_approach_and_the_swarms_total_path() -> None:
@@ -124,6 +124,8 @@ def test_the_tally_counts_the_closest_approach_and_the_swarms_total_path() -> No
     assert outcome.closest_approach_m == pytest.approx(math.hypot(3.0, 1.0))
     assert outcome.total_path_m == pytest.approx(3.0 + 3.0 + 0.0)  # horizontal path
     assert outcome.path_length_m == pytest.approx(2.0)  # per vehicle, as before
+    assert outcome.nearest_member_m == pytest.approx(97.0)  # the first vehicle at (3, 0)
+    assert outcome.min_distance_m == pytest.approx(math.dist((1.0, -1.0), (100.0, 0.0)))
 
 
 def test_the_speed_up_is_the_ratio_of_medians_with_a_paired_bootstrap_interval() -> None:
