@@ -37,15 +37,21 @@ class Anemometer:
     def read(
         self, vehicle_id: str, tick: int, sim_time_s: float, position: Vec3
     ) -> AnemometerReading:
-        true = self.wind.velocity([position], sim_time_s)[0]
+        uniform = self.wind.uniform_at(sim_time_s)  # the same everywhere: no lookup
+        if uniform is None:
+            v = self.wind.velocity([position], sim_time_s)[0]
+            true = (float(v[0]), float(v[1]), float(v[2]))
+        else:
+            true = (float(uniform[0]), float(uniform[1]), float(uniform[2]))
         measured = true
         if self.config.noise_std_m_s > 0.0:
             rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence([*self._seed, tick])))
-            measured = true + rng.normal(0.0, self.config.noise_std_m_s, 3)
+            m = np.asarray(true) + rng.normal(0.0, self.config.noise_std_m_s, 3)
+            measured = (float(m[0]), float(m[1]), float(m[2]))
         return AnemometerReading(
             vehicle_id=vehicle_id,
             sim_time_s=sim_time_s,
             position_enu_m=position,
-            wind_enu_m_s=(float(measured[0]), float(measured[1]), float(measured[2])),
-            true_wind_enu_m_s=(float(true[0]), float(true[1]), float(true[2])),
+            wind_enu_m_s=measured,
+            true_wind_enu_m_s=true,
         )

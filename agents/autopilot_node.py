@@ -33,8 +33,8 @@ from agents.flight import take_readings
 from agents.node_events import Idle, Inbox, PendingSensor, Tick, TickArrived
 from agents.resume import StateKeeper
 from plume_atmosphere.wind import WindModel, wind_from_scenario
-from swarmbus.catchup import CatchUpPublisher, RouterOutage, watch_router
-from swarmbus.codec import MessageError, decode, encode
+from swarmbus.catchup import CatchUpPublisher, Resender, RouterOutage, watch_router
+from swarmbus.codec import MessageError, decode, encode, refusals
 from swarmbus.keys import Keys, autopilot_node
 from swarmbus.messages import (
     ActuatorBatch,
@@ -71,6 +71,7 @@ class _Served:
         vehicle_id: str,
         options: AutopilotOptions,
         wind: WindModel,
+        resender: Resender,
     ) -> None:
         self.vehicle_id = vehicle_id
         # Where the physics puts this vehicle's state in a tick (checked on every use).
@@ -91,7 +92,7 @@ class _Served:
             scenario.time.participant_timeout_s,
         )
         self.readings_pub = CatchUpPublisher(
-            session, keys.vehicle_concentration(vehicle_id), READINGS_KEPT
+            session, keys.vehicle_concentration(vehicle_id), READINGS_KEPT, resender
         )
         self.last_status: VehicleStatus | None = None
         self.last_status_time_s = -1e9
@@ -162,8 +163,10 @@ class AutopilotNode:
         self.options = options
         self.inbox: Inbox[Event] = Inbox()
         wind = wind_from_scenario(ctx.scenario)  # one wind for every vehicle served here
+        # the readings put again after a router outage, off the loop's thread
+        self.resender = Resender("autopilot-catch-up")
         self.served = {
-            vid: _Served(session, self.keys, ctx.scenario, vid, options, wind)
+            vid: _Served(session, self.keys, ctx.scenario, vid, options, wind, self.resender)
             for vid in ctx.vehicle_ids
         }
         self.batch_pub = session.declare_publisher(self.keys.autopilot_actuators(ctx.name))
@@ -215,6 +218,7 @@ class AutopilotNode:
             served.publish_status(force=True, period_s=self.status_period_s)
 
     def close(self) -> None:
+        self.resender.close()
         if self.keeper is not None:
             self.keeper.close()
         for token in self._tokens:
@@ -262,7 +266,8 @@ class AutopilotNode:
                 # (the partial view leaves the other vehicles' states unchecked).
                 decode(data, SimTick)
         except MessageError as exc:
-            log.warning("ignoring bad tick: %s", exc)
+            key = self.keys.tick()
+            refusals(log).refuse(key, f"bad tick on {key}", exc)
             return
         try:
             self.on_tick(tick)
@@ -287,7 +292,7 @@ class AutopilotNode:
         back; subscribers keep one reading per vehicle and sim time)."""
         for vid, served in self.served.items():
             if n := served.readings_pub.catch_up(self.router_outage):
-                log.info("%s: re-sent its last %d readings after the router's outage", vid, n)
+                log.info("%s: re-sending its last %d readings after the router's outage", vid, n)
 
     def _idle_statuses(self) -> None:
         """While no ticks arrive (physics not running), a status every IDLE_STATUS_PERIOD_S."""
@@ -561,7 +566,7 @@ def main(ctx: NodeContext) -> int:
     # Before the session opens (Zenoh reads it once, when its runtime starts); an operator's
     # own ZENOH_RUNTIME wins.
     os.environ.setdefault("ZENOH_RUNTIME", SINGLE_THREAD_RUNTIME)
-    with NodeRuntime(ctx, role="autopilot") as rt:
+    with NodeRuntime(ctx, role="autopilot", check_scenario_of="physics") as rt:
         try:
             node = AutopilotNode(rt.session, ctx, options)
         except BehaviorError as exc:
@@ -573,4 +578,5 @@ def main(ctx: NodeContext) -> int:
             node.run(rt.stop)
         finally:
             node.close()
-    return 0
+        refused = rt.refusal is not None
+    return 2 if refused else 0

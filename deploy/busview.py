@@ -73,6 +73,7 @@ class Snapshot:
                     "pid": h.pid if h else None,
                     "host": h.host if h else None,
                     "version": h.version if h else None,
+                    "detail": h.detail if h else None,
                 }
             )
         vehicles: dict[str, Any] = {}

@@ -52,7 +52,9 @@ def answer_ticks(
     pub = session.declare_publisher(keys.autopilot_actuators(node_name))
 
     def on_tick(sample: zenoh.Sample) -> None:
-        decoded = decode_or_none(sample.payload.to_bytes(), TickView, "a tick", log)
+        decoded = decode_or_none(
+            sample.payload.to_bytes(), TickView, "a tick", log, str(sample.key_expr)
+        )
         if decoded is None:
             return
         tick = decoded.tick
@@ -112,7 +114,9 @@ class _Barrier:
         self.expected = vehicles
 
     def on_batch(self, sample: zenoh.Sample) -> None:
-        view = decode_or_none(sample.payload.to_bytes(), BatchView, "an actuator batch", log)
+        view = decode_or_none(
+            sample.payload.to_bytes(), BatchView, "an actuator batch", log, str(sample.key_expr)
+        )
         if view is None:
             return
         with self.cond:
@@ -122,7 +126,9 @@ class _Barrier:
                     self.cond.notify()
 
     def on_sample(self, sample: zenoh.Sample) -> None:
-        decoded = decode_or_none(sample.payload.to_bytes(), FieldSample, "a plume sample", log)
+        decoded = decode_or_none(
+            sample.payload.to_bytes(), FieldSample, "a plume sample", log, str(sample.key_expr)
+        )
         if decoded is None:
             return
         tick = decoded.tick
@@ -286,7 +292,9 @@ def plume_main(ctx: NodeContext) -> int:
         pub = rt.session.declare_publisher(keys.plume_sample())
 
         def on_tick(sample: zenoh.Sample) -> None:
-            view = decode_or_none(sample.payload.to_bytes(), TickView, "a tick", log)
+            view = decode_or_none(
+                sample.payload.to_bytes(), TickView, "a tick", log, str(sample.key_expr)
+            )
             if view is None:
                 return
             answer = FieldSample(tick=view.tick, sim_time_s=view.sim_time_s, values_g_m3=values)

@@ -53,15 +53,21 @@ def _default_field() -> list[str]:
     return ["plume"]
 
 
+def _default_commands() -> list[str]:
+    return ["gateway"]
+
+
 class AclSection(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
-    """Who may publish what (roles); everything else is open to every identity of the
-    deployment and closed to anybody else. Enforced only with ``[tls]`` (identities are the
-    certificates' common names)."""
+    """Which roles produce the planes that may move to other roles; the rest of what each role
+    may send is fixed by its role (``deploy.security.ROLE_PLANES``). Enforced only with
+    ``[tls]`` (identities are the certificates' common names)."""
 
     enabled: bool = True
     actuators: list[RoleName] = msgspec.field(default_factory=_default_actuators)
     world: list[RoleName] = msgspec.field(default_factory=_default_world)  # ticks, states, clock
     field: list[RoleName] = msgspec.field(default_factory=_default_field)  # plume samples, state
+    # Who may query vehicle/*/cmd and clock/step besides the operator and a vehicle's autopilot
+    commands: list[RoleName] = msgspec.field(default_factory=_default_commands)
     # One identity per autopilot process (one vehicle each), allowed to speak for its own
     # vehicle only (deploy.security); the hosts running autopilots then list their vehicles.
     per_vehicle: bool = False

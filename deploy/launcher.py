@@ -41,7 +41,7 @@ from swarmbus.closeable import Closeable
 from swarmbus.codec import encode
 from swarmbus.errors import PlumeswarmError
 from swarmbus.keys import Keys, process_node
-from swarmbus.messages import RestartNotice
+from swarmbus.messages import NodeState, RestartNotice
 from swarmbus.scenario import Scenario
 from swarmbus.session import DEFAULT_ROUTER, NetworkConfig, open_session
 
@@ -196,15 +196,21 @@ def plan(scenario: Scenario, opts: LaunchOptions) -> list[ProcessSpec]:
                 state = f"checkpoint={autopilot_state_path(opts, name)}"  # agents.resume
                 add(role, name, [a for vid in chunk for a in ("--vehicle", vid)] + net_args)
                 specs[-1] = replace(specs[-1], argv=(*specs[-1].argv, "--set", state))
-        elif role == "physics":
-            add(role, role, [*net_args, "--set", f"checkpoint={checkpoint_path(opts)}"])
-        elif role == "recorder":
-            out = opts.run_dir / "recording.mcap"
-            # resume: a restarted recorder continues in the next segment (recording.1.mcap …)
-            add(role, role, [*net_args, "--set", f"out={out}", "--set", "resume=true"])
         else:
-            add(role, role, net_args)
+            add(role, role, [*net_args, *run_dir_options(role, opts)])
     return specs
+
+
+def run_dir_options(role: str, opts: LaunchOptions) -> list[str]:
+    """The ``--set`` options that put what a role keeps across its restarts in the run
+    directory: the physics's checkpoint, the recording (a restarted recorder continues in the
+    next segment, recording.1.mcap …), the gateway's signed streams' timestamps."""
+    sets = {
+        "physics": [f"checkpoint={checkpoint_path(opts)}"],
+        "recorder": [f"out={opts.run_dir / 'recording.mcap'}", "resume=true"],
+        "gateway": [f"signing_state={opts.run_dir / 'mavlink-signing.state'}"],
+    }
+    return [a for item in sets.get(role, []) for a in ("--set", item)]
 
 
 def served_vehicles(spec: ProcessSpec) -> list[str]:
@@ -252,6 +258,7 @@ class Launcher(Closeable):
         self.supervisor = Supervisor(self.specs, self.run_dir, console=console)
         self._session: zenoh.Session | None = None
         self.view: BusView | None = None
+        self._errors: dict[str, str] = {}  # processes whose health says error: the detail
         self.started_at = time.monotonic()
 
     # ------------------------------------------------------------------ start
@@ -388,12 +395,29 @@ class Launcher(Closeable):
                 log.warning("%s exited with code %d", event.name, event.returncode)
         if self.supervisor.pids() != before:
             self.write_pids()
+        self._watch_errors()
         failed = self.supervisor.failed_for_good()
         if failed:
             sv = failed[0]
             raise LaunchError(
                 f"{sv.spec.name} exited with code {sv.returncode}: {_last_lines(sv.log_path)}"
             )
+
+    def _watch_errors(self) -> None:
+        """Log each of our processes that says on its health it is failing at its job (a
+        recorder on a full disk), and when it recovers; restarting would not help."""
+        if self.view is None:
+            return
+        health = self.view.snapshot().health
+        for name, sv in self.supervisor.procs.items():
+            h = health.get(name)
+            failing = h is not None and h.state is NodeState.ERROR
+            if failing and h is not None and name not in self._errors:
+                log.error("%s reports an error: %s", name, h.detail)
+                self._errors[name] = h.detail
+            elif not failing and name in self._errors and sv.state is ProcState.RUNNING:
+                del self._errors[name]
+                log.warning("%s recovered: %s", name, h.detail if h is not None else "")
 
     def _announce(self, event: ExitEvent) -> None:
         """Say on the bus that a process ended and whether it is being restarted: the physics

@@ -5,16 +5,17 @@ settings and the Zenoh access-control list of a deployment's hosts file. See doc
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import msgspec
 
+from agents.swarm import CLOCK_CLIENT_PREFIX
 from deploy.certs import OPERATOR, HostIdentities, identity
 from deploy.hosts import Deployment, HostsError
 from deploy.launcher import LaunchOptions
-from swarmbus.keys import ROUTER_ADMIN, Keys, autopilot_node
+from swarmbus.keys import ROUTER_ADMIN, Keys, autopilot_node, vehicle_of_autopilot
 from swarmbus.session import (
     NetworkConfig,
     NetworkConfigError,
@@ -91,66 +92,144 @@ def _role_of(name: str) -> str:
     return name.partition(".")[0]
 
 
-def access_control(dep: Deployment, keys: Keys) -> dict[str, Any]:
-    """Zenoh's ``access_control`` section for ``dep``."""
-    per_vehicle = set(per_vehicle_identities(dep).values())  # each with its own rules, below
-    members = sorted(n for h in host_identities(dep) for n in h.identities if n not in per_vehicle)
-    rules: list[dict[str, Any]] = [
-        {
-            "id": "members",
-            "permission": "allow",
-            "flows": ["ingress", "egress"],
-            "messages": list(MESSAGES),
-            "key_exprs": ["**", ROUTER_ADMIN],
-        }
-    ]
-    subjects: list[dict[str, Any]] = [{"id": "members", "cert_common_names": members}]
-    policies: list[dict[str, Any]] = [{"rules": ["members"], "subjects": ["members"]}]
-    planes = {
-        "actuators": (
-            [keys.all_autopilot_actuators()],
-            dep.acl.actuators,
-        ),
-        "world": (
-            [
-                keys.tick(),
-                keys.sensor_tick(),
-                keys.clock(),
-                keys.all_vehicle_states(),
-                keys.backfill(),
-            ],
-            dep.acl.world,
-        ),
-        "field": ([keys.plume_sample(), keys.plume_state()], dep.acl.field),
+# -- the role table ---------------------------------------------------------------------------
+# What each identity may send (ingress) beyond what every identity may: the planes of its role.
+# Every identity may also subscribe anywhere, query the plume and the router, receive anything,
+# and declare its presence (token and health) under its own node names. `[acl] actuators`,
+# `world`, `field` and `commands` move the planes of the same name to other roles.
+ROLE_PLANES: dict[str, tuple[str, ...]] = {
+    "router": ("everything",),  # forwards what others sent, checked where it entered
+    "physics": ("world", "stepping"),
+    "plume": ("field", "plume-service"),
+    "autopilot": ("actuators", "readings", "vehicle-service"),
+    "gateway": ("commands",),
+    OPERATOR: ("commands", "restarts"),
+    "recorder": (),
+    "viewer": (),
+    "foxglove": (),
+    "ros2": ("ros2-graph",),
+}
+CONFIGURABLE = ("actuators", "world", "field", "commands")  # `[acl] <plane> = [roles]`
+ROS2_GRAPH = "@ros2_lv"  # rmw_zenoh's liveliness space, where the ros2 bridge announces itself
+ROS2_DOMAINS = range(233)  # ROS 2 domain ids: the ros2 bridge's topics are `<domain id>/...`
+ALL_KEYS = ["**", ROUTER_ADMIN, f"{ROS2_GRAPH}/**"]  # `**` crosses no `@...` chunk
+PUT = ["put", "delete"]
+SERVE = ["declare_queryable", "reply"]
+READ = ["declare_subscriber", "liveliness_query", "declare_liveliness_subscriber"]
+
+
+@dataclass(frozen=True)
+class Own:
+    """What one identity speaks for, as key-expression chunks: its node names (presence,
+    actuator batches) and its vehicles (``*`` for every vehicle)."""
+
+    nodes: tuple[str, ...]
+    vehicles: tuple[str, ...]
+
+
+def planes_of(dep: Deployment, role: str) -> list[str]:
+    """The planes ``role`` may send on: its row of :data:`ROLE_PLANES`, with the configurable
+    planes given to the roles ``[acl]`` names."""
+    fixed = [p for p in ROLE_PLANES.get(role, ()) if p not in CONFIGURABLE or role == OPERATOR]
+    moved = [p for p in CONFIGURABLE if role in getattr(dep.acl, p)]
+    return list(dict.fromkeys([*fixed, *moved]))
+
+
+def own_of(dep: Deployment, name: str) -> Own:
+    """The node names and vehicles of identity ``name`` (``<role>.<host>``)."""
+    role, _, host = name.partition(".")
+    vid = vehicle_of_autopilot(role)
+    if vid is not None:  # a per-vehicle identity
+        return Own((role,), (vid,))
+    if role == OPERATOR:
+        return Own((OPERATOR, f"{OPERATOR}-$*", f"{CLOCK_CLIENT_PREFIX}$*"), ("*",))
+    vehicles = dep.host(host).vehicles if role == "autopilot" else None
+    if not vehicles:
+        return Own((role, f"{role}-$*"), ("*",))
+    nodes = [vehicle_node(v) for v in vehicles] + [f"{vehicle_node(v)}-plus$*" for v in vehicles]
+    return Own(tuple(nodes), tuple(vehicles))
+
+
+def plane_grants(keys: Keys, plane: str, own: Own, role: str) -> list[tuple[list[str], list[str]]]:
+    """(messages, key expressions) that ``plane`` allows an identity to send."""
+
+    def vehicles(*leaves: str) -> list[str]:
+        return [keys.owned("vehicle", v, leaf) for v in own.vehicles for leaf in leaves]
+
+    presence = [keys.owned("node", n, "health") for n in own.nodes]
+    drivers = own.nodes if role == "autopilot" or vehicle_of_autopilot(role) else ("*",)
+    grants: dict[str, list[tuple[list[str], list[str]]]] = {
+        "everything": [(list(MESSAGES), ALL_KEYS)],
+        "presence": [(PUT, presence), (["liveliness_token"], presence)],
+        "read": [
+            (READ, ALL_KEYS),
+            (
+                ["query"],
+                [keys.plume_concentration(), keys.plume_info(), keys.plume_mesh(), ROUTER_ADMIN],
+            ),
+        ],
+        "receive": [(list(MESSAGES), ALL_KEYS)],
+        "world": [
+            (
+                PUT,
+                [
+                    keys.tick(),
+                    keys.sensor_tick(),
+                    keys.clock(),
+                    keys.all_vehicle_states(),
+                    keys.backfill(),
+                ],
+            ),
+        ],
+        "stepping": [(SERVE, [keys.clock_step()])],
+        "field": [(PUT, [keys.plume_sample(), keys.plume_state()])],
+        "plume-service": [
+            (SERVE, [keys.plume_concentration(), keys.plume_info(), keys.plume_mesh()])
+        ],
+        "actuators": [(PUT, [keys.owned("autopilot", n, "actuators") for n in drivers])],
+        "readings": [(PUT, vehicles("status", "concentration", "wind"))],
+        # A vehicle's own autopilot serves its commands and may send itself one.
+        "vehicle-service": [(SERVE, vehicles("cmd")), (["query"], vehicles("cmd"))],
+        "commands": [(["query"], [keys.owned("vehicle", "*", "cmd"), keys.clock_step()])],
+        "restarts": [(PUT, [keys.all_node_restart()])],
+        "ros2-graph": [
+            (PUT, [f"{d}/**" for d in ROS2_DOMAINS]),
+            (["liveliness_token"], [f"{ROS2_GRAPH}/**"]),
+        ],
     }
-    for plane, (key_exprs, roles) in planes.items():
-        others = [n for n in members if _role_of(n) not in {*roles, "router"}]
-        if not others:
-            continue
-        rules.append(
-            {
-                "id": f"publish-{plane}",
-                "permission": "deny",
-                "flows": ["ingress"],
-                "messages": ["put", "delete"],
-                "key_exprs": key_exprs,
-            }
-        )
-        subjects.append({"id": f"not-{plane}-publishers", "cert_common_names": others})
-        policies.append({"rules": [f"publish-{plane}"], "subjects": [f"not-{plane}-publishers"]})
-    if dep.acl.per_vehicle:
-        rules += _shared_vehicle_rules()
-        for vid, name in per_vehicle_identities(dep).items():
-            own = _vehicle_rules(keys, vid)
-            rules += own
-            subject = vehicle_node(vid)
-            subjects.append({"id": subject, "cert_common_names": [name]})
-            policies.append(
-                {
-                    "rules": [r["id"] for r in own] + ["read-anything", "receive-anything"],
-                    "subjects": [subject],
-                }
-            )
+    return grants[plane]
+
+
+def access_control(dep: Deployment, keys: Keys, enforcer: str = "") -> dict[str, Any]:
+    """Zenoh's ``access_control`` section for ``dep``: default deny; each identity of the
+    hosts file its own policy, made of the planes of its role (:data:`ROLE_PLANES`).
+    ``enforcer``: the role of the process that enforces it; the router itself grants nothing
+    to the router's identity (one router: a link that shows its certificate is not it)."""
+    names = sorted({n for h in host_identities(dep) for n in h.identities})
+    if enforcer == "router":
+        names = [n for n in names if _role_of(n) != "router"]
+    rules: list[dict[str, Any]] = []
+    subjects: list[dict[str, Any]] = []
+    policies: list[dict[str, Any]] = []
+    for name in names:
+        role = _role_of(name)
+        kind = "autopilot" if vehicle_of_autopilot(role) else role
+        own = own_of(dep, name)
+        ids = []
+        for plane in ["presence", "read", "receive", *planes_of(dep, kind)]:
+            for i, (messages, key_exprs) in enumerate(plane_grants(keys, plane, own, role)):
+                ids.append(f"{name}/{plane}/{i}")
+                rules.append(
+                    {
+                        "id": ids[-1],
+                        "permission": "allow",
+                        "flows": ["egress"] if plane == "receive" else ["ingress"],
+                        "messages": messages,
+                        "key_exprs": key_exprs,
+                    }
+                )
+        subjects.append({"id": name, "cert_common_names": [name]})
+        policies.append({"rules": ids, "subjects": [name]})
     return {
         "enabled": True,
         "default_permission": "deny",
@@ -158,53 +237,6 @@ def access_control(dep: Deployment, keys: Keys) -> dict[str, Any]:
         "subjects": subjects,
         "policies": policies,
     }
-
-
-def _vehicle_rules(keys: Keys, vehicle_id: str) -> list[dict[str, Any]]:
-    """What a per-vehicle identity may send (ingress): its own vehicle's data and answers."""
-    node = vehicle_node(vehicle_id)
-    own_data = [
-        keys.vehicle_status(vehicle_id),
-        keys.vehicle_concentration(vehicle_id),
-        keys.autopilot_actuators(node),
-        keys.node_health(node),
-    ]
-    grants = [
-        ("data", ["put", "delete"], own_data),
-        ("presence", ["liveliness_token"], [keys.node_health(node)]),
-        ("commands", ["declare_queryable", "reply"], [keys.vehicle_cmd(vehicle_id)]),
-    ]
-    return [
-        {
-            "id": f"{node}-{what}",
-            "permission": "allow",
-            "flows": ["ingress"],
-            "messages": messages,
-            "key_exprs": key_exprs,
-        }
-        for what, messages, key_exprs in grants
-    ]
-
-
-def _shared_vehicle_rules() -> list[dict[str, Any]]:
-    """Every per-vehicle identity may subscribe and query anywhere, and receive anything."""
-    return [
-        {
-            "id": "read-anything",
-            "permission": "allow",
-            "flows": ["ingress", "egress"],
-            "messages": ["declare_subscriber", "query", "liveliness_query",
-                         "declare_liveliness_subscriber"],
-            "key_exprs": ["**", ROUTER_ADMIN],
-        },
-        {
-            "id": "receive-anything",
-            "permission": "allow",
-            "flows": ["egress"],
-            "messages": list(MESSAGES),
-            "key_exprs": ["**", ROUTER_ADMIN],
-        },
-    ]  # fmt: skip
 
 
 def tls_for(dep: Deployment, host: str, name: str) -> TlsConfig | None:
@@ -240,7 +272,7 @@ def secure_network(
         check_tls_files(tls)
     except NetworkConfigError as exc:
         raise HostsError(f"{exc} (make them with `plumeswarm certs generate`)") from None
-    acl = access_control(dep, keys) if dep.acl.enabled else None
+    acl = access_control(dep, keys, role) if dep.acl.enabled else None
     return msgspec.structs.replace(net, tls=tls, access_control=acl)
 
 

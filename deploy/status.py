@@ -78,6 +78,8 @@ def format_status(snap: Snapshot) -> str:
             f"{n['name']:<22} {n['role'] or '?':<10} {n['state'] or '?':<9} "
             f"{n['pid'] if n['pid'] is not None else '?':>8}  {n['host'] or '?'}"
         )
+        if n["state"] == "error":
+            lines.append(f"  {n['name']} error: {n['detail']}")
     if data["vehicles"]:
         lines.append(
             f"{'vehicle':<10} {'mode':<9} {'armed':<6} {'x':>8} {'y':>8} {'z':>8} {'g/m3':>8}"

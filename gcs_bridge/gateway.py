@@ -10,6 +10,7 @@ import logging
 import select
 import threading
 import time
+from pathlib import Path
 from typing import Any
 
 import zenoh
@@ -32,8 +33,14 @@ from gcs_bridge.handle_commands import CommandHandlers, GcsHeartbeats
 from gcs_bridge.handle_missions import MissionHandlers
 from gcs_bridge.handle_offboard import OffboardHandlers
 from gcs_bridge.handle_params import ParamHandlers
-from gcs_bridge.links import Link, LinkSet
-from gcs_bridge.options import GatewayOptions, signing_key
+from gcs_bridge.links import Link, LinkSet, Signing
+from gcs_bridge.options import (
+    GatewayOptions,
+    exposure_note,
+    peer_host,
+    signing_key,
+    unsigned_exposed,
+)
 from gcs_bridge.vehicle import Vehicle
 from plume_atmosphere.wind import wind_vector_enu
 from swarmbus.closeable import Closeable
@@ -55,16 +62,19 @@ def open_links(section: GatewaySpec, o: GatewayOptions, vehicles: list[Vehicle])
     """The shared GCS link (every vehicle) and, unless turned off, each vehicle's API link;
     :class:`OptionError` for a bad option or key file."""
     key = signing_key(section)
-    bind_host = o.bind_host_for(section)
-    links = LinkSet(o.rates_hz(), [v.sysid for v in vehicles])
+    exposed = unsigned_exposed(section, o)
+    if exposed:
+        log.warning("%s", exposure_note(exposed))
+    signing = open_signing(key, o.signing_state) if key is not None else None
+    links = LinkSet(o.rates_hz(), [v.sysid for v in vehicles], signing)
     try:
         links.add(
             Link(
                 "gcs",
-                (bind_host, o.gcs_bind_port),
-                (section.host, section.gcs_port),
+                (o.bind_host_for(section, "gcs"), o.gcs_bind_port),
+                (peer_host(section, "gcs"), section.gcs_port),
                 [v.sysid for v in vehicles],
-                key if o.signs("gcs") else None,
+                signing if o.signs("gcs") else None,
                 link_id=0,
             )
         )
@@ -74,10 +84,10 @@ def open_links(section: GatewaySpec, o: GatewayOptions, vehicles: list[Vehicle])
             bind_port = o.api_bind_port_base + v.index if o.api_bind_port_base else 0
             link = Link(
                 f"api-{v.id}",
-                (bind_host, bind_port),
-                (section.host, section.api_port_base + v.index),
+                (o.bind_host_for(section, "api"), bind_port),
+                (peer_host(section, "api"), section.api_port_base + v.index),
                 [v.sysid],
-                key if o.signs("api") else None,
+                signing if o.signs("api") else None,
                 link_id=(v.index + 1) % 256,
             )
             links.add(link)
@@ -85,6 +95,17 @@ def open_links(section: GatewaySpec, o: GatewayOptions, vehicles: list[Vehicle])
         links.close()
         raise
     return links
+
+
+def open_signing(key: bytes, state: str) -> Signing:
+    """The links' shared signing state, kept in the file ``state`` (empty: in memory)."""
+    path = Path(state).expanduser() if state else None
+    try:
+        return Signing(key, path)
+    except OSError as exc:
+        raise OptionError(
+            f"--set signing_state={state}: cannot open it ({exc.strerror or exc})"
+        ) from None
 
 
 class Gateway(Closeable):
@@ -128,7 +149,9 @@ class Gateway(Closeable):
         self.feed = TelemetryFeed(
             vehicles, self.links, self.out, self.autopilots, self.gcs, self._streams
         )
-        self.commands = CommandHandlers(self.links, self.out, self.autopilots)
+        self.commands = CommandHandlers(
+            self.links, self.out, self.autopilots, options.refuse_broadcast_disarm
+        )
         self.params = ParamHandlers(self.out, self.autopilots)
         self.missions = MissionHandlers(self.out, self.autopilots)
         self._handlers: dict[str, Handler] = {
@@ -308,6 +331,9 @@ def main(ctx: NodeContext) -> int:
             gateway = Gateway(ctx.scenario, options, ids, rt.session, rt.keys)
         except OSError as exc:
             log.error("gateway: cannot open its UDP ports: %s", exc)
+            return 2
+        except OptionError as exc:
+            log.error("gateway: %s", exc)
             return 2
         with gateway:
             rt.ready()

@@ -101,7 +101,14 @@ class CommandHandlers:
     """COMMAND_LONG / COMMAND_INT and SET_MODE: answered here (message streams, identity) or
     translated and sent to the autopilot, whose reply becomes the COMMAND_ACK."""
 
-    def __init__(self, links: LinkSet, out: Outbox, autopilots: Autopilots) -> None:
+    def __init__(
+        self,
+        links: LinkSet,
+        out: Outbox,
+        autopilots: Autopilots,
+        refuse_broadcast_disarm: bool = False,
+    ) -> None:
+        self._refuse_broadcast_disarm = refuse_broadcast_disarm
         self._links = links
         self._out = out
         self._autopilots = autopilots
@@ -189,12 +196,28 @@ class CommandHandlers:
             local(link, v, req, peer, now)
             return
         t = self._translate(v, req, now)
+        if t is not None and self._broadcast_force_disarm(link, v, msg, t, peer):
+            t = refuse(DENIED, "a force disarm to every system is refused here")
         if t is None:
             self._out.ack(link, v, req.command, UNSUPPORTED, peer, now)
         elif t.bus is None:
             self._out.ack(link, v, req.command, t.result, peer, now, t.reason)
         else:
             self._to_autopilot(link, v, req, t.bus, peer, key, now)
+
+    def _broadcast_force_disarm(
+        self, link: Link, v: Vehicle, msg: Msg, t: Translation, peer: ms.Peer
+    ) -> bool:
+        """Log a force disarm sent to every system (target_system 0: one datagram would drop
+        the whole swarm); True when the option refuses it."""
+        if not (isinstance(t.bus, Disarm) and t.bus.force and msg.target_system == 0):
+            return False
+        log.warning(
+            "%s: force disarm to every system (target_system 0) from %s:%d, system %d, "
+            "for %s: %s", link.name, *peer.addr, peer.system, v.id,
+            "refused (refuse_broadcast_disarm)" if self._refuse_broadcast_disarm else "sent on",
+        )  # fmt: skip
+        return self._refuse_broadcast_disarm
 
     def _translate(self, v: Vehicle, req: CommandRequest, now: float) -> Translation | None:
         """The command for the bus, or the gateway's own answer (a selection kept for arming

@@ -10,11 +10,13 @@ import errno
 import hashlib
 import logging
 import math
+import os
 import socket
 import struct
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from pathlib import Path
 
 from gcs_bridge.dialect import Msg, new_mav, pack
 from gcs_bridge.telemetry import StreamSchedule
@@ -25,6 +27,7 @@ Addr = tuple[str, int]
 SIGNATURE_LEN = 13  # link id (1) + timestamp (6) + signature (6)
 _EPOCH_2015 = 1420070400
 _NEW_STREAM_WINDOW = 60 * 100_000  # one minute, in 10 µs units
+_RECORD = struct.Struct("<BBB5xQ")  # a stream's link id, system, component; its newest stamp
 PEER_EXPIRY_S = 15.0
 MAX_PEERS = 16  # per link: one datagram must not buy a stranger our telemetry stream forever
 MAX_DATAGRAMS_PER_POLL = 256
@@ -61,11 +64,34 @@ class LinkStats:
     send_errors: int = 0
 
 
-@dataclass
 class Signing:
-    key: bytes
-    link_id: int
-    stream_timestamps: dict[tuple[int, int, int], int] = field(default_factory=dict)
+    """The signing state of one key, shared by every link that signs with it: a stream is the
+    (link id, system, component) a frame names, whichever socket it arrives on, so a frame
+    accepted on one link is a replay on every other. With ``state_path`` each stream's newest
+    timestamp is written to that file before the frame is handled (one fixed-size record per
+    stream, written in place: a ``SIGKILL`` loses nothing the kernel was given) and read back
+    at start, so a frame accepted before a restart is a replay after it."""
+
+    def __init__(self, key: bytes, state_path: Path | None = None) -> None:
+        self.key = key
+        self.stream_timestamps: dict[tuple[int, int, int], int] = {}
+        self._slots: dict[tuple[int, int, int], int] = {}
+        self._fd: int | None = None
+        self.write_errors = 0
+        if state_path is not None:
+            self._fd = os.open(state_path, os.O_RDWR | os.O_CREAT, 0o600)
+            data = os.pread(self._fd, 1 << 24, 0)
+            whole = len(data) - len(data) % _RECORD.size  # a torn last record is dropped
+            for slot, offset in enumerate(range(0, whole, _RECORD.size)):
+                link_id, system, component, stamp = _RECORD.unpack_from(data, offset)
+                stream = (link_id, system, component)
+                self._slots[stream] = slot
+                self.stream_timestamps[stream] = max(stamp, self.stream_timestamps.get(stream, 0))
+
+    def close(self) -> None:
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
 
     def verify(self, msgbuf: bytes, system: int, component: int) -> str | None:
         """None if ``msgbuf`` is validly signed with our key and fresh; else why not."""
@@ -84,7 +110,19 @@ class Signing:
         if last is None and stamp + _NEW_STREAM_WINDOW < signing_timestamp_now():
             return "stale timestamp"
         self.stream_timestamps[stream] = stamp
+        self._persist(stream, stamp)
         return None
+
+    def _persist(self, stream: tuple[int, int, int], stamp: int) -> None:
+        if self._fd is None:
+            return
+        slot = self._slots.setdefault(stream, len(self._slots))
+        try:
+            os.pwrite(self._fd, _RECORD.pack(*stream, stamp), slot * _RECORD.size)
+        except OSError as exc:
+            self.write_errors += 1
+            if self.write_errors == 1:
+                log.error("signing timestamps: cannot write them (%s); kept in memory", exc)
 
 
 class Link:
@@ -96,7 +134,7 @@ class Link:
         bind: Addr,
         default_peer: Addr | None,
         sysids: list[int],
-        signing_key: bytes | None = None,
+        signing: Signing | None = None,
         link_id: int = 0,
     ) -> None:
         self.name = name
@@ -112,7 +150,7 @@ class Link:
         self._peers: dict[Addr, float] = {}
         self._refused: dict[Addr, float] = {}  # destination → wall time of its last refusal
         self.gcs_heard_s = -1e9  # wall time of the last ground-station HEARTBEAT on this link
-        self.signing = Signing(signing_key, link_id) if signing_key is not None else None
+        self.signing = signing
         self._encoders = {sysid: self._encoder(sysid, link_id) for sysid in self.sysids}
 
     def _encoder(self, sysid: int, link_id: int) -> Msg:
@@ -258,7 +296,10 @@ class LinkSet:
     """Every link of the gateway: by name, and the links each vehicle (sysid) is on, with the
     telemetry schedule of each (vehicle, link) pair."""
 
-    def __init__(self, rates_hz: dict[int, float], sysids: list[int]) -> None:
+    def __init__(
+        self, rates_hz: dict[int, float], sysids: list[int], signing: Signing | None = None
+    ) -> None:
+        self.signing = signing  # shared by the links that sign; closed with them
         self._rates_hz = rates_hz
         self._by_name: dict[str, Link] = {}
         self._of: dict[int, list[Link]] = {sysid: [] for sysid in sysids}
@@ -298,3 +339,5 @@ class LinkSet:
     def close(self) -> None:
         for link in self._by_name.values():
             link.close()
+        if self.signing is not None:
+            self.signing.close()

@@ -32,8 +32,13 @@ class GatewayOptions(RoleOptions, frozen=True, kw_only=True):
     )
     """One stream's rate, ``rate.<MESSAGE>=HZ`` (e.g. ``rate.ATTITUDE=10``; 0 turns it off)."""
     bind_host: str = ""
-    """Address the UDP sockets bind (empty: 127.0.0.1 when the GCS host is on loopback, else
-    0.0.0.0)."""
+    """Address every UDP socket binds (empty: per link, below)."""
+    gcs_bind_host: str = ""
+    """Address the GCS link binds (empty: ``bind_host``, else 127.0.0.1 when ``[gateway] host``
+    is on loopback, else 0.0.0.0)."""
+    api_bind_host: str = ""
+    """Address the API links bind (empty: ``bind_host``, else 127.0.0.1 when ``[gateway]
+    api_host`` (or ``host``) is on loopback, else 0.0.0.0)."""
     gcs_bind_port: Port = 0
     """Local port of the shared GCS link (0: any free port; PX4 SITL uses 18570): set it when a
     remote GCS should connect to the gateway."""
@@ -46,21 +51,60 @@ class GatewayOptions(RoleOptions, frozen=True, kw_only=True):
     cmd_timeout_s: Annotated[float, msgspec.Meta(ge=0.01, le=60.0)] = 1.5
     """How long a command waits for the autopilot's reply (MAVSDK gives up after 3 x 0.5 s,
     QGC after about 3 s)."""
+    signing_state: str = ""
+    """File that keeps each signed stream's newest timestamp across restarts, so a frame
+    accepted before a restart is refused after it (empty: in memory only; ``plumeswarm up``
+    gives ``<run dir>/mavlink-signing.state``)."""
+    refuse_broadcast_disarm: bool = False
+    """Answer a force disarm to every system (target_system 0) with DENIED (default:
+    ``[gateway] refuse_broadcast_disarm``); it is logged either way."""
 
     @classmethod
     def defaults(cls, scenario: Scenario) -> Self:
-        return cls(telemetry_hz=scenario.gateway.telemetry_hz)
+        return cls(
+            telemetry_hz=scenario.gateway.telemetry_hz,
+            refuse_broadcast_disarm=scenario.gateway.refuse_broadcast_disarm,
+        )
 
     def rates_hz(self) -> dict[int, float]:
         """Every telemetry stream's rate, or :class:`OptionError` for a bad ``rate.<MESSAGE>``."""
         return stream_rates(self.telemetry_hz, self.rate)
 
-    def bind_host_for(self, section: GatewaySpec) -> str:
-        return self.bind_host or ("127.0.0.1" if _is_loopback(section.host) else "0.0.0.0")
+    def bind_host_for(self, section: GatewaySpec, link_kind: str) -> str:
+        """The address a link of ``link_kind`` (``gcs``, ``api``) binds."""
+        own = self.gcs_bind_host if link_kind == "gcs" else self.api_bind_host
+        peer = peer_host(section, link_kind)
+        return own or self.bind_host or ("127.0.0.1" if _is_loopback(peer) else "0.0.0.0")
 
     def signs(self, link_kind: str) -> bool:
         """Whether a link of ``link_kind`` (``gcs``, ``api``) requires signing given a key."""
         return self.signed_links in ("all", link_kind)
+
+
+def peer_host(section: GatewaySpec, link_kind: str) -> str:
+    """Where a link of ``link_kind`` sends before anyone talked to it."""
+    return section.host if link_kind == "gcs" else (section.api_host or section.host)
+
+
+def unsigned_exposed(section: GatewaySpec, o: GatewayOptions) -> list[str]:
+    """The links that would bind beyond loopback without signing, as ``<link> on <address>``
+    (:class:`OptionError` for a bad key file)."""
+    key = signing_key(section)
+    kinds = ["gcs", "api"] if o.api_links else ["gcs"]
+    out = []
+    for kind in kinds:
+        bind = o.bind_host_for(section, kind)
+        if not _is_loopback(bind) and not (key is not None and o.signs(kind)):
+            out.append(f"{kind} link on {bind}")
+    return out
+
+
+def exposure_note(exposed: list[str]) -> str:
+    """One line about unsigned links beyond loopback."""
+    return (
+        f"MAVLink without signing beyond loopback ({', '.join(exposed)}): anyone who reaches "
+        "it can command the vehicles; set [gateway] signing_key_file, or bind to 127.0.0.1"
+    )
 
 
 def stream_rates(telemetry_hz: float, overrides: Mapping[str, float]) -> dict[int, float]:

@@ -170,15 +170,28 @@ class FilamentPlume(TimeSteppedField[Filaments]):
         p = state.positions
         born = state.birth_step
         uniform = self.wind.uniform_at(k * h)  # the same wind everywhere: no per-filament lookup
-        wind = self.wind.velocity(p, k * h) if uniform is None else np.asarray(uniform)
-        moved = p + wind * h
-        noise = self._noise[np.minimum(k - born, self._noise.shape[0] - 1)]
-        moved += noise * rng.standard_normal(p.shape)
-        np.abs(moved[:, 2], out=moved[:, 2])
-        alive = (k + 1 - born) <= self._max_age_steps
+        # every centre draws its step (the dying ones too: the stream of draws stays the same)
+        normal = rng.standard_normal(p.shape)
+        # births only grow along the array, so the filaments that die are a prefix of it
+        first = int(np.searchsorted(born, k + 1 - self._max_age_steps, side="left"))
+        live = p.shape[0] - first
         new = int(rng.poisson(self.params.release_rate_hz * h))
-        positions = np.concatenate([moved[alive], np.tile(self.source_m, (new, 1))])
-        births = np.concatenate([born[alive], np.full(new, k + 1, dtype=np.int64)])
+        positions = np.empty((live + new, 3))
+        moved = positions[:live]
+        if uniform is None:
+            np.add(p[first:], self.wind.velocity(p, k * h)[first:] * h, out=moved)
+        else:
+            step = np.asarray(uniform) * h
+            for axis in range(3):  # a column at a time: numpy broadcasts a 3-vector slowly
+                np.add(p[first:, axis], step[axis], out=moved[:, axis])
+        ages = k - born[first:]
+        np.minimum(ages, self._noise.shape[0] - 1, out=ages)
+        moved += self._noise.take(ages, axis=0) * normal[first:]
+        np.abs(moved[:, 2], out=moved[:, 2])
+        positions[live:] = self.source_m
+        births = np.empty(live + new, dtype=np.int64)
+        births[:live] = born[first:]
+        births[live:] = k + 1
         return Filaments(positions, births)
 
     def filaments(self, t: float) -> tuple[FloatArray, FloatArray]:

@@ -332,7 +332,9 @@ def _start_state_publisher(
     publisher = rt.session.declare_publisher(rt.keys.plume_state())
 
     def on_clock(sample: zenoh.Sample) -> None:
-        clock = decode_or_none(sample.payload.to_bytes(), Clock, "a clock message", log)
+        clock = decode_or_none(
+            sample.payload.to_bytes(), Clock, "a clock message", log, str(sample.key_expr)
+        )
         if clock is None:
             return
         states.on_clock(clock.sim_time_s)
@@ -358,7 +360,7 @@ def main(ctx: NodeContext, options: PlumeOptions) -> int:
     # One Zenoh thread: a sensor tick is received, sampled and answered with no hand-over
     # between threads (as the autopilot's ticks); an operator's own ZENOH_RUNTIME wins.
     os.environ.setdefault("ZENOH_RUNTIME", SINGLE_THREAD_RUNTIME)
-    with NodeRuntime(ctx, role="plume") as rt:
+    with NodeRuntime(ctx, role="plume", check_scenario_of="physics") as rt:
         queryables, mesh_worker = serve_queries(rt.session, rt.keys, service, rt.stop)
         sample_pub = rt.session.declare_publisher(rt.keys.plume_sample())
         answers = SensorAnswers(service, sample_pub.put)
@@ -376,4 +378,5 @@ def main(ctx: NodeContext, options: PlumeOptions) -> int:
         tick_sub.undeclare()
         for q in queryables:
             q.undeclare()
-    return 0
+        refused = rt.refusal is not None
+    return 2 if refused else 0

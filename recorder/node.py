@@ -12,11 +12,20 @@ jump in ``tick`` is counted, logged and recorded as a ``gap`` event.
 The recorder acknowledges every ``NodeHealth`` it records from another node by publishing its own
 health with ``detail = "heard <name> <state>"``: a publisher that must not lose its first messages
 waits for that acknowledgement (:mod:`recorder.handshake`) before it starts.
+
+A write the disk refuses (full, I/O error) in the spool or the MCAP file does not stop the
+process: the recorder abandons the segment (it ends after its last complete chunk, as a killed
+recorder's does), says so on its health (``state = error``, the reason in ``detail``), logs and
+counts what it cannot record, and every ``retry_s`` checks the free space; once
+``resume_free_bytes`` are free it continues in the next segment, recovers from the abandoned
+segment's spool what that segment lacks, and records the gap there (:class:`~recorder.schema.
+SegmentGap` with its ``reason``), as a restarted recorder does.
 """
 
 from __future__ import annotations
 
 import logging
+import os
 import queue
 import sys
 import threading
@@ -37,10 +46,23 @@ from recorder.foxglove.scene import (
 from recorder.reader import RecordingError, SegmentEnd, segment_end
 from recorder.segments import next_segment
 from recorder.sink import DEFAULT_CHUNK_BYTES, DEFAULT_CHUNK_INTERVAL_S, McapSink
-from recorder.spool import Spool, read_durable, read_spool, remove_spool
+from recorder.spool import (
+    DEFAULT_FSYNC_INTERVAL_S,
+    Spool,
+    read_durable,
+    read_spool,
+    remove_spool,
+)
 from swarmbus.codec import encode
 from swarmbus.keys import Keys
-from swarmbus.messages import NodeHealth, PlumeInfo, PlumeInfoQuery, SimTick, VehicleState
+from swarmbus.messages import (
+    NodeHealth,
+    NodeState,
+    PlumeInfo,
+    PlumeInfoQuery,
+    SimTick,
+    VehicleState,
+)
 from swarmbus.node import NodeContext, NodeRuntime, package_version
 from swarmbus.options import RoleOptions, role_main
 from swarmbus.reqrep import RequestError, request
@@ -49,7 +71,8 @@ from swarmbus.view_feed import fetch_mesh, isosurface_queries
 
 log = logging.getLogger(__name__)
 
-HealthPublisher = Callable[[str], None]
+HealthPublisher = Callable[[str, NodeState | None], None]  # detail, new state (None: same)
+SegmentOpener = Callable[[Path], tuple[McapSink, Spool | None]]
 
 
 class RecorderOptions(RoleOptions, frozen=True, kw_only=True):
@@ -61,6 +84,8 @@ class RecorderOptions(RoleOptions, frozen=True, kw_only=True):
     chunk_bytes: Annotated[int, msgspec.Meta(ge=1, le=2**31)] = DEFAULT_CHUNK_BYTES
     max_backlog: Annotated[int, msgspec.Meta(ge=1, le=10**9)] = 2_000_000
     """Hard limit of queued messages (memory), then drop and count."""
+    max_backlog_bytes: Annotated[int, msgspec.Meta(ge=2**20, le=2**40)] = 256 * 2**20
+    """Hard limit of queued payload bytes (memory), then drop and count."""
     behind_backlog: Annotated[int, msgspec.Meta(ge=1, le=10**9)] = 50_000
     """Falling behind above this many queued messages …"""
     behind_age_s: Annotated[float, msgspec.Meta(gt=0.0, le=3600.0)] = 2.0
@@ -73,6 +98,12 @@ class RecorderOptions(RoleOptions, frozen=True, kw_only=True):
     """Also write the Foxglove channels (recorder.foxglove.scene)."""
     spool: bool = True
     """Write-ahead spool (recorder.spool): a kill loses nothing received."""
+    spool_fsync_s: Annotated[float, msgspec.Meta(gt=0.0, le=3600.0)] = DEFAULT_FSYNC_INTERVAL_S
+    """The spool is forced to the disk (fsync) at this interval."""
+    retry_s: Annotated[float, msgspec.Meta(gt=0.0, le=3600.0)] = 1.0
+    """After a write error: how often to check whether recording can go on."""
+    resume_free_bytes: Annotated[int, msgspec.Meta(ge=0, le=2**50)] = 1 << 20
+    """After a write error: recording goes on (in a new segment) once this much is free."""
 
     @classmethod
     def defaults(cls, scenario: Scenario) -> Self:
@@ -119,9 +150,21 @@ class Recorder:
         previous_segment: Path | None = None,
         scenario: Scenario | None = None,
         spool: Spool | None = None,
+        first: Path | None = None,
+        open_segment: SegmentOpener | None = None,
     ) -> None:
         self._session = session
         self._spool = spool
+        # After a write error: continue in the next segment of ``first`` (opened by
+        # ``open_segment``); without them the recorder stays in error until it stops.
+        self._first = first
+        self._open_segment = open_segment
+        self._failure: str | None = None  # the write error, until recording goes on
+        self._abandoned = False  # the failed segment's files are closed
+        self.write_lost = 0  # messages received while in error (not recorded)
+        self._retry_at = 0.0
+        self._last_sync = time.monotonic()
+        self._gap_reason = ""
         self._last_log_ns = 0  # receive times are made strictly increasing (queue order)
         self._written_ns = -1  # receive time of the last message written
         self.recovered = 0  # messages recovered from the previous segment's spool
@@ -145,11 +188,13 @@ class Recorder:
         self.dropped: Counter[str] = Counter()
         self.tick_gaps: Counter[str] = Counter()  # messages missing from per-tick streams
         self._last_tick: dict[str, int] = {}
+        self._durable_tick: dict[str, int] = {}  # the newest tick of each key in a closed chunk
         self._gaps_reported = 0
         self._received_total = 0
         self._dropped_total = 0
         self._taken_total = 0
         self._dropped_reported = 0
+        self._queued_bytes = 0  # payload bytes queued, not yet written
         self._behind = False
         self._stopping = threading.Event()
         self._thread = threading.Thread(target=self._run, name="recorder-writer", daemon=True)
@@ -180,7 +225,10 @@ class Recorder:
             self._on_backfill(original, sample, now)
             return
         with self._lock:
-            if self._received_total - self._taken_total >= self._opts.max_backlog:
+            if (
+                self._received_total - self._taken_total >= self._opts.max_backlog
+                or self._queued_bytes + len(sample.payload) > self._opts.max_backlog_bytes
+            ):
                 self.dropped[key] += 1
                 self._dropped_total += 1
                 return
@@ -191,12 +239,23 @@ class Recorder:
     def _enqueue(
         self, key: str, payload: bytes, now_ns: int, publish_ns: int | None, is_reply: bool
     ) -> None:
-        """Stamp, spool and queue one message (the caller holds the lock: one order for all)."""
-        self._last_log_ns = now_ns = max(now_ns, self._last_log_ns + 1)
-        item = (key, payload, now_ns, publish_ns, is_reply)
-        if self._spool is not None:
-            self._spool.append(item)
-        self._queue.put(item)
+        """Stamp, spool and queue one message (the caller holds the lock: one order for all);
+        while in error (or when the spool's write fails) count it as not recorded."""
+        if self._failure is None:
+            self._last_log_ns = now_ns = max(now_ns, self._last_log_ns + 1)
+            item = (key, payload, now_ns, publish_ns, is_reply)
+            try:
+                if self._spool is not None:
+                    self._spool.append(item)
+            except OSError as exc:
+                self._failure = f"spool of {self._sink.path.name}: {exc.strerror or exc}"
+            else:
+                self._queued_bytes += len(payload)
+                self._queue.put(item)
+                return
+        self.write_lost += 1
+        if not is_reply:
+            self._taken_total += 1  # never queued: not in the backlog
 
     def _on_backfill(self, key: str, sample: zenoh.Sample, now: int) -> None:
         """A tick or state the physics re-sent after our restart: recorded under its own key
@@ -220,12 +279,14 @@ class Recorder:
 
     def _recover(self) -> None:
         """Queue, first, what the previous segment's spool holds that its file does not (the
-        killed recorder's queue and open chunk), stamped now; its spool is then ours."""
+        killed recorder's queue and open chunk), stamped now; its spool is then ours. Recording
+        goes on (after a write error) from here."""
         previous = self._previous
         if previous is None:
             return
         durable_ns = read_durable(previous)
         with self._lock:
+            self._failure = None
             for key, payload, log_ns, publish_ns, is_reply in read_spool(previous):
                 tick = _tick_of(payload) if not is_reply else None
                 if tick is not None:
@@ -255,8 +316,9 @@ class Recorder:
         if self._opts.query_plume_info:
             self._info_thread.start()
 
-    def stop(self, timeout_s: float = 30.0) -> None:
-        """Stop subscribing, write what is queued, close the file with its summary."""
+    def stop(self, timeout_s: float = 30.0) -> bool:
+        """Stop subscribing, write what is queued, close the file with its summary; whether
+        the recording is complete (False: it stopped in error)."""
         if self._sub is not None:
             self._sub.undeclare()
             self._sub = None
@@ -266,6 +328,26 @@ class Recorder:
         self._thread.join(timeout_s)
         if self._thread.is_alive():
             log.error("recorder writer did not finish within %.0f s", timeout_s)
+        if self._failure is None:
+            try:
+                self._finish()
+            except OSError as exc:
+                self._failure = f"closing {self._sink.path.name}: {exc.strerror or exc}"
+        if self._failure is None:
+            return True
+        if not self._abandoned:
+            self._abandon()
+        log.error(
+            "recording stopped in error (%s): %s ends at its last complete chunk; "
+            "%d messages not recorded",
+            self._failure,
+            self._sink.path,
+            self.write_lost,
+        )
+        return False
+
+    def _finish(self) -> None:
+        """Write the last reports and events and close the file with its summary."""
         self._report_drops()
         self._report_gaps()
         if self._gap_pending:
@@ -313,24 +395,131 @@ class Recorder:
     # -- writer thread -------------------------------------------------------------------------
     def _run(self) -> None:
         while True:
-            try:
-                item = self._queue.get(timeout=0.05)
-            except queue.Empty:
+            if self._failure is not None:
                 if self._stopping.is_set():
-                    break
-                self._housekeeping()
+                    return
+                self._while_failed()
                 continue
-            self._write(item)
-            for _ in range(2000):  # drain a burst before the next housekeeping
-                try:
-                    self._write(self._queue.get_nowait())
-                except queue.Empty:
-                    break
-            self._housekeeping(age_s=(time.time_ns() - item[2]) / 1e9)
+            try:
+                if not self._write_some():
+                    return
+            except OSError as exc:
+                with self._lock:
+                    self._failure = self._failure or (
+                        f"{self._sink.path.name}: {exc.strerror or exc}"
+                    )
+
+    def _write_some(self) -> bool:
+        """Write what is queued, then housekeeping; False once stopping with nothing queued."""
+        try:
+            item = self._queue.get(timeout=0.05)
+        except queue.Empty:
+            if self._stopping.is_set():
+                return False
+            self._housekeeping()
+            return True
+        self._write(item)
+        for _ in range(2000):  # drain a burst before the next housekeeping
+            try:
+                self._write(self._queue.get_nowait())
+            except queue.Empty:
+                break
+        self._housekeeping(age_s=(time.time_ns() - item[2]) / 1e9)
+        return True
+
+    # -- write errors --------------------------------------------------------------------------
+    def _while_failed(self) -> None:
+        """In error: abandon the segment (once), drop what is queued (the spool has it), say
+        so on the health every period, and try to go on every ``retry_s``."""
+        if not self._abandoned:
+            self._abandon()
+        drained = 0
+        while True:
+            try:
+                drained += not self._queue.get_nowait()[4]
+            except queue.Empty:
+                break
+        with self._lock:
+            self._taken_total += drained
+            if self._spool is None:
+                self.write_lost += drained  # no spool to recover them from
+        now = time.monotonic()
+        if now - self._last_health >= self._opts.health_period_s:
+            self._last_health = now
+            self._publish_health(self._failure_detail(), NodeState.ERROR)
+        if now >= self._retry_at:
+            self._retry_at = now + self._opts.retry_s
+            try:
+                self._try_resume()
+            except OSError as exc:  # the new segment failed at once: abandoned in turn
+                with self._lock:
+                    self._failure = f"{self._sink.path.name}: {exc.strerror or exc}"
+        else:
+            self._stopping.wait(0.05)
+
+    def _failure_detail(self) -> str:
+        return f"write error: {self._failure}; {self.write_lost} messages not recorded"
+
+    def _abandon(self) -> None:
+        self._abandoned = True
+        log.error(
+            "RECORDER WRITE ERROR: %s; %s abandoned, recording goes on in a new segment once "
+            "%d bytes are free",
+            self._failure,
+            self._sink.path.name,
+            self._opts.resume_free_bytes,
+        )
+        self._sink.abandon()
+        if self._spool is not None:
+            self._spool.abandon()
+        self._last_health = time.monotonic()
+        self._publish_health(self._failure_detail(), NodeState.ERROR)
+
+    def _try_resume(self) -> None:
+        """Go on in the next segment if the disk has room again."""
+        if self._open_segment is None or self._first is None:
+            return
+        old = self._sink.path
+        try:
+            disk = os.statvfs(old.parent)
+            if disk.f_bavail * disk.f_frsize < self._opts.resume_free_bytes:
+                return
+        except OSError:
+            return
+        _, path = next_segment(self._first)
+        try:
+            sink, spool = self._open_segment(path)
+        except OSError as exc:
+            log.error("recording cannot go on in %s yet: %s", path.name, exc.strerror or exc)
+            path.unlink(missing_ok=True)
+            remove_spool(path)
+            return
+        reason = f"write error: {self._failure}"
+        with self._lock:
+            self._sink, self._spool = sink, spool
+        self._abandoned = False
+        self._previous, self._previous_end, self._gap_pending = old, None, True
+        self._gap_reason = reason
+        self._first_log_ns, self._first_tick = None, None
+        self._started_s = time.monotonic()
+        self._have.clear()
+        self._have_max = self._durable_tick  # re-sent ticks newer than these are taken
+        self._last_tick, self._durable_tick = {}, {}
+        sink.write_event(sch.RecorderEvent(kind=sch.EventKind.STARTED, detail=self._name))
+        sink.write_event(self._event(sch.EventKind.WRITE_ERROR, f"{old.name}: {reason}"))
+        self._scan_thread = threading.Thread(
+            target=self._scan_previous, name="recorder-previous-segment", daemon=True
+        )
+        self._scan_thread.start()
+        self._recover()
+        log.warning("recording goes on in %s after %s", path.name, reason)
+        self._publish_health(f"recording in {path.name} after {reason}", NodeState.READY)
 
     def _write(self, item: Item) -> None:
         key, payload, log_time_ns, publish_ns, is_reply = item
         self._written_ns = log_time_ns
+        with self._lock:
+            self._queued_bytes -= len(payload)
         if is_reply:
             reply = sch.decode_bus(payload)
             self._sink.write_reply(key, reply, log_time_ns)
@@ -347,7 +536,7 @@ class Recorder:
         if isinstance(message, VehicleState | SimTick):
             self._check_tick(key, message.tick)
         elif isinstance(message, NodeHealth) and message.name != self._name:
-            self._publish_health(f"heard {message.name} {message.state}")
+            self._publish_health(f"heard {message.name} {message.state}", None)
 
     def _to_foxglove(self, message: msgspec.Struct | None, log_time_ns: int) -> None:
         if self._foxglove is not None and message is not None:
@@ -363,18 +552,24 @@ class Recorder:
     def _housekeeping(self, age_s: float = 0.0) -> None:
         if self._gap_pending:
             self._write_segment_gap()
-        if self._sink.maybe_close_chunk() and self._spool is not None:
-            with self._lock:
-                self._spool.rotate(self._written_ns)
+        if self._sink.maybe_close_chunk():
+            self._durable_tick = dict(self._last_tick)
+            if self._spool is not None:
+                with self._lock:
+                    self._spool.rotate(self._written_ns)
         self._watch_backlog(age_s)
         self._report_drops()
         now = time.monotonic()
+        if self._spool is not None and now - self._last_sync >= self._opts.spool_fsync_s:
+            self._last_sync = now
+            self._spool.sync()  # the writer thread alone changes the spool's files
         if now - self._last_health >= self._opts.health_period_s:
             self._last_health = now
             self._report_gaps()
             self._publish_health(
                 f"recording {self._sink.path.name}: {self.written_total} messages, "
-                f"backlog {self.backlog}, dropped {self._dropped_total}"
+                f"backlog {self.backlog}, dropped {self._dropped_total}",
+                None,
             )
 
     def _watch_backlog(self, age_s: float) -> None:
@@ -408,7 +603,10 @@ class Recorder:
         with self._lock:
             dropped = self._dropped_total
         if dropped > self._dropped_reported:
-            detail = f"{dropped - self._dropped_reported} messages dropped (queue full)"
+            detail = (
+                f"{dropped - self._dropped_reported} messages dropped (queue full: at most "
+                f"{self._opts.max_backlog} messages, {self._opts.max_backlog_bytes} bytes)"
+            )
             log.error("RECORDER DROPPED MESSAGES: %s; %d in total", detail, dropped)
             self._sink.write_event(self._event(sch.EventKind.DROPPED, detail))
             self._dropped_reported = dropped
@@ -455,6 +653,7 @@ class Recorder:
             first_sim_time_s=first.sim_time_s if first is not None else None,
             gap_s=gap_s,
             ticks_missing=missing,
+            reason=self._gap_reason,
         )
         self._sink.write_gap(gap)
         detail = (
@@ -524,14 +723,23 @@ def main(ctx: NodeContext, opts: RecorderOptions) -> int:
         previous, out = next_segment(out)
     if previous is not None:
         log.warning("%s exists (recorder restarted): continuing in %s", previous, out.name)
-    try:
-        out.parent.mkdir(parents=True, exist_ok=True)
+
+    def open_segment(path: Path) -> tuple[McapSink, Spool | None]:
         sink = McapSink(
-            out,
+            path,
             chunk_interval_s=opts.chunk_interval_s,
             chunk_bytes=opts.chunk_bytes,
             metadata=metadata,
         )
+        try:
+            return sink, Spool(path) if opts.spool else None
+        except OSError:
+            sink.abandon()
+            raise
+
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        sink, spool = open_segment(out)
     except OSError as exc:
         log.error("cannot write recording %s: %s", out, exc.strerror or exc)
         return 2
@@ -542,14 +750,16 @@ def main(ctx: NodeContext, opts: RecorderOptions) -> int:
             ctx.name,
             sink,
             opts,
-            lambda d: rt.publish_health(detail=d),
+            lambda detail, state: rt.publish_health(state=state, detail=detail),
             previous_segment=previous,
             scenario=ctx.scenario,
-            spool=Spool(out) if opts.spool else None,
+            spool=spool,
+            first=Path(opts.out),
+            open_segment=open_segment,
         )
         recorder.start()
         log.info("recording %s to %s", rt.keys.everything(), out)
         rt.ready()
         rt.stop.wait()
-        recorder.stop()
-    return 0
+        complete = recorder.stop()
+    return 0 if complete else 1

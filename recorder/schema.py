@@ -45,6 +45,7 @@ class EventKind(enum.StrEnum):
     GAP = "gap"  # ticks missing from a per-tick stream: lost before reaching the recorder
     STOPPED = "stopped"
     RESUMED = "resumed"  # a restarted recorder continues in a new segment (see SegmentGap)
+    WRITE_ERROR = "write_error"  # the disk refused a write (full, I/O error): segment abandoned
 
 
 class RecorderEvent(msgspec.Struct, frozen=True, kw_only=True):
@@ -61,11 +62,12 @@ class RecorderEvent(msgspec.Struct, frozen=True, kw_only=True):
 
 
 class SegmentGap(msgspec.Struct, frozen=True, kw_only=True):
-    """What a restarted recorder did not record: between the end of the previous segment (what
-    was flushed to it before the old recorder died) and the first messages of this one. On the
-    ``recorder/gaps`` channel of the new segment. Times are the recorder's receive times (log
-    time, ns since the epoch); ticks and sim times are those of ``sim/tick``. ``None``: unknown
-    (no such message in that segment)."""
+    """What a restarted recorder, or one going on after a write error, did not record: between
+    the end of the previous segment (what was flushed to it before the old recorder died or the
+    disk refused a write) and the first messages of this one. On the ``recorder/gaps`` channel
+    of the new segment. Times are the recorder's receive times (log time, ns since the epoch);
+    ticks and sim times are those of ``sim/tick``. ``None``: unknown (no such message in that
+    segment)."""
 
     previous_segment: str  # file name, next to this one
     previous_truncated: bool  # the previous segment ends without its summary (killed)
@@ -78,6 +80,7 @@ class SegmentGap(msgspec.Struct, frozen=True, kw_only=True):
     first_sim_time_s: float | None
     gap_s: float | None  # wall seconds between the two log times
     ticks_missing: int | None  # first_tick - previous_last_tick - 1
+    reason: str = ""  # why the previous segment ended ("": its recorder was restarted)
 
 
 def gap_from_json(data: bytes) -> SegmentGap:

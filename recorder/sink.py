@@ -6,6 +6,7 @@ Used from one thread only (the recorder's writer thread).
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import time
 from collections import Counter
@@ -63,6 +64,7 @@ class McapSink:
         self._closed = False
         if metadata:
             self._writer.add_metadata("plumeswarm", metadata)
+        self._file.flush()  # the header is in the file at once (or OSError: no room)
 
     # -- registration ---------------------------------------------------------------------
     def _schema_id(self, type_: type) -> int:
@@ -196,6 +198,13 @@ class McapSink:
         self._pending_bytes = 0
         self._chunk_started = now
         return True
+
+    def abandon(self) -> None:
+        """Close the file after a write error without its summary: it ends after its last
+        complete chunk, as a killed recorder's segment does."""
+        self._closed = True
+        with contextlib.suppress(OSError):
+            self._file.close()
 
     def close(self, summary: dict[str, str] | None = None) -> None:
         """Write the summary (indexes, statistics) and close the file."""

@@ -9,10 +9,17 @@ it is a query reply) followed by the key and the payload. Whenever the writer ha
 chunk (flushed to the OS) the spool starts a new generation and deletes the generations whose
 every message is in a closed chunk, so the spool holds about one chunk interval of messages.
 A clean stop deletes the spool (everything is in the closed MCAP file).
+
+The spool is in the page cache at once (a killed process loses none of it) and on the disk
+within :data:`DEFAULT_FSYNC_INTERVAL_S` (``recorder.spool_fsync_s``): the recorder's writer
+thread calls :meth:`Spool.sync` at that interval, so a host that loses power loses at most that
+much of what the spool holds. A write that fails (disk full, I/O error) raises ``OSError``: the
+recorder then abandons the segment and keeps the spool for its successor (:meth:`Spool.abandon`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import struct
@@ -24,6 +31,8 @@ _GENERATION = re.compile(r"\.spool\.(?P<n>[0-9]+)$")
 
 # key, payload, receive time (ns), publish time (ns, the sample's timestamp), is a query reply
 SpoolItem = tuple[str, bytes, int, int | None, bool]
+
+DEFAULT_FSYNC_INTERVAL_S = 1.0
 
 
 def spool_files(segment: Path) -> list[Path]:
@@ -122,6 +131,17 @@ class Spool:
             else:
                 keep.append((path, last_ns))
         self._closed = keep
+
+    def sync(self) -> None:
+        """Force what was appended to the disk (``fsync``); raises ``OSError``."""
+        os.fsync(self._fd)
+
+    def abandon(self) -> None:
+        """Close the files after a write error, keeping them: the next segment recovers what
+        they hold that the abandoned segment does not."""
+        for fd in (self._fd, self._durable_fd):
+            with contextlib.suppress(OSError):
+                os.close(fd)
 
     def close(self, remove: bool) -> None:
         os.close(self._fd)

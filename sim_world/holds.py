@@ -1,5 +1,5 @@
-"""Holding the clock for processes that come back: restarted participants, the recorder, and
-whoever leaves with the router (lockstep mode).
+"""Holding the clock for processes that come back: restarted participants, the recorder (also
+while its health says it cannot write), and whoever leaves with the router (lockstep mode).
 
 See docs/physics.md, "Restarts: the clock waits (lockstep)".
 """
@@ -118,6 +118,15 @@ class Holds:
         or not at all."""
         self._recorder_until = self._clock() + delay_s + self.grace_s if restarting else 0.0
         self.recorder_lost = self.recorder_lost and restarting
+
+    def recorder_error(self, failing: bool) -> None:
+        """The recorder's health says it cannot write (a full disk: hold before the next tick,
+        as for a restart, up to the grace) or that it records again (as if it were back)."""
+        if failing:
+            self.recorder_lost = True
+            self._recorder_until = self._clock() + self.grace_s
+        else:
+            self.recorder_presence(True)
 
     def begin_recorder_wait(self) -> None:
         """The next tick waits for a recorder's token: up to ``word_s`` for the launcher's

@@ -1,6 +1,7 @@
 """What arrives for the lockstep from the bus, on Zenoh's callback threads: tokens, actuator
-batches, plume samples, restart notices and step requests, applied to the barrier and its parts
-under the one condition the physics loop waits on.
+batches, plume samples, restart notices, step requests and health (a participant whose scenario
+hash is not the physics's is refused; a recorder that cannot write holds the clock), applied to
+the barrier and its parts under the one condition the physics loop waits on.
 
 See docs/physics.md, "Lockstep".
 """
@@ -14,6 +15,7 @@ from collections.abc import Callable, Sequence
 
 import zenoh
 
+from sim_world.admission import Admission
 from sim_world.holds import RECORDER, ROUTER, Holds
 from sim_world.intake import ActuatorIntake
 from sim_world.lockstep import Lockstep, participant_of
@@ -22,7 +24,7 @@ from sim_world.stepping import SteppedClock, StepRefused
 from swarmbus.catchup import RouterOutage
 from swarmbus.codec import decode_or_none
 from swarmbus.keys import Keys, autopilot_node
-from swarmbus.messages import RestartNotice, StepRequest
+from swarmbus.messages import NodeHealth, NodeState, RestartNotice, StepRequest
 from swarmbus.reqrep import Incoming, serve_later
 from swarmbus.session import Presence
 
@@ -43,6 +45,7 @@ class LockstepInputs:
         holds: Holds,
         tick: Callable[[], int],
         step_refusal: str | None,
+        scenario_hash: str = "",
     ) -> None:
         self.cond = threading.Condition()
         self.barrier = barrier
@@ -63,10 +66,14 @@ class LockstepInputs:
         self._restart_sub = session.declare_subscriber(
             keys.all_node_restart(), self._on_restart_notice
         )
+        self._recorder_failing = False  # the recorder's health says error
+        self.admission = Admission(scenario_hash, lambda name: self._presence(name, True))
         self.presence = Presence(session, keys, self._on_presence)
+        self._health_sub = session.declare_subscriber(keys.all_node_health(), self._on_health)
 
     def close(self) -> None:
         self.presence.close()
+        self._health_sub.undeclare()
         self._step_queryable.undeclare()
         self._restart_sub.undeclare()
         self._actuator_sub.undeclare()
@@ -105,7 +112,43 @@ class LockstepInputs:
                 self.cond.wait(min(remaining, STOP_POLL_S))
             return self.holds.end_recorder_wait()
 
+    def _on_health(self, sample: zenoh.Sample) -> None:
+        what = f"health on {sample.key_expr}"
+        health = decode_or_none(sample.payload.to_bytes(), NodeHealth, what, log)
+        if health is None:
+            return
+        if health.name == RECORDER:
+            self._on_recorder_health(health)
+        self.admission.health(health)
+
+    def _on_recorder_health(self, health: NodeHealth) -> None:
+        """A recorder that cannot write (disk full) holds the clock as a restarting one."""
+        if not self.holds.enabled:
+            return
+        failing = health.state is NodeState.ERROR
+        if failing == self._recorder_failing or health.state is NodeState.STOPPING:
+            return
+        self._recorder_failing = failing
+        with self.cond:
+            self.holds.recorder_error(failing)
+            self.cond.notify_all()
+        if failing:
+            log.warning("the recorder cannot write (%s): holding the clock for it", health.detail)
+
     def _on_presence(self, name: str, alive: bool) -> None:
+        """A token came or went: a participant's arrival counts once its scenario is checked."""
+        participant = PLUME if is_plume(name) else participant_of(name, self.vehicle_ids)
+        if participant is not None:
+            admitted = (
+                self.admission.arrival(participant, name)
+                if alive
+                else self.admission.departure(participant)
+            )
+            if not admitted:
+                return
+        self._presence(name, alive)
+
+    def _presence(self, name: str, alive: bool) -> None:
         if is_plume(name):
             self._on_plume_presence(name, alive)
             return
@@ -188,8 +231,10 @@ class LockstepInputs:
 
     def _on_restart_notice(self, sample: zenoh.Sample) -> None:
         """The launcher's word on a process that ended: hold or drop its vehicles."""
-        what = f"restart notice on {sample.key_expr}"
-        notice = decode_or_none(sample.payload.to_bytes(), RestartNotice, what, log)
+        key = str(sample.key_expr)
+        notice = decode_or_none(
+            sample.payload.to_bytes(), RestartNotice, "restart notice", log, key
+        )
         if notice is None:
             return
         holds = self.holds

@@ -8,7 +8,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Iterable, Sequence
 
-from swarmbus.codec import MessageError, decode
+from swarmbus.codec import MessageError, decode, refusals
 from swarmbus.keys import KeyNameError, vehicle_of_autopilot
 from swarmbus.messages import ActuatorBatch, ActuatorCommand
 from swarmbus.views import BatchView
@@ -81,12 +81,12 @@ def _salvage(key: str, data: bytes, exc: MessageError) -> tuple[int, list[Actuat
     try:
         view = decode(data, BatchView)
     except MessageError:
-        log.warning("ignoring actuator batch on %s: %s", key, exc)
+        refusals(log).refuse(key, f"actuator batch on {key}", exc)
         return None
     good = []
     for k, raw in enumerate(view.commands):
         try:
             good.append(decode(raw, ActuatorCommand))
         except MessageError as bad:
-            log.warning("ignoring entry %d of the actuator batch on %s: %s", k, key, bad)
+            refusals(log).refuse(key, f"entry {k} of the actuator batch on {key}", bad, "entry")
     return view.tick, good

@@ -106,7 +106,13 @@ class PhysicsNode:
         self.out = TickOutput(session, self.keys, world.vehicle_ids, sensor_period)
         self._clock_pub = session.declare_publisher(self.keys.clock())
         self.inputs = LockstepInputs(
-            session, self.keys, barrier, self.holds, lambda: self.tick, self._step_refusal()
+            session,
+            self.keys,
+            barrier,
+            self.holds,
+            lambda: self.tick,
+            self._step_refusal(),
+            scenario_hash=rt.scenario_hash,
         )
         self._cond = self.inputs.cond  # the loop waits on what the inputs change
         self.barrier = barrier
@@ -152,6 +158,7 @@ class PhysicsNode:
             return 0 if self.rt.stop.is_set() else 1  # a stop signal is not a failure
         # Who is alive now (the plume, for tick 0's sensor values), not when history arrives.
         self.inputs.presence.sync(timeout_s=min(2.0, max(0.1, deadline - time.monotonic())))
+        self.inputs.admission.wait_settled()  # their scenario checked (sim_world.admission)
         with self._cond:
             self.barrier.start()
             self.barrier.begin(self.tick, timeout_s=max(0.0, deadline - time.monotonic()))

@@ -22,7 +22,7 @@ def is_plume(node_name: str) -> bool:
 
 def decode_answer(data: bytes, key: object) -> FieldSample | None:
     """A ``FieldSample`` from ``field/sample``, or None (logged) if it does not decode."""
-    return decode_or_none(data, FieldSample, f"plume sample on {key}", log)
+    return decode_or_none(data, FieldSample, "plume sample", log, str(key))
 
 
 class PlumeParticipation:

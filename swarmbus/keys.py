@@ -89,6 +89,13 @@ class Keys:
     def _every(self, plane: str, leaf: str) -> str:
         return f"{self.prefix}/{plane}/*/{leaf}"
 
+    def owned(self, plane: str, name: str, leaf: str) -> str:
+        """``<plane>/<name>/<leaf>`` for the access-control list: ``name`` is one name, ``*``
+        (every name) or a name ending in ``$*`` (every name that starts so)."""
+        if name != "*":
+            check_name(plane, name.removesuffix("$*"))
+        return f"{self.prefix}/{plane}/{name}/{leaf}"
+
     # -- vehicle data plane ----------------------------------------------------
     def _vehicle(self, vehicle_id: str, leaf: str) -> str:
         return self._named("vehicle", "vehicle", vehicle_id, leaf)

@@ -556,6 +556,7 @@ class NodeState(enum.StrEnum):
     UP = "up"
     READY = "ready"
     STOPPING = "stopping"
+    ERROR = "error"  # alive but failing at its job (``detail`` says why), e.g. a full disk
 
 
 class NodeHealth(Message, frozen=True, kw_only=True, tag=_tag("node_health")):
@@ -569,6 +570,9 @@ class NodeHealth(Message, frozen=True, kw_only=True, tag=_tag("node_health")):
     host: Text
     sim_time_s: SimTime | None = None
     detail: Text = ""
+    scenario: Text = ""  # the node's swarmbus.scenario.scenario_hash ("": not said)
+    vehicles: Annotated[list[Name], msgspec.Meta(max_length=MAX_BATCH_COMMANDS)] = []
+    """The vehicles the process serves (an autopilot's)."""
 
 
 # --------------------------------------------------------------------------- restarts

@@ -6,6 +6,11 @@ its :class:`~swarmbus.messages.NodeHealth` (up → ready → stopping) and turns
 into ``rt.stop`` being set, so the role's loop ends cleanly (``for t0 in rt.paced(rate_hz):``
 runs one at a fixed rate until then). ``rt.ready()`` declares the node's liveliness token once
 the role serves.
+
+Every health carries the node's scenario hash (:func:`~swarmbus.scenario.scenario_hash`). A
+lockstep participant (``check_scenario_of="physics"``) compares it with the physics's: a
+participant started with a different scenario is refused (``rt.refusal``, one line naming both
+hashes, logged) and stops; its ``main`` then exits non-zero. The physics refuses it too.
 """
 
 from __future__ import annotations
@@ -22,10 +27,10 @@ from types import FrameType, TracebackType
 
 import zenoh
 
-from swarmbus.codec import encode
+from swarmbus.codec import decode_or_none, encode
 from swarmbus.keys import Keys
 from swarmbus.messages import NodeHealth, NodeState
-from swarmbus.scenario import Scenario
+from swarmbus.scenario import Scenario, scenario_hash
 from swarmbus.session import NetworkConfig, open_session, process_identity
 
 log = logging.getLogger(__name__)
@@ -72,8 +77,18 @@ class NodeContext:
 class NodeRuntime:
     """Session + liveliness token + health + stop signal for one process."""
 
-    def __init__(self, ctx: NodeContext, role: str, install_signals: bool = True) -> None:
+    def __init__(
+        self,
+        ctx: NodeContext,
+        role: str,
+        install_signals: bool = True,
+        check_scenario_of: str | None = None,
+    ) -> None:
         self.ctx = ctx
+        self.scenario_hash = scenario_hash(ctx.scenario)
+        self._check_of = check_scenario_of  # the node whose scenario hash must equal ours
+        self._check_sub: zenoh.Subscriber[None] | None = None
+        self.refusal: str | None = None  # why this process was refused (a different scenario)
         self.role = role
         self.keys = ctx.keys
         self.stop = StopEvent()
@@ -103,10 +118,27 @@ class NodeRuntime:
             signal.signal(signal.SIGTERM, self._on_signal)
         self._session = open_session(self.ctx.network)
         self._health_pub = self._session.declare_publisher(self.keys.node_health(self.ctx.name))
+        if self._check_of is not None:
+            self._check_sub = self._session.declare_subscriber(
+                self.keys.node_health(self._check_of), self._on_checked_health
+            )
         self.publish_health(NodeState.UP)
         self._heartbeat = threading.Thread(target=self._beat, name="health", daemon=True)
         self._heartbeat.start()
         return self
+
+    def _on_checked_health(self, sample: zenoh.Sample) -> None:
+        what = f"health of {self._check_of}"
+        health = decode_or_none(sample.payload.to_bytes(), NodeHealth, what, log)
+        if health is None or not health.scenario or health.scenario == self.scenario_hash:
+            return
+        if self.refusal is None:
+            self.refusal = (
+                f"refused by {health.name}: scenario hash {self.scenario_hash} here, "
+                f"{health.scenario} at {health.name} (started with a different scenario file)"
+            )
+            log.error("%s: %s", self.ctx.name, self.refusal)
+        self.stop.set()
 
     def _beat(self) -> None:
         # NodeHealth is also periodic, so `plumeswarm status` learns PIDs/hosts within a period.
@@ -139,6 +171,8 @@ class NodeRuntime:
                     host=host,
                     sim_time_s=self._sim_time_s,
                     detail=self._detail[:1000],
+                    scenario=self.scenario_hash,
+                    vehicles=list(self.ctx.vehicle_ids),
                 )
             )
         )
@@ -172,6 +206,8 @@ class NodeRuntime:
         tb: TracebackType | None,
     ) -> None:
         self._heartbeat_stop.set()
+        if self._check_sub is not None:
+            self._check_sub.undeclare()
         if self._heartbeat is not None:
             self._heartbeat.join(timeout=2.0)
         try:

@@ -7,6 +7,7 @@ A bad file gives one line naming the file, the field and what is wrong
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import re
 import tomllib
@@ -52,6 +53,7 @@ from swarmbus.scenario_spec import (
     not_on_mavlink_note,
     sysid_at,
 )
+from swarmbus.session import NetworkConfig
 from swarmbus.vehicle_types import VehicleTypeError, load_vehicle_type
 
 __all__ = [
@@ -345,6 +347,14 @@ def calibrate_scenario(scenario: Scenario, source: str = "<scenario>") -> Scenar
     )
     plume = msgspec.structs.replace(scenario.plume, filament=filament)
     return msgspec.structs.replace(scenario, wind=wind, plume=plume)
+
+
+def scenario_hash(scenario: Scenario) -> str:
+    """What every host of a run must agree on, as 16 hex digits: SHA-256 of the validated
+    scenario's canonical JSON (keys sorted), ``network`` left out (each host has its own
+    endpoints and identity). Equal content in two files (comments, order, paths) hashes equal."""
+    shared = msgspec.structs.replace(scenario, network=NetworkConfig())
+    return hashlib.sha256(msgspec.json.encode(shared, order="sorted")).hexdigest()[:16]
 
 
 def bundled_scenarios() -> list[str]:

@@ -653,7 +653,16 @@ class VehicleSpec(_Section, frozen=True, kw_only=True):
 class GatewaySpec(_Section, frozen=True, kw_only=True):
     """The MAVLink gateway: the ports of its ground-station and API links, signing, rates."""
 
-    host: Annotated[str, _doc("Address the MAVLink gateway's links are on.")] = "127.0.0.1"
+    host: Annotated[
+        str, _doc("Where the ground station listens (the GCS link's peer); its link binds to it.")
+    ] = "127.0.0.1"
+    api_host: Annotated[
+        str,
+        msgspec.Meta(
+            max_length=253,
+            description="Where the API clients (MAVSDK, offboard programs) listen; empty: host.",
+        ),
+    ] = ""
     gcs_port: Annotated[
         int,
         msgspec.Meta(
@@ -685,6 +694,10 @@ class GatewaySpec(_Section, frozen=True, kw_only=True):
             gt=0.0, le=100.0, description="Rate of the fast telemetry streams per simulated second."
         ),
     ] = 4.0
+    refuse_broadcast_disarm: Annotated[
+        bool,
+        _doc("Refuse a force disarm sent to every system (target_system 0); it is always logged."),
+    ] = False
 
 
 class Env(_Section, frozen=True, kw_only=True):

@@ -42,6 +42,13 @@ SINGLE_THREAD_RUNTIME = (
 PEER_JOIN_TIMEOUT_S = 2.0
 CONNECT_RETRY = {"period_init_ms": 100, "period_max_ms": 1000, "period_increase_factor": 2.0}
 Endpoint = Annotated[str, msgspec.Meta(pattern=r"^(tcp|udp|tls|quic|unixsock-stream)/.+$")]
+# The largest message a session takes (Zenoh's ``transport/link/rx/max_message_size``; Zenoh's
+# own default is 1 GiB): a larger one is dropped by the receiving session when it reassembles
+# its fragments, before it is handed to anyone, and the link goes on. Well above our largest
+# legitimate messages: a 100 000-point plume query (≈ 2.8 MB), a 1 m plume mesh of the seed
+# domain (≈ 0.5 MB), a tick of 1024 vehicles (≈ 350 KB). A 0.1 m mesh (≈ 54 MB) needs more.
+DEFAULT_MAX_MESSAGE_BYTES = 32 * 1024 * 1024
+MIN_MAX_MESSAGE_BYTES = 64 * 1024  # below this a tick of a few hundred vehicles would not fit
 
 
 class NetworkConfigError(PlumeswarmError, ValueError):
@@ -99,6 +106,17 @@ class NetworkConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
     access_control: Annotated[
         dict[str, Any] | None, msgspec.Meta(description="Zenoh's access_control section, as is.")
     ] = None
+    max_message_size_bytes: Annotated[
+        int,
+        msgspec.Meta(
+            ge=MIN_MAX_MESSAGE_BYTES,
+            le=2**30,
+            description=(
+                "Largest message a session takes (bytes); a larger one is dropped by every "
+                "session that receives it, the router too."
+            ),
+        ),
+    ] = DEFAULT_MAX_MESSAGE_BYTES
 
     def with_overrides(
         self,
@@ -131,6 +149,7 @@ def zenoh_config(net: NetworkConfig) -> zenoh.Config:
     # published, not only when the recorder got it, and replay reproduces that timing.
     conf.insert_json5("timestamping/enabled", "true")
     conf.insert_json5("transport/shared_memory/enabled", json.dumps(net.shared_memory))
+    conf.insert_json5("transport/link/rx/max_message_size", json.dumps(net.max_message_size_bytes))
     if net.low_latency:
         conf.insert_json5("transport/unicast/lowlatency", "true")
         conf.insert_json5("transport/unicast/qos/enabled", "false")

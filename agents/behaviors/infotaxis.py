@@ -76,6 +76,7 @@ axis, ≈ 0 at 4 m):
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Sequence
 from typing import Any, ClassVar
@@ -89,9 +90,11 @@ from agents.behaviors.infotaxis_core import (
     IntArray,
     PlumeEncounterModel,
     PlumeHitStatistics,
+    SharedArrays,
+    SparseLikelihoods,
     bayes_update,
     choose_move,
-    expected_entropy,
+    expected_entropy_sparse,
     hit_likelihoods,
     model_from_statistics,
     width_slope,
@@ -220,23 +223,49 @@ class Infotaxis(SeekingBehavior):
     ) -> FloatArray:
         """P(h hits at (x, y) in dt | model, source cell): shape (n_hits, models, cells), for
         every cell or the ``cells`` given."""
+        return self.sparse_likelihoods(frame, x, y, dt_s, cells).dense()
+
+    def sparse_likelihoods(
+        self, frame: WindFrame, x: float, y: float, dt_s: float, cells: IntArray | None = None
+    ) -> SparseLikelihoods:
+        """:meth:`likelihoods` as the background's classes and each model's cells its plume
+        reaches."""
         assert self.cells_xy is not None
         xy = self.cells_xy if cells is None else self.cells_xy[cells]
+        return self._sparse_at(xy, frame, x, y, dt_s)
+
+    def _sparse_at(
+        self, xy: FloatArray, frame: WindFrame, x: float, y: float, dt_s: float
+    ) -> SparseLikelihoods:
+        """:meth:`sparse_likelihoods` for the cells whose centres are ``xy``."""
         dx = x - xy[:, 0]
         dy = y - xy[:, 1]
         along = dx * frame.downwind[0] + dy * frame.downwind[1]
         across = dx * frame.crosswind[0] + dy * frame.crosswind[1]
         # Only cells whose plume reaches (x, y) need the Poisson classes; the others see the
-        # background's.
-        support = np.stack([m.plume_cells(along, across) for m in self.models])
-        table = np.empty((self.n_hits, *support.shape))
+        # background's. The models that share a width share that support.
         background = np.array([self.background_hz * dt_s])
-        table[:] = hit_likelihoods(background, self.n_hits, self.miss_floor)[:, :, None]
-        for k, m in enumerate(self.models):
-            inside = support[k]
-            mean = m.mean_hits(along[inside], across[inside], dt_s)
-            table[:, k, inside] = hit_likelihoods(mean, self.n_hits, self.miss_floor)
-        return table
+        # per width: its plume cells, their (along, across) and the models' shared arrays
+        supports: dict[tuple[float, float], tuple[IntArray, FloatArray, FloatArray, SharedArrays]]
+        supports = {}
+        inside: list[IntArray] = []
+        means: list[FloatArray] = []
+        for m in self.models:
+            width = (m.width_slope, m.width_min_m)
+            if width not in supports:
+                cells = np.flatnonzero(m.plume_cells(along, across))
+                supports[width] = (cells, along[cells], across[cells], {})
+            cells, a, c, shared = supports[width]
+            inside.append(cells)
+            means.append(m.plume_mean_hits(a, c, dt_s, shared))
+        # one call for every model's cells: the classes are computed point by point
+        return SparseLikelihoods(
+            background=hit_likelihoods(background, self.n_hits, self.miss_floor)[:, 0],
+            inside=tuple(inside),
+            classes=hit_likelihoods(np.concatenate(means), self.n_hits, self.miss_floor),
+            offsets=(0, *itertools.accumulate(len(i) for i in inside)),
+            cells=xy.shape[0],
+        )
 
     def _observe(self, readings: Sequence[ConcentrationReading]) -> None:
         sx, sy, n = self.observed_xy
@@ -254,10 +283,9 @@ class Infotaxis(SeekingBehavior):
                 self.detecting_since_s = r.sim_time_s
         self.observed_xy = (sx, sy, n)
 
-    def _near(self, x: float, y: float, radius_m: float) -> np.ndarray:
-        assert self.cells_xy is not None
-        near = np.hypot(self.cells_xy[:, 0] - x, self.cells_xy[:, 1] - y) <= radius_m
-        return np.broadcast_to(near, (len(self.models), len(near)))
+    def _near(self, xy: FloatArray, x: float, y: float, radius_m: float) -> np.ndarray:
+        """Which of the cells centred at ``xy`` lie within ``radius_m`` of (x, y)."""
+        return np.asarray(np.hypot(xy[:, 0] - x, xy[:, 1] - y) <= radius_m)
 
     def _decide(self, frame: WindFrame, x: float, y: float, dt_s: float) -> tuple[float, float]:
         assert self.cells_xy is not None and self.belief is not None
@@ -267,6 +295,7 @@ class Infotaxis(SeekingBehavior):
         marginal = self.belief.sum(axis=0)
         cells = np.flatnonzero(marginal > SUPPORT_FLOOR * marginal.max())
         belief = self.belief[:, cells]
+        xy = self.cells_xy[cells]
         s = self.step_m
         places = [(x, y)]
         for a, c in _DIRECTIONS:
@@ -274,11 +303,10 @@ class Infotaxis(SeekingBehavior):
             if lo[0] <= x + mx <= hi[0] and lo[1] <= y + my <= hi[1]:
                 places.append((x + mx, y + my))
         scores = [
-            expected_entropy(
+            expected_entropy_sparse(
                 belief,
-                self.likelihoods(frame, px, py, dt_s, cells),
-                self._near(px, py, 0.5 * self.cell_m)[:, cells],
-                nuisance_axes=1,
+                self._sparse_at(xy, frame, px, py, dt_s),
+                self._near(xy, px, py, 0.5 * self.cell_m),
             )
             for px, py in places
         ]

@@ -195,6 +195,75 @@ def expected_entropy(
     return (1.0 - p_end) * float((p_h * _row_entropies_bits(joint, p_h)).sum())
 
 
+#: A reduction over at most this many models adds them one after the other (numpy sums fewer
+#: than 8 terms in order), so :func:`expected_entropy_sparse` may add them the same way.
+SEQUENTIAL_SUM_MAX = 7
+
+
+@dataclass(frozen=True)
+class SparseLikelihoods:
+    """Hit likelihoods of shape ``(n_hits, models, cells)`` that are ``background`` (n_hits,)
+    except at each model's ``inside`` cells, whose classes are ``classes[:, offsets[k] :
+    offsets[k + 1]]`` for model k."""
+
+    background: FloatArray
+    inside: tuple[IntArray, ...]
+    classes: FloatArray
+    offsets: tuple[int, ...]
+    cells: int
+
+    def dense(self) -> FloatArray:
+        """The full ``(n_hits, models, cells)`` table."""
+        n_hits, models = len(self.background), len(self.inside)
+        table = np.empty((n_hits, models, self.cells))
+        for h, value in enumerate(self.background):
+            table[h].fill(value)
+        places = [idx + k * self.cells for k, idx in enumerate(self.inside)]
+        table.reshape(n_hits, -1)[:, np.concatenate(places)] = self.classes
+        return table
+
+
+def expected_entropy_sparse(
+    belief: FloatArray, likelihoods: SparseLikelihoods, here: BoolArray | None
+) -> float:
+    """``expected_entropy(belief, likelihoods.dense(), here, nuisance_axes=1)`` for a belief of
+    shape (models, cells), bit for bit, without building the table: each model's share of
+    the joint is the background's product but at its ``inside`` cells, and the shares are added
+    in the order the dense sum over the models adds them."""
+    models = belief.shape[0]
+    if models > SEQUENTIAL_SUM_MAX:
+        return expected_entropy(belief, likelihoods.dense(), here, nuisance_axes=1)
+    given = belief.copy()
+    p_end = 0.0
+    if here is not None:
+        # the cells of ``here`` for every model, in the order a mask over the belief takes them
+        if here.ndim == 1:
+            places = np.flatnonzero(here)
+            p_end = float(belief[:, places].ravel().sum())
+            given[:, places] = 0.0
+        else:
+            mask = np.broadcast_to(here, belief.shape)
+            p_end = float(belief[mask].sum())
+            given[mask] = 0.0
+    if p_end > 1.0 - EPSILON:
+        return -EPSILON
+    total = given.ravel().sum()  # as the dense path sums it
+    if total > EPSILON:
+        given /= total
+    background = likelihoods.background[:, None]
+    joint = np.empty((len(likelihoods.background), belief.shape[1]))
+    share = np.empty_like(joint)
+    for k, inside in enumerate(likelihoods.inside):
+        out = joint if k == 0 else share
+        np.multiply(background, given[k], out=out)
+        lo, hi = likelihoods.offsets[k], likelihoods.offsets[k + 1]
+        out[:, inside] = likelihoods.classes[:, lo:hi] * given[k, inside]
+        if k:
+            joint += share
+    p_h = joint.sum(axis=1)
+    return (1.0 - p_end) * float((p_h * _row_entropies_bits(joint, p_h)).sum())
+
+
 def choose_move(scores: Sequence[float]) -> int:
     """The first candidate whose score is within 1e-10 of the lowest (OTTO's tie rule)."""
     arr = np.asarray(scores, dtype=float)
@@ -202,6 +271,10 @@ def choose_move(scores: Sequence[float]) -> int:
 
 
 # ------------------------------------------------------------------ an advected plume's hits
+#: Intermediate arrays of a computation at fixed points, by the parameters each depends on.
+SharedArrays = dict[tuple[object, ...], FloatArray]
+
+
 @dataclass(frozen=True)
 class PlumeEncounterModel:
     """Hit rate of a searcher at (along, across) of a source in a mean wind, along downwind:
@@ -253,6 +326,42 @@ class PlumeEncounterModel:
 
     def mean_hits(self, along_m: FloatArray, across_m: FloatArray, dt_s: float) -> FloatArray:
         return np.asarray(self.rate_hz(along_m, across_m) * dt_s)
+
+    def plume_mean_hits(
+        self,
+        along_m: FloatArray,
+        across_m: FloatArray,
+        dt_s: float,
+        shared: SharedArrays | None = None,
+    ) -> FloatArray:
+        """:meth:`mean_hits` at points of :meth:`plume_cells` only (the same operations on
+        each point, without the masks that are all true there). ``shared``: the intermediate
+        arrays of earlier calls at the same points, by the parameters each depends on (the
+        models of one width share the crosswind shape, of one axis law the distance factor);
+        filled here."""
+        memo: SharedArrays = {} if shared is None else shared
+        shape_key = ("shape", self.width_slope, self.width_min_m)
+        shape = memo.get(shape_key)
+        if shape is None:
+            width = np.maximum(self.width_min_m, self.width_slope * along_m)
+            u2 = (across_m / width) ** 2
+            shape = memo[shape_key] = np.exp(-0.5 * u2)
+        near_key = ("near", self.width_min_m)
+        near = memo.get(near_key)
+        if near is None:
+            near = memo[near_key] = np.maximum(along_m, self.width_min_m)
+        decay_key = ("decay", self.width_min_m, self.axis_ref_m, self.axis_decay)
+        decay = memo.get(decay_key)
+        if decay is None:
+            decay = memo[decay_key] = (near / self.axis_ref_m) ** (-self.axis_decay)
+        axis = self.axis_rate_hz * decay
+        if self.near_source_m > 0.0:
+            boost_key = ("boost", self.width_min_m, self.near_source_m)
+            boost = memo.get(boost_key)
+            if boost is None:
+                boost = memo[boost_key] = np.maximum(1.0, self.near_source_m / near)
+            axis = axis * boost
+        return np.asarray((axis * shape + self.background_hz) * dt_s)
 
 
 @dataclass(frozen=True)

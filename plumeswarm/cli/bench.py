@@ -6,6 +6,7 @@ from __future__ import annotations
 import logging
 import sys
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -189,7 +190,7 @@ def bench_envs(
 
 def _gsl_options(seed_default: int) -> Callable[[Callable[..., None]], Callable[..., None]]:
     """The options ``bench gsl`` and ``bench gsl sweep`` share: one row an option, each shown
-    with its default (``--out`` has none)."""
+    with its default (``--out`` and ``--shard`` have none)."""
     rows: list[tuple[str, Any, object, str | None]] = [
         ("--algorithms", None, "all", "Comma-separated names, name=module:Class, or 'all'; "
          "random_walk and oracle always run."),
@@ -214,19 +215,29 @@ def _gsl_options(seed_default: int) -> Callable[[Callable[..., None]], Callable[
          "(default: the algorithm's; 0: a circle of 2 m)."),
         ("--radio", None, "", "The link between vehicles: loss=P,latency=TICKS,range=M,"
          "bytes=N (default: a perfect link)."),
-        ("--jobs", click.IntRange(min=1), 2, "Worker processes."),
+        ("--jobs", click.IntRange(min=1), 2, "Worker processes (--executor local)."),
+        ("--executor", None, "local", "local: a pool of --jobs processes; ray: a Ray started "
+         "for the run; ray=ADDRESS: a Ray cluster (ray=auto: the one on this machine). Needs "
+         "plumeswarm[cluster]."),
+        ("--shard", None, None, "i/N: run only every N-th episode from the i-th; put the N "
+         "directories together with 'bench gsl merge'."),
     ]  # fmt: skip
     options: list[Decorator] = [
         click.option(
             *([flag, "time_limit_s"] if flag == "--time-limit" else [flag]),
             type=type_,
             default=default,
-            show_default=True,
+            show_default=default is not None,
             help=help_text,
         )
         for flag, type_, default, help_text in rows
     ]
-    options.append(out_dir_option("Output directory (default runs/bench-gsl-…)."))
+    options.append(
+        out_dir_option(
+            "Output directory (default runs/bench-gsl-…). Run again with the same options and "
+            "--out to resume: only the episodes it lacks run."
+        )
+    )
 
     def apply(f: Callable[..., None]) -> Callable[..., None]:
         for option in reversed(options):
@@ -236,47 +247,137 @@ def _gsl_options(seed_default: int) -> Callable[[Callable[..., None]], Callable[
     return apply
 
 
-def _gsl_run(
-    kwargs: dict[str, Any],
-    run: Callable[[Any, Path, Any], list[Path]],
-    check: Callable[[Any], None] | None = None,
-) -> None:
-    """Validate the options, run with a progress bar, write, and say what was written."""
+#: The options that make the grid (the others say where and how it runs).
+GRID_ARGS = (
+    "algorithms",
+    "environments",
+    "sensors",
+    "runs",
+    "seed",
+    "time_limit_s",
+    "dynamics",
+    "control_hz",
+    "sensor_period_ticks",
+    "vehicles",
+    "radio",
+    "spacing",
+)
+
+
+@dataclass
+class _Grid:
+    """A grid built from its options: its episodes, its command, how its tables are written."""
+
+    specs: list[Any]
+    command: str
+    finish: Callable[[Path, list[Any]], list[Path]]
+    warning: str | None = None
+
+
+def _grid(kind: str, args: dict[str, Any], jobs: int = 1) -> _Grid:
+    """``bench gsl`` (kind ``gsl``) or its ``sweep`` from the options in ``args``;
+    :class:`GslError` names a bad one."""
+    from plumeswarm.gsl.bench import command_line, make_options, rows_of, specs_of, write_outputs
+    from plumeswarm.gsl.sweep import (
+        parse_sweep,
+        seed_warning,
+        sweep_command,
+        sweep_groups,
+        sweep_tables,
+        write_sweep,
+    )
+
+    params = [parse_sweep(p) for p in args.get("params", ())]
+    opts = make_options(
+        comma_list(args["algorithms"]),
+        comma_list(args["environments"]),
+        comma_list(args["sensors"]),
+        jobs=jobs,
+        **{k: args[k] for k in GRID_ARGS[3:]},
+    )
+    if kind == "gsl":
+
+        def finish(directory: Path, outcomes: list[Any]) -> list[Path]:
+            return write_outputs(directory, opts, rows_of(opts, outcomes), outcomes)
+
+        return _Grid(specs_of(opts), command_line(opts), finish)
+    warning = seed_warning(opts, args["allow_test_seeds"])
+    groups = sweep_groups(opts, params)  # every value valid before any episode flies
+
+    def finish_sweep(directory: Path, outcomes: list[Any]) -> list[Path]:
+        return write_sweep(directory, opts, params, sweep_tables(groups, outcomes), warning)
+
+    specs = [s for _, _, specs in groups for s in specs]
+    return _Grid(specs, sweep_command(opts, params), finish_sweep, warning)
+
+
+def _gsl_run(kind: str, kwargs: dict[str, Any]) -> None:
+    """Validate the options, open (or resume) the output directory, run with a progress bar,
+    write, and say what was written."""
     import time
 
     from tqdm import tqdm
 
-    from plumeswarm.gsl.bench import GslError, availability_lines, make_options
+    from plumeswarm.gsl.bench import GslError, availability_lines, run_specs, throughput_lines
+    from plumeswarm.gsl.grid import (
+        Journal,
+        check_executor,
+        grid_header,
+        parse_executor,
+        parse_shard,
+    )
 
-    out = kwargs.pop("out")
-    jobs = kwargs["jobs"]
+    args = {k: v for k, v in kwargs.items() if k not in ("out", "jobs", "executor", "shard")}
+    directory = _bench_dir(kwargs["out"], "gsl")
     try:
-        opts = make_options(
-            comma_list(kwargs.pop("algorithms")),
-            comma_list(kwargs.pop("environments")),
-            comma_list(kwargs.pop("sensors")),
-            **kwargs,
-        )
-        if check is not None:
-            check(opts)
+        executor = parse_executor(kwargs["executor"])
+        shard = None if kwargs["shard"] is None else parse_shard(kwargs["shard"])
+        check_executor(executor)
+        grid = _grid(kind, args, kwargs["jobs"])
+        journal = Journal.open(directory, grid_header(kind, args, grid.command, grid.specs, shard))
     except GslError as exc:
         fail(str(exc))
+    if grid.warning:
+        click.echo(grid.warning, err=True)
     for line in availability_lines():
         click.echo(line)
     started = time.monotonic()
+    cpu_s: dict[Any, float] = {}
     with tqdm(total=1, desc="episodes", unit="run", file=sys.stderr) as bar:
 
         def progress(done: int, total: int) -> None:
             bar.total = total
             bar.update(done - bar.n)
 
-        directory = _bench_dir(out, "gsl")
         try:
-            written = run(opts, directory, progress)
+            outcomes = run_specs(
+                grid.specs,
+                kwargs["jobs"],
+                progress,
+                executor=executor,
+                journal=journal,
+                shard=shard,
+                log=click.echo,
+                cpu_s=cpu_s,
+            )
         except GslError as exc:
             fail(str(exc))
+    for line in throughput_lines(cpu_s) if cpu_s else []:
+        click.echo(line)
+    workers = f"{kwargs['jobs']} worker process(es)" if executor.kind == "local" else executor
+    click.echo(f"wall time {time.monotonic() - started:.0f} s on {workers}")
+    if shard is not None:
+        click.echo(
+            f"shard {shard}: {len(outcomes)} episodes in {journal.path}; when all "
+            f"{shard.count} have run: plumeswarm bench gsl merge DIR... --out DIR"
+        )
+        return
+    _finish(grid, directory, outcomes)
+
+
+def _finish(grid: _Grid, directory: Path, outcomes: list[Any]) -> None:
+    written = grid.finish(directory, outcomes)
     click.echo(written[0].read_text())
-    click.echo(f"wall time {time.monotonic() - started:.0f} s on {jobs} worker process(es)")
     for path in written:
         click.echo(f"wrote {path}")
 
@@ -286,15 +387,8 @@ def _gsl_run(
 @click.pass_context
 def bench_gsl(ctx: click.Context, /, **kwargs: Any) -> None:
     """Source seeking: algorithms × environments × sensors, N seeded runs per cell."""
-    if ctx.invoked_subcommand is not None:
-        return
-    from plumeswarm.gsl.bench import rows_of, run_all, write_outputs
-
-    def run(opts: Any, directory: Path, progress: Any) -> list[Path]:
-        outcomes = run_all(opts, progress)
-        return write_outputs(directory, opts, rows_of(opts, outcomes), outcomes)
-
-    _gsl_run(kwargs, run)
+    if ctx.invoked_subcommand is None:
+        _gsl_run("gsl", kwargs)
 
 
 @bench_gsl.command("sweep")
@@ -307,33 +401,49 @@ def bench_gsl(ctx: click.Context, /, **kwargs: Any) -> None:
 @_gsl_options(seed_default=1000)
 def bench_gsl_sweep(params: tuple[str, ...], allow_test_seeds: bool, **kwargs: Any) -> None:
     """One table per PARAM=v1,v2,… (behavior.NAME, start.along_m or a scenario section.key)."""
+    _gsl_run("sweep", {**kwargs, "params": list(params), "allow_test_seeds": allow_test_seeds})
+
+
+@bench_gsl.command("merge")
+@click.argument("dirs", nargs=-1, required=True, type=click.Path(file_okay=False, path_type=Path))
+@click.option(
+    "--out",
+    required=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Where the whole grid's tables go.",
+)
+def bench_gsl_merge(dirs: tuple[Path, ...], out: Path) -> None:
+    """Put the --out directories of a grid's shards (bench gsl or sweep --shard i/N) together:
+    the same tables as the grid run at once."""
     from plumeswarm.gsl.bench import GslError
-    from plumeswarm.gsl.sweep import (
-        parse_sweep,
-        run_sweep,
-        seed_warning,
-        value_specs,
-        write_sweep,
+    from plumeswarm.gsl.grid import (
+        Journal,
+        grid_digest,
+        merge_journals,
+        missing_episodes,
+        outcome_of,
+        spec_key,
     )
 
     try:
-        parsed = [parse_sweep(p) for p in params]
+        merged = merge_journals(dirs)
+        header = merged.header
+        grid = _grid(header["kind"], header["args"])
+        if grid_digest(grid.specs) != header["digest"]:
+            raise GslError(
+                f"merge: `{header['command']}` makes other episodes in this build than in the "
+                "one that ran the shards"
+            )
+        missing_episodes(merged, grid.specs)
+        journal = Journal.open(out, header)
     except GslError as exc:
         fail(str(exc))
-
-    def check(opts: Any) -> None:
-        warning = seed_warning(opts, allow_test_seeds)
-        if warning:
-            click.echo(warning, err=True)
-        for param in parsed:  # every value valid before any episode flies
-            for value in param.values:
-                value_specs(opts, param.name, value)
-
-    def run(opts: Any, directory: Path, progress: Any) -> list[Path]:
-        tables = run_sweep(opts, parsed, progress)
-        return write_sweep(directory, opts, parsed, tables, seed_warning(opts, allow_test_seeds))
-
-    _gsl_run(kwargs, run, check)
+    outcomes = [outcome_of(s, merged.records[spec_key(s)]) for s in grid.specs]
+    for outcome in {o.spec: o for o in outcomes}.values():
+        if spec_key(outcome.spec) not in journal.records:
+            journal.append(outcome)
+    click.echo(f"merged {len(merged.records)} episodes from {len(dirs)} directories")
+    _finish(grid, out, outcomes)
 
 
 @bench.command("pomdp")

@@ -284,6 +284,11 @@ def _optional_role(flag: tuple[str, str, str], value: tuple[str, click.IntRange,
     is_flag=True,
     help="Stepped clock: the world advances only when one client steps it (Swarm.step).",
 )
+@click.option(
+    "--insecure",
+    is_flag=True,
+    help="Start the gateway even with a MAVLink link beyond loopback and no signing key.",
+)
 @SET_OPT
 def up(
     scenario_arg: str | None,
@@ -303,12 +308,13 @@ def up(
     host_name: str | None,
     vehicles_per_process: int,
     stepped: bool,
+    insecure: bool,
     scenario_overrides: tuple[str, ...],
 ) -> None:
     """Start the whole swarm (plume, physics, autopilots, gateway, viewer) and supervise it."""
     from deploy.console import Console
     from deploy.hosts import HostsError, load_deployment, options_for_host
-    from deploy.launcher import LaunchError, LaunchOptions, default_run_dir
+    from deploy.launcher import LaunchError, LaunchOptions, default_run_dir, selected_roles
     from deploy.security import secure_launch
     from deploy.up import run_up
     from plumeswarm.experiments.launch import NODE_COMMAND
@@ -356,9 +362,27 @@ def up(
         except HostsError as exc:
             fail(str(exc))
     try:
+        if "gateway" in selected_roles(opts):
+            _check_mavlink_exposure(sc, insecure)
         sys.exit(run_up(sc, opts, Console()))
     except LaunchError as exc:
         fail(str(exc), code=1)
+
+
+def _check_mavlink_exposure(sc: Scenario, insecure: bool) -> None:
+    """Refuse a gateway link beyond loopback without signing unless ``insecure`` (then one
+    warning line)."""
+    from gcs_bridge.options import GatewayOptions, exposure_note, unsigned_exposed
+    from swarmbus.options import OptionError
+
+    try:
+        exposed = unsigned_exposed(sc.gateway, GatewayOptions.defaults(sc))
+    except OptionError as exc:
+        fail(f"gateway: {exc}")
+    if exposed and not insecure:
+        fail(f"{exposure_note(exposed)} (or --insecure)")
+    if exposed:
+        click.echo(f"plumeswarm: warning: {exposure_note(exposed)}", err=True)
 
 
 def _up_node_options(

@@ -14,7 +14,6 @@ import io
 import itertools
 import json
 import math
-import multiprocessing
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -30,8 +29,8 @@ from plumeswarm.gsl.episode import (
     START_ALTITUDE_M,
     EpisodeSpec,
     Outcome,
-    run_episode,
 )
+from plumeswarm.gsl.grid import Executor, Journal, Shard, run_episodes
 from plumeswarm.gsl.registry import (
     CEILING,
     FLOOR,
@@ -46,6 +45,8 @@ from plumeswarm.gsl.registry import (
 from plumeswarm.gsl.stats import Z_95, mcnemar_exact, speedup, summarise, wilson_interval
 
 __all__ = ["Z_95", "GslError", "wilson_interval"]
+
+LOCAL = Executor()
 
 DYNAMICS = ("kinematic", "full")
 FULL_SENSOR_HZ = 10  # with full dynamics a reading every control_hz / 10 ticks
@@ -251,29 +252,67 @@ def specs_of(opts: GslOptions, **fields: Any) -> list[EpisodeSpec]:
 
 
 def run_specs(
-    specs: Sequence[EpisodeSpec], jobs: int, progress: Callable[[int, int], None] | None = None
+    specs: Sequence[EpisodeSpec],
+    jobs: int,
+    progress: Callable[[int, int], None] | None = None,
+    *,
+    executor: Executor = LOCAL,
+    journal: Journal | None = None,
+    shard: Shard | None = None,
+    log: Callable[[str], None] | None = None,
+    cpu_s: dict[EpisodeSpec, float] | None = None,
 ) -> list[Outcome]:
     """Every episode's outcome, in spec order (the order the workers finish in does not
-    matter); a spec given twice is flown once."""
-    unique = list(dict.fromkeys(specs))
+    matter); a spec given twice is flown once. With a ``journal``, the episodes it holds are
+    read back, not flown, and each one flown is appended to it as it finishes; with a
+    ``shard``, only the shard's episodes run and come back. ``cpu_s``: filled with the CPU
+    seconds of each episode flown (in its worker's process)."""
+    mine = shard.of(specs) if shard is not None else list(dict.fromkeys(specs))
     done: dict[EpisodeSpec, Outcome] = {}
-    if jobs <= 1:
-        for spec in unique:
-            done[spec] = run_episode(spec)
-            if progress:
-                progress(len(done), len(unique))
-    else:
-        ctx = multiprocessing.get_context("fork")
-        with ctx.Pool(jobs) as pool:
-            for outcome in pool.imap_unordered(run_episode, unique, chunksize=1):
-                done[outcome.spec] = outcome
-                if progress:
-                    progress(len(done), len(unique))
-    return [done[spec] for spec in specs]
+    if journal is not None:
+        for spec in mine:
+            outcome = journal.outcome(spec)
+            if outcome is not None:
+                done[spec] = outcome
+    todo = [s for s in mine if s not in done]
+    if log is not None:
+        log(f"grid: {len(mine)} episodes, {len(done)} already done, {len(todo)} to run")
+    if progress and done:
+        progress(len(done), len(mine))
+    for outcome, cpu in run_episodes(todo, executor, jobs):
+        if journal is not None:
+            journal.append(outcome)
+        done[outcome.spec] = outcome
+        if cpu_s is not None:
+            cpu_s[outcome.spec] = cpu
+        if progress:
+            progress(len(done), len(mine))
+    return [done[spec] for spec in (mine if shard is not None else specs)]
 
 
-def run_all(opts: GslOptions, progress: Callable[[int, int], None] | None = None) -> list[Outcome]:
-    return run_specs(specs_of(opts), opts.jobs, progress)
+def run_all(
+    opts: GslOptions,
+    progress: Callable[[int, int], None] | None = None,
+    cpu_s: dict[EpisodeSpec, float] | None = None,
+) -> list[Outcome]:
+    return run_specs(specs_of(opts), opts.jobs, progress, cpu_s=cpu_s)
+
+
+def throughput_lines(cpu_s: dict[EpisodeSpec, float]) -> list[str]:
+    """Episodes per core-second and CPU seconds per episode of each algorithm and dynamics
+    (every episode's CPU time in its own process: what one idle core gives)."""
+    by: dict[tuple[str, str], list[float]] = {}
+    for spec, cpu in cpu_s.items():
+        by.setdefault((spec.algorithm, spec.dynamics), []).append(cpu)
+    lines = ["episodes per core-second (CPU s per episode: mean, max):"]
+    for (algorithm, dynamics), times in sorted(by.items()):
+        total = sum(times)
+        rate = len(times) / total if total > 0 else math.inf
+        lines.append(
+            f"  {algorithm:<16} {dynamics:<9} {rate:8.3f}  "
+            f"({total / len(times):.2f}, {max(times):.2f}; {len(times)} episodes)"
+        )
+    return lines
 
 
 Cell = tuple[str, str, str, int]  # environment, sensor, algorithm, vehicles

@@ -33,7 +33,7 @@ from plumeswarm.gsl.bench import (
     run_specs,
     specs_of,
 )
-from plumeswarm.gsl.episode import EpisodeSpec
+from plumeswarm.gsl.episode import EpisodeSpec, Outcome
 from plumeswarm.gsl.registry import (
     GslError,
     load_environment,
@@ -99,15 +99,17 @@ def value_specs(opts: GslOptions, name: str, value: Any) -> list[EpisodeSpec]:
     return specs_of(opts, overrides=overrides)
 
 
-def run_sweep(
-    opts: GslOptions,
-    params: Sequence[SweepParam],
-    progress: Callable[[int, int], None] | None = None,
-) -> list[dict[str, Any]]:
+Group = tuple[SweepParam, Any, list[EpisodeSpec]]  # a parameter, one of its values, its grid
+
+
+def sweep_groups(opts: GslOptions, params: Sequence[SweepParam]) -> list[Group]:
+    """Every (parameter, value) and its episodes; all of them together are the sweep's grid."""
+    return [(p, v, value_specs(opts, p.name, v)) for p in params for v in p.values]
+
+
+def sweep_tables(groups: Sequence[Group], outcomes: Sequence[Outcome]) -> list[dict[str, Any]]:
     """Every parameter's table: ``{"parameter", "values", "rows"}``; the rows of each value
-    carry ``value``. All episodes share the worker pool."""
-    groups = [(p, v, value_specs(opts, p.name, v)) for p in params for v in p.values]
-    outcomes = run_specs([s for _, _, specs in groups for s in specs], opts.jobs, progress)
+    carry ``value``. ``outcomes``: those of the groups' specs, in order."""
     tables: dict[str, dict[str, Any]] = {}
     at = 0
     for param, value, specs in groups:
@@ -121,6 +123,17 @@ def run_sweep(
             row["tuned"] = "?" in cell[0].spec.behavior or not param.name.startswith("behavior.")
             table["rows"].append({"parameter": param.name, "value": value, **row})
     return list(tables.values())
+
+
+def run_sweep(
+    opts: GslOptions,
+    params: Sequence[SweepParam],
+    progress: Callable[[int, int], None] | None = None,
+) -> list[dict[str, Any]]:
+    """Every parameter's table (:func:`sweep_tables`); all episodes share the worker pool."""
+    groups = sweep_groups(opts, params)
+    outcomes = run_specs([s for _, _, specs in groups for s in specs], opts.jobs, progress)
+    return sweep_tables(groups, outcomes)
 
 
 def _pct(rate: float, ci: Sequence[float]) -> str:
@@ -146,14 +159,18 @@ def sweep_table(table: dict[str, Any]) -> str:
     return head + "\n".join(lines) + "\n"
 
 
+def sweep_command(opts: GslOptions, params: Sequence[SweepParam]) -> str:
+    args = " ".join(f"{p.name}={','.join(json.dumps(v) for v in p.values)}" for p in params)
+    return command_line(opts, "sweep").replace(" sweep", f" sweep {args}", 1)
+
+
 def sweep_report(
     opts: GslOptions,
     params: Sequence[SweepParam],
     tables: Sequence[dict[str, Any]],
     warning: str | None,
 ) -> str:
-    args = " ".join(f"{p.name}={','.join(json.dumps(v) for v in p.values)}" for p in params)
-    command = command_line(opts, "sweep").replace(" sweep", f" sweep {args}", 1)
+    command = sweep_command(opts, params)
     text = f"```\n{command}\n```\n\n"
     if warning:
         text += f"**{warning}**\n\n"

@@ -14,10 +14,12 @@ from scipy.stats import poisson
 from agents.behaviors.infotaxis_core import (
     PlumeEncounterModel,
     PlumeHitStatistics,
+    SparseLikelihoods,
     bayes_update,
     choose_move,
     entropy_bits,
     expected_entropy,
+    expected_entropy_sparse,
     hit_likelihoods,
     hit_statistics_from_points,
     isotropic_mean_hits,
@@ -155,3 +157,62 @@ def test_statistics_from_measured_points_recover_a_gaussian_rate_profile() -> No
     assert stats.distances_m == (30.0, 50.0)
     np.testing.assert_allclose(stats.axis_p_hit_1s, [1 - math.exp(-1.2), 1 - math.exp(-0.9)])
     np.testing.assert_allclose(stats.width_m, [2.4, 4.0], rtol=0.01)
+
+
+def _models() -> list[PlumeEncounterModel]:
+    return [
+        PlumeEncounterModel(rate, 1.0, 0.0, factor * 0.08, 1.0, 0.02, near_source_m=10.0)
+        for rate in (0.3, 1.0, 3.0)
+        for factor in (0.3, 1.0)
+    ]
+
+
+def test_mean_hits_on_the_plume_cells_are_mean_hits_there_bit_for_bit() -> None:
+    rng = np.random.default_rng(3)
+    along, across = rng.uniform(-20.0, 120.0, 5000), rng.uniform(-40.0, 40.0, 5000)
+    decaying = PlumeEncounterModel(1.4, 30.0, 0.5, 0.08, 1.0, 0.02, near_source_m=10.0)
+    shared: dict[tuple[float, float], dict[tuple[object, ...], np.ndarray]] = {}
+    for m in [*_models(), decaying, *_models()]:
+        inside = m.plume_cells(along, across)
+        assert 100 < inside.sum() < 5000
+        want = m.mean_hits(along, across, 1.3)[inside].tobytes()
+        assert m.plume_mean_hits(along[inside], across[inside], 1.3).tobytes() == want
+        # the models of one width computing at the same points share their arrays
+        memo = shared.setdefault((m.width_slope, m.width_min_m), {})
+        assert m.plume_mean_hits(along[inside], across[inside], 1.3, memo).tobytes() == want
+
+
+def _sparse(
+    models: list[PlumeEncounterModel], along: np.ndarray, across: np.ndarray, dt: float
+) -> tuple[SparseLikelihoods, np.ndarray]:
+    """The sparse table of ``models`` at cells (along, across), and the dense one built the
+    plain way: every model's classes at every cell."""
+    inside = tuple(np.flatnonzero(m.plume_cells(along, across)) for m in models)
+    means = [m.mean_hits(along[i], across[i], dt) for m, i in zip(models, inside, strict=True)]
+    offsets = np.cumsum([0, *(len(i) for i in inside)])
+    sparse = SparseLikelihoods(
+        background=hit_likelihoods(np.array([0.02 * dt]), 4, 0.25)[:, 0],
+        inside=inside,
+        classes=hit_likelihoods(np.concatenate(means), 4, 0.25),
+        offsets=tuple(int(o) for o in offsets),
+        cells=len(along),
+    )
+    dense = np.stack([hit_likelihoods(m.mean_hits(along, across, dt), 4, 0.25) for m in models], 1)
+    return sparse, dense
+
+
+@pytest.mark.parametrize("cells", [1, 2, 7, 500, 4000])
+@pytest.mark.parametrize("n_models", [1, 6, 9])
+def test_sparse_expected_entropy_is_the_dense_one_bit_for_bit(cells: int, n_models: int) -> None:
+    rng = np.random.default_rng(cells * 10 + n_models)
+    models = (_models() * 2)[:n_models]
+    along, across = rng.uniform(-5.0, 60.0, cells), rng.uniform(-8.0, 8.0, cells)
+    sparse, dense = _sparse(models, along, across, 1.2)
+    assert np.array_equal(sparse.dense(), dense)
+    belief = rng.random((n_models, cells)) ** 8  # mass spread over decades
+    belief /= belief.sum()
+    here = np.zeros(cells, dtype=bool)
+    here[rng.integers(cells)] = True
+    for mask in (None, here, np.broadcast_to(here, belief.shape)):
+        want = expected_entropy(belief, dense, mask, nuisance_axes=1)
+        assert expected_entropy_sparse(belief, sparse, mask) == want

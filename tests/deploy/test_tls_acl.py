@@ -9,27 +9,31 @@ hosts with the real processes flying.
 
 from __future__ import annotations
 
+import itertools
 import re
 import shutil
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import msgspec
 import pytest
+import zenoh
 
 from deploy import certs
 from deploy.certs import common_name_of
 from deploy.hosts import Deployment, HostsError, load_deployment
-from deploy.security import access_control, host_identities, secure_network
+from deploy.security import ROLE_PLANES, access_control, host_identities, secure_network
 from swarmbus.keys import Keys
 from swarmbus.session import NetworkConfig, free_tcp_port, open_session
 from tests.deploy.test_faults_cli import assert_one_clear_line, bad_file
 from tests.support.hosts import write_hosts
-from tests.support.procs import run_cli
+from tests.support.procs import REPO, run_cli
 from tests.support.tls_probe import (
     door,
     forbidden_keys,
     forged_puts_seen,
+    marker_of,
     stranger_tls,
 )
 
@@ -80,22 +84,48 @@ def test_generated_certificates_carry_the_identities(certified: tuple[Deployment
     assert again.returncode != 0 and "refusing to replace" in again.stderr
 
 
-def test_acl_names_who_may_publish_what(tmp_path: Path) -> None:
+def allows(acl: dict[str, Any], name: str, message: str, key: str) -> bool:
+    """Whether ``acl`` lets identity ``name`` send ``message`` on ``key`` (ingress), decided
+    by zenoh's own key algebra: some allow rule of its policies includes the key."""
+    subjects = {s["id"] for s in acl["subjects"] if name in s["cert_common_names"]}
+    ids = {r for p in acl["policies"] if subjects & set(p["subjects"]) for r in p["rules"]}
+    return any(
+        zenoh.KeyExpr(k).includes(zenoh.KeyExpr(key))
+        for r in acl["rules"]
+        if r["id"] in ids and r["permission"] == "allow" and "ingress" in r["flows"]
+        and message in r["messages"]
+        for k in r["key_exprs"]
+    )  # fmt: skip
+
+
+def test_acl_names_who_may_send_what(tmp_path: Path) -> None:
     hosts_file = write_hosts(
         tmp_path / "hosts.toml", "tls/10.0.0.1:7447", addresses="10.0.0.1", tls_certs="c"
     )
     acl = access_control(load_deployment(hosts_file), KEYS)
     assert acl["default_permission"] == "deny"
-    subjects = {s["id"]: set(s["cert_common_names"]) for s in acl["subjects"]}
-    assert "autopilot.agents" not in subjects["not-actuators-publishers"]
-    assert {"gateway.gcs", "physics.sim", "operator.sim"} <= subjects["not-actuators-publishers"]
-    assert "physics.sim" not in subjects["not-world-publishers"]
-    assert "autopilot.agents" in subjects["not-world-publishers"]
-    assert "plume.sim" not in subjects["not-field-publishers"]
-    assert {"physics.sim", "autopilot.agents"} <= subjects["not-field-publishers"]
-    assert (
-        "router.sim" not in subjects["not-world-publishers"] | subjects["not-actuators-publishers"]
-    )
+    names = ["router.sim", "physics.sim", "plume.sim", "autopilot.agents", "gateway.gcs",
+             "operator.gcs"]  # fmt: skip
+    expected = [
+        ("put", KEYS.autopilot_actuators("autopilot-uav1"), {"router.sim", "autopilot.agents"}),
+        ("put", KEYS.tick(), {"router.sim", "physics.sim"}),
+        ("put", KEYS.vehicle_state("uav1"), {"router.sim", "physics.sim"}),
+        ("put", KEYS.plume_sample(), {"router.sim", "plume.sim"}),
+        ("put", KEYS.vehicle_status("uav1"), {"router.sim", "autopilot.agents"}),
+        ("put", KEYS.node_restart("physics"), {"router.sim", "operator.gcs"}),
+        ("put", KEYS.everything(), {"router.sim"}),
+        ("query", KEYS.vehicle_cmd("uav1"), {"router.sim", "autopilot.agents", "gateway.gcs",
+                                             "operator.gcs"}),
+        ("query", KEYS.everything(), {"router.sim"}),
+        ("query", KEYS.clock_step(), {"router.sim", "gateway.gcs", "operator.gcs"}),
+        ("declare_queryable", KEYS.vehicle_cmd("uav1"), {"router.sim", "autopilot.agents"}),
+        ("liveliness_token", KEYS.node_health("physics"), {"router.sim", "physics.sim"}),
+        ("liveliness_token", KEYS.node_health("gateway"), {"router.sim", "gateway.gcs"}),
+    ]  # fmt: skip
+    for message, key, who in expected:
+        assert {n for n in names if allows(acl, n, message, key)} == who, (message, key)
+    inside_router = access_control(load_deployment(hosts_file), KEYS, "router")
+    assert not allows(inside_router, "router.sim", "put", KEYS.tick())
 
 
 @pytest.mark.parametrize(
@@ -113,7 +143,8 @@ def test_router_lets_only_the_right_role_publish(
 ) -> None:
     dep, _ = deployment
     listener = as_role(dep, "sim", "physics")  # the real subscriber of actuators
-    result = forged_puts_seen(listener, as_role(dep, *publisher), KEYS)
+    marker = marker_of(dep, *publisher, KEYS)
+    result = forged_puts_seen(listener, as_role(dep, *publisher), KEYS, marker_key=marker)
     assert result["marker"], "the publisher's marker never arrived: nothing was tested"
     leaf = {k: k.rsplit("/", 1)[-1] for k in forbidden_keys(KEYS)}
     assert {leaf[k] for k in result["seen"]} == allowed
@@ -127,7 +158,9 @@ def test_a_peer_enforces_the_acl_on_a_direct_link(deployment: tuple[Deployment, 
     physics = as_role(dep, "sim", "physics", mode="peer", connect=[], listen=[physics_ep])
     for host, role, allowed in (("gcs", "gateway", 0), ("agents", "autopilot", 1)):
         direct = as_role(dep, host, role, connect=[physics_ep])
-        result = forged_puts_seen(physics, direct, KEYS)
+        result = forged_puts_seen(
+            physics, direct, KEYS, marker_key=marker_of(dep, host, role, KEYS)
+        )
         assert result["marker"]
         assert len(result["seen"]) == allowed, (role, result)
 
@@ -219,3 +252,17 @@ def test_a_bad_hosts_file_key_or_role_names_it_and_the_valid_ones(
     with pytest.raises(HostsError) as info:
         load_deployment(tmp_path / "hosts.toml")
     assert str(info.value).startswith(f"{tmp_path / 'hosts.toml'}: {error}"), info.value
+
+
+def test_the_role_table_of_the_docs_is_the_one_the_acl_is_made_from() -> None:
+    """docs/deploy.md's table of roles and planes lists every role with the planes of
+    :data:`deploy.security.ROLE_PLANES` (the defaults of ``[acl]``)."""
+    lines = (REPO / "docs" / "deploy.md").read_text().splitlines()
+    start = lines.index("| role | planes | may send (put/delete unless said) |") + 2
+    documented: dict[str, tuple[str, ...]] = {}
+    for line in itertools.takewhile(lambda ln: ln.startswith("|"), lines[start:]):
+        roles, planes, _ = (c.strip() for c in line.strip("|").split("|"))
+        named = () if planes == "none" else tuple(p.strip() for p in planes.split(","))
+        for role in roles.split("(")[0].split(","):
+            documented[role.strip()] = named
+    assert documented == ROLE_PLANES

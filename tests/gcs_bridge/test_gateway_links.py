@@ -10,7 +10,7 @@ from collections.abc import Iterator
 import pytest
 
 from gcs_bridge.dialect import mavlink, new_mav, pack
-from gcs_bridge.links import Link, signing_timestamp_now
+from gcs_bridge.links import Link, Signing, signing_timestamp_now
 
 KEY = bytes(range(32))
 
@@ -32,7 +32,7 @@ def client_mav(key: bytes | None = None, stamp: int | None = None) -> object:
 @pytest.fixture
 def pair() -> Iterator[tuple[socket.socket, Link, Link]]:
     plain = Link("plain", ("127.0.0.1", 0), None, [1])
-    signed = Link("signed", ("127.0.0.1", 0), None, [1], signing_key=KEY)
+    signed = Link("signed", ("127.0.0.1", 0), None, [1], Signing(KEY))
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     sock.bind(("127.0.0.1", 0))
     yield sock, plain, signed

@@ -69,8 +69,16 @@ def test_options_are_checked_and_rates_configurable() -> None:
     o = parse_options(GatewayOptions, given)
     assert o.rates_hz()[mavlink.MAVLINK_MSG_ID_ATTITUDE] == 10.0
     assert o.signs("gcs") and not o.signs("api") and not o.api_links
-    assert o.bind_host_for(GatewaySpec()) == "127.0.0.1"
-    assert GatewayOptions().bind_host_for(GatewaySpec(host="192.0.2.7")) == "0.0.0.0"
+    for kind in ("gcs", "api"):
+        assert o.bind_host_for(GatewaySpec(), kind) == "127.0.0.1"
+        assert GatewayOptions().bind_host_for(GatewaySpec(host="192.0.2.7"), kind) == "0.0.0.0"
+    # a remote ground station, the API clients on this machine: only the GCS link is exposed
+    remote_gcs = GatewaySpec(host="192.0.2.7", api_host="127.0.0.1")
+    assert GatewayOptions().bind_host_for(remote_gcs, "gcs") == "0.0.0.0"
+    assert GatewayOptions().bind_host_for(remote_gcs, "api") == "127.0.0.1"
+    pinned = parse_options(GatewayOptions, {"bind_host": "10.0.0.2", "api_bind_host": "127.0.0.3"})
+    assert pinned.bind_host_for(GatewaySpec(), "gcs") == "10.0.0.2"
+    assert pinned.bind_host_for(GatewaySpec(), "api") == "127.0.0.3"
     for bad in (
         {"nope": "1"},
         {"rate.NOT_A_MESSAGE": "1"},

@@ -15,6 +15,7 @@ from plumeswarm.gsl.bench import (
     make_options,
     rows_of,
     run_all,
+    throughput_lines,
     write_outputs,
 )
 from plumeswarm.gsl.episode import (
@@ -222,3 +223,20 @@ def test_the_floor_multiple_at_the_farthest_start_is_the_gaussians_over_the_floo
         if "the sensor cannot see the plume at the farthest starts" in line
     ]  # fmt: skip
     assert len(flagged) == 1 and "| meander_high | mox |" in flagged[0]
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_every_episodes_cpu_time_is_counted_and_summed_per_algorithm(jobs: int) -> None:
+    opts = make_options(
+        ["random_walk", "casting"], ["steady_gaussian"], ["ideal"],
+        runs=2, seed=4, time_limit_s=10.0, jobs=jobs,
+    )  # fmt: skip
+    cpu_s: dict[EpisodeSpec, float] = {}
+    outcomes = run_all(opts, cpu_s=cpu_s)
+    assert sorted(cpu_s, key=repr) == sorted((o.spec for o in outcomes), key=repr)
+    assert all(0.0 < t < 60.0 for t in cpu_s.values())
+    lines = throughput_lines(cpu_s)
+    for algorithm in ("random_walk", "casting"):
+        times = [t for s, t in cpu_s.items() if s.algorithm == algorithm]
+        (line,) = [x for x in lines if x.split()[:2] == [algorithm, "kinematic"]]
+        assert float(line.split()[2]) == pytest.approx(2 / sum(times), rel=1e-3, abs=1e-3)

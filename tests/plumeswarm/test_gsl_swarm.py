@@ -3,8 +3,13 @@ a swarm's starts, its columns and its speed-up."""
 
 from __future__ import annotations
 
+import csv
 import itertools
+import json
 import math
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 
@@ -27,6 +32,8 @@ from plumeswarm.gsl.episode import (
 from plumeswarm.gsl.registry import load_environment
 from plumeswarm.gsl.stats import speedup
 from swarmbus.radio import RadioSpec
+
+REPO = Path(__file__).resolve().parents[2]
 
 
 def test_radio_text_becomes_the_radio_sections_fields() -> None:
@@ -139,3 +146,29 @@ def test_the_speed_up_is_the_ratio_of_medians_with_a_paired_bootstrap_interval()
     ratios = [a / b for a, b in zip(single, [50.0, 60.0, 70.0, 65.0, 80.0], strict=True)]
     assert min(ratios) <= ci[0] and ci[1] <= max(single) / min(50.0, 60.0, 70.0, 65.0, 80.0)
     assert speedup([100.0, 90.0], [50.0, 45.0]) == (pytest.approx(2.0), None)
+
+
+def test_the_command_line_flies_the_swarm_options(tmp_path: Path) -> None:
+    """``--vehicles``, ``--spacing`` and ``--radio`` reach the episodes through the command."""
+    args = ["--algorithms", "coop_declare", "--environments", "steady_gaussian", "--sensors"]
+    args += ["ideal", "--runs", "1", "--seed", "1000", "--time-limit", "5", "--jobs", "1"]
+    args += ["--vehicles", "1,3", "--spacing", "3", "--radio", "loss=0.5"]
+    res = subprocess.run(
+        [sys.executable, "-m", "plumeswarm", "bench", "gsl", *args, "--out", str(tmp_path)],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert res.returncode == 0, res.stderr
+    rows = json.loads((tmp_path / "gsl.json").read_text())
+    assert [(r["algorithm"], r["vehicles"]) for r in rows][:4] == [
+        ("random_walk", 1), ("random_walk", 3), ("coop_declare", 1), ("coop_declare", 3)
+    ]  # fmt: skip
+    assert all(r["radio"] == {"radio.loss": 0.5} for r in rows)
+    assert "--vehicles 1,3 --spacing 3 --radio loss=0.5" in (tmp_path / "gsl.md").read_text()
+    lines = (tmp_path / "runs.csv").read_text().splitlines()
+    assert lines[0].endswith(",vehicles,closest_approach_m,total_path_m,nearest_member_m")
+    # the three members start 3 m apart across the wind: nothing closer at the start
+    swarm = [r for r in csv.DictReader(lines) if r["vehicles"] == "3"]
+    assert swarm and all(float(r["closest_approach_m"]) <= 3.0 + 1e-3 for r in swarm)

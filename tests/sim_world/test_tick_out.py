@@ -12,7 +12,8 @@ from sim_world.tick_out import TickOutput
 from swarmbus.catchup import RouterOutage
 from swarmbus.codec import encode
 from swarmbus.keys import Keys
-from tests.support.messages_samples import STATE
+from swarmbus.messages import SimTick, VehicleState
+from tests.support.messages_samples import SAMPLES, STATE
 from tests.support.procs import Network, wait_until
 
 KEYS = Keys("tickout")
@@ -80,7 +81,8 @@ def test_states_put_again_for_a_subscriber_back_during_a_router_outage(
     network: tuple[Network, zenoh.Session],
 ) -> None:
     """Ticks published while nobody subscribed (no state put) reach a subscriber that matches
-    again during an outage; the last CATCH_UP_TICKS are kept outside one, every tick during it."""
+    again during an outage; the last CATCH_UP_TICKS are kept outside one, every tick during it.
+    The re-sent states are put by the output's worker, with the bytes of ``encode(state)``."""
     _, session = network
     out = TickOutput(session, KEYS, ["a"], SENSOR_PERIOD)
     outage = RouterOutage(after_s=3600.0)
@@ -88,12 +90,12 @@ def test_states_put_again_for_a_subscriber_back_during_a_router_outage(
     try:
         states = {k: [msgspec.structs.replace(STATE, vehicle_id="a", tick=k)] for k in range(400)}
         for k in range(300):  # nobody listens: nothing put; 256 kept
-            out.set(k, b"", states[k])
+            out.set(k, _tick(k, states[k]), states[k])
             assert out.put_states() == []
             out.catch_up(outage)
         outage.router(False)
         for k in range(300, 400):  # during the outage every tick is kept
-            out.set(k, b"", states[k])
+            out.set(k, _tick(k, states[k]), states[k])
             out.catch_up(outage)
         inbox = Inbox(session, KEYS.vehicle_state("a"))
         wait_until(lambda: out.put_states(), 5.0, "the subscriber matched")
@@ -104,8 +106,65 @@ def test_states_put_again_for_a_subscriber_back_during_a_router_outage(
         wait_until(lambda: len(inbox.got) == len(want), 5.0, "ticks 44..399 again")
         assert [p for _, p in inbox.taken()] == want
         out.catch_up(outage)  # once per return
+        assert out.resender.wait_idle(5.0)
+        assert out.resender.puts == len(want)
         assert inbox.taken() == []
     finally:
         out.close()
         if inbox is not None:
+            inbox.sub.undeclare()
+
+
+def _tick(tick: int, states: list[VehicleState]) -> bytes:
+    """The encoded ``SimTick`` of ``tick`` holding ``states``."""
+    base = SAMPLES[SimTick]
+    assert isinstance(base, SimTick)
+    return encode(msgspec.structs.replace(base, tick=tick, states=states))
+
+
+def test_what_is_kept_for_a_catch_up_is_bounded_in_bytes(
+    network: tuple[Network, zenoh.Session],
+) -> None:
+    """During an outage the ticks kept stay under the byte bound: the newest ones, as many
+    as fit; and a catch-up of many vehicles is handed to the worker, which re-sends the kept
+    ticks' states of every vehicle that matched again."""
+    _, session = network
+    vehicles = [f"v{i}" for i in range(64)]
+    bound = 4 * 1024 * 1024
+    out = TickOutput(session, KEYS, vehicles, SENSOR_PERIOD, max_kept_bytes=bound)
+    outage = RouterOutage(after_s=3600.0)
+    inboxes: list[Inbox] = []
+    try:
+        outage.router(False)
+        ticks, sizes = 400, []
+        for k in range(ticks):
+            states = [msgspec.structs.replace(STATE, vehicle_id=v, tick=k) for v in vehicles]
+            payload = _tick(k, states)
+            sizes.append(len(payload))
+            out.set(k, payload, states)
+            out.catch_up(outage)
+        # the newest ticks whose sizes sum to at most the bound, counted here from the sizes
+        fit, total = 0, 0
+        while fit < len(sizes) and total + sizes[-1 - fit] <= bound:
+            total += sizes[-1 - fit]
+            fit += 1
+        assert 0 < fit < ticks
+        assert out.kept_bytes == total <= bound
+        inboxes = [Inbox(session, KEYS.vehicle_state(v)) for v in vehicles[:2]]
+        wait_until(lambda: out.put_states(), 5.0, "the subscribers matched")
+        wait_until(lambda: all(i.got for i in inboxes), 5.0, "the last tick's states")
+        for inbox in inboxes:
+            inbox.taken()
+        out.catch_up(outage)
+        assert out.resender.wait_idle(30.0)
+        for v, inbox in zip(vehicles, inboxes, strict=False):
+            got = [p for _, p in inbox.taken()]
+            want = [
+                encode(msgspec.structs.replace(STATE, vehicle_id=v, tick=k))
+                for k in range(ticks - fit, ticks)
+            ]
+            assert got == want
+    finally:
+        out.close()
+        for inbox in inboxes:
             inbox.sub.undeclare()

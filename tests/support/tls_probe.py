@@ -25,13 +25,20 @@ import zenoh
 
 from deploy.certs import OPERATOR, identity
 from deploy.hosts import Deployment, load_deployment
-from deploy.security import secure_network
+from deploy.security import node_identity, own_of, secure_network
 from swarmbus.keys import Keys, autopilot_node
 from swarmbus.scenario import load_scenario, resolve_scenario_path
 from swarmbus.session import NetworkConfig, TlsConfig, open_session, tls_settings, zenoh_config
 
 FORGED = b"forged by the tls probe"
-MARKER_KEY = "plumeswarm-probe/marker"  # outside every world: no node decodes it
+BLOCK = zenoh.CongestionControl.BLOCK  # a put dropped on a busy link would read as refused
+
+
+def marker_of(dep: Deployment, host: str, role: str, keys: Keys, node: str | None = None) -> str:
+    """A key the identity of ``role`` on ``host`` may put on: the health key of a node name
+    of its own that no process uses (``<role>-probe``, ``autopilot-<id>-plusprobe``)."""
+    own = own_of(dep, node_identity(dep, host, role, node))
+    return keys.node_health(own.nodes[-1].replace("$*", "probe"))
 
 
 def forbidden_keys(keys: Keys) -> list[str]:
@@ -48,7 +55,8 @@ def forged_puts_seen(
     keys: Keys,
     timeout_s: float = 30.0,
     forged_keys: list[str] | None = None,
-    marker_key: str = MARKER_KEY,
+    *,
+    marker_key: str,
 ) -> dict[str, Any]:
     """Which of ``forged_keys`` (default :func:`forbidden_keys`) the listener received from
     the publisher; the marker goes on ``marker_key`` (one the publisher may put on)."""
@@ -70,16 +78,16 @@ def forged_puts_seen(
         with open_session(publisher) as ps:
             while not markers.is_set() and time.monotonic() < deadline:
                 for key in forged:
-                    ps.put(key, FORGED)
+                    ps.put(key, FORGED, congestion_control=BLOCK)
                     sent += 1
-                ps.put(marker_key, b"marker")
+                ps.put(marker_key, b"marker", congestion_control=BLOCK)
                 markers.wait(0.2)
             # One more round after the first marker: routes are surely up for all keys now.
             markers.clear()
             for key in forged:
-                ps.put(key, FORGED)
+                ps.put(key, FORGED, congestion_control=BLOCK)
                 sent += 1
-            ps.put(marker_key, b"marker")
+            ps.put(marker_key, b"marker", congestion_control=BLOCK)
             markers.wait(max(0.0, deadline - time.monotonic()))
         for s in subs:
             s.undeclare()
@@ -160,7 +168,8 @@ def main(argv: list[str]) -> int:
         base = NetworkConfig(mode="client", connect=[dep.router], listen=[])
         listener = secure_network(base, dep, host, argv[3], keys)
         publisher = secure_network(base, dep, host, argv[4], keys)
-        result = forged_puts_seen(listener, publisher, keys)
+        marker = marker_of(dep, host, argv[4], keys)
+        result = forged_puts_seen(listener, publisher, keys, marker_key=marker)
     else:
         assert dep.tls is not None
         certs = Path(dep.tls.certs)

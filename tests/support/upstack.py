@@ -14,13 +14,15 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import zenoh
 
 from deploy.busview import BusView
+from deploy.launcher import LaunchOptions
 from swarmbus.keys import Keys
 from swarmbus.session import free_tcp_port
-from tests.support.procs import REPO, wait_until
+from tests.support.procs import NODE_COMMAND, REPO, wait_until
 
 
 @dataclass
@@ -110,3 +112,18 @@ def plumeswarm_up(
         yield Up(proc, tmp / "run", endpoint, console)
     finally:
         stop_up(proc)
+
+
+def recording_launch(scenario: Path, run_dir: Path, endpoint: str, **kw: Any) -> LaunchOptions:
+    """Launch options of a headless recorded stack without gateway (router, recorder, plume,
+    physics, autopilots) on ``endpoint``; ``kw`` adds to them."""
+    return LaunchOptions(
+        node_command=NODE_COMMAND,
+        scenario_path=scenario,
+        headless=True,
+        record=True,
+        run_dir=run_dir,
+        connect=(endpoint,),
+        roles=("router", "recorder", "plume", "physics", "autopilot"),
+        **kw,
+    )

@@ -5,10 +5,11 @@ otherwise. Real sessions (clients of a router on loopback)."""
 from __future__ import annotations
 
 import threading
+import time
 
 import zenoh
 
-from swarmbus.catchup import CatchUpPublisher, RouterOutage
+from swarmbus.catchup import CatchUpPublisher, Resender, RouterOutage
 from swarmbus.session import NetworkConfig, open_session
 from tests.support.procs import Network, wait_until
 
@@ -92,3 +93,38 @@ def test_a_subscriber_back_during_an_outage_gets_the_kept_samples_again(
         assert late.now() == []
         sub.undeclare()
         pub.close()
+
+
+def test_kept_samples_are_bounded_in_bytes_and_put_again_by_the_worker_at_its_rate(
+    network: tuple[Network, zenoh.Session],
+) -> None:
+    """A publisher keeps the newest samples that fit in ``max_bytes``; a catch-up hands them
+    to the Resender, whose worker puts them no faster than its rate (bursts of 200)."""
+    net, _ = network
+    client = NetworkConfig(mode="client", connect=[net.endpoint], listen=[])
+    outage = RouterOutage(after_s=3600.0)
+    resender = Resender("test-catch-up", rate_per_s=2000.0)
+    try:
+        with open_session(client) as pub_side, open_session(client) as sub_side:
+            pub = CatchUpPublisher(pub_side, KEY, depth=5000, resender=resender, max_bytes=10_000)
+            for k in range(3000):
+                pub.put(b"%09d" % k)  # 9 bytes each: the newest 1 111 fit in 10 000
+            assert pub.kept_bytes == 1111 * 9
+            outage.router(False)
+            back = _Collect()
+            sub = sub_side.declare_subscriber(KEY, back)
+            wait_until(lambda: pub.matching, 10.0, "a subscriber back during the outage")
+            t0 = time.monotonic()
+            assert pub.catch_up(outage) == 1111
+            assert resender.wait_idle(30.0)
+            took = time.monotonic() - t0
+            # 1 111 puts at 2 000/s: the worker waited after each burst of 200 but the last
+            assert took >= 1000 / 2000.0
+            assert resender.puts == 1111
+            want = [b"%09d" % k for k in range(3000 - 1111, 3000)]
+            wait_until(lambda: len(back.now()) == 1111, 10.0, "the kept samples")
+            assert back.now() == want
+            sub.undeclare()
+            pub.close()
+    finally:
+        resender.close()

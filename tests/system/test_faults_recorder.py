@@ -17,14 +17,15 @@ from pathlib import Path
 
 import zenoh
 
-from deploy.launcher import Launcher, LaunchOptions
+from deploy.launcher import Launcher
 from recorder.reader import Recording
 from swarmbus.codec import decode
 from swarmbus.messages import SimTick, VehicleState
 from swarmbus.scenario import load_scenario
 from swarmbus.session import free_tcp_port
 from tests.support.mavclient import write_scenario
-from tests.support.procs import NODE_COMMAND, keys_for, wait_until
+from tests.support.procs import keys_for, wait_until
+from tests.support.upstack import recording_launch
 
 VEHICLES = ("uav1", "uav2", "uav3")
 
@@ -32,15 +33,7 @@ VEHICLES = ("uav1", "uav2", "uav3")
 def test_recorder_killed_nothing_it_received_is_lost(tmp_path: Path) -> None:
     path, _, _ = write_scenario(tmp_path / "scenario.toml", len(VEHICLES))
     scenario = load_scenario(path)
-    opts = LaunchOptions(
-        node_command=NODE_COMMAND,
-        scenario_path=path,
-        headless=True,
-        record=True,
-        run_dir=tmp_path / "run",
-        connect=(f"tcp/127.0.0.1:{free_tcp_port()}",),
-        roles=("router", "recorder", "plume", "physics", "autopilot"),
-    )
+    opts = recording_launch(path, tmp_path / "run", f"tcp/127.0.0.1:{free_tcp_port()}")
     keys = keys_for()
     lock = threading.Lock()
     seen: dict[tuple[str, int], bytes] = {}  # (key, tick) → payload, as the test received it
