@@ -41,6 +41,7 @@ class CooperativeSurgeCast(SurgeCast):
     vehicles = 3
     source = "Lochmatter & Martinoli 2008; detections shared over the radio"
     talks: ClassVar[bool] = True
+    start_spacing_m = 4.0  # the bench starts the members on a crosswind line this far apart
 
     def seek(self, step: SeekStep) -> Setpoint | None:
         tracker = self.tracker

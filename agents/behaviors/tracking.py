@@ -101,7 +101,7 @@ class PlumeTracker(SavesState):
     behaviour decides how to surge.
     """
 
-    state_attributes = (
+    state_attributes: ClassVar[tuple[str, ...]] = (
         "state",
         "last_hit_s",
         "longest_blank_s",

@@ -208,9 +208,11 @@ def _gsl_options(seed_default: int) -> Callable[[Callable[..., None]], Callable[
          "dynamics (full uses the scenario's)."),
         ("--sensor-period-ticks", click.IntRange(min=1), 2, "A reading every N control ticks "
          "(kinematic; full: 10 Hz)."),
-        ("--vehicles", click.IntRange(min=1, max=64), None, "Vehicles flying each algorithm "
-         "(default: the algorithm's own; several single-vehicle searchers fly independently, "
-         "the first declaration counts)."),
+        ("--vehicles", None, None, "Vehicles flying each algorithm, e.g. 3 or 1,3,10 (each "
+         "count its own cells; default: the algorithm's own; several single-vehicle searchers "
+         "fly independently, the first declaration counts)."),
+        ("--spacing", click.FloatRange(min=0.0), None, "A swarm's crosswind start spacing, m "
+         "(default: the algorithm's; 0: a circle of 2 m)."),
         ("--radio", None, "", "The link between vehicles: loss=P,latency=TICKS,range=M,"
          "bytes=N (default: a perfect link)."),
         ("--jobs", click.IntRange(min=1), 2, "Worker processes (--executor local)."),
@@ -256,6 +258,9 @@ GRID_ARGS = (
     "dynamics",
     "control_hz",
     "sensor_period_ticks",
+    "vehicles",
+    "radio",
+    "spacing",
 )
 
 

@@ -19,6 +19,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from deploy.visibility import floor_multiple
 from plume_atmosphere.plume_formula import downwind_unit
 from plumeswarm.gsl.episode import (
@@ -40,7 +42,7 @@ from plumeswarm.gsl.registry import (
     registered_algorithms,
     resolve_algorithm,
 )
-from plumeswarm.gsl.stats import Z_95, mcnemar_exact, summarise, wilson_interval
+from plumeswarm.gsl.stats import Z_95, mcnemar_exact, speedup, summarise, wilson_interval
 
 __all__ = ["Z_95", "GslError", "wilson_interval"]
 
@@ -72,8 +74,14 @@ class GslOptions:
     jobs: int = 2
     configs: tuple[Algorithm, ...] = ()  # per algorithm
     asked: tuple[str, ...] = ()  # --algorithms as given, for the command line
-    vehicles: int = 0  # how many fly each algorithm; 0: its own number
+    vehicles: tuple[int, ...] = ()  # how many fly each algorithm, each a cell; (): its own
     radio: tuple[tuple[str, Any], ...] = ()  # "radio.key" overrides of every environment
+    spacing: float | None = None  # a swarm's crosswind start spacing; None: the algorithm's
+
+    @property
+    def swarm(self) -> bool:
+        """``--vehicles`` asked for more than one vehicle: the swarm columns and tables."""
+        return any(n > 1 for n in self.vehicles)
 
     def radio_text(self) -> str:
         """``--radio`` as given to :func:`parse_radio` ("" for the default link)."""
@@ -144,6 +152,25 @@ def parse_radio(text: str) -> tuple[tuple[str, Any], ...]:
     return tuple(out)
 
 
+def parse_vehicles(value: int | str | Sequence[int] | None) -> tuple[int, ...]:
+    """``--vehicles``: ``3`` or ``1,3,10`` (each count its own cells); :class:`GslError`
+    names a bad count."""
+    if value is None or value == "" or value == 0:
+        return ()
+    if isinstance(value, int):
+        texts = [str(value)]
+    elif isinstance(value, str):
+        texts = [t.strip() for t in value.split(",") if t.strip()]
+    else:
+        texts = [str(v) for v in value]
+    counts = []
+    for t in texts:
+        if not t.isdigit() or not 1 <= int(t) <= 64:
+            raise GslError(f"--vehicles {t!r}: expected whole numbers from 1 to 64, e.g. 1,3,10")
+        counts.append(int(t))
+    return tuple(dict.fromkeys(counts))
+
+
 def make_options(
     algorithms: Sequence[str],
     environments: Sequence[str],
@@ -166,8 +193,7 @@ def make_options(
         kwargs["radio"] = radio = parse_radio(radio)
     if radio:
         load_environment(envs[0], radio)  # GslError: a value out of range
-    if kwargs.get("vehicles") is None:
-        kwargs["vehicles"] = 0
+    kwargs["vehicles"] = parse_vehicles(kwargs.get("vehicles"))
     return GslOptions(
         algorithms=names,
         environments=envs,
@@ -199,8 +225,11 @@ def specs_of(opts: GslOptions, **fields: Any) -> list[EpisodeSpec]:
         if opts.dynamics == "full":
             hz = load_environment(e).scenario.time.control_hz
             period = max(1, hz // FULL_SENSOR_HZ)
-        for s, (a, algo), run in itertools.product(
-            opts.sensors, zip(opts.algorithms, opts.configs, strict=True), range(opts.runs)
+        for s, (a, algo), n, run in itertools.product(
+            opts.sensors,
+            zip(opts.algorithms, opts.configs, strict=True),
+            opts.vehicles or (0,),
+            range(opts.runs),
         ):
             spec = EpisodeSpec(
                 algorithm=a,
@@ -214,8 +243,9 @@ def specs_of(opts: GslOptions, **fields: Any) -> list[EpisodeSpec]:
                 keep_trajectory=run == 0,
                 dynamics=opts.dynamics,
                 behavior=algo.behavior,
-                vehicles=opts.vehicles or algo.vehicles,
+                vehicles=n or algo.vehicles,
                 overrides=opts.radio,
+                start_spacing_m=opts.spacing,
             )
             specs.append(replace(spec, **fields))
     return specs
@@ -285,13 +315,14 @@ def throughput_lines(cpu_s: dict[EpisodeSpec, float]) -> list[str]:
     return lines
 
 
-Cell = tuple[str, str, str]  # environment, sensor, algorithm
+Cell = tuple[str, str, str, int]  # environment, sensor, algorithm, vehicles
 
 
 def cells_of(outcomes: Sequence[Outcome]) -> dict[Cell, list[Outcome]]:
     cells: dict[Cell, list[Outcome]] = {}
     for o in outcomes:
-        cells.setdefault((o.spec.environment, o.spec.sensor, o.spec.algorithm), []).append(o)
+        key = (o.spec.environment, o.spec.sensor, o.spec.algorithm, o.spec.vehicles)
+        cells.setdefault(key, []).append(o)
     return cells
 
 
@@ -350,17 +381,88 @@ def visibility_table(rows: Sequence[dict[str, Any]]) -> str:
 
 
 def rows_of(opts: GslOptions, outcomes: Sequence[Outcome]) -> list[dict[str, Any]]:
-    return [row_of(cell) for cell in cells_of(outcomes).values()]
+    cells = cells_of(outcomes)
+    rows = [row_of(cell) for cell in cells.values()]
+    if opts.swarm:
+        for row, (key, cell) in zip(rows, cells.items(), strict=True):
+            row.update(swarm_columns(cell, cells.get((*key[:3], 1))))
+    return rows
 
 
-def paired_rows(outcomes: Sequence[Outcome]) -> list[dict[str, Any]]:
+def swarm_columns(cell: Sequence[Outcome], single: Sequence[Outcome] | None) -> dict[str, Any]:
+    """A swarm cell's own columns: the median closest approach between two of its vehicles,
+    the median total path, and the speed-up over the same algorithm's 1-vehicle cell
+    (``single``) on the runs both declared within 2 m (:func:`speedup`)."""
+    closest = [o.closest_approach_m for o in cell if o.closest_approach_m is not None]
+    out: dict[str, Any] = {
+        "closest_approach_m": round(float(np.median(closest)), 2) if closest else None,
+        "min_closest_approach_m": round(min(closest), 2) if closest else None,
+        "total_path_m": round(float(np.median([o.total_path_m for o in cell])), 1),
+        "reached_member_2m_rate": round(
+            sum(o.nearest_member_m <= RADII_M[0] for o in cell) / len(cell), 3
+        ),
+        "speedup_over_1": None,
+        "speedup_ci95": None,
+        "speedup_pairs": 0,
+    }
+    if single is None:
+        return out
+    by_run = {o.spec.run: o.time_to_success_s for o in single}
+    pairs = [
+        (t1, o.time_to_success_s)
+        for o in cell
+        if o.time_to_success_s is not None and (t1 := by_run.get(o.spec.run)) is not None
+    ]
+    if pairs:
+        point, ci = speedup([p[0] for p in pairs], [p[1] for p in pairs])
+        out["speedup_over_1"] = round(point, 2)
+        out["speedup_ci95"] = None if ci is None else [round(ci[0], 2), round(ci[1], 2)]
+        out["speedup_pairs"] = len(pairs)
+    return out
+
+
+def scaling_table(rows: Sequence[dict[str, Any]]) -> str:
+    """Per algorithm and number of vehicles: success, reached, false declarations, median time
+    to declare, the speed-up over 1 vehicle, closest approach and total path."""
+    head = (
+        "| algorithm | environment | sensor | vehicles | success % (95 % CI) "
+        "| reached ≤ 2 m % (centroid, any member) | false declarations % | median time s "
+        "| speed-up over 1 (95 % CI, pairs) | closest approach m (median, min) "
+        "| total path m |\n|---|---|---|---|---|---|---|---|---|---|---|\n"
+    )
+    lines = []
+    for r in rows:
+        ci = r["speedup_ci95"]
+        interval = "" if ci is None else f"{ci[0]:.2f}–{ci[1]:.2f}, "
+        gain = (
+            "–"
+            if r["speedup_over_1"] is None
+            else f"{r['speedup_over_1']:.2f} ({interval}{r['speedup_pairs']} pairs)"
+        )
+        closest = (
+            "–"
+            if r["closest_approach_m"] is None
+            else f"{r['closest_approach_m']:.2f}, {r['min_closest_approach_m']:.2f}"
+        )
+        lines.append(
+            f"| {r['algorithm']} | {r['environment']} | {r['sensor']} | {r['vehicles']} "
+            f"| {_pct(r, 'success_rate')} | {_pct(r, 'reached_2m_rate', ci=False)}, "
+            f"{_pct(r, 'reached_member_2m_rate', ci=False)} "
+            f"| {_pct(r, 'false_declaration_rate', ci=False)} "
+            f"| {_fmt(r['median_time_s'], 1)} | {gain} | {closest} | {r['total_path_m']:.0f} |"
+        )
+    return head + "\n".join(lines) + "\n"
+
+
+def paired_rows(outcomes: Sequence[Outcome], swarm: bool = False) -> list[dict[str, Any]]:
     """McNemar's exact test on success (declared within 2 m) for every pair of algorithms in
-    every (environment, sensor): run k of both had the same start."""
-    by_pair: dict[tuple[str, str], dict[str, list[Outcome]]] = {}
-    for (env, sensor, algorithm), cell in cells_of(outcomes).items():
-        by_pair.setdefault((env, sensor), {})[algorithm] = cell
+    every (environment, sensor) — with ``swarm``, every (environment, sensor, vehicles): run
+    k of both had the same start."""
+    by_pair: dict[tuple[str, str, int], dict[str, list[Outcome]]] = {}
+    for (env, sensor, algorithm, n), cell in cells_of(outcomes).items():
+        by_pair.setdefault((env, sensor, n if swarm else 0), {})[algorithm] = cell
     rows = []
-    for (env, sensor), algos in by_pair.items():
+    for (env, sensor, n), algos in by_pair.items():
         for a, b in itertools.combinations(algos, 2):
             runs_a = {o.spec.run: o.success for o in algos[a]}
             runs_b = {o.spec.run: o.success for o in algos[b]}
@@ -372,6 +474,7 @@ def paired_rows(outcomes: Sequence[Outcome]) -> list[dict[str, Any]]:
                 {
                     "environment": load_environment(env).name,
                     "sensor": sensor,
+                    **({"vehicles": n} if swarm else {}),
                     "a": a,
                     "b": b,
                     "runs": len(shared),
@@ -395,7 +498,11 @@ def _pct(row: dict[str, Any], key: str, ci: bool = True) -> str:
     return f"{100 * value:.0f} ({100 * low:.0f}–{100 * high:.0f})"
 
 
-def markdown_table(rows: Sequence[dict[str, Any]]) -> str:
+def _algorithm_cell(row: dict[str, Any], swarm: bool) -> str:
+    return f"{row['algorithm']} ×{row['vehicles']}" if swarm else str(row["algorithm"])
+
+
+def markdown_table(rows: Sequence[dict[str, Any]], swarm: bool = False) -> str:
     radii = [f"{r:g}m" for r in RADII_M]
     head = (
         "| algorithm | environment | sensor | runs | success % (95 % CI) "
@@ -414,7 +521,7 @@ def markdown_table(rows: Sequence[dict[str, Any]]) -> str:
             else f"{r['median_time_s']:.1f} ({_fmt(q1, 1)}–{_fmt(q3, 1)})"
         )
         cells = [
-            r["algorithm"],
+            _algorithm_cell(r, swarm),
             r["environment"],
             r["sensor"],
             str(r["runs"]),
@@ -432,12 +539,19 @@ def markdown_table(rows: Sequence[dict[str, Any]]) -> str:
 
 
 def paired_table(rows: Sequence[dict[str, Any]]) -> str:
+    swarm = bool(rows) and "vehicles" in rows[0]
     head = (
-        "| environment | sensor | A | B | runs | only A succeeds | only B succeeds "
-        "| p (McNemar exact) |\n|---|---|---|---|---|---|---|---|\n"
+        "| environment | sensor | "
+        + ("vehicles | " if swarm else "")
+        + "A | B | runs | only A succeeds | only B succeeds "
+        "| p (McNemar exact) |\n|---|---|---|---|---|---|---|---|"
+        + ("---|" if swarm else "")
+        + "\n"
     )
     lines = [
-        f"| {r['environment']} | {r['sensor']} | {r['a']} | {r['b']} | {r['runs']} "
+        f"| {r['environment']} | {r['sensor']} | "
+        + (f"{r['vehicles']} | " if swarm else "")
+        + f"{r['a']} | {r['b']} | {r['runs']} "
         f"| {r['a_only']} | {r['b_only']} | {r['p_exact']:.4f} |"
         for r in rows
     ]
@@ -454,7 +568,9 @@ def command_line(opts: GslOptions, sub: str = "") -> str:
     parts.append(f"--sensors {','.join(opts.sensors)}")
     parts.append(f"--runs {opts.runs} --seed {opts.seed}")
     if opts.vehicles:
-        parts.append(f"--vehicles {opts.vehicles}")
+        parts.append(f"--vehicles {','.join(str(n) for n in opts.vehicles)}")
+    if opts.spacing is not None:
+        parts.append(f"--spacing {opts.spacing:g}")
     if opts.radio:
         parts.append(f"--radio {opts.radio_text()}")
     if opts.time_limit_s != 300.0:
@@ -474,7 +590,14 @@ def seed_note(opts: GslOptions) -> str:
 
 
 def protocol_line(opts: GslOptions) -> str:
-    swarm = f"{opts.vehicles} vehicles per algorithm, " if opts.vehicles else ""
+    counts = ", ".join(str(n) for n in opts.vehicles)
+    swarm = f"{counts} vehicles per algorithm, " if opts.vehicles else ""
+    if opts.swarm:
+        spacing = "the algorithm's" if opts.spacing is None else f"{opts.spacing:g} m"
+        swarm += (
+            f"a swarm's starts on a crosswind line centred on the run's start ({spacing} "
+            "spacing; 0: a circle of 2 m), "
+        )
     radio = f"radio {opts.radio_text()} (docs/agents.md), " if opts.radio else ""
     return (
         f"{opts.runs} runs per cell, {swarm}{radio}"
@@ -507,11 +630,20 @@ def report_text(
     text = (
         f"```\n{command_line(opts)}\n```\n\n{protocol_line(opts)} {seed_note(opts)}\n\n"
         + "\n".join(environment_lines(opts))
-        + f"\n{avail}\n\n{markdown_table(rows)}"
+        + f"\n{avail}\n\n{markdown_table(rows, opts.swarm)}"
         + "\nSensor visibility: the time-averaged plume at the farthest start in multiples of "
         f"the sensor's detection floor; below {VISIBLE_FLOOR_MULTIPLE:g}, flagged.\n\n"
         + visibility_table(rows)
     )
+    if opts.swarm:
+        text += (
+            "\nSwarm scaling (success: the swarm's first declaration within 2 m; reached: the "
+            "vehicles' centroid, then any one member, within 2 m; speed-up: median time to "
+            "declare of 1 vehicle over that of N on the runs both declared within 2 m, paired "
+            "by start, 95 % percentile bootstrap; closest approach: between any two vehicles; "
+            "total path: all vehicles'):"
+            "\n\n" + scaling_table(rows)
+        )
     if paired:
         text += (
             "\nPaired comparisons on the same starts (success = declared within 2 m; "
@@ -554,13 +686,21 @@ def _cell(value: Any) -> str:
     return str(value)
 
 
-def runs_csv(outcomes: Sequence[Outcome]) -> str:
-    """Every episode, one line each (``RUN_COLUMNS``)."""
+#: Appended to ``RUN_COLUMNS`` when ``--vehicles`` asks for a swarm.
+SWARM_COLUMNS = ("vehicles", "closest_approach_m", "total_path_m", "nearest_member_m")
+
+
+def runs_csv(outcomes: Sequence[Outcome], swarm: bool = False) -> str:
+    """Every episode, one line each (``RUN_COLUMNS``; with ``swarm``, then
+    ``SWARM_COLUMNS``)."""
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
-    writer.writerow(RUN_COLUMNS)
+    writer.writerow(RUN_COLUMNS + (SWARM_COLUMNS if swarm else ()))
     for o in outcomes:
         s = o.spec
+        extra = (
+            (s.vehicles, o.closest_approach_m, o.total_path_m, o.nearest_member_m) if swarm else ()
+        )
         writer.writerow(
             _cell(v)
             for v in (
@@ -584,6 +724,7 @@ def runs_csv(outcomes: Sequence[Outcome]) -> str:
                 o.path_length_m,
                 o.path_length_m / o.initial_distance_m,
                 o.detections_per_min,
+                *extra,
             )
         )
     return buf.getvalue()
@@ -593,12 +734,12 @@ def write_outputs(
     out: Path, opts: GslOptions, rows: Sequence[dict[str, Any]], outcomes: Sequence[Outcome]
 ) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
-    paired = paired_rows(outcomes)
+    paired = paired_rows(outcomes, opts.swarm)
     files = {
         "gsl.md": report_text(opts, rows, paired),
         "gsl.json": json.dumps(list(rows), indent=1, ensure_ascii=False) + "\n",
         "paired.json": json.dumps(paired, indent=1, ensure_ascii=False) + "\n",
-        "runs.csv": runs_csv(outcomes),
+        "runs.csv": runs_csv(outcomes, opts.swarm),
     }
     written = []
     for name, text in files.items():

@@ -50,6 +50,7 @@ from plumeswarm.gsl.registry import (
     SENSORS,
     Algorithm,
     Environment,
+    algorithm_from_spec,
     load_environment,
     resolve_algorithm,
     time_dependent,
@@ -114,11 +115,20 @@ class EpisodeSpec:
     vehicles: int = 0  # how many fly it; 0: the algorithm's
     overrides: tuple[tuple[str, Any], ...] = ()  # "section.key" of the environment's scenario
     start_along_m: tuple[float, float] = START_ALONG_M
+    start_spacing_m: float | None = None  # a swarm's crosswind spacing; None: the algorithm's
 
     def algorithm_config(self) -> Algorithm:
         if self.behavior:
             return Algorithm(self.behavior, self.vehicles or 1)
         return resolve_algorithm(self.algorithm)[1]
+
+    def spacing_m(self) -> float:
+        """The crosswind spacing of a swarm's starts (0: a circle of 2 m)."""
+        if self.start_spacing_m is not None:
+            return self.start_spacing_m
+        if self.behavior:
+            return algorithm_from_spec(self.behavior).start_spacing_m
+        return self.algorithm_config().start_spacing_m
 
 
 @dataclass
@@ -126,7 +136,9 @@ class Outcome:
     """One episode. ``success``: a declaration within ``SUCCESS_RADIUS_M`` of the source;
     ``time_to_success_s`` its time from the episode's start. ``final_error_m``: the
     declaration's distance from the source, or (none) where the vehicles (their centroid)
-    end. ``first_within_s[i]``: when the centroid first came within ``RADII_M[i]``."""
+    end. ``first_within_s[i]``: when the centroid first came within ``RADII_M[i]``.
+    ``closest_approach_m``: the least distance (3-D) between two vehicles at any tick;
+    ``nearest_member_m``: the least horizontal distance of any one vehicle to the source."""
 
     spec: EpisodeSpec
     success: bool
@@ -142,6 +154,9 @@ class Outcome:
     min_distance_m: float = math.inf
     first_within_s: tuple[float | None, ...] = ()
     declared_s: float | None = None
+    closest_approach_m: float | None = None  # between two vehicles (None: one vehicle)
+    total_path_m: float = 0.0  # every vehicle's path, summed
+    nearest_member_m: float = math.inf  # the closest any one vehicle came to the source
 
 
 def start_point(
@@ -161,10 +176,20 @@ def start_point(
 
 def episode_starts(scenario: Scenario, spec: EpisodeSpec, count: int) -> list[list[float]]:
     """Where each vehicle starts (ENU, at ``START_ALTITUDE_M``): run ``spec.run``'s start; a
-    swarm on a circle of 2 m around it."""
+    swarm on a crosswind line centred on it, ``spec.spacing_m()`` apart (vehicle i at
+    (i − (N − 1)/2) × spacing to the left of the mean wind), or — spacing 0 — on a circle of
+    2 m around it."""
     sx, sy = start_point(scenario, spec.seed, spec.run, spec.start_along_m)
     starts = [[sx, sy, START_ALTITUDE_M] for _ in range(count)]
-    if count > 1:
+    spacing = spec.spacing_m() if count > 1 else 0.0
+    if spacing > 0.0:
+        dw = downwind_unit(scenario.wind.from_deg)
+        cw = (-dw[1], dw[0])
+        for i, p in enumerate(starts):
+            offset = (i - (count - 1) / 2.0) * spacing
+            p[0] += offset * cw[0]
+            p[1] += offset * cw[1]
+    elif count > 1:
         for i, p in enumerate(starts):
             angle = 2.0 * math.pi * i / count
             p[0] += 2.0 * math.cos(angle)
@@ -278,6 +303,8 @@ class Tally:
         self.tracks: list[list[tuple[float, float]]] = [[] for _ in range(n)]
         self.previous: list[tuple[float, float, float]] | None = None
         self.count = 0
+        self.closest_m = math.inf
+        self.nearest_m = math.inf
 
     def observe(self, t: float, positions: Sequence[tuple[float, float, float]]) -> None:
         """Every vehicle's position at sim time ``t`` (one call per control tick)."""
@@ -285,6 +312,9 @@ class Tally:
             for i, (p, q) in enumerate(zip(positions, self.previous, strict=True)):
                 self.path[i] += math.hypot(p[0] - q[0], p[1] - q[1])
         self.previous = list(positions)
+        for i in range(1, self.n):
+            for j in range(i):
+                self.closest_m = min(self.closest_m, math.dist(positions[i], positions[j]))
         if self.spec.keep_trajectory and self.count % self.keep_every == 0:
             for i, p in enumerate(positions):
                 self.tracks[i].append((p[0], p[1]))
@@ -293,6 +323,8 @@ class Tally:
         cy = sum(p[1] for p in positions) / self.n
         distance = math.dist((cx, cy), self.source)
         self.min_distance_m = min(self.min_distance_m, distance)
+        for p in positions:
+            self.nearest_m = min(self.nearest_m, math.dist((p[0], p[1]), self.source))
         for i, r in enumerate(RADII_M):
             if self.first_within_s[i] is None and distance <= r:
                 self.first_within_s[i] = t - self.t0
@@ -331,6 +363,9 @@ class Tally:
             min_distance_m=self.min_distance_m,
             first_within_s=tuple(self.first_within_s),
             declared_s=declared_s,
+            closest_approach_m=self.closest_m if self.n > 1 else None,
+            total_path_m=sum(self.path),
+            nearest_member_m=self.nearest_m,
         )
 
 

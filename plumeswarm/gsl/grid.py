@@ -84,8 +84,12 @@ def parse_executor(text: str) -> Executor:
 
 
 def spec_key(spec: EpisodeSpec) -> str:
-    """The episode's identity in a journal: a digest of every field of its spec."""
-    text = json.dumps(dataclasses.asdict(spec), sort_keys=True, default=repr)
+    """The episode's identity in a journal: a digest of every field of its spec (a start
+    spacing left to the algorithm is left out, as before the field existed)."""
+    fields = dataclasses.asdict(spec)
+    if fields["start_spacing_m"] is None:
+        del fields["start_spacing_m"]
+    text = json.dumps(fields, sort_keys=True, default=repr)
     return hashlib.sha256(text.encode()).hexdigest()[:24]
 
 

@@ -5,7 +5,8 @@
   entry-point group :data:`ENTRY_POINT_GROUP` (``plumeswarm.behaviors``), and any class named
   on the command line as ``name=module:Class`` — one registry, :func:`resolve_algorithm`. A
   class may say how many vehicles fly it (``vehicles = 3``) and what it follows
-  (``source = "…"``); the defaults are 1 and "".
+  (``source = "…"``), and how far apart its members start across the wind
+  (``start_spacing_m = 4.0``); the defaults are 1, "" and 0 (a circle of 2 m).
 - **Environments** are scenario files: a name is ``swarmbus/scenarios/gsl/<name>.toml``, anything
   else a path (:func:`load_environment`). The file gives the plume, the wind and the world; the
   bench adds the vehicles, the sensor, the seed and the protocol. ``section.key=value``
@@ -60,6 +61,7 @@ class Algorithm:
     behavior: str  # "module:Class"
     vehicles: int = 1
     source: str = ""  # the publication it follows
+    start_spacing_m: float = 0.0  # a swarm's starts: a crosswind line this far apart; 0: a circle
 
 
 BUILTIN_ALGORITHMS: dict[str, Algorithm] = {
@@ -83,6 +85,13 @@ BUILTIN_ALGORITHMS: dict[str, Algorithm] = {
         "agents.behaviors.coop_surge_cast:CooperativeSurgeCast",
         3,
         "Lochmatter & Martinoli 2008; detections shared over the radio",
+        4.0,
+    ),
+    "coop_declare": Algorithm(
+        "agents.behaviors.coop_declare:CooperativeDeclaration",
+        3,
+        "Lochmatter & Martinoli 2008; detections and empty casts pooled (Durve et al. 2020)",
+        4.0,
     ),
     "oracle": Algorithm("agents.behaviors.oracle:Oracle", 1, "knows the source (ceiling)"),
 }
@@ -111,7 +120,10 @@ def algorithm_from_spec(behavior: str) -> Algorithm:
     vehicles = getattr(cls, "vehicles", 1)
     if not isinstance(vehicles, int) or vehicles < 1:
         raise GslError(f"algorithm {behavior!r}: vehicles must be an int >= 1, got {vehicles!r}")
-    return Algorithm(behavior, vehicles, str(getattr(cls, "source", "")))
+    spacing = getattr(cls, "start_spacing_m", 0.0)
+    if not isinstance(spacing, int | float) or spacing < 0.0:
+        raise GslError(f"algorithm {behavior!r}: start_spacing_m must be >= 0, got {spacing!r}")
+    return Algorithm(behavior, vehicles, str(getattr(cls, "source", "")), float(spacing))
 
 
 @functools.cache

@@ -1,5 +1,6 @@
 """The statistics of ``plumeswarm bench gsl``: rates with Wilson intervals, one row per cell,
-and McNemar's exact test between two algorithms on the same starts."""
+McNemar's exact test between two algorithms on the same starts, and a swarm's speed-up over
+one vehicle with a bootstrap interval."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from scipy.stats import binomtest
+from scipy.stats import binomtest, bootstrap
 
 from plumeswarm.gsl.episode import RADII_M, SUCCESS_RADIUS_M, Outcome
 
@@ -36,6 +37,41 @@ def mcnemar_exact(a: Sequence[bool], b: Sequence[bool]) -> tuple[int, int, float
     if only_a + only_b == 0:
         return 0, 0, 1.0
     return only_a, only_b, float(binomtest(only_a, only_a + only_b, 0.5).pvalue)
+
+
+#: Bootstrap resamples of the speed-up interval, and the generator's seed (the same bytes
+#: for the same runs).
+BOOTSTRAP_RESAMPLES = 9999
+BOOTSTRAP_SEED = 0
+
+
+def speedup(
+    single: Sequence[float], swarm: Sequence[float]
+) -> tuple[float, tuple[float, float] | None]:
+    """The speed-up median(``single``) / median(``swarm``) of paired times (run k of both: the
+    same start) and its 95 % percentile bootstrap interval over the pairs
+    (``scipy.stats.bootstrap``, paired resampling; None with fewer than 3 pairs)."""
+    if len(single) != len(swarm) or not single:
+        raise ValueError(f"paired times of lengths {len(single)} and {len(swarm)}")
+    a, b = np.asarray(single, dtype=float), np.asarray(swarm, dtype=float)
+    point = float(np.median(a) / np.median(b))
+    if len(a) < 3:
+        return point, None
+
+    def ratio(x: np.ndarray, y: np.ndarray, axis: int = -1) -> np.ndarray:
+        return np.asarray(np.median(x, axis=axis) / np.median(y, axis=axis))
+
+    res = bootstrap(
+        (a, b),
+        ratio,
+        paired=True,
+        vectorized=True,
+        n_resamples=BOOTSTRAP_RESAMPLES,
+        method="percentile",
+        rng=np.random.default_rng(BOOTSTRAP_SEED),
+    )
+    ci = res.confidence_interval
+    return point, (float(ci.low), float(ci.high))
 
 
 def _r(value: float | None, digits: int = 3) -> float | None:
