@@ -151,19 +151,30 @@ def test_what_is_kept_for_a_catch_up_is_bounded_in_bytes(
         assert 0 < fit < ticks
         assert out.kept_bytes == total <= bound
         inboxes = [Inbox(session, KEYS.vehicle_state(v)) for v in vehicles[:2]]
-        wait_until(lambda: out.put_states(), 5.0, "the subscribers matched")
-        wait_until(lambda: all(i.got for i in inboxes), 5.0, "the last tick's states")
-        for inbox in inboxes:
-            inbox.taken()
+
+        def both_have_the_last_states() -> bool:
+            # the two subscriptions match one at a time: put again until both have had one
+            out.put_states()
+            return all(i.got for i in inboxes)
+
+        wait_until(both_have_the_last_states, 10.0, "the last tick's states at both subscribers")
         out.catch_up(outage)
         assert out.resender.wait_idle(30.0)
+        # a put is not a sample received: after the re-send, an end mark on each key (one
+        # session, one key: in order); what came before the re-send is the last tick's states
+        for v in vehicles[:2]:
+            session.put(KEYS.vehicle_state(v), b"end")
+        wait_until(
+            lambda: all(i.got and i.got[-1][1] == b"end" for i in inboxes), 10.0, "the end marks"
+        )
         for v, inbox in zip(vehicles, inboxes, strict=False):
-            got = [p for _, p in inbox.taken()]
+            got = [p for _, p in inbox.taken()][:-1]
             want = [
                 encode(msgspec.structs.replace(STATE, vehicle_id=v, tick=k))
                 for k in range(ticks - fit, ticks)
             ]
-            assert got == want
+            assert got[len(got) - fit :] == want
+            assert set(got[: len(got) - fit]) == {want[-1]}  # the last tick's, put before
     finally:
         out.close()
         for inbox in inboxes:
