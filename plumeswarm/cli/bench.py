@@ -214,7 +214,8 @@ def _gsl_options(seed_default: int) -> Callable[[Callable[..., None]], Callable[
         ("--spacing", click.FloatRange(min=0.0), None, "A swarm's crosswind start spacing, m "
          "(default: the algorithm's; 0: a circle of 2 m)."),
         ("--radio", None, "", "The link between vehicles: loss=P,latency=TICKS,range=M,"
-         "bytes=N (default: a perfect link)."),
+         "bytes=N, or perfect (the default); several separated by / (e.g. "
+         "perfect/loss=0.5,latency=20), each its own cells."),
         ("--jobs", click.IntRange(min=1), 2, "Worker processes (--executor local)."),
         ("--executor", None, "local", "local: a pool of --jobs processes; ray: a Ray started "
          "for the run; ray=ADDRESS: a Ray cluster (ray=auto: the one on this machine). Needs "
