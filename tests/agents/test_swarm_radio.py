@@ -11,7 +11,9 @@ crossed the bus, and their drop rate is the scenario's loss.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import io
 import math
 import struct
 import threading
@@ -27,7 +29,7 @@ from agents.swarm import RadioReadError, RadioSent, RadioUnavailable, WaitTimeou
 from swarmbus.codec import decode
 from swarmbus.messages import VehicleState, VehicleStatus
 from swarmbus.scenario import DEFAULT_SCENARIO, Scenario, load_scenario
-from tests.support.procs import wait_until
+from tests.support.procs import REPO, wait_until
 from tests.support.upstack import Up, plumeswarm_up
 
 COOP = 'behavior = "agents.behaviors.coop_surge_cast:CooperativeSurgeCast"\n'
@@ -108,6 +110,7 @@ def test_the_client_reads_the_detections_and_the_link_counts(
         raw.undeclare()
         sub.close()
         fetched_late = _a_late_client_fetches_the_kept_batches(up, sw, "uav2")
+        printed = _the_docs_example_on(sw)
 
     dt_s = 1.0 / scenario.time.control_hz
     with seen.lock:
@@ -126,6 +129,14 @@ def test_the_client_reads_the_detections_and_the_link_counts(
         assert (d.x_m, d.y_m) == pytest.approx(state.position_enu_m[:2], abs=1e-9), (m, d, state)
         # the reading reaches the behaviour on the tick after its sample: published then
         assert m.tick == sample_tick + 1, (m.tick, sample_tick)
+    # docs/agents.md's example printed every kept detection of uav2, and uav1's link counts
+    rows = [line.split() for line in printed.splitlines()[:-1]]
+    assert rows == [
+        ["uav2", str(m.tick), repr(d.x_m), repr(d.y_m), repr(d.sim_time_s)]
+        for m, d in detections
+        if m.sender == "uav2"
+    ]
+    assert printed.splitlines()[-1] == repr(links["uav1"])
 
     # The cache holds what the callbacks got, in (tick, index) order; since_tick and of filter it.
     for vid in FLYERS:
@@ -168,6 +179,18 @@ def _lost(seed: int, tick: int, sender: str, receiver: str, index: int) -> bool:
     h.update(struct.pack("<qqq", seed, tick, index))
     h.update(sender.encode() + b"\x00" + receiver.encode())
     return (int.from_bytes(h.digest(), "little") >> 11) * 2.0**-53 < LOSS
+
+
+def _the_docs_example_on(sw: Swarm) -> str:
+    """What docs/agents.md's "Reading the radio" example prints, run on this client."""
+    text = (REPO / "docs" / "agents.md").read_text().split("### Reading the radio", 1)[1]
+    code = text.split("```python\n", 1)[1].split("```", 1)[0]
+    assert code.count("Swarm.connect()") == 1
+    code = code.replace("Swarm.connect()", "_this_client")  # the stack's, not the default's
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        exec(compile(code, "docs/agents.md", "exec"), {"_this_client": contextlib.nullcontext(sw)})
+    return out.getvalue()
 
 
 def _a_late_client_fetches_the_kept_batches(up: Up, sw: Swarm, vid: str) -> bool:
