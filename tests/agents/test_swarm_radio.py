@@ -110,7 +110,8 @@ def test_the_client_reads_the_detections_and_the_link_counts(
         raw.undeclare()
         sub.close()
         fetched_late = _a_late_client_fetches_the_kept_batches(up, sw, "uav2")
-        printed = _the_docs_example_on(sw)
+        printed = _the_docs_example_on(sw, "agents.md", "### Reading the radio")
+        printed_swarm = _the_docs_example_on(sw, "swarm.md", "## Reading the radio")
 
     dt_s = 1.0 / scenario.time.control_hz
     with seen.lock:
@@ -129,7 +130,7 @@ def test_the_client_reads_the_detections_and_the_link_counts(
         assert (d.x_m, d.y_m) == pytest.approx(state.position_enu_m[:2], abs=1e-9), (m, d, state)
         # the reading reaches the behaviour on the tick after its sample: published then
         assert m.tick == sample_tick + 1, (m.tick, sample_tick)
-    # docs/agents.md's example printed every kept detection of uav2, and uav1's link counts
+    # the docs' examples printed every kept detection of uav2, and uav1's link counts
     rows = [line.split() for line in printed.splitlines()[:-1]]
     assert rows == [
         ["uav2", str(m.tick), repr(d.x_m), repr(d.y_m), repr(d.sim_time_s)]
@@ -137,6 +138,8 @@ def test_the_client_reads_the_detections_and_the_link_counts(
         if m.sender == "uav2"
     ]
     assert printed.splitlines()[-1] == repr(links["uav1"])
+    assert [line.split() for line in printed_swarm.splitlines()[:-1]] == [r[1:4] for r in rows]
+    assert printed_swarm.splitlines()[-1] == repr(links["uav1"])
 
     # The cache holds what the callbacks got, in (tick, index) order; since_tick and of filter it.
     for vid in FLYERS:
@@ -181,15 +184,15 @@ def _lost(seed: int, tick: int, sender: str, receiver: str, index: int) -> bool:
     return (int.from_bytes(h.digest(), "little") >> 11) * 2.0**-53 < LOSS
 
 
-def _the_docs_example_on(sw: Swarm) -> str:
-    """What docs/agents.md's "Reading the radio" example prints, run on this client."""
-    text = (REPO / "docs" / "agents.md").read_text().split("### Reading the radio", 1)[1]
+def _the_docs_example_on(sw: Swarm, page: str, heading: str) -> str:
+    """What the example under ``heading`` of ``docs/<page>`` prints, run on this client."""
+    text = (REPO / "docs" / page).read_text().split(heading, 1)[1]
     code = text.split("```python\n", 1)[1].split("```", 1)[0]
     assert code.count("Swarm.connect()") == 1
     code = code.replace("Swarm.connect()", "_this_client")  # the stack's, not the default's
     out = io.StringIO()
     with contextlib.redirect_stdout(out):
-        exec(compile(code, "docs/agents.md", "exec"), {"_this_client": contextlib.nullcontext(sw)})
+        exec(compile(code, f"docs/{page}", "exec"), {"_this_client": contextlib.nullcontext(sw)})
     return out.getvalue()
 
 
