@@ -20,14 +20,16 @@ import threading
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 
+import msgspec
 import pytest
 import zenoh
 
 from agents import ClockError, Swarm
 from agents.behaviors.coop_surge_cast import Detection
 from agents.swarm import RadioReadError, RadioSent, RadioUnavailable, WaitTimeout
+from agents.swarm_radio import RadioKept, kind_of
 from swarmbus.codec import decode
-from swarmbus.messages import VehicleState, VehicleStatus
+from swarmbus.messages import RadioBatch, RadioMessage, VehicleState, VehicleStatus
 from swarmbus.scenario import DEFAULT_SCENARIO, Scenario, load_scenario
 from tests.support.procs import REPO, wait_until
 from tests.support.upstack import Up, plumeswarm_up
@@ -216,3 +218,28 @@ def _a_late_client_fetches_the_kept_batches(up: Up, sw: Swarm, vid: str) -> bool
 def test_radio_kept_ticks_is_checked(coop_stack: tuple[Up, Scenario]) -> None:
     with pytest.raises(ValueError, match="radio_kept_ticks must be an integer >= 1, got 0"):
         Swarm.connect(connect=[coop_stack[0].endpoint], radio_kept_ticks=0)
+
+
+_encode = msgspec.msgpack.Encoder().encode
+
+
+def _batch(tick: int, *values: float) -> RadioBatch:
+    messages = [
+        RadioMessage(index=2 + n, kind=kind_of(Detection), payload=_encode(Detection(v, v, v)))
+        for n, v in enumerate(values)
+    ]
+    return RadioBatch(sender="uav1", tick=tick, messages=messages)
+
+
+def test_the_kept_batches_stay_in_tick_order_and_bounded() -> None:
+    kept = RadioKept(ticks=3)
+    assert kept.add(_batch(5, 1.0)) is not None and kept.add(_batch(7)) == []  # empty: kept
+    assert kept.add(_batch(5, 9.0)) is None  # a tick it has: ignored
+    assert kept.add(_batch(6, 2.0, 3.0)) is not None  # late (a query's answer): in its place
+    assert [(m.tick, m.index) for m in kept.messages("uav1", -1, None)] == [(5, 2), (6, 2), (6, 3)]
+    assert kept.add(_batch(8, 4.0)) is not None  # a fourth tick: the oldest goes
+    assert [m.decode(Detection).x_m for m in kept.messages("uav1", -1, None)] == [2.0, 3.0, 4.0]
+    assert kept.add(_batch(4, 0.0)) is None  # older than everything a full history keeps
+    assert kept.messages("uav1", 6, kind_of(Detection)) == kept.messages("uav1", 7, None)
+    assert kept.last_tick("uav1") == 8 and kept.last_tick("uav2") is None
+    assert kept.messages("uav1", 6, "other:Type") == []
