@@ -15,7 +15,11 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from plume_atmosphere.calibration import derive_calibration, taylor_variance
+from plume_atmosphere.calibration import (
+    derive_calibration,
+    lagrangian_timescale_s,
+    taylor_variance,
+)
 from plume_atmosphere.wind import ColouredNoise
 from plume_service.field import ConcentrationField, FloatArray
 from plume_service.filament import FilamentPlume
@@ -281,3 +285,52 @@ def test_a_bad_intermittency_option_is_one_line(extra: list[str]) -> None:
     res = run_cli(["plume", "intermittency", "gsl/meander_low", "--seconds", "1", *extra])
     assert res.returncode != 0
     assert res.stderr.startswith("plumeswarm: error:") and res.stderr.count("\n") == 1
+
+
+# --- with local turbulence ([wind.turbulence]) ---------------------------------------------
+
+_TURBULENT_TOML = """
+[wind]
+speed_m_s = 6.0
+[wind.turbulence]
+share = 0.3
+[plume]
+model = "filament"
+[[vehicles]]
+id = "a"
+"""
+
+
+def test_the_scenario_derives_it_from_the_stability_class() -> None:
+    s = parse_scenario(_TURBULENT_TOML)
+    t = s.wind.turbulence
+    assert t is not None
+    # Hanna's T_L at 10 m, 6 m/s, z0 0.1 m; Kaimal's v length scale 19/12·z
+    assert t.timescale_s == pytest.approx(lagrangian_timescale_s(6.0, 10.0, 0.1), rel=1e-12)
+    assert t.length_scale_m == pytest.approx(19.0 / 12.0 * 10.0)
+    # crosswind: 30 % of class D's σy² (a meander of share 0.3 has the same σv)
+    cal = derive_calibration("D", "mcmullen", 6.0, 10.0, 0.3)
+    assert t.std_m_s[1] == pytest.approx(cal.sigma_v_m_s, rel=1e-12)
+    # along-wind: Kaimal's σu/σv = √(105·19 / (22·3·17))
+    assert t.std_m_s[0] / t.std_m_s[1] == pytest.approx(math.sqrt(1995.0 / 1122.0))
+    # vertical: Taylor's σz² at 30, 50, 80 m from σw, 30 % of class D's within 25 % each
+    for x in (30.0, 50.0, 80.0):
+        tt, tl, sw = x / 6.0, t.timescale_s, t.std_m_s[2]
+        variance = 2.0 * sw**2 * tl * (tt - tl * (1.0 - math.exp(-tt / tl)))
+        assert variance / mcmullen_d("z", x) ** 2 == pytest.approx(0.3, rel=0.25)
+
+
+def test_the_calibrated_filament_plume_keeps_the_class_d_widths_with_turbulence() -> None:
+    # meander_low with 30 % of the variance in local turbulence (the meander keeps its 30 %):
+    # the filaments' own spread is what the two leave; 90 m of plume, 200 s every 2 s
+    scenario = load_scenario(
+        GSL_ENVIRONMENTS_DIR / "meander_low.toml",
+        ["wind.turbulence.share=0.3", "wind.turbulence.modes=16", "plume.filament.max_age_s=15.0"],
+    )
+    field = field_from_scenario(scenario)
+    widths = time_averaged_widths(
+        field, (0.0, 0.0, 10.0), (1.0, 0.0), (30.0, 50.0, 80.0), 20.0, 200.0, every_s=2.0
+    )
+    for w in widths:
+        assert w.sigma_y_m == pytest.approx(mcmullen_d("y", w.x_m), rel=0.2), w
+        assert w.sigma_z_m == pytest.approx(mcmullen_d("z", w.x_m), rel=0.2), w
