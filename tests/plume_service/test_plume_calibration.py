@@ -20,18 +20,21 @@ from plume_atmosphere.calibration import (
     lagrangian_timescale_s,
     taylor_variance,
 )
-from plume_atmosphere.wind import ColouredNoise
+from plume_atmosphere.wind import ColouredNoise, wind_vector_enu
 from plume_service.field import ConcentrationField, FloatArray
 from plume_service.filament import FilamentPlume
 from plume_service.from_scenario import field_from_scenario
+from plume_service.gaussian import GaussianPlume
 from plume_service.statistics import intermittency, time_averaged_widths, warmup_s
 from swarmbus.scenario import (
     GSL_ENVIRONMENTS_DIR,
     ScenarioError,
     WindMeander,
+    bundled_scenarios,
     calibrate_scenario,
     load_scenario,
     parse_scenario,
+    resolve_scenario_path,
 )
 from tests.support.procs import run_cli
 
@@ -196,6 +199,60 @@ def test_calibrated_time_average_has_the_class_d_gaussian_widths(name: str) -> N
     for w in widths:
         assert w.sigma_y_m == pytest.approx(mcmullen_d("y", w.x_m), rel=0.2), (name, w)
         assert w.sigma_z_m == pytest.approx(mcmullen_d("z", w.x_m), rel=0.2), (name, w)
+
+
+#: The bundled time-dependent scenarios outside the benchmark's environments, calibrated to
+#: their atmosphere (the benchmark's: CALIBRATED, measured above).
+OTHER_CALIBRATED = ("filament",)
+#: Bundled time-dependent scenarios that are published references, deliberately not
+#: calibrated to an atmosphere (docs/plume.md): Farrell et al.'s plume as published and the
+#: wind-tunnel thread.
+REFERENCES = ("gsl/farrell2002_reference", "gsl/lab_thread")
+
+
+def _time_dependent(name: str) -> bool:
+    plume = load_scenario(resolve_scenario_path(name)).plume
+    return any((src.model or plume.model) in ("filament", "puff") for src in plume.sources)
+
+
+def test_every_bundled_time_dependent_scenario_is_calibrated_or_a_named_reference() -> None:
+    # a new bundled filament or puff scenario must be calibrated (and measured) or named here
+    names = {n for n in bundled_scenarios() if _time_dependent(n)}
+    calibrated = {f"gsl/{n}" for n in CALIBRATED} | set(OTHER_CALIBRATED)
+    assert names == calibrated | set(REFERENCES)
+    for name in names:
+        scenario = load_scenario(resolve_scenario_path(name))
+        assert (scenario.plume.calibration is not None) == (name in calibrated), name
+
+
+@pytest.mark.parametrize("name", OTHER_CALIBRATED)
+def test_bundled_scenario_time_average_has_its_atmospheres_widths(name: str) -> None:
+    # the same measurement of the steady Gaussian plume of its atmosphere (class, family, wind,
+    # source) is the target: at a 5 m release the ground folds σz on both alike
+    scenario = load_scenario(resolve_scenario_path(name))
+    src = scenario.plume.sources[0]
+    source = (src.x_m, src.y_m, src.release_height_m)
+    ux, uy, _ = wind_vector_enu(1.0, scenario.wind.from_deg)
+    x = (30.0, 50.0, 80.0)
+    widths = time_averaged_widths(
+        field_from_scenario(scenario), source, (ux, uy), x, warmup_s(scenario), 300.0, 2.0
+    )
+    steady = GaussianPlume(
+        release_rate=src.release_rate_g_s,
+        wind_speed=scenario.wind.speed_m_s,
+        release_height=src.release_height_m,
+        stability=scenario.plume.stability,
+        coefficients=scenario.plume.coefficients,
+        source=(src.x_m, src.y_m),
+        wind_from_deg=scenario.wind.from_deg,
+    )
+    targets = time_averaged_widths(steady, source, (ux, uy), x, 0.0, 1.0)
+    for w, target in zip(widths, targets, strict=True):
+        assert w.sigma_y_m == pytest.approx(target.sigma_y_m, rel=0.2), (name, w, target)
+        assert w.sigma_z_m == pytest.approx(target.sigma_z_m, rel=0.2), (name, w, target)
+    if (scenario.plume.stability, scenario.plume.coefficients) == ("D", "mcmullen"):
+        for w in widths:  # and σy against McMullen's closed form
+            assert w.sigma_y_m == pytest.approx(mcmullen_d("y", w.x_m), rel=0.2), (name, w)
 
 
 def test_the_filament_cut_off_does_not_set_where_a_sensor_reads_a_hit() -> None:
