@@ -377,16 +377,26 @@ def test_the_scenario_derives_it_from_the_stability_class() -> None:
         assert variance / mcmullen_d("z", x) ** 2 == pytest.approx(0.3, rel=0.25)
 
 
-def test_the_calibrated_filament_plume_keeps_the_class_d_widths_with_turbulence() -> None:
-    # meander_low with 30 % of the variance in local turbulence (the meander keeps its 30 %):
-    # the filaments' own spread is what the two leave; 90 m of plume, 200 s every 2 s
+@pytest.mark.parametrize(
+    ("name", "overrides"),
+    [
+        # 90 m of filaments, 16 modes: the turbulence at every filament is the cost
+        ("meander_low", ["wind.turbulence.modes=16", "plume.filament.max_age_s=15.0"]),
+        ("puff_meander", []),
+    ],
+)
+def test_the_calibrated_plume_keeps_the_class_d_widths_with_turbulence(
+    name: str, overrides: list[str]
+) -> None:
+    # 30 % of the variance in local turbulence (the meander keeps its share): the filaments'
+    # own spread (a puff's own σy) is what the two leave; 200 s every 2 s
     scenario = load_scenario(
-        GSL_ENVIRONMENTS_DIR / "meander_low.toml",
-        ["wind.turbulence.share=0.3", "wind.turbulence.modes=16", "plume.filament.max_age_s=15.0"],
+        GSL_ENVIRONMENTS_DIR / f"{name}.toml", ["wind.turbulence.share=0.3", *overrides]
     )
+    assert scenario.wind.turbulence is not None
     field = field_from_scenario(scenario)
     widths = time_averaged_widths(
-        field, (0.0, 0.0, 10.0), (1.0, 0.0), (30.0, 50.0, 80.0), 20.0, 200.0, every_s=2.0
+        field, (0.0, 0.0, 10.0), (1.0, 0.0), (30.0, 50.0, 80.0), 30.0, 200.0, every_s=2.0
     )
     for w in widths:
         assert w.sigma_y_m == pytest.approx(mcmullen_d("y", w.x_m), rel=0.2), w
