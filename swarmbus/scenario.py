@@ -16,7 +16,11 @@ from pathlib import Path
 
 import msgspec
 
-from plume_atmosphere.calibration import AtmosphereCalibration, derive_calibration
+from plume_atmosphere.calibration import (
+    AtmosphereCalibration,
+    derive_calibration,
+    derive_turbulence,
+)
 from plume_atmosphere.gases import FORMULAS
 from swarmbus.errors import FieldError
 from swarmbus.radio import RadioSpec
@@ -49,6 +53,7 @@ from swarmbus.scenario_spec import (
     Wind,
     WindField,
     WindMeander,
+    WindTurbulence,
     WorldSpec,
     not_on_mavlink_note,
     sysid_at,
@@ -86,6 +91,7 @@ __all__ = [
     "Wind",
     "WindField",
     "WindMeander",
+    "WindTurbulence",
     "WorldSpec",
     "apply_overrides",
     "bundled_scenarios",
@@ -296,13 +302,20 @@ def parse_scenario(
     return calibrate_scenario(scenario, source)
 
 
+def _roughness_m(scenario: Scenario) -> float:
+    cal = scenario.plume.calibration
+    return 0.1 if cal is None else cal.roughness_m
+
+
 def scenario_calibration(scenario: Scenario) -> AtmosphereCalibration | None:
     """The derived calibration of a scenario with ``[plume.calibration]``, else None; the wind
-    speed and the first source's release height set it. Raises ValueError."""
+    speed and the first source's release height set it, and a ``[wind.turbulence]`` is counted
+    in its split. Raises ValueError."""
     cal = scenario.plume.calibration
     if cal is None:
         return None
     plume = scenario.plume
+    turbulence = scenario.wind.turbulence
     return derive_calibration(
         plume.stability,
         plume.coefficients,
@@ -310,6 +323,34 @@ def scenario_calibration(scenario: Scenario) -> AtmosphereCalibration | None:
         plume.sources[0].release_height_m,
         cal.meander_share,
         cal.roughness_m,
+        turbulence_share=0.0 if turbulence is None else turbulence.share,
+    )
+
+
+def _derived_turbulence(scenario: Scenario, source: str) -> WindTurbulence | None:
+    """The scenario's ``[wind.turbulence]`` with its intensities, length scale and timescale
+    derived from the atmosphere (``[plume]`` stability and coefficients, the wind speed, the
+    first source's release height, ``[plume.calibration]``'s roughness or 0.1 m)."""
+    turbulence = scenario.wind.turbulence
+    if turbulence is None:
+        return None
+    plume = scenario.plume
+    try:
+        derived = derive_turbulence(
+            plume.stability,
+            plume.coefficients,
+            scenario.wind.speed_m_s,
+            plume.sources[0].release_height_m,
+            turbulence.share,
+            _roughness_m(scenario),
+        )
+    except ValueError as exc:
+        raise ScenarioError(source, "wind.turbulence", str(exc)) from None
+    return msgspec.structs.replace(
+        turbulence,
+        std_m_s=derived.std_m_s,
+        length_scale_m=derived.length_scale_m,
+        timescale_s=derived.timescale_s,
     )
 
 
@@ -317,11 +358,18 @@ def calibrate_scenario(scenario: Scenario, source: str = "<scenario>") -> Scenar
     """``scenario`` with what its ``[plume.calibration]`` derives: the wind ``model =
     "meander"`` with an Ornstein–Uhlenbeck ``[wind.meander]`` of the derived std and timescale
     (``steady`` for a zero meander share), and ``[plume.filament]``'s ``growth_m2_s`` and
-    ``release_rate_hz``; unchanged without a calibration. Idempotent."""
+    ``release_rate_hz``; and what a ``[wind.turbulence]`` derives (with or without a
+    calibration). Unchanged without either. Idempotent."""
+    turbulence = _derived_turbulence(scenario, source)
+    if turbulence is not None:
+        scenario = msgspec.structs.replace(
+            scenario, wind=msgspec.structs.replace(scenario.wind, turbulence=turbulence)
+        )
     try:
         derived = scenario_calibration(scenario)
     except ValueError as exc:
-        raise ScenarioError(source, "plume.calibration", str(exc)) from None
+        field = "wind.turbulence.share" if "turbulence_share" in str(exc) else "plume.calibration"
+        raise ScenarioError(source, field, str(exc)) from None
     if derived is None:
         return scenario
     wind = scenario.wind
