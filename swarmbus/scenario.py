@@ -1,6 +1,10 @@
 """Scenario files: TOML validated into typed, immutable config objects (their schema:
 :mod:`swarmbus.scenario_spec`, whose names are all importable from here too).
 
+A randomised environment family's ``[randomise]`` table (:data:`FAMILY_TABLE`) is not part of
+the scenario: it is set aside when the file is read (the rest is the family's base scenario) and
+read by ``plumeswarm.gsl.family``.
+
 A bad file gives one line naming the file, the field and what is wrong
 (:class:`ScenarioError`), never a traceback.
 """
@@ -27,7 +31,9 @@ from swarmbus.radio import RadioSpec
 from swarmbus.scenario_errors import did_you_mean, explain
 from swarmbus.scenario_spec import (
     DEFAULT_SCENARIO,
+    FAMILY_TABLE,
     GSL_ENVIRONMENTS_DIR,
+    GSL_TUNING_DIR,
     MAVLINK_MAX_SYSID,
     MAX_VEHICLES,
     RENAMED_KEYS,
@@ -63,7 +69,9 @@ from swarmbus.vehicle_types import VehicleTypeError, load_vehicle_type
 
 __all__ = [
     "DEFAULT_SCENARIO",
+    "FAMILY_TABLE",
     "GSL_ENVIRONMENTS_DIR",
+    "GSL_TUNING_DIR",
     "MAVLINK_MAX_SYSID",
     "MAX_VEHICLES",
     "RENAMED_KEYS",
@@ -274,6 +282,7 @@ def parse_scenario(
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(source, "", f"not valid TOML: {exc}") from None
     read_renamed_keys(raw, source)
+    raw.pop(FAMILY_TABLE, None)  # a randomised family's ranges: read by plumeswarm.gsl.family
     overrides = tuple(renamed_override(item, source) for item in overrides)
     if overrides:
         apply_overrides(raw, overrides, source)
@@ -407,10 +416,13 @@ def scenario_hash(scenario: Scenario) -> str:
 
 def bundled_scenarios() -> list[str]:
     """The names of the scenarios that ship with plumeswarm: ``swarmbus/scenarios/*.toml`` by
-    their stem, then the source-seeking benchmark's environments as ``gsl/<name>``."""
-    gsl = GSL_ENVIRONMENTS_DIR.name
-    return sorted(p.stem for p in SCENARIOS_DIR.glob("*.toml")) + sorted(
-        f"{gsl}/{p.stem}" for p in GSL_ENVIRONMENTS_DIR.glob("*.toml")
+    their stem, then the source-seeking benchmark's environments as ``gsl/<name>``, then its
+    tuning environments as ``gsl/tuning/<name>``."""
+    gsl, tuning = GSL_ENVIRONMENTS_DIR.name, GSL_TUNING_DIR.name
+    return (
+        sorted(p.stem for p in SCENARIOS_DIR.glob("*.toml"))
+        + sorted(f"{gsl}/{p.stem}" for p in GSL_ENVIRONMENTS_DIR.glob("*.toml"))
+        + sorted(f"{gsl}/{tuning}/{p.stem}" for p in GSL_TUNING_DIR.glob("*.toml"))
     )
 
 

@@ -20,6 +20,8 @@ SCENARIOS_DIR = Path(__file__).resolve().with_name("scenarios")
 DEFAULT_SCENARIO = SCENARIOS_DIR / "novak2018.toml"
 #: The gas-source-localisation benchmark's environments, one scenario file each.
 GSL_ENVIRONMENTS_DIR = SCENARIOS_DIR / "gsl"
+GSL_TUNING_DIR = GSL_ENVIRONMENTS_DIR / "tuning"  # environments tuning uses, never published
+FAMILY_TABLE = "randomise"  # a randomised environment family's ranges, not the scenario's
 MAVLINK_MAX_SYSID = 254  # MAVLink systems are 1–254 (0 is broadcast, 255 ground stations)
 MAX_VEHICLES = 1024  # per scenario; past MAVLINK_MAX_SYSID vehicles are on the bus only
 

@@ -30,7 +30,9 @@ from plumeswarm.gsl.episode import (
     START_ALTITUDE_M,
     EpisodeSpec,
     Outcome,
+    episode_time_limit_s,
 )
+from plumeswarm.gsl.family import AUTO_TIME_LIMIT_MULTIPLE, SEARCH_SPEED_M_S
 from plumeswarm.gsl.grid import Executor, Journal, Shard, run_episodes
 from plumeswarm.gsl.registry import (
     CEILING,
@@ -68,7 +70,7 @@ class GslOptions:
     sensors: tuple[str, ...]
     runs: int = 30
     seed: int = 0
-    time_limit_s: float = 300.0
+    time_limit_s: float = 300.0  # a fixed environment's (a family's is its own)
     control_hz: int = 20
     sensor_period_ticks: int = 2
     dynamics: str = "kinematic"
@@ -78,6 +80,7 @@ class GslOptions:
     vehicles: tuple[int, ...] = ()  # how many fly each algorithm, each a cell; (): its own
     radios: tuple[Radio, ...] = ((),)  # each a radio setting ("radio.key" overrides), a cell
     spacing: float | None = None  # a swarm's crosswind start spacing; None: the algorithm's
+    time_limit_auto: bool = False  # --time-limit auto: every episode's limit from its start
 
     @property
     def swarm(self) -> bool:
@@ -256,6 +259,16 @@ def make_options(
         if radio:
             load_environment(envs[0], radio)  # GslError: a value out of range
     kwargs["vehicles"] = parse_vehicles(kwargs.get("vehicles"))
+    limit = kwargs.get("time_limit_s", 300.0)
+    if limit == "auto":
+        kwargs["time_limit_s"], kwargs["time_limit_auto"] = 300.0, True
+    elif isinstance(limit, str):
+        try:
+            kwargs["time_limit_s"] = float(limit)
+        except ValueError:
+            raise GslError(f"--time-limit {limit!r}: seconds (>= 1) or auto") from None
+    if kwargs.get("time_limit_s", 300.0) < 1.0:
+        raise GslError(f"--time-limit {limit!r}: seconds (>= 1) or auto")
     return GslOptions(
         algorithms=names,
         environments=envs,
@@ -312,7 +325,10 @@ def specs_of(opts: GslOptions, **fields: Any) -> list[EpisodeSpec]:
                 overrides=radio,
                 start_spacing_m=opts.spacing,
             )
-            specs.append(replace(spec, **fields))
+            spec = replace(spec, **fields)
+            if opts.time_limit_auto or load_environment(e).family is not None:
+                spec = replace(spec, time_limit_s=episode_time_limit_s(spec))
+            specs.append(spec)
     return specs
 
 
@@ -707,7 +723,9 @@ def command_line(opts: GslOptions, sub: str = "") -> str:
         parts.append(f"--spacing {opts.spacing:g}")
     if opts.radio_text():
         parts.append(f"--radio {opts.radio_text()}")
-    if opts.time_limit_s != 300.0:
+    if opts.time_limit_auto:
+        parts.append("--time-limit auto")
+    elif opts.time_limit_s != 300.0:
         parts.append(f"--time-limit {opts.time_limit_s:g}")
     parts.append(f"--dynamics {opts.dynamics}")
     if opts.dynamics == "kinematic" and (opts.control_hz, opts.sensor_period_ticks) != (20, 2):
@@ -739,6 +757,9 @@ def protocol_line(opts: GslOptions) -> str:
             "episodes no radio changes, one vehicle or a behaviour that ignores its peers, is "
             "flown on the first only and shown with radio –), "
         )
+    families = [e for e in opts.environments if load_environment(e).family is not None]
+    if opts.time_limit_auto or families:
+        return protocol_line_drawn(opts, swarm, radio, families)
     return (
         f"{opts.runs} runs per cell, {swarm}{radio}"
         f"seed {opts.seed}, dynamics {opts.dynamics} "
@@ -747,6 +768,33 @@ def protocol_line(opts: GslOptions) -> str:
         "(run k: the same start for every algorithm), a time-dependent release running "
         "max(60 s, 1.5 × 80 m / wind speed) before; success: a declaration within 2 m of the "
         "source."
+    )
+
+
+def protocol_line_drawn(opts: GslOptions, swarm: str, radio: str, families: Sequence[str]) -> str:
+    """The protocol line of a grid with a randomised family or ``--time-limit auto``."""
+    names = ", ".join(load_environment(e).name for e in families)
+    drawn = (
+        f"in the randomised families ({names}) every run draws its source, wind, release and "
+        'class and its start (docs/gsl.md "Randomised families"), '
+        if families
+        else ""
+    )
+    fixed = (
+        f"limit {AUTO_TIME_LIMIT_MULTIPLE:g} × the straight flight from the start at "
+        f"{SEARCH_SPEED_M_S:g} m/s"
+        if opts.time_limit_auto
+        else f"limit {opts.time_limit_s:g} s"
+    )
+    return (
+        f"{opts.runs} runs per cell, {swarm}{radio}"
+        f"seed {opts.seed}, dynamics {opts.dynamics} "
+        f"(control {opts.control_hz} Hz, sensor every {opts.sensor_period_ticks} ticks), "
+        f"{drawn}a family's limit its time_limit_multiple × the straight flight from the "
+        f"start at {SEARCH_SPEED_M_S:g} m/s; in the other environments {fixed}, starts 30–80 m "
+        "downwind and ±20 m crosswind at 10 m (run k: the same start for every algorithm), "
+        "a time-dependent release running max(60 s, 1.5 × the farthest start / wind speed) "
+        "before; success: a declaration within 2 m of the source."
     )
 
 
