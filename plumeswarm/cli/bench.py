@@ -492,3 +492,62 @@ def bench_pomdp(
     for line in report_lines(result):
         click.echo(line)
     click.echo(f"wrote {write_result(_bench_dir(out, 'pomdp'), result)}")
+
+
+@bench.command("survey")
+@click.option(
+    "--environments",
+    default="steady_gaussian,meander_low,meander_high,puff_meander",
+    show_default=True,
+    help="Comma-separated environment names (NAME or gsl/NAME) or scenario paths.",
+)
+@click.option(
+    "--runs", type=click.IntRange(min=1), default=10, show_default=True, help="Runs each."
+)
+@click.option(
+    "--seed", type=int, default=0, show_default=True, help="Run k flies world seed seed·100003+k."
+)
+@click.option(
+    "--sensor",
+    type=click.Choice(["ideal", "mox", "pid"]),
+    default="ideal",
+    show_default=True,
+    help="The sensor preset the vehicle reads through.",
+)
+@click.option(
+    "--distance",
+    type=float,
+    default=50.0,
+    show_default=True,
+    help="The curtain's distance downwind of the source (m).",
+)
+@click.option("--speed", type=float, default=18.0, show_default=True, help="Ground speed (m/s).")
+@click.option(
+    "--repeats",
+    type=click.IntRange(min=1),
+    default=1,
+    show_default=True,
+    help="Sweeps of the curtain (up, down, up, …).",
+)
+@out_dir_option("Directory for survey.md and survey.json (default runs/bench-survey-<time>/).")
+def bench_survey(
+    environments: str,
+    runs: int,
+    seed: int,
+    sensor: str,
+    distance: float,
+    speed: float,
+    repeats: int,
+    out: Path | None,
+) -> None:
+    """Mass-balance survey: a curtain of crosswind legs downwind of the source, the release
+    rate estimated from the readings against the true one (docs/survey.md)."""
+    from plumeswarm.survey.bench import SurveyOptions, run_survey_bench
+    from plumeswarm.survey.pattern import SurveyError
+
+    try:
+        opts = SurveyOptions(comma_list(environments), runs, seed, sensor, distance, speed, repeats)
+        rows = run_survey_bench(opts, _bench_dir(out, "survey"), click.echo)
+    except SurveyError as exc:
+        fail(str(exc))
+    sys.exit(1 if any(r.summary is None for r in rows) else 0)

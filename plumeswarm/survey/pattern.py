@@ -143,3 +143,21 @@ def plan_for_scenario(scenario: Scenario, distance_m: float = DEFAULT_DISTANCE_M
         sigma_z,
         source.release_height_m,
     )
+
+
+def model_coverage(
+    plan: CurtainPlan, sigma_y_m: float, sigma_z_m: float, release_height_m: float
+) -> float:
+    """The share of a steady Gaussian plume's flux (σy, σz at the curtain, ground reflection)
+    that crosses the flown rectangle: ±``half_width_m`` crosswind, from the lowest to the top
+    leg. The crosswind integral of exp(−y²/2σy²) over ±W is erf(W/√2σy) of its whole; the
+    vertical one of the reflected pair over [z₁, zₙ] is half the sum of the two erf
+    differences, of its whole ∫₀^∞ = √(2π)·σz."""
+    root = math.sqrt(2.0)
+    across = math.erf(plan.half_width_m / (root * sigma_y_m))
+    low, top = plan.heights_m[0], plan.heights_m[-1]
+    vertical = 0.0
+    for source in (release_height_m, -release_height_m):
+        vertical += math.erf((top - source) / (root * sigma_z_m))
+        vertical -= math.erf((low - source) / (root * sigma_z_m))
+    return across * 0.5 * vertical
