@@ -494,41 +494,28 @@ def bench_pomdp(
     click.echo(f"wrote {write_result(_bench_dir(out, 'pomdp'), result)}")
 
 
+#: ``bench survey``'s options, one row each: name, type, default, help.
+_SURVEY_OPTIONS: list[tuple[str, Any, object, str]] = [
+    ("--environments", str, "steady_gaussian,meander_low,meander_high,puff_meander",
+     "Comma-separated environment names (NAME or gsl/NAME) or scenario paths."),
+    ("--runs", click.IntRange(min=1), 10, "Runs each."),
+    ("--seed", int, 0, "Run k flies world seed seed·100003 + k."),
+    ("--sensor", click.Choice(["ideal", "mox", "pid"]), "ideal",
+     "The sensor preset the vehicle reads through."),
+    ("--distance", float, 50.0, "The curtain's distance downwind of the source (m)."),
+    ("--speed", float, 18.0, "Ground speed (m/s)."),
+    ("--repeats", click.IntRange(min=1), 1, "Sweeps of the curtain (up, down, up, …)."),
+]  # fmt: skip
+
+
+def _survey_options(f: Callable[..., None]) -> Callable[..., None]:
+    for name, kind, default, text in reversed(_SURVEY_OPTIONS):
+        f = click.option(name, type=kind, default=default, show_default=True, help=text)(f)
+    return f
+
+
 @bench.command("survey")
-@click.option(
-    "--environments",
-    default="steady_gaussian,meander_low,meander_high,puff_meander",
-    show_default=True,
-    help="Comma-separated environment names (NAME or gsl/NAME) or scenario paths.",
-)
-@click.option(
-    "--runs", type=click.IntRange(min=1), default=10, show_default=True, help="Runs each."
-)
-@click.option(
-    "--seed", type=int, default=0, show_default=True, help="Run k flies world seed seed·100003+k."
-)
-@click.option(
-    "--sensor",
-    type=click.Choice(["ideal", "mox", "pid"]),
-    default="ideal",
-    show_default=True,
-    help="The sensor preset the vehicle reads through.",
-)
-@click.option(
-    "--distance",
-    type=float,
-    default=50.0,
-    show_default=True,
-    help="The curtain's distance downwind of the source (m).",
-)
-@click.option("--speed", type=float, default=18.0, show_default=True, help="Ground speed (m/s).")
-@click.option(
-    "--repeats",
-    type=click.IntRange(min=1),
-    default=1,
-    show_default=True,
-    help="Sweeps of the curtain (up, down, up, …).",
-)
+@_survey_options
 @out_dir_option("Directory for survey.md and survey.json (default runs/bench-survey-<time>/).")
 def bench_survey(
     environments: str,
