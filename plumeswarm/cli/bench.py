@@ -505,7 +505,12 @@ _SURVEY_OPTIONS: list[tuple[str, Any, object, str]] = [
     ("--distance", float, 50.0, "The curtain's distance downwind of the source (m)."),
     ("--speed", float, 18.0, "Ground speed (m/s)."),
     ("--repeats", click.IntRange(min=1), 1, "Sweeps of the curtain (up, down, up, …)."),
+    ("--sample-hz", float, 20.0, "Readings per second of sim time."),
 ]  # fmt: skip
+_MEAN_PLUME_HELP = (
+    "Fly each environment's time average instead (its steady Gaussian plume, the mean wind, an "
+    "anemometer without noise): the method's own bias."
+)
 
 
 def _survey_options(f: Callable[..., None]) -> Callable[..., None]:
@@ -516,6 +521,7 @@ def _survey_options(f: Callable[..., None]) -> Callable[..., None]:
 
 @bench.command("survey")
 @_survey_options
+@click.option("--mean-plume", is_flag=True, help=_MEAN_PLUME_HELP)
 @out_dir_option("Directory for survey.md and survey.json (default runs/bench-survey-<time>/).")
 def bench_survey(
     environments: str,
@@ -525,6 +531,8 @@ def bench_survey(
     distance: float,
     speed: float,
     repeats: int,
+    sample_hz: float,
+    mean_plume: bool,
     out: Path | None,
 ) -> None:
     """Mass-balance survey: a curtain of crosswind legs downwind of the source, the release
@@ -533,7 +541,17 @@ def bench_survey(
     from plumeswarm.survey.pattern import SurveyError
 
     try:
-        opts = SurveyOptions(comma_list(environments), runs, seed, sensor, distance, speed, repeats)
+        opts = SurveyOptions(
+            comma_list(environments),
+            runs,
+            seed,
+            sensor,
+            distance,
+            speed,
+            repeats,
+            mean_plume,
+            sample_hz,
+        )
         rows = run_survey_bench(opts, _bench_dir(out, "survey"), click.echo)
     except SurveyError as exc:
         fail(str(exc))

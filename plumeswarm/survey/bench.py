@@ -28,7 +28,7 @@ from pathlib import Path
 import msgspec
 
 from plumeswarm.gsl.registry import SENSORS, GslError, load_environment, time_dependent
-from plumeswarm.survey.flight import SURVEY_SPEED_M_S, flight_time_s, fly_survey
+from plumeswarm.survey.flight import SAMPLE_HZ, SURVEY_SPEED_M_S, flight_time_s, fly_survey
 from plumeswarm.survey.flux import FluxEstimate, estimate_flux
 from plumeswarm.survey.pattern import (
     DEFAULT_DISTANCE_M,
@@ -52,6 +52,8 @@ class SurveyOptions:
     distance_m: float = DEFAULT_DISTANCE_M
     speed_m_s: float = SURVEY_SPEED_M_S
     repeats: int = 1
+    mean_plume: bool = False  # fly each environment's time-averaged Gaussian, exact wind
+    sample_hz: float = SAMPLE_HZ
 
     def __post_init__(self) -> None:
         if self.runs < 1:
@@ -68,13 +70,27 @@ def command_line(opts: SurveyOptions) -> str:
         f"plumeswarm bench survey --environments {','.join(opts.environments)} "
         f"--runs {opts.runs} --seed {opts.seed} --sensor {opts.sensor} "
         f"--distance {opts.distance_m:g} --speed {opts.speed_m_s:g} --repeats {opts.repeats}"
+        + (f" --sample-hz {opts.sample_hz:g}" if opts.sample_hz != SAMPLE_HZ else "")
+        + (" --mean-plume" if opts.mean_plume else "")
     )
 
 
+def mean_plume(scenario: Scenario) -> Scenario:
+    """The scenario's time average as the survey would meet it: every source a steady Gaussian
+    plume of its atmosphere, in the steady mean wind, read by an anemometer without noise."""
+    sources = [msgspec.structs.replace(s, model=None) for s in scenario.plume.sources]
+    plume = msgspec.structs.replace(scenario.plume, model="gaussian", sources=sources)
+    wind = msgspec.structs.replace(scenario.wind, model="steady")
+    anemometer = msgspec.structs.replace(scenario.anemometer, noise_std_m_s=0.0)
+    return msgspec.structs.replace(scenario, plume=plume, wind=wind, anemometer=anemometer)
+
+
 def run_scenario(base: Scenario, opts: SurveyOptions, run: int) -> Scenario:
-    """Run ``run``'s scenario: its own seed, the bench's sensor."""
+    """Run ``run``'s scenario: its own seed, the bench's sensor (``mean_plume``: the
+    environment's time average, :func:`mean_plume`)."""
     world = msgspec.structs.replace(base.world, seed=opts.seed * SEED_STRIDE + run)
-    return msgspec.structs.replace(base, world=world, sensor=SENSORS[opts.sensor].config)
+    scenario = msgspec.structs.replace(base, world=world, sensor=SENSORS[opts.sensor].config)
+    return mean_plume(scenario) if opts.mean_plume else scenario
 
 
 @dataclass(frozen=True)
@@ -123,7 +139,9 @@ def survey_run(base: Scenario, opts: SurveyOptions, run: int) -> RunResult:
     """One flight and its estimate (or the reason there is none)."""
     scenario = run_scenario(base, opts, run)
     plan = plan_for_scenario(scenario, opts.distance_m)
-    readings = fly_survey(scenario, plan, opts.speed_m_s, repeats=opts.repeats)
+    readings = fly_survey(
+        scenario, plan, opts.speed_m_s, repeats=opts.repeats, sample_hz=opts.sample_hz
+    )
     true_q = scenario.plume.sources[0].release_rate_g_s
     seed, flight = scenario.world.seed, flight_time_s(readings)
     try:
@@ -165,7 +183,7 @@ def environment_row(name: str, opts: SurveyOptions) -> EnvironmentRow:
     return EnvironmentRow(
         environment=env.name,
         scenario_sha256=env.sha256,
-        time_dependent=time_dependent(scenario),
+        time_dependent=time_dependent(scenario) and not opts.mean_plume,
         true_g_s=source.release_rate_g_s,
         heights_m=plan.heights_m,
         half_width_m=plan.half_width_m,
