@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import json
 import math
 from pathlib import Path
 
@@ -167,3 +168,18 @@ def test_bench_survey_refuses_a_bad_distance_in_one_line(tmp_path: Path) -> None
     assert len(lines) == 1
     assert "distance_m" in lines[0] and "-5" in lines[0]
     assert "Traceback" not in done.stderr
+
+
+def test_bench_survey_writes_the_table_under_its_command_and_every_run(tmp_path: Path) -> None:
+    done = run_cli(
+        ["bench", "survey", "--environments", "steady_gaussian", "--runs", "2", "--out",
+         str(tmp_path)]
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    table = (tmp_path / "survey.md").read_text().splitlines()
+    assert table[0].startswith("`plumeswarm bench survey --environments steady_gaussian --runs 2")
+    assert table[4].startswith("| `steady_gaussian` | 2/2 | 10 |")
+    document = json.loads((tmp_path / "survey.json").read_text())
+    (row,) = document["rows"]
+    assert [r["seed"] for r in row["runs"]] == [0, 1]
+    assert abs(row["summary"]["mean_error_pct"]) < 30.0
