@@ -19,7 +19,9 @@ Computed here, in this order (docs/survey.md):
 2. **Background** C_b: given, or the median of the readings in the outer 10 % of each end of
    every pass (where the planned leg is clear of the mean plume).
 3. **Per leg**: the trapezoid rule over y of C − C_b along each pass (readings sorted by y), the
-   passes at one height averaged: a line integral L(z) in g/m².
+   passes at one height averaged: a line integral L(z) in g/m², at z the mean height of the
+   passes' readings (a vehicle that holds its altitude only to within the tolerance is
+   integrated where it flew).
 4. **Over height**: the trapezoid rule between the legs' heights; below the lowest leg L is
    held at the lowest leg's value down to the ground (the constant extrapolation of the
    aircraft mass balance: a vehicle cannot fly at z = 0, and a plume reflected by the ground
@@ -87,6 +89,7 @@ class FluxEstimate:
 class _Pass:
     leg: int
     y_m: list[float]
+    z_m: list[float]
     c_g_m3: list[float]
     wind: list[tuple[float, float]]
 
@@ -114,9 +117,10 @@ def _passes(
             current = None
             continue
         if current is None or current.leg != leg:
-            current = _Pass(leg, [], [], [])
+            current = _Pass(leg, [], [], [], [])
             runs.append(current)
         current.y_m.append(y)
+        current.z_m.append(z)
         current.c_g_m3.append(r.concentration_g_m3)
         if r.wind_enu_m_s is not None:
             current.wind.append(r.wind_enu_m_s)
@@ -206,7 +210,7 @@ def estimate_flux(
     heights, lines, counts, edge = [], [], [], 0.0
     for leg in flown_legs:
         mine = [p for p in passes if p.leg == leg]
-        heights.append(plan.heights_m[leg])
+        heights.append(statistics.fmean(z for p in mine for z in p.z_m))
         lines.append(statistics.fmean(_line_integral(p, background) for p in mine))
         counts.append(len(mine))
         ends = [c - background for p in mine for c in _edge_values(p, plan.half_width_m)]
