@@ -191,8 +191,8 @@ def estimate_flux(
             "curtain",
             f"no reading rises above the background ({background:.3g} g/m³) by "
             f"{min_peak_g_m3:g} g/m³ or more ({len(used)} readings on the curtain; "
-            f"{_legs_text(plan)}): the curtain misses the plume; move it onto the plume "
-            "or widen it",
+            f"{_legs_text(plan)}): the curtain misses the plume, or the plume is too dilute "
+            "there; move the curtain onto the plume, closer to the source or widen it",
         )
     winds = [w for p in passes for w in p.wind]
     if not winds:
