@@ -9,6 +9,7 @@ import json
 import math
 from pathlib import Path
 
+import msgspec
 import numpy as np
 import pytest
 
@@ -16,10 +17,11 @@ from plume_atmosphere.dispersion import dispersion_curves
 from plume_atmosphere.plume_formula import downwind_unit, gaussian_plume_g_m3, plume_frame
 from plumeswarm.gsl.registry import load_environment
 from plumeswarm.survey import CurtainPlan, SurveyError, SurveyReading, estimate_flux
+from plumeswarm.survey.bench import EnvironmentRow, SurveyOptions, command_line, table_lines
 from plumeswarm.survey.flight import Racetrack, fly_survey, leg_order
 from plumeswarm.survey.flux import vertical_integral
 from plumeswarm.survey.pattern import model_coverage, plan_for_scenario
-from tests.support.procs import run_cli
+from tests.support.procs import REPO, run_cli
 
 SOURCE = (30.0, -20.0)
 WIND_FROM_DEG = 225.0  # toward the north-east: the curtain is not along a grid axis
@@ -183,3 +185,18 @@ def test_bench_survey_writes_the_table_under_its_command_and_every_run(tmp_path:
     (row,) = document["rows"]
     assert [r["seed"] for r in row["runs"]] == [0, 1]
     assert abs(row["summary"]["mean_error_pct"]) < 30.0
+
+
+def test_the_published_tables_are_the_benchs_own_rendering_of_its_json() -> None:
+    """Every table in docs/survey.md is what ``table_lines`` makes of the ``survey.json`` the
+    same command wrote (docs/survey-results/*/): no number was edited by hand."""
+    page = (REPO / "docs" / "survey.md").read_text()
+    documents = sorted((REPO / "docs" / "survey-results").glob("*/survey.json"))
+    assert len(documents) >= 3
+    for path in documents:
+        document = json.loads(path.read_text())
+        options = msgspec.convert(document["options"], SurveyOptions)
+        rows = [msgspec.convert(r, EnvironmentRow) for r in document["rows"]]
+        assert document["command"] == command_line(options)
+        table = "\n".join(table_lines(options, rows))
+        assert table in page, f"{path.parent.name}: the page's table differs from its JSON"
