@@ -135,6 +135,15 @@ class EnvironmentRow:
         return sum(r.estimate is not None for r in self.runs)
 
 
+def sensor_lag_s(scenario: Scenario) -> float:
+    """The time constant the estimate undoes: the sensor's, when it is a linear first-order lag
+    (rise = decay, no metal-oxide transducer); else 0."""
+    sensor = scenario.sensor.resolved()
+    if sensor.mox is not None or sensor.rise_time_constant_s != sensor.decay_time_constant_s:
+        return 0.0
+    return sensor.rise_time_constant_s or 0.0
+
+
 def survey_run(base: Scenario, opts: SurveyOptions, run: int) -> RunResult:
     """One flight and its estimate (or the reason there is none)."""
     scenario = run_scenario(base, opts, run)
@@ -145,7 +154,7 @@ def survey_run(base: Scenario, opts: SurveyOptions, run: int) -> RunResult:
     true_q = scenario.plume.sources[0].release_rate_g_s
     seed, flight = scenario.world.seed, flight_time_s(readings)
     try:
-        estimate = estimate_flux(readings, plan)
+        estimate = estimate_flux(readings, plan, sensor_lag_s=sensor_lag_s(scenario))
     except SurveyError as exc:
         return RunResult(run, seed, flight, None, None, str(exc))
     error = 100.0 * (estimate.release_rate_g_s - true_q) / true_q

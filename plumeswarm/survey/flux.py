@@ -18,7 +18,10 @@ Computed here, in this order (docs/survey.md):
    least ``MIN_PASS_SAMPLES`` readings.
 2. **Background** C_b: given, or the median of the readings in the outer 10 % of each end of
    every pass (where the planned leg is clear of the mean plume).
-3. **Per leg**: the trapezoid rule over y of C − C_b along each pass (readings sorted by y), the
+3. **Per leg**: the trapezoid rule over y of C − C_b along each pass (readings sorted by y),
+   plus, for a sensor with a first-order lag τ (``sensor_lag_s``), τ·|v|·(m_end − m_start): a
+   lagged reading m obeys τ·dm/dt = C − m, so the response still owed when the pass ends is
+   exactly the area the lag moved past it (v the crosswind speed along the pass); the
    passes at one height averaged: a line integral L(z) in g/m², at z the mean height of the
    passes' readings (a vehicle that holds its altitude only to within the tolerance is
    integrated where it flew).
@@ -88,6 +91,7 @@ class FluxEstimate:
 @dataclass
 class _Pass:
     leg: int
+    t_s: list[float]
     y_m: list[float]
     z_m: list[float]
     c_g_m3: list[float]
@@ -117,8 +121,9 @@ def _passes(
             current = None
             continue
         if current is None or current.leg != leg:
-            current = _Pass(leg, [], [], [], [])
+            current = _Pass(leg, [], [], [], [], [])
             runs.append(current)
+        current.t_s.append(r.sim_time_s)
         current.y_m.append(y)
         current.z_m.append(z)
         current.c_g_m3.append(r.concentration_g_m3)
@@ -133,11 +138,17 @@ def _edge_values(p: _Pass, half_width_m: float) -> list[float]:
     return [c for y, c in zip(p.y_m, p.c_g_m3, strict=True) if abs(y) >= inner]
 
 
-def _line_integral(p: _Pass, background: float) -> float:
+def _line_integral(p: _Pass, background: float, lag_s: float) -> float:
     order = np.argsort(p.y_m, kind="stable")
     y = np.asarray(p.y_m)[order]
     c = np.asarray(p.c_g_m3)[order] - background
-    return float(np.trapezoid(c, y))
+    area = float(np.trapezoid(c, y))
+    if lag_s > 0.0:
+        # A first-order sensor reads m with τ·dm/dt = C − m, so ∫ C dy = ∫ m dy + τ·|v|·(m at
+        # the pass's end − m at its start): what it still owed when the leg ended.
+        speed = (max(p.y_m) - min(p.y_m)) / (p.t_s[-1] - p.t_s[0])
+        area += lag_s * speed * (p.c_g_m3[-1] - p.c_g_m3[0])
+    return area
 
 
 def vertical_integral(
@@ -169,8 +180,12 @@ def estimate_flux(
     plane_tolerance_m: float = 5.0,
     height_tolerance_m: float = 0.5,
     min_peak_g_m3: float = PLUME_THRESHOLD_G_M3,
+    sensor_lag_s: float = 0.0,
 ) -> FluxEstimate:
-    """The release rate (g/s) from ``readings`` on ``plan``'s curtain (module docstring)."""
+    """The release rate (g/s) from ``readings`` on ``plan``'s curtain (module docstring);
+    ``sensor_lag_s``: the time constant of a linear first-order sensor, whose lag is undone."""
+    if not (math.isfinite(sensor_lag_s) and sensor_lag_s >= 0.0):
+        raise SurveyError("sensor_lag_s", f"{sensor_lag_s!r} must be ≥ 0 s")
     passes = _passes(readings, plan, plane_tolerance_m, height_tolerance_m)
     flown_legs = sorted({p.leg for p in passes})
     if len(flown_legs) < 2:
@@ -211,7 +226,7 @@ def estimate_flux(
     for leg in flown_legs:
         mine = [p for p in passes if p.leg == leg]
         heights.append(statistics.fmean(z for p in mine for z in p.z_m))
-        lines.append(statistics.fmean(_line_integral(p, background) for p in mine))
+        lines.append(statistics.fmean(_line_integral(p, background, sensor_lag_s) for p in mine))
         counts.append(len(mine))
         ends = [c - background for p in mine for c in _edge_values(p, plan.half_width_m)]
         if ends:

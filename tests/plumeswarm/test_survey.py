@@ -200,3 +200,24 @@ def test_the_published_tables_are_the_benchs_own_rendering_of_its_json() -> None
         assert document["command"] == command_line(options)
         table = "\n".join(table_lines(options, rows))
         assert table in page, f"{path.parent.name}: the page's table differs from its JSON"
+
+
+def test_a_first_order_sensors_lag_is_undone_from_the_response_it_still_owes() -> None:
+    """The dense curtain's readings through a first-order lag (τ = 1.3 s, the PID preset's;
+    updated exactly for each 0.01 s step, its state carried over the turns): at 20 m/s the
+    lag moves 26 m of response along a leg that reaches 32 m past the axis, and the part past
+    the leg's end is lost unless it is added back."""
+    curves = dispersion_curves("novak2018", "D")
+    sigma_y, sigma_z = (float(s[0]) for s in curves.sigmas(np.array([DISTANCE_M])))
+    heights = np.arange(0.5, 10.0 + 8.0 * sigma_z, 0.5)
+    plan, readings = curtain_readings("novak2018", 10.0, heights, 8.0 * sigma_y, dy_m=0.2)
+    tau, lagged, m, t = 1.3, [], 0.0, readings[0].sim_time_s
+    for r in readings:
+        m *= math.exp(-max(0.0, r.sim_time_s - t - 0.01) / tau)  # clean air in a turn
+        t = r.sim_time_s
+        m += (r.concentration_g_m3 - m) * (1.0 - math.exp(-0.01 / tau))
+        lagged.append(dataclasses.replace(r, concentration_g_m3=m))
+    raw = estimate_flux(lagged, plan, background_g_m3=0.0)
+    undone = estimate_flux(lagged, plan, background_g_m3=0.0, sensor_lag_s=tau)
+    assert raw.release_rate_g_s < 0.9 * RELEASE_G_S
+    assert undone.release_rate_g_s == pytest.approx(RELEASE_G_S, rel=0.01)
