@@ -26,9 +26,9 @@ Computed here, in this order (docs/survey.md):
    passes' readings (a vehicle that holds its altitude only to within the tolerance is
    integrated where it flew).
 4. **Over height**: the trapezoid rule between the legs' heights; below the lowest leg L is
-   held at the lowest leg's value down to the ground (the constant extrapolation of the
-   aircraft mass balance: a vehicle cannot fly at z = 0, and a plume reflected by the ground
-   has ∂C/∂z = 0 there), and above the top leg it falls linearly to 0 one leg spacing higher.
+   held at the lowest leg's value down to the ground (a vehicle cannot fly at z = 0, and a
+   plume reflected by the ground has ∂C/∂z = 0 there), and above the top leg it falls
+   linearly to 0 one leg spacing higher.
 5. **Wind**: U⊥, the mean of the anemometer's readings on the accepted passes, projected on
    the curtain's normal (the planned downwind direction). Q = U⊥ · ∫ L dz.
 
