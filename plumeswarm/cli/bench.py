@@ -495,3 +495,67 @@ def bench_pomdp(
     for line in report_lines(result):
         click.echo(line)
     click.echo(f"wrote {write_result(_bench_dir(out, 'pomdp'), result)}")
+
+
+#: ``bench survey``'s options, one row each: name, type, default, help.
+_SURVEY_OPTIONS: list[tuple[str, Any, object, str]] = [
+    ("--environments", str, "steady_gaussian,meander_low,meander_high,puff_meander",
+     "Comma-separated environment names (NAME or gsl/NAME) or scenario paths."),
+    ("--runs", click.IntRange(min=1), 10, "Runs each."),
+    ("--seed", int, 0, "Run k flies world seed seed·100003 + k."),
+    ("--sensor", click.Choice(["ideal", "mox", "pid"]), "ideal",
+     "The sensor preset the vehicle reads through."),
+    ("--distance", float, 50.0, "The curtain's distance downwind of the source (m)."),
+    ("--speed", float, 18.0, "Ground speed (m/s)."),
+    ("--repeats", click.IntRange(min=1), 1, "Sweeps of the curtain (up, down, up, …)."),
+    ("--sample-hz", float, 20.0, "Readings per second of sim time."),
+]  # fmt: skip
+_MEAN_PLUME_HELP = (
+    "Fly each environment's time average instead (its steady Gaussian plume, the mean wind, an "
+    "anemometer without noise): the method's own bias."
+)
+
+
+def _survey_options(f: Callable[..., None]) -> Callable[..., None]:
+    for name, kind, default, text in reversed(_SURVEY_OPTIONS):
+        f = click.option(name, type=kind, default=default, show_default=True, help=text)(f)
+    return f
+
+
+@bench.command("survey")
+@_survey_options
+@click.option("--mean-plume", is_flag=True, help=_MEAN_PLUME_HELP)
+@out_dir_option("Directory for survey.md and survey.json (default runs/bench-survey-<time>/).")
+def bench_survey(
+    environments: str,
+    runs: int,
+    seed: int,
+    sensor: str,
+    distance: float,
+    speed: float,
+    repeats: int,
+    sample_hz: float,
+    mean_plume: bool,
+    out: Path | None,
+) -> None:
+    """Mass-balance survey: a curtain of crosswind legs downwind of the source, the release
+    rate estimated from the readings against the true one (docs/survey.md)."""
+    from plumeswarm.survey.bench import SurveyOptions, run_survey_bench
+    from plumeswarm.survey.pattern import SurveyError
+
+    try:
+        opts = SurveyOptions(
+            comma_list(environments),
+            runs,
+            seed,
+            sensor,
+            distance,
+            speed,
+            repeats,
+            mean_plume,
+            sample_hz,
+        )
+        rows = run_survey_bench(opts, _bench_dir(out, "survey"), click.echo)
+    except SurveyError as exc:
+        fail(str(exc))
+    sys.exit(1 if any(r.summary is None for r in rows) else 0)
