@@ -331,6 +331,10 @@ def _gsl_run(kind: str, kwargs: dict[str, Any]) -> None:
     )
 
     args = {k: v for k, v in kwargs.items() if k not in ("out", "jobs", "executor", "shard")}
+    try:  # seconds as a number, as the journal has always kept them (auto stays a word)
+        args["time_limit_s"] = float(args["time_limit_s"])
+    except ValueError:
+        pass  # auto, or a bad value make_options names
     directory = _bench_dir(kwargs["out"], "gsl")
     try:
         executor = parse_executor(kwargs["executor"])
