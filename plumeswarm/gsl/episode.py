@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import msgspec
@@ -157,9 +157,12 @@ class EpisodeSpec:
     start_spacing_m: float | None = None  # a swarm's crosswind spacing; None: the algorithm's
 
     def algorithm_config(self) -> Algorithm:
+        """What flies: the behaviour (the named algorithm's when none is given) on ``vehicles``
+        vehicles (0: the algorithm's own number)."""
         if self.behavior:
             return Algorithm(self.behavior, self.vehicles or 1)
-        return resolve_algorithm(self.algorithm)[1]
+        config = resolve_algorithm(self.algorithm)[1]
+        return replace(config, vehicles=self.vehicles) if self.vehicles else config
 
     def spacing_m(self) -> float:
         """The crosswind spacing of a swarm's starts (0: a circle of 2 m)."""

@@ -234,6 +234,7 @@ def test_a_behaviour_that_ignores_its_peers_flies_the_same_bits_on_any_radio(
         keep_trajectory=True, vehicles=3,
     )  # fmt: skip
     perfect, lossy = run_episode(spec), run_episode(replace(spec, overrides=LOSS_05_1S))
+    assert len(perfect.trajectories) == len(lossy.trajectories) == 3
     same = (perfect.trajectories, perfect.estimate_xy) == (lossy.trajectories, lossy.estimate_xy)
     assert same == (algorithm != "gradient_swarm")
 
