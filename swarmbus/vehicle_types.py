@@ -78,19 +78,26 @@ class FixedWingParams(
     fw_r_lim: PositiveF = 35.0  # roll setpoint limit, deg
     fw_r_tc: PositiveF = 0.4  # roll attitude time constant, s
     fw_p_tc: PositiveF = 0.4  # pitch attitude time constant, s
-    fw_rr_p: NonNegF = 0.05  # roll rate P, surface fraction per rad/s
+    fw_rr_p: NonNegF = 0.1  # roll rate P, surface travel per rad/s
     fw_rr_i: NonNegF = 0.1
-    fw_rr_ff: NonNegF = 0.2
-    fw_pr_p: NonNegF = 0.08
-    fw_pr_i: NonNegF = 0.1
-    fw_pr_ff: NonNegF = 0.2
-    fw_yr_p: NonNegF = 0.05  # yaw damper
+    fw_rr_ff: NonNegF = 0.4
+    fw_pr_p: NonNegF = 0.15
+    fw_pr_i: NonNegF = 0.2
+    fw_pr_ff: NonNegF = 0.3
+    fw_yr_p: NonNegF = 0.1  # yaw damper
     fw_psp_off: FiniteF = 0.0  # pitch setpoint offset (level flight), deg
+    fw_t_ptch_damp: NonNegF = 0.1
+    # elevator trim (travel, Beard's sign: negative pitches up) at FW_AIRSPD_TRIM, and its
+    # increments at FW_AIRSPD_MIN and FW_AIRSPD_MAX
+    trim_pitch: Annotated[float, msgspec.Meta(ge=-1.0, le=1.0)] = 0.0
+    fw_dtrim_p_vmin: Annotated[float, msgspec.Meta(ge=-1.0, le=1.0)] = 0.0
+    fw_dtrim_p_vmax: Annotated[float, msgspec.Meta(ge=-1.0, le=1.0)] = 0.0
     nav_l1_period: PositiveF = 20.0  # s
     nav_l1_damping: PositiveF = 0.75
     nav_loiter_rad: PositiveF = 80.0  # m
     nav_acc_rad: PositiveF = 20.0  # waypoint acceptance radius, m
     fw_clmbout_diff: PositiveF = 10.0  # take-off: climb out at max pitch below this height, m
+    fw_tko_pitch_min: FiniteF = 10.0  # take-off: pitch at least this from rotation on, deg
     fw_lnd_ang: PositiveF = 5.0  # landing glide slope, deg
     fw_lnd_flalt: PositiveF = 3.0  # flare altitude, m
     fw_lnd_airspd_sc: PositiveF = 1.2  # approach airspeed = this * FW_AIRSPD_MIN
