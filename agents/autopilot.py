@@ -131,13 +131,18 @@ class Autopilot:
             MissionPause: self._pause,
             MissionClear: lambda c: self.modes.clear_mission(),
             MissionDownload: lambda c: self._reply(mission=self.mission_items()),
-            Setpoint: lambda c: self.modes.setpoint(c, self.now),
+            Setpoint: lambda c: (
+                self._plane_refuses("setpoints (offboard)") or self.modes.setpoint(c, self.now)
+            ),
             GcsHeartbeat: self._heartbeat,
             SetParam: self._set_param,
             GetParams: lambda c: self._reply(params=self.params()),
             GeofenceUpload: lambda c: self.modes.upload_fence(self.est, list(c.zones)),
             RallyUpload: lambda c: self.modes.upload_rally([tuple(p) for p in c.points_enu_m]),
-            Orbit: lambda c: self._flying(lambda est: self.modes.orbit(est, c)),
+            Orbit: lambda c: (
+                self._stall_check("orbit: speed_m_s", abs(c.speed_m_s))
+                or self._flying(lambda est: self.modes.orbit(est, c))
+            ),
         }
 
     def mission_items(self) -> list[MissionItem]:
@@ -274,6 +279,15 @@ class Autopilot:
         vehicle type and custom modes follow."""
         return self.vehicle_type.kind
 
+    def _plane_refuses(self, what: str) -> Refusal | None:
+        if self.vehicle_type.fixed_wing is None:
+            return None
+        return Refusal(
+            RejectCode.UNSUPPORTED,
+            f"{what}: not flown by the fixed-wing controller (it flies takeoff, hold, goto, "
+            "mission, orbit, land and rtl)",
+        )
+
     def _stall_check(self, what: str, speed_m_s: float) -> Refusal | None:
         """A fixed wing refuses an airspeed below FW_AIRSPD_MIN (stall) or above
         FW_AIRSPD_MAX; 0 means FW_AIRSPD_TRIM."""
@@ -332,6 +346,10 @@ class Autopilot:
         }
         if cmd.mode == m.mode:
             return None
+        if cmd.mode in (FlightMode.OFFBOARD, FlightMode.POSITION, FlightMode.FOLLOW):
+            refusal = self._plane_refuses(f"mode {cmd.mode}")
+            if refusal is not None:
+                return refusal
         return self._flying(actions[cmd.mode])
 
     def _heartbeat(self, cmd: GcsHeartbeat) -> None:

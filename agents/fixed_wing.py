@@ -17,7 +17,10 @@ guidance target is read as a plane reads it:
   ``FW_LND_ANG`` at ``FW_LND_AIRSPD_SC`` × ``FW_AIRSPD_MIN``, the flare below
   ``FW_LND_FLALT`` (pitch between ``FW_LND_FL_PMIN`` and ``_PMAX`` on the sink rate), throttle
   off on the ground, disarmed once stopped;
-- RTL: loiter over home (or the nearest rally point) at the RTL altitude.
+- RTL: loiter over home (or the nearest rally point) at the RTL altitude;
+- orbit: loiter around the orbit's centre at its radius, altitude and speed (clockwise for a
+  positive speed, as PX4). Offboard, position and follow modes are not flown by a plane (the
+  autopilot refuses them).
 
 Airspeed setpoints are never below ``FW_AIRSPD_MIN`` nor above ``FW_AIRSPD_MAX`` (the
 autopilot refuses a slower goto or mission item; here it is a clamp). The airspeed is the
@@ -194,7 +197,11 @@ class FixedWingPilot:
         pos, vel = (x, y), (est.velocity[0], est.velocity[1])
         centre, height, speed = self._cruise_target(est, target)
         if self._loitering():
-            lateral = self.l1.loiter(centre, self.p.nav_loiter_rad, True, pos, vel)
+            radius, clockwise = self.p.nav_loiter_rad, True
+            orbit = self.modes.orbit_command
+            if self.modes.mode == M.ORBIT and orbit is not None:
+                radius, clockwise = orbit.radius_m, orbit.speed_m_s >= 0.0
+            lateral = self.l1.loiter(centre, radius, clockwise, pos, vel)
         else:
             lateral = self.l1.line(self._leg_start(centre, pos), centre, pos, vel)
         pitch, throttle = self.tecs.update(
@@ -208,7 +215,11 @@ class FixedWingPilot:
         m = self.modes
         if m.mode == M.RTL:
             (hx, hy, _), alt = m.rtl_target
-            return (hx, hy), max(alt, est.position[2] if est.position[2] < alt else alt), 0.0
+            return (hx, hy), alt, 0.0
+        orbit = m.orbit_command
+        if m.mode == M.ORBIT and orbit is not None:
+            cx, cy, cz = orbit.center_enu_m
+            return (cx, cy), cz, abs(orbit.speed_m_s)
         xy = target.position_xy if target.position_xy is not None else est.position[:2]
         z = target.position_z if target.position_z is not None else est.position[2]
         return (xy[0], xy[1]), z, target.max_speed_xy_m_s
@@ -217,7 +228,7 @@ class FixedWingPilot:
         """Loiter (rather than follow a leg) around the target: from far away the loiter
         heads for the centre first."""
         m = self.modes
-        if m.mode in (M.HOLD, M.TAKEOFF, M.RTL):
+        if m.mode in (M.HOLD, M.TAKEOFF, M.RTL, M.ORBIT):
             return True
         item = m.mission.current
         return m.mode == M.MISSION and item is not None and item.hold_s > 0.0

@@ -119,6 +119,11 @@ class FlightModes:
         self.waypoint_reached: Callable[[ResolvedItem, Estimate], bool] | None = None
 
     @property
+    def orbit_command(self) -> Orbit | None:
+        """The orbit being flown (mode ORBIT)."""
+        return self._orbit
+
+    @property
     def rtl_target(self) -> tuple[tuple[float, float, float], float]:
         """Where RTL returns to and the altitude it flies at."""
         return self._rtl_dest, self._rtl_alt
