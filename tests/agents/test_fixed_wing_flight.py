@@ -13,10 +13,11 @@ import pytest
 
 from plumeswarm.experiments.fused import FusedRunner
 from swarmbus.messages import Arm, Goto, MissionItem, MissionStart, MissionUpload, VehicleState
-from swarmbus.scenario import Scenario, parse_scenario
+from swarmbus.scenario import Scenario
 from swarmbus.vehicle_types import load_vehicle_type
+from tests.support.fixed_wing import WIND_ENU_M_S, plane_scenario
 
-WIND = (3.0, 0.0, 0.0)  # 3 m/s from 270°: toward +x
+WIND = WIND_ENU_M_S
 LAND = (0.0, 0.0)
 CRUISE_Z = 40.0
 FW = load_vehicle_type("aerosonde").fixed_wing
@@ -27,20 +28,7 @@ PARAMS = FW.params
 TOUCHDOWN_WITHIN_M = 80.0
 SETTLE_S = 15.0  # after a new leg starts (a turn of up to 180°), before "level"
 
-SCENARIO = f"""
-[time]
-physics_hz = 240
-control_hz = 120
-[wind]
-speed_m_s = 3.0
-from_deg = 270.0
-[failsafe]
-takeoff_altitude_m = 30.0
-crash_speed_m_s = 3.0
-[[vehicles]]
-id = "p"
-type = "aerosonde"
-spawn_enu_m = [0.0, 0.0, 0.0]
+MISSION = f"""
 mission = [
   {{ x = 400.0, y = 0.0, z = {CRUISE_Z} }},
   {{ x = 400.0, y = 400.0, z = {CRUISE_Z} }},
@@ -84,7 +72,7 @@ def fly(scenario: Scenario, seconds: float = 190.0) -> Flight:
 
 @pytest.fixture(scope="module")
 def flights() -> tuple[Flight, Flight]:
-    sc = parse_scenario(SCENARIO)
+    sc = plane_scenario("crash_speed_m_s = 3.0", MISSION)
     return fly(sc), fly(sc)
 
 
@@ -167,7 +155,7 @@ def test_a_below_stall_goto_is_refused_and_the_mission_goes_on(
 
 
 def test_a_mission_item_below_stall_is_refused_at_upload() -> None:
-    sc = parse_scenario(SCENARIO)
+    sc = plane_scenario("crash_speed_m_s = 3.0", MISSION)
     with FusedRunner(sc, plume=False) as run:
         item = MissionItem(x=100.0, y=0.0, z=30.0, speed_m_s=12.0)
         reply = run.command("p", MissionUpload(items=[item]))

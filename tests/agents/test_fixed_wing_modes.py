@@ -23,29 +23,14 @@ from swarmbus.messages import (
     Takeoff,
     VehicleState,
 )
-from swarmbus.scenario import parse_scenario
 from swarmbus.vehicle_types import load_vehicle_type
+from tests.support.fixed_wing import plane_scenario
 
 FW = load_vehicle_type("aerosonde").fixed_wing
 assert FW is not None
 LOITER_R = FW.params.nav_loiter_rad
 ORBIT = Orbit(center_enu_m=(300.0, 300.0, 45.0), radius_m=120.0, speed_m_s=-22.0)
-SCENARIO = """
-[time]
-physics_hz = 240
-control_hz = 120
-[wind]
-speed_m_s = 3.0
-from_deg = 270.0
-[failsafe]
-takeoff_altitude_m = 30.0
-rtl_altitude_m = 50.0
-[[vehicles]]
-id = "p"
-type = "aerosonde"
-spawn_enu_m = [0.0, 0.0, 0.0]
-spawn_yaw_deg = 90.0
-"""
+
 # seconds → command
 PLAN: dict[int, object] = {
     0: Arm(),
@@ -67,7 +52,9 @@ class Run:
 @pytest.fixture(scope="module")
 def run() -> Run:
     out = Run()
-    with FusedRunner(parse_scenario(SCENARIO), plume=False) as fused:
+    with FusedRunner(
+        plane_scenario("rtl_altitude_m = 50.0", "spawn_yaw_deg = 90.0"), plume=False
+    ) as fused:
         ap = fused.flights["p"].autopilot
         for k in range(300 * 120):
             if k % 120 == 0 and k // 120 in PLAN:
