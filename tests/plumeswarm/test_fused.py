@@ -141,15 +141,10 @@ def distributed_stream(
 
 
 def stepped_stream(
-    path: Path,
-    scenario: Scenario,
-    last_tick: int,
-    boundary: Boundary,
-    log_dir: Path,
-    groups: Sequence[Sequence[str]] = ONE_EACH,
+    path: Path, scenario: Scenario, last_tick: int, boundary: Boundary, log_dir: Path
 ) -> dict:
     """The distributed stack in stepped mode, stepped by a Swarm client between boundaries
-    (one autopilot process per group of vehicles)."""
+    (one autopilot process per vehicle of the scenario)."""
     keys = Keys(scenario.world.name)
     digest = StateDigest()
 
@@ -159,7 +154,7 @@ def stepped_stream(
 
     with zenoh_network() as (net, session), NodeProcs(net, path, log_dir) as procs:
         sub = session.declare_subscriber(keys.tick(), on_tick)
-        start_plume_and_autopilots(procs, session, keys, groups)
+        start_plume_and_autopilots(procs, session, keys, [(v.id,) for v in scenario.vehicles])
         procs.start("physics")
         with Swarm.connect(scenario.world.name, [net.endpoint], command_timeout_s=20.0) as sw:
             tick = 0
@@ -290,7 +285,7 @@ def test_a_fixed_wing_take_off_gives_the_same_states_fused_and_distributed(
                 top = max(top, s.position_enu_m[2])
     assert top > 20.0, "the plane should have taken off"
     fused = digest.result()
-    distributed = stepped_stream(path, scenario, last_tick, boundary, tmp_path, (("p",),))
+    distributed = stepped_stream(path, scenario, last_tick, boundary, tmp_path)
     assert fused["messages"] == distributed["messages"] == last_tick + 1
     assert distributed["missing"] == distributed["conflicts"] == 0
     assert fused["sha256"] == distributed["sha256"]
