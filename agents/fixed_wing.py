@@ -71,6 +71,7 @@ class FixedWingPilot:
         self.l1 = L1(self.p)
         self.att = AttitudeControl(self.p, dt)
         self._launch: tuple[tuple[float, float], float] | None = None  # start xy, heading
+        self._runway: tuple[tuple[float, float], float] | None = None  # kept after the launch
         self._leg: tuple[tuple[float, float], tuple[float, float]] | None = None
         self._approach: Approach | None = None
         self._mode = modes.mode
@@ -119,6 +120,7 @@ class FixedWingPilot:
         if est.on_ground and self._mode in (M.TAKEOFF, M.MISSION):
             x, y, _ = est.position
             self._launch = ((x, y), attitude_of(est.attitude_xyzw, est.body_rates).yaw_enu)
+            self._runway = self._launch
 
     def _airspeed(self, est: Estimate, now: float) -> float:
         wx, wy, wz = self._wind(est, now)
@@ -196,7 +198,10 @@ class FixedWingPilot:
         x, y, z = est.position
         pos, vel = (x, y), (est.velocity[0], est.velocity[1])
         centre, height, speed = self._cruise_target(est, target)
-        if self._loitering():
+        runway = self._runway_line(centre)
+        if runway is not None:
+            lateral = self.l1.line(runway[0], runway[1], pos, vel)
+        elif self._loitering():
             radius, clockwise = self.p.nav_loiter_rad, True
             orbit = self.modes.orbit_command
             if self.modes.mode == M.ORBIT and orbit is not None:
@@ -223,6 +228,20 @@ class FixedWingPilot:
         xy = target.position_xy if target.position_xy is not None else est.position[:2]
         z = target.position_z if target.position_z is not None else est.position[2]
         return (xy[0], xy[1]), z, target.max_speed_xy_m_s
+
+    def _runway_line(
+        self, centre: tuple[float, float]
+    ) -> tuple[tuple[float, float], tuple[float, float]] | None:
+        """A mission started on the ground climbs to its first altitude over the launch point
+        (its target): the plane climbs on along the runway's line instead of turning back."""
+        if self._runway is None or self.modes.mode != M.MISSION:
+            self._runway = None
+            return None
+        (sx, sy), heading = self._runway
+        if math.hypot(centre[0] - sx, centre[1] - sy) > 1.0:  # the mission's own items now
+            self._runway = None
+            return None
+        return (sx, sy), (sx + 1000.0 * math.cos(heading), sy + 1000.0 * math.sin(heading))
 
     def _loitering(self) -> bool:
         """Loiter (rather than follow a leg) around the target: from far away the loiter
