@@ -18,9 +18,11 @@ from agents.behavior import Behavior
 from agents.control import Controller, Estimate
 from agents.estimator import Estimator
 from agents.failsafe import FailsafeMonitor
+from agents.fixed_wing import IDLE, FixedWingPilot
 from agents.mixer import Mixer
 from agents.mode_table import AIRBORNE, Refusal, denied, invalid
 from agents.modes import FlightModes
+from plume_atmosphere.wind import wind_from_scenario
 from swarmbus.messages import (
     ACTION_CODES_OF_PARAM,
     Arm,
@@ -86,8 +88,16 @@ class Autopilot:
         self.vehicle_type = load_vehicle_type(vehicle.type)
         self.control_dt_s = 1.0 / scenario.time.control_hz
         self.controller = Controller(self.vehicle_type, self.control_dt_s)
-        self.mixer = Mixer(self.vehicle_type)
         self.modes = FlightModes(scenario.failsafe_for(vehicle_id), scenario.world.origin)
+        fw = self.vehicle_type.fixed_wing
+        # the vehicle kind selects the controller: the multirotor cascade and mixer, or the
+        # fixed-wing pilot (agents/fixed_wing.py) on the same modes
+        self.pilot = (
+            FixedWingPilot(fw, self.control_dt_s, self.modes, wind_from_scenario(scenario))
+            if fw is not None
+            else None
+        )
+        self.mixer = Mixer(self.vehicle_type) if fw is None else None
         self.monitor = FailsafeMonitor(self.modes)
         self.estimator = estimator or Estimator()
         self.behavior = behavior
@@ -100,8 +110,11 @@ class Autopilot:
         # the scenario's mission is uploaded with the first state, when home is known
         self._scenario_mission = list(vehicle.mission)
         self._spawn = vehicle.spawn_enu_m
-        self._zero = [0.0] * self.mixer.rotor_count
-        self._idle = [IDLE_COMMAND] * self.mixer.rotor_count
+        if self.mixer is not None:
+            self._zero = [0.0] * self.mixer.rotor_count
+            self._idle = [IDLE_COMMAND] * self.mixer.rotor_count
+        else:
+            self._zero = self._idle = list(IDLE)
         self._handlers: dict[type[Any], Callable[[Any], CommandReply | Refusal | None]] = {
             Arm: self._arm,
             Disarm: self._disarm,
@@ -111,20 +124,25 @@ class Autopilot:
             Hold: lambda c: self._flying(self.modes.hold),
             Goto: self._goto,
             SetMode: self._set_mode,
-            MissionUpload: lambda c: self.modes.upload_mission(list(c.items)),
+            MissionUpload: lambda c: self._upload(list(c.items)),
             MissionStart: lambda c: self._flying(
                 lambda est: self.modes.start_mission(est, c.start_index)
             ),
             MissionPause: self._pause,
             MissionClear: lambda c: self.modes.clear_mission(),
             MissionDownload: lambda c: self._reply(mission=self.mission_items()),
-            Setpoint: lambda c: self.modes.setpoint(c, self.now),
+            Setpoint: lambda c: (
+                self._plane_refuses("setpoints (offboard)") or self.modes.setpoint(c, self.now)
+            ),
             GcsHeartbeat: self._heartbeat,
             SetParam: self._set_param,
             GetParams: lambda c: self._reply(params=self.params()),
             GeofenceUpload: lambda c: self.modes.upload_fence(self.est, list(c.zones)),
             RallyUpload: lambda c: self.modes.upload_rally([tuple(p) for p in c.points_enu_m]),
-            Orbit: lambda c: self._flying(lambda est: self.modes.orbit(est, c)),
+            Orbit: lambda c: (
+                self._stall_check("orbit: speed_m_s", abs(c.speed_m_s))
+                or self._flying(lambda est: self.modes.orbit(est, c))
+            ),
         }
 
     def mission_items(self) -> list[MissionItem]:
@@ -156,7 +174,7 @@ class Autopilot:
         if not modes.armed:
             modes.home = est.position  # home follows the vehicle until it is armed
         if self._scenario_mission:
-            refusal = modes.upload_mission(self._scenario_mission)
+            refusal = self._upload(self._scenario_mission)
             if refusal is not None:
                 log.error("%s: scenario mission refused: %s", self.vehicle_id, refusal.reason)
             self._scenario_mission = []
@@ -164,6 +182,9 @@ class Autopilot:
         if modes.mode == FlightMode.OFFBOARD and self.behavior is not None:
             self._run_behavior(state, peers, readings)
         target = modes.guidance(est, now)
+        if self.pilot is not None:
+            return self.pilot.update(est, target, now)
+        assert self.mixer is not None
         if target is None:
             self.controller.reset()
             return self._idle if modes.mode == FlightMode.ARMED else self._zero
@@ -252,7 +273,52 @@ class Autopilot:
     def _takeoff(self, cmd: Takeoff) -> Refusal | None:
         return self._flying(lambda est: self.modes.takeoff(est, cmd.altitude_m))
 
+    @property
+    def kind(self) -> str:
+        """The vehicle kind (``multirotor``, ``fixed_wing``): what a MAVLink heartbeat's
+        vehicle type and custom modes follow."""
+        return self.vehicle_type.kind
+
+    def _plane_refuses(self, what: str) -> Refusal | None:
+        if self.vehicle_type.fixed_wing is None:
+            return None
+        return Refusal(
+            RejectCode.UNSUPPORTED,
+            f"{what}: not flown by the fixed-wing controller (it flies takeoff, hold, goto, "
+            "mission, orbit, land and rtl)",
+        )
+
+    def _stall_check(self, what: str, speed_m_s: float) -> Refusal | None:
+        """A fixed wing refuses an airspeed below FW_AIRSPD_MIN (stall) or above
+        FW_AIRSPD_MAX; 0 means FW_AIRSPD_TRIM."""
+        fw = self.vehicle_type.fixed_wing
+        if fw is None or speed_m_s == 0.0:
+            return None
+        p = fw.params
+        if speed_m_s < p.fw_airspd_min:
+            return invalid(
+                f"{what} {speed_m_s:g} m/s is below FW_AIRSPD_MIN {p.fw_airspd_min:g} m/s "
+                f"(stall); valid: 0 (FW_AIRSPD_TRIM {p.fw_airspd_trim:g}) or "
+                f"{p.fw_airspd_min:g}..{p.fw_airspd_max:g}"
+            )
+        if speed_m_s > p.fw_airspd_max:
+            return invalid(
+                f"{what} {speed_m_s:g} m/s is above FW_AIRSPD_MAX {p.fw_airspd_max:g} m/s; "
+                f"valid: 0 or {p.fw_airspd_min:g}..{p.fw_airspd_max:g}"
+            )
+        return None
+
+    def _upload(self, items: list[MissionItem]) -> Refusal | None:
+        for i, item in enumerate(items):
+            refusal = self._stall_check(f"item {i}: speed_m_s", item.speed_m_s)
+            if refusal is not None:
+                return refusal
+        return self.modes.upload_mission(items)
+
     def _goto(self, cmd: Goto) -> Refusal | None:
+        refusal = self._stall_check("goto: speed_m_s", cmd.speed_m_s)
+        if refusal is not None:
+            return refusal
         yaw = math.radians(cmd.yaw_deg) if cmd.yaw_deg is not None else None
         return self._flying(
             lambda est: self.modes.goto(est, cmd.position_enu_m, yaw, cmd.speed_m_s)
@@ -280,6 +346,10 @@ class Autopilot:
         }
         if cmd.mode == m.mode:
             return None
+        if cmd.mode in (FlightMode.OFFBOARD, FlightMode.POSITION, FlightMode.FOLLOW):
+            refusal = self._plane_refuses(f"mode {cmd.mode}")
+            if refusal is not None:
+                return refusal
         return self._flying(actions[cmd.mode])
 
     def _heartbeat(self, cmd: GcsHeartbeat) -> None:

@@ -114,6 +114,28 @@ class FlightModes:
             M.FOLLOW: self._guide_follow,
         }
         self._orbit: Orbit | None = None
+        # A fixed wing's pilot decides when a mission waypoint is reached (it cannot stop on
+        # it: a horizontal radius, a loiter circle); None: the 3-D acceptance radius.
+        self.waypoint_reached: Callable[[ResolvedItem, Estimate], bool] | None = None
+
+    @property
+    def orbit_command(self) -> Orbit | None:
+        """The orbit being flown (mode ORBIT)."""
+        return self._orbit
+
+    @property
+    def rtl_target(self) -> tuple[tuple[float, float, float], float]:
+        """Where RTL returns to and the altitude it flies at."""
+        return self._rtl_dest, self._rtl_alt
+
+    def landed(self, est: Estimate, now: float) -> None:
+        """A fixed wing stopped on the ground after its landing: the land item is reached,
+        the vehicle disarms (a multirotor's touchdown is detected in guidance)."""
+        item = self.mission.current
+        if self.mode == M.MISSION and item is not None and item.command == MissionCommand.LAND:
+            self.mission.reached(now)
+        if self.mode in (M.MISSION, M.LAND, M.RTL):
+            self._set_mode(M.DISARMED, est)
 
     # ------------------------------------------------------------------ table
     @property
@@ -477,8 +499,12 @@ class FlightModes:
         if item.command == MissionCommand.LAND:
             return self._mission_land(item, est, now)
         x, y, z = est.position
-        dist = math.sqrt((x - item.x) ** 2 + (y - item.y) ** 2 + (z - item.z) ** 2)
-        if dist < item.acceptance_radius_m and mission.arrived(now):
+        if self.waypoint_reached is not None:
+            inside = self.waypoint_reached(item, est)
+        else:
+            dist = math.sqrt((x - item.x) ** 2 + (y - item.y) ** 2 + (z - item.z) ** 2)
+            inside = dist < item.acceptance_radius_m
+        if inside and mission.arrived(now):
             return self._guide_mission(est, now)
         return Target((item.x, item.y), item.z, self._yaw, max_speed_xy_m_s=item.speed_m_s)
 

@@ -12,6 +12,10 @@ uses the vehicle's true state of the tick, as the autopilot would its estimate, 
 type's inertia, rotors and coefficients. The autopilot, back, finds that ticks were stepped
 without it and lands too (``agents.autopilot_node``), as in realtime after a state loss.
 
+A fixed wing cannot hold or descend on the spot: without its autopilot it glides, throttle
+off and surfaces centred (the Aerosonde is statically stable: it settles into a glide);
+on the ground its throttle stays off.
+
 The episodes are counted per vehicle (:class:`CommandGaps`): how many ticks went without the
 vehicle's command, in how many outages, how much sim time under the failsafe; the physics puts
 them in its health detail and its last log line ("the run reports what was late").
@@ -126,6 +130,24 @@ class LandController:
         return out
 
 
+class GlideController:
+    """A fixed wing's failsafe: throttle off, surfaces centred; None on the ground."""
+
+    def command(self, state: VehicleState, hold_z_m: float | None = None) -> list[float] | None:
+        if state.on_ground or state.crashed:
+            return None
+        return [0.0, 0.5, 0.5, 0.5]
+
+
+def failsafe_controller(
+    vtype: VehicleType, descend_speed_m_s: float
+) -> LandController | GlideController:
+    """The physics' failsafe for a vehicle type: Land for a multirotor, a glide for a plane."""
+    if vtype.fixed_wing is not None:
+        return GlideController()
+    return LandController(vtype, descend_speed_m_s)
+
+
 @dataclass(slots=True)
 class Gap:
     """One vehicle's command outages."""
@@ -148,7 +170,7 @@ class CommandGaps:
             for vid in vehicle_ids
         }
         self.controllers = {
-            vid: LandController(
+            vid: failsafe_controller(
                 load_vehicle_type(scenario.vehicle(vid).type),
                 scenario.failsafe_for(vid).descend_speed_m_s,
             )

@@ -252,7 +252,7 @@ class Scene:
         base = f"/vehicles/{vid}"
         body = mg.MeshLambertMaterial(color=colour)
         self._set(f"{base}/body", mg.Box([2 * half[0], 2 * half[1], 2 * half[2]]), body)
-        arm_r = max(math.hypot(r.position_m[0], r.position_m[1]) for r in vt.rotors)
+        arm_r = max((math.hypot(r.position_m[0], r.position_m[1]) for r in vt.rotors), default=0.0)
         disc_r = max(0.05, 0.45 * arm_r)
         for i, rotor in enumerate(vt.rotors):
             path = f"{base}/rotor_{i}"

@@ -15,6 +15,13 @@ Forces per vehicle and substep (conventions in the team notes and ``docs/physics
   of every :meth:`World.step` call, i.e. once per control tick, and held over its substeps);
 - gravity from pybullet; pybullet's own velocity damping is switched off.
 
+A fixed-wing vehicle (``kind = "fixed_wing"``) has no rotors: its four actuator channels are
+throttle (0..1, through the motor lag) and aileron, elevator, rudder (0..1 → −max..+max
+deflection, 0.5 neutral, instant), and its force and moment are Beard & McLain's aerodynamics
+and propeller (:mod:`sim_world.aero`) from its velocity relative to the same wind, evaluated
+every substep. Its touchdown is a crash when it sinks faster than the crash speed (its
+forward speed on a runway is no crash).
+
 The per-substep loop is plain scalar Python (numpy on 3-vectors costs more than it saves), with
 one force and one torque call per vehicle, both in the body frame.
 """
@@ -26,13 +33,14 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from plume_atmosphere.wind import wind_from_scenario, wind_vector_enu
+from sim_world.aero import fixed_wing_wrench
 from sim_world.checkpoint import CheckpointError, VehicleCheckpoint, WorldCheckpoint, scratch_file
 from sim_world.geodesy import EnuToGeodetic
 from sim_world.pybullet_quiet import pb
 from swarmbus.closeable import Closeable
 from swarmbus.messages import VehicleState
 from swarmbus.scenario import Scenario, VehicleSpec
-from swarmbus.vehicle_types import VehicleType, load_vehicle_type
+from swarmbus.vehicle_types import FixedWing, VehicleType, load_vehicle_type
 
 __all__ = ["GRAVITY_M_S2", "World", "rotate_to_body", "wind_vector_enu"]
 
@@ -68,6 +76,7 @@ class _Vehicle:
     """Mutable per-vehicle simulation state (plain attributes: this sits in the hot loop)."""
 
     __slots__ = (
+        "aero",
         "body",
         "crash_speed_m_s",
         "crashed",
@@ -80,6 +89,7 @@ class _Vehicle:
         "max_speed2",
         "motor_alpha",
         "motors_enabled",
+        "neutral",
         "omega",
         "omega_max",
         "on_ground",
@@ -96,7 +106,10 @@ class _Vehicle:
         self.id = spec.id
         self.type = vtype
         self.body = body
-        n = len(vtype.rotors)
+        n = vtype.actuator_count
+        self.aero: FixedWing | None = vtype.fixed_wing
+        # the actuators' rest position: motors off (a fixed wing: surfaces centred)
+        self.neutral = [0.0] * n if self.aero is None else [0.0, 0.5, 0.5, 0.5]
         self.rotor_x = [r.position_m[0] for r in vtype.rotors]
         self.rotor_y = [r.position_m[1] for r in vtype.rotors]
         self.spin = [float(r.spin) for r in vtype.rotors]
@@ -106,8 +119,8 @@ class _Vehicle:
         self.drag = vtype.linear_drag_n_per_m_s
         self.half_height_m = vtype.collision_half_extents_m[2]
         self.motor_alpha = 1.0  # set by World from the physics step
-        self.omega = [0.0] * n
-        self.target = [0.0] * n
+        self.omega = list(self.neutral)
+        self.target = list(self.neutral)
         # Motors at their targets: the body-frame thrust and torque are constant (cached).
         self.settled = True
         self.wrench = (0.0, 0.0, 0.0, 0.0)
@@ -268,11 +281,12 @@ class World(Closeable):
                 f"vehicle {vehicle_id!r} has {len(target)} rotors, got {len(rotor_commands)} "
                 "rotor commands"
             )
-        omega_max = v.omega_max
+        omega_max = v.omega_max if v.aero is None else 1.0  # a fixed wing's are fractions
         enabled = v.motors_enabled
+        neutral = v.neutral
         for i, u in enumerate(rotor_commands):
             u = 0.0 if u < 0.0 else (1.0 if u > 1.0 else float(u))
-            w = u * omega_max if enabled else 0.0
+            w = u * omega_max if enabled else neutral[i]
             if w != target[i]:
                 target[i] = w
                 v.settled = False
@@ -298,7 +312,7 @@ class World(Closeable):
         v = self._by_id[vehicle_id]
         v.motors_enabled = enabled
         if not enabled:
-            v.target[:] = [0.0] * len(v.target)
+            v.target[:] = v.neutral
             v.settled = False
 
     def set_rotor_speeds(self, vehicle_id: str, omega_rad_s: Sequence[float]) -> None:
@@ -309,6 +323,26 @@ class World(Closeable):
         v.omega[:] = [float(w) for w in omega_rad_s]
         v.target[:] = [float(w) for w in omega_rad_s]
         v.settled = False
+
+    def set_motion(
+        self,
+        vehicle_id: str,
+        position_enu_m: Sequence[float],
+        velocity_enu_m_s: Sequence[float],
+        yaw_deg: float = 0.0,
+        pitch_deg: float = 0.0,
+    ) -> None:
+        """Initial condition: the body's centre at ``position_enu_m`` moving at
+        ``velocity_enu_m_s``, heading ``yaw_deg`` (ENU) and pitched ``pitch_deg`` nose up, not
+        rotating (a fixed wing in flight, a hand launch)."""
+        v = self._by_id[vehicle_id]
+        c = self._client
+        q = pb.getQuaternionFromEuler(
+            (0.0, -math.radians(pitch_deg), math.radians(yaw_deg)), physicsClientId=c
+        )
+        pb.resetBasePositionAndOrientation(v.body, list(position_enu_m), q, physicsClientId=c)
+        pb.resetBaseVelocity(v.body, list(velocity_enu_m_s), [0.0, 0.0, 0.0], physicsClientId=c)
+        self._fresh_step = -1
 
     def rotor_speeds(self, vehicle_id: str) -> tuple[float, ...]:
         return tuple(self._by_id[vehicle_id].omega)
@@ -347,6 +381,9 @@ class World(Closeable):
                     (vx, vy, vz) = get_vel(body, physicsClientId=c)[0]
                 else:
                     q, (vx, vy, vz) = fresh[i]
+                if v.aero is not None:
+                    self._fly_fixed_wing(v, q, vx, vy, vz, winds[i])
+                    continue
                 speed2 = vx * vx + vy * vy + vz * vz
                 if speed2 > v.max_speed2:
                     v.max_speed2 = speed2
@@ -372,6 +409,34 @@ class World(Closeable):
             self.step_count += 1
             fresh = None
         self._update_contacts()
+
+    def _fly_fixed_wing(
+        self,
+        v: _Vehicle,
+        q: Sequence[float],
+        vx: float,
+        vy: float,
+        vz: float,
+        wind: tuple[float, float, float],
+    ) -> None:
+        """One substep's aerodynamic and propeller wrench on a fixed wing (body frame)."""
+        assert v.aero is not None
+        c = self._client
+        if vz < 0.0 and vz * vz > v.max_speed2:  # a fixed wing crashes on its sink rate
+            v.max_speed2 = vz * vz
+        omega = v.omega
+        target = v.target
+        omega[0] += (target[0] - omega[0]) * v.motor_alpha
+        omega[1:] = target[1:]
+        limits = v.aero.max_deflection_deg
+        surfaces = [math.radians(limits[k]) * (2.0 * omega[k + 1] - 1.0) for k in range(3)]
+        ang = pb.getBaseVelocity(v.body, physicsClientId=c)[1]
+        air = rotate_to_body(q, vx - wind[0], vy - wind[1], vz - wind[2])
+        fx, fy, fz, tx, ty, tz = fixed_wing_wrench(
+            v.aero, omega[0], surfaces, air, rotate_to_body(q, *ang)
+        )
+        pb.applyExternalForce(v.body, -1, (fx, fy, fz), _ORIGIN, pb.LINK_FRAME, physicsClientId=c)
+        pb.applyExternalTorque(v.body, -1, (tx, ty, tz), pb.LINK_FRAME, physicsClientId=c)
 
     def _update_contacts(self) -> None:
         ground = self.ground_body

@@ -101,7 +101,7 @@ def vehicle_type(name: str) -> VehicleType:
 def body_entity(vid: str, vt: VehicleType, rgb: int, ts: fm.Timestamp) -> fm.SceneEntity:
     s = VEHICLE_SCALE
     hx, hy, hz = vt.collision_half_extents_m
-    arm_r = max(math.hypot(r.position_m[0], r.position_m[1]) for r in vt.rotors)
+    arm_r = max((math.hypot(r.position_m[0], r.position_m[1]) for r in vt.rotors), default=0.0)
     disc_d = 2 * max(0.05, 0.45 * arm_r) * s
     rotors = [
         fm.CylinderPrimitive(

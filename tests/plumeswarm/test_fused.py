@@ -143,7 +143,8 @@ def distributed_stream(
 def stepped_stream(
     path: Path, scenario: Scenario, last_tick: int, boundary: Boundary, log_dir: Path
 ) -> dict:
-    """The distributed stack in stepped mode, stepped by a Swarm client between boundaries."""
+    """The distributed stack in stepped mode, stepped by a Swarm client between boundaries
+    (one autopilot process per vehicle of the scenario)."""
     keys = Keys(scenario.world.name)
     digest = StateDigest()
 
@@ -153,7 +154,7 @@ def stepped_stream(
 
     with zenoh_network() as (net, session), NodeProcs(net, path, log_dir) as procs:
         sub = session.declare_subscriber(keys.tick(), on_tick)
-        start_plume_and_autopilots(procs, session, keys)
+        start_plume_and_autopilots(procs, session, keys, [(v.id,) for v in scenario.vehicles])
         procs.start("physics")
         with Swarm.connect(scenario.world.name, [net.endpoint], command_timeout_s=20.0) as sw:
             tick = 0
@@ -255,6 +256,39 @@ def test_casting_in_offboard_with_a_noisy_sensor_gives_the_same_states(
         assert runner.flights[vid].autopilot.modes.mode == FlightMode.OFFBOARD, vid
     readings = [r for r in runner.latest_readings.values() if r.true_g_m3 is not None]
     assert readings and any(r.reported_g_m3 != r.true_g_m3 for r in readings)
+
+
+def test_a_fixed_wing_take_off_gives_the_same_states_fused_and_distributed(
+    tmp_path: Path,
+) -> None:
+    """The Aerosonde's ground roll, rotation and climb-out (12 s) over the bus, stepped."""
+    path = tmp_path / "plane.toml"
+    path.write_text(
+        '[world]\nname = "plane"\n[time]\nphysics_hz = 240\ncontrol_hz = 120\n'
+        'mode = "stepped"\n[wind]\nspeed_m_s = 3.0\nfrom_deg = 270.0\n'
+        "[failsafe]\ntakeoff_altitude_m = 30.0\n"
+        '[[vehicles]]\nid = "p"\ntype = "aerosonde"\nspawn_enu_m = [0.0, 0.0, 0.0]\n'
+    )
+    scenario = load_scenario(path)
+    last_tick = 12 * 120
+    boundary: Boundary = {0: [("p", Arm()), ("p", Takeoff(altitude_m=30.0))]}
+    digest = StateDigest()
+    top = 0.0
+    with FusedRunner(scenario) as runner:
+        for vid, command in boundary[0]:
+            assert runner.command(vid, command).accepted
+        for s in runner.states:
+            digest.add(encode(s))
+        for _ in range(last_tick):
+            for s in runner.step():
+                digest.add(encode(s))
+                top = max(top, s.position_enu_m[2])
+    assert top > 20.0, "the plane should have taken off"
+    fused = digest.result()
+    distributed = stepped_stream(path, scenario, last_tick, boundary, tmp_path)
+    assert fused["messages"] == distributed["messages"] == last_tick + 1
+    assert distributed["missing"] == distributed["conflicts"] == 0
+    assert fused["sha256"] == distributed["sha256"]
 
 
 def test_the_docs_example_of_the_runner_flies_the_missions() -> None:
