@@ -122,7 +122,7 @@ def scenario_width_slope(ctx: BehaviorContext) -> float:
 
 class Infotaxis(SeekingBehavior):
     # ``cells_xy`` is rebuilt from ``grid_origin`` (where the grid was laid) on restore
-    own_state = (
+    own_state: ClassVar[tuple[str, ...]] = (
         "detector",
         "grid_origin",
         "belief",
@@ -343,7 +343,7 @@ class Infotaxis(SeekingBehavior):
         likelihood = table[min(self.hits, self.n_hits - 1)]
         if self.evidence_weight != 1.0:
             likelihood = likelihood**self.evidence_weight
-        return likelihood
+        return np.asarray(likelihood)
 
     def _belief_mean(self) -> tuple[float, float, float, float]:
         """Mean (x, y), spread and the mass within ``declare_radius_m`` of the mean."""
