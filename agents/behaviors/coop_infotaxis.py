@@ -22,6 +22,13 @@ only its own:
   this behaviour) along the scenario's mean wind, so every member lays the same cells
   without a message. One member alone lays infotaxis's (at its start, along its first
   anemometer reading).
+- **The swarm's evidence weight.** Members near one another meet the same bursts of a
+  meandering plume, so their observations of one step are not independent: infotaxis's
+  ``evidence_weight`` (0.5: a 1 s step counts as half an independent observation) is divided
+  by N^``swarm_exponent`` for every observation, own and received alike (so every member
+  still holds the same posterior). With ``swarm_exponent`` 0.5 the N observations of a step
+  count as √N of a lone searcher's: between fully redundant members (1) and independent
+  ones (N). Chosen on tuning seed 1000, runs 0–4, ``meander_low`` (docs/gsl.md).
 - **Its own move, not a peer's.** Each member chooses its move by the lowest expected entropy
   of its belief, as infotaxis does, among the places no peer has announced as its next
   target (within ``avoid_radius_m``, the grid's 1 m cell: the same place at the belief's
@@ -87,7 +94,7 @@ class CooperativeInfotaxis(Infotaxis):
     own_state: ClassVar[tuple[str, ...]] = (*Infotaxis.own_state, "pending", "peer_targets")
     start_spacing_m = 4.0
     avoid_radius_m = 1.0
-    peer_weight = 1.0
+    swarm_exponent = 0.5
 
     def __init__(self, ctx: BehaviorContext) -> None:
         super().__init__(ctx)
@@ -99,6 +106,8 @@ class CooperativeInfotaxis(Infotaxis):
             sum(p[1] for p in starts) / len(starts),
         )
         self.planned_wind = scenario_wind(ctx)
+        if self.shared:  # every member weighs every observation alike
+            self.evidence_weight = type(self).evidence_weight * len(starts) ** -self.swarm_exponent
         #: Peer observations received and not yet applied, as :data:`Evidence`.
         self.pending: list[Evidence] = []
         #: Each peer's latest announced next place.
@@ -149,7 +158,7 @@ class CooperativeInfotaxis(Infotaxis):
         cells its plume reaches and their ratio to the background's (the background's own
         factor is the same in every cell, so normalisation removes it)."""
         assert self.grid_origin is not None and self.cells_xy is not None
-        key = (type(self), self.grid_origin, evidence)
+        key = (type(self), self.evidence_weight, self.grid_origin, evidence)
         found = _memo.get(key)
         if found is not None:
             _memo.move_to_end(key)
@@ -165,9 +174,8 @@ class CooperativeInfotaxis(Infotaxis):
         for k, cells in enumerate(sparse.inside):
             lo, hi = sparse.offsets[k], sparse.offsets[k + 1]
             ratio = sparse.classes[h, lo:hi] / background
-            weight = self.evidence_weight * self.peer_weight
-            if weight != 1.0:
-                ratio = ratio**weight
+            if self.evidence_weight != 1.0:
+                ratio = ratio**self.evidence_weight
             factors.append((cells, ratio))
         out = tuple(factors)
         _memo[key] = out

@@ -9,9 +9,11 @@ from dataclasses import dataclass, field
 
 import msgspec
 import numpy as np
+import pytest
 
 from agents.behavior import BehaviorContext
 from agents.behaviors.coop_infotaxis import CooperativeInfotaxis, Observation
+from agents.behaviors.infotaxis import Infotaxis
 from agents.behaviors.infotaxis_core import FloatArray
 from agents.behaviors.wind import WindFrame
 from agents.peer_link import PeerLink
@@ -131,6 +133,9 @@ def test_under_a_perfect_radio_the_members_hold_the_product_of_the_same_likeliho
     flight = fly(pair(RadioSpec()), 8.0)
     a, b = flight.members["uav1"], flight.members["uav2"]
     assert a.grid_origin == b.grid_origin  # one grid for the swarm
+    # two members: every observation counts as 1/√2 of a lone searcher's
+    assert a.evidence_weight == b.evidence_weight
+    assert a.evidence_weight == pytest.approx(Infotaxis.evidence_weight / math.sqrt(2.0), rel=1e-15)
     assert sum(m.hits for _, m in flight.published["uav1"] + flight.published["uav2"]) > 0
     held_a, held_b = held(flight, "uav1"), held(flight, "uav2")
     assert a.belief is not None and b.belief is not None
