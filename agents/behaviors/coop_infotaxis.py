@@ -8,7 +8,10 @@ only its own:
   :class:`Observation`: where the step observed (the mean of its readings' positions), the
   step's duration, its hit count, the mean wind it judged the step in, and the place it heads
   for next (8 numbers, 67 bytes of msgpack). That is every input of the step's likelihood, so
-  a receiver computes the very likelihood the sender applied.
+  a receiver computes the very likelihood the sender applied. Agents that fold their
+  conspecifics' observations into their own maps are the collaborative infotaxis of Song,
+  He, Ristic, Li & Lei (J. Phys. A, doi:10.1088/1751-8121/ab5088; there weighted by how
+  much two maps differ, here all alike).
 - **One belief, updated once a step.** The peers' observations that arrive are kept and
   folded in at the member's next step end, with its own, in one Bayes update: the belief is
   multiplied by the product of the step's likelihoods and normalised once. Observations are
@@ -88,7 +91,7 @@ class CooperativeInfotaxis(Infotaxis):
     vehicles = 3
     source = (
         "Vergassola, Villermaux & Shraiman 2007 infotaxis; every step's observation shared "
-        "(Masson, Bailly Bechet & Vergassola 2009)"
+        "(collaborative infotaxis, Song et al., J. Phys. A)"
     )
     talks: ClassVar[bool] = True
     own_state: ClassVar[tuple[str, ...]] = (*Infotaxis.own_state, "pending", "peer_targets")

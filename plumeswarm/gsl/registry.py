@@ -97,7 +97,7 @@ BUILTIN_ALGORITHMS: dict[str, Algorithm] = {
         "agents.behaviors.coop_infotaxis:CooperativeInfotaxis",
         3,
         "Vergassola, Villermaux & Shraiman 2007 infotaxis; every step's observation shared "
-        "(Masson, Bailly Bechet & Vergassola 2009)",
+        "(collaborative infotaxis, Song et al., J. Phys. A)",
         4.0,
     ),
     "oracle": Algorithm("agents.behaviors.oracle:Oracle", 1, "knows the source (ceiling)"),
