@@ -7,7 +7,7 @@ only its own:
 - **What it shares.** At the end of each of its steps a member publishes one
   :class:`Observation`: where the step observed (the mean of its readings' positions), the
   step's duration, its hit count, the mean wind it judged the step in, and the place it heads
-  for next (8 numbers, 67 bytes of msgpack). That is every input of the step's likelihood, so
+  for next (8 numbers, 65 bytes of msgpack). That is every input of the step's likelihood, so
   a receiver computes the very likelihood the sender applied. Agents that fold their
   conspecifics' observations into their own maps are the collaborative infotaxis of Song,
   He, Ristic, Li & Lei (J. Phys. A, doi:10.1088/1751-8121/ab5088; there weighted by how
