@@ -123,7 +123,7 @@ def scenario_width_slope(ctx: BehaviorContext) -> float:
 class Infotaxis(SeekingBehavior):
     ignores_peers = True  # reads neither its peers' states nor their readings: any radio
     # ``cells_xy`` is rebuilt from ``grid_origin`` (where the grid was laid) on restore
-    own_state = (
+    own_state: ClassVar[tuple[str, ...]] = (
         "detector",
         "grid_origin",
         "belief",
@@ -289,21 +289,34 @@ class Infotaxis(SeekingBehavior):
         return np.asarray(np.hypot(xy[:, 0] - x, xy[:, 1] - y) <= radius_m)
 
     def _decide(self, frame: WindFrame, x: float, y: float, dt_s: float) -> tuple[float, float]:
-        assert self.cells_xy is not None and self.belief is not None
+        places = self._places(frame, x, y)
+        return places[choose_move(self._scores(frame, places, dt_s))]
+
+    def _places(self, frame: WindFrame, x: float, y: float) -> list[tuple[float, float]]:
+        """Where the next step may go: stay, then upwind, downwind, left, right by ``step_m``
+        (those inside the grid)."""
+        assert self.cells_xy is not None
         lo, hi = self.cells_xy.min(axis=0), self.cells_xy.max(axis=0)
-        # The choice is made on the cells the belief has not ruled out (mass above 1e-12 of
-        # the largest): the rest cannot change an expected entropy by more than that.
-        marginal = self.belief.sum(axis=0)
-        cells = np.flatnonzero(marginal > SUPPORT_FLOOR * marginal.max())
-        belief = self.belief[:, cells]
-        xy = self.cells_xy[cells]
         s = self.step_m
         places = [(x, y)]
         for a, c in _DIRECTIONS:
             mx, my = frame.velocity(a * s, c * s)
             if lo[0] <= x + mx <= hi[0] and lo[1] <= y + my <= hi[1]:
                 places.append((x + mx, y + my))
-        scores = [
+        return places
+
+    def _scores(
+        self, frame: WindFrame, places: Sequence[tuple[float, float]], dt_s: float
+    ) -> list[float]:
+        """The expected entropy of the belief after a step to each of ``places``."""
+        assert self.cells_xy is not None and self.belief is not None
+        # The choice is made on the cells the belief has not ruled out (mass above 1e-12 of
+        # the largest): the rest cannot change an expected entropy by more than that.
+        marginal = self.belief.sum(axis=0)
+        cells = np.flatnonzero(marginal > SUPPORT_FLOOR * marginal.max())
+        belief = self.belief[:, cells]
+        xy = self.cells_xy[cells]
+        return [
             expected_entropy_sparse(
                 belief,
                 self._sparse_at(xy, frame, px, py, dt_s),
@@ -311,19 +324,27 @@ class Infotaxis(SeekingBehavior):
             )
             for px, py in places
         ]
-        return places[choose_move(scores)]
 
     def _update(self, frame: WindFrame, x: float, y: float, dt_s: float) -> None:
         assert self.belief is not None
+        self.belief = bayes_update(self.belief, self._own_likelihood(frame, x, y, dt_s), None)
+        self.hits = 0
+        self.observed_xy = (0.0, 0.0, 0.0)
+
+    def _observed_at(self, x: float, y: float) -> tuple[float, float]:
+        """Where this step observed: the mean position of its readings ((x, y) if none)."""
         sx, sy, n = self.observed_xy
-        ox, oy = (sx / n, sy / n) if n else (x, y)
+        return (sx / n, sy / n) if n else (x, y)
+
+    def _own_likelihood(self, frame: WindFrame, x: float, y: float, dt_s: float) -> FloatArray:
+        """This step's likelihood of its hits per (model, cell), weighed by
+        ``evidence_weight``."""
+        ox, oy = self._observed_at(x, y)
         table = self.likelihoods(frame, ox, oy, dt_s)
         likelihood = table[min(self.hits, self.n_hits - 1)]
         if self.evidence_weight != 1.0:
             likelihood = likelihood**self.evidence_weight
-        self.belief = bayes_update(self.belief, likelihood, None)
-        self.hits = 0
-        self.observed_xy = (0.0, 0.0, 0.0)
+        return np.asarray(likelihood)
 
     def _belief_mean(self) -> tuple[float, float, float, float]:
         """Mean (x, y), spread and the mass within ``declare_radius_m`` of the mean."""

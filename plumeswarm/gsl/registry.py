@@ -97,6 +97,13 @@ BUILTIN_ALGORITHMS: dict[str, Algorithm] = {
         "Lochmatter & Martinoli 2008; detections and empty casts pooled (Durve et al. 2020)",
         4.0,
     ),
+    "coop_infotaxis": Algorithm(
+        "agents.behaviors.coop_infotaxis:CooperativeInfotaxis",
+        3,
+        "Vergassola, Villermaux & Shraiman 2007 infotaxis; every step's observation shared "
+        "(collaborative infotaxis, Song et al., J. Phys. A)",
+        4.0,
+    ),
     "oracle": Algorithm("agents.behaviors.oracle:Oracle", 1, "knows the source (ceiling)"),
 }
 
