@@ -196,7 +196,7 @@ class CooperativeSTE(ParticleFilter):
         announced points."""
         assert self.filter is not None
         candidates = self.offsets + np.array([x, y])
-        predicted = np.stack([self.filter.predict(cx, cy, z, wind) for cx, cy in candidates])
+        predicted = self.filter.predict(candidates[:, :1], candidates[:, 1:2], z, wind)
         score = binary_information(self.filter, self.filter.detection_probability(predicted))
         for px, py in self.peer_points.values():
             taken = np.hypot(candidates[:, 0] - px, candidates[:, 1] - py) < self.separation_m

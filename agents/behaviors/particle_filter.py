@@ -105,8 +105,15 @@ class SourceTermFilter(SavesState):
         self.particles = np.array(self.particles, dtype=np.float64)
         self.weights = np.full(len(self.particles), 1.0 / len(self.particles))
 
-    def predict(self, x_m: float, y_m: float, z_m: float, wind: tuple[float, float]) -> FloatArray:
-        """Each particle's predicted concentration at (x, y, z) in the wind (east, north)."""
+    def predict(
+        self,
+        x_m: float | FloatArray,
+        y_m: float | FloatArray,
+        z_m: float | FloatArray,
+        wind: tuple[float, float],
+    ) -> FloatArray:
+        """Each particle's predicted concentration at (x, y, z) in the wind (east, north); for
+        arrays of points (shape (k, 1)), a (k, particles) array."""
         frame = WindFrame.of(wind)
         dx = x_m - self.particles[:, 0]
         dy = y_m - self.particles[:, 1]
