@@ -19,22 +19,26 @@ and feeds it its own readings and its peers':
   time T carries D / (2T) independent samples in a duration D (the variance of the mean of an
   Ornstein–Uhlenbeck process). T is ``correlation_time_s``, or when that is 0 the scenario's
   meander timescale (``[wind.meander] timescale_s`` of an ``ou`` meander: assumed known, as
-  the stability class is); a steady wind gives 1 (no tempering).
+  the stability class is); a steady wind gives 1 (no tempering). Windows of different
+  members taken at the same time share the same meander too; they are not tempered against
+  each other.
 * **Moves**: before any member has detected gas, the particle filter's crosswind sweeps (each
   member its own side first, by index parity). After, every window (or on reaching its point)
   a member flies to the candidate point (``step_m`` and ``2 × step_m`` away in 8 directions)
   whose detection outcome carries the most information about θ: the mutual information
   H(Σ wᵢpᵢ) − Σ wᵢH(pᵢ) of a binary detection with the particles' detection probabilities
-  pᵢ (the filter's P(detection | c)). A candidate within ``separation_m`` of a peer's
-  announced next point scores nothing, so the members do not all fly to the same point.
+  pᵢ (the filter's P(detection | c)): the expected entropy reduction that infotaxis
+  (Vergassola, Villermaux & Shraiman 2007) maximises, for one reading. A candidate within
+  ``separation_m`` of a peer's announced next point scores nothing (a plain exclusion, not
+  taken from a paper), so the members do not all fly to the same point.
 * **Stopping rule**: a member declares the weighted mean (x₀, y₀, Q) once the spread is below
   ``declare_spread_m`` and a window (its own or a peer's) was taken within ``near_m`` of the
   estimate (the estimate has met readings close to it).
 
 With one vehicle, or where the runner carries no peer messages (``ctx.mailbox`` is ``None``),
 a member flies alone: the same filter on its own windows only, with the tempered likelihood
-and the information-driven moves. Use ``behavior = "agents.behaviors.coop_ste:CooperativeSTE"``
-on every member.
+and the information-driven moves. Parameters and where their values come from: docs/gsl.md.
+Use ``behavior = "agents.behaviors.coop_ste:CooperativeSTE"`` on every member.
 """
 
 from __future__ import annotations
