@@ -83,6 +83,14 @@ def talks(spec: str) -> bool:
     return bool(getattr(behavior_class(spec), "talks", False))
 
 
+def ignores_peers(spec: str) -> bool:
+    """Whether the behaviour ``spec`` names says it never reads its peers (its class's
+    ``ignores_peers``; a behaviour that talks reads them whatever it says): no radio changes
+    what it does."""
+    cls = behavior_class(spec)
+    return bool(getattr(cls, "ignores_peers", False)) and not getattr(cls, "talks", False)
+
+
 def load_behavior(spec: str, ctx: BehaviorContext) -> Behavior:
     """Import ``module:Class`` and build it with ``ctx``; :class:`BehaviorError` if it fails."""
     cls = behavior_class(spec)

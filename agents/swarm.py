@@ -1,6 +1,7 @@
 """``from agents import Swarm``: a client for swarm-algorithm researchers: cached states,
-statuses and readings, typed commands and errors, waits with deadlines, and the stepped clock
-(:meth:`Swarm.step`). See docs/agents.md ("Swarm client", "Stepping the clock").
+statuses and readings, the radio's messages between vehicles, typed commands and errors, waits
+with deadlines, and the stepped clock (:meth:`Swarm.step`). See docs/agents.md ("Swarm client",
+"Reading the radio", "Stepping the clock").
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import uuid
 from collections.abc import Callable, Sequence
 from typing import TypeVar
 
+import msgspec
 import zenoh
 
 from agents.swarm_clients import (
@@ -26,13 +28,23 @@ from agents.swarm_clients import (
     VehicleCommander,
     WaitTimeout,
 )
+from agents.swarm_radio import (
+    RADIO_KEPT_TICKS,
+    RadioKept,
+    RadioReadError,
+    RadioSent,
+    RadioUnavailable,
+    kind_of,
+)
 from swarmbus.closeable import Closeable
 from swarmbus.codec import MessageError, decode
 from swarmbus.keys import Keys, vehicle_of_autopilot
 from swarmbus.messages import (
     Clock,
     ConcentrationReading,
+    LinkStatus,
     Message,
+    RadioBatch,
     StepReply,
     StepRequest,
     VehicleState,
@@ -48,6 +60,9 @@ __all__ = [
     "CommandTimeout",
     "PlumeClient",
     "PlumeError",
+    "RadioReadError",
+    "RadioSent",
+    "RadioUnavailable",
     "Subscription",
     "Swarm",
     "SwarmError",
@@ -75,6 +90,15 @@ def _check(predicate: Callable[[], T]) -> T | None:
         return None
 
 
+def _decoded(sample: zenoh.Sample, type_: type[M]) -> M | None:
+    """The sample's message, or None (logged) when it is not a valid ``type_``."""
+    try:
+        return decode(sample.payload.to_bytes(), type_)
+    except MessageError as exc:
+        log.warning("ignoring %s: %s", sample.key_expr, exc)
+        return None
+
+
 class Subscription:
     def __init__(self, swarm: Swarm, entry: tuple[Callable[..., None] | None, ...]) -> None:
         self._swarm = swarm
@@ -93,6 +117,7 @@ class Swarm(Closeable):
         keys: Keys,
         command_timeout_s: float = 2.0,
         own_session: bool = True,
+        radio_kept_ticks: int = RADIO_KEPT_TICKS,
     ) -> None:
         self.session = session
         self.keys = keys
@@ -102,10 +127,12 @@ class Swarm(Closeable):
         self._states: dict[str, VehicleState] = {}
         self._status: dict[str, VehicleStatus] = {}
         self._readings: dict[str, ConcentrationReading] = {}
+        self._radio = RadioKept(radio_kept_ticks)
         self._callbacks: list[tuple[Callable[..., None] | None, ...]] = []
         # What every callback has been given (a stepped client waits for this, see step)
         self._handled_tick: dict[str, int] = {}
         self._handled_status_s: dict[str, float] = {}
+        self._handled_radio_tick: dict[str, int] = {}
         self._clock: Clock | None = None
         self._changed = threading.Condition(self._lock)  # a handled message or a clock
         self._clock_name = f"{CLOCK_CLIENT_PREFIX}{uuid.uuid4().hex[:12]}"
@@ -123,6 +150,7 @@ class Swarm(Closeable):
                 keys.all_vehicle_concentration(),
                 self._on(ConcentrationReading, self._readings, 2),
             ),
+            session.declare_subscriber(keys.all_vehicle_radio(), self._on_radio),
             session.declare_subscriber(keys.clock(), self._on_clock),
         ]
         self._presence = Presence(session, keys)
@@ -135,15 +163,18 @@ class Swarm(Closeable):
         *,
         network: NetworkConfig | None = None,
         command_timeout_s: float = 2.0,
+        radio_kept_ticks: int = RADIO_KEPT_TICKS,
     ) -> Swarm:
         """Join ``world``. ``connect``: Zenoh endpoints (e.g. ``["tcp/10.0.0.5:7447"]``);
-        ``None`` → the default scenario's network (a router on ``tcp/127.0.0.1:7447``)."""
+        ``None`` → the default scenario's network (a router on ``tcp/127.0.0.1:7447``).
+        ``radio_kept_ticks``: how many ticks of each vehicle's radio messages :meth:`radio`
+        keeps."""
         net = network or load_scenario().network
         if connect is not None:
             net = net.with_overrides(connect=list(connect))
         session = open_session(net)
         try:
-            return cls(session, Keys(world), command_timeout_s)
+            return cls(session, Keys(world), command_timeout_s, radio_kept_ticks=radio_kept_ticks)
         except Exception:
             session.close()
             raise
@@ -189,11 +220,27 @@ class Swarm(Closeable):
 
         return handle
 
+    def _on_radio(self, sample: zenoh.Sample) -> None:
+        batch = _decoded(sample, RadioBatch)
+        if batch is None:
+            return
+        with self._lock:
+            sent = self._radio.add(batch)
+            callbacks = [c[3] for c in self._callbacks if c[3] is not None] if sent else []
+        for message in sent or []:
+            for cb in callbacks:
+                try:
+                    cb(message)
+                except Exception:
+                    log.exception("swarm subscriber callback failed")
+        with self._lock:
+            old = self._handled_radio_tick.get(batch.sender, -1)
+            self._handled_radio_tick[batch.sender] = max(batch.tick, old)
+            self._changed.notify_all()
+
     def _on_clock(self, sample: zenoh.Sample) -> None:
-        try:
-            clock = decode(sample.payload.to_bytes(), Clock)
-        except MessageError as exc:
-            log.warning("ignoring %s: %s", sample.key_expr, exc)
+        clock = _decoded(sample, Clock)
+        if clock is None:
             return
         with self._lock:
             if self._clock is None or clock.tick >= self._clock.tick:
@@ -229,9 +276,12 @@ class Swarm(Closeable):
         on_state: Callable[[VehicleState], None] | None = None,
         on_status: Callable[[VehicleStatus], None] | None = None,
         on_reading: Callable[[ConcentrationReading], None] | None = None,
+        on_radio: Callable[[RadioSent], None] | None = None,
     ) -> Subscription:
-        """Callbacks for every new state / status / reading (Zenoh's thread); ``.close()``."""
-        entry = (on_state, on_status, on_reading)
+        """Callbacks for every new state / status / reading / radio message (Zenoh's thread;
+        ``on_radio`` gets each message of each new ``vehicle/<id>/radio`` batch, in index
+        order); ``.close()``."""
+        entry = (on_state, on_status, on_reading, on_radio)
         with self._lock:
             self._callbacks.append(entry)
         return Subscription(self, entry)
@@ -240,6 +290,90 @@ class Swarm(Closeable):
         with self._lock:
             if entry in self._callbacks:
                 self._callbacks.remove(entry)
+
+    # ------------------------------------------------------------------ radio
+    def radio(
+        self,
+        vehicle_id: str,
+        of: type[msgspec.Struct] | None = None,
+        since_tick: int = -1,
+    ) -> list[RadioSent]:
+        """The messages ``vehicle_id``'s behaviour published (``ctx.mailbox.publish``) in its
+        steps after ``since_tick``, oldest first, from the batches this client keeps (the last
+        ``radio_kept_ticks`` ticks a vehicle); ``of``: only those of that type. Each is a
+        :class:`RadioSent` (sender, tick, index, kind, payload); ``.decode(Type)`` gives the
+        message. Empty when nothing was published (or the behaviour does not talk)."""
+        kind = kind_of(of) if of is not None else None
+        with self._lock:
+            return self._radio.messages(vehicle_id, since_tick, kind)
+
+    def radio_tick(self, vehicle_id: str) -> int | None:
+        """The newest tick whose radio batch from ``vehicle_id`` has arrived (a talking
+        behaviour's batch comes every tick, an empty one too); None before the first."""
+        with self._lock:
+            return self._radio.last_tick(vehicle_id)
+
+    def wait_radio(
+        self,
+        vehicle_id: str,
+        timeout_s: float | None = None,
+        *,
+        of: type[msgspec.Struct] | None = None,
+        since_tick: int = -1,
+        sim_timeout_s: float | None = None,
+    ) -> list[RadioSent]:
+        """:meth:`radio` once it has at least one message (of type ``of``, after
+        ``since_tick``); :class:`WaitTimeout` after ``timeout_s`` of wall clock or
+        ``sim_timeout_s`` of sim time, as :meth:`wait_until` (which steps a stepped world
+        whose clock this client holds)."""
+        what = f"a radio message{f' ({of.__qualname__})' if of else ''} from {vehicle_id}"
+        return self.wait_until(
+            lambda: self.radio(vehicle_id, of, since_tick),
+            timeout_s,
+            what,
+            sim_timeout_s=sim_timeout_s,
+        )
+
+    def fetch_radio(self, vehicle_id: str, timeout_s: float | None = None) -> int:
+        """Ask ``vehicle_id``'s autopilot for the radio batches it keeps (its last 64 ticks:
+        what a client that joined late missed) and keep them; returns how many were new.
+        :class:`RadioUnavailable` when nothing answers within ``timeout_s`` (default
+        ``command_timeout_s``). Callbacks are not called for them."""
+        wait_s = self.command_timeout_s if timeout_s is None else timeout_s
+        replies = self.session.get(
+            self.keys.vehicle_radio(vehicle_id),
+            timeout=wait_s,
+            consolidation=zenoh.ConsolidationMode.NONE,  # every kept batch, not the newest
+        )
+        answered, new = False, 0
+        for reply in replies:
+            if reply.ok is None:
+                continue
+            answered = True
+            try:
+                batch = decode(reply.ok.payload.to_bytes(), RadioBatch)
+            except MessageError as exc:
+                log.warning("ignoring a radio batch of %s: %s", vehicle_id, exc)
+                continue
+            with self._lock:
+                new += self._radio.add(batch) is not None
+                self._changed.notify_all()
+        if not answered:
+            raise RadioUnavailable(
+                f"no answer for {self.keys.vehicle_radio(vehicle_id)} within {wait_s:g} s "
+                f"(does the behaviour of {vehicle_id} talk? is its autopilot running?)"
+            )
+        return new
+
+    def radio_links(self, vehicle_id: str) -> dict[str, LinkStatus] | None:
+        """What the radio carried into ``vehicle_id`` so far, by sending peer: the
+        ``LinkStatus(sender, delivered, dropped)`` of its latest status (peer states, peer
+        samples and behaviour messages). None before its first status; empty with a perfect
+        radio on which no behaviour talks."""
+        status = self.status(vehicle_id)
+        if status is None:
+            return None
+        return {link.sender: link for link in status.radio}
 
     def command(self, vehicle_id: str) -> VehicleCommander:
         return VehicleCommander(self.session, self.keys, vehicle_id, self.command_timeout_s)
@@ -316,8 +450,9 @@ class Swarm(Closeable):
 
     def step(self, ticks: int = 1, timeout_s: float | None = None) -> StepReply:
         """Advance a stepped world by ``ticks`` control ticks; returns where it paused (tick,
-        sim time). On return every state, status and reading of that tick has reached this
-        client's caches and callbacks; a command sent now takes effect on the next tick.
+        sim time). On return every state, status and reading of that tick, and the radio batch
+        of every vehicle seen talking, has reached this client's caches and callbacks; a
+        command sent now takes effect on the next tick.
 
         The first call takes the world's clock (until :meth:`close`). Raises
         :class:`ClockError` when the world is not in stepped mode, another client holds its
@@ -372,14 +507,18 @@ class Swarm(Closeable):
         )
 
     def _await_handled(self, reply: StepReply) -> None:
-        """Until this tick's states and (live autopilots') statuses went through the caches and
-        callbacks: they travel from other processes than the step's reply, so they may come
-        after it. Readings are published before their status, so they are in too."""
+        """Until this tick's states, (live autopilots') statuses and radio batches (of the
+        vehicles seen talking) went through the caches and callbacks: they travel from other
+        processes than the step's reply, so they may come after it, and each subscriber's
+        callbacks run on their own thread. Readings are published before their status."""
         alive = set(self.autopilots_alive())
 
         def stale() -> list[str]:
             late = {v for v, t in self._handled_tick.items() if t < reply.tick}
             late |= {v for v in alive if self._handled_status_s.get(v, -1.0) < reply.sim_time_s}
+            late |= {
+                v for v, t in self._handled_radio_tick.items() if v in alive and t < reply.tick
+            }
             return sorted(late)
 
         with self._lock:

@@ -6,6 +6,7 @@ from pathlib import Path
 
 from swarmbus.scenario import (
     GSL_ENVIRONMENTS_DIR,
+    GSL_TUNING_DIR,
     SCENARIOS_DIR,
     Scenario,
     ScenarioError,
@@ -31,14 +32,16 @@ def first_comment(path: Path) -> str:
 
 def catalog(directory: Path | None = None) -> list[str]:
     """``name  summary  — first comment line`` for every ``*.toml`` scenario of ``directory``
-    (default: the bundled ones, then the benchmark environments as ``gsl/<name>``); a file that
-    does not validate is listed with its error."""
+    (default: the bundled ones, then the benchmark environments as ``gsl/<name>``, then the
+    tuning environments as ``gsl/tuning/<name>``); a file that does not validate is listed
+    with its error."""
     folder = SCENARIOS_DIR if directory is None else directory
     if not folder.is_dir():
         raise ValueError(f"--dir {folder}: not a directory")
     files = sorted(folder.glob("*.toml"))
     if directory is None:
         files += sorted(GSL_ENVIRONMENTS_DIR.glob("*.toml"))
+        files += sorted(GSL_TUNING_DIR.glob("*.toml"))
     if not files:
         raise ValueError(f"--dir {folder}: no scenario files (*.toml)")
     names = [p.relative_to(folder).with_suffix("").as_posix() for p in files]

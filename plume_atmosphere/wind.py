@@ -28,6 +28,17 @@ Models (``[wind] model``):
     advection–diffusion ``∂u/∂t = −U·∇u + K∇²u`` (upwind, explicit, stable substeps) with the
     mean wind U and ``diffusivity_m2_s`` K (Farrell et al. 2002, §3). Queries interpolate the
     grid bilinearly (clamped to its edges); the grid is held between internal steps.
+
+Local turbulence (``[wind.turbulence]``, any model): a spatially correlated perturbation added
+to the wind above, a kinematic simulation (Kraichnan 1970, "Diffusion by a random velocity
+field", Phys. Fluids 13:22; Fung et al. 1992, J. Fluid Mech. 236:281) frozen in the frame that
+moves with the mean wind U and decorrelating in it. Each component i (along the mean wind,
+across it, up) is ``σi·√(2/M)·Σₙ cos(kₙ·(x − U t) + ωₙ t + φₙ)`` over M modes, with kₙ drawn
+from the 3-D Cauchy distribution of scale 1/L, ωₙ from the Cauchy distribution of scale 1/T
+and φₙ uniform, all from a generator seeded by the scenario seed: a closed-form function of
+(x, t), the same for every process and order, whose ensemble covariance is
+``σi²·exp(−|r − Uτ|/L)·exp(−|τ|/T)`` (integral length scale L, timescale T) and whose variance
+over space is σi² in every realisation (:class:`TurbulenceField`).
 """
 
 from __future__ import annotations
@@ -70,6 +81,17 @@ class WindField(Protocol):
     def diffusivity_m2_s(self) -> float: ...
 
 
+class WindTurbulence(Protocol):
+    @property
+    def std_m_s(self) -> tuple[float, float, float]: ...
+    @property
+    def length_scale_m(self) -> float: ...
+    @property
+    def timescale_s(self) -> float: ...
+    @property
+    def modes(self) -> int: ...
+
+
 class Wind(Protocol):
     @property
     def model(self) -> str: ...
@@ -81,6 +103,8 @@ class Wind(Protocol):
     def meander(self) -> WindMeander: ...
     @property
     def field(self) -> WindField: ...
+    @property
+    def turbulence(self) -> WindTurbulence | None: ...
 
 
 class _World(Protocol):
@@ -435,13 +459,102 @@ class GridWind(WindModel):
         }
 
 
+class TurbulenceField:
+    """The local turbulence's perturbation (see the module docstring): ``at(points, t)``."""
+
+    def __init__(
+        self, config: WindTurbulence, mean_enu_m_s: tuple[float, float, float], seed: int
+    ) -> None:
+        self.config = config
+        modes = config.modes
+        rng = np.random.Generator(
+            np.random.PCG64(np.random.SeedSequence([seed, _WIND_STREAM, 2, 0]))
+        )
+        # a 3-D Cauchy vector of scale 1/L is a normal one over |N(0, 1)|: its characteristic
+        # function, the field's spatial correlation, is exp(−|r|/L)
+        normal = rng.standard_normal((3, modes, 3))
+        chi = np.maximum(np.abs(rng.standard_normal((3, modes, 1))), 1e-12)
+        self.wavenumbers: FloatArray = normal / (chi * config.length_scale_m)
+        # ω: Cauchy of scale 1/T, so E[cos ωτ] = exp(−|τ|/T)
+        ratio = rng.standard_normal((3, modes)) / np.maximum(
+            np.abs(rng.standard_normal((3, modes))), 1e-12
+        )
+        self.frequencies: FloatArray = ratio / config.timescale_s
+        self.phases: FloatArray = rng.uniform(0.0, 2.0 * math.pi, (3, modes))
+        self.amplitudes: FloatArray = np.asarray(config.std_m_s, dtype=np.float64) * math.sqrt(
+            2.0 / modes
+        )
+        self.mean_enu_m_s = mean_enu_m_s
+        speed = math.hypot(mean_enu_m_s[0], mean_enu_m_s[1])
+        if speed > 0.0:
+            self.along = (mean_enu_m_s[0] / speed, mean_enu_m_s[1] / speed)
+        else:
+            self.along = (1.0, 0.0)
+
+    def components(self, points: npt.ArrayLike, t: float) -> FloatArray:
+        """(N, 3): the perturbation along the mean wind, across it (to its left) and up."""
+        p = _points(points)
+        k = self.wavenumbers
+        ux, uy, uz = self.mean_enu_m_s
+        x = (p[:, 0] - ux * t)[:, None, None]
+        y = (p[:, 1] - uy * t)[:, None, None]
+        z = (p[:, 2] - uz * t)[:, None, None]
+        arg = (
+            x * k[:, :, 0] + y * k[:, :, 1] + z * k[:, :, 2] + (self.frequencies * t + self.phases)
+        )
+        out: FloatArray = np.cos(arg).sum(axis=2) * self.amplitudes
+        return out
+
+    def at(self, points: npt.ArrayLike, t: float) -> FloatArray:
+        """(N, 3) ENU m/s: the perturbation at each point at sim time t."""
+        c = self.components(points, t)
+        ax, ay = self.along
+        out = np.empty_like(c)
+        out[:, 0] = c[:, 0] * ax - c[:, 1] * ay
+        out[:, 1] = c[:, 0] * ay + c[:, 1] * ax
+        out[:, 2] = c[:, 2]
+        return out
+
+    def info(self) -> dict[str, Any]:
+        cfg = self.config
+        return {
+            "std_m_s": list(cfg.std_m_s),
+            "length_scale_m": cfg.length_scale_m,
+            "timescale_s": cfg.timescale_s,
+            "modes": cfg.modes,
+        }
+
+
+class TurbulentWind(WindModel):
+    """A wind (``base``) plus the local turbulence: varies in space, so it is never uniform."""
+
+    def __init__(self, base: WindModel, config: WindTurbulence, seed: int) -> None:
+        self.base = base
+        self.mean_enu_m_s = base.mean_enu_m_s
+        self.turbulence = TurbulenceField(config, base.mean_enu_m_s, seed)
+
+    def velocity(self, points: npt.ArrayLike, t: float) -> FloatArray:
+        p = _points(points)
+        out: FloatArray = self.base.velocity(p, t) + self.turbulence.at(p, t)
+        return out
+
+    def info(self) -> dict[str, Any]:
+        return {**self.base.info(), "turbulence": self.turbulence.info()}
+
+
 def wind_model(wind: Wind, seed: int) -> WindModel:
     """The wind a ``[wind]`` section describes, seeded by ``seed``."""
+    base: WindModel
     if wind.model == "meander":
-        return MeanderWind(wind, seed)
-    if wind.model == "field":
-        return GridWind(wind, seed)
-    return SteadyWind(wind.speed_m_s, wind.from_deg)
+        base = MeanderWind(wind, seed)
+    elif wind.model == "field":
+        base = GridWind(wind, seed)
+    else:
+        base = SteadyWind(wind.speed_m_s, wind.from_deg)
+    turbulence = wind.turbulence
+    if turbulence is None:
+        return base
+    return TurbulentWind(base, turbulence, seed)
 
 
 def wind_from_scenario(scenario: Scenario) -> WindModel:

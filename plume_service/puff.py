@@ -111,8 +111,8 @@ class PuffPlume(TimeSteppedField[Puffs]):
         travel = np.maximum(state.travel_m, 1e-9)
         sigma_y, sigma_z = self.dispersion.sigmas(travel)
         if self.calibration is not None:
-            # the meander carries the puffs: their own σy is the rest of the plume's
-            meander = self.calibration.meander_variance(travel / self.calibration.wind_speed_m_s)
+            # the meander (and the local turbulence) carry the puffs: their own σy is the rest
+            meander = self.calibration.carried_variance(travel / self.calibration.wind_speed_m_s)
             sigma_y = np.sqrt(np.maximum(sigma_y**2 - meander, 1e-4 * sigma_y**2))
         height = np.full((state.centres.shape[0], 1), self.source_m[2])
         return np.hstack([state.centres, height]), sigma_y, sigma_z

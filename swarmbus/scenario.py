@@ -1,6 +1,10 @@
 """Scenario files: TOML validated into typed, immutable config objects (their schema:
 :mod:`swarmbus.scenario_spec`, whose names are all importable from here too).
 
+A randomised environment family's ``[randomise]`` table (:data:`FAMILY_TABLE`) is not part of
+the scenario: it is set aside when the file is read (the rest is the family's base scenario) and
+read by ``plumeswarm.gsl.family``.
+
 A bad file gives one line naming the file, the field and what is wrong
 (:class:`ScenarioError`), never a traceback.
 """
@@ -16,14 +20,20 @@ from pathlib import Path
 
 import msgspec
 
-from plume_atmosphere.calibration import AtmosphereCalibration, derive_calibration
+from plume_atmosphere.calibration import (
+    AtmosphereCalibration,
+    derive_calibration,
+    derive_turbulence,
+)
 from plume_atmosphere.gases import FORMULAS
 from swarmbus.errors import FieldError
 from swarmbus.radio import RadioSpec
 from swarmbus.scenario_errors import did_you_mean, explain
 from swarmbus.scenario_spec import (
     DEFAULT_SCENARIO,
+    FAMILY_TABLE,
     GSL_ENVIRONMENTS_DIR,
+    GSL_TUNING_DIR,
     MAVLINK_MAX_SYSID,
     MAX_VEHICLES,
     RENAMED_KEYS,
@@ -49,6 +59,7 @@ from swarmbus.scenario_spec import (
     Wind,
     WindField,
     WindMeander,
+    WindTurbulence,
     WorldSpec,
     not_on_mavlink_note,
     sysid_at,
@@ -58,7 +69,9 @@ from swarmbus.vehicle_types import VehicleTypeError, load_vehicle_type
 
 __all__ = [
     "DEFAULT_SCENARIO",
+    "FAMILY_TABLE",
     "GSL_ENVIRONMENTS_DIR",
+    "GSL_TUNING_DIR",
     "MAVLINK_MAX_SYSID",
     "MAX_VEHICLES",
     "RENAMED_KEYS",
@@ -86,6 +99,7 @@ __all__ = [
     "Wind",
     "WindField",
     "WindMeander",
+    "WindTurbulence",
     "WorldSpec",
     "apply_overrides",
     "bundled_scenarios",
@@ -268,6 +282,7 @@ def parse_scenario(
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(source, "", f"not valid TOML: {exc}") from None
     read_renamed_keys(raw, source)
+    raw.pop(FAMILY_TABLE, None)  # a randomised family's ranges: read by plumeswarm.gsl.family
     overrides = tuple(renamed_override(item, source) for item in overrides)
     if overrides:
         apply_overrides(raw, overrides, source)
@@ -296,13 +311,20 @@ def parse_scenario(
     return calibrate_scenario(scenario, source)
 
 
+def _roughness_m(scenario: Scenario) -> float:
+    cal = scenario.plume.calibration
+    return 0.1 if cal is None else cal.roughness_m
+
+
 def scenario_calibration(scenario: Scenario) -> AtmosphereCalibration | None:
     """The derived calibration of a scenario with ``[plume.calibration]``, else None; the wind
-    speed and the first source's release height set it. Raises ValueError."""
+    speed and the first source's release height set it, and a ``[wind.turbulence]`` is counted
+    in its split. Raises ValueError."""
     cal = scenario.plume.calibration
     if cal is None:
         return None
     plume = scenario.plume
+    turbulence = scenario.wind.turbulence
     return derive_calibration(
         plume.stability,
         plume.coefficients,
@@ -310,6 +332,34 @@ def scenario_calibration(scenario: Scenario) -> AtmosphereCalibration | None:
         plume.sources[0].release_height_m,
         cal.meander_share,
         cal.roughness_m,
+        turbulence_share=0.0 if turbulence is None else turbulence.share,
+    )
+
+
+def _derived_turbulence(scenario: Scenario, source: str) -> WindTurbulence | None:
+    """The scenario's ``[wind.turbulence]`` with its intensities, length scale and timescale
+    derived from the atmosphere (``[plume]`` stability and coefficients, the wind speed, the
+    first source's release height, ``[plume.calibration]``'s roughness or 0.1 m)."""
+    turbulence = scenario.wind.turbulence
+    if turbulence is None:
+        return None
+    plume = scenario.plume
+    try:
+        derived = derive_turbulence(
+            plume.stability,
+            plume.coefficients,
+            scenario.wind.speed_m_s,
+            plume.sources[0].release_height_m,
+            turbulence.share,
+            _roughness_m(scenario),
+        )
+    except ValueError as exc:
+        raise ScenarioError(source, "wind.turbulence", str(exc)) from None
+    return msgspec.structs.replace(
+        turbulence,
+        std_m_s=derived.std_m_s,
+        length_scale_m=derived.length_scale_m,
+        timescale_s=derived.timescale_s,
     )
 
 
@@ -317,11 +367,18 @@ def calibrate_scenario(scenario: Scenario, source: str = "<scenario>") -> Scenar
     """``scenario`` with what its ``[plume.calibration]`` derives: the wind ``model =
     "meander"`` with an Ornstein–Uhlenbeck ``[wind.meander]`` of the derived std and timescale
     (``steady`` for a zero meander share), and ``[plume.filament]``'s ``growth_m2_s`` and
-    ``release_rate_hz``; unchanged without a calibration. Idempotent."""
+    ``release_rate_hz``; and what a ``[wind.turbulence]`` derives (with or without a
+    calibration). Unchanged without either. Idempotent."""
+    turbulence = _derived_turbulence(scenario, source)
+    if turbulence is not None:
+        scenario = msgspec.structs.replace(
+            scenario, wind=msgspec.structs.replace(scenario.wind, turbulence=turbulence)
+        )
     try:
         derived = scenario_calibration(scenario)
     except ValueError as exc:
-        raise ScenarioError(source, "plume.calibration", str(exc)) from None
+        field = "wind.turbulence.share" if "turbulence_share" in str(exc) else "plume.calibration"
+        raise ScenarioError(source, field, str(exc)) from None
     if derived is None:
         return scenario
     wind = scenario.wind
@@ -359,10 +416,13 @@ def scenario_hash(scenario: Scenario) -> str:
 
 def bundled_scenarios() -> list[str]:
     """The names of the scenarios that ship with plumeswarm: ``swarmbus/scenarios/*.toml`` by
-    their stem, then the source-seeking benchmark's environments as ``gsl/<name>``."""
-    gsl = GSL_ENVIRONMENTS_DIR.name
-    return sorted(p.stem for p in SCENARIOS_DIR.glob("*.toml")) + sorted(
-        f"{gsl}/{p.stem}" for p in GSL_ENVIRONMENTS_DIR.glob("*.toml")
+    their stem, then the source-seeking benchmark's environments as ``gsl/<name>``, then its
+    tuning environments as ``gsl/tuning/<name>``."""
+    gsl, tuning = GSL_ENVIRONMENTS_DIR.name, GSL_TUNING_DIR.name
+    return (
+        sorted(p.stem for p in SCENARIOS_DIR.glob("*.toml"))
+        + sorted(f"{gsl}/{p.stem}" for p in GSL_ENVIRONMENTS_DIR.glob("*.toml"))
+        + sorted(f"{gsl}/{tuning}/{p.stem}" for p in GSL_TUNING_DIR.glob("*.toml"))
     )
 
 

@@ -20,6 +20,8 @@ SCENARIOS_DIR = Path(__file__).resolve().with_name("scenarios")
 DEFAULT_SCENARIO = SCENARIOS_DIR / "novak2018.toml"
 #: The gas-source-localisation benchmark's environments, one scenario file each.
 GSL_ENVIRONMENTS_DIR = SCENARIOS_DIR / "gsl"
+GSL_TUNING_DIR = GSL_ENVIRONMENTS_DIR / "tuning"  # environments tuning uses, never published
+FAMILY_TABLE = "randomise"  # a randomised environment family's ranges, not the scenario's
 MAVLINK_MAX_SYSID = 254  # MAVLink systems are 1–254 (0 is broadcast, 255 ground stations)
 MAX_VEHICLES = 1024  # per scenario; past MAVLINK_MAX_SYSID vehicles are on the bus only
 
@@ -228,6 +230,44 @@ class WindField(_Section, frozen=True, kw_only=True):
     ] = 2.0
 
 
+class WindTurbulence(_Section, frozen=True, kw_only=True):
+    """Local turbulence on top of the wind: a seeded, spatially correlated perturbation frozen in
+    the frame of the mean wind (``plume_atmosphere.wind.TurbulenceField``). Its intensities,
+    length scale and timescale are derived from the atmosphere when the file is read
+    (``plume_atmosphere.calibration.derive_turbulence``: ``share`` of the stability class's
+    crosswind and vertical variance); explicit values of those three are replaced."""
+
+    share: Annotated[
+        float,
+        msgspec.Meta(
+            ge=0.0,
+            le=0.85,
+            description=(
+                "Share of the stability class's crosswind and vertical variance the local "
+                "turbulence carries."
+            ),
+        ),
+    ] = 0.3
+    modes: Annotated[
+        int,
+        msgspec.Meta(
+            ge=1, le=1024, description="Random Fourier modes per component (more: finer, slower)."
+        ),
+    ] = 32
+    std_m_s: Annotated[
+        tuple[NonNeg, NonNeg, NonNeg],
+        _doc("Derived: standard deviation along the mean wind, across it and vertically, m/s."),
+    ] = (0.0, 0.0, 0.0)
+    length_scale_m: Annotated[
+        float,
+        msgspec.Meta(ge=1e-3, le=1e6, description="Derived: integral length scale L, m."),
+    ] = 1.0
+    timescale_s: Annotated[
+        float,
+        msgspec.Meta(ge=1e-3, le=1e6, description="Derived: decorrelation timescale T, s."),
+    ] = 1.0
+
+
 class Wind(_Section, frozen=True, kw_only=True):
     """One wind, three consumers: the plume's advection, the vehicles' air velocity (drag) and
     their anemometers (``plume_atmosphere.wind``). ``speed_m_s``/``from_deg`` give the mean wind."""
@@ -248,6 +288,10 @@ class Wind(_Section, frozen=True, kw_only=True):
     ] = "steady"
     meander: Annotated[WindMeander, _doc("The meander's noise process.")] = WindMeander()
     field: Annotated[WindField, _doc("The gridded wind's grid.")] = WindField()
+    turbulence: Annotated[
+        WindTurbulence | None,
+        _doc("Present: local turbulence on top of the wind (docs/plume.md); absent: none."),
+    ] = None
 
 
 PlumeModel = Literal["gaussian", "filament", "puff"]

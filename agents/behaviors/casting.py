@@ -28,6 +28,7 @@ from swarmbus.messages import ConcentrationReading
 
 
 class Casting(TrackingBehavior):
+    ignores_peers = True  # reads neither its peers' states nor their readings: any radio
     own_state = ("detector", "tracker", "side", "leg_best")
     surge_speed_m_s = 2.0
     weave_speed_m_s = 0.3

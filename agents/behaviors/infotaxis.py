@@ -121,6 +121,7 @@ def scenario_width_slope(ctx: BehaviorContext) -> float:
 
 
 class Infotaxis(SeekingBehavior):
+    ignores_peers = True  # reads neither its peers' states nor their readings: any radio
     # ``cells_xy`` is rebuilt from ``grid_origin`` (where the grid was laid) on restore
     own_state = (
         "detector",

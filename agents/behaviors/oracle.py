@@ -22,6 +22,7 @@ from swarmbus.messages import Setpoint
 
 
 class Oracle(SeekingBehavior):
+    ignores_peers = True  # reads neither its peers' states nor their readings: any radio
     own_state = ()
     vehicles = 1
     source = "knows the source (ceiling)"

@@ -223,6 +223,7 @@ class SourceTermFilter(SavesState):
 
 
 class ParticleFilter(SeekingBehavior):
+    ignores_peers = True  # reads neither its peers' states nor their readings: any radio
     # ``filter`` is rebuilt from ``prior_origin`` (where its prior was drawn) on restore;
     # ``rng`` is the context's generator, which the autopilot saves on its own.
     own_state: ClassVar[tuple[str, ...]] = (

@@ -28,6 +28,7 @@ def _calm(own: VehicleState) -> tuple[float, float]:
 
 
 class RandomWalk(SeekingBehavior):
+    ignores_peers = True  # reads neither its peers' states nor their readings: any radio
     # ``rng`` is the context's generator, which the autopilot saves on its own
     own_state = ("heading_rad",)
     speed_m_s = 2.0

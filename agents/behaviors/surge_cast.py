@@ -32,6 +32,7 @@ from agents.behaviors.tracking import TrackingBehavior
 
 
 class SurgeCast(TrackingBehavior):
+    ignores_peers = True  # reads neither its peers' states nor their readings: any radio
     surge_speed_m_s = 2.0
     cast_speed_m_s = 2.5
     first_cast_half_width_m = 3.0

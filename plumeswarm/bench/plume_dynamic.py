@@ -8,7 +8,8 @@ and writes the same numbers as JSON (default ``runs/bench-plume-dynamic.json``):
   one internal step, and ~1200 puffs (0.5 s period, 600 s lifetime) one step;
 * answering a query for 3 and for 256 points at a fresh step (the filament query includes the
   k-d tree a 256-point query builds once per step), against the Gaussian plume's;
-* one evaluation of the meandering wind.
+* one evaluation of the meandering wind; the same wind with ``[wind.turbulence]`` (32 modes)
+  at one and at 2000 points, and the filaments advanced one step in it.
 
 Times are the best of ``--repeats`` runs (the machine may be shared).
 """
@@ -20,6 +21,7 @@ import json
 from functools import partial
 from pathlib import Path
 
+import msgspec
 import numpy as np
 
 from plume_atmosphere.wind import wind_model
@@ -27,7 +29,7 @@ from plume_service import GaussianPlume
 from plume_service.filament import FilamentPlume, filament_concentration
 from plume_service.puff import PuffPlume
 from plumeswarm.bench.plume import best_seconds
-from swarmbus.scenario import PlumeFilament, PlumePuff, Wind, WindMeander
+from swarmbus.scenario import PlumeFilament, PlumePuff, Wind, WindMeander, WindTurbulence
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -78,6 +80,24 @@ def main() -> None:
         )
     one = query_points(1)
     results["meander_wind_query_us"] = 1e6 * best_seconds(lambda: wind.velocity(one, t), repeats)
+    # the meander with local turbulence (share 0.3 of class D at 2 m/s, 5 m: derived values)
+    turbulence = WindTurbulence(
+        std_m_s=(0.164, 0.123, 0.078), length_scale_m=7.92, timescale_s=9.40, modes=32
+    )
+    turbulent = wind_model(msgspec.structs.replace(meander, turbulence=turbulence), seed=1)
+    many = query_points(2000)
+    results["turbulent_wind_query_us"] = 1e6 * best_seconds(
+        lambda: turbulent.velocity(one, t), repeats
+    )
+    results["turbulent_wind_query_2000_ms"] = 1e3 * best_seconds(
+        lambda: turbulent.velocity(many, t), repeats
+    )
+    stirred = FilamentPlume((0.0, 0.0, 5.0), 10.0, params, turbulent, seed=1)
+    sk, sstate = stirred.state_at(t)
+    results["turbulent_filaments_live"] = float(sstate.birth_step.shape[0])
+    results["turbulent_filament_step_ms"] = 1e3 * best_seconds(
+        lambda: stirred.advance(sstate, sk, rng), repeats
+    )
 
     rows = [
         (f"filament plume: advance {live} live filaments one step", "filament_step_ms", "ms"),
@@ -89,6 +109,14 @@ def main() -> None:
         ("Gaussian plume: query 3 points", "gaussian_query_3_ms", "ms"),
         ("Gaussian plume: query 256 points", "gaussian_query_256_ms", "ms"),
         ("meander wind: one point", "meander_wind_query_us", "µs"),
+        ("meander wind with turbulence: one point", "turbulent_wind_query_us", "µs"),
+        ("meander wind with turbulence: 2000 points", "turbulent_wind_query_2000_ms", "ms"),
+        (
+            f"filament plume, turbulent wind: advance "
+            f"{int(results['turbulent_filaments_live'])} filaments one step",
+            "turbulent_filament_step_ms",
+            "ms",
+        ),
     ]
     width = max(len(r[0]) for r in rows)
     print(f"{'dynamic plume benchmark (best of ' + str(repeats) + ')':<{width}}  result")

@@ -201,7 +201,9 @@ def _gsl_options(seed_default: int) -> Callable[[Callable[..., None]], Callable[
          "× sensor)."),
         ("--seed", click.IntRange(min=0, max=2**31 - 1), seed_default,
          "Published tables: 0; tuning: >= 1000."),
-        ("--time-limit", click.FloatRange(min=1.0), 300.0, "Seconds of simulated time per run."),
+        ("--time-limit", None, "300", "Seconds of simulated time per run in a fixed "
+         "environment, or auto: 10 × the straight flight from the start at 2 m/s (a "
+         "randomised family always uses its own multiple)."),
         ("--dynamics", click.Choice(["kinematic", "full"]), "kinematic", "kinematic: point "
          "masses following the setpoint; full: pybullet vehicles and autopilots."),
         ("--control-hz", click.IntRange(min=1, max=1000), 20, "Behaviour rate with kinematic "
@@ -214,7 +216,8 @@ def _gsl_options(seed_default: int) -> Callable[[Callable[..., None]], Callable[
         ("--spacing", click.FloatRange(min=0.0), None, "A swarm's crosswind start spacing, m "
          "(default: the algorithm's; 0: a circle of 2 m)."),
         ("--radio", None, "", "The link between vehicles: loss=P,latency=TICKS,range=M,"
-         "bytes=N (default: a perfect link)."),
+         "bytes=N, or perfect (the default); several separated by / (e.g. "
+         "perfect/loss=0.5,latency=20), each its own cells."),
         ("--jobs", click.IntRange(min=1), 2, "Worker processes (--executor local)."),
         ("--executor", None, "local", "local: a pool of --jobs processes; ray: a Ray started "
          "for the run; ray=ADDRESS: a Ray cluster (ray=auto: the one on this machine). Needs "
@@ -328,6 +331,10 @@ def _gsl_run(kind: str, kwargs: dict[str, Any]) -> None:
     )
 
     args = {k: v for k, v in kwargs.items() if k not in ("out", "jobs", "executor", "shard")}
+    try:  # seconds as a number, as the journal has always kept them (auto stays a word)
+        args["time_limit_s"] = float(args["time_limit_s"])
+    except ValueError:
+        pass  # auto, or a bad value make_options names
     directory = _bench_dir(kwargs["out"], "gsl")
     try:
         executor = parse_executor(kwargs["executor"])
@@ -492,3 +499,67 @@ def bench_pomdp(
     for line in report_lines(result):
         click.echo(line)
     click.echo(f"wrote {write_result(_bench_dir(out, 'pomdp'), result)}")
+
+
+#: ``bench survey``'s options, one row each: name, type, default, help.
+_SURVEY_OPTIONS: list[tuple[str, Any, object, str]] = [
+    ("--environments", str, "steady_gaussian,meander_low,meander_high,puff_meander",
+     "Comma-separated environment names (NAME or gsl/NAME) or scenario paths."),
+    ("--runs", click.IntRange(min=1), 10, "Runs each."),
+    ("--seed", int, 0, "Run k flies world seed seed·100003 + k."),
+    ("--sensor", click.Choice(["ideal", "mox", "pid"]), "ideal",
+     "The sensor preset the vehicle reads through."),
+    ("--distance", float, 50.0, "The curtain's distance downwind of the source (m)."),
+    ("--speed", float, 18.0, "Ground speed (m/s)."),
+    ("--repeats", click.IntRange(min=1), 1, "Sweeps of the curtain (up, down, up, …)."),
+    ("--sample-hz", float, 20.0, "Readings per second of sim time."),
+]  # fmt: skip
+_MEAN_PLUME_HELP = (
+    "Fly each environment's time average instead (its steady Gaussian plume, the mean wind, an "
+    "anemometer without noise): the method's own bias."
+)
+
+
+def _survey_options(f: Callable[..., None]) -> Callable[..., None]:
+    for name, kind, default, text in reversed(_SURVEY_OPTIONS):
+        f = click.option(name, type=kind, default=default, show_default=True, help=text)(f)
+    return f
+
+
+@bench.command("survey")
+@_survey_options
+@click.option("--mean-plume", is_flag=True, help=_MEAN_PLUME_HELP)
+@out_dir_option("Directory for survey.md and survey.json (default runs/bench-survey-<time>/).")
+def bench_survey(
+    environments: str,
+    runs: int,
+    seed: int,
+    sensor: str,
+    distance: float,
+    speed: float,
+    repeats: int,
+    sample_hz: float,
+    mean_plume: bool,
+    out: Path | None,
+) -> None:
+    """Mass-balance survey: a curtain of crosswind legs downwind of the source, the release
+    rate estimated from the readings against the true one (docs/survey.md)."""
+    from plumeswarm.survey.bench import SurveyOptions, run_survey_bench
+    from plumeswarm.survey.pattern import SurveyError
+
+    try:
+        opts = SurveyOptions(
+            comma_list(environments),
+            runs,
+            seed,
+            sensor,
+            distance,
+            speed,
+            repeats,
+            mean_plume,
+            sample_hz,
+        )
+        rows = run_survey_bench(opts, _bench_dir(out, "survey"), click.echo)
+    except SurveyError as exc:
+        fail(str(exc))
+    sys.exit(1 if any(r.summary is None for r in rows) else 0)

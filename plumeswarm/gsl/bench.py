@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from agents.behavior import ignores_peers, talks
 from deploy.visibility import floor_multiple
 from plume_atmosphere.plume_formula import downwind_unit
 from plumeswarm.gsl.episode import (
@@ -29,7 +30,9 @@ from plumeswarm.gsl.episode import (
     START_ALTITUDE_M,
     EpisodeSpec,
     Outcome,
+    episode_time_limit_s,
 )
+from plumeswarm.gsl.family import AUTO_TIME_LIMIT_MULTIPLE, SEARCH_SPEED_M_S
 from plumeswarm.gsl.grid import Executor, Journal, Shard, run_episodes
 from plumeswarm.gsl.registry import (
     CEILING,
@@ -67,7 +70,7 @@ class GslOptions:
     sensors: tuple[str, ...]
     runs: int = 30
     seed: int = 0
-    time_limit_s: float = 300.0
+    time_limit_s: float = 300.0  # a fixed environment's (a family's is its own)
     control_hz: int = 20
     sensor_period_ticks: int = 2
     dynamics: str = "kinematic"
@@ -75,18 +78,25 @@ class GslOptions:
     configs: tuple[Algorithm, ...] = ()  # per algorithm
     asked: tuple[str, ...] = ()  # --algorithms as given, for the command line
     vehicles: tuple[int, ...] = ()  # how many fly each algorithm, each a cell; (): its own
-    radio: tuple[tuple[str, Any], ...] = ()  # "radio.key" overrides of every environment
+    radios: tuple[Radio, ...] = ((),)  # each a radio setting ("radio.key" overrides), a cell
     spacing: float | None = None  # a swarm's crosswind start spacing; None: the algorithm's
+    time_limit_auto: bool = False  # --time-limit auto: every episode's limit from its start
 
     @property
     def swarm(self) -> bool:
         """``--vehicles`` asked for more than one vehicle: the swarm columns and tables."""
         return any(n > 1 for n in self.vehicles)
 
+    @property
+    def radio(self) -> Radio:
+        """The first radio setting (the only one a sweep takes)."""
+        return self.radios[0]
+
     def radio_text(self) -> str:
-        """``--radio`` as given to :func:`parse_radio` ("" for the default link)."""
-        names = {v: k for k, v in RADIO_KEYS.items()}
-        return ",".join(f"{names[k]}={v:g}" for k, v in self.radio)
+        """``--radio`` as given to :func:`parse_radios` ("" for the default link alone)."""
+        if self.radios == ((),):
+            return ""
+        return "/".join(radio_text(r) or PERFECT for r in self.radios)
 
     def config(self, algorithm: str) -> Algorithm:
         return self.configs[self.algorithms.index(algorithm)]
@@ -133,10 +143,18 @@ RADIO_KEYS = {
 }
 
 
-def parse_radio(text: str) -> tuple[tuple[str, Any], ...]:
-    """``loss=0.2,latency=12,range=80,bytes=255`` as ``[radio]`` overrides; :class:`GslError`
-    names a bad key or value."""
+Radio = tuple[tuple[str, Any], ...]  # one radio setting: "radio.key" overrides
+
+#: The default link's name in ``--radio`` (a setting with no key).
+PERFECT = "perfect"
+
+
+def parse_radio(text: str) -> Radio:
+    """``loss=0.2,latency=12,range=80,bytes=255`` as ``[radio]`` overrides (``perfect`` or
+    nothing: none); :class:`GslError` names a bad key or value."""
     out: list[tuple[str, Any]] = []
+    if text.strip() == PERFECT:
+        return ()
     for part in (p.strip() for p in text.split(",") if p.strip()):
         key, sep, value = part.partition("=")
         if not sep or key.strip() not in RADIO_KEYS:
@@ -150,6 +168,54 @@ def parse_radio(text: str) -> tuple[tuple[str, Any], ...]:
             raise GslError(f"--radio {part!r}: {value!r} is not a number") from None
         out.append((field, number))
     return tuple(out)
+
+
+def parse_radios(value: str | Sequence[str] | Sequence[Radio]) -> tuple[Radio, ...]:
+    """``--radio``: one setting (``loss=0.5,latency=20``) or several separated by ``/``
+    (``perfect/loss=0.2/loss=0.5,latency=20``), each its own cells; :class:`GslError` names
+    a bad one or one given twice."""
+    if isinstance(value, str):
+        texts: list[Any] = value.split("/") if value.strip() else [""]
+    else:
+        texts = list(value) or [""]
+    radios = [parse_radio(t) if isinstance(t, str) else tuple(map(tuple, t)) for t in texts]
+    for i, radio in enumerate(radios):
+        if radio in radios[:i]:
+            raise GslError(f"--radio {radio_text(radio) or PERFECT!r}: given twice")
+    return tuple(radios)
+
+
+def radio_text(radio: Radio) -> str:
+    """A radio setting as ``--radio`` spells it ("" for the default link)."""
+    names = {v: k for k, v in RADIO_KEYS.items()}
+    return ",".join(f"{names[k]}={v:g}" for k, v in radio)
+
+
+def radio_label(radio: Radio, control_hz: int) -> str:
+    """A radio setting for a table: "perfect", or "loss 0.5, 1 s" (latency in seconds at the
+    behaviour's rate), range and message bytes when set."""
+    if not radio:
+        return PERFECT
+    values = dict(radio)
+    parts = []
+    if "radio.loss" in values:
+        parts.append(f"loss {values['radio.loss']:g}")
+    if "radio.latency_ticks" in values:
+        parts.append(f"{values['radio.latency_ticks'] / control_hz:g} s")
+    if "radio.range_m" in values:
+        parts.append(f"range {values['radio.range_m']:g} m")
+    if "radio.max_message_bytes" in values:
+        parts.append(f"{values['radio.max_message_bytes']} B")
+    return ", ".join(parts)
+
+
+def hears_peers(config: Algorithm, vehicles: int) -> bool:
+    """Whether a radio can change the cell's episodes: more than one vehicle, flying a
+    behaviour that talks or reads its peers (one that says ``ignores_peers = True`` and does
+    not talk flies the same bits on any radio)."""
+    if vehicles <= 1:
+        return False
+    return talks(config.behavior) or not ignores_peers(config.behavior)
 
 
 def parse_vehicles(value: int | str | Sequence[int] | None) -> tuple[int, ...]:
@@ -188,12 +254,21 @@ def make_options(
         kwargs["sensor_period_ticks"] = max(1, hz // FULL_SENSOR_HZ)
     names, configs = _algorithms(algorithms)
     asked = tuple(a for a in algorithms if a != "all")
-    radio = kwargs.get("radio", ())
-    if isinstance(radio, str):
-        kwargs["radio"] = radio = parse_radio(radio)
-    if radio:
-        load_environment(envs[0], radio)  # GslError: a value out of range
+    kwargs["radios"] = parse_radios(kwargs.pop("radio", ""))
+    for radio in kwargs["radios"]:
+        if radio:
+            load_environment(envs[0], radio)  # GslError: a value out of range
     kwargs["vehicles"] = parse_vehicles(kwargs.get("vehicles"))
+    limit = kwargs.get("time_limit_s", 300.0)
+    if limit == "auto":
+        kwargs["time_limit_s"], kwargs["time_limit_auto"] = 300.0, True
+    elif isinstance(limit, str):
+        try:
+            kwargs["time_limit_s"] = float(limit)
+        except ValueError:
+            raise GslError(f"--time-limit {limit!r}: seconds (>= 1) or auto") from None
+    if kwargs.get("time_limit_s", 300.0) < 1.0:
+        raise GslError(f"--time-limit {limit!r}: seconds (>= 1) or auto")
     return GslOptions(
         algorithms=names,
         environments=envs,
@@ -225,12 +300,15 @@ def specs_of(opts: GslOptions, **fields: Any) -> list[EpisodeSpec]:
         if opts.dynamics == "full":
             hz = load_environment(e).scenario.time.control_hz
             period = max(1, hz // FULL_SENSOR_HZ)
-        for s, (a, algo), n, run in itertools.product(
+        for s, (a, algo), n, radio, run in itertools.product(
             opts.sensors,
             zip(opts.algorithms, opts.configs, strict=True),
             opts.vehicles or (0,),
+            opts.radios,
             range(opts.runs),
         ):
+            if radio != opts.radios[0] and not hears_peers(algo, n or algo.vehicles):
+                continue  # the same bits on every radio: flown on the first only
             spec = EpisodeSpec(
                 algorithm=a,
                 environment=e,
@@ -244,10 +322,13 @@ def specs_of(opts: GslOptions, **fields: Any) -> list[EpisodeSpec]:
                 dynamics=opts.dynamics,
                 behavior=algo.behavior,
                 vehicles=n or algo.vehicles,
-                overrides=opts.radio,
+                overrides=radio,
                 start_spacing_m=opts.spacing,
             )
-            specs.append(replace(spec, **fields))
+            spec = replace(spec, **fields)
+            if opts.time_limit_auto or load_environment(e).family is not None:
+                spec = replace(spec, time_limit_s=episode_time_limit_s(spec))
+            specs.append(spec)
     return specs
 
 
@@ -315,14 +396,16 @@ def throughput_lines(cpu_s: dict[EpisodeSpec, float]) -> list[str]:
     return lines
 
 
-Cell = tuple[str, str, str, int]  # environment, sensor, algorithm, vehicles
+Cell = tuple[str, str, str, int, Radio]  # environment, sensor, algorithm, vehicles, radio
 
 
 def cells_of(outcomes: Sequence[Outcome]) -> dict[Cell, list[Outcome]]:
     cells: dict[Cell, list[Outcome]] = {}
     for o in outcomes:
-        key = (o.spec.environment, o.spec.sensor, o.spec.algorithm, o.spec.vehicles)
-        cells.setdefault(key, []).append(o)
+        s = o.spec
+        cells.setdefault(
+            (s.environment, s.sensor, s.algorithm, s.vehicles, s.overrides), []
+        ).append(o)
     return cells
 
 
@@ -384,15 +467,46 @@ def rows_of(opts: GslOptions, outcomes: Sequence[Outcome]) -> list[dict[str, Any
     cells = cells_of(outcomes)
     rows = [row_of(cell) for cell in cells.values()]
     if opts.swarm:
+        first = opts.radios[0]
+        best = best_single(cells)
         for row, (key, cell) in zip(rows, cells.items(), strict=True):
-            row.update(swarm_columns(cell, cells.get((*key[:3], 1))))
+            env, sensor, algorithm, n, radio = key
+            heard = hears_peers(opts.config(algorithm), n)
+            row.update(
+                swarm_columns(
+                    cell,
+                    cells.get((env, sensor, algorithm, 1, first)),
+                    cells.get((env, sensor, best[env, sensor], 1, first))
+                    if (env, sensor) in best
+                    else None,
+                )
+            )
+            row["radio_label"] = radio_label(radio, opts.control_hz) if heard else "–"
     return rows
 
 
-def swarm_columns(cell: Sequence[Outcome], single: Sequence[Outcome] | None) -> dict[str, Any]:
+def best_single(cells: dict[Cell, list[Outcome]]) -> dict[tuple[str, str], str]:
+    """Per (environment, sensor): the algorithm whose 1-vehicle cell declared within 2 m most
+    often (the floor and the ceiling left out; on a tie, the first in the grid's order)."""
+    best: dict[tuple[str, str], tuple[int, str]] = {}
+    for (env, sensor, algorithm, n, _), cell in cells.items():
+        if n != 1 or algorithm in (FLOOR, CEILING):
+            continue
+        wins = sum(o.success for o in cell)
+        if (env, sensor) not in best or wins > best[env, sensor][0]:
+            best[env, sensor] = (wins, algorithm)
+    return {k: v[1] for k, v in best.items()}
+
+
+def swarm_columns(
+    cell: Sequence[Outcome],
+    single: Sequence[Outcome] | None,
+    best: Sequence[Outcome] | None = None,
+) -> dict[str, Any]:
     """A swarm cell's own columns: the median closest approach between two of its vehicles,
-    the median total path, and the speed-up over the same algorithm's 1-vehicle cell
-    (``single``) on the runs both declared within 2 m (:func:`speedup`)."""
+    the median total path, the speed-up over the same algorithm's 1-vehicle cell
+    (``single``) on the runs both declared within 2 m (:func:`speedup`), and McNemar's exact
+    test of its success against the best 1-vehicle cell (``best``) on the same starts."""
     closest = [o.closest_approach_m for o in cell if o.closest_approach_m is not None]
     out: dict[str, Any] = {
         "closest_approach_m": round(float(np.median(closest)), 2) if closest else None,
@@ -404,7 +518,20 @@ def swarm_columns(cell: Sequence[Outcome], single: Sequence[Outcome] | None) -> 
         "speedup_over_1": None,
         "speedup_ci95": None,
         "speedup_pairs": 0,
+        "vs_best_single": None,
     }
+    if best is not None:
+        mine = {o.spec.run: o.success for o in cell}
+        theirs = {o.spec.run: o.success for o in best}
+        shared = sorted(mine.keys() & theirs.keys())
+        only_n, only_1, p = mcnemar_exact([mine[k] for k in shared], [theirs[k] for k in shared])
+        out["vs_best_single"] = {
+            "algorithm": best[0].spec.algorithm,
+            "runs": len(shared),
+            "only_this": only_n,
+            "only_single": only_1,
+            "p_exact": round(p, 4),
+        }
     if single is None:
         return out
     by_run = {o.spec.run: o.time_to_success_s for o in single}
@@ -422,14 +549,16 @@ def swarm_columns(cell: Sequence[Outcome], single: Sequence[Outcome] | None) -> 
 
 
 def scaling_table(rows: Sequence[dict[str, Any]]) -> str:
-    """Per algorithm and number of vehicles: success, reached, false declarations, median time
-    to declare, the speed-up over 1 vehicle, closest approach and total path."""
+    """Per algorithm, number of vehicles and radio: success, reached, false declarations,
+    median time to declare, the speed-up over 1 vehicle, the paired test against the best
+    1-vehicle algorithm, closest approach and total path."""
     head = (
-        "| algorithm | environment | sensor | vehicles | success % (95 % CI) "
+        "| algorithm | environment | sensor | vehicles | radio | success % (95 % CI) "
         "| reached ≤ 2 m % (centroid, any member) | false declarations % | median time s "
-        "| speed-up over 1 (95 % CI, pairs) | closest approach m (median, min) "
-        "| total path m |\n|---|---|---|---|---|---|---|---|---|---|---|\n"
+        "| speed-up over 1 (95 % CI, pairs) | vs best single vehicle (only N, only 1, p) "
+        "| closest approach m (median, min) | total path m |\n"
     )
+    head += "|---" * (head.count("|") - 1) + "|\n"
     lines = []
     for r in rows:
         ci = r["speedup_ci95"]
@@ -444,46 +573,67 @@ def scaling_table(rows: Sequence[dict[str, Any]]) -> str:
             if r["closest_approach_m"] is None
             else f"{r['closest_approach_m']:.2f}, {r['min_closest_approach_m']:.2f}"
         )
+        vs = r["vs_best_single"]
+        versus = (
+            "–"
+            if vs is None
+            else f"{vs['algorithm']}: {vs['only_this']}, {vs['only_single']}, {vs['p_exact']:.3f}"
+        )
         lines.append(
             f"| {r['algorithm']} | {r['environment']} | {r['sensor']} | {r['vehicles']} "
-            f"| {_pct(r, 'success_rate')} | {_pct(r, 'reached_2m_rate', ci=False)}, "
+            f"| {r['radio_label']} | {_pct(r, 'success_rate')} "
+            f"| {_pct(r, 'reached_2m_rate', ci=False)}, "
             f"{_pct(r, 'reached_member_2m_rate', ci=False)} "
             f"| {_pct(r, 'false_declaration_rate', ci=False)} "
-            f"| {_fmt(r['median_time_s'], 1)} | {gain} | {closest} | {r['total_path_m']:.0f} |"
+            f"| {_fmt(r['median_time_s'], 1)} | {gain} | {versus} | {closest} "
+            f"| {r['total_path_m']:.0f} |"
         )
     return head + "\n".join(lines) + "\n"
 
 
 def paired_rows(outcomes: Sequence[Outcome], swarm: bool = False) -> list[dict[str, Any]]:
     """McNemar's exact test on success (declared within 2 m) for every pair of algorithms in
-    every (environment, sensor) — with ``swarm``, every (environment, sensor, vehicles): run
-    k of both had the same start."""
-    by_pair: dict[tuple[str, str, int], dict[str, list[Outcome]]] = {}
-    for (env, sensor, algorithm, n), cell in cells_of(outcomes).items():
-        by_pair.setdefault((env, sensor, n if swarm else 0), {})[algorithm] = cell
+    every (environment, sensor) — with ``swarm``, every (environment, sensor, vehicles,
+    radio), a cell whose episodes no radio changes (:func:`hears_peers`) taking part under
+    each radio: run k of both had the same start."""
+    groups: dict[tuple[str, str, int], dict[Cell, list[Outcome]]] = {}
+    for key, cell in cells_of(outcomes).items():
+        env, sensor, _, n, _ = key
+        groups.setdefault((env, sensor, n if swarm else 0), {})[key] = cell
     rows = []
-    for (env, sensor, n), algos in by_pair.items():
-        for a, b in itertools.combinations(algos, 2):
-            runs_a = {o.spec.run: o.success for o in algos[a]}
-            runs_b = {o.spec.run: o.success for o in algos[b]}
-            shared = sorted(runs_a.keys() & runs_b.keys())
-            only_a, only_b, p = mcnemar_exact(
-                [runs_a[k] for k in shared], [runs_b[k] for k in shared]
-            )
-            rows.append(
-                {
-                    "environment": load_environment(env).name,
-                    "sensor": sensor,
-                    **({"vehicles": n} if swarm else {}),
-                    "a": a,
-                    "b": b,
-                    "runs": len(shared),
-                    "a_only": only_a,
-                    "b_only": only_b,
-                    "p_exact": round(p, 4),
-                }
-            )
+    for (env, sensor, n), cells in groups.items():
+        heard = {k: hears_peers(c[0].spec.algorithm_config(), n) for k, c in cells.items()}
+        radios: list[Radio | None] = list(dict.fromkeys(k[4] for k in cells if heard[k]))
+        radios = radios or [None]
+        for radio in radios:
+            algos = {k[2]: c for k, c in cells.items() if not heard[k] or k[4] == radio}
+            label = "–" if radio is None else radio_label(radio, cells_hz(cells))
+            for a, b in itertools.combinations(algos, 2):
+                runs_a = {o.spec.run: o.success for o in algos[a]}
+                runs_b = {o.spec.run: o.success for o in algos[b]}
+                shared = sorted(runs_a.keys() & runs_b.keys())
+                only_a, only_b, p = mcnemar_exact(
+                    [runs_a[k] for k in shared], [runs_b[k] for k in shared]
+                )
+                rows.append(
+                    {
+                        "environment": load_environment(env).name,
+                        "sensor": sensor,
+                        **({"vehicles": n, "radio": label} if swarm else {}),
+                        "a": a,
+                        "b": b,
+                        "runs": len(shared),
+                        "a_only": only_a,
+                        "b_only": only_b,
+                        "p_exact": round(p, 4),
+                    }
+                )
     return rows
+
+
+def cells_hz(cells: dict[Cell, list[Outcome]]) -> int:
+    """The behaviour rate of a group's episodes (a latency's ticks in seconds)."""
+    return next(iter(cells.values()))[0].spec.control_hz
 
 
 def _fmt(value: float | None, digits: int) -> str:
@@ -542,15 +692,15 @@ def paired_table(rows: Sequence[dict[str, Any]]) -> str:
     swarm = bool(rows) and "vehicles" in rows[0]
     head = (
         "| environment | sensor | "
-        + ("vehicles | " if swarm else "")
+        + ("vehicles | radio | " if swarm else "")
         + "A | B | runs | only A succeeds | only B succeeds "
         "| p (McNemar exact) |\n|---|---|---|---|---|---|---|---|"
-        + ("---|" if swarm else "")
+        + ("---|---|" if swarm else "")
         + "\n"
     )
     lines = [
         f"| {r['environment']} | {r['sensor']} | "
-        + (f"{r['vehicles']} | " if swarm else "")
+        + (f"{r['vehicles']} | {r['radio']} | " if swarm else "")
         + f"{r['a']} | {r['b']} | {r['runs']} "
         f"| {r['a_only']} | {r['b_only']} | {r['p_exact']:.4f} |"
         for r in rows
@@ -571,9 +721,11 @@ def command_line(opts: GslOptions, sub: str = "") -> str:
         parts.append(f"--vehicles {','.join(str(n) for n in opts.vehicles)}")
     if opts.spacing is not None:
         parts.append(f"--spacing {opts.spacing:g}")
-    if opts.radio:
+    if opts.radio_text():
         parts.append(f"--radio {opts.radio_text()}")
-    if opts.time_limit_s != 300.0:
+    if opts.time_limit_auto:
+        parts.append("--time-limit auto")
+    elif opts.time_limit_s != 300.0:
         parts.append(f"--time-limit {opts.time_limit_s:g}")
     parts.append(f"--dynamics {opts.dynamics}")
     if opts.dynamics == "kinematic" and (opts.control_hz, opts.sensor_period_ticks) != (20, 2):
@@ -598,7 +750,16 @@ def protocol_line(opts: GslOptions) -> str:
             f"a swarm's starts on a crosswind line centred on the run's start ({spacing} "
             "spacing; 0: a circle of 2 m), "
         )
-    radio = f"radio {opts.radio_text()} (docs/agents.md), " if opts.radio else ""
+    radio = f"radio {opts.radio_text()} (docs/agents.md), " if opts.radio_text() else ""
+    if len(opts.radios) > 1:
+        radio = (
+            f"radios {opts.radio_text()} (docs/agents.md; each its own cells; a cell whose "
+            "episodes no radio changes, one vehicle or a behaviour that ignores its peers, is "
+            "flown on the first only and shown with radio –), "
+        )
+    families = [e for e in opts.environments if load_environment(e).family is not None]
+    if opts.time_limit_auto or families:
+        return protocol_line_drawn(opts, swarm, radio, families)
     return (
         f"{opts.runs} runs per cell, {swarm}{radio}"
         f"seed {opts.seed}, dynamics {opts.dynamics} "
@@ -607,6 +768,33 @@ def protocol_line(opts: GslOptions) -> str:
         "(run k: the same start for every algorithm), a time-dependent release running "
         "max(60 s, 1.5 × 80 m / wind speed) before; success: a declaration within 2 m of the "
         "source."
+    )
+
+
+def protocol_line_drawn(opts: GslOptions, swarm: str, radio: str, families: Sequence[str]) -> str:
+    """The protocol line of a grid with a randomised family or ``--time-limit auto``."""
+    names = ", ".join(load_environment(e).name for e in families)
+    drawn = (
+        f"in the randomised families ({names}) every run draws its source, wind, release and "
+        'class and its start (docs/gsl.md "Randomised families"), '
+        if families
+        else ""
+    )
+    fixed = (
+        f"limit {AUTO_TIME_LIMIT_MULTIPLE:g} × the straight flight from the start at "
+        f"{SEARCH_SPEED_M_S:g} m/s"
+        if opts.time_limit_auto
+        else f"limit {opts.time_limit_s:g} s"
+    )
+    return (
+        f"{opts.runs} runs per cell, {swarm}{radio}"
+        f"seed {opts.seed}, dynamics {opts.dynamics} "
+        f"(control {opts.control_hz} Hz, sensor every {opts.sensor_period_ticks} ticks), "
+        f"{drawn}a family's limit its time_limit_multiple × the straight flight from the "
+        f"start at {SEARCH_SPEED_M_S:g} m/s; in the other environments {fixed}, starts 30–80 m "
+        "downwind and ±20 m crosswind at 10 m (run k: the same start for every algorithm), "
+        "a time-dependent release running max(60 s, 1.5 × the farthest start / wind speed) "
+        "before; success: a declaration within 2 m of the source."
     )
 
 
@@ -687,7 +875,7 @@ def _cell(value: Any) -> str:
 
 
 #: Appended to ``RUN_COLUMNS`` when ``--vehicles`` asks for a swarm.
-SWARM_COLUMNS = ("vehicles", "closest_approach_m", "total_path_m", "nearest_member_m")
+SWARM_COLUMNS = ("vehicles", "radio", "closest_approach_m", "total_path_m", "nearest_member_m")
 
 
 def runs_csv(outcomes: Sequence[Outcome], swarm: bool = False) -> str:
@@ -699,7 +887,15 @@ def runs_csv(outcomes: Sequence[Outcome], swarm: bool = False) -> str:
     for o in outcomes:
         s = o.spec
         extra = (
-            (s.vehicles, o.closest_approach_m, o.total_path_m, o.nearest_member_m) if swarm else ()
+            (
+                s.vehicles,
+                radio_text(s.overrides) or PERFECT,
+                o.closest_approach_m,
+                o.total_path_m,
+                o.nearest_member_m,
+            )
+            if swarm
+            else ()
         )
         writer.writerow(
             _cell(v)
@@ -746,9 +942,11 @@ def write_outputs(
         (out / name).write_text(text)
         written.append(out / name)
     # matplotlib only when writing figures
-    from plumeswarm.gsl.figure import plot_errors, plot_success, plot_trajectories
+    from plumeswarm.gsl.figure import plot_errors, plot_scaling, plot_success, plot_trajectories
 
     written.append(plot_success(out / "success.png", rows))
+    if opts.swarm:
+        written.append(plot_scaling(out / "swarm.png", rows))
     written.append(plot_errors(out / "final_error.png", outcomes))
     for env in opts.environments:
         samples = [o for o in outcomes if o.spec.environment == env and o.trajectories]

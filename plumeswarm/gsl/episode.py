@@ -46,6 +46,7 @@ from plume_service.from_scenario import field_from_scenario
 from plume_service.statistics import warmup_s
 from plumeswarm.experiments.driver import InProcessDriver
 from plumeswarm.experiments.fused import StatesObserver
+from plumeswarm.gsl.family import AUTO_TIME_LIMIT_MULTIPLE, straight_flight_limit_s
 from plumeswarm.gsl.registry import (
     SENSORS,
     Algorithm,
@@ -90,6 +91,44 @@ FIELD_WARMUP_S = 60.0
 def environment_of(spec: EpisodeSpec) -> Environment:
     """The spec's environment file, loaded with its overrides."""
     return load_environment(spec.environment, spec.overrides)
+
+
+def episode_environment(spec: EpisodeSpec) -> Scenario:
+    """The world the episode flies in: the environment's scenario or, in a randomised family
+    (:mod:`plumeswarm.gsl.family`), its base with run (seed, run)'s draw, calibrated."""
+    env = environment_of(spec)
+    if env.family is None:
+        return env.scenario
+    return env.family.scenario(env.scenario, spec.seed, spec.run)
+
+
+def start_distances_m(spec: EpisodeSpec) -> tuple[float, float]:
+    """The nearest and farthest start from the source the episode's environment may draw
+    (the warm-up covers the farthest): a family's ``start_distance_m``, else the spec's."""
+    family = environment_of(spec).family
+    return family.start_distance_m if family is not None else spec.start_along_m
+
+
+def episode_start(spec: EpisodeSpec, scenario: Scenario) -> Point:
+    """Where run ``spec.run`` starts (ENU): :func:`start_point` or, in a randomised family,
+    the drawn start relative to the drawn source and wind (``scenario``: the episode's)."""
+    family = environment_of(spec).family
+    if family is None:
+        return start_point(scenario, spec.seed, spec.run, spec.start_along_m)
+    return _at(scenario, *family.draw(spec.seed, spec.run).start_along_across_m)
+
+
+def episode_time_limit_s(spec: EpisodeSpec, scenario: Scenario | None = None) -> float:
+    """``--time-limit auto``'s limit for the episode: a randomised family's own
+    (:attr:`plumeswarm.gsl.family.Draw.time_limit_s`), else ``AUTO_TIME_LIMIT_MULTIPLE`` × the
+    straight flight from the run's start to the source at ``SEARCH_SPEED_M_S``."""
+    family = environment_of(spec).family
+    if family is not None:
+        return family.draw(spec.seed, spec.run).time_limit_s
+    world = scenario if scenario is not None else episode_environment(spec)
+    src = world.plume.sources[0]
+    distance = math.dist(episode_start(spec, world), (src.x_m, src.y_m))
+    return straight_flight_limit_s(distance, AUTO_TIME_LIMIT_MULTIPLE)
 
 
 def environment_field(scenario: Scenario) -> tuple[Field, WindModel]:
@@ -168,6 +207,12 @@ def start_point(
     rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence([seed, run, 0x57A7])))
     along = float(rng.uniform(*along_m))
     across = float(rng.uniform(*START_ACROSS_M))
+    return _at(scenario, along, across)
+
+
+def _at(scenario: Scenario, along: float, across: float) -> Point:
+    """The point ``along`` downwind of the first source and ``across`` to the left of the
+    downwind direction (ENU)."""
     src = scenario.plume.sources[0]
     dw = downwind_unit(scenario.wind.from_deg)
     cw = (-dw[1], dw[0])
@@ -179,7 +224,7 @@ def episode_starts(scenario: Scenario, spec: EpisodeSpec, count: int) -> list[li
     swarm on a crosswind line centred on it, ``spec.spacing_m()`` apart (vehicle i at
     (i − (N − 1)/2) × spacing to the left of the mean wind), or — spacing 0 — on a circle of
     2 m around it."""
-    sx, sy = start_point(scenario, spec.seed, spec.run, spec.start_along_m)
+    sx, sy = episode_start(spec, scenario)
     starts = [[sx, sy, START_ALTITUDE_M] for _ in range(count)]
     spacing = spec.spacing_m() if count > 1 else 0.0
     if spacing > 0.0:
@@ -203,7 +248,7 @@ def episode_scenario(spec: EpisodeSpec, environment: Scenario | None = None) -> 
     ground under its start, the sensor, and the run's own seed (seed × 100003 + run: the
     sensors' noise, the anemometers, the behaviours' generators and a time-dependent field's
     realisation). Any runner of the scenario flies the same episode."""
-    base = environment if environment is not None else environment_of(spec).scenario
+    base = environment if environment is not None else episode_environment(spec)
     algo = spec.algorithm_config()
     sensor = msgspec.structs.replace(
         SENSORS[spec.sensor].config, period_ticks=spec.sensor_period_ticks
@@ -384,7 +429,7 @@ def _tally(spec: EpisodeSpec, scenario: Scenario, dt: float, t0: float) -> Tally
         len(scenario.vehicles),
         dt,
         t0,
-        start_point(scenario, spec.seed, spec.run, spec.start_along_m),
+        episode_start(spec, scenario),
         (src.x_m, src.y_m),
     )
 
@@ -395,7 +440,7 @@ def kinematic_episode(spec: EpisodeSpec, environment: Scenario | None = None) ->
     scenario = episode_scenario(spec, environment)
     concentration, _ = environment_field(scenario)
     dt = 1.0 / spec.control_hz
-    start_tick = round(start_s(scenario, spec.start_along_m) / dt)
+    start_tick = round(start_s(scenario, start_distances_m(spec)) / dt)
     ids = [v.id for v in scenario.vehicles]
     link = PeerLink(scenario)
     behaviors = episode_behaviors(spec, scenario, link)
@@ -556,7 +601,7 @@ def fused_episode(
     scenario = episode_scenario(spec, environment)
     episode = FusedEpisode(scenario, on_states)
     try:
-        episode.take_off(START_ALTITUDE_M, start_s(scenario, spec.start_along_m))
+        episode.take_off(START_ALTITUDE_M, start_s(scenario, start_distances_m(spec)))
         drv = episode.driver
         drv.step(1)  # the first tick the behaviours fly
         t0 = next(iter(drv.states().values())).sim_time_s

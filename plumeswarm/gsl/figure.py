@@ -21,6 +21,7 @@ from plumeswarm.gsl.episode import (
     episode_scenario,
     start_s,
 )
+from plumeswarm.gsl.registry import CEILING, FLOOR
 
 
 def _figure(width: float, height: float) -> Figure:
@@ -128,4 +129,78 @@ def plot_errors(path: Path, outcomes: Sequence[Outcome]) -> Path:
         ax.tick_params(axis="y", labelsize=8)
         ax.set_xlabel("final error m (log)")
         ax.set_title(f"{key[0]}, {key[1]}", fontsize=9)
+    return _save(fig, path)
+
+
+def _scaling_lines(cell: Sequence[dict[str, Any]]) -> dict[tuple[str, str], list[dict[str, Any]]]:
+    """The rows of each (algorithm, radio) line: a row no radio changes (radio "–") joins
+    every radio line of its algorithm, or is its own line if the algorithm has none."""
+    heard: dict[str, list[str]] = {}  # algorithm → the radios that change its cells
+    for r in cell:
+        radios = heard.setdefault(r["algorithm"], [])
+        if r["radio_label"] != "–" and r["radio_label"] not in radios:
+            radios.append(r["radio_label"])
+    lines: dict[tuple[str, str], list[dict[str, Any]]] = {}
+    for r in cell:
+        own = [r["radio_label"]] if r["radio_label"] != "–" else heard[r["algorithm"]]
+        for radio in own or ["–"]:
+            lines.setdefault((r["algorithm"], radio), []).append(r)
+    return lines
+
+
+def plot_scaling(path: Path, rows: Sequence[dict[str, Any]]) -> Path:
+    """A swarm grid against its number of vehicles: success (declared within 2 m, Wilson 95 %
+    interval) above and the median time to declare below, one column per environment and
+    sensor, one line per algorithm and radio (a cell no radio changes joins every radio's
+    line); the time panel's dashed and dotted lines are the best 1-vehicle median (the floor and the
+    ceiling left out) over N and over √N."""
+    keys = list(dict.fromkeys((r["environment"], r["sensor"]) for r in rows))
+    cols = max(1, len(keys))
+    fig = _figure(4.2 * cols, 7.0)
+    colours = colormaps["tab10"]
+    for c, (env, sensor) in enumerate(keys):
+        top = fig.add_subplot(2, cols, c + 1)
+        bottom = fig.add_subplot(2, cols, cols + c + 1)
+        cell = [r for r in rows if (r["environment"], r["sensor"]) == (env, sensor)]
+        lines = _scaling_lines(cell)
+        for k, ((algorithm, radio), points) in enumerate(lines.items()):
+            points = sorted(points, key=lambda r: r["vehicles"])
+            n = np.array([r["vehicles"] for r in points])
+            rate = np.array([100 * r["success_rate"] for r in points])
+            low = np.array([100 * r["success_ci95"][0] for r in points])
+            high = np.array([100 * r["success_ci95"][1] for r in points])
+            label = algorithm if radio in ("–", "perfect") else f"{algorithm}, {radio}"
+            style = "-" if radio in ("–", "perfect") else "--"
+            colour = colours(k % 10)
+            top.errorbar(
+                n, rate, yerr=[rate - low, high - rate], fmt="o" + style, color=colour,
+                capsize=3, label=label,
+            )  # fmt: skip
+            timed = [(r["vehicles"], r["median_time_s"]) for r in points if r["median_time_s"]]
+            if timed:
+                bottom.plot(*zip(*timed, strict=True), "o" + style, color=colour, label=label)
+        singles = [
+            r["median_time_s"]
+            for r in cell
+            if r["vehicles"] == 1 and r["median_time_s"] and r["algorithm"] not in (FLOOR, CEILING)
+        ]
+        best = min(singles, default=None)
+        counts = sorted({r["vehicles"] for r in cell})
+        if best is not None and counts:
+            grid = np.linspace(min(counts), max(counts), 50)
+            bottom.plot(grid, best / grid, "k--", lw=0.8, label="best 1-vehicle / N")
+            bottom.plot(grid, best / np.sqrt(grid), "k:", lw=0.8, label="best 1-vehicle / √N")
+        top.set_ylim(-2, 102)
+        top.set_ylabel("declared ≤ 2 m %, 95 % CI")
+        top.set_title(f"{env}, {sensor}", fontsize=9)
+        bottom.set_xscale("log")
+        bottom.set_yscale("log")
+        bottom.set_xlabel("vehicles")
+        bottom.set_ylabel("median time to declare s")
+        for ax in (top, bottom):
+            ax.set_xticks(counts, [str(n) for n in counts])
+            ax.minorticks_off()
+        if c == cols - 1:
+            top.legend(fontsize=7, loc="lower right")
+            bottom.legend(fontsize=7, loc="upper right")
     return _save(fig, path)

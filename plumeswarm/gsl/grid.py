@@ -202,7 +202,11 @@ def _difference(theirs: dict[str, Any], ours: dict[str, Any]) -> str:
         return f"`{theirs.get('command')}`, not `{ours.get('command')}`"
     if theirs.get("digest") != ours.get("digest"):
         return "the same command over other episodes (the algorithms or environments changed)"
-    return f"{_shard_text(theirs)}, not {_shard_text(ours)}"
+    if theirs.get("shard") != ours.get("shard"):
+        return f"{_shard_text(theirs)}, not {_shard_text(ours)}"
+    mine, yours = theirs.get("args", {}), ours.get("args", {})
+    keys = sorted(k for k in mine.keys() | yours.keys() if mine.get(k) != yours.get(k))
+    return "the grid with " + ", ".join(f"{k}={mine.get(k)!r} (now {yours.get(k)!r})" for k in keys)
 
 
 def _shard_text(header: dict[str, Any]) -> str:

@@ -7,7 +7,8 @@
   class may say how many vehicles fly it (``vehicles = 3``) and what it follows
   (``source = "…"``), and how far apart its members start across the wind
   (``start_spacing_m = 4.0``); the defaults are 1, "" and 0 (a circle of 2 m).
-- **Environments** are scenario files: a name is ``swarmbus/scenarios/gsl/<name>.toml``, anything
+- **Environments** are scenario files: a name is ``swarmbus/scenarios/gsl/<name>.toml`` (or a
+  tuning one, ``gsl/tuning/<name>.toml``), anything
   else a path (:func:`load_environment`). The file gives the plume, the wind and the world; the
   bench adds the vehicles, the sensor, the seed and the protocol. ``section.key=value``
   overrides (:func:`apply_overrides`) change a loaded scenario, for sensitivity sweeps.
@@ -34,9 +35,12 @@ from typing import Any
 
 import msgspec
 
+from plumeswarm.gsl.family import Family, FamilyError
 from swarmbus.errors import PlumeswarmError
 from swarmbus.scenario import (
+    FAMILY_TABLE,
     GSL_ENVIRONMENTS_DIR,
+    GSL_TUNING_DIR,
     SENSOR_PRESETS,
     Scenario,
     ScenarioError,
@@ -252,7 +256,8 @@ class Environment:
     path: Path
     sha256: str  # of the file's bytes
     description: str  # the file's first comment line
-    scenario: Scenario  # with the overrides applied
+    scenario: Scenario  # with the overrides applied (a family's: its base)
+    family: Family | None = None  # a randomised family's ranges (its [randomise] table)
 
     @property
     def time_dependent(self) -> bool:
@@ -264,20 +269,32 @@ def environment_names() -> list[str]:
     return sorted(p.stem for p in ENVIRONMENTS_DIR.glob("*.toml"))
 
 
+def tuning_environment_names() -> list[str]:
+    """The tuning environments shipped in ``swarmbus/scenarios/gsl/tuning``, by name: tuning
+    uses only these (and seeds >= 1000); no published table uses them."""
+    return sorted(p.stem for p in GSL_TUNING_DIR.glob("*.toml"))
+
+
 def environment_path(name_or_path: str) -> Path:
     """The file of an environment: its name (``steady_gaussian``, or ``gsl/steady_gaussian`` as
-    ``plumeswarm scenario list`` shows it), or a scenario file's path."""
+    ``plumeswarm scenario list`` shows it; a tuning one as ``tune_randomised``,
+    ``tuning/tune_randomised`` or ``gsl/tuning/tune_randomised``), or a scenario file's path."""
     asked, listed = name_or_path, f"{ENVIRONMENTS_DIR.name}/"
     if name_or_path.startswith(listed) and not Path(name_or_path).is_file():
         name_or_path = name_or_path.removeprefix(listed)
-    if "/" in name_or_path or name_or_path.endswith(".toml"):
+    tuning = f"{GSL_TUNING_DIR.name}/"
+    if name_or_path.startswith(tuning) and not Path(name_or_path).is_file():
+        name_or_path = name_or_path.removeprefix(tuning)  # tuning/<name>: the tuning file
+    elif "/" in name_or_path or name_or_path.endswith(".toml"):
         path = Path(name_or_path)
         if not path.is_file():
             raise GslError(f"--environments {name_or_path!r}: no such file")
         return path
     path = ENVIRONMENTS_DIR / f"{name_or_path}.toml"
+    if not path.is_file() and (GSL_TUNING_DIR / f"{name_or_path}.toml").is_file():
+        path = GSL_TUNING_DIR / f"{name_or_path}.toml"
     if not path.is_file():
-        names = environment_names()
+        names = environment_names() + tuning_environment_names()
         hint = did_you_mean(name_or_path, names)
         valid = ", ".join(names)
         raise GslError(f"--environments {asked!r}: unknown{hint}; valid: {valid} or a path")
@@ -299,7 +316,14 @@ def load_environment(name_or_path: str, overrides: tuple[tuple[str, Any], ...] =
 @functools.cache
 def _environment(path: Path, data: bytes, overrides: tuple[tuple[str, Any], ...]) -> Environment:
     text = data.decode()
-    if "vehicles" not in tomllib.loads(text):  # a placeholder the bench replaces
+    raw = tomllib.loads(text)
+    family = None
+    if FAMILY_TABLE in raw:
+        try:
+            family = Family.from_table(raw[FAMILY_TABLE], str(path))
+        except FamilyError as exc:
+            raise GslError(f"--environments {str(path)!r}: {exc}") from None
+    if "vehicles" not in raw:  # a placeholder the bench replaces
         text += '\n[[vehicles]]\nid = "uav1"\n'
     try:
         scenario = parse_scenario(text, str(path))
@@ -311,6 +335,7 @@ def _environment(path: Path, data: bytes, overrides: tuple[tuple[str, Any], ...]
         sha256=hashlib.sha256(data).hexdigest(),
         description=_description(text),
         scenario=apply_overrides(scenario, overrides),
+        family=family,
     )
 
 

@@ -104,6 +104,8 @@ Group = tuple[SweepParam, Any, list[EpisodeSpec]]  # a parameter, one of its val
 
 def sweep_groups(opts: GslOptions, params: Sequence[SweepParam]) -> list[Group]:
     """Every (parameter, value) and its episodes; all of them together are the sweep's grid."""
+    if len(opts.radios) > 1:
+        raise GslError(f"--radio {opts.radio_text()}: a sweep takes one radio setting")
     return [(p, v, value_specs(opts, p.name, v)) for p in params for v in p.values]
 
 

@@ -17,6 +17,9 @@ def test_exports() -> None:
         "CommandRejected",
         "CommandTimeout",
         "PlumeError",
+        "RadioReadError",
+        "RadioSent",
+        "RadioUnavailable",
         "Swarm",
         "SwarmError",
         "VehicleCommander",
@@ -31,6 +34,8 @@ def test_swarm_surface() -> None:
     for name in ("vehicles", "state", "status", "reading", "subscribe", "command", "wait_until"):
         assert hasattr(Swarm, name), name
     for name in ("step", "step_until", "sim_time", "holds_clock"):
+        assert hasattr(Swarm, name), name
+    for name in ("radio", "radio_tick", "wait_radio", "fetch_radio", "radio_links"):
         assert hasattr(Swarm, name), name
     assert list(inspect.signature(Swarm.step).parameters)[1:2] == ["ticks"]
     assert list(inspect.signature(Swarm.step_until).parameters)[1:3] == [

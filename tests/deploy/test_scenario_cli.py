@@ -19,14 +19,18 @@ from tests.support.procs import run_cli
 BUNDLED = sorted(p.stem for p in SCENARIOS_DIR.glob("*.toml"))
 # the benchmark environments, by the names `bench gsl --environments` takes
 ENVIRONMENTS = sorted(p.stem for p in (SCENARIOS_DIR / "gsl").glob("*.toml"))
+# the environments tuning uses, never published
+TUNING = sorted(p.stem for p in (SCENARIOS_DIR / "gsl" / "tuning").glob("*.toml"))
 
 
 def test_list_names_every_bundled_scenario_with_its_vehicle_count() -> None:
     res = run_cli(["scenario", "list"], timeout_s=60)
     assert res.returncode == 0, res.stderr
     lines = res.stdout.splitlines()
-    assert [ln.split()[0] for ln in lines] == BUNDLED + [f"gsl/{e}" for e in ENVIRONMENTS]
-    assert len(ENVIRONMENTS) >= 6
+    assert [ln.split()[0] for ln in lines] == BUNDLED + [f"gsl/{e}" for e in ENVIRONMENTS] + [
+        f"gsl/tuning/{e}" for e in TUNING
+    ]
+    assert len(ENVIRONMENTS) >= 6 and len(TUNING) >= 2
     for line in lines:
         raw = tomllib.loads((SCENARIOS_DIR / f"{line.split()[0]}.toml").read_text())
         assert f"{len(raw['vehicles'])} vehicle(s)" in line

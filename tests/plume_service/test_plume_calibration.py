@@ -15,19 +15,26 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from plume_atmosphere.calibration import derive_calibration, taylor_variance
-from plume_atmosphere.wind import ColouredNoise
+from plume_atmosphere.calibration import (
+    derive_calibration,
+    lagrangian_timescale_s,
+    taylor_variance,
+)
+from plume_atmosphere.wind import ColouredNoise, wind_vector_enu
 from plume_service.field import ConcentrationField, FloatArray
 from plume_service.filament import FilamentPlume
 from plume_service.from_scenario import field_from_scenario
+from plume_service.gaussian import GaussianPlume
 from plume_service.statistics import intermittency, time_averaged_widths, warmup_s
 from swarmbus.scenario import (
     GSL_ENVIRONMENTS_DIR,
     ScenarioError,
     WindMeander,
+    bundled_scenarios,
     calibrate_scenario,
     load_scenario,
     parse_scenario,
+    resolve_scenario_path,
 )
 from tests.support.procs import run_cli
 
@@ -194,6 +201,60 @@ def test_calibrated_time_average_has_the_class_d_gaussian_widths(name: str) -> N
         assert w.sigma_z_m == pytest.approx(mcmullen_d("z", w.x_m), rel=0.2), (name, w)
 
 
+#: The bundled time-dependent scenarios outside the benchmark's environments, calibrated to
+#: their atmosphere (the benchmark's: CALIBRATED, measured above).
+OTHER_CALIBRATED = ("filament",)
+#: Bundled time-dependent scenarios that are published references, deliberately not
+#: calibrated to an atmosphere (docs/plume.md): Farrell et al.'s plume as published and the
+#: wind-tunnel thread.
+REFERENCES = ("gsl/farrell2002_reference", "gsl/lab_thread")
+
+
+def _time_dependent(name: str) -> bool:
+    plume = load_scenario(resolve_scenario_path(name)).plume
+    return any((src.model or plume.model) in ("filament", "puff") for src in plume.sources)
+
+
+def test_every_bundled_time_dependent_scenario_is_calibrated_or_a_named_reference() -> None:
+    # a new bundled filament or puff scenario must be calibrated (and measured) or named here
+    names = {n for n in bundled_scenarios() if _time_dependent(n)}
+    calibrated = {f"gsl/{n}" for n in CALIBRATED} | set(OTHER_CALIBRATED)
+    assert names == calibrated | set(REFERENCES)
+    for name in names:
+        scenario = load_scenario(resolve_scenario_path(name))
+        assert (scenario.plume.calibration is not None) == (name in calibrated), name
+
+
+@pytest.mark.parametrize("name", OTHER_CALIBRATED)
+def test_bundled_scenario_time_average_has_its_atmospheres_widths(name: str) -> None:
+    # the same measurement of the steady Gaussian plume of its atmosphere (class, family, wind,
+    # source) is the target: at a 5 m release the ground folds σz on both alike
+    scenario = load_scenario(resolve_scenario_path(name))
+    src = scenario.plume.sources[0]
+    source = (src.x_m, src.y_m, src.release_height_m)
+    ux, uy, _ = wind_vector_enu(1.0, scenario.wind.from_deg)
+    x = (30.0, 50.0, 80.0)
+    widths = time_averaged_widths(
+        field_from_scenario(scenario), source, (ux, uy), x, warmup_s(scenario), 300.0, 2.0
+    )
+    steady = GaussianPlume(
+        release_rate=src.release_rate_g_s,
+        wind_speed=scenario.wind.speed_m_s,
+        release_height=src.release_height_m,
+        stability=scenario.plume.stability,
+        coefficients=scenario.plume.coefficients,
+        source=(src.x_m, src.y_m),
+        wind_from_deg=scenario.wind.from_deg,
+    )
+    targets = time_averaged_widths(steady, source, (ux, uy), x, 0.0, 1.0)
+    for w, target in zip(widths, targets, strict=True):
+        assert w.sigma_y_m == pytest.approx(target.sigma_y_m, rel=0.2), (name, w, target)
+        assert w.sigma_z_m == pytest.approx(target.sigma_z_m, rel=0.2), (name, w, target)
+    if (scenario.plume.stability, scenario.plume.coefficients) == ("D", "mcmullen"):
+        for w in widths:  # and σy against McMullen's closed form
+            assert w.sigma_y_m == pytest.approx(mcmullen_d("y", w.x_m), rel=0.2), (name, w)
+
+
 def test_the_filament_cut_off_does_not_set_where_a_sensor_reads_a_hit() -> None:
     # the calibrated filaments at 6 R: the kernel there is below 1 % of the 0.001 g/m³ hit
     # level even for a newly released filament, so the cut moves no reading across it
@@ -281,3 +342,62 @@ def test_a_bad_intermittency_option_is_one_line(extra: list[str]) -> None:
     res = run_cli(["plume", "intermittency", "gsl/meander_low", "--seconds", "1", *extra])
     assert res.returncode != 0
     assert res.stderr.startswith("plumeswarm: error:") and res.stderr.count("\n") == 1
+
+
+# --- with local turbulence ([wind.turbulence]) ---------------------------------------------
+
+_TURBULENT_TOML = """
+[wind]
+speed_m_s = 6.0
+[wind.turbulence]
+share = 0.3
+[plume]
+model = "filament"
+[[vehicles]]
+id = "a"
+"""
+
+
+def test_the_scenario_derives_it_from_the_stability_class() -> None:
+    s = parse_scenario(_TURBULENT_TOML)
+    t = s.wind.turbulence
+    assert t is not None
+    # Hanna's T_L at 10 m, 6 m/s, z0 0.1 m; Kaimal's v length scale 19/12·z
+    assert t.timescale_s == pytest.approx(lagrangian_timescale_s(6.0, 10.0, 0.1), rel=1e-12)
+    assert t.length_scale_m == pytest.approx(19.0 / 12.0 * 10.0)
+    # crosswind: 30 % of class D's σy² (a meander of share 0.3 has the same σv)
+    cal = derive_calibration("D", "mcmullen", 6.0, 10.0, 0.3)
+    assert t.std_m_s[1] == pytest.approx(cal.sigma_v_m_s, rel=1e-12)
+    # along-wind: Kaimal's σu/σv = √(105·19 / (22·3·17))
+    assert t.std_m_s[0] / t.std_m_s[1] == pytest.approx(math.sqrt(1995.0 / 1122.0))
+    # vertical: Taylor's σz² at 30, 50, 80 m from σw, 30 % of class D's within 25 % each
+    for x in (30.0, 50.0, 80.0):
+        tt, tl, sw = x / 6.0, t.timescale_s, t.std_m_s[2]
+        variance = 2.0 * sw**2 * tl * (tt - tl * (1.0 - math.exp(-tt / tl)))
+        assert variance / mcmullen_d("z", x) ** 2 == pytest.approx(0.3, rel=0.25)
+
+
+@pytest.mark.parametrize(
+    ("name", "overrides"),
+    [
+        # 90 m of filaments, 16 modes: the turbulence at every filament is the cost
+        ("meander_low", ["wind.turbulence.modes=16", "plume.filament.max_age_s=15.0"]),
+        ("puff_meander", []),
+    ],
+)
+def test_the_calibrated_plume_keeps_the_class_d_widths_with_turbulence(
+    name: str, overrides: list[str]
+) -> None:
+    # 30 % of the variance in local turbulence (the meander keeps its share): the filaments'
+    # own spread (a puff's own σy) is what the two leave; 200 s every 2 s
+    scenario = load_scenario(
+        GSL_ENVIRONMENTS_DIR / f"{name}.toml", ["wind.turbulence.share=0.3", *overrides]
+    )
+    assert scenario.wind.turbulence is not None
+    field = field_from_scenario(scenario)
+    widths = time_averaged_widths(
+        field, (0.0, 0.0, 10.0), (1.0, 0.0), (30.0, 50.0, 80.0), 30.0, 200.0, every_s=2.0
+    )
+    for w in widths:
+        assert w.sigma_y_m == pytest.approx(mcmullen_d("y", w.x_m), rel=0.2), w
+        assert w.sigma_z_m == pytest.approx(mcmullen_d("z", w.x_m), rel=0.2), w

@@ -9,15 +9,19 @@ import json
 import math
 import subprocess
 import sys
+from collections import Counter
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
 
+from agents.behavior import ignores_peers
 from plumeswarm.gsl.bench import (
     GslError,
     command_line,
     make_options,
     parse_radio,
+    rows_of,
     runs_csv,
     specs_of,
 )
@@ -27,9 +31,10 @@ from plumeswarm.gsl.episode import (
     Tally,
     episode_scenario,
     episode_starts,
+    run_episode,
     start_point,
 )
-from plumeswarm.gsl.registry import load_environment
+from plumeswarm.gsl.registry import BUILTIN_ALGORITHMS, load_environment
 from plumeswarm.gsl.stats import speedup
 from swarmbus.radio import RadioSpec
 
@@ -118,8 +123,8 @@ def test_vehicles_counts_are_cells_and_the_swarm_columns_appear_only_for_a_swarm
     outcome = Outcome(spec, True, 10.0, 5.0, 50.0, 0.5, 1.0, True, (0.0, 0.0),
                       closest_approach_m=1.5, total_path_m=10.0, nearest_member_m=0.5)  # fmt: skip
     plain, swarm = runs_csv([outcome]).splitlines(), runs_csv([outcome], swarm=True).splitlines()
-    assert swarm[0] == plain[0] + ",vehicles,closest_approach_m,total_path_m,nearest_member_m"
-    assert swarm[1] == plain[1] + ",2,1.5000,10.0000,0.5000"
+    assert swarm[0] == plain[0] + ",vehicles,radio,closest_approach_m,total_path_m,nearest_member_m"
+    assert swarm[1] == plain[1] + ",2,perfect,1.5000,10.0000,0.5000"
 
 
 def test_the_tally_counts_the_closest_approach_and_the_swarms_total_path() -> None:
@@ -168,7 +173,100 @@ def test_the_command_line_flies_the_swarm_options(tmp_path: Path) -> None:
     assert all(r["radio"] == {"radio.loss": 0.5} for r in rows)
     assert "--vehicles 1,3 --spacing 3 --radio loss=0.5" in (tmp_path / "gsl.md").read_text()
     lines = (tmp_path / "runs.csv").read_text().splitlines()
-    assert lines[0].endswith(",vehicles,closest_approach_m,total_path_m,nearest_member_m")
+    assert lines[0].endswith(",vehicles,radio,closest_approach_m,total_path_m,nearest_member_m")
     # the three members start 3 m apart across the wind: nothing closer at the start
+    assert {r["radio"] for r in csv.DictReader(lines)} == {"loss=0.5"}
     swarm = [r for r in csv.DictReader(lines) if r["vehicles"] == "3"]
     assert swarm and all(float(r["closest_approach_m"]) <= 3.0 + 1e-3 for r in swarm)
+
+
+LOSS_05_1S = (("radio.loss", 0.5), ("radio.latency_ticks", 20))
+
+
+def test_several_radios_are_cells_and_a_cell_no_radio_changes_is_flown_once() -> None:
+    """``--radio perfect/…/…``: each setting its own cells for a swarm that hears its peers
+    (one that talks, or one that reads their states or readings: gradient_swarm); one
+    vehicle, or a behaviour that ignores its peers, flies on the first setting only."""
+    opts = make_options(
+        ["surge_cast", "coop_declare", "gradient_swarm"], ["steady_gaussian"], ["ideal"],
+        runs=2, vehicles="1,3", radio="perfect/loss=0.5,latency=20/loss=0.2",
+    )  # fmt: skip
+    cells = Counter((s.algorithm, s.vehicles, s.overrides) for s in specs_of(opts))
+    loss_02 = (("radio.loss", 0.2),)
+    single = {(a, n, ()): 2 for a in ("random_walk", "surge_cast", "oracle") for n in (1, 3)}
+    heard = {
+        (a, 3, radio): 2
+        for a in ("coop_declare", "gradient_swarm")
+        for radio in ((), LOSS_05_1S, loss_02)
+    }
+    assert cells == {
+        **single,
+        ("coop_declare", 1, ()): 2,
+        ("gradient_swarm", 1, ()): 2,
+        **heard,
+    }
+    assert "--radio perfect/loss=0.5,latency=20/loss=0.2" in command_line(opts)
+    with pytest.raises(GslError, match="given twice"):
+        make_options(["surge_cast"], ["steady_gaussian"], ["ideal"], radio="loss=0.2/loss=0.2")
+    with pytest.raises(GslError, match="not a number"):
+        make_options(["surge_cast"], ["steady_gaussian"], ["ideal"], radio="perfect/loss=x")
+
+
+IGNORE_PEERS = sorted(n for n, a in BUILTIN_ALGORITHMS.items() if ignores_peers(a.behavior))
+
+
+def test_the_built_ins_that_ignore_their_peers_are_the_single_vehicle_ones() -> None:
+    assert (
+        sorted(["random_walk", "casting", "surge_cast", "infotaxis", "particle_filter", "oracle"])
+        == IGNORE_PEERS
+    )
+
+
+@pytest.mark.parametrize("algorithm", [*IGNORE_PEERS, "gradient_swarm"])
+def test_a_behaviour_that_ignores_its_peers_flies_the_same_bits_on_any_radio(
+    algorithm: str,
+) -> None:
+    """Why such a cell is flown once: three of its vehicles fly the same tracks on a link
+    that loses half of everything and delays the rest by 1 s; the gradient swarm, which
+    reads its peers' readings, does not (so the comparison can fail)."""
+    spec = EpisodeSpec(
+        algorithm, "meander_low", "ideal", run=0, seed=1000, time_limit_s=40.0,
+        keep_trajectory=True, vehicles=3,
+    )  # fmt: skip
+    perfect, lossy = run_episode(spec), run_episode(replace(spec, overrides=LOSS_05_1S))
+    same = (perfect.trajectories, perfect.estimate_xy) == (lossy.trajectories, lossy.estimate_xy)
+    assert same == (algorithm != "gradient_swarm")
+
+
+def test_each_swarm_cell_is_paired_with_the_best_single_vehicle_on_the_same_starts() -> None:
+    """The swarm table's paired test against the best 1-vehicle algorithm (most successes,
+    the floor and the ceiling left out): on 6 starts, casting alone wins runs 0–3 and
+    coop_declare alone runs 0–1, so casting is the best single vehicle; coop_declare ×3
+    wins runs 2–5. Counted by hand: ×3 against casting ×1, only ×3 wins runs 4–5 and only
+    casting runs 0–1: p = 1 (two against two); casting ×3 (runs 0–5) against casting ×1:
+    only ×3 runs 4–5, p = 0.5 (binomial, 2 of 2 at ½)."""
+    wins = {
+        ("random_walk", 1): set(), ("oracle", 1): {0, 1, 2, 3, 4, 5},
+        ("casting", 1): {0, 1, 2, 3}, ("coop_declare", 1): {0, 1},
+        ("casting", 3): {0, 1, 2, 3, 4, 5}, ("coop_declare", 3): {2, 3, 4, 5},
+    }  # fmt: skip
+    opts = make_options(["casting", "coop_declare"], ["meander_low"], ["ideal"], vehicles="1,3")
+    outcomes = [
+        Outcome(
+            EpisodeSpec(a, "meander_low", "ideal", k, 0, vehicles=n), k in won,
+            50.0 if k in won else None, 90.0, 50.0, 0.5 if k in won else 9.0, 1.0, True,
+            (0.0, 0.0), closest_approach_m=None if n == 1 else 1.0, total_path_m=90.0 * n,
+        )
+        for (a, n), won in wins.items()
+        for k in range(6)
+    ]  # fmt: skip
+    rows = {(r["algorithm"], r["vehicles"]): r for r in rows_of(opts, outcomes)}
+    assert rows["coop_declare", 3]["vs_best_single"] == {
+        "algorithm": "casting", "runs": 6, "only_this": 2, "only_single": 2, "p_exact": 1.0,
+    }  # fmt: skip
+    assert rows["casting", 3]["vs_best_single"] == {
+        "algorithm": "casting", "runs": 6, "only_this": 2, "only_single": 0, "p_exact": 0.5,
+    }  # fmt: skip
+    assert rows["casting", 1]["vs_best_single"]["only_this"] == 0
+    labels = {k: r["radio_label"] for k, r in rows.items()}
+    assert labels == {k: "perfect" if k == ("coop_declare", 3) else "–" for k in wins}

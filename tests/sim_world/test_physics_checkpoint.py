@@ -86,13 +86,17 @@ def test_restored_world_continues_bit_for_bit(tmp_path: Path) -> None:
     assert not any(s.on_ground for s in by_vid["air"])
 
 
-@pytest.mark.parametrize("model", ["meander", "field"])
+@pytest.mark.parametrize(
+    ("model", "turbulence"),
+    [("meander", ""), ("field", ""), ("meander", "\n[wind.turbulence]\nshare = 0.5\n")],
+    ids=["meander", "field", "meander+turbulence"],
+)
 def test_restored_world_in_a_time_varying_wind_continues_bit_for_bit(
-    tmp_path: Path, model: str
+    tmp_path: Path, model: str, turbulence: str
 ) -> None:
     """The wind is a function of the sim time (and position): a world resumed at tick 30 sees
     the same wind as the one that ran through, so the same states, bit for bit."""
-    wind = f'[wind]\nmodel = "{model}"\n[wind.meander]\npreset = "large"\n'
+    wind = f'[wind]\nmodel = "{model}"\n[wind.meander]\npreset = "large"\n{turbulence}'
     sc = scenario(extra=wind)
     path = tmp_path / "physics.ckpt"
     with World(sc) as original:

@@ -206,6 +206,7 @@ def test_a_mistyped_key_gets_the_nearest_key_of_its_section() -> None:
         "model",
         "meander",
         "field",
+        "turbulence",
     }
 
 

@@ -66,6 +66,7 @@ BUILTIN_OF: dict[str, type[BaseException]] = {
     "plumeswarm.experiments.demo.DemoError": RuntimeError,
     "plumeswarm.experiments.driver.DriverError": RuntimeError,
     "plumeswarm.bench.pomdp.PomdpError": ValueError,
+    "plumeswarm.survey.pattern.SurveyError": ValueError,
     "plumeswarm.bench.pyflyt.BenchError": RuntimeError,
     "plumeswarm.bench.scale.ScaleError": RuntimeError,
 }
