@@ -42,7 +42,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 import numpy.typing as npt
@@ -58,6 +58,16 @@ from plume_atmosphere.plume_formula import gaussian_plume_g_m3
 from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
 
 FloatArray = npt.NDArray[np.float64]
+
+
+class WindowMean(NamedTuple):
+    """A window of readings as the filter takes it: the reading positions, the mean reading,
+    the mean wind (east, north) and whether any reading was a detection."""
+
+    points: list[tuple[float, float, float]]
+    value_g_m3: float
+    wind: tuple[float, float]
+    detected: bool
 
 
 @dataclass(eq=False)
@@ -81,6 +91,11 @@ class SourceTermFilter(SavesState):
     detect_scale_g_m3: float = PLUME_THRESHOLD_G_M3
     background_probability: float = 0.01
     miss_probability: float = 0.3
+    #: Each window's log-likelihood is multiplied by this (its weight as evidence): 1 treats
+    #: every window as independent; below 1 it counts correlated windows as fewer.
+    tempering: float = 1.0
+    #: Resample when the effective sample size is below this fraction of the particles.
+    resample_below: float = 0.5
     weights: FloatArray = field(init=False)
     # below this for every particle, a reading is unexplained: ln of the 3σ magnitude
     # floor times a 2 % detection probability (twice the background)
@@ -90,8 +105,15 @@ class SourceTermFilter(SavesState):
         self.particles = np.array(self.particles, dtype=np.float64)
         self.weights = np.full(len(self.particles), 1.0 / len(self.particles))
 
-    def predict(self, x_m: float, y_m: float, z_m: float, wind: tuple[float, float]) -> FloatArray:
-        """Each particle's predicted concentration at (x, y, z) in the wind (east, north)."""
+    def predict(
+        self,
+        x_m: float | FloatArray,
+        y_m: float | FloatArray,
+        z_m: float | FloatArray,
+        wind: tuple[float, float],
+    ) -> FloatArray:
+        """Each particle's predicted concentration at (x, y, z) in the wind (east, north); for
+        arrays of points (shape (k, 1)), a (k, particles) array."""
         frame = WindFrame.of(wind)
         dx = x_m - self.particles[:, 0]
         dy = y_m - self.particles[:, 1]
@@ -106,6 +128,14 @@ class SourceTermFilter(SavesState):
             self.release_height_m,
             self.curves,
         )
+
+    def detection_probability(self, predicted: FloatArray) -> FloatArray:
+        """P(detection | each predicted mean c) of :meth:`log_likelihood`."""
+        scale = self.detect_scale_g_m3
+        p_det = self.background_probability + (1.0 - self.background_probability) * (
+            -np.expm1(-predicted / scale)
+        )
+        return np.asarray(np.minimum(p_det, 1.0 - self.miss_probability))
 
     def log_likelihood(
         self, predicted: FloatArray, value_g_m3: float, detected: bool | None = None
@@ -122,11 +152,7 @@ class SourceTermFilter(SavesState):
         c) times the magnitude term exp(−r²/2σ²), r = ln(y + ε) − ln(c + ε), floored at r = 3σ
         (a filament peak far above the mean is not evidence against the particle).
         """
-        scale = self.detect_scale_g_m3
-        p_det = self.background_probability + (1.0 - self.background_probability) * (
-            -np.expm1(-predicted / scale)
-        )
-        p_det = np.minimum(p_det, 1.0 - self.miss_probability)
+        p_det = self.detection_probability(predicted)
         if not (value_g_m3 >= self.detect_g_m3 if detected is None else detected):
             return np.asarray(np.log1p(-p_det))
         eps = self.floor_g_m3
@@ -167,11 +193,13 @@ class SourceTermFilter(SavesState):
             self.particles[fresh] = self.prior(int(fresh.sum()))
             predicted[fresh] = self.predict_mean(points, wind)[fresh]
             log_l = self.log_likelihood(predicted, value_g_m3, detected)
+        if self.tempering != 1.0:
+            log_l = self.tempering * log_l
         log_w = np.log(self.weights + 1e-300) + log_l
         log_w -= log_w.max()
         w = np.exp(log_w)
         self.weights = w / w.sum()
-        if 1.0 / float(np.sum(self.weights**2)) < 0.5 * len(self.weights):
+        if 1.0 / float(np.sum(self.weights**2)) < self.resample_below * len(self.weights):
             self._resample()
 
     def _resample(self) -> None:
@@ -198,7 +226,7 @@ class ParticleFilter(SeekingBehavior):
     ignores_peers = True  # reads neither its peers' states nor their readings: any radio
     # ``filter`` is rebuilt from ``prior_origin`` (where its prior was drawn) on restore;
     # ``rng`` is the context's generator, which the autopilot saves on its own.
-    own_state = (
+    own_state: ClassVar[tuple[str, ...]] = (
         "prior_origin",
         "window",
         "window_wind",
@@ -331,8 +359,13 @@ class ParticleFilter(SeekingBehavior):
             sum(w[1] for w in self.window_wind) / n,
         )
         detected = max(values) >= self.threshold_g_m3
-        self.filter.update_mean(points, sum(values) / len(values), mean_wind, detected)
+        self._update(now_s, WindowMean(points, sum(values) / len(values), mean_wind, detected))
         self.window, self.window_wind, self.window_start_s = [], [], None
+
+    def _update(self, now_s: float, window: WindowMean) -> None:
+        """One window into the filter (a cooperative subclass also shares it)."""
+        assert self.filter is not None
+        self.filter.update_mean(*window)
 
     def seek(self, step: SeekStep) -> Setpoint | None:
         own, readings, wind_read = step.own, step.readings, step.wind

@@ -104,6 +104,12 @@ BUILTIN_ALGORITHMS: dict[str, Algorithm] = {
         "(collaborative infotaxis, Song et al., J. Phys. A)",
         4.0,
     ),
+    "coop_ste": Algorithm(
+        "agents.behaviors.coop_ste:CooperativeSTE",
+        3,
+        "source-term estimation (Hutchinson, Oh & Chen 2017); readings shared over the radio",
+        4.0,
+    ),
     "oracle": Algorithm("agents.behaviors.oracle:Oracle", 1, "knows the source (ceiling)"),
 }
 
