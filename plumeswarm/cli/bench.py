@@ -3,6 +3,7 @@ calls its library function in :mod:`bench` or :mod:`experiments`."""
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import sys
 from collections.abc import Callable
@@ -331,10 +332,10 @@ def _gsl_run(kind: str, kwargs: dict[str, Any]) -> None:
     )
 
     args = {k: v for k, v in kwargs.items() if k not in ("out", "jobs", "executor", "shard")}
-    try:  # seconds as a number, as the journal has always kept them (auto stays a word)
+    # seconds as a number, as the journal has always kept them (auto, or a bad value
+    # make_options names, stays a word)
+    with contextlib.suppress(ValueError):
         args["time_limit_s"] = float(args["time_limit_s"])
-    except ValueError:
-        pass  # auto, or a bad value make_options names
     directory = _bench_dir(kwargs["out"], "gsl")
     try:
         executor = parse_executor(kwargs["executor"])

@@ -12,6 +12,7 @@ import sys
 from collections import Counter
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -199,12 +200,11 @@ def test_several_radios_are_cells_and_a_cell_no_radio_changes_is_flown_once() ->
         for a in ("coop_declare", "gradient_swarm")
         for radio in ((), LOSS_05_1S, loss_02)
     }
-    assert cells == {
-        **single,
-        ("coop_declare", 1, ()): 2,
-        ("gradient_swarm", 1, ()): 2,
-        **heard,
-    }
+    expected: dict[Any, int] = {}
+    expected.update(single)
+    expected.update({("coop_declare", 1, ()): 2, ("gradient_swarm", 1, ()): 2})
+    expected.update(heard)
+    assert cells == expected
     assert "--radio perfect/loss=0.5,latency=20/loss=0.2" in command_line(opts)
     with pytest.raises(GslError, match="given twice"):
         make_options(["surge_cast"], ["steady_gaussian"], ["ideal"], radio="loss=0.2/loss=0.2")
