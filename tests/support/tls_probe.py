@@ -17,6 +17,7 @@ import json
 import sys
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -63,18 +64,31 @@ def forged_puts_seen(
     forged = forged_keys if forged_keys is not None else forbidden_keys(keys)
     seen: set[str] = set()
     markers = threading.Event()
+    # The router matches a session's subscriptions one at a time: the marker counts once it
+    # came through every subscription that includes its key, so the forged keys' route (the
+    # everything subscription) is up when the marker is seen.
+    sub_keys = (keys.everything(), marker_key)
+    needed = {i for i, k in enumerate(sub_keys) if zenoh.KeyExpr(k).includes(marker_key)}
+    marked: set[int] = set()
+    lock = threading.Lock()
 
-    def on_sample(sample: zenoh.Sample) -> None:
-        payload = sample.payload.to_bytes()
-        if payload == FORGED:
-            seen.add(str(sample.key_expr))
-        elif str(sample.key_expr) == marker_key:
-            markers.set()
+    def on_sample_of(index: int) -> Callable[[zenoh.Sample], None]:
+        def on_sample(sample: zenoh.Sample) -> None:
+            payload = sample.payload.to_bytes()
+            if payload == FORGED:
+                seen.add(str(sample.key_expr))
+            elif str(sample.key_expr) == marker_key:
+                with lock:
+                    marked.add(index)
+                    if needed <= marked:
+                        markers.set()
+
+        return on_sample
 
     deadline = time.monotonic() + timeout_s
     sent = 0
     with open_session(listener) as ls:
-        subs = [ls.declare_subscriber(k, on_sample) for k in (keys.everything(), marker_key)]
+        subs = [ls.declare_subscriber(k, on_sample_of(i)) for i, k in enumerate(sub_keys)]
         with open_session(publisher) as ps:
             while not markers.is_set() and time.monotonic() < deadline:
                 for key in forged:
@@ -84,6 +98,8 @@ def forged_puts_seen(
                 markers.wait(0.2)
             # One more round after the first marker: routes are surely up for all keys now.
             markers.clear()
+            with lock:
+                marked.clear()
             for key in forged:
                 ps.put(key, FORGED, congestion_control=BLOCK)
                 sent += 1
