@@ -326,16 +326,17 @@ def check_executor(executor: Executor) -> None:
 
 @dataclass(frozen=True)
 class Merged:
-    """Shards put back together: the grid's header (without a shard) and every outcome's
-    fields by episode key."""
+    """Shards put back together: the grid's header (without a shard), every outcome's
+    fields by episode key, and the keys found in more than one directory."""
 
     header: dict[str, Any]
     records: dict[str, dict[str, Any]]
+    overlap: frozenset[str] = frozenset()
 
 
 def merge_journals(dirs: Sequence[Path]) -> Merged:
-    """The journals of ``dirs``, which must hold parts of one grid with no episode twice;
-    :class:`GslError` (one line naming the directories or episodes) otherwise."""
+    """The journals of ``dirs``, which must hold parts of one grid; :class:`GslError` (one
+    line naming the directories) otherwise. :func:`missing_episodes` checks the episodes."""
     journals = []
     for d in dirs:
         journal = Journal.read(d / JOURNAL)
@@ -345,8 +346,7 @@ def merge_journals(dirs: Sequence[Path]) -> Merged:
     first = journals[0]
     grid = {k: v for k, v in first.header.items() if k != "shard"}
     records: dict[str, dict[str, Any]] = {}
-    names: dict[str, str] = {}
-    overlap: list[str] = []
+    overlap: set[str] = set()
     for d, journal in zip(dirs, journals, strict=True):
         theirs = {k: v for k, v in journal.header.items() if k != "shard"}
         if theirs != grid:
@@ -355,22 +355,24 @@ def merge_journals(dirs: Sequence[Path]) -> Merged:
             )
         for key, fields in journal.records.items():
             if key in records:
-                overlap.append(key)
+                overlap.add(key)
             records[key] = fields
-            names[key] = journal.names[key]
-    if overlap:
-        raise GslError(f"merge: episodes in more than one directory: {_listed(overlap, names)}")
-    return Merged({**grid, "shard": None}, records)
+    return Merged({**grid, "shard": None}, records, frozenset(overlap))
 
 
-def _listed(keys: Sequence[str], names: dict[str, str]) -> str:
-    shown = [names.get(k, k) for k in keys[:5]]
-    more = f" and {len(keys) - 5} more" if len(keys) > 5 else ""
+def _listed(names: Sequence[str]) -> str:
+    shown = list(names[:5])
+    more = f" and {len(names) - 5} more" if len(names) > 5 else ""
     return ", ".join(shown) + more
 
 
 def missing_episodes(merged: Merged, specs: Sequence[EpisodeSpec]) -> None:
-    """:class:`GslError` naming the grid's episodes no shard ran."""
-    missing = [spec_name(s) for s in dict.fromkeys(specs) if spec_key(s) not in merged.records]
+    """:class:`GslError` naming, in the grid's order, the episodes more than one shard ran,
+    or else those no shard ran."""
+    unique = list(dict.fromkeys(specs))
+    twice = [spec_name(s) for s in unique if spec_key(s) in merged.overlap]
+    if twice:
+        raise GslError(f"merge: episodes in more than one directory: {_listed(twice)}")
+    missing = [spec_name(s) for s in unique if spec_key(s) not in merged.records]
     if missing:
-        raise GslError(f"merge: {len(missing)} episode(s) in no directory: {_listed(missing, {})}")
+        raise GslError(f"merge: {len(missing)} episode(s) in no directory: {_listed(missing)}")
