@@ -284,9 +284,12 @@ class Recorder:
         previous = self._previous
         if previous is None:
             return
-        durable_ns = read_durable(previous)
+        durable_ns, durable_ticks = read_durable(previous)
         with self._lock:
             self._failure = None
+            # the ticks in the file's closed chunks, which a spool just rotated no longer holds
+            for key, newest in durable_ticks.items():
+                self._have_max[key] = max(newest, self._have_max.get(key, -1))
             for key, payload, log_ns, publish_ns, is_reply in read_spool(previous):
                 tick = _tick_of(payload) if not is_reply else None
                 if tick is not None:
@@ -556,7 +559,7 @@ class Recorder:
             self._durable_tick = dict(self._last_tick)
             if self._spool is not None:
                 with self._lock:
-                    self._spool.rotate(self._written_ns)
+                    self._spool.rotate(self._written_ns, self._durable_tick)
         self._watch_backlog(age_s)
         self._report_drops()
         now = time.monotonic()

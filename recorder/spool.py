@@ -20,6 +20,7 @@ recorder then abandons the segment and keeps the spool for its successor (:meth:
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import re
 import struct
@@ -27,6 +28,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 HEADER = struct.Struct("<IIqqB")
+_MARK = struct.Struct("<qI")  # durable receive time, then the length of the ticks' JSON
 _GENERATION = re.compile(r"\.spool\.(?P<n>[0-9]+)$")
 
 # key, payload, receive time (ns), publish time (ns, the sample's timestamp), is a query reply
@@ -64,19 +66,28 @@ def read_spool(segment: Path) -> Iterator[SpoolItem]:
 
 
 def durable_path(segment: Path) -> Path:
-    """Where the receive time of the last message in a closed chunk is kept."""
+    """Where the receive time of the last message in a closed chunk is kept, with the newest
+    tick of each per-tick stream there."""
     return segment.with_name(f"{segment.name}.spool.durable")
 
 
-def read_durable(segment: Path) -> int:
-    """The receive time of the last message ``segment`` holds in a closed chunk (-1: none).
-    A kill between a chunk's flush and this mark leaves it one chunk behind: the messages of
-    that chunk are then recovered twice (never lost)."""
+def read_durable(segment: Path) -> tuple[int, dict[str, int]]:
+    """The receive time of the last message ``segment`` holds in a closed chunk (-1: none),
+    and the newest tick of each per-tick stream in its closed chunks. A kill between a chunk's
+    flush and this mark leaves it one chunk behind: the messages of that chunk are then
+    recovered twice (never lost)."""
     try:
         data = durable_path(segment).read_bytes()
     except OSError:
-        return -1
-    return int(struct.unpack("<q", data[:8])[0]) if len(data) >= 8 else -1
+        return -1, {}
+    if len(data) < _MARK.size:
+        return -1, {}
+    durable_ns, size = _MARK.unpack_from(data)
+    try:
+        ticks = json.loads(data[_MARK.size : _MARK.size + size]) if size else {}
+    except ValueError:
+        ticks = {}
+    return int(durable_ns), {str(k): int(v) for k, v in dict(ticks).items()}
 
 
 def remove_spool(segment: Path) -> None:
@@ -114,10 +125,12 @@ class Spool:
         self.bytes_written += os.writev(self._fd, (header, raw_key, payload))
         self._last_ns = log_ns
 
-    def rotate(self, durable_ns: int) -> None:
-        """Every record received at or before ``durable_ns`` is in a closed chunk: start a new
-        generation and delete those whose records all are."""
-        os.pwrite(self._durable_fd, struct.pack("<q", durable_ns), 0)
+    def rotate(self, durable_ns: int, durable_ticks: dict[str, int]) -> None:
+        """Every record received at or before ``durable_ns`` is in a closed chunk, and so is
+        every tick up to ``durable_ticks[key]`` of each per-tick stream: mark it (one write), start
+        a new generation and delete those whose records all are."""
+        ticks = json.dumps(durable_ticks, separators=(",", ":")).encode()
+        os.pwrite(self._durable_fd, _MARK.pack(durable_ns, len(ticks)) + ticks, 0)
         if self._last_ns >= 0:
             os.close(self._fd)
             self._closed.append((self._path(self._generation), self._last_ns))
