@@ -14,10 +14,12 @@ import statistics
 import tomllib
 from collections.abc import Iterator
 
+import msgspec
 import pytest
 
 from gcs_bridge.dialect import Msg, mavlink
 from swarmbus.session import free_udp_block
+from swarmbus.vehicle_types import FixedWingParams
 from tests.support.gateway_stack import gateway, vehicles
 from tests.support.mavclient import MavClient
 from tests.support.procs import REPO, zenoh_network
@@ -112,6 +114,8 @@ def test_the_planes_parameters_are_its_types(gcs: MavClient) -> None:
         assert plane[name][0] == pytest.approx(value), name
         assert plane[name][1] == REAL32
     assert "MPC_XY_CRUISE" not in plane and "RTL_RETURN_ALT" in plane
+    # the quad's without MPC_XY_CRUISE, and every field of the fixed-wing parameter schema
+    assert len(plane) == len(quad) - 1 + len(msgspec.structs.fields(FixedWingParams)) == 56
     assert "MPC_XY_CRUISE" in quad and not any(n.startswith("FW_") for n in quad)
 
 
