@@ -54,7 +54,7 @@ from swarmbus.messages import (
     VehicleStatus,
 )
 from swarmbus.scenario import Scenario
-from swarmbus.vehicle_types import load_vehicle_type
+from swarmbus.vehicle_types import FixedWingParams, load_vehicle_type
 
 log = logging.getLogger(__name__)
 
@@ -73,6 +73,8 @@ _PARAMS: dict[str, str] = {
     "GF_MAX_HOR_DIST": "geofence_max_distance_m",
     "MIS_TAKEOFF_ALT": "takeoff_altitude_m",
 }
+# a fixed wing's PX4 parameters (swarmbus.vehicle_types.FixedWingParams), by their PX4 names
+_FIXED_WING_PARAMS = frozenset(msgspec.to_builtins(FixedWingParams()))
 
 
 class Autopilot:
@@ -291,10 +293,9 @@ class Autopilot:
     def _stall_check(self, what: str, speed_m_s: float) -> Refusal | None:
         """A fixed wing refuses an airspeed below FW_AIRSPD_MIN (stall) or above
         FW_AIRSPD_MAX; 0 means FW_AIRSPD_TRIM."""
-        fw = self.vehicle_type.fixed_wing
-        if fw is None or speed_m_s == 0.0:
+        if self.pilot is None or speed_m_s == 0.0:
             return None
-        p = fw.params
+        p = self.pilot.p
         if speed_m_s < p.fw_airspd_min:
             return invalid(
                 f"{what} {speed_m_s:g} m/s is below FW_AIRSPD_MIN {p.fw_airspd_min:g} m/s "
@@ -364,10 +365,38 @@ class Autopilot:
                 out[name] = float(ACTION_CODES_OF_PARAM[name][value])
             else:
                 out[name] = float(value)
+        if self.pilot is not None:  # a fixed wing: its PX4 parameters, by their PX4 names
+            out.update(msgspec.to_builtins(self.pilot.p))
         return out
+
+    def _set_fixed_wing_param(self, cmd: SetParam) -> CommandReply | Refusal:
+        """A PX4 fixed-wing parameter: valid by the type's bounds, FW_AIRSPD_MIN not below
+        the stall speed and MIN <= TRIM <= MAX; in effect from the next control tick."""
+        assert self.pilot is not None
+        wanted = {**msgspec.to_builtins(self.pilot.p), cmd.name: cmd.value}
+        try:
+            p = msgspec.convert(wanted, FixedWingParams)
+        except msgspec.ValidationError as exc:
+            return invalid(f"{cmd.name}: {exc}")
+        stall = self.vehicle_type.stall_speed_m_s
+        if p.fw_airspd_min < stall:
+            return invalid(
+                f"FW_AIRSPD_MIN {p.fw_airspd_min:g} m/s is below the stall speed "
+                f"{stall:.1f} m/s of {self.vehicle_type.name}; valid: {stall:.1f}.."
+                f"FW_AIRSPD_TRIM {p.fw_airspd_trim:g}"
+            )
+        if not p.fw_airspd_min <= p.fw_airspd_trim <= p.fw_airspd_max:
+            return invalid(
+                f"{cmd.name}: {cmd.value:g} breaks FW_AIRSPD_MIN <= FW_AIRSPD_TRIM <= "
+                f"FW_AIRSPD_MAX ({p.fw_airspd_min:g}, {p.fw_airspd_trim:g}, {p.fw_airspd_max:g})"
+            )
+        self.pilot.set_params(p)
+        return self._reply(params=self.params())
 
     def _set_param(self, cmd: SetParam) -> CommandReply | Refusal:
         field = _PARAMS.get(cmd.name)
+        if field is None and self.pilot is not None and cmd.name in _FIXED_WING_PARAMS:
+            return self._set_fixed_wing_param(cmd)
         if field is None:
             return Refusal(RejectCode.UNSUPPORTED, f"unknown parameter {cmd.name!r}")
         fs = self.modes.failsafe

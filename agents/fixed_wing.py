@@ -39,7 +39,7 @@ from agents.mode_table import M
 from agents.modes import FlightModes
 from plume_atmosphere.wind import WindModel
 from swarmbus.messages import MissionCommand
-from swarmbus.vehicle_types import FixedWing
+from swarmbus.vehicle_types import FixedWing, FixedWingParams
 
 IDLE = [0.0, 0.5, 0.5, 0.5]  # throttle off, surfaces centred
 STOPPED_M_S = 1.0  # ground speed under which a landed plane counts as stopped
@@ -81,6 +81,12 @@ class FixedWingPilot:
     def reset(self) -> None:
         self.tecs.reset()
         self.att.reset()
+
+    def set_params(self, p: FixedWingParams) -> None:
+        """New PX4 parameters (a PARAM_SET), in effect from the next tick; the controllers'
+        integrators carry on."""
+        self.p = self.tecs.p = self.att.p = p
+        self.l1 = L1(p)
 
     # ------------------------------------------------------------------ mission acceptance
     def waypoint_reached(self, item: ResolvedItem, est: Estimate) -> bool:

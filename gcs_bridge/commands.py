@@ -108,7 +108,7 @@ class Facts:
     landed: bool
     takeoff_altitude_m: float  # MIS_TAKEOFF_ALT
     mission_seqs: list[int]
-    cruise_m_s: float = 0.0  # MPC_XY_CRUISE
+    cruise_m_s: float = 0.0  # MPC_XY_CRUISE; a fixed wing: 0 (the autopilot flies FW_AIRSPD_TRIM)
 
 
 @dataclass(frozen=True)

@@ -72,7 +72,7 @@ def facts_of(v: Vehicle) -> Facts:
         landed=v.status.landed if v.status is not None else True,
         takeoff_altitude_m=v.params.value("MIS_TAKEOFF_ALT"),
         mission_seqs=v.seqs(),
-        cruise_m_s=v.params.value("MPC_XY_CRUISE"),
+        cruise_m_s=v.params.cruise_m_s,
     )
 
 

@@ -42,7 +42,7 @@ from gcs_bridge.options import (
     unsigned_exposed,
 )
 from gcs_bridge.vehicle import Vehicle
-from plume_atmosphere.wind import wind_vector_enu
+from plume_atmosphere.wind import wind_from_scenario, wind_vector_enu
 from swarmbus.closeable import Closeable
 from swarmbus.codec import MessageError, decode
 from swarmbus.keys import Keys
@@ -50,6 +50,7 @@ from swarmbus.messages import VehicleStatus
 from swarmbus.node import NodeContext, NodeRuntime
 from swarmbus.options import OptionError, role_options
 from swarmbus.scenario import GatewaySpec, Scenario, not_on_mavlink_note
+from swarmbus.vehicle_types import load_vehicle_type
 from swarmbus.views import TickView
 
 log = logging.getLogger(__name__)
@@ -125,10 +126,12 @@ class Gateway(Closeable):
         off_mavlink = set(scenario.not_on_mavlink(vehicle_ids))
         if off_mavlink:
             log.warning("%s", not_on_mavlink_note(len(off_mavlink)))
+        on_mavlink = [vid for vid in vehicle_ids if vid not in off_mavlink]
+        # a fixed wing's airspeed is against the physics' own wind (gusts and all)
+        planes = any(load_vehicle_type(scenario.vehicle(vid).type).fixed_wing for vid in on_mavlink)
+        air = wind_from_scenario(scenario) if planes else None
         self.vehicles = {
-            vid: Vehicle(scenario, vid, index_of[vid], wind)
-            for vid in vehicle_ids
-            if vid not in off_mavlink
+            vid: Vehicle(scenario, vid, index_of[vid], wind, air) for vid in on_mavlink
         }
         self.by_sysid = {v.sysid: v for v in self.vehicles.values()}
         vehicles = list(self.vehicles.values())

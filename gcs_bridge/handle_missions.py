@@ -105,7 +105,7 @@ class MissionHandlers:
             self._autopilots.submit(v, MissionClear(), finish(ms.Converted([], [], [])))
             return
         try:
-            cruise = v.params.value("MPC_XY_CRUISE")
+            cruise = v.params.cruise_m_s
             converted = ms.convert_upload(c.items, v.home_place(), cruise)
             command = MissionUpload(items=converted.items)
         except ms.MissionError as exc:

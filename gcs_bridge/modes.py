@@ -140,6 +140,10 @@ def system_status_of(status: VehicleStatus | None) -> int:
     return int(mavlink.MAV_STATE_STANDBY)
 
 
-def mav_type_of(rotor_count: int) -> int:
-    """MAV_TYPE for a multirotor with ``rotor_count`` rotors (quad when unusual)."""
+def mav_type_of(kind: str, rotor_count: int) -> int:
+    """MAV_TYPE of a vehicle type: ``fixed_wing`` is MAV_TYPE_FIXED_WING; a multirotor's
+    follows its ``rotor_count`` (quad when unusual). PX4 reports a plane's modes with the same
+    main and sub modes as a multirotor's (hold is AUTO / LOITER)."""
+    if kind == "fixed_wing":
+        return int(mavlink.MAV_TYPE_FIXED_WING)
     return int(_MAV_TYPE_OF_ROTORS.get(rotor_count, mavlink.MAV_TYPE_QUADROTOR))

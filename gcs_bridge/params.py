@@ -5,6 +5,8 @@ autopilot's own values when it answers ``GetParams``; ``PARAM_SET`` goes to the 
 ``SetParam`` and the table keeps what the autopilot confirmed. Two parameters act in the
 gateway itself and live here when the autopilot does not know them: MIS_TAKEOFF_ALT (takeoff
 commands without an altitude) and MPC_XY_CRUISE (speed of MAVLink missions and go-to).
+A fixed wing shows, instead of MPC_XY_CRUISE, its type's ``[fixed_wing.params]`` (FW_AIRSPD_*,
+NAV_LOITER_RAD, ...), which its autopilot flies by.
 PARAM_VALUE uses PX4's bytewise encoding: an INT32 parameter's bits travel in the float field.
 """
 
@@ -15,11 +17,14 @@ import struct
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import msgspec
+import msgspec.inspect
+
 from gcs_bridge.dialect import mavlink
 from swarmbus.errors import PlumeswarmError
 from swarmbus.messages import COM_OBL_ACT_CODES, NAV_DLL_ACT_CODES
 from swarmbus.scenario import Failsafe
-from swarmbus.vehicle_types import VehicleType
+from swarmbus.vehicle_types import FixedWingParams, VehicleType
 
 REAL32 = int(mavlink.MAV_PARAM_TYPE_REAL32)
 INT32 = int(mavlink.MAV_PARAM_TYPE_INT32)
@@ -178,6 +183,51 @@ SPECS: tuple[ParamSpec, ...] = (
 )
 
 
+# MPC_XY_CRUISE is a multirotor's: a fixed wing flies MAVLink missions and go-to at
+# FW_AIRSPD_TRIM (a speed of 0 asks the autopilot for it), as PX4's planes do.
+MULTIROTOR_ONLY = frozenset({"MPC_XY_CRUISE"})
+
+
+def _fixed_wing_spec(field: msgspec.inspect.Field) -> ParamSpec:
+    """A PX4 fixed-wing parameter of the vehicle type's ``[fixed_wing.params]``, its range
+    the type's own bounds (the autopilot checks the rest: stall speed, MIN <= TRIM <= MAX)."""
+    ftype = field.type
+    assert isinstance(ftype, msgspec.inspect.FloatType)
+    low = ftype.ge if ftype.ge is not None else ftype.gt
+    high = ftype.le if ftype.le is not None else ftype.lt
+    name = field.encode_name
+
+    def default(f: Failsafe, t: VehicleType) -> float:
+        assert t.fixed_wing is not None
+        return float(getattr(t.fixed_wing.params, field.name))
+
+    return ParamSpec(
+        name,
+        REAL32,
+        -math.inf if low is None else float(low),
+        math.inf if high is None else float(high),
+        default,
+        f"fixed-wing {name} (the vehicle type's [fixed_wing.params])",
+    )
+
+
+def _fixed_wing_specs() -> tuple[ParamSpec, ...]:
+    info = msgspec.inspect.type_info(FixedWingParams)
+    assert isinstance(info, msgspec.inspect.StructType)
+    return tuple(_fixed_wing_spec(field) for field in info.fields)
+
+
+FIXED_WING_SPECS = (
+    *(s for s in SPECS if s.name not in MULTIROTOR_ONLY),
+    *_fixed_wing_specs(),
+)
+
+
+def specs_for(vehicle_type: VehicleType) -> tuple[ParamSpec, ...]:
+    """The parameters a vehicle of this type shows: a multirotor's, or a fixed wing's."""
+    return FIXED_WING_SPECS if vehicle_type.fixed_wing is not None else SPECS
+
+
 def float_bits_of_int(value: int) -> float:
     """PX4's bytewise encoding: the int32's bytes read as a float32."""
     return float(struct.unpack("<f", struct.pack("<i", int(value)))[0])
@@ -191,7 +241,7 @@ class ParamTable:
     """One vehicle's parameters: fixed order (param_index), current values, and provenance."""
 
     def __init__(self, failsafe: Failsafe, vehicle_type: VehicleType) -> None:
-        self.specs = SPECS
+        self.specs = specs_for(vehicle_type)
         self._index = {s.name: i for i, s in enumerate(self.specs)}
         self._values: dict[str, float] = {
             s.name: float(s.default(failsafe, vehicle_type)) for s in self.specs
@@ -211,6 +261,12 @@ class ParamTable:
 
     def value(self, name: str) -> float:
         return self._values[name]
+
+    @property
+    def cruise_m_s(self) -> float:
+        """Speed of MAVLink missions and go-to: MPC_XY_CRUISE, or 0 (the autopilot's own:
+        FW_AIRSPD_TRIM) for a fixed wing, which has no MPC_XY_CRUISE."""
+        return self._values.get("MPC_XY_CRUISE", 0.0)
 
     def wire_value(self, name: str) -> float:
         """The float that goes in PARAM_VALUE.param_value (bytewise for integers)."""

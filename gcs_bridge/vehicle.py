@@ -24,6 +24,7 @@ from gcs_bridge.modes import (
 )
 from gcs_bridge.params import ParamTable
 from gcs_bridge.telemetry import View
+from plume_atmosphere.wind import WindModel
 from swarmbus.codec import MessageError, decode
 from swarmbus.messages import (
     ConcentrationReading,
@@ -136,7 +137,16 @@ class StatusEvents:
 
 
 class Vehicle:
-    def __init__(self, scenario: Scenario, vehicle_id: str, index: int, wind_enu: Vec3) -> None:
+    def __init__(
+        self,
+        scenario: Scenario,
+        vehicle_id: str,
+        index: int,
+        wind_enu: Vec3,
+        air: WindModel | None = None,
+    ) -> None:
+        """``wind_enu``: the scenario's steady wind (a multirotor's VFR_HUD airspeed); ``air``:
+        the physics' wind model, a fixed wing's airspeed is against it where it flies."""
         cfg = scenario.vehicle(vehicle_id)
         vtype = load_vehicle_type(cfg.type)
         self.id = vehicle_id
@@ -145,9 +155,10 @@ class Vehicle:
         if sysid is None:
             raise ValueError(f"vehicle {vehicle_id!r} has no MAVLink sysid")
         self.sysid = sysid
-        self.mav_type = mav_type_of(len(vtype.rotors))
+        self.mav_type = mav_type_of(vtype.kind, len(vtype.rotors))
         self.origin: Origin = scenario.world.origin
         self.wind_enu = wind_enu
+        self._air = air if vtype.fixed_wing is not None else None
         self.params = ParamTable(scenario.failsafe_for(vehicle_id), vtype)
         self.params_synced = False
         self._state = Latest(VehicleState, vehicle_id)
@@ -274,17 +285,30 @@ class Vehicle:
     def home_amsl_m(self) -> float | None:
         return self.home_place().alt_amsl_m if self.home_enu is not None else None
 
+    def wind_at(self, state: VehicleState | None) -> Vec3:
+        """The wind a VFR_HUD airspeed is against: a fixed wing's, the physics' wind model at
+        its position and sim time (what its wings and pitot feel); a multirotor's, the
+        scenario's steady wind."""
+        if self._air is None or state is None:
+            return self.wind_enu
+        uniform = self._air.uniform_at(state.sim_time_s)
+        if uniform is not None:
+            return (float(uniform[0]), float(uniform[1]), float(uniform[2]))
+        w = self._air.velocity([state.position_enu_m], state.sim_time_s)[0]
+        return (float(w[0]), float(w[1]), float(w[2]))
+
     def view(self) -> View:
         home = self.home_enu
         if home is not None and self._home_geo is None:
             self._home_geo = enu_to_geodetic(home, self.origin)
+        state = self.state
         return View(
-            self.state,
+            state,
             self.status,
             self.reading,
             self._home_geo,
             home,
-            self.wind_enu,
+            self.wind_at(state),
             self.spawn_enu,
         )
 

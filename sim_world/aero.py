@@ -22,28 +22,12 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
-from swarmbus.vehicle_types import FixedWing
+from swarmbus.vehicle_types import FixedWing, lift_coefficient
 
 # Below this airspeed the angles are undefined: no aerodynamic force (the propeller still pulls).
 MIN_AIRSPEED_M_S = 0.1
 
 Wrench = tuple[float, float, float, float, float, float]
-
-
-def stall_blend(fw: FixedWing, alpha: float) -> float:
-    """Beard's sigma(alpha), eq. 4.10: 0 on the linear lift curve, 1 on the flat plate."""
-    m, a0 = fw.stall_blend_m, fw.stall_alpha0_rad
-    e_minus = math.exp(-m * (alpha - a0))
-    e_plus = math.exp(m * (alpha + a0))
-    return (1.0 + e_minus + e_plus) / ((1.0 + e_minus) * (1.0 + e_plus))
-
-
-def lift_coefficient(fw: FixedWing, alpha: float) -> float:
-    """C_L(alpha), eq. 4.9: the blended linear / flat-plate lift curve."""
-    s = stall_blend(fw, alpha)
-    sa = math.sin(alpha)
-    plate = 2.0 * math.copysign(1.0, alpha) * sa * sa * math.cos(alpha)
-    return (1.0 - s) * (fw.c_l_0 + fw.c_l_alpha * alpha) + s * plate
 
 
 def drag_coefficient(fw: FixedWing, alpha: float) -> float:

@@ -9,6 +9,7 @@ table: Beard & McLain's aerodynamic model and PX4's fixed-wing parameters).
 
 from __future__ import annotations
 
+import math
 import tomllib
 from functools import cache
 from pathlib import Path
@@ -165,6 +166,26 @@ class FixedWing(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields
         return self.span_m**2 / self.wing_area_m2
 
 
+# The physics' gravity (sim_world), for the stall speed.
+GRAVITY_M_S2 = 9.81
+
+
+def stall_blend(fw: FixedWing, alpha: float) -> float:
+    """Beard's sigma(alpha), eq. 4.10: 0 on the linear lift curve, 1 on the flat plate."""
+    m, a0 = fw.stall_blend_m, fw.stall_alpha0_rad
+    e_minus = math.exp(-m * (alpha - a0))
+    e_plus = math.exp(m * (alpha + a0))
+    return (1.0 + e_minus + e_plus) / ((1.0 + e_minus) * (1.0 + e_plus))
+
+
+def lift_coefficient(fw: FixedWing, alpha: float) -> float:
+    """C_L(alpha), eq. 4.9: the blended linear / flat-plate lift curve (the physics' own)."""
+    s = stall_blend(fw, alpha)
+    sa = math.sin(alpha)
+    plate = 2.0 * math.copysign(1.0, alpha) * sa * sa * math.cos(alpha)
+    return (1.0 - s) * (fw.c_l_0 + fw.c_l_alpha * alpha) + s * plate
+
+
 # Fixed-wing actuator channels (ActuatorCommand.rotor_commands): throttle, then the surfaces.
 FW_THROTTLE, FW_AILERON, FW_ELEVATOR, FW_RUDDER = 0, 1, 2, 3
 FW_CHANNELS = 4
@@ -211,6 +232,18 @@ class VehicleType(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fiel
     def actuator_count(self) -> int:
         """Entries of this type's ``ActuatorCommand.rotor_commands``."""
         return FW_CHANNELS if self.fixed_wing is not None else len(self.rotors)
+
+    @property
+    def stall_speed_m_s(self) -> float:
+        """A fixed wing's level-flight stall speed (airspeed, m/s) at its mass: lift equals
+        weight at the peak of the lift curve (sampled every milliradian up to 90°); 0 for a
+        multirotor."""
+        fw = self.fixed_wing
+        if fw is None:
+            return 0.0
+        peak = max(lift_coefficient(fw, k / 1000.0) for k in range(1, 1571))
+        weight = self.mass_kg * GRAVITY_M_S2
+        return math.sqrt(2.0 * weight / (fw.air_density_kg_m3 * fw.wing_area_m2 * peak))
 
     @property
     def max_total_thrust_n(self) -> float:

@@ -95,12 +95,18 @@ def test_base_mode_has_custom_bit_and_armed_bit_only_when_armed() -> None:
     assert base_mode_of(status(armed=True)) & mavlink.MAV_MODE_FLAG_SAFETY_ARMED
 
 
-def test_manual_modes_have_no_autopilot_mode_and_rotor_count_picks_mav_type() -> None:
+def test_manual_modes_have_no_autopilot_mode_and_kind_and_rotors_pick_mav_type() -> None:
     assert flight_mode_for(Px4Main.MANUAL, 0) is None  # no RC: no stick-only modes
     assert flight_mode_for(Px4Main.ALTCTL, 0) is None
     assert flight_mode_for(Px4Main.AUTO, 0) is None
-    assert mav_type_of(len(load_vehicle_type("iris").rotors)) == mavlink.MAV_TYPE_QUADROTOR
-    assert mav_type_of(len(load_vehicle_type("typhoon_h480").rotors)) == mavlink.MAV_TYPE_HEXAROTOR
+
+    def mav_type(name: str) -> int:
+        t = load_vehicle_type(name)
+        return mav_type_of(t.kind, len(t.rotors))
+
+    assert mav_type("iris") == mavlink.MAV_TYPE_QUADROTOR == 2
+    assert mav_type("typhoon_h480") == mavlink.MAV_TYPE_HEXAROTOR == 13
+    assert mav_type("aerosonde") == mavlink.MAV_TYPE_FIXED_WING == 1
 
 
 # ----------------------------------------------------------------------------- frames

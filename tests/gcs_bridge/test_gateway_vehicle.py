@@ -2,16 +2,21 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
 from gcs_bridge import mission as ms
 from gcs_bridge.dialect import mavlink
 from gcs_bridge.modes import decode_custom_mode
 from gcs_bridge.options import GatewayOptions
+from gcs_bridge.telemetry import vfr_hud
 from gcs_bridge.vehicle import ArmIntent, Vehicle
+from plume_atmosphere.wind import wind_from_scenario
 from swarmbus.messages import FlightMode, MissionItem
 from swarmbus.options import OptionError, parse_options
-from swarmbus.scenario import GatewaySpec, load_scenario
+from swarmbus.scenario import GatewaySpec, load_scenario, parse_scenario
+from tests.support.messages_samples import vehicle_state
 from tests.support.messages_samples import vehicle_status as status
 
 SCENARIO = load_scenario()
@@ -89,3 +94,39 @@ def test_options_are_checked_and_rates_configurable() -> None:
     ):
         with pytest.raises(OptionError):
             parse_options(GatewayOptions, bad).rates_hz()
+
+
+def test_a_planes_airspeed_is_against_the_physics_wind_a_quads_against_the_steady() -> None:
+    """VFR_HUD airspeed of a plane in a meandering, turbulent wind: its velocity minus the
+    wind the physics builds from the scenario, where and when it flies."""
+    sc = parse_scenario(
+        '[wind]\nspeed_m_s = 3.0\nfrom_deg = 270.0\nmodel = "meander"\n'
+        '[wind.meander]\npreset = "small"\n'
+        "[wind.turbulence]\nstd_m_s = [1.0, 1.0, 0.5]\nlength_scale_m = 20.0\ntimescale_s = 2.0\n"
+        '[[vehicles]]\nid = "p"\ntype = "aerosonde"\nsysid = 1\n'
+        '[[vehicles]]\nid = "q"\ntype = "iris"\nsysid = 2\n'
+    )
+    steady = (3.0, 0.0, 0.0)
+    plane = Vehicle(sc, "p", 0, steady, wind_from_scenario(sc))
+    quad = Vehicle(sc, "q", 1, steady, wind_from_scenario(sc))
+    physics_wind = wind_from_scenario(sc)  # what sim_world.world builds from the scenario
+    velocity = (25.0, 4.0, 1.0)
+    gusts = []
+    for t in (5.0, 20.0, 40.0, 60.0, 90.0):
+        where = (25.0 * t, 4.0 * t, 40.0)
+        for v in (plane, quad):
+            v.state = vehicle_state(
+                v.id, position_enu_m=where, velocity_enu_m_s=velocity, sim_time_s=t
+            )
+        w = physics_wind.velocity([where], t)[0]
+        expected = math.dist(velocity, (float(w[0]), float(w[1]), float(w[2])))
+        hud = vfr_hud(plane.view(), plane.state)  # type: ignore[arg-type]
+        assert hud.airspeed == pytest.approx(expected, abs=1e-5)  # a float32 on the wire
+        assert hud.groundspeed == pytest.approx(math.hypot(25.0, 4.0), abs=1e-5)
+        assert hud.climb == pytest.approx(1.0)
+        quad_hud = vfr_hud(quad.view(), quad.state)  # type: ignore[arg-type]
+        assert quad_hud.airspeed == pytest.approx(math.dist(velocity, steady), abs=1e-5)
+        gusts.append(abs(expected - math.dist(velocity, steady)))
+    assert max(gusts) > 0.1  # meander and gusts: the plane's airspeed is not the steady one
+    assert plane.mav_type == mavlink.MAV_TYPE_FIXED_WING
+    assert quad.mav_type == mavlink.MAV_TYPE_QUADROTOR
