@@ -10,7 +10,7 @@ import pytest
 
 from agents.behavior import BehaviorContext
 from agents.behaviors.casting import Casting
-from agents.behaviors.detection import PLUME_THRESHOLD_G_M3, PlumeDetector, detector_for
+from agents.behaviors.detection import PLUME_THRESHOLD_G_M3, PlumeDetector, detector_for, lags
 from agents.behaviors.gradient_swarm import GradientSwarm, log_gradient
 from agents.behaviors.infotaxis import Infotaxis
 from agents.behaviors.infotaxis_core import PlumeHitStatistics
@@ -603,3 +603,13 @@ def test_pid_noise_at_the_rise_threshold_hits_at_the_gaussian_tail_rate() -> Non
     hits = sum(detector.hit(sensor.sample(0.01, 0.1 * k)) for k in range(settle, settle + samples))
     expected = samples * 0.5 * math.erfc(3.0 / math.sqrt(2.0))
     assert abs(hits - expected) <= 4.0 * math.sqrt(expected), (hits, expected)
+
+
+@pytest.mark.parametrize(("tau_s", "mode"), [(0.004, "level"), (0.006, "rise"), (0.4, "rise")])
+def test_a_lag_of_a_twentieth_of_the_sample_period_gets_the_rise_detector(
+    tau_s: float, mode: str
+) -> None:
+    """A linear sensor read every 0.1 s (12 ticks at 120 Hz) lags from τ = 0.1 / 20 = 5 ms on."""
+    scenario = msgspec.structs.replace(IDEAL, sensor=Sensor(time_constant_s=tau_s, period_ticks=12))
+    assert detector_for(ctx(scenario=scenario)).mode == mode
+    assert lags(scenario.sensor, 120.0) is (mode == "rise")
