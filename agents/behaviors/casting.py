@@ -2,12 +2,13 @@
 
 The moth strategy (Kennedy & Marsh 1974, Science 184:999; as a robot algorithm, e.g. Ishida et
 al. 1994 and Lochmatter & Martinoli 2008). While the sensor detects gas (a reading of at least
-:data:`~agents.behaviors.detection.PLUME_THRESHOLD_G_M3`; with a slow-recovery sensor such as
-the metal-oxide preset: a rise of the equivalent, :func:`~agents.behaviors.detection.detector_for`)
-and for the hit memory after it, the vehicle *surges* upwind, weaving cross-wind and turning
-back whenever the reading drops below ``turn_fraction`` of the best of the leg (climbing the
-cross-wind gradient, which keeps it on the plume's axis). When the gas is lost it *casts*:
-cross-wind legs of growing width centred on where it last smelled gas, without drifting.
+:data:`~agents.behaviors.detection.PLUME_THRESHOLD_G_M3`; with a lagging sensor such as the PID
+and metal-oxide presets: a rise of the equivalent,
+:func:`~agents.behaviors.detection.detector_for`) and for the hit memory after it, the vehicle
+*surges* upwind, weaving cross-wind and turning back whenever the reading drops below
+``turn_fraction`` of the best of the leg (climbing the cross-wind gradient, which keeps it on
+the plume's axis). When the gas is lost it *casts*: cross-wind legs of growing width centred on
+where it last smelled gas, without drifting.
 
 The hit memory, the averaged wind, the cast and the stopping rule — the source declared at
 the most upwind detection after two empty upwind searches with that frontier settled — are

@@ -6,8 +6,8 @@ Lochmatter's thesis (EPFL 2010); made for an intermittent plume as the moth does
 Marsh 1974): keep surging through blanks shorter than the plume's typical blank, cast without
 drifting downwind, and declare the source on evidence, never at the first strong whiff. The
 sensor is read as binary: a detection when the reading is at least
-:data:`~agents.behaviors.detection.PLUME_THRESHOLD_G_M3` (with a slow-recovery sensor such as
-the metal-oxide preset: when it rose by the equivalent per sample,
+:data:`~agents.behaviors.detection.PLUME_THRESHOLD_G_M3` (with a lagging sensor such as the
+PID and metal-oxide presets: when it rose by the equivalent per sample,
 :func:`~agents.behaviors.detection.detector_for`).
 
 States (``self.tracker.state``, :class:`~agents.behaviors.tracking.PlumeTracker`):

@@ -10,7 +10,7 @@ import pytest
 
 from agents.behavior import BehaviorContext
 from agents.behaviors.casting import Casting
-from agents.behaviors.detection import PLUME_THRESHOLD_G_M3, PlumeDetector, detector_for
+from agents.behaviors.detection import PLUME_THRESHOLD_G_M3, PlumeDetector, detector_for, lags
 from agents.behaviors.gradient_swarm import GradientSwarm, log_gradient
 from agents.behaviors.infotaxis import Infotaxis
 from agents.behaviors.infotaxis_core import PlumeHitStatistics
@@ -436,6 +436,7 @@ def test_random_walk_statistics_match_a_run_and_tumble_walk() -> None:
 
 # ---------------------------------------------------------------- detection with a slow sensor
 MOX = msgspec.structs.replace(IDEAL, sensor=Sensor(preset="mox-tgs2620", period_ticks=12))
+PID = msgspec.structs.replace(IDEAL, sensor=Sensor(preset="pid", period_ticks=12))
 
 
 def _burst_hits(detector: PlumeDetector, bursts_at_s: tuple[float, ...]) -> list[float]:
@@ -467,9 +468,10 @@ def test_a_rise_detector_sees_each_burst_of_a_slow_sensor_once() -> None:
     assert detector_for(ctx()).mode == "level"
 
 
-def test_source_seekers_use_the_rise_detector_with_the_mox_sensor() -> None:
+def test_source_seekers_use_the_rise_detector_with_a_lagging_sensor() -> None:
     for cls in (Casting, SurgeCast, Infotaxis):
         assert cls(ctx(scenario=MOX)).detector.mode == "rise", cls
+        assert cls(ctx(scenario=PID)).detector.mode == "rise", cls
         assert cls(ctx()).detector.mode == "level", cls
 
 
@@ -482,36 +484,48 @@ PID_NOISE_G_M3 = PID_FLOOR_G_M3 / 3.0
 
 
 @pytest.mark.parametrize(
-    ("preset", "floor_g_m3", "noise_g_m3"),
-    [("ideal", 0.0, 0.0), ("pid", PID_FLOOR_G_M3, PID_NOISE_G_M3), ("mox-tgs2620", None, 0.0)],
+    ("preset", "floor_g_m3", "noise_g_m3", "mode", "threshold_g_m3"),
+    [
+        ("ideal", 0.0, 0.0, "level", PLUME_THRESHOLD_G_M3),
+        ("novak2018", 0.01, 0.0, "level", 0.01),
+        ("pid-fast", PID_FLOOR_G_M3, PID_NOISE_G_M3, "level", PLUME_THRESHOLD_G_M3),
+        ("pid", PID_FLOOR_G_M3, PID_NOISE_G_M3, "rise", 3.0 * math.sqrt(2.0) * PID_NOISE_G_M3),
+        ("mox-tgs2620", None, 0.0, "rise", 0.001 * (1 - math.exp(-0.1 / 2.96))),
+    ],
 )
 def test_every_presets_detector_sits_above_its_floor_and_noise(
-    preset: str, floor_g_m3: float | None, noise_g_m3: float
+    preset: str, floor_g_m3: float | None, noise_g_m3: float, mode: str, threshold_g_m3: float
 ) -> None:
-    """ideal: no floor, no noise — the level is 0.001 g/m³ exactly (the behaviours' bits do not
-    change). pid: floor 2.29·10⁻⁴ g/m³ and 3σ = the floor, both below 0.001: the level stays.
-    mox (rise detector; no additive noise): the rise equivalent of 0.001 g/m³ is above
-    3·√2·0 — and every rise is to a reading at or above the floor (below it the output is 0)."""
+    """At a reading every 0.1 s. ideal: no lag, floor or noise — the level is 0.001 g/m³
+    exactly (the behaviours' bits do not change). novak2018: no lag, its 0.01 g/m³ floor.
+    pid-fast: τ 0.3 ms, 0.003 of the period, under the 1/20 that makes a sensor lag: a level;
+    floor 2.29·10⁻⁴ g/m³ and 3σ = the floor, both below 0.001. pid: τ 1.3 s, 13 periods: a rise,
+    its noise's 3·√2·σ = 3.2·10⁻⁴ g/m³ above the 0.001 × (1 − e^(−0.1/1.3)) = 7.4·10⁻⁵ a
+    clean sensor shows in one sample on meeting 0.001 g/m³. mox (decay 15.71 s; no additive
+    noise): the rise equivalent of 0.001 g/m³ — and every rise is to a reading at or above the
+    floor (below it the output is 0)."""
     scenario = msgspec.structs.replace(IDEAL, sensor=Sensor(preset=preset, period_ticks=12))  # type: ignore[arg-type]
     sensor = ConcentrationSensor.for_vehicle(scenario, 0)
     if floor_g_m3 is not None:
         assert sensor.floor_g_m3 == pytest.approx(floor_g_m3, rel=1e-3, abs=1e-15)
     assert sensor.noise_std_g_m3 == pytest.approx(noise_g_m3, rel=1e-3, abs=1e-15)
     detector = detector_for(ctx(scenario=scenario))
-    if detector.mode == "level":
+    assert detector.mode == mode
+    assert detector.threshold_g_m3 == pytest.approx(threshold_g_m3, rel=1e-3)
+    if mode == "level":
         assert detector.threshold_g_m3 >= max(sensor.floor_g_m3, 3.0 * sensor.noise_std_g_m3)
-        assert detector.threshold_g_m3 == PLUME_THRESHOLD_G_M3  # 0.001 is above both
     else:
         assert detector.threshold_g_m3 >= 3.0 * math.sqrt(2.0) * sensor.noise_std_g_m3
-        assert detector.threshold_g_m3 == pytest.approx(0.001 * (1 - math.exp(-0.1 / 2.96)))
+    if preset == "ideal":
+        assert detector.threshold_g_m3 == PLUME_THRESHOLD_G_M3  # the same bits
 
 
 def test_a_noisy_sensor_raises_the_detection_level_above_its_noise() -> None:
-    """A PID with a noise std of 0.001 g/m³ (the level itself): clean air reads ≥ 0.001 g/m³ in
-    P(Z ≥ 1) ≈ 16 % of samples; the detector's level 3σ = 0.003 g/m³ lets noise through in
+    """A fast PID with a noise std of 0.001 g/m³ (the level itself): clean air reads ≥ 0.001 g/m³
+    in P(Z ≥ 1) ≈ 16 % of samples; the detector's level 3σ = 0.003 g/m³ lets noise through in
     P(Z ≥ 3) ≈ 0.13 % (20 000 samples: ≈ 27, the bound 100). A detection limit above 3σ wins."""
     noisy = msgspec.structs.replace(
-        IDEAL, sensor=Sensor(preset="pid", period_ticks=12, noise_std_g_m3=0.001)
+        IDEAL, sensor=Sensor(preset="pid-fast", period_ticks=12, noise_std_g_m3=0.001)
     )
     detector = detector_for(ctx(scenario=noisy))
     assert (detector.mode, detector.threshold_g_m3) == ("level", pytest.approx(0.003))
@@ -521,7 +535,81 @@ def test_a_noisy_sensor_raises_the_detection_level_above_its_noise() -> None:
     assert sum(naive.hit(r) for r in readings) > 0.1 * len(readings)
     assert sum(detector.hit(r) for r in readings) < 100
     limited = msgspec.structs.replace(
-        noisy, sensor=Sensor(preset="pid", period_ticks=12, noise_std_g_m3=0.001,
+        noisy, sensor=Sensor(preset="pid-fast", period_ticks=12, noise_std_g_m3=0.001,
                              detection_limit_g_m3=0.005)
     )  # fmt: skip
     assert detector_for(ctx(scenario=limited)).threshold_g_m3 == pytest.approx(0.005)
+
+
+# ---------------------------------------------------------------- detection with a lagging PID
+PID_TAU_S = 1.30  # the MiniPID preset's time constant (rise = decay)
+
+
+def _step_in_and_out(
+    level_g_m3: float, in_s: float, out_s: float, tau_s: float, period_s: float, n: int
+) -> list[tuple[float, float]]:
+    """(t, reading) of a first-order sensor sampled every ``period_s`` from clean air, with
+    ``level_g_m3`` of gas from ``in_s`` to ``out_s``: C·(1 − e^(−(t − in)/τ)) inside, then the
+    value at ``out_s`` times e^(−(t − out)/τ)."""
+    at_out = level_g_m3 * -math.expm1(-(out_s - in_s) / tau_s)
+    series = []
+    for k in range(n):
+        t = k * period_s
+        if t < in_s:
+            value = 0.0
+        elif t < out_s:
+            value = level_g_m3 * -math.expm1(-(t - in_s) / tau_s)
+        else:
+            value = at_out * math.exp(-(t - out_s) / tau_s)
+        series.append((t, value))
+    return series
+
+
+def test_a_rise_detector_sees_a_pid_enter_the_gas_and_not_its_decay() -> None:
+    """The PID preset (τ 1.3 s) sampled at 10 Hz enters 0.05 g/m³ at 5 s and leaves at 15 s. Its
+    output stays above 0.001 g/m³ for τ·ln(0.05 / 0.001) ≈ 5.1 s after it left, all of which a
+    level detector calls gas; the rise detector hits from the first sample in the gas while the
+    rise per sample, 0.05·(1 − e^(−0.1/τ))·e^(−k·0.1/τ), is ≥ its 3.2·10⁻⁴ g/m³ (k ≤ 31, the
+    first 3.2 s), and never while the reading falls."""
+    series = _step_in_and_out(0.05, 5.0, 15.0, PID_TAU_S, 0.1, 400)
+    level = PlumeDetector("level", PLUME_THRESHOLD_G_M3)
+    level_hits = [t for t, v in series if level.hit(v)]
+    peak = 0.05 * -math.expm1(-10.0 / PID_TAU_S)
+    last_level_s = 15.0 + PID_TAU_S * math.log(peak / PLUME_THRESHOLD_G_M3)
+    assert max(level_hits) == pytest.approx(last_level_s, abs=0.1)  # ≈ 20.1 s: 5 s of decay
+    detector = detector_for(ctx(scenario=PID))
+    assert detector.mode == "rise"
+    hits = [t for t, v in series if detector.hit(v)]
+    threshold = 3.0 * math.sqrt(2.0) * PID_NOISE_G_M3
+    first_rise = 0.05 * -math.expm1(-0.1 / PID_TAU_S)
+    last_k = math.floor(PID_TAU_S / 0.1 * math.log(first_rise / threshold))
+    assert hits[0] == pytest.approx(5.1)  # the first sample in the gas (5.0 still reads 0)
+    assert hits[-1] == pytest.approx(5.1 + 0.1 * last_k)
+    assert len(hits) == last_k + 1
+    assert not [t for t in hits if t >= 15.0]  # none while it decays
+
+
+def test_pid_noise_at_the_rise_threshold_hits_at_the_gaussian_tail_rate() -> None:
+    """The PID preset held in a steady 0.01 g/m³ (43× its floor, so the output stage never
+    clips) for 60 s, then 4 000 s more: the lag has settled (e^(−46)), every rise is the
+    difference of two noise draws, std √2·σ, and the threshold 3·√2·σ is crossed with the
+    one-sided Gaussian tail Q(3) = erfc(3/√2)/2 ≈ 0.135 % per sample: ≈ 54 of 40 000. Counts
+    of rare exceedances are near Poisson; the bound is 4 standard deviations either side."""
+    sensor = ConcentrationSensor.for_vehicle(PID, 0)
+    detector = detector_for(ctx(scenario=PID))
+    settle, samples = 600, 40_000
+    for k in range(settle):
+        detector.hit(sensor.sample(0.01, 0.1 * k))
+    hits = sum(detector.hit(sensor.sample(0.01, 0.1 * k)) for k in range(settle, settle + samples))
+    expected = samples * 0.5 * math.erfc(3.0 / math.sqrt(2.0))
+    assert abs(hits - expected) <= 4.0 * math.sqrt(expected), (hits, expected)
+
+
+@pytest.mark.parametrize(("tau_s", "mode"), [(0.004, "level"), (0.006, "rise"), (0.4, "rise")])
+def test_a_lag_of_a_twentieth_of_the_sample_period_gets_the_rise_detector(
+    tau_s: float, mode: str
+) -> None:
+    """A linear sensor read every 0.1 s (12 ticks at 120 Hz) lags from τ = 0.1 / 20 = 5 ms on."""
+    scenario = msgspec.structs.replace(IDEAL, sensor=Sensor(time_constant_s=tau_s, period_ticks=12))
+    assert detector_for(ctx(scenario=scenario)).mode == mode
+    assert lags(scenario.sensor, 120.0) is (mode == "rise")
