@@ -189,14 +189,16 @@ def bench_envs(
     _run_rows(run_env_bench, opts, ValueError)
 
 
-def _gsl_options(seed_default: int) -> Callable[[Callable[..., None]], Callable[..., None]]:
+def _gsl_options(
+    seed_default: int, environments_help: str = "'all'"
+) -> Callable[[Callable[..., None]], Callable[..., None]]:
     """The options ``bench gsl`` and ``bench gsl sweep`` share: one row an option, each shown
     with its default (``--out`` and ``--shard`` have none)."""
     rows: list[tuple[str, Any, object, str | None]] = [
         ("--algorithms", None, "all", "Comma-separated names, name=module:Class, or 'all'; "
          "random_walk and oracle always run."),
         ("--environments", None, "all", "Comma-separated names (NAME or gsl/NAME, as "
-         "`plumeswarm scenario list` shows them), scenario paths, or 'all'."),
+         f"`plumeswarm scenario list` shows them), scenario paths, or {environments_help}."),
         ("--sensors", None, "all", "Comma-separated, or 'all' available."),
         ("--runs", click.IntRange(min=1), 30, "Seeded runs per cell (algorithm × environment "
          "× sensor)."),
@@ -282,19 +284,23 @@ def _grid(kind: str, args: dict[str, Any], jobs: int = 1) -> _Grid:
     """``bench gsl`` (kind ``gsl``) or its ``sweep`` from the options in ``args``;
     :class:`GslError` names a bad one."""
     from plumeswarm.gsl.bench import command_line, make_options, rows_of, specs_of, write_outputs
+    from plumeswarm.gsl.registry import tuning_environment_names
     from plumeswarm.gsl.sweep import (
         parse_sweep,
-        seed_warning,
         sweep_command,
         sweep_groups,
         sweep_tables,
+        tuning_warning,
         write_sweep,
     )
 
     params = [parse_sweep(p) for p in args.get("params", ())]
+    environments = comma_list(args["environments"])
+    if kind == "sweep" and list(environments) in ([], ["all"]):
+        environments = tuple(tuning_environment_names())
     opts = make_options(
         comma_list(args["algorithms"]),
-        comma_list(args["environments"]),
+        environments,
         comma_list(args["sensors"]),
         jobs=jobs,
         **{k: args[k] for k in GRID_ARGS[3:]},
@@ -305,7 +311,9 @@ def _grid(kind: str, args: dict[str, Any], jobs: int = 1) -> _Grid:
             return write_outputs(directory, opts, rows_of(opts, outcomes), outcomes)
 
         return _Grid(specs_of(opts), command_line(opts), finish)
-    warning = seed_warning(opts, args["allow_test_seeds"])
+    warning = tuning_warning(
+        opts, args["allow_test_seeds"], args.get("allow_test_environments", False)
+    )
     groups = sweep_groups(opts, params)  # every value valid before any episode flies
 
     def finish_sweep(directory: Path, outcomes: list[Any]) -> list[Path]:
@@ -406,10 +414,26 @@ def bench_gsl(ctx: click.Context, /, **kwargs: Any) -> None:
     is_flag=True,
     help="Sweep seeds < 1000 anyway (the output then says so).",
 )
-@_gsl_options(seed_default=1000)
-def bench_gsl_sweep(params: tuple[str, ...], allow_test_seeds: bool, **kwargs: Any) -> None:
-    """One table per PARAM=v1,v2,… (behavior.NAME, start.along_m or a scenario section.key)."""
-    _gsl_run("sweep", {**kwargs, "params": list(params), "allow_test_seeds": allow_test_seeds})
+@click.option(
+    "--allow-test-environments",
+    is_flag=True,
+    help="Sweep the published tables' environments anyway (the output then says so).",
+)
+@_gsl_options(seed_default=1000, environments_help="'all': every tuning environment")
+def bench_gsl_sweep(
+    params: tuple[str, ...], allow_test_seeds: bool, allow_test_environments: bool, **kwargs: Any
+) -> None:
+    """One table per PARAM=v1,v2,… (behavior.NAME, start.along_m or a scenario section.key),
+    on the tuning seeds and environments."""
+    _gsl_run(
+        "sweep",
+        {
+            **kwargs,
+            "params": list(params),
+            "allow_test_seeds": allow_test_seeds,
+            "allow_test_environments": allow_test_environments,
+        },
+    )
 
 
 @bench_gsl.command("merge")

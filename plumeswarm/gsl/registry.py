@@ -282,6 +282,12 @@ def tuning_environment_names() -> list[str]:
     return sorted(p.stem for p in GSL_TUNING_DIR.glob("*.toml"))
 
 
+def is_published_environment(name_or_path: str) -> bool:
+    """Whether ``name_or_path`` is one of the published tables' environments (by name or by
+    the path of its bundled file): tuning never uses them."""
+    return environment_path(name_or_path).resolve().parent == ENVIRONMENTS_DIR.resolve()
+
+
 def environment_path(name_or_path: str) -> Path:
     """The file of an environment: its name (``steady_gaussian``, or ``gsl/steady_gaussian`` as
     ``plumeswarm scenario list`` shows it; a tuning one as ``tune_randomised``,

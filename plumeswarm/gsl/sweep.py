@@ -10,8 +10,9 @@ A parameter is one of
   ``plume.sources.release_rate_g_s``: a key under a list of sections is set in each).
 
 Each value runs the whole grid on the same starts; one table per parameter. Sweeps are for
-tuning, so they refuse the test seeds (< 1000) unless told otherwise, and then say so loudly in
-``sweep.md`` and ``sweep.json``.
+tuning, so they run the tuning environments by default and refuse the test seeds (< 1000) and
+the published environments unless told otherwise, and then say so loudly in ``sweep.md`` and
+``sweep.json``.
 """
 
 from __future__ import annotations
@@ -36,9 +37,11 @@ from plumeswarm.gsl.bench import (
 from plumeswarm.gsl.episode import EpisodeSpec, Outcome
 from plumeswarm.gsl.registry import (
     GslError,
+    is_published_environment,
     load_environment,
     parse_value,
     tuned_behavior,
+    tuning_environment_names,
 )
 
 START_PARAM = "start.along_m"
@@ -59,19 +62,36 @@ def parse_sweep(text: str) -> SweepParam:
     return SweepParam(name, tuple(parse_value(p) for p in parts))
 
 
-def seed_warning(opts: GslOptions, allow_test_seeds: bool) -> str | None:
-    """None for tuning seeds; a warning when test seeds were allowed; else GslError."""
-    if opts.seed >= TUNING_SEED_MIN:
-        return None
-    if not allow_test_seeds:
-        raise GslError(
-            f"--seed {opts.seed}: a sweep tunes, and tuning uses seeds >= {TUNING_SEED_MIN} "
-            "(the published tables use seed 0); --allow-test-seeds to sweep them anyway"
+def tuning_warning(
+    opts: GslOptions, allow_test_seeds: bool, allow_test_environments: bool = False
+) -> str | None:
+    """None for tuning seeds in tuning environments (or scenario files of one's own); a
+    warning when test seeds or published environments were allowed; else :class:`GslError`."""
+    warnings = []
+    if opts.seed < TUNING_SEED_MIN:
+        if not allow_test_seeds:
+            raise GslError(
+                f"--seed {opts.seed}: a sweep tunes, and tuning uses seeds >= {TUNING_SEED_MIN} "
+                "(the published tables use seed 0); --allow-test-seeds to sweep them anyway"
+            )
+        warnings.append(
+            f"this sweep used test seeds (seed {opts.seed} < {TUNING_SEED_MIN}): parameters "
+            "chosen from it are tuned on the published tables' starts"
         )
-    return (
-        f"WARNING: this sweep used test seeds (seed {opts.seed} < {TUNING_SEED_MIN}): "
-        "parameters chosen from it are tuned on the published tables' starts"
-    )
+    published = [e for e in opts.environments if is_published_environment(e)]
+    if published:
+        if not allow_test_environments:
+            raise GslError(
+                f"--environments {','.join(published)}: a sweep tunes, and tuning uses the "
+                f"tuning environments ({', '.join(tuning_environment_names())}) or scenario "
+                "files of your own, not the published tables' environments; "
+                "--allow-test-environments to sweep them anyway"
+            )
+        warnings.append(
+            f"this sweep used the published tables' environments ({', '.join(published)}): "
+            "parameters chosen from it are tuned on the test environments"
+        )
+    return f"WARNING: {'; '.join(warnings)}" if warnings else None
 
 
 def value_specs(opts: GslOptions, name: str, value: Any) -> list[EpisodeSpec]:
@@ -163,7 +183,15 @@ def sweep_table(table: dict[str, Any]) -> str:
 
 def sweep_command(opts: GslOptions, params: Sequence[SweepParam]) -> str:
     args = " ".join(f"{p.name}={','.join(json.dumps(v) for v in p.values)}" for p in params)
-    return command_line(opts, "sweep").replace(" sweep", f" sweep {args}", 1)
+    allowed = "".join(
+        f" --allow-test-{what}"
+        for what, used in (
+            ("seeds", opts.seed < TUNING_SEED_MIN),
+            ("environments", any(is_published_environment(e) for e in opts.environments)),
+        )
+        if used
+    )
+    return command_line(opts, "sweep").replace(" sweep", f" sweep {args}", 1) + allowed
 
 
 def sweep_report(

@@ -34,7 +34,7 @@ from plumeswarm.gsl.registry import (
     tuned_behavior,
 )
 from plumeswarm.gsl.stats import mcnemar_exact, summarise
-from plumeswarm.gsl.sweep import SweepParam, run_sweep, seed_warning, write_sweep
+from plumeswarm.gsl.sweep import SweepParam, run_sweep, tuning_warning, write_sweep
 from tests.support.procs import REPO, run_cli
 
 # A behaviour from outside the package: two vehicles fly upwind (−x in every environment
@@ -230,18 +230,23 @@ def test_behaviour_parameters_reach_the_loader_every_runner_uses() -> None:
         tuned_behavior("agents.behaviors.random_walk:RandomWalk", {"hit_memory_s": 1.0})
 
 
-def test_a_sweep_refuses_test_seeds_and_tables_the_start_distance(tmp_path: Path) -> None:
+def test_a_sweep_refuses_test_seeds_and_environments_and_tables_the_start_distance(
+    tmp_path: Path,
+) -> None:
     """The oracle flies at 2 m/s: from 30 m downwind (≤ 36.1 m away, ±20 m crosswind) it
     arrives within the 25 s limit, from 60 m (≥ 60 m away) it cannot."""
-    opts = make_options(["oracle"], ["steady_gaussian"], ["ideal"], runs=2, seed=0, jobs=1)
+    tuning = make_options(["oracle"], ["tune_north_c"], ["ideal"], runs=2, seed=0, jobs=1)
     with pytest.raises(GslError, match="seeds >= 1000"):
-        seed_warning(opts, allow_test_seeds=False)
-    warning = seed_warning(opts, allow_test_seeds=True)
-    assert warning is not None and "WARNING" in warning
+        tuning_warning(tuning, allow_test_seeds=False)
+    warning = tuning_warning(tuning, allow_test_seeds=True)
+    assert warning is not None and "WARNING" in warning and "test seeds" in warning
     opts = make_options(
         ["oracle"], ["steady_gaussian"], ["ideal"], runs=2, seed=1000, time_limit_s=25.0, jobs=1
     )
-    assert seed_warning(opts, allow_test_seeds=False) is None
+    with pytest.raises(GslError, match="tune_north_c, tune_randomised"):
+        tuning_warning(opts, allow_test_seeds=False)
+    warning = tuning_warning(opts, allow_test_seeds=False, allow_test_environments=True)
+    assert warning is not None and "published tables' environments (steady_gaussian)" in warning
     params = [SweepParam("start.along_m", (30.0, 60.0))]
     (table,) = run_sweep(opts, params)
     oracle = {r["value"]: r["success_rate"] for r in table["rows"] if r["algorithm"] == "oracle"}
@@ -249,6 +254,7 @@ def test_a_sweep_refuses_test_seeds_and_tables_the_start_distance(tmp_path: Path
     md, js = write_sweep(tmp_path, opts, params, [table], warning)
     assert "**WARNING" in md.read_text() and json.loads(js.read_text())["warning"] == warning
     assert "plumeswarm bench gsl sweep start.along_m=30.0,60.0" in md.read_text()
+    assert md.read_text().split("```")[1].strip().endswith("--allow-test-environments")
 
 
 def test_the_sensor_column_has_the_pid() -> None:
@@ -264,6 +270,10 @@ def test_the_sensor_column_has_the_pid() -> None:
 def test_the_command_line_refuses_a_sweep_on_test_seeds_and_a_bad_parameter() -> None:
     res = run_cli(["bench", "gsl", "sweep", "behavior.lost_s=0.5,1", "--seed", "0"])
     assert res.returncode == 2 and "seeds >= 1000" in res.stderr
+    res = run_cli(
+        ["bench", "gsl", "sweep", "behavior.lost_s=0.5,1", "--environments", "meander_low"]
+    )
+    assert res.returncode == 2 and "--allow-test-environments" in res.stderr
     res = run_cli(["bench", "gsl", "sweep", "plume.nope=1", "--runs", "1"])
     assert res.returncode == 2 and "no 'nope' there" in res.stderr
     assert "Traceback" not in res.stderr
