@@ -7,6 +7,8 @@ tests/system/test_mixed_swarm.py."""
 
 from __future__ import annotations
 
+import math
+
 import pytest
 
 from deploy.scaling import ScalingError, fixed_wing_vehicles, scale_scenario
@@ -44,6 +46,25 @@ def test_the_fused_runner_flies_every_vehicle_to_the_ground() -> None:
         assert all(st.mission_finished and st.landed and not st.armed for st in status)
         assert all(h > 8.0 for h in highest.values()), highest
         assert all(s.on_ground for s in states)
+
+
+def _yaw_deg(q: tuple[float, float, float, float]) -> float:
+    x, y, z, w = q
+    return math.degrees(math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z)))
+
+
+def test_the_plane_waits_on_its_runway_facing_the_wind() -> None:
+    """Disarmed for a minute in the scenario's 6 m/s west wind, the plane keeps its spawn pose
+    (into the wind), so its runway take-off goes up the plume's axis whenever it is armed."""
+    spec = MIXED.vehicle("plane")
+    into_wind_enu_deg = (90.0 - MIXED.wind.from_deg) % 360.0  # compass "from" → ENU yaw
+    assert spec.spawn_yaw_deg == pytest.approx(into_wind_enu_deg)
+    with FusedRunner(MIXED) as run:
+        for _ in range(60):
+            plane = next(s for s in run.step(120) if s.vehicle_id == "plane")
+            turned = (_yaw_deg(plane.attitude_xyzw) - spec.spawn_yaw_deg + 180.0) % 360.0 - 180.0
+            assert abs(turned) < 1.0, (plane.sim_time_s, turned)
+            assert math.dist(plane.position_enu_m[:2], spec.spawn_enu_m[:2]) < 0.1, plane
 
 
 def test_scaling_goes_down_but_not_up() -> None:
