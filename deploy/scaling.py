@@ -3,7 +3,11 @@
 ``plumeswarm demo --vehicles N`` flies the same scenario with N vehicles: vehicle k copies the
 mission of the scenario's vehicle ``k mod len(vehicles)``; vehicles are spawned in a grid
 (``spacing_m`` apart) and each mission is shifted with its vehicle's spawn point. Copies of the
-same template fly one ``layer_m`` higher per copy so that parallel tracks do not meet.
+same template fly one ``layer_m`` higher per copy so that parallel tracks do not meet. A
+fixed-wing vehicle is not copied (its runway and its pattern, hundreds of metres long, are its
+own): a scenario with one scales down, not up (:class:`ScalingError`), and the runners that fly
+every vehicle as a multirotor (the environments, ``bench scale``) refuse it
+(:func:`multirotors_only`).
 """
 
 from __future__ import annotations
@@ -15,9 +19,33 @@ from typing import Any
 import msgspec
 import tomli_w
 
+from swarmbus.errors import PlumeswarmError
 from swarmbus.messages import MissionCommand, MissionFrame, MissionItem
 from swarmbus.scenario import Scenario, VehicleSpec, parse_scenario
 from swarmbus.session import free_tcp_port
+from swarmbus.vehicle_types import available_types, load_vehicle_type
+
+
+class ScalingError(PlumeswarmError, ValueError):
+    """A scenario a runner cannot fly as asked: one line naming the vehicle and what is valid."""
+
+
+def fixed_wing_vehicles(scenario: Scenario) -> list[str]:
+    """The ids of the scenario's fixed-wing vehicles, in its order."""
+    return [v.id for v in scenario.vehicles if load_vehicle_type(v.type).kind == "fixed_wing"]
+
+
+def multirotors_only(scenario: Scenario, why: str) -> None:
+    """:class:`ScalingError` when the scenario has a fixed-wing vehicle, for a runner that
+    flies every vehicle as a multirotor (``why``: what it does that a plane cannot)."""
+    planes = fixed_wing_vehicles(scenario)
+    if planes:
+        vid = planes[0]
+        rotors = [t for t in available_types() if load_vehicle_type(t).kind == "multirotor"]
+        raise ScalingError(
+            f"vehicle {vid!r} is a fixed wing ({scenario.vehicle(vid).type}): {why}; "
+            f"valid vehicle types: {', '.join(rotors)}"
+        )
 
 
 def scale_scenario(
@@ -31,6 +59,12 @@ def scale_scenario(
         return scenario
     if n < len(base):
         return msgspec.structs.replace(scenario, vehicles=list(base[:n]))
+    planes = fixed_wing_vehicles(scenario)
+    if planes:
+        raise ScalingError(
+            f"--vehicles {n}: vehicle {planes[0]!r} is a fixed wing, whose copies would share "
+            f"its runway and pattern; valid: 1..{len(base)} (the scenario's vehicles or fewer)"
+        )
     columns = math.ceil(math.sqrt(n))
     x0 = min(v.spawn_enu_m[0] for v in base)
     y_mid = sum(v.spawn_enu_m[1] for v in base) / len(base)

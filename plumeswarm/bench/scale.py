@@ -25,9 +25,11 @@ import zenoh
 from agents import SwarmError, VehicleCommander
 from deploy.launcher import Launcher, LaunchError
 from deploy.scaling import (
+    ScalingError,
     flight_altitude,
     local_stack_scenario,
     loop_mission,
+    multirotors_only,
     scale_scenario,
 )
 from deploy.up import stop_on_signals
@@ -428,6 +430,10 @@ def run_scale(opts: ScaleOptions, echo: Callable[[str], None] = print) -> list[d
     unknown = [s for s in opts.states if s not in STATES]
     if unknown:
         raise ScaleError(f"unknown state(s) {', '.join(unknown)}; states: {', '.join(STATES)}")
+    try:
+        multirotors_only(opts.scenario, "bench scale flies every vehicle in 3 m squares")
+    except ScalingError as exc:
+        raise ScaleError(str(exc)) from None
     opts.out.mkdir(parents=True, exist_ok=True)
     cases = [(n, s) for n in opts.vehicles for s in opts.states]
     rows: list[dict[str, Any]] = []

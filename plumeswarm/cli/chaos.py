@@ -31,6 +31,7 @@ def chaos(scenario: str | None, seconds: float, seed: int, faults: int, out: Pat
     """Kill processes at seeded moments of a run; compare the vehicles with a fault-free run."""
     import time
 
+    from deploy.scaling import ScalingError, multirotors_only
     from plumeswarm.experiments.chaos import ChaosOptions, run_chaos
     from swarmbus.scenario import resolve_scenario_path
 
@@ -39,6 +40,10 @@ def chaos(scenario: str | None, seconds: float, seed: int, faults: int, out: Pat
     if faults < 1:
         fail(f"--faults must be >= 1, got {faults}")
     sc = scenario_from(scenario)
+    try:
+        multirotors_only(sc, "a restarted plane's autopilot does not resume bit for bit")
+    except ScalingError as exc:
+        fail(str(exc))
     path = resolve_scenario_path(scenario)
     run_dir = out or Path("runs") / f"chaos-{time.strftime('%Y%m%d-%H%M%S')}"
     try:

@@ -456,7 +456,13 @@ def demo(
         network=net,
         clock=clock,
     )
-    sys.exit(run_demo(opts, Console()))
+    from deploy.scaling import ScalingError
+
+    try:
+        code = run_demo(opts, Console())
+    except ScalingError as exc:  # --vehicles beyond a scenario with a plane
+        fail(str(exc))
+    sys.exit(code)
 
 
 @cli.command()

@@ -24,7 +24,7 @@ from gymnasium.utils import seeding
 from pettingzoo import ParallelEnv
 
 from agents.anemometer import Anemometer
-from deploy.scaling import scale_scenario, scenario_toml
+from deploy.scaling import multirotors_only, scale_scenario, scenario_toml
 from plume_atmosphere.wind import wind_from_scenario
 from plumeswarm.envs.render import Renderer
 from plumeswarm.experiments.driver import DRIVERS, BusDriver, Driver, DriverError, open_driver
@@ -154,6 +154,7 @@ class PlumeSwarmEnv(ParallelEnv[str, Obs, Action]):  # type: ignore[misc]
         base = env_scenario(scenario, scenario_overrides)
         if vehicles is not None:
             base = scale_scenario(base, vehicles)
+        multirotors_only(base, "the environments fly every vehicle on velocity setpoints")
         self.scenario = msgspec.structs.replace(
             base,
             vehicles=[msgspec.structs.replace(v, mission=[], behavior=None) for v in base.vehicles],

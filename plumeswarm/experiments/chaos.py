@@ -33,7 +33,7 @@ import zenoh
 
 from agents.swarm import Swarm, SwarmError
 from deploy.launcher import Launcher, LaunchError, LaunchOptions
-from deploy.scaling import local_stack_scenario
+from deploy.scaling import ScalingError, local_stack_scenario, multirotors_only
 from plumeswarm.experiments.demo import DemoError, start_missions
 from plumeswarm.experiments.launch import NODE_COMMAND
 from swarmbus.errors import PlumeswarmError
@@ -217,6 +217,7 @@ def run_chaos(opts: ChaosOptions, console: Callable[[str], None]) -> int:
     control_hz = opts.scenario.time.control_hz
     total = round(opts.seconds * control_hz)
     try:
+        multirotors_only(opts.scenario, "a restarted plane's autopilot does not resume bit for bit")
         plan = fault_plan(opts.seed, opts.faults, 2 * round(STEP_S * control_hz), total)
         console(f"fault-free run: {opts.seconds:g} s of sim time")
         base = fly(opts, opts.out / "fault-free", [], console)
@@ -224,7 +225,7 @@ def run_chaos(opts: ChaosOptions, console: Callable[[str], None]) -> int:
         t0 = time.monotonic()
         chaos = fly(opts, opts.out / "chaos", plan, console)
         wall_s = time.monotonic() - t0
-    except (ChaosError, LaunchError, DemoError, SwarmError) as exc:
+    except (ChaosError, LaunchError, DemoError, SwarmError, ScalingError) as exc:
         console(f"chaos: {exc}")
         return 2
     result = compare(base, chaos)
