@@ -10,6 +10,7 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 import zenoh
@@ -50,16 +51,21 @@ TOKENS = [KEYS.node_health("autopilot-uav1"), KEYS.node_health("physics")]
 OWN_TOKEN = {"autopilot-uav1": TOKENS[0], "physics": TOKENS[1]}
 
 
-@pytest.fixture(scope="module")
-def deployment(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Deployment]:
-    tmp = tmp_path_factory.mktemp("tlsc")
+def issue(tmp: Path) -> Deployment:
+    """The hosts file of :data:`ROLES` (per-vehicle identities for uav1 and uav2) in ``tmp``,
+    with the certificates of ``plumeswarm certs generate``."""
     hosts_file = write_hosts(
         tmp / "hosts.toml", f"tls/127.0.0.1:{free_tcp_port()}", ROLES, tls_certs="certs",
         per_vehicle_acl=True, vehicles={"agents": ["uav1", "uav2"]},
     )  # fmt: skip
     res = run_cli(["certs", "generate", "--hosts", str(hosts_file)])
     assert res.returncode == 0, res.stderr
-    dep = load_deployment(hosts_file)
+    return load_deployment(hosts_file)
+
+
+@pytest.fixture(scope="module")
+def deployment(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Deployment]:
+    dep = issue(tmp_path_factory.mktemp("tlsc"))
     router = NetworkConfig(mode="router", connect=[], listen=[dep.router])
     with open_session(secure_network(router, dep, "sim", "router", KEYS)):
         yield dep
