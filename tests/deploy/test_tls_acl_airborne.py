@@ -6,13 +6,8 @@ disarm from the gateway's certificate then takes effect (so the refusals were no
 
 from __future__ import annotations
 
-import os
-import signal
-import subprocess
-import sys
 import threading
 from collections.abc import Iterator
-from pathlib import Path
 
 import pytest
 import zenoh
@@ -34,7 +29,7 @@ from swarmbus.messages import (
 from swarmbus.reqrep import NoReply, request
 from swarmbus.session import NetworkConfig, open_session
 from tests.deploy.test_tls_acl_commands import COMMANDERS, client, identities, issue
-from tests.support.procs import REPO, wait_until
+from tests.support.procs import Network, NodeProcs, wait_until
 
 KEYS = Keys("default")
 ALTITUDE_M = 10.0
@@ -77,20 +72,6 @@ class Flight:
         )
 
 
-def node(
-    role: str, host: str, hosts_file: Path, scenario: Path, log: Path, *extra: str
-) -> subprocess.Popen[bytes]:
-    cmd = [
-        sys.executable, "-m", "plumeswarm", "node", role, *extra, "--scenario", str(scenario),
-        "--hosts", str(hosts_file), "--host", host, "--listen", "tls/127.0.0.1:0",
-    ]  # fmt: skip
-    with open(log, "wb") as out:
-        return subprocess.Popen(
-            cmd, cwd=REPO, env=dict(os.environ, PYTHONPATH=str(REPO), PYTHONUNBUFFERED="1"),
-            start_new_session=True, stdout=out, stderr=subprocess.STDOUT,
-        )  # fmt: skip
-
-
 @pytest.fixture(scope="module")
 def airborne(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Deployment, Flight]]:
     """uav1 armed and holding at ALTITUDE_M, flown by real physics and autopilot processes
@@ -110,12 +91,14 @@ def airborne(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Deploym
             op.declare_subscriber(KEYS.vehicle_status("uav1"), flight.on_status),
             op.declare_subscriber(KEYS.vehicle_state("uav1"), flight.on_state),
         ]
-        procs = [
-            node("physics", "sim", hosts_file, scenario, tmp / "physics.log"),
-            node("autopilot", "agents", hosts_file, scenario, tmp / "uav1.log", "--vehicle",
-                 "uav1"),
-        ]  # fmt: skip
+        procs = NodeProcs(Network(0), scenario, log_dir=tmp)
+        secured = ["--hosts", str(hosts_file), "--listen", "tls/127.0.0.1:0"]
         try:
+            procs.start_module("plumeswarm", "node", "physics", "--scenario", str(scenario),
+                               *secured, "--host", "sim", label="physics")  # fmt: skip
+            procs.start_module("plumeswarm", "node", "autopilot", "--vehicle", "uav1",
+                               "--scenario", str(scenario), *secured, "--host", "agents",
+                               label="uav1")  # fmt: skip
 
             def command(cmd: object) -> CommandReply | None:
                 try:
@@ -133,14 +116,7 @@ def airborne(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Deploym
         finally:
             for s in subs:
                 s.undeclare()
-            for p in procs:
-                os.killpg(p.pid, signal.SIGTERM)
-            for p in procs:
-                try:
-                    p.wait(30)
-                except subprocess.TimeoutExpired:
-                    os.killpg(p.pid, signal.SIGKILL)
-                    p.wait(10)
+            procs.stop_all(30.0)
 
 
 def test_a_force_disarm_of_an_airborne_vehicle_from_any_other_certificate_is_refused(
