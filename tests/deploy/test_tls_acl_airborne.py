@@ -1,19 +1,22 @@
 """A force disarm of an airborne vehicle from every certificate but the gateway's, an operator's
-and its own autopilot's, over real mTLS sessions through a router enforcing the deployment's ACL
-(loopback, no root; as test_tls_acl_commands.py) with a real physics and a real autopilot process
-flying uav1: after every refused disarm uav1 is still armed, holding, at its altitude; the same
-disarm from the gateway's certificate then takes effect (so the refusals were not vacuous)."""
+and its own autopilot's, over real mTLS sessions (which enforce nothing themselves, as a forger's
+would not) through a real ``plumeswarm node router`` enforcing the deployment's ACL (loopback, no
+root; as test_tls_acl_commands.py), with a real physics and a real autopilot process flying
+uav1: every disarm is refused and named in the router's log, and uav1 is still armed, holding,
+at its altitude; the same disarm from the gateway's certificate then takes effect (so the
+refusals were not vacuous)."""
 
 from __future__ import annotations
 
 import threading
 from collections.abc import Iterator
+from pathlib import Path
 
+import msgspec
 import pytest
 import zenoh
 
 from deploy.hosts import Deployment
-from deploy.security import secure_network
 from swarmbus.codec import decode, encode
 from swarmbus.keys import Keys
 from swarmbus.messages import (
@@ -27,8 +30,9 @@ from swarmbus.messages import (
     VehicleStatus,
 )
 from swarmbus.reqrep import NoReply, request
-from swarmbus.session import NetworkConfig, open_session
+from swarmbus.session import open_session
 from tests.deploy.test_tls_acl_commands import COMMANDERS, client, identities, issue
+from tests.deploy.test_tls_acl_refusals import refused, start_router
 from tests.support.procs import Network, NodeProcs, wait_until
 
 KEYS = Keys("default")
@@ -73,27 +77,26 @@ class Flight:
 
 
 @pytest.fixture(scope="module")
-def airborne(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Deployment, Flight]]:
+def airborne(
+    tmp_path_factory: pytest.TempPathFactory,
+) -> Iterator[tuple[Deployment, Flight, Path]]:
     """uav1 armed and holding at ALTITUDE_M, flown by real physics and autopilot processes
-    under mTLS + the ACL, taken off by an operator's certificate."""
+    under mTLS + the ACL through a real router, taken off by an operator's certificate; and
+    the router's log."""
     tmp = tmp_path_factory.mktemp("tlsair")
     dep = issue(tmp)
     hosts_file = tmp / "hosts.toml"
     scenario = tmp / "scenario.toml"
     scenario.write_text(SCENARIO)
-    router = NetworkConfig(mode="router", connect=[], listen=[dep.router])
     flight = Flight()
-    with (
-        open_session(secure_network(router, dep, "sim", "router", KEYS)),
-        open_session(client(dep, "gcs", "operator")) as op,
-    ):
-        subs = [
-            op.declare_subscriber(KEYS.vehicle_status("uav1"), flight.on_status),
-            op.declare_subscriber(KEYS.vehicle_state("uav1"), flight.on_state),
-        ]
-        procs = NodeProcs(Network(0), scenario, log_dir=tmp)
-        secured = ["--hosts", str(hosts_file), "--listen", "tls/127.0.0.1:0"]
-        try:
+    with NodeProcs(Network(0), scenario, log_dir=tmp) as procs:
+        start_router(procs, tmp)
+        with open_session(client(dep, "gcs", "operator")) as op:
+            subs = [
+                op.declare_subscriber(KEYS.vehicle_status("uav1"), flight.on_status),
+                op.declare_subscriber(KEYS.vehicle_state("uav1"), flight.on_state),
+            ]
+            secured = ["--hosts", str(hosts_file), "--listen", "tls/127.0.0.1:0"]
             procs.start_module("plumeswarm", "node", "physics", "--scenario", str(scenario),
                                *secured, "--host", "sim", label="physics")  # fmt: skip
             procs.start_module("plumeswarm", "node", "autopilot", "--vehicle", "uav1",
@@ -112,17 +115,15 @@ def airborne(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Deploym
             took_off = command(Takeoff(altitude_m=ALTITUDE_M))
             assert took_off is not None and took_off.accepted, took_off
             wait_until(flight.holding_at_altitude, 180.0, "uav1 holding at altitude", poll_s=0.2)
-            yield dep, flight
-        finally:
+            yield dep, flight, tmp / "router.log"
             for s in subs:
                 s.undeclare()
-            procs.stop_all(30.0)
 
 
 def test_a_force_disarm_of_an_airborne_vehicle_from_any_other_certificate_is_refused(
-    airborne: tuple[Deployment, Flight],
+    airborne: tuple[Deployment, Flight, Path],
 ) -> None:
-    dep, flight = airborne
+    dep, flight, router_log = airborne
     everyone = identities(dep)
     names = {f"{node or role}.{host}": (host, role, node) for host, role, node in everyone}
     others = sorted(set(names) - COMMANDERS)
@@ -133,7 +134,11 @@ def test_a_force_disarm_of_an_airborne_vehicle_from_any_other_certificate_is_ref
     _, before = flight.newest()
     assert before is not None
     answered: list[str] = []
-    sessions = {name: open_session(client(dep, *names[name])) for name in others}
+    # Each sender's own session enforces nothing (as a forger's would): the router refuses.
+    sessions = {
+        name: open_session(msgspec.structs.replace(client(dep, *names[name]), access_control=None))
+        for name in others
+    }
     try:
         pending = [
             (name, s.get(key, payload=disarm, timeout=3.0))
@@ -146,6 +151,11 @@ def test_a_force_disarm_of_an_airborne_vehicle_from_any_other_certificate_is_ref
         for s in sessions.values():
             s.close()
     assert answered == [], f"the autopilot answered a force disarm from {sorted(set(answered))}"
+    cmd = ("query", KEYS.vehicle_cmd("uav1"))
+    wait_until(
+        lambda: all(cmd in refused(router_log, name) for name in others),
+        10.0, "the router's line for each refused disarm",
+    )  # fmt: skip
     # Two simulated seconds after the last refused disarm, uav1 still holds at its altitude.
     t_end = before.sim_time_s + 2.0
     wait_until(

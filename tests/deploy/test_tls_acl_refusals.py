@@ -29,20 +29,24 @@ from tests.support.procs import Network, NodeProcs, wait_until
 KEYS = Keys("default")
 
 
+def start_router(procs: NodeProcs, tmp: Path) -> Path:
+    """``plumeswarm node router`` of the hosts file in ``tmp`` (as ``router.sim``), once it
+    listens; its log."""
+    log = tmp / "router.log"
+    procs.start_module(
+        "plumeswarm", "-v", "node", "router", "--hosts", str(tmp / "hosts.toml"),
+        "--host", "sim", label="router",
+    )  # fmt: skip
+    wait_until(lambda: "zenoh router listening" in log.read_text(), 60.0, "the router", 0.2)
+    return log
+
+
 @pytest.fixture(scope="module")
 def router_log(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Deployment, Path]]:
     tmp = tmp_path_factory.mktemp("tlsr")
     dep = issue(tmp)
-    log = tmp / "router.log"
     with NodeProcs(Network(0), log_dir=tmp) as procs:
-        procs.start_module(
-            "plumeswarm", "-v", "node", "router", "--hosts", str(tmp / "hosts.toml"),
-            "--host", "sim", label="router",
-        )  # fmt: skip
-        wait_until(
-            lambda: "zenoh router listening" in log.read_text(), 60.0, "the router", poll_s=0.2
-        )
-        yield dep, log
+        yield dep, start_router(procs, tmp)
 
 
 def refused(log: Path, identity: str) -> set[tuple[str, str]]:
