@@ -8,7 +8,9 @@ interceptor (``zenoh::net::routing::interceptor``), written to the process's sta
 every other line to the real standard output. The warnings are rate-limited so that a flood
 cannot fill a disk: the first refusal of each (identity, action, key) is logged at once, later
 ones as one line per :data:`REPEAT_S` with their count, and at most :data:`BURST` lines at once
-then one a second (a count of the lines held back follows)."""
+then one a second (a count of the lines held back follows). A link whose certificate names no
+subject of the ACL (Zenoh logs no decision of it) gets one line, by its Zenoh id, when it
+connects."""
 
 from __future__ import annotations
 
@@ -31,6 +33,7 @@ log = logging.getLogger(__name__)
 DIRECTIVE = "zenoh::net::routing::interceptor=trace"  # the ACL's decisions and its drops
 TARGET = b"zenoh::net::routing::interceptor"
 DROPPED = b"Msg intercepted!"
+NO_SUBJECT = b"did not match any configured ACL subject"  # a link of an unknown identity
 REPEAT_S = 60.0  # a repeated refusal: one line (with its count) per this many seconds
 BURST = 100  # lines at once; then one a second
 MAX_TRACKED = 4096  # (identity, action, key) remembered for repeats
@@ -43,6 +46,7 @@ _DECISION = re.compile(
     r"(?:Declare/Undeclare |Declare )?(?P<action>.+?) \((?P<flow>ingress|egress)\) "
     r"on (?P<key>\S+)\s*$"
 )
+_STRANGER = re.compile(r"([0-9a-f]+) did not match any configured ACL subject")
 _SUBJECT = re.compile(r"(?P<zid>[0-9a-f]+) on (?P<subject>\S+) is (?:un)?authorized to ")
 _COMMON_NAME = re.compile(r"CertCommonName\(([^)]*)\)")
 
@@ -91,6 +95,17 @@ class RefusalLog:
 
     def record(self, r: Refusal) -> list[str]:
         """Count ``r``; the lines to log now (none while rate-limited)."""
+        return self._lines(r, f"access control refused {r.action} on {r.key} from {r.identity}")
+
+    def stranger(self, zid: str) -> list[str]:
+        """A link whose certificate names no identity of the ACL: the lines to log now."""
+        line = (
+            f"access control: zenoh id {zid} shows a certificate that names no identity of the "
+            "hosts file; everything it sends is refused"
+        )
+        return self._lines(Refusal(f"zenoh id {zid}", "everything", "*"), line)
+
+    def _lines(self, r: Refusal, line: str) -> list[str]:
         now = self.clock()
         self.total += 1
         if self._refilled is None:
@@ -108,7 +123,6 @@ class RefusalLog:
         if last is None and len(self._last) >= MAX_TRACKED:
             self._last.clear()
         self._last[r] = (now, 0)
-        line = f"access control refused {r.action} on {r.key} from {r.identity}"
         if last is not None and last[1]:
             line += f" ({last[1]} more since {now - last[0]:.0f} s ago)"
         lines = [line]
@@ -145,21 +159,41 @@ class _Reader:
             return False
         thread = _THREAD.search(line)
         tid = thread.group(1) if thread else b""
-        if DROPPED in line:
+        if NO_SUBJECT in line:
+            self.stranger(_text(line))
+        elif DROPPED in line:
             decision = self.last_decision.pop(tid, b"")
             if b"is unauthorized" in decision:
-                text = _ANSI.sub(b"", decision).decode("utf-8", "replace")
-                refusal = parse_refusal(text, self.names)
-                if refusal is not None:
-                    for message in self.refusals.record(refusal):
-                        log.warning("%s", message)
+                self.refused(_text(decision))
         elif b"authorized to" in line:
             self.last_decision[tid] = line
             if b" on " in line and b"CertCommonName(" in line and b"cached" not in line:
-                m = _SUBJECT.search(_ANSI.sub(b"", line).decode("utf-8", "replace"))
-                if m:
-                    self.names[m["zid"]] = identity_of(m["subject"])
+                self.learn(_text(line))
         return True
+
+    def stranger(self, text: str) -> None:
+        m = _STRANGER.search(text)
+        if m:
+            _warn(self.refusals.stranger(m.group(1)))
+
+    def refused(self, decision: str) -> None:
+        refusal = parse_refusal(decision, self.names)
+        if refusal is not None:
+            _warn(self.refusals.record(refusal))
+
+    def learn(self, text: str) -> None:
+        m = _SUBJECT.search(text)
+        if m:
+            self.names[m["zid"]] = identity_of(m["subject"])
+
+
+def _text(line: bytes) -> str:
+    return _ANSI.sub(b"", line).decode("utf-8", "replace")
+
+
+def _warn(lines: list[str]) -> None:
+    for line in lines:
+        log.warning("%s", line)
 
 
 _watching: RefusalLog | None = None

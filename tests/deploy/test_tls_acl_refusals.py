@@ -14,6 +14,7 @@ import pytest
 
 from deploy.hosts import Deployment
 from swarmbus.keys import Keys
+from swarmbus.session import NetworkConfig, open_session
 from tests.deploy.test_tls_acl_commands import (
     FORGED,
     OWN_TOKEN,
@@ -25,6 +26,7 @@ from tests.deploy.test_tls_acl_commands import (
     sender,
 )
 from tests.support.procs import Network, NodeProcs, wait_until
+from tests.support.tls_probe import stranger_tls
 
 KEYS = Keys("default")
 
@@ -71,3 +73,17 @@ def test_each_forged_put_and_token_is_dropped_and_logged_with_its_key_and_identi
     )
     got = refused(log, identity)
     assert not {(a, k) for a, k in got if k in allowed or k == OWN_TOKEN.get(who)}, got
+
+
+def test_a_certificate_of_our_ca_that_names_no_identity_is_logged_by_its_zenoh_id(
+    router_log: tuple[Deployment, Path],
+) -> None:
+    dep, log = router_log
+    tmp = log.parent
+    tls = stranger_tls(tmp / "certs", tmp / "strangers", "stranger.gcs")
+    net = NetworkConfig(mode="client", connect=[dep.router], listen=[], tls=tls)
+    with open_session(net) as stranger:
+        zid = str(stranger.info.zid())
+        stranger.put(KEYS.vehicle_status("uav1"), b"forged")
+        line = f"access control: zenoh id {zid} shows a certificate that names no identity"
+        wait_until(lambda: line in log.read_text(), 10.0, "the router's line for the stranger")
