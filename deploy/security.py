@@ -205,9 +205,8 @@ def access_control(dep: Deployment, keys: Keys, enforcer: str = "") -> dict[str,
     hosts file its own policy, made of the planes of its role (:data:`ROLE_PLANES`).
     ``enforcer``: the role of the process that enforces it; the router itself grants nothing
     to the router's identity (one router: a link that shows its certificate is not it)."""
-    names = sorted({n for h in host_identities(dep) for n in h.identities})
-    if enforcer == "router":
-        names = [n for n in names if _role_of(n) != "router"]
+    everyone = sorted({n for h in host_identities(dep) for n in h.identities})
+    names = [n for n in everyone if enforcer != "router" or _role_of(n) != "router"]
     rules: list[dict[str, Any]] = []
     subjects: list[dict[str, Any]] = []
     policies: list[dict[str, Any]] = []
@@ -230,6 +229,9 @@ def access_control(dep: Deployment, keys: Keys, enforcer: str = "") -> dict[str,
                 )
         subjects.append({"id": name, "cert_common_names": [name]})
         policies.append({"rules": ids, "subjects": [name]})
+    # An identity granted nothing here is still a subject, so that what it sends is refused
+    # under its name (the refusal log names the sender by its subject).
+    subjects += [{"id": n, "cert_common_names": [n]} for n in everyone if n not in names]
     return {
         "enabled": True,
         "default_permission": "deny",

@@ -4,6 +4,8 @@ Run: ``python -m plumeswarm.bench.tls``. Two client sessions (the ``physics`` an
 identities of
 a generated deployment) bounce a 100-byte sample through an in-process router: ping on a
 state key, pong on an actuators key, as in the lockstep. Prints a table; no assertions.
+``--refusal-log``: the ACL's trace on and read for refusals (``swarmbus.refusals``), as every
+``plumeswarm node`` under an ACL runs; here the router and both clients share that one reader.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from deploy import certs
 from deploy.hosts import AclSection, Deployment, Host, TlsSection
 from deploy.security import host_identities, secure_network
 from swarmbus.keys import Keys, autopilot_node
+from swarmbus.refusals import watch
 from swarmbus.session import NetworkConfig, free_tcp_port, open_session
 
 KEYS = Keys("bench")
@@ -82,7 +85,12 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("-n", type=int, default=1000, help="round trips per row and round")
     parser.add_argument("--rounds", type=int, default=3, help="rows interleaved this often")
+    parser.add_argument(
+        "--refusal-log", action="store_true", help="log ACL refusals (trace on) as nodes do"
+    )
     args = parser.parse_args()
+    if args.refusal_log:
+        watch()
     with tempfile.TemporaryDirectory() as tmp:
         certs_dir = Path(tmp) / "certs"
         certs.generate(host_identities(deployment("tls", 1, certs_dir, True)), certs_dir, days=1)

@@ -232,6 +232,10 @@ def node(
         mode=mode, connect=list(connect) or None, listen=list(listen) or None
     )
     net = secured(sc, net, hosts_file, host_name, role, node_name)
+    if net.access_control and net.access_control.get("enabled", True):
+        from swarmbus.refusals import watch
+
+        watch()  # each message its ACL refuses: one warning line (docs/deploy.md)
     try:
         entry = role_entry(role)
     except RoleUnavailable as exc:

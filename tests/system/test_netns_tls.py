@@ -6,8 +6,8 @@ the ``gcs`` and ``agents`` namespaces (``tests/support/tls_probe.py``): clients 
 certificate, with another CA's or over plain TCP do not get in; a certificate of our CA with an
 unknown name is shown nothing; a gateway identity that publishes actuators and states, and an
 autopilot identity that publishes states, are refused at the router (a legitimate subscriber
-never sees them, while the autopilot's own actuators do pass); then the seed scenario flies.
-Needs root.
+never sees them, while the autopilot's own actuators do pass), and the router's log names each
+of those refusals with its key and identity; then the seed scenario flies. Needs root.
 """
 
 from __future__ import annotations
@@ -23,7 +23,8 @@ from deploy import certs
 from deploy.hosts import load_deployment
 from deploy.security import host_identities
 from swarmbus.keys import Keys
-from tests.support.procs import run_cli
+from tests.deploy.test_tls_acl_refusals import refused
+from tests.support.procs import run_cli, wait_until
 from tests.support.tls_probe import forbidden_keys
 from tests.system.test_netns_deploy import Hosts, fly_demo, netns_of, three_namespaces, write_hosts
 
@@ -76,6 +77,18 @@ def test_seed_scenario_flies_over_mutual_tls_and_strangers_stay_out(tmp_path: Pa
             assert autopilot["marker"], autopilot
             assert leaves(autopilot["seen"]) == {"actuators"}, autopilot
             assert len(forbidden_keys(KEYS)) == 3
+            # ... and each refusal is named in the router's log, with its key and identity
+            forged = {("put", k) for k in forbidden_keys(KEYS)}
+            router_log = tmp_path / "sim" / "router.log"
+            wait_until(
+                lambda: forged <= refused(router_log, "gateway.gcs"), 30.0, "gateway's lines"
+            )
+            actuators = ("put", forbidden_keys(KEYS)[0])
+            wait_until(
+                lambda: forged - {actuators} <= refused(router_log, "autopilot.agents"),
+                30.0, "the autopilot's lines",
+            )  # fmt: skip
+            assert actuators not in refused(router_log, "autopilot.agents")
             sent = (gateway["sent"], autopilot["sent"])
             print(f"\nforged samples refused: gateway {sent[0]}, autopilot {sent[1]}")
 
