@@ -54,6 +54,7 @@ CMD_RTL = int(mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH)
 CMD_LAND = int(mavlink.MAV_CMD_NAV_LAND)
 CMD_TAKEOFF = int(mavlink.MAV_CMD_NAV_TAKEOFF)
 CMD_CHANGE_SPEED = int(mavlink.MAV_CMD_DO_CHANGE_SPEED)
+CMD_LAND_START = int(mavlink.MAV_CMD_DO_LAND_START)
 
 FRAME_GLOBAL = int(mavlink.MAV_FRAME_GLOBAL)
 FRAME_GLOBAL_INT = int(mavlink.MAV_FRAME_GLOBAL_INT)
@@ -158,6 +159,8 @@ def convert_upload(wire: list[WireItem], here: Place, cruise_m_s: float = 0.0) -
     for w in wire:
         if w.command == CMD_CHANGE_SPEED:
             speed = _changed_speed(w, speed)
+            continue
+        if w.command == CMD_LAND_START:  # a marker where the landing begins: nothing to fly
             continue
         if w.command == CMD_RTL:
             items.append(_rtl_item(here))

@@ -115,6 +115,24 @@ def test_conversion_to_enu_folds_speed_items_and_keeps_seqs() -> None:
     assert ms.bus_index_of_seq(c.seqs, 1) == 1 and ms.seq_of_bus_index(c.seqs, 2) == 3
 
 
+def test_do_land_start_is_a_marker_the_landing_keeps_its_seq() -> None:
+    """QGC's fixed-wing landing pattern: DO_LAND_START (189), the approach, NAV_LAND."""
+    wire = [
+        wp(0, 100.0, 0.0, 30.0),
+        ms.WireItem(seq=1, frame=ms.FRAME_MISSION, command=189),
+        wp(2, 300.0, 0.0, 30.0),
+        ms.WireItem(seq=3, frame=ms.FRAME_RELATIVE_INT, command=ms.CMD_LAND),
+    ]
+    c = ms.convert_upload(wire, HOME)
+    assert c.seqs == [0, 2, 3]
+    assert [i.command for i in c.items] == [
+        MissionCommand.WAYPOINT,
+        MissionCommand.WAYPOINT,
+        MissionCommand.LAND,
+    ]
+    assert c.wire == wire  # downloaded as uploaded
+
+
 @pytest.mark.parametrize(
     ("item", "result"),
     [

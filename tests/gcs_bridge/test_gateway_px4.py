@@ -51,7 +51,6 @@ from tests.support.procs import zenoh_network
 
 mavsdk = pytest.importorskip("mavsdk")
 
-from mavsdk.asyncio import ComponentType, Configuration, Mavsdk  # noqa: E402
 from mavsdk.asyncio.plugins.action import ActionAsync, ActionError  # noqa: E402
 from mavsdk.asyncio.plugins.geofence import GeofenceAsync  # noqa: E402
 from mavsdk.asyncio.plugins.info import InfoAsync  # noqa: E402
@@ -68,6 +67,7 @@ from tests.support.px4_flight import (  # noqa: E402
     SPAWN_ENU,
     SYSID,
     TELEMETRY_HZ,
+    connect,
     east_north_of,
     horizontal_m,
     latlon,
@@ -302,22 +302,6 @@ async def qgc_plan_imported_and_flown(system: Any, plan: Path) -> None:
     landed = await first(tel.subscribe_position(), lambda p: True, "a position after the plan")
     e0, n0 = SPAWN_ENU
     assert math.dist(east_north_of(landed), (e0 + 22.0, n0 + 22.0)) < 1.5, "not at the rally point"
-
-
-async def connect(api_port: int) -> tuple[Mavsdk, Any]:
-    config = Configuration.create_with_component_type(ComponentType.GROUND_STATION)
-    sdk = Mavsdk(config)
-    await sdk.__aenter__()
-    await sdk.add_any_connection(f"udpin://127.0.0.1:{api_port}")
-
-    async def found() -> Any:
-        while True:
-            for s in await sdk.get_systems():
-                if await s.has_autopilot():
-                    return s
-            await asyncio.sleep(0.2)
-
-    return sdk, await asyncio.wait_for(found(), 120.0)
 
 
 async def workflows(api_port: int, plan: Path) -> None:
