@@ -3,14 +3,15 @@ UDP on 127.0.0.1, the real stack: plume + physics + autopilot + gateway, in lock
 
 The heartbeat says MAV_TYPE_FIXED_WING and MAV_AUTOPILOT_PX4; a mission as QGC's Plan view
 makes it for a plane — a take-off item first, waypoints, then its landing pattern
-(DO_LAND_START, the approach waypoint, NAV_LAND) — is uploaded (MISSION_ACK accepted), read
-back item for item, and flown with QGC's *Start Mission* (mode Mission while disarmed, then
-ARM): the plane rolls along the runway and climbs on its heading, passes every waypoint, lands
-on the approach line and disarms within ``LANDED_WITHIN_M`` of the landing point.
+(DO_LAND_START, its default final approach NAV_LOITER_TO_ALT, NAV_LAND) — is uploaded
+(MISSION_ACK accepted), read back item for item, and flown with QGC's *Start Mission* (mode
+Mission while disarmed, then ARM): the plane rolls along the runway and climbs on its heading,
+passes every waypoint, lands on the approach line and disarms within ``LANDED_WITHIN_M`` of the
+landing point.
 
 Positions are measured from GLOBAL_POSITION_INT with the small-angle formula (not the
-gateway's own frame conversion); the landing bound is the distance the fixed-wing flight test
-allows for touchdown plus the ground roll (docs/qgroundcontrol.md, "Fixed-wing vehicles").
+gateway's own frame conversion); the landing bound is the measured distance with a margin
+(docs/qgroundcontrol.md, "Fixed-wing vehicles").
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ NAV_ACC_RAD_M = 20.0  # swarmbus/vehicles/aerosonde.toml's default, FixedWingPar
 LANDED_WITHIN_M = 60.0  # measured 31.9 m (docs/qgroundcontrol.md, "Fixed-wing vehicles")
 CMD_TAKEOFF, CMD_WAYPOINT, CMD_LAND = 22, 16, 21
 CMD_LAND_START = 189
+CMD_LOITER_TO_ALT = 31
 
 
 def east_north(m: Any, lat0: float, lon0: float) -> tuple[float, float]:
@@ -54,7 +56,8 @@ def latlon(east: float, north: float, lat0: float, lon0: float) -> tuple[float, 
 
 
 def plan(lat0: float, lon0: float) -> list[Any]:
-    """Take-off, two waypoints, DO_LAND_START, the approach, the landing (relative altitudes)."""
+    """Take-off, two waypoints, then QGC's landing pattern: DO_LAND_START, the final approach,
+    the landing (relative altitudes)."""
     items = [mission_item(SYSID, 0, CMD_TAKEOFF, *latlon(-300.0, 0.0, lat0, lon0), TAKEOFF_ALT_M)]
     for e, n in WAYPOINTS:
         items.append(
@@ -65,9 +68,14 @@ def plan(lat0: float, lon0: float) -> list[Any]:
         0, 1, 0.0, 0.0, 0.0, 0.0, 0, 0, 0.0, 0,
     )  # fmt: skip
     items.append(land_start)
-    items.append(
-        mission_item(SYSID, len(items), CMD_WAYPOINT, *latlon(*APPROACH, lat0, lon0), TAKEOFF_ALT_M)
-    )
+    # QGC's default final approach: loiter to altitude (heading required, 75 m clockwise, exit
+    # on the tangent toward the landing point)
+    lat, lon = latlon(*APPROACH, lat0, lon0)
+    final_approach = mavlink.MAVLink_mission_item_int_message(
+        SYSID, 1, len(items), int(mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT), CMD_LOITER_TO_ALT,
+        0, 1, 1.0, 75.0, 0.0, 1.0, round(lat * 1e7), round(lon * 1e7), TAKEOFF_ALT_M, 0,
+    )  # fmt: skip
+    items.append(final_approach)
     items.append(mission_item(SYSID, len(items), CMD_LAND, *latlon(*LANDING, lat0, lon0), 0.0))
     return items
 
