@@ -8,7 +8,11 @@ a runway roll and climb-out on the heading to MIS_TAKEOFF_ALT, then loiter — m
 the position and the airspeed (``fixedwing_metrics``), upload a mission with the mission
 plugin (no speed, no acceptance radius: the plane's own FW_AIRSPD_TRIM and NAV_ACC_RAD) and
 fly it to its end, return to launch (the plane loiters over home at RTL_RETURN_ALT), land
-(straight ahead on the glide slope) and see it on the ground and disarmed.
+(straight ahead on the glide slope) and see it on the ground and disarmed. Then, as PX4's own
+fixed-wing MAVSDK test does, import a QGroundControl plan with mission_raw (take-off item,
+waypoints, the landing pattern DO_LAND_START, NAV_LOITER_TO_ALT, NAV_LAND), upload it, arm,
+start it on the ground and wait until disarmed: at rest on the approach line past the landing
+point.
 
 Expected values are the scenario's and the type file's (read here with ``tomllib``), never
 the autopilot's own numbers.
@@ -17,6 +21,7 @@ the autopilot's own numbers.
 from __future__ import annotations
 
 import asyncio
+import json
 import math
 import statistics
 import tomllib
@@ -30,14 +35,16 @@ from tests.support.fixed_wing import bundled_plane_scenario
 from tests.support.gateway_stack import gateway, vehicles
 from tests.support.mavclient import first
 from tests.support.procs import REPO, zenoh_network
+from tests.support.qgc_plan import MAV_TYPE_FIXED_WING, plan_document, simple_item
 
 mavsdk = pytest.importorskip("mavsdk")
 
 from mavsdk.asyncio.plugins.action import ActionAsync  # noqa: E402
 from mavsdk.asyncio.plugins.mission import MissionAsync, MissionItem, MissionPlan  # noqa: E402
+from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync  # noqa: E402
 from mavsdk.asyncio.plugins.telemetry import TelemetryAsync  # noqa: E402
 
-from tests.support.px4_flight import connect  # noqa: E402
+from tests.support.px4_flight import connect, fly_uploaded_mission  # noqa: E402
 
 SCENARIO = tomllib.loads((SCENARIOS_DIR / "fixedwing.toml").read_text())
 TAKEOFF_ALT_M = SCENARIO["failsafe"]["takeoff_altitude_m"]
@@ -54,6 +61,9 @@ PASSED_WITHIN_M = NAV_ACC_RAD_M + (TRIM_M_S + WIND_M_S) / TELEMETRY_HZ
 MISSION_ALT_M = 50.0
 WAYPOINTS = [(-800.0, 0.0), (-800.0, 600.0), (0.0, 600.0)]  # ENU metres from home
 NAN = math.nan
+CRUISE_ALT_M = 40.0  # the plan's waypoints
+PLAN_APPROACH = (800.0, 0.0)  # the plan's final approach: the landing runs west along y = 0
+PLAN_LANDED_WITHIN_M = 60.0  # at rest past the landing point (the QGC test's bound)
 
 
 def metres(p: Any, home: Any) -> tuple[float, float]:
@@ -187,12 +197,50 @@ async def return_and_land(drone: Any, home: Any) -> None:
     print(f"landed {math.hypot(*metres(pos, home)):.0f} m from home")
 
 
-async def scripts(api_port: int) -> None:
+def fixed_wing_plan(path: Path, home: Any) -> Path:
+    """A QGroundControl plan for a plane as its Plan view saves it (relative altitudes, frame
+    3): take-off, two waypoints, then the landing pattern — DO_LAND_START, the final approach
+    (loiter to altitude, 75 m clockwise, exit on the tangent), NAV_LAND at home."""
+
+    def at(east: float, north: float, alt: float) -> list[Any]:
+        return [*latlon(home, east, north), alt]
+
+    e_app, n_app = PLAN_APPROACH
+    items = [
+        simple_item(0, 22, 3, [15, 0, 0, None, *at(-300.0, 0.0, TAKEOFF_ALT_M)]),
+        simple_item(1, 16, 3, [0, 0, 0, None, *at(-600.0, 300.0, CRUISE_ALT_M)]),
+        simple_item(2, 16, 3, [0, 0, 0, None, *at(400.0, 300.0, CRUISE_ALT_M)]),
+        simple_item(3, 189, 2, [0, 0, 0, 0, 0, 0, 0]),
+        simple_item(4, 31, 3, [1, 75, 0, 1, *at(e_app, n_app, TAKEOFF_ALT_M)]),
+        simple_item(5, 21, 3, [0, 0, 0, None, *at(0.0, 0.0, 0.0)]),
+    ]
+    home_lla = (home.latitude_deg, home.longitude_deg, home.absolute_altitude_m)
+    plan = plan_document(items, home_lla, MAV_TYPE_FIXED_WING, TRIM_M_S)
+    path.write_text(json.dumps(plan))
+    return path
+
+
+async def plan_flown_from_the_ground(drone: Any, plan: Path, home: Any) -> None:
+    """PX4's own fixed-wing MAVSDK test: import a QGC plan with mission_raw, upload it, arm,
+    start it on the ground, wait until disarmed."""
+    raw = MissionRawAsync(drone)
+    imported = await raw.import_qgroundcontrol_mission(str(plan))
+    assert [i.command for i in imported.mission_items] == [22, 16, 16, 189, 31, 21]
+    await raw.upload_mission(imported.mission_items)
+    pos = await fly_uploaded_mission(drone, "the plan", 400.0)
+    east, north = metres(pos, home)
+    print(f"plan: at rest at ({east:.1f}, {north:.1f}) m from the landing point")
+    assert math.hypot(east, north) < PLAN_LANDED_WITHIN_M
+    assert abs(north) < 5.0  # on the approach line, y = 0
+
+
+async def scripts(api_port: int, plan_path: Path) -> None:
     sdk, drone = await connect(api_port)
     try:
         home = await takeoff_and_loiter(drone)
         await fly_mission(drone, home)
         await return_and_land(drone, home)
+        await plan_flown_from_the_ground(drone, fixed_wing_plan(plan_path, home), home)
     finally:
         await sdk.__aexit__(None, None, None)
 
@@ -204,4 +252,4 @@ def test_mavsdk_scripts_fly_the_plane(tmp_path: Path) -> None:
         vehicles(net, scenario, tmp_path, ["plane1"], backend="real"),
         gateway(net, scenario, tmp_path, "cmd_timeout_s=3"),
     ):
-        asyncio.run(scripts(api_port))
+        asyncio.run(scripts(api_port, tmp_path / "fixed_wing.plan"))

@@ -10,6 +10,7 @@ from typing import Any
 
 from mavsdk.asyncio import ComponentType, Configuration, Mavsdk
 from mavsdk.asyncio.plugins.action import ActionAsync
+from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync
 from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
 
 from gcs_bridge.frames import enu_to_geodetic
@@ -38,6 +39,20 @@ async def connect(api_port: int) -> tuple[Mavsdk, Any]:
             await asyncio.sleep(0.2)
 
     return sdk, await asyncio.wait_for(found(), 120.0)
+
+
+async def fly_uploaded_mission(system: Any, what: str, landed_within_s: float) -> Any:
+    """Arm, start the uploaded mission, see it in the air, wait until it has landed and
+    disarmed (within ``landed_within_s`` wall seconds); returns the position after it."""
+    tel, act, raw = TelemetryAsync(system), ActionAsync(system), MissionRawAsync(system)
+    await first(tel.subscribe_health(), lambda h: h.is_armable, "ready to arm")
+    await act.arm()
+    await raw.start_mission()
+    await first(tel.subscribe_in_air(), bool, f"in the air on {what}")
+    await first(
+        tel.subscribe_armed(), lambda armed: not armed, "landed and disarmed", landed_within_s
+    )
+    return await first(tel.subscribe_position(), lambda p: True, f"a position after {what}")
 
 
 def horizontal_m(a: Any, b: Any) -> float:
