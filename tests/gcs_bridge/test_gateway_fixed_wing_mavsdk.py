@@ -155,7 +155,7 @@ async def fly_mission(drone: Any, home: Any) -> None:
             mis.subscribe_mission_progress(),
             lambda p: p.total == len(WAYPOINTS) and p.current == p.total,
             "the mission's end",
-            300.0,
+            240.0,
         )
         # the positions up to the end and 3 s past it: the stream may lag the progress
         end = len(track) + int(3.0 * TELEMETRY_HZ)
@@ -179,7 +179,7 @@ async def return_and_land(drone: Any, home: Any) -> None:
             and abs(p.relative_altitude_m - RTL_ALT_M) < 3.0
         ),
         "home at the RTL altitude",
-        300.0,
+        240.0,
     )
     # settled on the circle (10 s), then a full circle of it (25 s at 4 Hz)
     circle = (await samples(tel.subscribe_position(), 140))[40:]
@@ -189,7 +189,7 @@ async def return_and_land(drone: Any, home: Any) -> None:
     assert all(abs(p.relative_altitude_m - RTL_ALT_M) < 3.0 for p in circle)
     await act.land()
     await first(tel.subscribe_flight_mode(), lambda m: m.name == "LAND", "mode land")
-    await first(tel.subscribe_armed(), lambda armed: not armed, "landed and disarmed", 300.0)
+    await first(tel.subscribe_armed(), lambda armed: not armed, "landed and disarmed", 240.0)
     landed = await first(tel.subscribe_landed_state(), lambda _: True, "a landed state")
     assert landed.name == "ON_GROUND", landed
     pos = await first(tel.subscribe_position(), lambda _: True, "a position")
@@ -227,7 +227,7 @@ async def plan_flown_from_the_ground(drone: Any, plan: Path, home: Any) -> None:
     imported = await raw.import_qgroundcontrol_mission(str(plan))
     assert [i.command for i in imported.mission_items] == [22, 16, 16, 189, 31, 21]
     await raw.upload_mission(imported.mission_items)
-    pos = await fly_uploaded_mission(drone, "the plan", 400.0)
+    pos = await fly_uploaded_mission(drone, "the plan", 240.0)
     east, north = metres(pos, home)
     print(f"plan: at rest at ({east:.1f}, {north:.1f}) m from the landing point")
     assert math.hypot(east, north) < PLAN_LANDED_WITHIN_M
