@@ -50,10 +50,12 @@ PLAN_TYPES = (MISSION_TYPE_MISSION, MISSION_TYPE_FENCE, MISSION_TYPE_RALLY)
 
 CMD_WAYPOINT = int(mavlink.MAV_CMD_NAV_WAYPOINT)
 CMD_LOITER_TIME = int(mavlink.MAV_CMD_NAV_LOITER_TIME)
+CMD_LOITER_TO_ALT = int(mavlink.MAV_CMD_NAV_LOITER_TO_ALT)
 CMD_RTL = int(mavlink.MAV_CMD_NAV_RETURN_TO_LAUNCH)
 CMD_LAND = int(mavlink.MAV_CMD_NAV_LAND)
 CMD_TAKEOFF = int(mavlink.MAV_CMD_NAV_TAKEOFF)
 CMD_CHANGE_SPEED = int(mavlink.MAV_CMD_DO_CHANGE_SPEED)
+CMD_LAND_START = int(mavlink.MAV_CMD_DO_LAND_START)
 
 FRAME_GLOBAL = int(mavlink.MAV_FRAME_GLOBAL)
 FRAME_GLOBAL_INT = int(mavlink.MAV_FRAME_GLOBAL_INT)
@@ -159,9 +161,11 @@ def convert_upload(wire: list[WireItem], here: Place, cruise_m_s: float = 0.0) -
         if w.command == CMD_CHANGE_SPEED:
             speed = _changed_speed(w, speed)
             continue
+        if w.command == CMD_LAND_START:  # a marker where the landing begins: nothing to fly
+            continue
         if w.command == CMD_RTL:
             items.append(_rtl_item(here))
-        elif w.command in (CMD_WAYPOINT, CMD_LOITER_TIME, CMD_TAKEOFF, CMD_LAND):
+        elif w.command in (CMD_WAYPOINT, CMD_LOITER_TIME, CMD_LOITER_TO_ALT, CMD_TAKEOFF, CMD_LAND):
             items.append(_navigation_item(w, here, speed))
         else:
             raise MissionError(Result.UNSUPPORTED, w.seq, f"command {w.command} not supported")
@@ -201,8 +205,11 @@ def _hold_and_radius(w: WireItem) -> tuple[float, float]:
 
 
 def _navigation_item(w: WireItem, here: Place, speed: float) -> MissionItem:
-    """A waypoint, loiter, takeoff or land item."""
-    x, y, z = _position(w, here, needs_position=w.command in (CMD_WAYPOINT, CMD_LOITER_TIME))
+    """A waypoint, loiter, takeoff or land item. A loiter to altitude (QGC's final approach of
+    a fixed-wing landing pattern) is a waypoint at its point and altitude: the vehicle reaches
+    the altitude on its way there, it does not circle."""
+    positioned = (CMD_WAYPOINT, CMD_LOITER_TIME, CMD_LOITER_TO_ALT)
+    x, y, z = _position(w, here, needs_position=w.command in positioned)
     hold, radius = _hold_and_radius(w)
     command = {
         CMD_TAKEOFF: MissionCommand.TAKEOFF,

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 
 from gcs_bridge import mission as ms
@@ -113,6 +115,34 @@ def test_conversion_to_enu_folds_speed_items_and_keeps_seqs() -> None:
     assert way.speed_m_s == 3.0 and way.acceptance_radius_m == ms.DEFAULT_ACCEPTANCE_M
     assert land.command == MissionCommand.LAND
     assert ms.bus_index_of_seq(c.seqs, 1) == 1 and ms.seq_of_bus_index(c.seqs, 2) == 3
+
+
+def test_do_land_start_is_a_marker_the_landing_keeps_its_seq() -> None:
+    """QGC's fixed-wing landing pattern: DO_LAND_START (189), the final approach (a waypoint,
+    or by default NAV_LOITER_TO_ALT 31: heading required, radius, exit on the tangent), then
+    NAV_LAND; the loiter to altitude is flown as a waypoint at its point and altitude."""
+    loiter_to_alt = dataclasses.replace(
+        wp(3, 400.0, 50.0, 25.0, command=31), param1=1.0, param2=75.0, param3=0.0, param4=1.0
+    )
+    wire = [
+        wp(0, 100.0, 0.0, 30.0),
+        wp(1, 300.0, 0.0, 30.0),
+        ms.WireItem(seq=2, frame=ms.FRAME_MISSION, command=189),
+        loiter_to_alt,
+        ms.WireItem(seq=4, frame=ms.FRAME_RELATIVE_INT, command=ms.CMD_LAND),
+    ]
+    c = ms.convert_upload(wire, HOME)
+    assert c.seqs == [0, 1, 3, 4]
+    assert [i.command for i in c.items] == [
+        MissionCommand.WAYPOINT,
+        MissionCommand.WAYPOINT,
+        MissionCommand.WAYPOINT,
+        MissionCommand.LAND,
+    ]
+    final = c.items[2]
+    assert (final.x, final.y, final.z) == pytest.approx((400.0, 50.0, 25.0), abs=0.05)
+    assert final.hold_s == 0.0 and final.acceptance_radius_m == ms.DEFAULT_ACCEPTANCE_M
+    assert c.wire == wire  # downloaded as uploaded
 
 
 @pytest.mark.parametrize(

@@ -48,10 +48,10 @@ from gcs_bridge.dialect import mavlink
 from tests.support.gateway_stack import gateway, vehicles
 from tests.support.mavclient import clients, first, mission_item, write_scenario
 from tests.support.procs import zenoh_network
+from tests.support.qgc_plan import MAV_TYPE_QUADROTOR, plan_document, simple_item
 
 mavsdk = pytest.importorskip("mavsdk")
 
-from mavsdk.asyncio import ComponentType, Configuration, Mavsdk  # noqa: E402
 from mavsdk.asyncio.plugins.action import ActionAsync, ActionError  # noqa: E402
 from mavsdk.asyncio.plugins.geofence import GeofenceAsync  # noqa: E402
 from mavsdk.asyncio.plugins.info import InfoAsync  # noqa: E402
@@ -68,7 +68,9 @@ from tests.support.px4_flight import (  # noqa: E402
     SPAWN_ENU,
     SYSID,
     TELEMETRY_HZ,
+    connect,
     east_north_of,
+    fly_uploaded_mission,
     horizontal_m,
     latlon,
     take_off,
@@ -247,46 +249,29 @@ def qgc_plan(path: Path) -> Path:
 
     def item(seq: int, command: int, east: float, north: float, alt: float) -> dict[str, Any]:
         lat, lon = latlon(east, north)
-        return {
-            "type": "SimpleItem",
-            "autoContinue": True,
-            "command": command,
-            "doJumpId": seq + 1,
-            "frame": 3 if command == 16 else 2,
-            "params": [0, 0, 0, None, lat, lon, alt] if command == 16 else [0] * 7,
-        }
+        if command == 16:
+            return simple_item(seq, command, 3, [0, 0, 0, None, lat, lon, alt])
+        return simple_item(seq, command, 2, [0] * 7)
 
     fence = [latlon(e0 + de, n0 + dn) for de, dn in ((-50, -50), (50, -50), (50, 50), (-50, 50))]
-    plan = {
-        "fileType": "Plan",
-        "version": 1,
-        "groundStation": "QGroundControl",
-        "mission": {
-            "version": 2,
-            "firmwareType": 12,
-            "vehicleType": 2,
-            "cruiseSpeed": 5,
-            "hoverSpeed": 3,
-            "plannedHomePosition": [*latlon(e0, n0), ORIGIN.alt_m],
-            "items": [
-                item(0, 16, e0 + 10.0, n0 + 20.0, 6.0),
-                item(1, 16, e0 + 20.0, n0 + 20.0, 6.0),
-                item(2, 20, 0.0, 0.0, 0.0),
-            ],
-        },
-        "geoFence": {
-            "version": 2,
-            "circles": [],
-            "polygons": [{"inclusion": True, "polygon": [list(p) for p in fence], "version": 1}],
-        },
-        "rallyPoints": {"version": 2, "points": [[*latlon(e0 + 22.0, n0 + 22.0), 6.0]]},
-    }
+    plan = plan_document(
+        [
+            item(0, 16, e0 + 10.0, n0 + 20.0, 6.0),
+            item(1, 16, e0 + 20.0, n0 + 20.0, 6.0),
+            item(2, 20, 0.0, 0.0, 0.0),
+        ],
+        (*latlon(e0, n0), ORIGIN.alt_m),
+        MAV_TYPE_QUADROTOR,
+        5,
+        polygons=[{"inclusion": True, "polygon": [list(p) for p in fence], "version": 1}],
+        rally=[[*latlon(e0 + 22.0, n0 + 22.0), 6.0]],
+    )
     path.write_text(json.dumps(plan))
     return path
 
 
 async def qgc_plan_imported_and_flown(system: Any, plan: Path) -> None:
-    tel, act, raw = TelemetryAsync(system), ActionAsync(system), MissionRawAsync(system)
+    raw = MissionRawAsync(system)
     imported = await raw.import_qgroundcontrol_mission(str(plan))
     assert len(imported.mission_items) == 3 and len(imported.rally_items) == 1
     await raw.upload_mission(imported.mission_items)
@@ -294,30 +279,9 @@ async def qgc_plan_imported_and_flown(system: Any, plan: Path) -> None:
     await raw.upload_rally_points(imported.rally_items)
     assert len(await raw.download_geofence()) == len(imported.geofence_items) == 4
     assert len(await raw.download_rallypoints()) == 1
-    await first(tel.subscribe_health(), lambda h: h.is_armable, "ready to arm")
-    await act.arm()
-    await raw.start_mission()
-    await first(tel.subscribe_in_air(), bool, "in the air on the imported mission")
-    await first(tel.subscribe_armed(), lambda armed: not armed, "landed and disarmed", 180.0)
-    landed = await first(tel.subscribe_position(), lambda p: True, "a position after the plan")
+    landed = await fly_uploaded_mission(system, "the imported mission", 180.0)
     e0, n0 = SPAWN_ENU
     assert math.dist(east_north_of(landed), (e0 + 22.0, n0 + 22.0)) < 1.5, "not at the rally point"
-
-
-async def connect(api_port: int) -> tuple[Mavsdk, Any]:
-    config = Configuration.create_with_component_type(ComponentType.GROUND_STATION)
-    sdk = Mavsdk(config)
-    await sdk.__aenter__()
-    await sdk.add_any_connection(f"udpin://127.0.0.1:{api_port}")
-
-    async def found() -> Any:
-        while True:
-            for s in await sdk.get_systems():
-                if await s.has_autopilot():
-                    return s
-            await asyncio.sleep(0.2)
-
-    return sdk, await asyncio.wait_for(found(), 120.0)
 
 
 async def workflows(api_port: int, plan: Path) -> None:

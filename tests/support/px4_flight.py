@@ -4,10 +4,13 @@ imports this only after ``pytest.importorskip("mavsdk")``."""
 
 from __future__ import annotations
 
+import asyncio
 import math
 from typing import Any
 
+from mavsdk.asyncio import ComponentType, Configuration, Mavsdk
 from mavsdk.asyncio.plugins.action import ActionAsync
+from mavsdk.asyncio.plugins.mission_raw import MissionRawAsync
 from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
 
 from gcs_bridge.frames import enu_to_geodetic
@@ -18,6 +21,38 @@ ORIGIN = Origin()
 SPAWN_ENU = (20.0, 0.0)  # tests.support.mavclient.scenario_text, one vehicle
 SYSID = 1  # ditto
 TELEMETRY_HZ = 4.0  # ditto: GLOBAL_POSITION_INT per simulated second
+
+
+async def connect(api_port: int) -> tuple[Mavsdk, Any]:
+    """A ground station's MAVSDK listening on ``api_port`` (127.0.0.1) and the first system
+    with an autopilot it hears; the caller exits the MAVSDK context."""
+    config = Configuration.create_with_component_type(ComponentType.GROUND_STATION)
+    sdk = Mavsdk(config)
+    await sdk.__aenter__()
+    await sdk.add_any_connection(f"udpin://127.0.0.1:{api_port}")
+
+    async def found() -> Any:
+        while True:
+            for s in await sdk.get_systems():
+                if await s.has_autopilot():
+                    return s
+            await asyncio.sleep(0.2)
+
+    return sdk, await asyncio.wait_for(found(), 120.0)
+
+
+async def fly_uploaded_mission(system: Any, what: str, landed_within_s: float) -> Any:
+    """Arm, start the uploaded mission, see it in the air, wait until it has landed and
+    disarmed (within ``landed_within_s`` wall seconds); returns the position after it."""
+    tel, act, raw = TelemetryAsync(system), ActionAsync(system), MissionRawAsync(system)
+    await first(tel.subscribe_health(), lambda h: h.is_armable, "ready to arm")
+    await act.arm()
+    await raw.start_mission()
+    await first(tel.subscribe_in_air(), bool, f"in the air on {what}")
+    await first(
+        tel.subscribe_armed(), lambda armed: not armed, "landed and disarmed", landed_within_s
+    )
+    return await first(tel.subscribe_position(), lambda p: True, f"a position after {what}")
 
 
 def horizontal_m(a: Any, b: Any) -> float:
