@@ -11,10 +11,9 @@ import math
 
 import pytest
 
-from sim_world.aero import lift_coefficient
 from sim_world.world import GRAVITY_M_S2, World
 from swarmbus.scenario import Scenario, parse_scenario
-from swarmbus.vehicle_types import load_vehicle_type
+from swarmbus.vehicle_types import lift_coefficient, load_vehicle_type
 
 G = GRAVITY_M_S2
 HZ = 240
