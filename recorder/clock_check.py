@@ -94,10 +94,9 @@ class ClockCheck:
         by = "this host" if stamper == self._own_id else f"the router {stamper}"
         self._report(
             key,
-            f"{key}: samples arrive stamped more than {self._bound_ns / 1e9:.1f} s ahead of "
-            f"this host's clock, so Zenoh re-stamped them ({by}): the publisher's clock is "
-            f"ahead; their recorded publish times are the receiver's (check the hosts' clocks: "
-            f"chronyc tracking)",
+            f"{key}: its publisher's clock is more than {self._bound_ns / 1e9:.1f} s ahead of "
+            f"{by}'s, which re-stamped its samples (Zenoh); their recorded publish times are "
+            f"{by}'s (check the hosts' clocks: chronyc tracking)",
         )
 
     def _behind(self, key: str, publisher: str, offset_ns: int) -> None:

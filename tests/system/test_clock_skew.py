@@ -83,10 +83,12 @@ class Flight:
         return (self.logs / f"{label}.log").read_text(errors="replace")
 
 
-def fly(tmp: Path, skews: dict[str, float]) -> Flight:
-    """The flight up to END_TICK, each process in ``skews`` with its clock that far off."""
+def fly(tmp: Path, skews: dict[str, float], mode: str) -> Flight:
+    """The flight up to END_TICK, each process in ``skews`` with its clock that far off, every
+    node in network ``mode``."""
     tmp.mkdir()
     path, _, _ = write_scenario(tmp / "scenario.toml", len(FLYING) + 1)
+    path.write_text(path.read_text() + f'\n[network]\nmode = "{mode}"\n')
     f = Flight(tmp, tmp / "recording.mcap")
     keys = keys_for()
     release = tmp / "release"
@@ -137,11 +139,14 @@ def fly(tmp: Path, skews: dict[str, float]) -> Flight:
     return f
 
 
+# peer: every node links to every other (the default); client: everything through the router,
+# which then re-stamps the samples of a clock too far ahead
+@pytest.mark.parametrize("mode", ["peer", "client"])
 def test_a_host_clock_seconds_off_changes_nothing_and_the_recorder_names_it(
-    tmp_path: Path,
+    tmp_path: Path, mode: str
 ) -> None:
-    base = fly(tmp_path / "same-clocks", {})
-    skewed = fly(tmp_path / "skewed-clocks", SKEWED)
+    base = fly(tmp_path / "same-clocks", {}, mode)
+    skewed = fly(tmp_path / "skewed-clocks", SKEWED, mode)
 
     for run in (base, skewed):
         assert not run.conflicts, run.conflicts[:5]
@@ -167,7 +172,9 @@ def test_a_host_clock_seconds_off_changes_nothing_and_the_recorder_names_it(
     # the recorder names the two clocks beyond the bound, and nothing else
     assert "CLOCK SKEW" not in base.log("recorder")
     warnings = [ln for ln in skewed.log("recorder").splitlines() if "CLOCK SKEW" in ln]
-    assert any("/vehicle/uav1/" in w and "re-stamped" in w for w in warnings), warnings
+    stamper = "this host's" if mode == "peer" else "the router "
+    restamped = [w for w in warnings if "/vehicle/uav1/" in w and "re-stamped" in w]
+    assert restamped and stamper in restamped[0], warnings
     behind = [w for w in warnings if "uav2" in w and "behind" in w]
     assert behind, warnings
     seconds = re.search(r"is (\d+\.\d+) s behind", behind[0])
