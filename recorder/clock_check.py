@@ -4,7 +4,8 @@ Nothing in the simulation compares one host's wall clock with another's (its tim
 physics' tick; every timeout is measured on the local monotonic clock), but every sample
 carries its publisher's Zenoh timestamp, a hybrid logical clock (HLC) time that the recording
 keeps as ``publish_time``. Zenoh takes such a timestamp as it is when it is at most
-:data:`CLOCK_BOUND_S` (its HLC's maximum delta, 500 ms) ahead of the receiver's clock; one
+:data:`CLOCK_BOUND_S` (its HLC's maximum delta, 500 ms unless ``UHLC_MAX_DELTA_MS`` says
+otherwise) ahead of the receiver's clock; one
 further ahead is replaced by the receiver's own (by the router's, when the sample came
 through it), with a log line only if Zenoh's own logging is on. A publisher whose clock is
 behind is never corrected.
@@ -19,16 +20,32 @@ count). Each is reported once, as one line naming the key, the publisher and the
 
 from __future__ import annotations
 
+import os
 import threading
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 
 import zenoh
 
+from swarmbus.session import CLOCK_DELTA_VARIABLE
+
 # Zenoh's HLC delta (uhlc's default of 500 ms; eclipse-zenoh 1.10): a sample stamped further
-# ahead of the receiver's clock is re-stamped by the receiver.
-CLOCK_BOUND_S = 0.5
+# ahead of the receiver's clock is re-stamped by the receiver. uhlc reads UHLC_MAX_DELTA_MS
+# (milliseconds) from each process's environment (swarmbus.session checks it).
+DEFAULT_CLOCK_BOUND_S = 0.5
+
+
+def zenoh_clock_bound_s(environ: Mapping[str, str] = os.environ) -> float:
+    """This process's Zenoh HLC delta in seconds: ``UHLC_MAX_DELTA_MS`` (whole milliseconds),
+    else uhlc's default, 0.5 s."""
+    raw = environ.get(CLOCK_DELTA_VARIABLE, "")
+    if raw.isascii() and raw.isdigit():
+        return int(raw) / 1000.0
+    return DEFAULT_CLOCK_BOUND_S
+
+
+CLOCK_BOUND_S = zenoh_clock_bound_s()
 
 
 class ClockCheck:

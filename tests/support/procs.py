@@ -202,13 +202,16 @@ def run_python(code: str, timeout_s: float = 120.0) -> subprocess.CompletedProce
     )
 
 
-def run_cli(args: Sequence[str], timeout_s: float = 120.0) -> subprocess.CompletedProcess[str]:
-    """Run ``python -m plumeswarm ARGS`` to completion (bounded)."""
-    env = dict(os.environ, PYTHONPATH=str(REPO))
+def run_cli(
+    args: Sequence[str], timeout_s: float = 120.0, env: Mapping[str, str] | None = None
+) -> subprocess.CompletedProcess[str]:
+    """Run ``python -m plumeswarm ARGS`` to completion (bounded; ``env`` added to this
+    process's environment)."""
+    environ = dict(os.environ, PYTHONPATH=str(REPO), **(env or {}))
     return subprocess.run(
         [sys.executable, "-m", "plumeswarm", *args],
         cwd=REPO,
-        env=env,
+        env=environ,
         capture_output=True,
         text=True,
         timeout=timeout_s,
