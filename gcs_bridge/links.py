@@ -78,6 +78,7 @@ class Signing:
         self._slots: dict[tuple[int, int, int], int] = {}
         self._fd: int | None = None
         self.write_errors = 0
+        self._stale_warned: set[tuple[int, int, int]] = set()  # streams named in a warning
         if state_path is not None:
             self._fd = os.open(state_path, os.O_RDWR | os.O_CREAT, 0o600)
             data = os.pread(self._fd, 1 << 24, 0)
@@ -107,11 +108,32 @@ class Signing:
         last = self.stream_timestamps.get(stream)
         if last is not None and stamp <= last:
             return "replayed timestamp"
-        if last is None and stamp + _NEW_STREAM_WINDOW < signing_timestamp_now():
+        if last is None and stamp + _NEW_STREAM_WINDOW < (now := signing_timestamp_now()):
+            self._warn_stale(stream, (now - stamp) / 100_000)
             return "stale timestamp"
         self.stream_timestamps[stream] = stamp
         self._persist(stream, stamp)
         return None
+
+    def _warn_stale(self, stream: tuple[int, int, int], age_s: float) -> None:
+        """Once per stream: its first frame, validly signed, is older than a new stream may be
+        (the sender has the key; its clock is behind ours, or the frame is a replay). Only
+        holders of the key can make streams, so the warnings are bounded."""
+        if stream in self._stale_warned:
+            return
+        self._stale_warned.add(stream)
+        link_id, system, component = stream
+        log.warning(
+            "refused signed frames of link id %d, system %d, component %d: their timestamp is "
+            "%.0f s behind this host's clock, a new stream may be at most %.0f s behind; the "
+            "sender's clock is behind (check both hosts' clocks: chronyc tracking) or the "
+            "frames are a replay",
+            link_id,
+            system,
+            component,
+            age_s,
+            _NEW_STREAM_WINDOW / 100_000,
+        )
 
     def _persist(self, stream: tuple[int, int, int], stamp: int) -> None:
         if self._fd is None:

@@ -40,6 +40,7 @@ import msgspec
 import zenoh
 
 from recorder import schema as sch
+from recorder.clock_check import ClockCheck
 from recorder.foxglove.scene import (
     FoxgloveScene,
 )
@@ -198,6 +199,12 @@ class Recorder:
         self._behind = False
         self._stopping = threading.Event()
         self._thread = threading.Thread(target=self._run, name="recorder-writer", daemon=True)
+        # publishers whose clocks differ from ours beyond Zenoh's bound: logged at once,
+        # recorded as ``clock`` events by the writer thread
+        self._clock_findings: list[tuple[str, str]] = []
+        self._clock = ClockCheck(
+            session, lambda key: key.startswith(f"{keys.prefix}/node/"), self._clock_finding
+        )
         self._sub: zenoh.Subscriber[None] | None = None
         self._last_health = 0.0
         self._info_thread = threading.Thread(
@@ -224,6 +231,7 @@ class Recorder:
         if original is not None:
             self._on_backfill(original, sample, now)
             return
+        self._clock.observe(key, sample, now)
         with self._lock:
             if (
                 self._received_total - self._taken_total >= self._opts.max_backlog
@@ -272,6 +280,11 @@ class Recorder:
             self.received[key] += 1
             self._received_total += 1
             self._enqueue(key, payload, now, publish_time_ns(sample), False)
+
+    def _clock_finding(self, key: str, detail: str) -> None:
+        log.warning("CLOCK SKEW: %s", detail)
+        with self._lock:
+            self._clock_findings.append((key, detail))
 
     def _put_reply(self, key: str, payload: bytes) -> None:
         with self._lock:
@@ -562,6 +575,12 @@ class Recorder:
                     self._spool.rotate(self._written_ns, self._durable_tick)
         self._watch_backlog(age_s)
         self._report_drops()
+        if self._clock_findings:
+            with self._lock:
+                findings, self._clock_findings = self._clock_findings, []
+            for key, detail in findings:
+                event = self._event(sch.EventKind.CLOCK, detail)
+                self._sink.write_event(msgspec.structs.replace(event, key=key))
         now = time.monotonic()
         if self._spool is not None and now - self._last_sync >= self._opts.spool_fsync_s:
             self._last_sync = now

@@ -2,10 +2,14 @@
 
 Messages go out on the keys they were recorded from, in file order, spaced as they were
 published (publish time: the publisher's Zenoh timestamp; the receive time in recordings made
-without one), divided by ``speed``. Published bus messages only: the presence plane
-(``node/*``, other nodes' health would confuse supervisors), replies the recorder asked for
-itself, and the recorder's own events are not replayed. Raw payloads that were not valid
-messages go out byte for byte, as they came.
+without one), divided by ``speed``. Publishers on hosts whose clocks disagree by more than
+Zenoh's bound (0.5 s) are told apart by the recorder's one clock (:class:`Pacing`): a message
+stamped further ahead of the newest one so far than it arrived after it does not hold the
+rest back, and one stamped behind goes out right after the message before it.
+Published bus messages only: the presence plane (``node/*``, other nodes' health would
+confuse supervisors), replies the recorder asked for itself, and the recorder's own events
+are not replayed. Raw payloads that were not valid messages go out byte for byte, as they
+came.
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ from dataclasses import dataclass
 import msgspec
 import zenoh
 
+from recorder.clock_check import CLOCK_BOUND_S
 from recorder.handshake import RecorderNotListening, wait_until_recorded
 from recorder.reader import Recorded, Recording, RecordingError
 from swarmbus.codec import encode
@@ -49,6 +54,34 @@ def recorded_world(recording: Recording) -> str:
         return Keys(world).world
     except KeyNameError as exc:
         raise RecordingError(f"{recording.path}: bad world name in metadata: {exc}") from None
+
+
+class Pacing:
+    """When each recorded message is due, in seconds from the first, by its publish time.
+
+    Publish times come from the publishers' clocks, receive (log) times from the recorder's
+    alone. A message stamped more than ``bound_s`` further after the newest publish time so far
+    than it was received after that message's receipt comes from a clock that is ahead of that
+    one's (after the recording's first message from a host whose clock is behind, say): the
+    schedule is moved back so that it is due after that message by their receive times' spacing,
+    not by the difference of the clocks."""
+
+    def __init__(self, bound_s: float = CLOCK_BOUND_S) -> None:
+        self._bound_ns = round(bound_s * 1e9)
+        self._anchor_ns: int | None = None  # the publish time that is due at 0
+        self._newest: tuple[int, int] = (0, 0)  # publish and log time of the newest publish
+
+    def due_s(self, publish_ns: int, log_ns: int) -> float:
+        if self._anchor_ns is None:
+            self._anchor_ns = publish_ns
+            self._newest = (publish_ns, log_ns)
+        newest_publish, newest_log = self._newest
+        if publish_ns > newest_publish:
+            excess = (publish_ns - newest_publish) - (log_ns - newest_log)
+            if excess > self._bound_ns:
+                self._anchor_ns += excess
+            self._newest = (publish_ns, log_ns)
+        return (publish_ns - self._anchor_ns) / 1e9
 
 
 def replayable(recording: Recording, keys: Keys) -> Iterator[tuple[Recorded, bytes]]:
@@ -118,13 +151,11 @@ def replay(recording: Recording, rt: NodeRuntime, opts: ReplayOptions) -> int:
     rt.ready()
     pubs = _Publishers(rt.session)
     sent = 0
-    first_ns: int | None = None
+    pacing = Pacing()
     start = time.monotonic()
     try:
         for rec, payload in replayable(recording, rt.keys):
-            if first_ns is None:
-                first_ns = rec.publish_time_ns
-            due = start + (rec.publish_time_ns - first_ns) / 1e9 / opts.speed
+            due = start + pacing.due_s(rec.publish_time_ns, rec.log_time_ns) / opts.speed
             delay = due - time.monotonic()
             if delay > 0 and rt.stop.wait(delay):
                 break

@@ -46,6 +46,7 @@ class EventKind(enum.StrEnum):
     STOPPED = "stopped"
     RESUMED = "resumed"  # a restarted recorder continues in a new segment (see SegmentGap)
     WRITE_ERROR = "write_error"  # the disk refused a write (full, I/O error): segment abandoned
+    CLOCK = "clock"  # a publisher's clock differs from the recorder's by more than Zenoh's bound
 
 
 class RecorderEvent(msgspec.Struct, frozen=True, kw_only=True):

@@ -14,7 +14,7 @@ import random
 import socket
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager, suppress
 from typing import Annotated, Any, Literal
 
@@ -133,8 +133,25 @@ class NetworkConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
         )
 
 
+# Zenoh's bound on how far ahead of a receiver's clock a sample's timestamp may be (its hybrid
+# logical clock's delta): uhlc reads it from this variable, in milliseconds (default 500), and
+# panics on a value that is not a whole number (docs/reliability.md, "Clocks of the hosts").
+CLOCK_DELTA_VARIABLE = "UHLC_MAX_DELTA_MS"
+
+
+def check_clock_delta(environ: Mapping[str, str] = os.environ) -> None:
+    """Refuse, in one line, a ``UHLC_MAX_DELTA_MS`` that Zenoh's clock would panic on."""
+    raw = environ.get(CLOCK_DELTA_VARIABLE)
+    if raw is not None and not (raw.isascii() and raw.isdigit() and int(raw) < 2**64):
+        raise NetworkConfigError(
+            f"{CLOCK_DELTA_VARIABLE}={raw!r}: expected a whole number of milliseconds (how far "
+            f"ahead of a host's clock Zenoh takes a timestamp; default 500)"
+        )
+
+
 def zenoh_config(net: NetworkConfig) -> zenoh.Config:
     """A ``zenoh.Config`` for ``net``."""
+    check_clock_delta()
     conf = zenoh.Config()
     conf.insert_json5("mode", json.dumps(net.mode))
     conf.insert_json5("connect/endpoints", json.dumps(list(net.connect)))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import select
 import socket
 import time
@@ -19,8 +20,8 @@ def heartbeat() -> object:
     return mavlink.MAVLink_heartbeat_message(6, 8, 0, 0, 0, 3)
 
 
-def client_mav(key: bytes | None = None, stamp: int | None = None) -> object:
-    mav = new_mav(255, 190)
+def client_mav(key: bytes | None = None, stamp: int | None = None, system: int = 255) -> object:
+    mav = new_mav(system, 190)
     if key is not None:
         mav.signing.secret_key = key
         mav.signing.link_id = 7
@@ -78,6 +79,25 @@ def test_signing_accepts_signed_frames_and_refuses_unsigned_wrong_key_and_replay
     assert got == ["HEARTBEAT"]
     assert signed.stats.refused_unsigned == 1
     assert signed.stats.refused_bad_signature == 3  # wrong key, replay, stale new stream
+
+
+def test_a_sender_clock_behind_by_more_than_a_minute_is_refused_with_one_warning(
+    pair: tuple[socket.socket, Link, Link], caplog: pytest.LogCaptureFixture
+) -> None:
+    """MAVLink's window for a new signed stream is one minute: a station whose clock is 30 s
+    behind the gateway's is taken, one 90 s behind refused, named once in a warning."""
+    sock, _, signed = pair
+    minute = 60 * 100_000
+    behind_30 = client_mav(KEY, stamp=signing_timestamp_now() - minute // 2)
+    behind_90 = client_mav(KEY, stamp=signing_timestamp_now() - minute * 3 // 2, system=254)
+    with caplog.at_level(logging.WARNING, "gcs_bridge.links"):
+        frames = [pack(behind_30, heartbeat())] + [pack(behind_90, heartbeat()) for _ in range(3)]
+        got = exchange(sock, signed, frames)
+    assert got == ["HEARTBEAT"]
+    assert signed.stats.refused_bad_signature == 3
+    warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert len(warnings) == 1, warnings
+    assert "system 254" in warnings[0] and "90 s behind this host's clock" in warnings[0]
 
 
 def test_forged_frame_cannot_poison_a_stream_timestamp(

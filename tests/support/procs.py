@@ -12,7 +12,7 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager, suppress
 from pathlib import Path
 from typing import IO, Literal, TypeVar
@@ -98,26 +98,35 @@ class NodeProcs:
         self.log_dir = log_dir
         self.procs: list[tuple[str, subprocess.Popen[bytes]]] = []
 
-    def start(self, role: str, *args: str, name: str | None = None) -> subprocess.Popen[bytes]:
+    def start(
+        self,
+        role: str,
+        *args: str,
+        name: str | None = None,
+        env: Mapping[str, str] | None = None,
+    ) -> subprocess.Popen[bytes]:
         cmd = ["plumeswarm", "node", role, *self.net.cli_args()]
         if self.scenario is not None:
             cmd += ["--scenario", self.scenario]
         label = name or "-".join([role, *[a for a in args if not a.startswith("-")]])
-        return self.start_module(*cmd, *args, label=label)
+        return self.start_module(*cmd, *args, label=label, env=env)
 
-    def start_module(self, module: str, *args: str, label: str) -> subprocess.Popen[bytes]:
-        """``python -m MODULE ARGS`` in its own process group, its output in ``<label>.log``
-        of the log directory (if any); stopped with the others."""
+    def start_module(
+        self, module: str, *args: str, label: str, env: Mapping[str, str] | None = None
+    ) -> subprocess.Popen[bytes]:
+        """``python -m MODULE ARGS`` in its own process group (``env`` added to this process's
+        environment), its output in ``<label>.log`` of the log directory (if any); stopped
+        with the others."""
         out: int | IO[bytes] = subprocess.DEVNULL
         if self.log_dir is not None:
             out = open(self.log_dir / f"{label}.log", "wb")  # noqa: SIM115 - closed with the proc
-        env = dict(os.environ, PYTHONPATH=str(REPO), PYTHONUNBUFFERED="1")
+        environ = dict(os.environ, PYTHONPATH=str(REPO), PYTHONUNBUFFERED="1", **(env or {}))
         proc = subprocess.Popen(
             [sys.executable, "-m", module, *args],
             cwd=REPO,
             stdout=out,
             stderr=subprocess.STDOUT,
-            env=env,
+            env=environ,
             start_new_session=True,
         )
         if not isinstance(out, int):
@@ -193,13 +202,16 @@ def run_python(code: str, timeout_s: float = 120.0) -> subprocess.CompletedProce
     )
 
 
-def run_cli(args: Sequence[str], timeout_s: float = 120.0) -> subprocess.CompletedProcess[str]:
-    """Run ``python -m plumeswarm ARGS`` to completion (bounded)."""
-    env = dict(os.environ, PYTHONPATH=str(REPO))
+def run_cli(
+    args: Sequence[str], timeout_s: float = 120.0, env: Mapping[str, str] | None = None
+) -> subprocess.CompletedProcess[str]:
+    """Run ``python -m plumeswarm ARGS`` to completion (bounded; ``env`` added to this
+    process's environment)."""
+    environ = dict(os.environ, PYTHONPATH=str(REPO), **(env or {}))
     return subprocess.run(
         [sys.executable, "-m", "plumeswarm", *args],
         cwd=REPO,
-        env=env,
+        env=environ,
         capture_output=True,
         text=True,
         timeout=timeout_s,

@@ -8,19 +8,23 @@ import os
 import signal
 import subprocess
 import sys
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 from tests.support.procs import REPO, Network, NodeProcs
 
 
-def start_publisher(net: Network, out: Path, *args: str) -> subprocess.Popen[str]:
-    env = dict(os.environ, PYTHONPATH=str(REPO))
+def start_publisher(
+    net: Network, out: Path, *args: str, env: Mapping[str, str] | None = None
+) -> subprocess.Popen[str]:
+    """The scripted publisher (``env`` added to this process's environment)."""
+    environ = dict(os.environ, PYTHONPATH=str(REPO), **(env or {}))
     cmd = [sys.executable, "-m", "tests.support.scripted_publisher", "--connect", net.endpoint]
     return subprocess.Popen(
         [*cmd, "--out", str(out), *args],
         cwd=REPO,
-        env=env,
+        env=environ,
         stdout=subprocess.DEVNULL,
         stderr=subprocess.PIPE,
         text=True,
@@ -43,9 +47,11 @@ def finish_publisher(
     return result
 
 
-def run_publisher(net: Network, out: Path, *args: str) -> dict[str, Any]:
+def run_publisher(
+    net: Network, out: Path, *args: str, env: Mapping[str, str] | None = None
+) -> dict[str, Any]:
     """Run the scripted publisher to completion."""
-    return finish_publisher(start_publisher(net, out, *args), out)
+    return finish_publisher(start_publisher(net, out, *args, env=env), out)
 
 
 def start_recorder(procs: NodeProcs, out: Path, *extra: str) -> subprocess.Popen[bytes]:
