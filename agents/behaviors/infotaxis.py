@@ -242,9 +242,13 @@ class Infotaxis(SeekingBehavior):
         dx = x - xy[:, 0]
         dy = y - xy[:, 1]
         along = dx * frame.downwind[0] + dy * frame.downwind[1]
-        across = dx * frame.crosswind[0] + dy * frame.crosswind[1]
         # Only cells whose plume reaches (x, y) need the Poisson classes; the others see the
-        # background's. The models that share a width share that support.
+        # background's. Those are downwind of (x, y)'s source cells (along > 0), where
+        # :meth:`PlumeEncounterModel.plume_cells` is its crosswind test alone; the models
+        # that share a width share that support.
+        downwind = np.flatnonzero(along > 0.0)
+        along = along[downwind]
+        across = dx[downwind] * frame.crosswind[0] + dy[downwind] * frame.crosswind[1]
         background = np.array([self.background_hz * dt_s])
         # per width: its plume cells, their (along, across) and the models' shared arrays
         supports: dict[tuple[float, float], tuple[IntArray, FloatArray, FloatArray, SharedArrays]]
@@ -254,8 +258,10 @@ class Infotaxis(SeekingBehavior):
         for m in self.models:
             width = (m.width_slope, m.width_min_m)
             if width not in supports:
-                cells = np.flatnonzero(m.plume_cells(along, across))
-                supports[width] = (cells, along[cells], across[cells], {})
+                u2 = m.crosswind_u2(along, across)
+                keep = np.flatnonzero(u2 < 36.0)
+                shared: SharedArrays = {m.shape_key(): np.exp(-0.5 * u2[keep])}
+                supports[width] = (downwind[keep], along[keep], across[keep], shared)
             cells, a, c, shared = supports[width]
             inside.append(cells)
             means.append(m.plume_mean_hits(a, c, dt_s, shared))
@@ -284,9 +290,14 @@ class Infotaxis(SeekingBehavior):
                 self.detecting_since_s = r.sim_time_s
         self.observed_xy = (sx, sy, n)
 
-    def _near(self, xy: FloatArray, x: float, y: float, radius_m: float) -> np.ndarray:
-        """Which of the cells centred at ``xy`` lie within ``radius_m`` of (x, y)."""
-        return np.asarray(np.hypot(xy[:, 0] - x, xy[:, 1] - y) <= radius_m)
+    def _near(self, xy: FloatArray, x: float, y: float, radius_m: float) -> IntArray:
+        """Which of the cells centred at ``xy`` lie within ``radius_m`` of (x, y) (indices,
+        ascending). A cell within the radius is within it on each axis (the hypotenuse is
+        at least either side), so only those are measured."""
+        dx = xy[:, 0] - x
+        dy = xy[:, 1] - y
+        box = np.flatnonzero((np.abs(dx) <= radius_m) & (np.abs(dy) <= radius_m))
+        return box[np.hypot(dx[box], dy[box]) <= radius_m]
 
     def _decide(self, frame: WindFrame, x: float, y: float, dt_s: float) -> tuple[float, float]:
         places = self._places(frame, x, y)
@@ -340,8 +351,9 @@ class Infotaxis(SeekingBehavior):
         """This step's likelihood of its hits per (model, cell), weighed by
         ``evidence_weight``."""
         ox, oy = self._observed_at(x, y)
-        table = self.likelihoods(frame, ox, oy, dt_s)
-        likelihood = table[min(self.hits, self.n_hits - 1)]
+        likelihood = self.sparse_likelihoods(frame, ox, oy, dt_s).row(
+            min(self.hits, self.n_hits - 1)
+        )
         if self.evidence_weight != 1.0:
             likelihood = likelihood**self.evidence_weight
         return np.asarray(likelihood)
