@@ -158,6 +158,8 @@ class Infotaxis(SeekingBehavior):
         self.detector = detector_for(ctx, self.threshold_g_m3)
         self.models = self._models(ctx)
         self.cells_xy: FloatArray | None = None  # (n, 2) ENU centres
+        self._box = (np.zeros(2), np.zeros(2))  # the cells' least and greatest east, north
+        self._background_memo: tuple[tuple[float, float, int, float], FloatArray] | None = None
         self.grid_origin: tuple[tuple[float, float], float, float] | None = None  # wind, x, y
         self.belief: FloatArray | None = None  # (models, cells)
         self.target_xy: tuple[float, float] | None = None
@@ -213,6 +215,7 @@ class Infotaxis(SeekingBehavior):
         a, c = a.ravel(), c.ravel()
         dw, cw = frame.downwind, frame.crosswind
         self.cells_xy = np.column_stack([a * dw[0] + c * cw[0], a * dw[1] + c * cw[1]])
+        self._box = (self.cells_xy.min(axis=0), self.cells_xy.max(axis=0))
         self.belief = np.full((len(self.models), a.size), 1.0 / (len(self.models) * a.size))
 
     def mean_wind(self) -> WindFrame:
@@ -249,7 +252,6 @@ class Infotaxis(SeekingBehavior):
         downwind = np.flatnonzero(along > 0.0)
         along = along[downwind]
         across = dx[downwind] * frame.crosswind[0] + dy[downwind] * frame.crosswind[1]
-        background = np.array([self.background_hz * dt_s])
         # per width: its plume cells, their (along, across) and the models' shared arrays
         supports: dict[tuple[float, float], tuple[IntArray, FloatArray, FloatArray, SharedArrays]]
         supports = {}
@@ -267,12 +269,21 @@ class Infotaxis(SeekingBehavior):
             means.append(m.plume_mean_hits(a, c, dt_s, shared))
         # one call for every model's cells: the classes are computed point by point
         return SparseLikelihoods(
-            background=hit_likelihoods(background, self.n_hits, self.miss_floor)[:, 0],
+            background=self._background_classes(dt_s),
             inside=tuple(inside),
             classes=hit_likelihoods(np.concatenate(means), self.n_hits, self.miss_floor),
             offsets=(0, *itertools.accumulate(len(i) for i in inside)),
             cells=xy.shape[0],
         )
+
+    def _background_classes(self, dt_s: float) -> FloatArray:
+        """The hit classes of the background alone in a step of ``dt_s`` (every place of a
+        decision asks for the same step)."""
+        key = (dt_s, self.background_hz, self.n_hits, self.miss_floor)
+        if self._background_memo is None or self._background_memo[0] != key:
+            mean = np.array([self.background_hz * dt_s])
+            self._background_memo = (key, hit_likelihoods(mean, self.n_hits, self.miss_floor)[:, 0])
+        return self._background_memo[1]
 
     def _observe(self, readings: Sequence[ConcentrationReading]) -> None:
         sx, sy, n = self.observed_xy
@@ -307,7 +318,7 @@ class Infotaxis(SeekingBehavior):
         """Where the next step may go: stay, then upwind, downwind, left, right by ``step_m``
         (those inside the grid)."""
         assert self.cells_xy is not None
-        lo, hi = self.cells_xy.min(axis=0), self.cells_xy.max(axis=0)
+        lo, hi = self._box
         s = self.step_m
         places = [(x, y)]
         for a, c in _DIRECTIONS:
