@@ -107,7 +107,7 @@ class SeededNormals:
             ticks = np.arange(first, min(first + SEED_BLOCK, _M32 + 1), dtype=np.uint64)
             self._states = _pcg64_states(self.prefix, ticks)
             self._block = block
-        s0, s1, i0, i1 = (int(w) for w in self._states[tick - block * SEED_BLOCK])
+        s0, s1, i0, i1 = self._states[tick - block * SEED_BLOCK].tolist()
         # pcg_setseq_128_srandom_r(initstate = s0·2⁶⁴ + s1, initseq = i0·2⁶⁴ + i1)
         inc = (((i0 << 64) | i1) << 1 | 1) & _M128
         state = ((inc + ((s0 << 64) | s1)) * _PCG_MULT + inc) & _M128

@@ -375,7 +375,7 @@ class Infotaxis(SeekingBehavior):
         cells = self.belief.sum(axis=0)
         mean = cells @ self.cells_xy
         var = cells @ ((self.cells_xy - mean) ** 2)
-        near = np.hypot(*(self.cells_xy - mean).T) <= self.declare_radius_m
+        near = self._near(self.cells_xy, float(mean[0]), float(mean[1]), self.declare_radius_m)
         return float(mean[0]), float(mean[1]), float(math.sqrt(var.sum())), float(cells[near].sum())
 
     def seek(self, step: SeekStep) -> Setpoint | None:

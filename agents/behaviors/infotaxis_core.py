@@ -238,8 +238,36 @@ class SparseLikelihoods:
         """``dense()[h]``, shape ``(models, cells)``, without the other classes."""
         table = np.full((len(self.inside), self.cells), self.background[h])
         for k, idx in enumerate(self.inside):
-            table[k, idx] = self.classes[h, self.offsets[k] : self.offsets[k + 1]]
+            table[k][idx] = self.classes[h, self.offsets[k] : self.offsets[k + 1]]
         return table
+
+
+def _as_mask(here: BoolArray | IntArray | None, cells: int) -> BoolArray | None:
+    """``here`` as a mask over ``cells`` cells (it may be their indices)."""
+    if here is None:
+        return None
+    if here.dtype == np.bool_:
+        return np.asarray(here, dtype=np.bool_)
+    mask = np.zeros(cells, dtype=bool)
+    mask[here] = True
+    return mask
+
+
+def _ruled_out(belief: FloatArray, here: BoolArray | IntArray | None) -> tuple[FloatArray, float]:
+    """A copy of ``belief`` (models, cells) with the cells ``here`` zeroed, and the mass they
+    held, summed in the order a mask over the belief takes them."""
+    given = belief.copy()
+    if here is None:
+        return given, 0.0
+    if here.dtype != np.bool_ or here.ndim == 1:
+        places = here if here.dtype != np.bool_ else np.flatnonzero(here)
+        p_end = float(belief[:, places].ravel().sum())
+        given[:, places] = 0.0
+        return given, p_end
+    mask = np.broadcast_to(here, belief.shape)
+    p_end = float(belief[mask].sum())
+    given[mask] = 0.0
+    return given, p_end
 
 
 def expected_entropy_sparse(
@@ -250,27 +278,10 @@ def expected_entropy_sparse(
     the joint is the background's product but at its ``inside`` cells, and the shares are added
     in the order the dense sum over the models adds them. ``here`` may also be the indices of
     its cells (ascending)."""
-    models = belief.shape[0]
-    if models > SEQUENTIAL_SUM_MAX:
-        dense_here: BoolArray | None = None
-        if here is not None and here.dtype != np.bool_:
-            dense_here = np.zeros(belief.shape[1], dtype=bool)
-            dense_here[here] = True
-        elif here is not None:
-            dense_here = np.asarray(here, dtype=bool)
-        return expected_entropy(belief, likelihoods.dense(), dense_here, nuisance_axes=1)
-    given = belief.copy()
-    p_end = 0.0
-    if here is not None:
-        # the cells of ``here`` for every model, in the order a mask over the belief takes them
-        if here.dtype != np.bool_ or here.ndim == 1:
-            places = here if here.dtype != np.bool_ else np.flatnonzero(here)
-            p_end = float(belief[:, places].ravel().sum())
-            given[:, places] = 0.0
-        else:
-            mask = np.broadcast_to(here, belief.shape)
-            p_end = float(belief[mask].sum())
-            given[mask] = 0.0
+    if belief.shape[0] > SEQUENTIAL_SUM_MAX:
+        mask = _as_mask(here, belief.shape[1])
+        return expected_entropy(belief, likelihoods.dense(), mask, nuisance_axes=1)
+    given, p_end = _ruled_out(belief, here)
     if p_end > 1.0 - EPSILON:
         return -EPSILON
     total = given.ravel().sum()  # as the dense path sums it
@@ -283,7 +294,9 @@ def expected_entropy_sparse(
         out = joint if k == 0 else share
         np.multiply(background, given[k], out=out)
         lo, hi = likelihoods.offsets[k], likelihoods.offsets[k + 1]
-        out[:, inside] = likelihoods.classes[:, lo:hi] * given[k, inside]
+        inside_values = likelihoods.classes[:, lo:hi] * given[k, inside]
+        for row, values in zip(out, inside_values, strict=True):
+            row[inside] = values  # a row at a time: numpy's fast path for one index array
         if k:
             joint += share
     p_h = joint.sum(axis=1)
