@@ -58,6 +58,9 @@ def inside_radii(radii: float) -> float:
 
 INSIDE_4R = inside_radii(TRUNCATE_RADII)
 
+#: Per filament: amplitude, 1/(2R²), squared cut-off radius (:func:`filament_kernel`).
+Kernel = tuple[FloatArray, FloatArray, FloatArray]
+
 
 @dataclass(frozen=True, slots=True)
 class Filaments:
@@ -67,6 +70,18 @@ class Filaments:
     birth_step: np.ndarray[Any, np.dtype[np.int64]]
 
 
+def filament_kernel(
+    radii: FloatArray, masses: FloatArray, truncate_radii: float = TRUNCATE_RADII
+) -> Kernel:
+    """Per filament: the amplitude M·(2π)^−3/2·R^−3/P, 1/(2R²) and the squared cut-off
+    (``truncate_radii``·R)² of :func:`filament_concentration`."""
+    norm = 1.0 / ((2.0 * math.pi) ** 1.5 * inside_radii(truncate_radii))
+    amplitude = masses * norm / radii**3
+    inv_two_r2 = 0.5 / radii**2
+    cut2 = (truncate_radii * radii) ** 2
+    return amplitude, inv_two_r2, cut2
+
+
 def filament_concentration(
     points: FloatArray,
     centres: FloatArray,
@@ -74,31 +89,22 @@ def filament_concentration(
     masses: FloatArray,
     tree: cKDTree | None = None,
     truncate_radii: float = TRUNCATE_RADII,
+    kernel: Kernel | None = None,
 ) -> FloatArray:
     """Σ over filaments of the Gaussian cut at ``truncate_radii`` R and renormalised, plus its
     ground image (g/m³) at (n, 3) points; exactly 0 below ground. ``tree``: a k-d tree of
-    ``centres`` to reuse."""
+    ``centres`` to reuse; ``kernel``: :func:`filament_kernel` of the filaments, if known."""
     out = np.zeros(points.shape[0])
     if centres.shape[0] == 0 or points.shape[0] == 0:
         return out
     reach = truncate_radii * float(radii.max())
-    norm = 1.0 / ((2.0 * math.pi) ** 1.5 * inside_radii(truncate_radii))
-    amplitude = masses * norm / radii**3
-    inv_two_r2 = 0.5 / radii**2
-    cut2 = (truncate_radii * radii) ** 2
+    if kernel is None:
+        kernel = filament_kernel(radii, masses, truncate_radii)
+    amplitude, inv_two_r2, cut2 = kernel
     above = points[:, 2] >= 0.0
     if points.shape[0] <= BRUTE_FORCE_POINTS:
-        cx, cy, cz = centres[:, 0], centres[:, 1], centres[:, 2]
         for j in range(points.shape[0]):
-            x, y, z = points[j]
-            dxy2 = (cx - x) ** 2 + (cy - y) ** 2
-            # the filament, then its ground image (mirror the point): centres are at z ≥ 0, so
-            # the mirrored point is at least z from all of them and out of reach when z ≥ reach
-            for zz in (z, -z) if z < reach else (z,):
-                d2 = dxy2 + (cz - zz) ** 2
-                hit = np.flatnonzero(d2 < cut2)
-                if hit.size:
-                    out[j] += float(np.dot(amplitude[hit], np.exp(-d2[hit] * inv_two_r2[hit])))
+            out[j] = _one_point(points[j], centres, reach, (amplitude, inv_two_r2, cut2))
         out[~above] = 0.0
         return out
     from scipy.spatial import cKDTree  # ≈ 30 MB: loaded by the filament model only
@@ -117,6 +123,29 @@ def filament_concentration(
         np.add.at(out, pt, amplitude[fil] * np.exp(-d2 * inv_two_r2[fil]))
     out[~above] = 0.0
     return out
+
+
+def _one_point(point: FloatArray, centres: FloatArray, reach: float, kernel: Kernel) -> float:
+    """:func:`filament_concentration` at one point, every filament measured directly."""
+    amplitude, inv_two_r2, cut2 = kernel
+    x, y, z = point
+    dxy2 = (centres[:, 0] - x) ** 2 + (centres[:, 1] - y) ** 2
+    # d2 = dxy2 + (cz − z)² is never below dxy2, so only the filaments whose cut-off reaches
+    # across are measured in height (the same d2, bit for bit)
+    near = np.flatnonzero(dxy2 < cut2)
+    value = 0.0
+    if not near.size:
+        return value
+    near_xy2, near_z, near_cut2 = dxy2[near], centres[near, 2], cut2[near]
+    # the filament, then its ground image (mirror the point): centres are at z ≥ 0, so the
+    # mirrored point is at least z from all of them and out of reach when z ≥ reach
+    for zz in (z, -z) if z < reach else (z,):
+        d2 = near_xy2 + (near_z - zz) ** 2
+        inside = np.flatnonzero(d2 < near_cut2)
+        if inside.size:
+            hit = near[inside]
+            value += float(np.dot(amplitude[hit], np.exp(-d2[inside] * inv_two_r2[hit])))
+    return value
 
 
 class FilamentPlume(TimeSteppedField[Filaments]):
@@ -138,6 +167,9 @@ class FilamentPlume(TimeSteppedField[Filaments]):
         self._max_age_steps = math.floor(params.max_age_s / params.step_s + 1e-9)
         self._noise = self._noise_by_age(params, calibration)
         self._tree: tuple[Filaments, cKDTree, FloatArray] | None = None
+        # radii and kernels by age in internal steps: a filament's depend on its age alone
+        self._radii_by_age: FloatArray = np.empty(0)
+        self._kernel_by_age: Kernel = (np.empty(0), np.empty(0), np.empty(0))
         super().__init__(source_m, release_rate_g_s, wind, params.step_s, seed, stream)
 
     def _noise_by_age(
@@ -200,19 +232,38 @@ class FilamentPlume(TimeSteppedField[Filaments]):
         return state.positions, self.radii(state, k)
 
     def radii(self, state: Filaments, k: int) -> FloatArray:
-        age = (k - state.birth_step) * self.step_s
+        return self._radii_of_ages(k - state.birth_step)
+
+    def _radii_of_ages(self, steps: np.ndarray[Any, np.dtype[np.int64]]) -> FloatArray:
+        age = steps * self.step_s
         p = self.params
         radii: FloatArray = np.sqrt(p.initial_radius_m**2 + p.growth_m2_s * age)
         return radii
 
+    def _kernel_at(self, state: Filaments, k: int) -> tuple[FloatArray, Kernel]:
+        """The live filaments' radii and :func:`filament_kernel`, looked up by age in tables
+        computed once (the same operations on the same values as computing them per
+        filament)."""
+        ages = k - state.birth_step
+        if ages.size and int(ages.max()) >= self._radii_by_age.shape[0]:
+            table = np.arange(max(int(ages.max()) + 1, self._max_age_steps + 2), dtype=np.int64)
+            radii = self._radii_of_ages(table)
+            masses = np.full(table.shape[0], self.mass_g)
+            self._radii_by_age = radii
+            self._kernel_by_age = filament_kernel(radii, masses, self.params.truncate_radii)
+        amplitude, inv_two_r2, cut2 = self._kernel_by_age
+        return self._radii_by_age[ages], (amplitude[ages], inv_two_r2[ages], cut2[ages])
+
     def _evaluate(self, points: FloatArray, t: float | None, out: FloatArray) -> None:
         k, state = self.state_at(0.0 if t is None else t)
-        masses = np.full(state.birth_step.shape[0], self.mass_g)
         cut = self.params.truncate_radii
         if points.shape[0] <= BRUTE_FORCE_POINTS:
-            radii = self.radii(state, k)
-            out[:] = filament_concentration(points, state.positions, radii, masses, None, cut)
+            radii, kernel = self._kernel_at(state, k)
+            out[:] = filament_concentration(
+                points, state.positions, radii, radii, None, cut, kernel
+            )
             return
+        masses = np.full(state.birth_step.shape[0], self.mass_g)
         from scipy.spatial import cKDTree  # ≈ 30 MB: loaded by the filament model only
 
         with self._lock:

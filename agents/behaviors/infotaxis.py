@@ -158,6 +158,8 @@ class Infotaxis(SeekingBehavior):
         self.detector = detector_for(ctx, self.threshold_g_m3)
         self.models = self._models(ctx)
         self.cells_xy: FloatArray | None = None  # (n, 2) ENU centres
+        self._box = (np.zeros(2), np.zeros(2))  # the cells' least and greatest east, north
+        self._background_memo: tuple[tuple[float, float, int, float], FloatArray] | None = None
         self.grid_origin: tuple[tuple[float, float], float, float] | None = None  # wind, x, y
         self.belief: FloatArray | None = None  # (models, cells)
         self.target_xy: tuple[float, float] | None = None
@@ -213,6 +215,7 @@ class Infotaxis(SeekingBehavior):
         a, c = a.ravel(), c.ravel()
         dw, cw = frame.downwind, frame.crosswind
         self.cells_xy = np.column_stack([a * dw[0] + c * cw[0], a * dw[1] + c * cw[1]])
+        self._box = (self.cells_xy.min(axis=0), self.cells_xy.max(axis=0))
         self.belief = np.full((len(self.models), a.size), 1.0 / (len(self.models) * a.size))
 
     def mean_wind(self) -> WindFrame:
@@ -242,10 +245,13 @@ class Infotaxis(SeekingBehavior):
         dx = x - xy[:, 0]
         dy = y - xy[:, 1]
         along = dx * frame.downwind[0] + dy * frame.downwind[1]
-        across = dx * frame.crosswind[0] + dy * frame.crosswind[1]
         # Only cells whose plume reaches (x, y) need the Poisson classes; the others see the
-        # background's. The models that share a width share that support.
-        background = np.array([self.background_hz * dt_s])
+        # background's. Those are downwind of (x, y)'s source cells (along > 0), where
+        # :meth:`PlumeEncounterModel.plume_cells` is its crosswind test alone; the models
+        # that share a width share that support.
+        downwind = np.flatnonzero(along > 0.0)
+        along = along[downwind]
+        across = dx[downwind] * frame.crosswind[0] + dy[downwind] * frame.crosswind[1]
         # per width: its plume cells, their (along, across) and the models' shared arrays
         supports: dict[tuple[float, float], tuple[IntArray, FloatArray, FloatArray, SharedArrays]]
         supports = {}
@@ -254,19 +260,30 @@ class Infotaxis(SeekingBehavior):
         for m in self.models:
             width = (m.width_slope, m.width_min_m)
             if width not in supports:
-                cells = np.flatnonzero(m.plume_cells(along, across))
-                supports[width] = (cells, along[cells], across[cells], {})
+                u2 = m.crosswind_u2(along, across)
+                keep = np.flatnonzero(u2 < 36.0)
+                shared: SharedArrays = {m.shape_key(): np.exp(-0.5 * u2[keep])}
+                supports[width] = (downwind[keep], along[keep], across[keep], shared)
             cells, a, c, shared = supports[width]
             inside.append(cells)
             means.append(m.plume_mean_hits(a, c, dt_s, shared))
         # one call for every model's cells: the classes are computed point by point
         return SparseLikelihoods(
-            background=hit_likelihoods(background, self.n_hits, self.miss_floor)[:, 0],
+            background=self._background_classes(dt_s),
             inside=tuple(inside),
             classes=hit_likelihoods(np.concatenate(means), self.n_hits, self.miss_floor),
             offsets=(0, *itertools.accumulate(len(i) for i in inside)),
             cells=xy.shape[0],
         )
+
+    def _background_classes(self, dt_s: float) -> FloatArray:
+        """The hit classes of the background alone in a step of ``dt_s`` (every place of a
+        decision asks for the same step)."""
+        key = (dt_s, self.background_hz, self.n_hits, self.miss_floor)
+        if self._background_memo is None or self._background_memo[0] != key:
+            mean = np.array([self.background_hz * dt_s])
+            self._background_memo = (key, hit_likelihoods(mean, self.n_hits, self.miss_floor)[:, 0])
+        return self._background_memo[1]
 
     def _observe(self, readings: Sequence[ConcentrationReading]) -> None:
         sx, sy, n = self.observed_xy
@@ -284,9 +301,14 @@ class Infotaxis(SeekingBehavior):
                 self.detecting_since_s = r.sim_time_s
         self.observed_xy = (sx, sy, n)
 
-    def _near(self, xy: FloatArray, x: float, y: float, radius_m: float) -> np.ndarray:
-        """Which of the cells centred at ``xy`` lie within ``radius_m`` of (x, y)."""
-        return np.asarray(np.hypot(xy[:, 0] - x, xy[:, 1] - y) <= radius_m)
+    def _near(self, xy: FloatArray, x: float, y: float, radius_m: float) -> IntArray:
+        """Which of the cells centred at ``xy`` lie within ``radius_m`` of (x, y) (indices,
+        ascending). A cell within the radius is within it on each axis (the hypotenuse is
+        at least either side), so only those are measured."""
+        dx = xy[:, 0] - x
+        dy = xy[:, 1] - y
+        box = np.flatnonzero((np.abs(dx) <= radius_m) & (np.abs(dy) <= radius_m))
+        return box[np.hypot(dx[box], dy[box]) <= radius_m]
 
     def _decide(self, frame: WindFrame, x: float, y: float, dt_s: float) -> tuple[float, float]:
         places = self._places(frame, x, y)
@@ -296,7 +318,7 @@ class Infotaxis(SeekingBehavior):
         """Where the next step may go: stay, then upwind, downwind, left, right by ``step_m``
         (those inside the grid)."""
         assert self.cells_xy is not None
-        lo, hi = self.cells_xy.min(axis=0), self.cells_xy.max(axis=0)
+        lo, hi = self._box
         s = self.step_m
         places = [(x, y)]
         for a, c in _DIRECTIONS:
@@ -340,8 +362,9 @@ class Infotaxis(SeekingBehavior):
         """This step's likelihood of its hits per (model, cell), weighed by
         ``evidence_weight``."""
         ox, oy = self._observed_at(x, y)
-        table = self.likelihoods(frame, ox, oy, dt_s)
-        likelihood = table[min(self.hits, self.n_hits - 1)]
+        likelihood = self.sparse_likelihoods(frame, ox, oy, dt_s).row(
+            min(self.hits, self.n_hits - 1)
+        )
         if self.evidence_weight != 1.0:
             likelihood = likelihood**self.evidence_weight
         return np.asarray(likelihood)
@@ -352,7 +375,7 @@ class Infotaxis(SeekingBehavior):
         cells = self.belief.sum(axis=0)
         mean = cells @ self.cells_xy
         var = cells @ ((self.cells_xy - mean) ** 2)
-        near = np.hypot(*(self.cells_xy - mean).T) <= self.declare_radius_m
+        near = self._near(self.cells_xy, float(mean[0]), float(mean[1]), self.declare_radius_m)
         return float(mean[0]), float(mean[1]), float(math.sqrt(var.sum())), float(cells[near].sum())
 
     def seek(self, step: SeekStep) -> Setpoint | None:

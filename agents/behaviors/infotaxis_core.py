@@ -98,13 +98,20 @@ def poisson_classes(mean_hits: FloatArray, n_hits: int) -> FloatArray:
     ``(n_hits, *mean_hits.shape)``."""
     mu = np.asarray(mean_hits, dtype=float)
     out = np.empty((n_hits, *mu.shape))
-    term = np.exp(-mu)
-    below = np.zeros_like(mu)
-    for h in range(n_hits - 1):
-        out[h] = term
-        below = below + term
-        term = term * mu / (h + 1)
-    out[n_hits - 1] = np.maximum(0.0, 1.0 - below)
+    if n_hits == 1:
+        out[0, ...] = 1.0  # max(0, 1 − 0): every count is in the one class
+        return out
+    # P(h) = P(h − 1)·μ/h, each class written in place; the running sum starts at P(0) (0 + x
+    # is x) and a division by 1 is skipped (x / 1 is x): the same bits as the plain recurrence
+    np.exp(-mu, out=out[0, ...])
+    below = out[0, ...].copy()
+    for h in range(1, n_hits - 1):
+        term = np.multiply(out[h - 1, ...], mu, out=out[h, ...])
+        if h > 1:
+            term /= h
+        below += term
+    np.subtract(1.0, below, out=below)
+    np.maximum(0.0, below, out=out[n_hits - 1, ...])
     return out
 
 
@@ -116,8 +123,13 @@ def hit_likelihoods(mean_hits: FloatArray, n_hits: int, miss_floor: float = 0.0)
     if miss_floor > 0.0:
         p0 = table[0]
         floored = np.maximum(p0, miss_floor)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            scale = np.where(p0 < 1.0, (1.0 - floored) / (1.0 - p0), 0.0)
+        missed = 1.0 - p0
+        if missed.size and missed.min() > 0.0:  # every P(0) below 1: no division by zero
+            scale = np.subtract(1.0, floored)
+            scale /= missed
+        else:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                scale = np.where(p0 < 1.0, (1.0 - floored) / missed, 0.0)
         table[1:] *= scale
         table[0] = floored
     return table
@@ -222,29 +234,54 @@ class SparseLikelihoods:
         table.reshape(n_hits, -1)[:, np.concatenate(places)] = self.classes
         return table
 
+    def row(self, h: int) -> FloatArray:
+        """``dense()[h]``, shape ``(models, cells)``, without the other classes."""
+        table = np.full((len(self.inside), self.cells), self.background[h])
+        for k, idx in enumerate(self.inside):
+            table[k][idx] = self.classes[h, self.offsets[k] : self.offsets[k + 1]]
+        return table
+
+
+def _as_mask(here: BoolArray | IntArray | None, cells: int) -> BoolArray | None:
+    """``here`` as a mask over ``cells`` cells (it may be their indices)."""
+    if here is None:
+        return None
+    if here.dtype == np.bool_:
+        return np.asarray(here, dtype=np.bool_)
+    mask = np.zeros(cells, dtype=bool)
+    mask[here] = True
+    return mask
+
+
+def _ruled_out(belief: FloatArray, here: BoolArray | IntArray | None) -> tuple[FloatArray, float]:
+    """A copy of ``belief`` (models, cells) with the cells ``here`` zeroed, and the mass they
+    held, summed in the order a mask over the belief takes them."""
+    given = belief.copy()
+    if here is None:
+        return given, 0.0
+    if here.dtype != np.bool_ or here.ndim == 1:
+        places = here if here.dtype != np.bool_ else np.flatnonzero(here)
+        p_end = float(belief[:, places].ravel().sum())
+        given[:, places] = 0.0
+        return given, p_end
+    mask = np.broadcast_to(here, belief.shape)
+    p_end = float(belief[mask].sum())
+    given[mask] = 0.0
+    return given, p_end
+
 
 def expected_entropy_sparse(
-    belief: FloatArray, likelihoods: SparseLikelihoods, here: BoolArray | None
+    belief: FloatArray, likelihoods: SparseLikelihoods, here: BoolArray | IntArray | None
 ) -> float:
     """``expected_entropy(belief, likelihoods.dense(), here, nuisance_axes=1)`` for a belief of
     shape (models, cells), bit for bit, without building the table: each model's share of
     the joint is the background's product but at its ``inside`` cells, and the shares are added
-    in the order the dense sum over the models adds them."""
-    models = belief.shape[0]
-    if models > SEQUENTIAL_SUM_MAX:
-        return expected_entropy(belief, likelihoods.dense(), here, nuisance_axes=1)
-    given = belief.copy()
-    p_end = 0.0
-    if here is not None:
-        # the cells of ``here`` for every model, in the order a mask over the belief takes them
-        if here.ndim == 1:
-            places = np.flatnonzero(here)
-            p_end = float(belief[:, places].ravel().sum())
-            given[:, places] = 0.0
-        else:
-            mask = np.broadcast_to(here, belief.shape)
-            p_end = float(belief[mask].sum())
-            given[mask] = 0.0
+    in the order the dense sum over the models adds them. ``here`` may also be the indices of
+    its cells (ascending)."""
+    if belief.shape[0] > SEQUENTIAL_SUM_MAX:
+        mask = _as_mask(here, belief.shape[1])
+        return expected_entropy(belief, likelihoods.dense(), mask, nuisance_axes=1)
+    given, p_end = _ruled_out(belief, here)
     if p_end > 1.0 - EPSILON:
         return -EPSILON
     total = given.ravel().sum()  # as the dense path sums it
@@ -257,7 +294,9 @@ def expected_entropy_sparse(
         out = joint if k == 0 else share
         np.multiply(background, given[k], out=out)
         lo, hi = likelihoods.offsets[k], likelihoods.offsets[k + 1]
-        out[:, inside] = likelihoods.classes[:, lo:hi] * given[k, inside]
+        inside_values = likelihoods.classes[:, lo:hi] * given[k, inside]
+        for row, values in zip(out, inside_values, strict=True):
+            row[inside] = values  # a row at a time: numpy's fast path for one index array
         if k:
             joint += share
     p_h = joint.sum(axis=1)
@@ -317,6 +356,17 @@ class PlumeEncounterModel:
         rate = np.where(downwind & (u2 < 36.0), axis * np.exp(-0.5 * u2), 0.0)
         return np.asarray(rate + self.background_hz)
 
+    def crosswind_u2(self, along_m: FloatArray, across_m: FloatArray) -> FloatArray:
+        """(across / w(along))² at points downwind of the source (along > 0): the squared
+        crosswind distance in plume widths, as :meth:`plume_cells` and
+        :meth:`plume_mean_hits` compute it."""
+        width = np.maximum(self.width_min_m, self.width_slope * along_m)
+        return np.asarray((across_m / width) ** 2)
+
+    def shape_key(self) -> tuple[object, ...]:
+        """The key of the crosswind shape exp(−u²/2) in :meth:`plume_mean_hits`' ``shared``."""
+        return ("shape", self.width_slope, self.width_min_m)
+
     def plume_cells(self, along_m: FloatArray, across_m: FloatArray) -> BoolArray:
         """Where the rate is more than the background (:meth:`rate_hz`'s support)."""
         along = np.asarray(along_m, dtype=float)
@@ -340,7 +390,7 @@ class PlumeEncounterModel:
         models of one width share the crosswind shape, of one axis law the distance factor);
         filled here."""
         memo: SharedArrays = {} if shared is None else shared
-        shape_key = ("shape", self.width_slope, self.width_min_m)
+        shape_key = self.shape_key()
         shape = memo.get(shape_key)
         if shape is None:
             width = np.maximum(self.width_min_m, self.width_slope * along_m)

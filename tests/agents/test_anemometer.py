@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from agents.anemometer import Anemometer
+from agents.anemometer import SEED_BLOCK, Anemometer, SeededNormals
 from plume_atmosphere.wind import wind_from_scenario
 from sim_world.world import GRAVITY_M_S2, World
 from swarmbus.scenario import AnemometerSpec, parse_scenario
@@ -75,3 +75,20 @@ def test_anemometer_noise_is_seeded_per_tick_with_its_configured_std() -> None:
     other = Anemometer(config, wind, 4, 1).read("b", 17, 17 / 120, (1.0, 2.0, 10.0))
     assert other.wind_enu_m_s != again.wind_enu_m_s
     assert not Anemometer(AnemometerSpec(), wind, 4, 0).due(0)  # off by default
+
+
+@pytest.mark.parametrize(
+    "prefix", [(4, 0, 0xA7E), (100_003_001, 2, 0xA7E), (2**40 + 7, 3, 0xA7E), (0,)]
+)
+def test_the_noise_is_numpys_generator_seeded_by_the_tick_bit_for_bit(
+    prefix: tuple[int, ...],
+) -> None:
+    """Each tick's draws are ``Generator(PCG64(SeedSequence([*prefix, tick]))).normal(0, σ, 3)``
+    as numpy makes them, asked in any order, across seeding blocks, past 2³² (one word more)."""
+    normals = SeededNormals(prefix)
+    ticks = [*range(3 * SEED_BLOCK - 5, 3 * SEED_BLOCK + 5), 0, 7, SEED_BLOCK - 1, 2**32 - 1]
+    ticks += [2**32, 2**40 + 3, 5]
+    for tick in ticks:
+        seeded = np.random.SeedSequence([*prefix, tick])
+        expected = np.random.Generator(np.random.PCG64(seeded)).normal(0.0, 0.3, 3)
+        assert normals.normal(tick, 0.3).tobytes() == expected.tobytes(), tick

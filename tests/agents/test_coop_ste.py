@@ -5,9 +5,7 @@ published particle filter's rows unchanged; a swarm of 3 flies an episode."""
 
 from __future__ import annotations
 
-import csv
 import math
-from pathlib import Path
 
 import msgspec
 import numpy as np
@@ -17,13 +15,12 @@ from agents.behaviors.coop_ste import CooperativeSTE, Window
 from agents.peer_link import PeerLink
 from plume_atmosphere.dispersion import dispersion_curves
 from plume_atmosphere.plume_formula import gaussian_plume_g_m3
-from plumeswarm.gsl.bench import make_options, runs_csv, specs_of
 from plumeswarm.gsl.episode import EpisodeSpec, run_episode
 from swarmbus.radio import RadioSpec
 from swarmbus.scenario import Scenario, Sensor, VehicleSpec, load_scenario
 from tests.support.messages_samples import reading, vehicle_state
+from tests.support.published import published_and_reflown
 
-REPO = Path(__file__).resolve().parents[2]
 SCENARIO = load_scenario()  # wind 6 m/s toward +x, class D
 IDEAL = msgspec.structs.replace(
     SCENARIO,
@@ -153,18 +150,9 @@ def test_without_a_mailbox_a_member_flies_alone_on_its_own_windows() -> None:
 def test_the_correction_leaves_the_published_particle_filter_rows_unchanged() -> None:
     """Runs 0–1 of particle_filter in meander_high (seed 0, ideal sensor) as the published
     results/gsl-ideal/runs.csv has them, byte for byte."""
-    opts = make_options(["particle_filter"], ["meander_high"], ["ideal"], runs=2, seed=0)
-    specs = [s for s in specs_of(opts) if s.algorithm == "particle_filter"]
-    new = runs_csv([run_episode(s) for s in specs]).splitlines()
-    lines = (REPO / "results/gsl-ideal/runs.csv").read_text().splitlines()
-    published = [
-        line
-        for line, row in zip(lines[1:], csv.DictReader(lines), strict=True)
-        if (row["algorithm"], row["environment"], row["run"])
-        in {("particle_filter", "meander_high", "0"), ("particle_filter", "meander_high", "1")}
-    ]
+    published, new = published_and_reflown("gsl-ideal", "particle_filter", "meander_high", 2)
     assert len(published) == 2
-    assert new[1:] == published
+    assert new == published
 
 
 def test_a_swarm_of_three_flies_an_episode_end_to_end() -> None:

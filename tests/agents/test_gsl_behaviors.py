@@ -28,6 +28,7 @@ from swarmbus.messages import PeerReading, Setpoint, VehicleState
 from swarmbus.scenario import Scenario, Sensor, load_scenario
 from tests.support.messages_samples import reading as noiseless_reading
 from tests.support.messages_samples import vehicle_state
+from tests.support.published import published_and_reflown
 
 SCENARIO = load_scenario()  # novak2018: wind 6 m/s from 270° (toward +x), source at the origin
 
@@ -613,3 +614,11 @@ def test_a_lag_of_a_twentieth_of_the_sample_period_gets_the_rise_detector(
     scenario = msgspec.structs.replace(IDEAL, sensor=Sensor(time_constant_s=tau_s, period_ticks=12))
     assert detector_for(ctx(scenario=scenario)).mode == mode
     assert lags(scenario.sensor, 120.0) is (mode == "rise")
+
+
+def test_infotaxis_flies_its_published_episode_again_field_for_field() -> None:
+    """Run 0 of infotaxis in meander_low (the filament plume; a declaration after 191 s), test
+    seed 0, ideal sensor, as results/gsl-ideal/runs.csv has it: every field of the line."""
+    published, new = published_and_reflown("gsl-ideal", "infotaxis", "meander_low", 1)
+    assert len(published) == 1
+    assert new == published
