@@ -535,7 +535,10 @@ _SURVEY_OPTIONS: list[tuple[str, Any, object, str]] = [
     ("--sensor", click.Choice(["ideal", "mox", "pid"]), "ideal",
      "The sensor preset the vehicle reads through."),
     ("--distance", float, 50.0, "The curtain's distance downwind of the source (m)."),
-    ("--speed", float, 18.0, "Ground speed (m/s)."),
+    ("--dynamics", click.Choice(["plane", "kinematic"]), "plane",
+     "Who flies it: the Aerosonde (autopilot and physics) or a kinematic point."),
+    ("--speed", float, 0.0,
+     "The plane's airspeed or the point's ground speed (m/s); 0: the plane's cruise, 18 m/s."),
     ("--repeats", click.IntRange(min=1), 1, "Sweeps of the curtain (up, down, up, …)."),
     ("--sample-hz", float, 20.0, "Readings per second of sim time."),
 ]  # fmt: skip
@@ -560,6 +563,7 @@ def bench_survey(
     runs: int,
     seed: int,
     sensor: str,
+    dynamics: str,
     distance: float,
     speed: float,
     repeats: int,
@@ -583,6 +587,7 @@ def bench_survey(
             repeats,
             mean_plume,
             sample_hz,
+            dynamics,
         )
         rows = run_survey_bench(opts, _bench_dir(out, "survey"), click.echo)
     except SurveyError as exc:

@@ -6,14 +6,19 @@ and each run k of ``runs``: the environment's scenario with the world seed seed 
 (the GSL benchmark's: it seeds the anemometer's noise, the sensor and a time-dependent field's
 realisation), the sensor preset, the curtain planned from the scenario's source, mean wind
 direction and stability class (:func:`~plumeswarm.survey.pattern.plan_for_scenario`), flown by
-the kinematic runner (:func:`~plumeswarm.survey.flight.fly_survey`) and estimated
-(:func:`~plumeswarm.survey.flux.estimate_flux`). Rows: per environment, the true rate (the
-scenario's first source), the estimates' mean and standard deviation, the mean and RMS error
-in per cent of the true rate, the largest error, the curtain's coverage (the share of the
-time-averaged Gaussian plume's flux that crosses the flown rectangle,
-:func:`~plumeswarm.survey.pattern.model_coverage`), the estimate's flown share and the flight
-time. Prints the table, writes ``survey.json`` (every run) and ``survey.md`` (the table, the
-command on its first line) into the output directory.
+the Aerosonde in the fused runner (``dynamics = "plane"``,
+:func:`~plumeswarm.survey.plane.fly_plane_survey`) or by the kinematic runner (``"kinematic"``,
+:func:`~plumeswarm.survey.flight.fly_survey`: a point on the same kind of racetrack at a
+constant ground speed), estimated (:func:`~plumeswarm.survey.flux.estimate_flux`) from all
+its sweeps and, with ``repeats`` > 1, from its first 1, 2, … sweeps too. Rows: per
+environment, the true rate (the scenario's first source), the estimates' mean and standard
+deviation, the mean and RMS error in per cent of the true rate, the largest error, the
+curtain's coverage (the share of the time-averaged Gaussian plume's flux that crosses the
+flown rectangle, :func:`~plumeswarm.survey.pattern.model_coverage`), the estimate's flown
+share, the flight time and, with ``repeats`` > 1, the RMS error of the estimates from the
+first 1, 2, … sweeps of the same flights (how the error shrinks with more passes). Prints
+the table, writes ``survey.json`` (every run) and ``survey.md`` (the table, the command on its
+first line) into the output directory.
 """
 
 from __future__ import annotations
@@ -28,19 +33,29 @@ from pathlib import Path
 import msgspec
 
 from plumeswarm.gsl.registry import SENSORS, GslError, load_environment, time_dependent
-from plumeswarm.survey.flight import SAMPLE_HZ, SURVEY_SPEED_M_S, flight_time_s, fly_survey
+from plumeswarm.survey.flight import (
+    SAMPLE_HZ,
+    SURVEY_SPEED_M_S,
+    SurveyFlight,
+    flight_time_s,
+    kinematic_flight,
+)
 from plumeswarm.survey.flux import FluxEstimate, estimate_flux
 from plumeswarm.survey.pattern import (
     DEFAULT_DISTANCE_M,
+    CurtainPlan,
     SurveyError,
     model_coverage,
     plan_for_scenario,
     scenario_sigmas,
 )
+from plumeswarm.survey.plane import fly_plane_survey
 from swarmbus.scenario import Scenario
 
 ENVIRONMENTS = ("steady_gaussian", "meander_low", "meander_high", "puff_meander")
 SEED_STRIDE = 100_003
+#: Who flies the survey: the Aerosonde with its autopilot and physics, or a kinematic point.
+DYNAMICS = ("plane", "kinematic")
 
 
 @dataclass(frozen=True)
@@ -50,10 +65,11 @@ class SurveyOptions:
     seed: int = 0
     sensor: str = "ideal"
     distance_m: float = DEFAULT_DISTANCE_M
-    speed_m_s: float = SURVEY_SPEED_M_S
+    speed_m_s: float = 0.0  # 0: the plane's cruise airspeed, the kinematic runner's 18 m/s
     repeats: int = 1
     mean_plume: bool = False  # fly each environment's time-averaged Gaussian, exact wind
     sample_hz: float = SAMPLE_HZ
+    dynamics: str = "plane"
 
     def __post_init__(self) -> None:
         if self.runs < 1:
@@ -62,6 +78,10 @@ class SurveyOptions:
             raise SurveyError("sensor", f"{self.sensor!r} is none of {', '.join(SENSORS)}")
         if not self.environments:
             raise SurveyError("environments", f"none given; shipped: {', '.join(ENVIRONMENTS)}")
+        if self.dynamics not in DYNAMICS:
+            raise SurveyError("dynamics", f"{self.dynamics!r} is none of {', '.join(DYNAMICS)}")
+        if not (math.isfinite(self.speed_m_s) and self.speed_m_s >= 0.0):
+            raise SurveyError("speed_m_s", f"{self.speed_m_s!r} must be ≥ 0 (0: the cruise)")
 
 
 def command_line(opts: SurveyOptions) -> str:
@@ -69,7 +89,8 @@ def command_line(opts: SurveyOptions) -> str:
     return (
         f"plumeswarm bench survey --environments {','.join(opts.environments)} "
         f"--runs {opts.runs} --seed {opts.seed} --sensor {opts.sensor} "
-        f"--distance {opts.distance_m:g} --speed {opts.speed_m_s:g} --repeats {opts.repeats}"
+        f"--dynamics {opts.dynamics} --distance {opts.distance_m:g} --repeats {opts.repeats}"
+        + (f" --speed {opts.speed_m_s:g}" if opts.speed_m_s else "")
         + (f" --sample-hz {opts.sample_hz:g}" if opts.sample_hz != SAMPLE_HZ else "")
         + (" --mean-plume" if opts.mean_plume else "")
     )
@@ -103,6 +124,9 @@ class RunResult:
     estimate: FluxEstimate | None
     error_pct: float | None
     refused: str | None
+    #: The error of the estimate from the first 1, 2, … sweeps (the last: ``error_pct``);
+    #: None where the first sweeps gave no estimate.
+    sweep_errors_pct: tuple[float | None, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -116,6 +140,8 @@ class Summary:
     max_abs_error_pct: float
     flown_fraction: float
     flight_s: float
+    #: The RMS error of the estimates from the first 1, 2, … sweeps, over the runs that have one.
+    sweep_rms_pct: tuple[float | None, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -144,21 +170,45 @@ def sensor_lag_s(scenario: Scenario) -> float:
     return sensor.rise_time_constant_s or 0.0
 
 
+def fly(scenario: Scenario, plan: CurtainPlan, opts: SurveyOptions) -> SurveyFlight:
+    """The survey flown by ``opts.dynamics``."""
+    if opts.dynamics == "kinematic":
+        speed = opts.speed_m_s or SURVEY_SPEED_M_S
+        return kinematic_flight(scenario, plan, speed, opts.repeats, opts.sample_hz)
+    return fly_plane_survey(scenario, plan, opts.repeats, opts.sample_hz, opts.speed_m_s)
+
+
 def survey_run(base: Scenario, opts: SurveyOptions, run: int) -> RunResult:
-    """One flight and its estimate (or the reason there is none)."""
+    """One flight and its estimate (or the reason there is none), and the errors of the
+    estimates from its first sweeps."""
     scenario = run_scenario(base, opts, run)
     plan = plan_for_scenario(scenario, opts.distance_m)
-    readings = fly_survey(
-        scenario, plan, opts.speed_m_s, repeats=opts.repeats, sample_hz=opts.sample_hz
-    )
+    flight = fly(scenario, plan, opts)
     true_q = scenario.plume.sources[0].release_rate_g_s
-    seed, flight = scenario.world.seed, flight_time_s(readings)
+    lag, tolerance = sensor_lag_s(scenario), flight.height_tolerance_m
+    seed, flight_s = scenario.world.seed, flight_time_s(flight.readings)
+    errors: list[float | None] = []
+    for sweeps in range(1, opts.repeats):
+        try:
+            part = estimate_flux(
+                flight.through_sweep(sweeps), plan, height_tolerance_m=tolerance, sensor_lag_s=lag
+            )
+        except SurveyError:
+            errors.append(None)
+            continue
+        errors.append(100.0 * (part.release_rate_g_s - true_q) / true_q)
     try:
-        estimate = estimate_flux(readings, plan, sensor_lag_s=sensor_lag_s(scenario))
+        estimate = estimate_flux(
+            flight.readings, plan, height_tolerance_m=tolerance, sensor_lag_s=lag
+        )
     except SurveyError as exc:
-        return RunResult(run, seed, flight, None, None, str(exc))
+        return RunResult(run, seed, flight_s, None, None, str(exc), (*errors, None))
     error = 100.0 * (estimate.release_rate_g_s - true_q) / true_q
-    return RunResult(run, seed, flight, estimate, error, None)
+    return RunResult(run, seed, flight_s, estimate, error, None, (*errors, error))
+
+
+def _rms(values: list[float]) -> float | None:
+    return math.sqrt(statistics.fmean(v * v for v in values)) if values else None
 
 
 def summary_of(runs: tuple[RunResult, ...]) -> Summary | None:
@@ -175,6 +225,10 @@ def summary_of(runs: tuple[RunResult, ...]) -> Summary | None:
         max_abs_error_pct=max(abs(e) for e in err),
         flown_fraction=statistics.fmean(e.flown_fraction for _, e in good),
         flight_s=statistics.fmean(r.flight_s for r, _ in good),
+        sweep_rms_pct=tuple(
+            _rms([e for e in sweep if e is not None])
+            for sweep in zip(*(r.sweep_errors_pct for r in runs), strict=True)
+        ),
     )
 
 
@@ -208,20 +262,32 @@ HEADER = (
 )
 
 
+def _sweeps_cell(s: Summary) -> str:
+    return " / ".join("–" if e is None else f"{e:.1f}" for e in s.sweep_rms_pct) + " %"
+
+
 def table_lines(opts: SurveyOptions, rows: list[EnvironmentRow]) -> list[str]:
-    """The markdown table, the command above it."""
-    lines = [f"`{command_line(opts)}`", "", HEADER, "|---" * 10 + "|"]
+    """The markdown table, the command above it; with ``repeats`` > 1 a column of the RMS
+    error from the first 1, 2, … sweeps."""
+    sweeps = opts.repeats > 1
+    header = HEADER + (
+        f" RMS error after {' / '.join(str(k + 1) for k in range(opts.repeats))} sweeps |"
+        if sweeps
+        else ""
+    )
+    columns = 10 + sweeps
+    lines = [f"`{command_line(opts)}`", "", header, "|---" * columns + "|"]
     for r in rows:
         head = f"| `{r.environment}` | {r.estimated}/{len(r.runs)} | {r.true_g_s:g} |"
         s = r.summary
         if s is None:
-            lines.append(head + " – |" * 7)
+            lines.append(head + " – |" * (columns - 3))
             continue
         lines.append(
             f"{head} {s.mean_g_s:.2f} ± {s.std_g_s:.2f} | {s.mean_error_pct:+.1f} % | "
             f"{s.rms_error_pct:.1f} % | {s.max_abs_error_pct:.1f} % | "
             f"{100.0 * r.coverage:.1f} % | {100.0 * s.flown_fraction:.1f} % | "
-            f"{s.flight_s:.0f} s |"
+            f"{s.flight_s:.0f} s |" + (f" {_sweeps_cell(s)} |" if sweeps else "")
         )
     return lines
 

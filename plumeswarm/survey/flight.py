@@ -93,6 +93,23 @@ class Racetrack:
         return r + r * math.cos(a), -w - r * math.sin(a), z
 
 
+@dataclass(frozen=True)
+class SurveyFlight:
+    """A flown survey: its readings, and when each sweep of the curtain ended (the readings of
+    sweeps 1…j are those before ``sweep_ends_s[j - 1]``; the last end is infinite)."""
+
+    readings: list[SurveyReading]
+    sweep_ends_s: tuple[float, ...]
+    #: How far from a leg's height a reading still belongs to the leg (the estimate's
+    #: ``height_tolerance_m``): as tightly as the vehicle holds its altitude.
+    height_tolerance_m: float = 0.5
+
+    def through_sweep(self, sweeps: int) -> list[SurveyReading]:
+        """The readings of the first ``sweeps`` sweeps."""
+        end = self.sweep_ends_s[sweeps - 1]
+        return [r for r in self.readings if r.sim_time_s < end]
+
+
 def fly_survey(
     scenario: Scenario,
     plan: CurtainPlan,
@@ -128,6 +145,22 @@ def fly_survey(
         measured = anemometer.read("survey", tick, t, point).wind_enu_m_s
         readings.append(SurveyReading(t, point, sensor.sample(true, t), (measured[0], measured[1])))
     return readings
+
+
+def kinematic_flight(
+    scenario: Scenario,
+    plan: CurtainPlan,
+    speed_m_s: float = SURVEY_SPEED_M_S,
+    repeats: int = 1,
+    sample_hz: float = SAMPLE_HZ,
+) -> SurveyFlight:
+    """:func:`fly_survey` (default radius) with the end of each sweep: the start of the next
+    sweep's first leg."""
+    readings = fly_survey(scenario, plan, speed_m_s, repeats=repeats, sample_hz=sample_hz)
+    lap_s = Racetrack(plan, (0,), turn_radius_m(speed_m_s)).lap_m / speed_m_s
+    t0, legs = readings[0].sim_time_s, len(plan.heights_m)
+    ends = tuple(t0 + (j + 1) * legs * lap_s for j in range(repeats - 1))
+    return SurveyFlight(readings, (*ends, math.inf))
 
 
 def flight_time_s(readings: Sequence[SurveyReading]) -> float:

@@ -1,5 +1,6 @@
 """The mass-balance survey: its integrator against the Gaussian plume's own integral, its
-estimate in the steady environment, and its refusals (docs/survey.md)."""
+estimate in the steady environment flown by the kinematic runner and by the Aerosonde, the
+published table reproduced, and its refusals (docs/survey.md)."""
 
 from __future__ import annotations
 
@@ -7,7 +8,9 @@ import dataclasses
 import itertools
 import json
 import math
+import tomllib
 from pathlib import Path
+from typing import Any
 
 import msgspec
 import numpy as np
@@ -17,10 +20,17 @@ from plume_atmosphere.dispersion import dispersion_curves
 from plume_atmosphere.plume_formula import downwind_unit, gaussian_plume_g_m3, plume_frame
 from plumeswarm.gsl.registry import load_environment
 from plumeswarm.survey import CurtainPlan, SurveyError, SurveyReading, estimate_flux
-from plumeswarm.survey.bench import EnvironmentRow, SurveyOptions, command_line, table_lines
+from plumeswarm.survey.bench import (
+    EnvironmentRow,
+    SurveyOptions,
+    command_line,
+    survey_run,
+    table_lines,
+)
 from plumeswarm.survey.flight import Racetrack, fly_survey, leg_order
 from plumeswarm.survey.flux import vertical_integral
 from plumeswarm.survey.pattern import model_coverage, plan_for_scenario
+from plumeswarm.survey.plane import fly_plane_survey
 from tests.support.procs import REPO, run_cli
 
 SOURCE = (30.0, -20.0)
@@ -116,6 +126,57 @@ def test_the_survey_estimates_the_steady_gaussian_release_within_30_percent() ->
     assert 5.9 < estimate.wind_normal_m_s < 6.1
 
 
+def _toml(path: Path) -> dict[str, Any]:
+    with path.open("rb") as f:
+        return tomllib.load(f)
+
+
+def test_the_aerosonde_estimates_the_steady_gaussian_release_within_30_percent() -> None:
+    """One sweep flown by the plane (its autopilot and physics in the fused runner). The true
+    rate and the wind are read from the environment's file, the cruise airspeed from the
+    Aerosonde's: a plane at 25 m/s airspeed crabbing across a 6 m/s wind normal to its track
+    makes √(25² − 6²) = 24.3 m/s along it, 1.21 m between readings at 20 Hz (the kinematic
+    runner's point makes 18 m/s, 0.9 m)."""
+    env = _toml(REPO / "swarmbus" / "scenarios" / "gsl" / "steady_gaussian.toml")
+    airframe = _toml(REPO / "swarmbus" / "vehicles" / "aerosonde.toml")
+    truth = env["plume"]["sources"][0]["release_rate_g_s"]
+    wind = env["wind"]["speed_m_s"]
+    cruise = airframe["fixed_wing"]["params"]["FW_AIRSPD_TRIM"]
+    scenario = load_environment("steady_gaussian").scenario
+    plan = plan_for_scenario(scenario)
+    flight = fly_plane_survey(scenario, plan, repeats=1, sample_hz=20.0)
+    estimate = estimate_flux(flight.readings, plan, height_tolerance_m=flight.height_tolerance_m)
+    assert abs(estimate.release_rate_g_s - truth) <= 0.3 * truth
+    assert estimate.passes == (1,) * len(plan.heights_m)
+    assert wind - 0.1 < estimate.wind_normal_m_s < wind + 0.1
+    on_legs = [
+        (a, b)
+        for a, b in itertools.pairwise(flight.readings)
+        if abs(plan.curtain_frame(*a.position_enu_m[:2])[1]) <= plan.half_width_m
+        and abs(plan.curtain_frame(*a.position_enu_m[:2])[0]) < 50.0  # not the straight back
+    ]
+    assert len(on_legs) >= 5 * len(plan.heights_m)
+    step = math.sqrt(cruise**2 - wind**2) / 20.0
+    for a, b in on_legs:
+        assert math.dist(a.position_enu_m, b.position_enu_m) == pytest.approx(step, rel=0.05)
+        assert abs(plan.curtain_frame(*a.position_enu_m[:2])[0]) < 5.0
+
+
+def test_the_published_tables_first_run_is_reproduced_bit_for_bit() -> None:
+    """results/survey/survey.json's first environment, run 0, flown again with the options
+    the JSON records: the same estimate and errors, to the last bit."""
+    document = json.loads((REPO / "results" / "survey" / "survey.json").read_text())
+    options = msgspec.convert(document["options"], SurveyOptions)
+    row = document["rows"][0]
+    published = row["runs"][0]
+    base = load_environment(row["environment"]).scenario
+    again = survey_run(base, options, 0)
+    assert again.estimate is not None
+    assert again.estimate.release_rate_g_s == published["estimate"]["release_rate_g_s"]
+    assert list(again.sweep_errors_pct) == published["sweep_errors_pct"]
+    assert again.flight_s == published["flight_s"]
+
+
 def test_the_racetrack_is_flown_at_constant_speed_and_crosses_every_leg() -> None:
     """Consecutive readings are v·dt apart horizontally (ground speed; a chord of a turn is a
     hair shorter than its arc); each planned height has a pass across its whole leg a sweep."""
@@ -174,8 +235,8 @@ def test_bench_survey_refuses_a_bad_distance_in_one_line(tmp_path: Path) -> None
 
 def test_bench_survey_writes_the_table_under_its_command_and_every_run(tmp_path: Path) -> None:
     done = run_cli(
-        ["bench", "survey", "--environments", "steady_gaussian", "--runs", "2", "--out",
-         str(tmp_path)]
+        ["bench", "survey", "--environments", "steady_gaussian", "--runs", "2", "--dynamics",
+         "kinematic", "--out", str(tmp_path)]
     )  # fmt: skip
     assert done.returncode == 0, done.stderr
     table = (tmp_path / "survey.md").read_text().splitlines()
@@ -189,10 +250,11 @@ def test_bench_survey_writes_the_table_under_its_command_and_every_run(tmp_path:
 
 def test_the_published_tables_are_the_benchs_own_rendering_of_its_json() -> None:
     """Every table in docs/survey.md is what ``table_lines`` makes of the ``survey.json`` the
-    same command wrote (docs/survey-results/*/): no number was edited by hand."""
+    same command wrote (results/survey*/), and is that command's ``survey.md``: no number was
+    edited by hand."""
     page = (REPO / "docs" / "survey.md").read_text()
-    documents = sorted((REPO / "docs" / "survey-results").glob("*/survey.json"))
-    assert len(documents) >= 3
+    documents = sorted((REPO / "results").glob("survey*/survey.json"))
+    assert len(documents) >= 2
     for path in documents:
         document = json.loads(path.read_text())
         options = msgspec.convert(document["options"], SurveyOptions)
@@ -200,6 +262,7 @@ def test_the_published_tables_are_the_benchs_own_rendering_of_its_json() -> None
         assert document["command"] == command_line(options)
         table = "\n".join(table_lines(options, rows))
         assert table in page, f"{path.parent.name}: the page's table differs from its JSON"
+        assert (path.parent / "survey.md").read_text() == table + "\n"
 
 
 def test_a_first_order_sensors_lag_is_undone_from_the_response_it_still_owes() -> None:
