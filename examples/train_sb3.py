@@ -1,9 +1,11 @@
 """Train PPO (Stable-Baselines3) on plumeswarm/PlumeSource-v0 over N parallel environments.
 
-Needs the `train` extra (Stable-Baselines3 and the CPU build of PyTorch, about 0.9 GB):
+Needs the `train` extra (Stable-Baselines3 and PyTorch 2.13.0, about 0.9 GB; the CPU build
+first, or pip may take PyPI's multi-GB CUDA one):
 
+    pip install torch==2.13.0 --index-url https://download.pytorch.org/whl/cpu
     pip install 'plumeswarm[train]'
-    python examples/train_sb3.py --envs 2 --steps 100000 --seed 0 --out runs/train
+    python examples/train_sb3.py --envs 1 --steps 32768 --seed 0 --episodes 10 --out runs/train
 
 `--envs N` runs N copies of the environment, each in its own process (SB3's SubprocVecEnv; one
 copy runs in-process), copy i seeded with seed + i. Every finished training episode is a row of
