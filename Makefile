@@ -3,7 +3,8 @@ PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 # One venv, two stamps: `make demo` installs the core only (the simulator, its CLI, recordings);
-# `make test` adds the dev tools and every extra (environments, figures) to the same venv.
+# `make test` adds the dev tools and every extra (environments, figures, training: the CPU build
+# of PyTorch, pinned in the train extra) to the same venv.
 CORE := $(VENV)/.installed-core
 DEV := $(VENV)/.installed-dev
 STAMP := $(DEV)

@@ -7,6 +7,8 @@ what the test itself published, never from the code under test.
 
 from __future__ import annotations
 
+import csv
+import math
 import os
 import re
 import subprocess
@@ -111,10 +113,48 @@ def test_read_recording_counts_what_was_published(tmp_path: Path) -> None:
         assert "pandas: 240 rows" in out
 
 
-def test_train_sb3_runs_a_few_updates(tmp_path: Path) -> None:
-    pytest.importorskip(
-        "stable_baselines3",
-        reason="the train extra (stable-baselines3, PyTorch) is not installed; CI skips it",
+def train_tiny(tmp_path: Path, out: str) -> str:
+    """A tiny budget: 3-s episodes, two PPO updates over two worker processes."""
+    return run_example(
+        "train_sb3.py",
+        *("--envs", "2", "--steps", "256", "--n-steps", "64", "--episodes", "1"),
+        *("--set", "env.time_limit_s=3", "--out", str(tmp_path / out)),
+        cwd=tmp_path,
     )
-    out = run_example("train_sb3.py", "--timesteps", "512", "--episodes", "1", cwd=tmp_path)
-    assert re.fullmatch(rf"after 512 timesteps: mean return {NUM} \(random actions {NUM}\)\n", out)
+
+
+def test_train_sb3_trains_saves_reloads_and_evaluates(tmp_path: Path) -> None:
+    out = train_tiny(tmp_path, "run")
+    pattern = (
+        rf"(\d+) timesteps on 2 env\(s\) in {NUM} s: (\d+) steps/s, (\d+) training episodes\n"
+        rf"reloaded policy gives the same (\d+) actions bit for bit: (True|False)\n"
+        rf"mean return on 1 seeds: trained {NUM}, random actions {NUM}\n"
+    )
+    m = re.fullmatch(pattern, out)
+    assert m, out
+    timesteps, episodes, same = int(m[1]), int(m[4]), m[6]
+    assert timesteps == 256  # 2 envs x 64 steps x 2 rollouts
+    assert same == "True", out
+    assert all(math.isfinite(float(v)) for v in (m[7], m[8])), out
+
+    # the learning curve: one row per finished episode, each at most as long as the time limit
+    # allows (3 s of 12-tick steps at the scenario's control rate; one more step where the
+    # summed step times fall a rounding short of it)
+    hz = NOVAK["time"]["control_hz"]
+    max_len = math.ceil(3.0 * hz / 12) + 1
+    with open(tmp_path / "run" / "learning_curve.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == episodes >= 2 * (128 // max_len)  # each env steps 128 times
+    steps = [int(r["timestep"]) for r in rows]
+    assert steps == sorted(steps) and 0 < steps[-1] <= timesteps
+    assert all(1 <= int(r["length"]) <= max_len for r in rows), rows
+    assert sum(int(r["length"]) for r in rows) <= timesteps
+    assert all(math.isfinite(float(r["return"])) for r in rows), rows
+    assert (tmp_path / "run" / "learning_curve.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert (tmp_path / "run" / "ppo.zip").stat().st_size > 0
+
+    # seeded: a second run gives the same curve and the same evaluation, bit for bit
+    again = train_tiny(tmp_path, "again")
+    assert again.splitlines()[1:] == out.splitlines()[1:]  # the first line holds the wall time
+    curve = (tmp_path / "again" / "learning_curve.csv").read_bytes()
+    assert curve == (tmp_path / "run" / "learning_curve.csv").read_bytes()

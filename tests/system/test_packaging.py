@@ -10,7 +10,10 @@ import re
 import subprocess
 import sys
 import tomllib
-from importlib.metadata import packages_distributions
+from importlib.metadata import distribution, packages_distributions
+
+from packaging.requirements import Requirement
+from packaging.utils import canonicalize_name
 
 from swarmbus.extras import EXTRA_OF_MODULE
 from tests.support.procs import CORE_PACKAGES, REPO, run_python
@@ -90,3 +93,29 @@ def test_the_environments_without_the_rl_extra_name_it() -> None:
         "swarmbus.extras.MissingExtra: plumeswarm.envs needs gymnasium, from the 'rl' extra: "
         "pip install 'plumeswarm[rl]'"
     )
+
+
+def core_closure() -> set[str]:
+    """Every distribution ``pip install plumeswarm`` installs: the core requirements and theirs,
+    read from the installed distributions' metadata (extras left out, markers evaluated here)."""
+    seen: set[str] = set()
+    todo = [Requirement(r) for r in PROJECT["dependencies"]]
+    while todo:
+        req = todo.pop()
+        name = canonicalize_name(req.name)
+        if name in seen or (req.marker is not None and not req.marker.evaluate({"extra": ""})):
+            continue
+        seen.add(name)
+        todo += [Requirement(r) for r in distribution(name).requires or []]
+    return seen
+
+
+def test_the_core_install_pulls_neither_ray_nor_pytorch_and_train_pins_the_cpu_wheel() -> None:
+    closure = core_closure()
+    assert len(closure) > len(PROJECT["dependencies"])  # the walk reached their dependencies
+    assert not closure & {"ray", "torch", "stable-baselines3"}, closure
+    train = [Requirement(r) for r in PROJECT["optional-dependencies"]["train"]]
+    # the release whose CPU wheel CI holds: a range would let pip take a newer CUDA build
+    assert [str(r.specifier) for r in train if r.name == "torch"] == ["==2.13.0"]
+    dev = Requirement(next(r for r in PROJECT["optional-dependencies"]["dev"] if "[" in r))
+    assert "train" in dev.extras  # make test's venv (the dev extra) trains
