@@ -13,6 +13,9 @@ from swarmbus.keys import Keys, autopilot_node
 from swarmbus.session import NetworkConfig, open_session
 
 PRESENCE_WAIT_S = 2.0
+# Once every vehicle's state and status are in: how long to wait on for the readings still
+# missing (a vehicle's readings come at the sensor rate; one that reads nothing shows --).
+READING_WAIT_S = 1.0
 
 
 class NothingRunning(PlumeswarmError, RuntimeError):
@@ -34,6 +37,11 @@ def _complete(snap: Snapshot, vehicle_ids: Sequence[str]) -> bool:
     return True
 
 
+def _readings_in(snap: Snapshot) -> bool:
+    """Whether every vehicle with a status (an autopilot flying it) has a reading too."""
+    return all(v.reading is not None for v in snap.vehicles.values() if v.status is not None)
+
+
 def query_status(
     net: NetworkConfig, keys: Keys, vehicle_ids: Sequence[str] = (), timeout_s: float = 5.0
 ) -> Snapshot:
@@ -44,11 +52,16 @@ def query_status(
         try:
             start = time.monotonic()
             deadline = start + timeout_s
+            complete_at: float | None = None
             while True:
                 snap = view.snapshot()
                 now = time.monotonic()
-                if _complete(snap, vehicle_ids) or now >= deadline:
+                if now >= deadline:
                     break
+                if _complete(snap, vehicle_ids):
+                    complete_at = complete_at if complete_at is not None else now
+                    if _readings_in(snap) or now - complete_at >= READING_WAIT_S:
+                        break
                 if not snap.alive and now - start >= min(PRESENCE_WAIT_S, timeout_s):
                     break
                 view.wait_changed(0.1)

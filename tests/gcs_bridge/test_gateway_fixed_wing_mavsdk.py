@@ -106,9 +106,15 @@ async def takeoff_and_loiter(drone: Any) -> Any:
     )
     home = await first(tel.subscribe_home(), lambda _: True, "home")
     assert await act.get_takeoff_altitude() == pytest.approx(TAKEOFF_ALT_M)
+    # listening before the take-off: in lockstep the climb can be over (and the mode HOLD)
+    # before a subscription made after the command's answer hears its first mode
+    takeoff_mode = asyncio.create_task(
+        first(tel.subscribe_flight_mode(), lambda m: m.name == "TAKEOFF", "mode takeoff")
+    )
+    await first(tel.subscribe_flight_mode(), lambda _: True, "a flight mode")
     await act.arm()
     await act.takeoff()
-    await first(tel.subscribe_flight_mode(), lambda m: m.name == "TAKEOFF", "mode takeoff")
+    await takeoff_mode
     await first(tel.subscribe_in_air(), bool, "in the air")
     await first(tel.subscribe_flight_mode(), lambda m: m.name == "HOLD", "the loiter", 180.0)
     pos = await first(tel.subscribe_position(), lambda _: True, "a position")
