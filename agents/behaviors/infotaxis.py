@@ -76,6 +76,7 @@ axis, ≈ 0 at 4 m):
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 from collections.abc import Sequence
@@ -120,6 +121,17 @@ def scenario_width_slope(ctx: BehaviorContext) -> float:
     return width_slope(WIDTH_FIT_DISTANCES_M, list(sigma_y))
 
 
+@functools.lru_cache(maxsize=256)
+def _background_classes(
+    dt_s: float, background_hz: float, n_hits: int, miss_floor: float
+) -> FloatArray:
+    """The hit classes of the background alone in a step of ``dt_s``: a pure function, kept
+    out of the behaviour's state (a restored behaviour computes the same bits), read-only."""
+    classes = hit_likelihoods(np.array([background_hz * dt_s]), n_hits, miss_floor)[:, 0]
+    classes.setflags(write=False)
+    return classes
+
+
 class Infotaxis(SeekingBehavior):
     ignores_peers = True  # reads neither its peers' states nor their readings: any radio
     # ``cells_xy`` is rebuilt from ``grid_origin`` (where the grid was laid) on restore
@@ -159,7 +171,6 @@ class Infotaxis(SeekingBehavior):
         self.models = self._models(ctx)
         self.cells_xy: FloatArray | None = None  # (n, 2) ENU centres
         self._box = (np.zeros(2), np.zeros(2))  # the cells' least and greatest east, north
-        self._background_memo: tuple[tuple[float, float, int, float], FloatArray] | None = None
         self.grid_origin: tuple[tuple[float, float], float, float] | None = None  # wind, x, y
         self.belief: FloatArray | None = None  # (models, cells)
         self.target_xy: tuple[float, float] | None = None
@@ -279,11 +290,7 @@ class Infotaxis(SeekingBehavior):
     def _background_classes(self, dt_s: float) -> FloatArray:
         """The hit classes of the background alone in a step of ``dt_s`` (every place of a
         decision asks for the same step)."""
-        key = (dt_s, self.background_hz, self.n_hits, self.miss_floor)
-        if self._background_memo is None or self._background_memo[0] != key:
-            mean = np.array([self.background_hz * dt_s])
-            self._background_memo = (key, hit_likelihoods(mean, self.n_hits, self.miss_floor)[:, 0])
-        return self._background_memo[1]
+        return _background_classes(dt_s, self.background_hz, self.n_hits, self.miss_floor)
 
     def _observe(self, readings: Sequence[ConcentrationReading]) -> None:
         sx, sy, n = self.observed_xy
