@@ -135,7 +135,6 @@ class Journal:
     path: Path
     header: dict[str, Any]
     records: dict[str, dict[str, Any]]  # key → the outcome's fields
-    names: dict[str, str] = dataclasses.field(default_factory=dict)  # key → the episode
 
     @staticmethod
     def read(path: Path, repair: bool = False) -> Journal | None:
@@ -153,14 +152,13 @@ class Journal:
             return None
         try:
             header = json.loads(lines[0])["grid"]
-            records, names = {}, {}
+            records = {}
             for line in lines[1:]:
                 record = json.loads(line)
                 records[record["key"]] = record["outcome"]
-                names[record["key"]] = record["episode"]
         except (ValueError, KeyError, TypeError) as exc:
             raise GslError(f"{path}: not a grid journal ({exc})") from None
-        return Journal(path, header, records, names)
+        return Journal(path, header, records)
 
     @staticmethod
     def open(out: Path, header: dict[str, Any]) -> Journal:
@@ -193,7 +191,6 @@ class Journal:
             f.flush()
             os.fsync(f.fileno())
         self.records[record["key"]] = record["outcome"]
-        self.names[record["key"]] = record["episode"]
 
 
 def _difference(theirs: dict[str, Any], ours: dict[str, Any]) -> str:
