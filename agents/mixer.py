@@ -72,7 +72,7 @@ class Mixer:
         self, thrust_n: float, torque_x: float, torque_y: float, torque_z: float
     ) -> tuple[list[float], list[float], float]:
         """The rotors' thrusts with roll/pitch scaled to fit, their yaw shares, the yaw scale
-        that fits (:func:`_fit_scale` of each, in one pass over the rotors)."""
+        that fits: :func:`_fit_scale` of each, computed in one pass over the rotors each."""
         t_max = self.max_rotor_thrust_n
         thrust_n = min(max(thrust_n, 0.0), t_max * self.rotor_count)
         base = []
@@ -85,27 +85,24 @@ class Mixer:
             base.append(b)
             rp.append(d)
             yaw.append(r3 * torque_z)
-            s = _fit_one(s, b, d, t_max)
+            if d > 0.0:  # _fit_scale's step, inline: this runs every tick for every rotor
+                room = t_max - b
+                if room < s * d:
+                    s = max(room, 0.0) / d
+            elif d < 0.0 and b < -s * d:
+                s = max(b, 0.0) / -d
         mid = []
         s_yaw = 1.0
         for b, d, y in zip(base, rp, yaw, strict=True):
             m = b + s * d
             mid.append(m)
-            s_yaw = _fit_one(s_yaw, m, y, t_max)
+            if y > 0.0:
+                room = t_max - m
+                if room < s_yaw * y:
+                    s_yaw = max(room, 0.0) / y
+            elif y < 0.0 and m < -s_yaw * y:
+                s_yaw = max(m, 0.0) / -y
         return mid, yaw, s_yaw
-
-
-def _fit_one(s: float, b: float, d: float, t_max: float) -> float:
-    """:func:`_fit_scale`'s step for one rotor: ``s`` reduced so that b + s·d fits."""
-    if d > 0.0:
-        room = t_max - b
-        if room < s * d:
-            return max(room, 0.0) / d
-    elif d < 0.0:
-        room = b
-        if room < -s * d:
-            return max(room, 0.0) / -d
-    return s
 
 
 def _fit_scale(base: list[float], delta: list[float], t_max: float) -> float:
