@@ -72,7 +72,8 @@ class Mixer:
         self, thrust_n: float, torque_x: float, torque_y: float, torque_z: float
     ) -> tuple[list[float], list[float], float]:
         """The rotors' thrusts with roll/pitch scaled to fit, their yaw shares, the yaw scale
-        that fits: :func:`_fit_scale` of each, computed in one pass over the rotors each."""
+        that fits. Each scale is the largest s in [0, 1] with every rotor's b + s·d inside
+        [0, t_max] (where b itself is), found in the pass over the rotors that makes b and d."""
         t_max = self.max_rotor_thrust_n
         thrust_n = min(max(thrust_n, 0.0), t_max * self.rotor_count)
         base = []
@@ -85,7 +86,7 @@ class Mixer:
             base.append(b)
             rp.append(d)
             yaw.append(r3 * torque_z)
-            if d > 0.0:  # _fit_scale's step, inline: this runs every tick for every rotor
+            if d > 0.0:  # inline, not a call per rotor: this runs every tick for every rotor
                 room = t_max - b
                 if room < s * d:
                     s = max(room, 0.0) / d
@@ -103,18 +104,3 @@ class Mixer:
             elif y < 0.0 and m < -s_yaw * y:
                 s_yaw = max(m, 0.0) / -y
         return mid, yaw, s_yaw
-
-
-def _fit_scale(base: list[float], delta: list[float], t_max: float) -> float:
-    """Largest s in [0, 1] with base + s·delta inside [0, t_max] (where base itself is)."""
-    s = 1.0
-    for b, d in zip(base, delta, strict=True):
-        if d > 0.0:
-            room = t_max - b
-            if room < s * d:
-                s = max(room, 0.0) / d
-        elif d < 0.0:
-            room = b
-            if room < -s * d:
-                s = max(room, 0.0) / -d
-    return s
