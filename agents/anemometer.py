@@ -146,8 +146,9 @@ class Anemometer:
             true = (float(uniform[0]), float(uniform[1]), float(uniform[2]))
         measured = true
         if self.config.noise_std_m_s > 0.0:
-            m = np.asarray(true) + self._normals.normal(tick, self.config.noise_std_m_s)
-            measured = (float(m[0]), float(m[1]), float(m[2]))
+            # the float64 sums numpy's add of the two vectors gives, without building arrays
+            n = self._normals.normal(tick, self.config.noise_std_m_s).tolist()
+            measured = (true[0] + n[0], true[1] + n[1], true[2] + n[2])
         return AnemometerReading(
             vehicle_id=vehicle_id,
             sim_time_s=sim_time_s,

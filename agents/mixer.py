@@ -46,14 +46,7 @@ class Mixer:
     ) -> list[float]:
         """Per-rotor thrust (N) within [0, max], yaw then roll/pitch reduced to fit."""
         t_max = self.max_rotor_thrust_n
-        rows = self._rows
-        thrust_n = min(max(thrust_n, 0.0), t_max * self.rotor_count)
-        base = [r[0] * thrust_n for r in rows]
-        rp = [r[1] * torque_x + r[2] * torque_y for r in rows]
-        yaw = [r[3] * torque_z for r in rows]
-        s_rp = _fit_scale(base, rp, t_max)
-        mid = [b + s_rp * d for b, d in zip(base, rp, strict=True)]
-        s_yaw = _fit_scale(mid, yaw, t_max)
+        mid, yaw, s_yaw = self._fit(thrust_n, torque_x, torque_y, torque_z)
         return [min(max(m + s_yaw * d, 0.0), t_max) for m, d in zip(mid, yaw, strict=True)]
 
     def commands(
@@ -62,22 +55,52 @@ class Mixer:
         """Rotor commands u in [0, 1] (ω = u·ω_max, T = k_f·ω²) for the request."""
         k_f = self.k_f
         w_max = self.omega_max
-        return [
-            min(math.sqrt(t / k_f) / w_max, 1.0)
-            for t in self.rotor_thrusts(thrust_n, torque_x, torque_y, torque_z)
-        ]
+        t_max = self.max_rotor_thrust_n
+        mid, yaw, s_yaw = self._fit(thrust_n, torque_x, torque_y, torque_z)
+        out = []
+        for m, d in zip(mid, yaw, strict=True):
+            t = m + s_yaw * d  # min(max(t, 0.0), t_max), NaN kept as the builtins keep it
+            if t < 0.0:
+                t = 0.0
+            if t_max < t:
+                t = t_max
+            u = math.sqrt(t / k_f) / w_max
+            out.append(1.0 if u > 1.0 else u)
+        return out
 
-
-def _fit_scale(base: list[float], delta: list[float], t_max: float) -> float:
-    """Largest s in [0, 1] with base + s·delta inside [0, t_max] (where base itself is)."""
-    s = 1.0
-    for b, d in zip(base, delta, strict=True):
-        if d > 0.0:
-            room = t_max - b
-            if room < s * d:
-                s = max(room, 0.0) / d
-        elif d < 0.0:
-            room = b
-            if room < -s * d:
-                s = max(room, 0.0) / -d
-    return s
+    def _fit(
+        self, thrust_n: float, torque_x: float, torque_y: float, torque_z: float
+    ) -> tuple[list[float], list[float], float]:
+        """The rotors' thrusts with roll/pitch scaled to fit, their yaw shares, the yaw scale
+        that fits. Each scale is the largest s in [0, 1] with every rotor's b + s·d inside
+        [0, t_max] (where b itself is), found in the pass over the rotors that makes b and d."""
+        t_max = self.max_rotor_thrust_n
+        thrust_n = min(max(thrust_n, 0.0), t_max * self.rotor_count)
+        base = []
+        rp = []
+        yaw = []
+        s = 1.0
+        for r0, r1, r2, r3 in self._rows:
+            b = r0 * thrust_n
+            d = r1 * torque_x + r2 * torque_y
+            base.append(b)
+            rp.append(d)
+            yaw.append(r3 * torque_z)
+            if d > 0.0:  # inline, not a call per rotor: this runs every tick for every rotor
+                room = t_max - b
+                if room < s * d:
+                    s = max(room, 0.0) / d
+            elif d < 0.0 and b < -s * d:
+                s = max(b, 0.0) / -d
+        mid = []
+        s_yaw = 1.0
+        for b, d, y in zip(base, rp, yaw, strict=True):
+            m = b + s * d
+            mid.append(m)
+            if y > 0.0:
+                room = t_max - m
+                if room < s_yaw * y:
+                    s_yaw = max(room, 0.0) / y
+            elif y < 0.0 and m < -s_yaw * y:
+                s_yaw = max(m, 0.0) / -y
+        return mid, yaw, s_yaw

@@ -170,7 +170,7 @@ class FlightModes:
         dist = math.hypot(x - hx, y - hy)
         if fs.geofence_max_distance_m > 0.0 and dist > fs.geofence_max_distance_m:
             return f"GF_MAX_HOR_DIST {fs.geofence_max_distance_m:g} m: {dist:.1f} m from home"
-        return zones_violation(self.fence_zones, x, y)
+        return zones_violation(self.fence_zones, x, y) if self.fence_zones else None
 
     def upload_fence(self, est: Estimate | None, zones: list[FenceZone]) -> Refusal | None:
         """Replace the uploaded zones. As PX4 does, a fence that leaves out home (or, before

@@ -203,8 +203,12 @@ class PeerLink:
     def after_step(self, tick: int, states: Sequence[VehicleState]) -> None:
         """Send what the behaviours published in their steps of ``tick``."""
         arrival = self.radio.arrival_tick(tick + 1)
-        by_id = {s.vehicle_id: s for s in states}
+        by_id: dict[str, VehicleState] = {}
         for vid, box in self.mailboxes.items():
+            if not box.outbox:
+                continue
+            if not by_id:
+                by_id = {s.vehicle_id: s for s in states}
             for n, message in enumerate(box.outbox):
                 self._send(tick, MESSAGE_INDEX + n, MESSAGE_INDEX, by_id[vid], states, message,
                            arrival)  # fmt: skip

@@ -51,6 +51,8 @@ log = logging.getLogger(__name__)
 
 #: Largest mesh grid served over the bus (points); finer requests are refused, not attempted.
 MAX_MESH_GRID_POINTS = 20_000_000
+#: Up to this many points, σ use is noted in scalar maths (numpy's per-call cost dominates).
+SCALAR_NOTE_POINTS = 16
 
 
 class PlumeService:
@@ -163,11 +165,15 @@ class SigmaUse:
 
     def __init__(self, field: ConcentrationField) -> None:
         self.sources = [f for f in source_fields(field) if isinstance(f, GaussianPlume | PuffPlume)]
+        self._gaussian_only = all(isinstance(f, GaussianPlume) for f in self.sources)
         self._range: dict[int, tuple[float, float]] = {}
         self._lock = threading.Lock()
 
     def note(self, points: FloatArray, values: FloatArray) -> None:
         if not self.sources:
+            return
+        if self._gaussian_only and points.shape[0] <= SCALAR_NOTE_POINTS:
+            self._note_few(points, values)
             return
         seen = points[values > 0.0]
         if seen.shape[0] == 0:
@@ -182,10 +188,28 @@ class SigmaUse:
             distance = distance[distance > 0.0]
             if distance.size == 0:
                 continue
-            lo, hi = float(distance.min()), float(distance.max())
-            with self._lock:
-                old = self._range.get(index)
-                self._range[index] = (lo, hi) if old is None else (min(old[0], lo), max(old[1], hi))
+            self._widen(index, float(distance.min()), float(distance.max()))
+
+    def _note_few(self, points: FloatArray, values: FloatArray) -> None:
+        """:meth:`note` for a few points and Gaussian sources, in scalar maths: the downwind
+        distance (x − x₀)·uₓ + (y − y₀)·u_y as the plume frame computes it, without numpy's
+        per-call cost (a sensor tick of a few vehicles)."""
+        seen = [
+            (p[0], p[1]) for p, v in zip(points.tolist(), values.tolist(), strict=True) if v > 0.0
+        ]
+        if not seen:
+            return
+        for index, source in enumerate(self.sources):
+            assert isinstance(source, GaussianPlume)
+            (x0, y0), (ux, uy) = source.source_m, source.downwind_unit
+            distance = [d for x, y in seen if (d := (x - x0) * ux + (y - y0) * uy) > 0.0]
+            if distance:
+                self._widen(index, min(distance), max(distance))
+
+    def _widen(self, index: int, lo: float, hi: float) -> None:
+        with self._lock:
+            old = self._range.get(index)
+            self._range[index] = (lo, hi) if old is None else (min(old[0], lo), max(old[1], hi))
 
     def notes(self) -> list[str]:
         out = []

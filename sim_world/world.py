@@ -266,6 +266,11 @@ class World(Closeable):
     def sim_time_s(self) -> float:
         return self.step_count / self.physics_hz
 
+    @property
+    def pybullet_bodies(self) -> tuple[int, tuple[int, ...]]:
+        """The pybullet client and every vehicle's body, in scenario order (for benches)."""
+        return self._client, tuple(v.body for v in self._vehicles)
+
     def vehicle_type(self, vehicle_id: str) -> VehicleType:
         return self._by_id[vehicle_id].type
 
@@ -274,11 +279,13 @@ class World(Closeable):
 
         Raises ``KeyError`` for an unknown vehicle and ``ValueError`` for a wrong rotor count.
         """
-        v = self._by_id[vehicle_id]
+        self._apply(self._by_id[vehicle_id], rotor_commands)
+
+    def _apply(self, v: _Vehicle, rotor_commands: Sequence[float]) -> None:
         target = v.target
         if len(rotor_commands) != len(target):
             raise ValueError(
-                f"vehicle {vehicle_id!r} has {len(target)} rotors, got {len(rotor_commands)} "
+                f"vehicle {v.id!r} has {len(target)} rotors, got {len(rotor_commands)} "
                 "rotor commands"
             )
         omega_max = v.omega_max if v.aero is None else 1.0  # a fixed wing's are fractions
@@ -295,16 +302,17 @@ class World(Closeable):
         """A tick's commands of every vehicle: a vehicle without one (no answer, a dropped
         participant) or with a bad one gets its motors off. Returns one line per bad command."""
         bad = []
-        for vid in self.vehicle_ids:
-            cmd = commands.get(vid)
-            self.set_motors_enabled(vid, cmd is not None)
+        for v in self._vehicles:
+            cmd = commands.get(v.id)
             if cmd is None:
+                self.set_motors_enabled(v.id, False)
                 continue
+            v.motors_enabled = True
             try:
-                self.apply(vid, cmd)
+                self._apply(v, cmd)
             except ValueError as exc:
                 bad.append(str(exc))
-                self.set_motors_enabled(vid, False)
+                self.set_motors_enabled(v.id, False)
         return bad
 
     def set_motors_enabled(self, vehicle_id: str, enabled: bool) -> None:

@@ -5,7 +5,8 @@ plumeswarm).
 ``Aviary`` (240 Hz physics, 120 Hz control: two physics steps per ``step()``), flying
 position setpoints (mode 7) that jump 3 m sideways every 2 s of sim time, so the controllers
 keep working. After 1 s of sim time it counts ``step()`` calls for SECONDS of wall time and
-prints one JSON line: steps, wall seconds, steps per second, real-time factor.
+prints one JSON line: steps, wall seconds, CPU seconds of this process, steps per second,
+real-time factor.
 """
 
 from __future__ import annotations
@@ -49,12 +50,14 @@ def main() -> None:
         env.step()
         step += 1
     start = time.perf_counter()
+    cpu0 = time.process_time()
     steps = 0
     while (elapsed := time.perf_counter() - start) < seconds:
         env.set_all_setpoints(setpoints(step))
         env.step()
         step += 1
         steps += 1
+    cpu = time.process_time() - cpu0
     env.disconnect()
     rate = steps / elapsed
     print(
@@ -62,6 +65,7 @@ def main() -> None:
             {
                 "steps": steps,
                 "wall_s": round(elapsed, 3),
+                "cpu_s": round(cpu, 3),
                 "steps_per_s": round(rate, 1),
                 "real_time_factor": round(rate / CONTROL_HZ, 3),
             }

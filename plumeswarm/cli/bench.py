@@ -153,7 +153,8 @@ def bench_scale(
     "--backends",
     default="fused,bus",
     show_default=True,
-    help="Comma-separated: fused (one process, no bus), bus (the distributed stack).",
+    help="Comma-separated: fused (one process, no bus), bus (the distributed stack), pyflyt "
+    "(PyFlyt's Aviary, in a virtualenv of its own), floor (the same pybullet bodies alone).",
 )
 @click.option(
     "--steps", type=click.IntRange(min=1), default=30, show_default=True, help="Timed steps."

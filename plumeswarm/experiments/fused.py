@@ -122,7 +122,9 @@ class FusedRunner(Closeable):
         states = self.states
         link, tick = self.link, self.tick
         link.before_step(tick)
-        everyone = link.peers(tick, states)
+        # A perfect link hands every peer's state over unchanged and draws nothing: each
+        # vehicle's peers are then built only for the behaviours that read them.
+        everyone = None if link.perfect else link.peers(tick, states)
         pending, self._pending = self._pending, None
         if pending is not None:
             sensor_tick, sensor_time_s, located, values = pending
@@ -133,7 +135,12 @@ class FusedRunner(Closeable):
                 self.latest_readings[flight.vehicle_id] = reading
         commands: dict[str, Sequence[float]] = {}
         for own, (flight, state) in enumerate(zip(self._flights, states, strict=True)):
-            peers = everyone[own] if flight.autopilot.behavior is not None else []
+            if flight.autopilot.behavior is None:
+                peers = []
+            elif everyone is None:
+                peers = states[:own] + states[own + 1 :]
+            else:
+                peers = everyone[own]
             commands[flight.vehicle_id] = flight.step(state, peers)
         link.after_step(tick, states)
         self._commands = commands

@@ -3,10 +3,12 @@
 
 from __future__ import annotations
 
+import msgspec
 import numpy as np
 
 from plume_service.from_scenario import field_from_scenario
-from plume_service.service import PlumeService, StatePublisher
+from plume_service.gaussian import GaussianPlume
+from plume_service.service import PlumeService, SigmaUse, StatePublisher
 from swarmbus.messages import PlumeInfoQuery, PlumeQuery
 from swarmbus.scenario import load_scenario, parse_scenario
 
@@ -64,6 +66,36 @@ def test_info_says_when_a_sigma_fit_is_used_outside_its_range() -> None:
     service.concentration(PlumeQuery(points_enu_m=[(14.0, 0.0, 10.0), (50.0, 0.0, 10.0)]))
     (note,) = service.info(PlumeInfoQuery()).sigma_validity
     assert "14–500 m downwind" in note and "100–100000 m" in note
+
+
+def test_sigma_use_of_a_few_points_is_the_plume_frames_distance_to_the_bit() -> None:
+    """A sensor tick's few points are noted in scalar maths: each point's downwind distance
+    is the one the numpy plume frame gives (two sources, wind along an axis and not)."""
+    rng = np.random.default_rng(3)
+    for from_deg in (270.0, 200.0, 33.3):
+        scenario = load_scenario("swarmbus/scenarios/novak2018.toml")
+        source = scenario.plume.sources[0]
+        scenario = msgspec.structs.replace(
+            scenario,
+            wind=msgspec.structs.replace(scenario.wind, from_deg=from_deg),
+            plume=msgspec.structs.replace(
+                scenario.plume,
+                sources=[source, msgspec.structs.replace(source, x_m=-7.3, y_m=2.9)],
+            ),
+        )
+        field = field_from_scenario(scenario)
+        sources = SigmaUse(field).sources
+        assert len(sources) == 2
+        compared = 0
+        for point in rng.uniform((-300, -300, 0), (300, 300, 20), (300, 3)):
+            use = SigmaUse(field)
+            use.note(point[None, :], np.ones(1))
+            for index, plume in enumerate(sources):
+                assert isinstance(plume, GaussianPlume)
+                x = float(plume.to_plume_frame(point[None, :])[0][0])
+                assert use._range.get(index) == ((x, x) if x > 0.0 else None)
+                compared += x > 0.0
+        assert compared > 100
 
 
 def test_state_publisher_sends_the_filaments_at_multiples_of_its_period() -> None:

@@ -11,6 +11,7 @@ import socket
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import gymnasium
 import msgspec
@@ -193,20 +194,40 @@ def test_the_scripted_policy_of_the_docs_runs_and_finds_the_source() -> None:
     assert printed in text  # the docs quote what it prints
 
 
-def test_bench_envs_writes_one_row_per_backend_and_count(tmp_path: Path) -> None:
+def bench_envs(out: Path, backends: str, vehicles: str, steps: int) -> tuple[str, list[Any]]:
+    """``plumeswarm bench envs``'s output and rows."""
     res = run_cli(
-        ["bench", "envs", "--backends", "fused", "--vehicles", "1,2", "--steps", "3",
-         "--out", str(tmp_path)],
+        ["bench", "envs", "--backends", backends, "--vehicles", vehicles, "--steps", str(steps),
+         "--out", str(out)],
         timeout_s=240,
     )  # fmt: skip
     assert res.returncode == 0, res.stderr[-2000:]
-    rows = json.loads((tmp_path / "envs.json").read_text())
+    rows: list[Any] = json.loads((out / "envs.json").read_text())
+    return res.stdout, rows
+
+
+def test_bench_envs_writes_one_row_per_backend_and_count(tmp_path: Path) -> None:
+    stdout, rows = bench_envs(tmp_path, "fused", "1,2", 3)
     assert [(r["backend"], r["vehicles"]) for r in rows] == [("fused", 1), ("fused", 2)]
     for row in rows:
         assert row["steps"] == 3 and row["steps_per_s"] > 0
         # 3 steps of 12 ticks at 120 Hz: 0.3 s of sim time over the measured wall time
         assert row["real_time_factor"] == pytest.approx(0.3 * row["steps_per_s"] / 3, rel=1e-6)
-    assert "steps/s" in res.stdout and "envs.json" in res.stdout
+    assert "steps/s" in stdout and "envs.json" in stdout
+
+
+def test_bench_envs_puts_the_pybullet_floor_beside_the_fused_runner(tmp_path: Path) -> None:
+    stdout, rows = bench_envs(tmp_path, "fused,floor", "2", 2)
+    assert [(r["backend"], r["vehicles"]) for r in rows] == [("fused", 2), ("floor", 2)]
+    fused, floor = rows
+    # the floor steps as many control ticks as the fused rows: 2 steps of 12 at 120 Hz
+    assert floor["steps"] == 24 and floor["real_time_factor"] == pytest.approx(
+        0.2 / (24 / floor["steps_per_s"]), rel=1e-6
+    )
+    ratio = fused["cpu_real_time_factor"] / floor["cpu_real_time_factor"]
+    table = stdout.split("/ floor", 1)[1].splitlines()[1].split()
+    assert table[0] == "2" and table[-1] == f"{ratio:.2f}x", stdout
+    assert table[-2] == "-"  # no PyFlyt row in this run
 
 
 def test_bench_envs_names_an_unknown_backend(tmp_path: Path) -> None:
