@@ -266,3 +266,37 @@ def test_the_role_table_of_the_docs_is_the_one_the_acl_is_made_from() -> None:
         for role in roles.split("(")[0].split(","):
             documented[role.strip()] = named
     assert documented == ROLE_PLANES
+
+
+def test_acl_off_keeps_mutual_tls_and_lets_every_identity_send(
+    certified: tuple[Deployment, Path],
+) -> None:
+    """``[acl] enabled = false``: TLS stays on (a client without a certificate, with another
+    CA's or over plain TCP still does not get in) and nothing an identity sends is refused (the
+    gateway's forged actuators, state and tick all reach the physics)."""
+    dep, tmp = certified
+    off = msgspec.structs.replace(
+        dep,
+        router=f"tls/127.0.0.1:{free_tcp_port()}",
+        acl=msgspec.structs.replace(dep.acl, enabled=False),
+    )
+    router = secure_network(
+        NetworkConfig(mode="router", connect=[], listen=[off.router]), off, "sim", "router", KEYS
+    )
+    assert router.tls is not None and router.access_control is None
+    with open_session(router), open_session(as_role(off, "sim", "plume")) as plume:
+        token = plume.liveliness().declare_token(KEYS.node_health("plume"))  # for door()
+        result = forged_puts_seen(
+            as_role(off, "sim", "physics"),
+            as_role(off, "gcs", "gateway"),
+            KEYS,
+            marker_key=marker_of(off, "gcs", "gateway", KEYS),
+        )
+        stranger = stranger_tls(tmp / "certs", tmp / "strangers-acl-off", "stranger.gcs")
+        outside = door(off, "gcs", KEYS, tmp / "other-ca", stranger)
+        token.undeclare()
+    assert result["marker"], "the gateway's marker never arrived: nothing was tested"
+    assert sorted(result["seen"]) == sorted(forbidden_keys(KEYS)), result
+    assert outside["operator"] is None, outside
+    for how in ("no_cert", "other_ca", "plain_tcp"):
+        assert outside[how] is not None, f"{how} joined with the ACL off: {outside}"
