@@ -21,6 +21,7 @@ from typing import Any
 import msgspec
 import pytest
 import zenoh
+from cryptography import x509
 
 from deploy import certs
 from deploy.certs import common_name_of
@@ -341,3 +342,16 @@ def test_a_scenarios_network_tls_puts_its_sessions_on_mutual_tls(
         assert join_error(bare, {"root_ca_certificate": net.tls.root_ca}) is not None
         plain = NetworkConfig(mode="client", connect=[endpoint.replace("tls/", "tcp/")], listen=[])
         assert join_error(plain, None) is not None
+
+
+def test_certificates_are_valid_from_5_minutes_before_they_were_written(
+    certified: tuple[Deployment, Path],
+) -> None:
+    """docs/reliability.md, "Clocks of the hosts": a host whose clock is up to 5 minutes behind
+    the one that made the certificates accepts them (beyond that, TLS refuses them)."""
+    _, tmp = certified
+    for pem in [tmp / "certs" / "ca.pem", *sorted((tmp / "certs").glob("*/*.pem"))]:
+        cert = x509.load_pem_x509_certificate(pem.read_bytes())
+        written = pem.stat().st_mtime
+        lead_s = written - cert.not_valid_before_utc.timestamp()
+        assert 300.0 - 30.0 < lead_s < 300.0 + 30.0, (pem.name, lead_s)
