@@ -118,10 +118,13 @@ class TickOutput:
 
     def backfill(self, ticks: Iterable[list[tuple[str, bytes]]]) -> None:
         """Re-send ``ticks`` (each a tick's and its states' key and payload) on
-        ``sim/backfill/<key>`` for a new recorder."""
+        ``sim/backfill/<key>`` for a new recorder. Blocking, not dropping, when the link's
+        queue is full: the clock is held meanwhile, and a burst of 256 ticks dropped its
+        tail under load."""
+        block = zenoh.CongestionControl.BLOCK
         for entries in ticks:
             for key, payload in entries:
-                self._session.put(self._keys.backfill_of(key), payload)
+                self._session.put(self._keys.backfill_of(key), payload, congestion_control=block)
 
     def close(self) -> None:
         self.resender.close()

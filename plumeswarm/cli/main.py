@@ -97,6 +97,9 @@ def _as_deployed(
         dep = load_deployment(hosts_file)
         if net.connect == sc.network.connect:  # not given: the deployment's router
             net = net.with_overrides(connect=[dep.router])
+        listen = dep.host(host_name).listen
+        if net.listen == sc.network.listen and listen:  # not given: the host's, as `up` does
+            net = net.with_overrides(listen=list(listen))  # (never plain TCP beside mTLS)
         return secure_network(net, dep, host_name, role, Keys(sc.world.name), node_name)
     except HostsError as exc:
         fail(str(exc))

@@ -12,6 +12,8 @@ from __future__ import annotations
 import itertools
 import re
 import shutil
+import threading
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -19,20 +21,24 @@ from typing import Any
 import msgspec
 import pytest
 import zenoh
+from cryptography import x509
 
 from deploy import certs
 from deploy.certs import common_name_of
 from deploy.hosts import Deployment, HostsError, load_deployment
 from deploy.security import ROLE_PLANES, access_control, host_identities, secure_network
 from swarmbus.keys import Keys
+from swarmbus.scenario import load_scenario
 from swarmbus.session import NetworkConfig, free_tcp_port, open_session
 from tests.deploy.test_faults_cli import assert_one_clear_line, bad_file
 from tests.support.hosts import write_hosts
+from tests.support.mavclient import write_scenario
 from tests.support.procs import REPO, run_cli
 from tests.support.tls_probe import (
     door,
     forbidden_keys,
     forged_puts_seen,
+    join_error,
     marker_of,
     stranger_tls,
 )
@@ -266,3 +272,86 @@ def test_the_role_table_of_the_docs_is_the_one_the_acl_is_made_from() -> None:
         for role in roles.split("(")[0].split(","):
             documented[role.strip()] = named
     assert documented == ROLE_PLANES
+
+
+def test_acl_off_keeps_mutual_tls_and_lets_every_identity_send(
+    certified: tuple[Deployment, Path],
+) -> None:
+    """``[acl] enabled = false``: TLS stays on (a client without a certificate, with another
+    CA's or over plain TCP still does not get in) and nothing an identity sends is refused (the
+    gateway's forged actuators, state and tick all reach the physics)."""
+    dep, tmp = certified
+    off = msgspec.structs.replace(
+        dep,
+        router=f"tls/127.0.0.1:{free_tcp_port()}",
+        acl=msgspec.structs.replace(dep.acl, enabled=False),
+    )
+    router = secure_network(
+        NetworkConfig(mode="router", connect=[], listen=[off.router]), off, "sim", "router", KEYS
+    )
+    assert router.tls is not None and router.access_control is None
+    with open_session(router), open_session(as_role(off, "sim", "plume")) as plume:
+        token = plume.liveliness().declare_token(KEYS.node_health("plume"))  # for door()
+        result = forged_puts_seen(
+            as_role(off, "sim", "physics"),
+            as_role(off, "gcs", "gateway"),
+            KEYS,
+            marker_key=marker_of(off, "gcs", "gateway", KEYS),
+        )
+        stranger = stranger_tls(tmp / "certs", tmp / "strangers-acl-off", "stranger.gcs")
+        outside = door(off, "gcs", KEYS, tmp / "other-ca", stranger)
+        token.undeclare()
+    assert result["marker"], "the gateway's marker never arrived: nothing was tested"
+    assert sorted(result["seen"]) == sorted(forbidden_keys(KEYS)), result
+    assert outside["operator"] is None, outside
+    for how in ("no_cert", "other_ca", "plain_tcp"):
+        assert outside[how] is not None, f"{how} joined with the ACL off: {outside}"
+
+
+def test_a_scenarios_network_tls_puts_its_sessions_on_mutual_tls(
+    certified: tuple[Deployment, Path], tmp_path: Path
+) -> None:
+    """Without a hosts file, ``[network.tls]`` of a scenario: every session made from the
+    scenario's network shows that one identity; one with it joins a router made from it and
+    exchanges samples, one without a certificate or over plain TCP does not join."""
+    _, tmp = certified
+    issued = certs.Authority.load(tmp / "certs").issue_to(
+        tmp_path / "run", "run.local", ["127.0.0.1"], 1
+    )
+    path, _, _ = write_scenario(tmp_path / "scenario.toml", 1)
+    with path.open("a") as f:
+        f.write(
+            f'\n[network.tls]\nroot_ca = "{tmp / "certs" / "ca.pem"}"\n'
+            f'cert = "{issued.cert}"\nkey = "{issued.key}"\n'
+        )
+    net = load_scenario(path).network
+    assert net.tls is not None and common_name_of(Path(net.tls.cert)) == "run.local"
+    endpoint = f"tls/127.0.0.1:{free_tcp_port()}"
+    router = net.with_overrides(mode="router", connect=[], listen=[endpoint])
+    client = net.with_overrides(mode="client", connect=[endpoint], listen=[])
+    got = threading.Event()
+    with open_session(router), open_session(client) as a, open_session(client) as b:
+        sub = b.declare_subscriber("tls/check", lambda _: got.set())
+        deadline = time.monotonic() + 10.0
+        while not got.is_set() and time.monotonic() < deadline:
+            a.put("tls/check", b"x")
+            got.wait(0.1)
+        sub.undeclare()
+        assert got.is_set(), "no sample between two sessions of the scenario's identity"
+        bare = NetworkConfig(mode="client", connect=[endpoint], listen=[])
+        assert join_error(bare, {"root_ca_certificate": net.tls.root_ca}) is not None
+        plain = NetworkConfig(mode="client", connect=[endpoint.replace("tls/", "tcp/")], listen=[])
+        assert join_error(plain, None) is not None
+
+
+def test_certificates_are_valid_from_5_minutes_before_they_were_written(
+    certified: tuple[Deployment, Path],
+) -> None:
+    """docs/reliability.md, "Clocks of the hosts": a host whose clock is up to 5 minutes behind
+    the one that made the certificates accepts them (beyond that, TLS refuses them)."""
+    _, tmp = certified
+    for pem in [tmp / "certs" / "ca.pem", *sorted((tmp / "certs").glob("*/*.pem"))]:
+        cert = x509.load_pem_x509_certificate(pem.read_bytes())
+        written = pem.stat().st_mtime
+        lead_s = written - cert.not_valid_before_utc.timestamp()
+        assert 300.0 - 30.0 < lead_s < 300.0 + 30.0, (pem.name, lead_s)

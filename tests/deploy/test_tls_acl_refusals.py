@@ -7,9 +7,11 @@ may send."""
 from __future__ import annotations
 
 import re
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
+import psutil
 import pytest
 
 from deploy.hosts import Deployment
@@ -26,7 +28,7 @@ from tests.deploy.test_tls_acl_commands import (
     sender,
 )
 from tests.support.procs import Network, NodeProcs, wait_until
-from tests.support.tls_probe import stranger_tls
+from tests.support.tls_probe import join_error, stranger_tls
 
 KEYS = Keys("default")
 
@@ -87,3 +89,47 @@ def test_a_certificate_of_our_ca_that_names_no_identity_is_logged_by_its_zenoh_i
         stranger.put(KEYS.vehicle_status("uav1"), b"forged")
         line = f"access control: zenoh id {zid} shows a certificate that names no identity"
         wait_until(lambda: line in log.read_text(), 10.0, "the router's line for the stranger")
+
+
+def _listening_ports(pid: int) -> list[int]:
+    return [
+        c.laddr.port
+        for c in psutil.Process(pid).net_connections(kind="tcp")
+        if c.status == psutil.CONN_LISTEN
+    ]
+
+
+def _ready_and_listening(log: Path, role: str, pid: int) -> list[int]:
+    """Once the node says it is ready: the TCP ports it listens on."""
+    wait_until(lambda: f"{role} ready" in log.read_text(), 60.0, f"{role} ready", 0.2)
+    return list(wait_until(lambda: _listening_ports(pid), 10.0, f"{role} listening"))
+
+
+def test_nodes_given_a_hosts_file_listen_on_its_tls_endpoints_only(
+    router_log: tuple[Deployment, Path], tmp_path: Path
+) -> None:
+    """``node ROLE --hosts … --host …`` without ``--listen`` listens where the hosts file says
+    (``tls/``), as the nodes of ``up`` do: a plain TCP client opens no session on any port
+    it listens on, and two peers of one host, which link to each other, see no link without a
+    certificate (one the ACL would refuse wholesale, logged as a certificate that names no
+    identity)."""
+    _, log = router_log
+    hosts = str(log.parent / "hosts.toml")
+    roles = ("plume", "physics")
+    with NodeProcs(Network(0), log_dir=tmp_path) as procs:
+        pids = {
+            role: procs.start_module(
+                "plumeswarm", "-v", "node", role, "--hosts", hosts, "--host", "sim", label=role
+            ).pid
+            for role in roles
+        }
+        ports = {role: _ready_and_listening(tmp_path / f"{role}.log", role, pid)
+                 for role, pid in pids.items()}  # fmt: skip
+        for role, listening in ports.items():
+            for port in listening:
+                plain = NetworkConfig(mode="client", connect=[f"tcp/127.0.0.1:{port}"], listen=[])
+                assert join_error(plain, None) is not None, f"{role} takes plain TCP on {port}"
+        time.sleep(2.0)  # the peers' own link (gossip) is up within a second of both starting
+        logs = {role: (tmp_path / f"{role}.log").read_text() for role in roles}
+    for role, text in logs.items():
+        assert "names no identity" not in text, (role, text[-2000:])

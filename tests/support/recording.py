@@ -1,5 +1,6 @@
 """Recording a run of the scripted publisher (tests/support/scripted_publisher.py): the
-publisher and recorder processes, and what the publisher says it published."""
+publisher and recorder processes, and what the publisher says it published; the ticks a
+recording lacks."""
 
 from __future__ import annotations
 
@@ -12,6 +13,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from recorder.reader import Recording
+from swarmbus.messages import SimTick
 from tests.support.procs import REPO, Network, NodeProcs
 
 
@@ -72,3 +75,15 @@ def recorded_run(net: Network, log_dir: Path, out: Path, *publisher_args: str) -
 def published_messages(published: dict[str, Any]) -> list[tuple[str, bytes]]:
     """(key, payload) of every message the publisher put, in order."""
     return [(key, bytes.fromhex(payload)) for key, payload, _ in published["published"]]
+
+
+def ticks_not_recorded(path: Path, tick_key: str) -> list[int]:
+    """The ticks between the first and the last ``SimTick`` on ``tick_key`` that no segment of
+    the recording at ``path`` holds (read from the messages, not from a gap record)."""
+    ticks = {
+        msg.tick
+        for m in Recording.open(path).messages()
+        if m.topic == tick_key and isinstance(msg := m.message(), SimTick)
+    }
+    assert ticks, f"no tick on {tick_key} in {path}"
+    return sorted(set(range(min(ticks), max(ticks) + 1)) - ticks)

@@ -36,6 +36,7 @@ from swarmbus.session import NetworkConfig, open_session
 from tests.support.mavclient import MavClient
 from tests.support.mavclient import write_scenario as write_gcs_scenario
 from tests.support.procs import run_cli, wait_until
+from tests.support.recording import ticks_not_recorded
 from tests.support.upstack import StackOnBus, plumeswarm_up
 
 VEHICLES = ["uav1", "uav2", "uav3"]
@@ -197,6 +198,11 @@ def test_recorder_killed_continues_in_a_new_segment_with_the_gap(
         if m.topic == stack.keys.tick() and isinstance(m.message(), SimTick)
     ]
     assert ticks[0] == gap.first_tick and len(ticks) >= new_ticks
+    # "0 missing" measured on the recording itself, not taken from the gap record: every tick
+    # from the first recorded to the last is in one of the segments (both read, in order)
+    absent = ticks_not_recorded(seg0, stack.keys.tick())
+    assert absent == [], f"{len(absent)} ticks not recorded: {absent[:10]}"
+    assert gap.ticks_missing == 0
     # report reads the run directory: both segments, and says what was not recorded
     out = tmp_path / "report"
     r = run_cli(["report", str(run), "--out", str(out)], timeout_s=240.0)

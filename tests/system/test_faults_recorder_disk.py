@@ -27,6 +27,7 @@ from swarmbus.scenario import load_scenario
 from swarmbus.session import free_tcp_port
 from tests.support.mavclient import write_scenario
 from tests.support.procs import keys_for, run_cli, wait_until
+from tests.support.recording import ticks_not_recorded
 from tests.support.upstack import recording_launch
 
 
@@ -155,5 +156,8 @@ def test_full_disk_is_reported_held_and_recovered(
         gap.ticks_missing == 0 if spool else gap.ticks_missing >= 0
     ), gap
     assert max(recorded) >= held + 150, (held, max(recorded))
+    # what the gap record says, measured on the segments themselves: the ticks they lack
+    absent = ticks_not_recorded(out, keys.tick())
+    assert len(absent) == gap.ticks_missing, (len(absent), absent[:3], absent[-3:], gap)
     assert "recorder reports an error: write error" in caplog.text
     print(f"\nfull at tick {filled_at}, held at {held}: {gap}")

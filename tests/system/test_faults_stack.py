@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import itertools
 import random
+import re
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -273,8 +274,26 @@ def test_fuzz_every_bus_key_while_flying(stack: Stack) -> None:
     for v in VEHICLES:
         assert stack.states[v].position_enu_m[2] > ALTITUDE_M - 3, v
         assert stack.status[v].mode == FlightMode.HOLD and stack.status[v].armed, v
+    # Every receiver of a fuzzed key said what it refused, as the type it expected there: the
+    # physics (actuators, health, plume samples), the plume (sensor ticks, its queries), each
+    # autopilot (ticks, its commands), the gateway (states in ticks, statuses, readings).
+    receivers = ["physics", "plume", "gateway", *[autopilot_node(v) for v in VEHICLES]]
+    assert set(receivers) == set(pids) - {"router"}, sorted(pids)
+    rejections = {n: _typed_rejections((stack.up.run / f"{n}.log").read_text()) for n in receivers}
+    counts = {n: len(r) for n, r in rejections.items()}
+    print("fuzz: typed rejections logged: " + ", ".join(f"{n} {c}" for n, c in counts.items()))
+    assert all(counts.values()), counts
     print(f"fuzz: {sent} publications and {asked} queries in {FUZZ_SECONDS:.0f} s, "
           "no process died, the vehicles held")  # fmt: skip
+
+
+# a refusal naming the message type it expected (``swarmbus.codec.MessageError``)
+_TYPED = re.compile(r" WARNING: .*\binvalid [A-Z][A-Za-z]+\b")
+
+
+def _typed_rejections(log_text: str) -> list[str]:
+    """The lines of a process log that refuse a payload as not of its expected type."""
+    return [line for line in log_text.splitlines() if _TYPED.search(line)]
 
 
 def test_autopilot_killed_midflight_the_clock_waits_and_it_flies_on(stack: Stack) -> None:

@@ -100,3 +100,12 @@ def test_seed_scenario_flies_over_mutual_tls_and_strangers_stay_out(tmp_path: Pa
             )
         finally:
             h.stop()
+        # Every link between our own processes showed a certificate of an identity: only the
+        # router met one that names none (the probe's stranger). A process listening on plain
+        # TCP beside mTLS (the demo's session, once) would show up here.
+        strangers = [
+            f.relative_to(tmp_path)
+            for f in tmp_path.glob("*/*.log")
+            if "names no identity" in f.read_text(errors="replace")
+        ]
+        assert strangers == [Path("sim/router.log")], strangers
