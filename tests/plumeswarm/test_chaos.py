@@ -8,6 +8,7 @@ replay conflict); the plan of the kills is checked against its definition."""
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 from plumeswarm.experiments.chaos import ChaosRun, compare, fault_plan, moment_plan
@@ -80,6 +81,29 @@ def test_chaos_twenty_faults_streams_identical(tmp_path: Path) -> None:
     for vid, v in report["vehicles"].items():
         assert v["ticks"] == 1201 and v["missing"] == 0 and v["differ"] == 0, vid
     assert "identical to the fault-free run" in r.stdout
+
+
+def test_chaos_physics_and_an_autopilot_killed_before_the_checkpoint_after_the_commands(
+    tmp_path: Path,
+) -> None:
+    """Seed 13 kills autopilot-uav2 and the physics together at tick 90: the physics resumes
+    from its checkpoint of tick 0, before the missions' commands of tick 1. The autopilots
+    that ran on and the restarted one handle those commands again in the replay, where they
+    came: the streams are the fault-free run's."""
+    path, _, _ = write_scenario(tmp_path / "scenario.toml", 3)
+    out = tmp_path / "run"
+    args = ["--seconds", "2", "--faults", "2", "--concurrent", "2", "--in-hold", "0"]
+    r = run_cli(["chaos", str(path), *args, "--seed", "13", "--out", str(out)], timeout_s=300.0)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    report = json.loads((out / "chaos.json").read_text())
+    [fault] = report["faults"]
+    assert fault["processes"] == ["autopilot-uav2", "physics"] and fault["tick"] < 120, fault
+    physics = (out / "chaos" / "physics.log").read_text()
+    assert "resumed from checkpoint at tick 0 " in physics
+    for vid in ("uav1", "uav2"):
+        log = (out / "chaos" / f"autopilot-{vid}.log").read_text()
+        assert re.search(r"tick 1: \d+ command\(s\) handled again in the replay", log), vid
+    assert report["identical"] and report["conflicts"] == 0
 
 
 def test_chaos_bad_input_is_one_line() -> None:
