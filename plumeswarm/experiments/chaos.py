@@ -269,7 +269,7 @@ class Killer:
         """Supervise until every process of ``faults`` (with the monotonic time each was
         killed) is back and ``stepper`` is done; fill in their ``back_s``."""
         deadline = time.monotonic() + BACK_TIMEOUT_S
-        pending = list(faults)
+        pending = [(f, t0) for f, t0 in faults if not f.back_s]
         while pending or (stepper is not None and stepper.running):
             self.supervise()
             now = time.monotonic()
@@ -355,6 +355,8 @@ def _fault(
     while time.monotonic() - t0 < delay_s:
         killer.supervise()
         time.sleep(0.02)
+    if not killer.eligible():  # every process left to kill is the first group's: after it
+        killer.wait_back([(first, t0)], stepper)
     t1 = time.monotonic()
     second = killer.kill(moment.hold_size)
     faults.append(second)
