@@ -415,7 +415,7 @@ def run_chaos(opts: ChaosOptions, console: Callable[[str], None]) -> int:
         base = fly(opts, opts.out / "fault-free", [], console)
         holds = sum(1 for m in moments if m.hold_size)
         console(
-            f"chaos run: {opts.faults} processes killed at {len(moments) + holds} moments, "
+            f"chaos run: up to {opts.faults} processes killed at {len(moments) + holds} moments, "
             f"up to {opts.concurrent} at once, {holds} during a hold (seed {opts.seed})"
         )
         t0 = time.monotonic()
