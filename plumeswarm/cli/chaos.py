@@ -65,7 +65,8 @@ def chaos(
     vehicles_per_process: int,
     out: Path | None,
 ) -> None:
-    """Kill processes at seeded moments of a run; compare the vehicles with a fault-free run."""
+    """Kill processes at seeded moments of a run, several at once and during the hold for an
+    earlier kill's restart; compare the vehicles with a fault-free run."""
     import time
 
     from deploy.scaling import ScalingError, multirotors_only, scale_scenario
