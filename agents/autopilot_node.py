@@ -25,6 +25,7 @@ from agents.behavior import BehaviorError, talks
 from agents.build import AutopilotOptions, build_flight, vehicle_index
 from agents.checkpoint import (
     CheckpointError,
+    HandledCommand,
     PendingCheckpoint,
     ProcessCheckpoint,
     capture,
@@ -253,6 +254,12 @@ class AutopilotNode:
             self.keeper = StateKeeper(Path(options.checkpoint), round(period))
         self._snap_pending: PendingCheckpoint | None = None
         self._snap_tick = -1  # the tick of the state (last_tick runs ahead while resuming)
+        # The commands handled since the oldest kept checkpoint — (the tick answered before
+        # it, vehicle, command) — and the ticks a replay from a checkpoint passes again, the
+        # one it went back to and the highest answered before: the replay handles those
+        # commands again where they came (agents.resume).
+        self._commands: list[HandledCommand] = []
+        self._replay = (0, -1)
         self.node_name = ctx.name
         # Realtime: the vehicles that landed for want of ticks (docs/agents.md)
         self._realtime = ctx.scenario.time.mode == "realtime"
@@ -374,6 +381,9 @@ class AutopilotNode:
 
     def _handle_command(self, served: _Served, command: Command) -> CommandReply:
         reply = served.autopilot.handle(command)
+        if self.keeper is not None:
+            handled = HandledCommand(self.last_tick, served.vehicle_id, encode(command))
+            self._commands.append(handled)
         served.publish_status(force=False, period_s=self.status_period_s)
         self._save()
         if not reply.accepted:
@@ -474,6 +484,8 @@ class AutopilotNode:
             )
 
     def _advance(self, tick: Tick) -> None:
+        if self._replay[0] <= tick.tick - 1 <= self._replay[1]:
+            self._replay_commands(tick.tick - 1)
         if tick.tick < self.last_tick:
             # Physics restarted from a checkpoint: fly on from its tick (timers stretch by it).
             log.warning(
@@ -490,6 +502,9 @@ class AutopilotNode:
         self.last_tick = tick.tick
         if self.keeper is not None:
             self.keeper.before_tick(tick.tick)
+            oldest = self.keeper.oldest_kept()
+            if oldest is not None and self._commands and self._commands[0].after_tick < oldest:
+                self._commands = [c for c in self._commands if c.after_tick >= oldest]
 
     def _world_went_on(self, tick: Tick) -> None:
         """Lockstep and stepped mode: ticks this process never answered were stepped, so the
@@ -655,6 +670,7 @@ class AutopilotNode:
             pending=self._snap_pending,
             link=self.link.snapshot() if self.link_on else b"",
             link_states=self._link_states if self.link_on else [],
+            handled=self._commands,
         )
         return msgspec.msgpack.encode(snap)
 
@@ -675,16 +691,23 @@ class AutopilotNode:
         """Restore a checkpoint when this tick calls for one (agents.resume)."""
         keeper = self.keeper
         assert keeper is not None
+        high = -1
         if self.last_tick < 0:
             snap = keeper.for_restart(tick.tick)
             how = "restarted process"
+            latest = keeper.latest_found()
+            if snap is not None and latest is not None:  # what it had handled: the replay's
+                self._commands, high = list(latest.handled), latest.tick
         elif tick.tick < self.last_tick:
             snap = keeper.for_rewind(tick.tick)
             how = "physics resumed from its checkpoint"
+            high = self.last_tick
         else:
             return
         if snap is None:
             return
+        # The ticks a replay passes again: its state holds the commands up to its own tick.
+        self._replay = (snap.tick + 1, max(self._replay[1], high))
         self._restore(snap)
         log.warning(
             "%s: restored the state of tick %d for tick %d (%s)",
@@ -693,6 +716,17 @@ class AutopilotNode:
             tick.tick,
             how,
         )
+
+    def _replay_commands(self, after_tick: int) -> None:
+        """The replay of a tick that went back is about to pass ``after_tick``: the commands
+        handled there the first time are handled again (their replies went out then), so the
+        replay flies as the first pass did."""
+        again = [c for c in self._commands if c.after_tick == after_tick]
+        for c in again:
+            self.served[c.vehicle_id].autopilot.handle(decode(c.command, Command))  # type: ignore[arg-type]
+        if again:
+            log.info("tick %d: %d command(s) handled again in the replay", after_tick, len(again))
+            self._save()
 
     def _restore(self, snap: ProcessCheckpoint) -> None:
         served = list(self.served.values())

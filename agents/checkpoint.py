@@ -399,6 +399,15 @@ class PendingCheckpoint(msgspec.Struct, frozen=True, kw_only=True):
     by_physics: bool
 
 
+class HandledCommand(msgspec.Struct, frozen=True):
+    """A command a process handled after answering tick ``after_tick`` (``swarmbus.codec``
+    encoding): a replay from an earlier checkpoint handles it again there."""
+
+    after_tick: int
+    vehicle_id: str
+    command: bytes
+
+
 class ProcessCheckpoint(msgspec.Struct, frozen=True, kw_only=True):
     """An autopilot process after handling tick ``tick`` (and any command since)."""
 
@@ -415,6 +424,8 @@ class ProcessCheckpoint(msgspec.Struct, frozen=True, kw_only=True):
     # it sends them with; empty when the link is off.
     link: bytes = b""
     link_states: list[VehicleState] = []
+    # The commands handled since the oldest checkpoint kept for a rewind (agents.resume)
+    handled: list[HandledCommand] = []
 
 
 _process_decoder = msgspec.msgpack.Decoder(ProcessCheckpoint)

@@ -76,6 +76,14 @@ class StateKeeper:
             for old in sorted(self._at_checkpoint)[:-2]:
                 del self._at_checkpoint[old]
 
+    def oldest_kept(self) -> int | None:
+        """The oldest checkpoint tick whose state before it is kept (a rewind's furthest)."""
+        return min(self._at_checkpoint, default=None)
+
+    def latest_found(self) -> ProcessCheckpoint | None:
+        """The predecessor's last checkpoint (the most commands of its last tick)."""
+        return max(self._found, key=lambda s: (s.tick, len(s.handled)), default=None)
+
     def for_restart(self, tick: int) -> ProcessCheckpoint | None:
         """A restarted process's first tick: the predecessor's checkpoint of ``tick - 1`` (or of
         ``tick``, already answered), or None."""

@@ -255,9 +255,15 @@ class Swarm(Closeable):
             return sorted(set(self._states) | set(self._status) | set(self._readings))
 
     def autopilots_alive(self) -> list[str]:
-        """Ids of the vehicles whose autopilot token is alive right now."""
-        ids = (vehicle_of_autopilot(name) for name in self._presence.alive)
-        return sorted(vid for vid in ids if vid is not None)
+        """Ids of the vehicles whose autopilot token is alive right now.
+
+        A process serving several vehicles declares a token per vehicle and one under its own
+        name (``autopilot-uav1-plus7``), which reads like a vehicle's: once vehicles were seen
+        on the bus, only theirs count (a stepped client would wait for the status of a vehicle
+        that does not exist)."""
+        ids = {vid for name in self._presence.alive if (vid := vehicle_of_autopilot(name))}
+        seen = set(self.vehicles)
+        return sorted(ids & seen if seen else ids)
 
     def state(self, vehicle_id: str) -> VehicleState | None:
         with self._lock:
