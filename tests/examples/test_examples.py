@@ -14,8 +14,10 @@ import re
 import subprocess
 import sys
 import tomllib
+import zipfile
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from swarmbus.scenario import SCENARIOS_DIR
@@ -158,3 +160,59 @@ def test_train_sb3_trains_saves_reloads_and_evaluates(tmp_path: Path) -> None:
     assert again.splitlines()[1:] == out.splitlines()[1:]  # the first line holds the wall time
     curve = (tmp_path / "again" / "learning_curve.csv").read_bytes()
     assert curve == (tmp_path / "run" / "learning_curve.csv").read_bytes()
+
+
+def train_marl_tiny(tmp_path: Path, out: str) -> str:
+    """A tiny budget: 3-s episodes, four PPO updates on one copy of the three-vehicle swarm."""
+    return run_example(
+        "train_marl.py",
+        *("--envs", "1", "--steps", "256", "--n-steps", "64", "--episodes", "1"),
+        *("--set", "env.time_limit_s=3", "--out", str(tmp_path / out)),
+        cwd=tmp_path,
+    )
+
+
+def test_train_marl_trains_one_shared_policy_and_repeats_bit_for_bit(tmp_path: Path) -> None:
+    out = train_marl_tiny(tmp_path, "run")
+    agents = len(NOVAK["vehicles"])
+    pattern = (
+        rf"(\d+) environment steps \((\d+) agent steps\) on 1 env\(s\) in {NUM} s: "
+        rf"(\d+) steps/s, (\d+) training episodes\n"
+        rf"reloaded policy gives the same (\d+) actions bit for bit: (True|False)\n"
+        rf"mean team return on 1 seeds: trained {NUM}, random actions {NUM}\n"
+    )
+    m = re.fullmatch(pattern, out)
+    assert m, out
+    steps, agent_steps, episodes = int(m[1]), int(m[2]), int(m[5])
+    assert (steps, agent_steps) == (256, 256 * agents)  # 64-step rollouts x 4, every agent
+    assert int(m[6]) == agents + 8 and m[7] == "True", out  # each agent's first obs + 8 samples
+    assert all(math.isfinite(float(v)) for v in (m[8], m[9])), out
+
+    # one row per finished episode of the swarm: at most the 3-s limit in 12-tick steps (one
+    # more where the summed step times fall a rounding short of it), plus the step in which
+    # SuperSuit closes the episode after its last agent ended
+    max_len = math.ceil(3.0 * NOVAK["time"]["control_hz"] / 12) + 2
+    run = tmp_path / "run"
+    with open(run / "learning_curve.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert list(rows[0]) == ["step", "team_return", "length"]
+    assert len(rows) == episodes >= 256 // max_len
+    ends = [int(r["step"]) for r in rows]
+    assert ends == sorted(ends) and 0 < ends[-1] <= steps
+    # one copy: the episodes tile the run, each ending where the previous one's length says
+    assert ends == list(np.cumsum([int(r["length"]) for r in rows]))
+    assert all(2 <= int(r["length"]) <= max_len for r in rows), rows
+    assert all(math.isfinite(float(r["team_return"])) for r in rows), rows
+    assert (run / "learning_curve.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+    # seeded: a second run gives the same curve, figure, weights and evaluation, bit for bit
+    # (not the same zip: SB3 stores the policy class's repr, memory addresses included)
+    again = train_marl_tiny(tmp_path, "again")
+    assert again.splitlines()[1:] == out.splitlines()[1:]  # the first line holds the wall time
+    for name in ("learning_curve.csv", "learning_curve.png"):
+        assert (tmp_path / "again" / name).read_bytes() == (run / name).read_bytes(), name
+    weights = []
+    for d in (run, tmp_path / "again"):
+        with zipfile.ZipFile(d / "ppo_shared.zip") as z:
+            weights.append([z.read(n) for n in ("policy.pth", "policy.optimizer.pth")])
+    assert weights[0] == weights[1]
