@@ -115,11 +115,11 @@ def test_read_recording_counts_what_was_published(tmp_path: Path) -> None:
         assert "pandas: 240 rows" in out
 
 
-def train_tiny(tmp_path: Path, out: str) -> str:
-    """A tiny budget: 3-s episodes, two PPO updates over two worker processes."""
+def train_tiny(tmp_path: Path, out: str, script: str = "train_sb3.py", envs: int = 2) -> str:
+    """A tiny budget: 3-s episodes, 256 steps in 64-step rollouts over ``envs`` copies."""
     return run_example(
-        "train_sb3.py",
-        *("--envs", "2", "--steps", "256", "--n-steps", "64", "--episodes", "1"),
+        script,
+        *("--envs", str(envs), "--steps", "256", "--n-steps", "64", "--episodes", "1"),
         *("--set", "env.time_limit_s=3", "--out", str(tmp_path / out)),
         cwd=tmp_path,
     )
@@ -162,18 +162,8 @@ def test_train_sb3_trains_saves_reloads_and_evaluates(tmp_path: Path) -> None:
     assert curve == (tmp_path / "run" / "learning_curve.csv").read_bytes()
 
 
-def train_marl_tiny(tmp_path: Path, out: str) -> str:
-    """A tiny budget: 3-s episodes, four PPO updates on one copy of the three-vehicle swarm."""
-    return run_example(
-        "train_marl.py",
-        *("--envs", "1", "--steps", "256", "--n-steps", "64", "--episodes", "1"),
-        *("--set", "env.time_limit_s=3", "--out", str(tmp_path / out)),
-        cwd=tmp_path,
-    )
-
-
 def test_train_marl_trains_one_shared_policy_and_repeats_bit_for_bit(tmp_path: Path) -> None:
-    out = train_marl_tiny(tmp_path, "run")
+    out = train_tiny(tmp_path, "run", "train_marl.py", envs=1)
     agents = len(NOVAK["vehicles"])
     pattern = (
         rf"(\d+) environment steps \((\d+) agent steps\) on 1 env\(s\) in {NUM} s: "
@@ -207,7 +197,7 @@ def test_train_marl_trains_one_shared_policy_and_repeats_bit_for_bit(tmp_path: P
 
     # seeded: a second run gives the same curve, figure, weights and evaluation, bit for bit
     # (not the same zip: SB3 stores the policy class's repr, memory addresses included)
-    again = train_marl_tiny(tmp_path, "again")
+    again = train_tiny(tmp_path, "again", "train_marl.py", envs=1)
     assert again.splitlines()[1:] == out.splitlines()[1:]  # the first line holds the wall time
     for name in ("learning_curve.csv", "learning_curve.png"):
         assert (tmp_path / "again" / name).read_bytes() == (run / name).read_bytes(), name
