@@ -96,7 +96,7 @@ if __name__ == "__main__":  # the worker processes import this file
     loaded = PPO.load(args.out / "ppo_shared.zip", device="cpu")
     seeds = range(10_000 + args.seed, 10_000 + args.seed + args.episodes)
     space = env.observation_space(env.possible_agents[0])
-    probe = [o for s in seeds for o in env.reset(seed=s)[0].values()]
+    probe: list[np.ndarray] = [o for s in seeds for o in env.reset(seed=s)[0].values()]
     probe += [space.sample() for _ in range(8)]
     before = np.stack([model.predict(o, deterministic=True)[0] for o in probe])
     after = np.stack([loaded.predict(o, deterministic=True)[0] for o in probe])
