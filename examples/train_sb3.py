@@ -15,17 +15,11 @@ loaded back, checked to give the same actions bit for bit, then evaluated with t
 policy on the same seeds. Throughput and the full run's numbers: docs/envs.md.
 """
 
-import argparse
-import csv
 import time
-from pathlib import Path
 
 import gymnasium
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt
 import numpy as np
+from _training import parse_args, write_curve
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
@@ -33,20 +27,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
 ENV_ID = "plumeswarm.envs:plumeswarm/PlumeSource-v0"
 
-parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-parser.add_argument("--envs", type=int, default=1, help="parallel environments (processes)")
-parser.add_argument("--steps", type=int, default=2048, help="training timesteps, all envs")
-parser.add_argument("--seed", type=int, default=0)
-parser.add_argument("--episodes", type=int, default=3, help="evaluation episodes")
-parser.add_argument("--n-steps", type=int, default=256, help="PPO rollout length per env")
-parser.add_argument("--out", type=Path, default=Path("runs/train_sb3"))
-parser.add_argument(
-    "--set", action="append", default=[], metavar="KEY=VALUE", help="scenario override"
-)
-args = parser.parse_args()
-if args.envs < 1 or args.steps < 1 or args.n_steps < 2:
-    parser.error(f"--envs {args.envs}, --steps {args.steps}, --n-steps {args.n_steps}: too small")
-args.out.mkdir(parents=True, exist_ok=True)
+args = parse_args(__doc__, "training timesteps, all envs", "runs/train_sb3")
 env_kwargs = {"scenario_overrides": args.set}
 
 
@@ -111,22 +92,15 @@ if __name__ == "__main__":  # SubprocVecEnv's workers import this file
     )
     env.close()
 
-    with open(args.out / "learning_curve.csv", "w", newline="") as f:
-        writer = csv.writer(f)
-        writer.writerow(["timestep", "return", "length"])
-        writer.writerows((t, f"{r:.6f}", n) for t, r, n in curve.rows)
-    fig, ax = plt.subplots(figsize=(7, 4))
-    if curve.rows:
-        t, r = np.array([row[0] for row in curve.rows]), np.array([row[1] for row in curve.rows])
-        ax.plot(t, r, ".", alpha=0.3, label="training episode")
-        k = max(1, len(r) // 20)
-        ax.plot(t[k - 1 :], np.convolve(r, np.ones(k) / k, "valid"), label=f"mean of {k}")
-    ax.axhline(random, color="grey", ls="--", label=f"random actions, {args.episodes} eval seeds")
-    ax.axhline(trained, color="C3", ls=":", label=f"trained policy, {args.episodes} eval seeds")
-    ax.set(xlabel="timestep", ylabel="episode return", title=f"PPO, {args.envs} env(s)")
-    ax.legend(loc="lower right")
-    fig.tight_layout()
-    fig.savefig(args.out / "learning_curve.png", dpi=80)
+    write_curve(
+        args.out,
+        ["timestep", "return", "length"],
+        curve.rows,
+        random,
+        trained,
+        args.episodes,
+        {"xlabel": "timestep", "ylabel": "episode return", "title": f"PPO, {args.envs} env(s)"},
+    )
 
     print(
         f"{model.num_timesteps} timesteps on {args.envs} env(s) in {wall_s:.1f} s: "

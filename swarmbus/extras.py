@@ -17,6 +17,7 @@ EXTRA_OF_MODULE: dict[str, str] = {
     "matplotlib": "report",
     "rosbags": "ros2",
     "stable_baselines3": "train",
+    "supersuit": "train",
     "ray": "cluster",
 }
 

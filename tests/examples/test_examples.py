@@ -14,8 +14,10 @@ import re
 import subprocess
 import sys
 import tomllib
+import zipfile
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from swarmbus.scenario import SCENARIOS_DIR
@@ -113,11 +115,11 @@ def test_read_recording_counts_what_was_published(tmp_path: Path) -> None:
         assert "pandas: 240 rows" in out
 
 
-def train_tiny(tmp_path: Path, out: str) -> str:
-    """A tiny budget: 3-s episodes, two PPO updates over two worker processes."""
+def train_tiny(tmp_path: Path, out: str, script: str = "train_sb3.py", envs: int = 2) -> str:
+    """A tiny budget: 3-s episodes, 256 steps in 64-step rollouts over ``envs`` copies."""
     return run_example(
-        "train_sb3.py",
-        *("--envs", "2", "--steps", "256", "--n-steps", "64", "--episodes", "1"),
+        script,
+        *("--envs", str(envs), "--steps", "256", "--n-steps", "64", "--episodes", "1"),
         *("--set", "env.time_limit_s=3", "--out", str(tmp_path / out)),
         cwd=tmp_path,
     )
@@ -158,3 +160,49 @@ def test_train_sb3_trains_saves_reloads_and_evaluates(tmp_path: Path) -> None:
     assert again.splitlines()[1:] == out.splitlines()[1:]  # the first line holds the wall time
     curve = (tmp_path / "again" / "learning_curve.csv").read_bytes()
     assert curve == (tmp_path / "run" / "learning_curve.csv").read_bytes()
+
+
+def test_train_marl_trains_one_shared_policy_and_repeats_bit_for_bit(tmp_path: Path) -> None:
+    out = train_tiny(tmp_path, "run", "train_marl.py", envs=1)
+    agents = len(NOVAK["vehicles"])
+    pattern = (
+        rf"(\d+) environment steps \((\d+) agent steps\) on 1 env\(s\) in {NUM} s: "
+        rf"(\d+) steps/s, (\d+) training episodes\n"
+        rf"reloaded policy gives the same (\d+) actions bit for bit: (True|False)\n"
+        rf"mean team return on 1 seeds: trained {NUM}, random actions {NUM}\n"
+    )
+    m = re.fullmatch(pattern, out)
+    assert m, out
+    steps, agent_steps, episodes = int(m[1]), int(m[2]), int(m[5])
+    assert (steps, agent_steps) == (256, 256 * agents)  # 64-step rollouts x 4, every agent
+    assert int(m[6]) == agents + 8 and m[7] == "True", out  # each agent's first obs + 8 samples
+    assert all(math.isfinite(float(v)) for v in (m[8], m[9])), out
+
+    # one row per finished episode of the swarm: at most the 3-s limit in 12-tick steps (one
+    # more where the summed step times fall a rounding short of it), plus the step in which
+    # SuperSuit closes the episode after its last agent ended
+    max_len = math.ceil(3.0 * NOVAK["time"]["control_hz"] / 12) + 2
+    run = tmp_path / "run"
+    with open(run / "learning_curve.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert list(rows[0]) == ["step", "team_return", "length"]
+    assert len(rows) == episodes >= 256 // max_len
+    ends = [int(r["step"]) for r in rows]
+    assert ends == sorted(ends) and 0 < ends[-1] <= steps
+    # one copy: the episodes tile the run, each ending where the previous one's length says
+    assert ends == list(np.cumsum([int(r["length"]) for r in rows]))
+    assert all(2 <= int(r["length"]) <= max_len for r in rows), rows
+    assert all(math.isfinite(float(r["team_return"])) for r in rows), rows
+    assert (run / "learning_curve.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+    # seeded: a second run gives the same curve, figure, weights and evaluation, bit for bit
+    # (not the same zip: SB3 stores the policy class's repr, memory addresses included)
+    again = train_tiny(tmp_path, "again", "train_marl.py", envs=1)
+    assert again.splitlines()[1:] == out.splitlines()[1:]  # the first line holds the wall time
+    for name in ("learning_curve.csv", "learning_curve.png"):
+        assert (tmp_path / "again" / name).read_bytes() == (run / name).read_bytes(), name
+    weights = []
+    for d in (run, tmp_path / "again"):
+        with zipfile.ZipFile(d / "ppo_shared.zip") as z:
+            weights.append([z.read(n) for n in ("policy.pth", "policy.optimizer.pth")])
+    assert weights[0] == weights[1]
