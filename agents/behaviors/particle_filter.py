@@ -41,7 +41,8 @@ a source of hazardous substance dispersion using binary measurements", Atmos. En
   moves the plume, and the vehicle measures it itself), so a run of n correlated windows counts
   as n_eff independent ones. With it the stopping rule is the posterior's: the particles'
   weight within ``declare_radius_m`` (2 m) of the estimate is at least ``declare_mass`` (0.9),
-  i.e. the filter is 90 % sure the source is within 2 m.
+  i.e. the filter is 90 % sure the source is within 2 m; it starts probing once its spread is
+  below ``effective_approach_spread_m`` (20 m).
 
 Use ``behavior = "agents.behaviors.particle_filter:ParticleFilter"``.
 """
@@ -318,6 +319,9 @@ class ParticleFilter(SeekingBehavior):
     #: ``declare_radius_m`` of the estimate (instead of ``declare_spread_m``).
     declare_mass = 0.9
     declare_radius_m = 2.0
+    #: With ``likelihood = "effective"``: probe once the spread is below this (instead of
+    #: ``approach_spread_m``; the tempered posterior is wider while the vehicle sweeps).
+    effective_approach_spread_m = 20.0
 
     def __init__(self, ctx: BehaviorContext) -> None:
         super().__init__(ctx)
@@ -467,6 +471,11 @@ class ParticleFilter(SeekingBehavior):
                 x_m=mx, y_m=my, sim_time_s=own.sim_time_s, release_rate_g_s=q, spread_m=spread
             )
             return None
-        if self.detected and spread < self.approach_spread_m:
+        approach = (
+            self.effective_approach_spread_m
+            if self.likelihood == "effective"
+            else self.approach_spread_m
+        )
+        if self.detected and spread < approach:
             return fly(own, self._probe_velocity(own, frame, mx, my), self.altitude)
         return fly(own, self.sweep.velocity(frame, x, y), self.altitude)

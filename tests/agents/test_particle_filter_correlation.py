@@ -13,9 +13,11 @@ from agents.behaviors.particle_filter import (
     FloatArray,
     ParticleFilter,
     SourceTermFilter,
+    WindowMean,
     effective_fraction,
     mass_within,
 )
+from agents.behaviors.wind import WindFrame
 from plume_atmosphere.dispersion import dispersion_curves
 from plumeswarm.gsl.registry import BUILTIN_ALGORITHMS, tuned_behavior
 from plumeswarm.gsl.tuned import __getattr__ as tuned_class
@@ -136,3 +138,25 @@ def test_an_unknown_likelihood_is_one_line_naming_the_valid_ones() -> None:
     with pytest.raises(PlumeswarmError, match="likelihood: 'x': valid: independent, effective"):
         cls(ctx)
     assert issubclass(cls, ParticleFilter)
+
+
+def test_the_behaviour_weighs_its_windows_by_its_own_winds_only_when_asked() -> None:
+    """Windows whose mean winds are independent values each held for 5 windows (a meander
+    of 5 s seen at 1 Hz): the effective filter weighs each by about 1/5; the default by 1."""
+    rng = np.random.default_rng(3)
+    winds = 5.0 + np.repeat(rng.normal(0.0, 0.5, size=(40, 2)), 5, axis=0)
+    scenario = load_scenario()
+    weights = {}
+    for likelihood in ("independent", "effective"):
+        cls = tuned_class(
+            tuned_behavior(
+                BUILTIN_ALGORITHMS["particle_filter"].behavior, {"likelihood": likelihood}
+            ).partition(":")[2]
+        )
+        pf = cls(BehaviorContext("uav1", 0, scenario, 0.05, np.random.default_rng(0)))
+        pf.filter = pf._new_filter(WindFrame.of((5.0, 0.0)), 50.0, 0.0)
+        for e, n in winds:
+            pf._update(0.0, WindowMean([(50.0, 0.0, 10.0)], 0.0, (float(e), float(n)), False))
+        weights[likelihood] = pf.filter.tempering
+    assert weights["independent"] == 1.0
+    assert weights["effective"] == pytest.approx(1.0 / 5.0, rel=0.15)
