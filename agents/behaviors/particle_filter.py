@@ -33,6 +33,16 @@ a source of hazardous substance dispersion using binary measurements", Atmos. En
   ``declare_spread_m`` (1 m) while the vehicle is probing next to the estimate (so the estimate has
   met the readings taken close to it), it declares the weighted mean (x₀, y₀, Q) with that
   spread and holds.
+* Correlated windows (``likelihood``): ``"independent"`` (the default) multiplies the windows'
+  likelihoods as if each were independent evidence. In a meandering wind successive windows
+  share the plume's wander and are not: ``"effective"`` multiplies each window's
+  log-likelihood by n_eff / n, the effective sample size per window of the series of the
+  windows' mean anemometer winds so far (:func:`effective_fraction`: the wind's meander is what
+  moves the plume, and the vehicle measures it itself), so a run of n correlated windows counts
+  as n_eff independent ones. With it the stopping rule is the posterior's: the particles'
+  weight within ``declare_radius_m`` (2 m) of the estimate is at least ``declare_mass`` (0.9),
+  i.e. the filter is 90 % sure the source is within 2 m; it starts probing once its spread is
+  below ``effective_approach_spread_m`` (20 m).
 
 Use ``behavior = "agents.behaviors.particle_filter:ParticleFilter"``.
 """
@@ -55,9 +65,57 @@ from agents.behaviors.steering import CrosswindSweep, fly, toward
 from agents.behaviors.wind import WindFrame
 from plume_atmosphere.dispersion import DispersionCurves, dispersion_curves
 from plume_atmosphere.plume_formula import gaussian_plume_g_m3
+from swarmbus.errors import FieldError
 from swarmbus.messages import ConcentrationReading, Setpoint, VehicleState
 
 FloatArray = npt.NDArray[np.float64]
+
+
+LIKELIHOODS = ("independent", "effective")
+
+
+def autocorrelation(series: npt.ArrayLike) -> FloatArray:
+    """The sample autocorrelation ρ(0 … n − 1) of ``series`` ((n,) or (n, d): the d
+    components' mean-removed lagged products pooled), biased (divided by n, as
+    Geyer 1992 takes it)."""
+    x = np.asarray(series, dtype=np.float64)
+    x = x.reshape(len(x), -1) - x.reshape(len(x), -1).mean(axis=0)
+    n = len(x)
+    products = np.zeros(n)
+    for c in x.T:
+        products += np.correlate(c, c, mode="full")[n - 1 :]
+    if products[0] <= 0.0:
+        return np.zeros(n)
+    return np.asarray(products / products[0], dtype=np.float64)
+
+
+def effective_fraction(series: npt.ArrayLike) -> float:
+    """n_eff / n of a stationary series: 1 / τ, τ = 1 + 2 Σ ρ(k) the integrated
+    autocorrelation time in samples, summed by Geyer's initial monotone sequence (Geyer 1992,
+    "Practical Markov chain Monte Carlo", Stat. Sci. 7:473): the pair sums
+    Γₘ = ρ(2m) + ρ(2m + 1) up to the first that is not positive, each capped at the one before,
+    τ = 2 Σ Γₘ − 1. At most 1; 1 for fewer than 4 samples or a constant series. For an AR(1)
+    series of coefficient φ it tends to (1 − φ) / (1 + φ)."""
+    rho = autocorrelation(series)
+    n = len(rho)
+    if n < 4 or rho[0] == 0.0:
+        return 1.0
+    tau, cap = -1.0, math.inf
+    for m in range((n - 1) // 2):
+        pair = float(rho[2 * m] + rho[2 * m + 1])
+        if pair <= 0.0:
+            break
+        cap = min(cap, pair)
+        tau += 2.0 * cap
+    return min(1.0, 1.0 / tau) if tau > 0.0 else 1.0
+
+
+def mass_within(
+    particles: FloatArray, weights: FloatArray, x_m: float, y_m: float, radius_m: float
+) -> float:
+    """The weight of the particles whose (x₀, y₀) lie within ``radius_m`` of (x, y)."""
+    inside = np.hypot(particles[:, 0] - x_m, particles[:, 1] - y_m) <= radius_m
+    return float(weights[inside].sum())
 
 
 class WindowMean(NamedTuple):
@@ -234,6 +292,7 @@ class ParticleFilter(SeekingBehavior):
         "detected",
         "probe_side",
         "sweep",
+        "wind_series",
     )
     particles = 2000
     prior_upwind_m = 100.0
@@ -253,10 +312,27 @@ class ParticleFilter(SeekingBehavior):
     threshold_g_m3 = PLUME_THRESHOLD_G_M3
     window_s = 1.0
     window_log_sigma = 1.0
+    #: "independent": every window full evidence (the published tables); "effective": each
+    #: window's log-likelihood × n_eff / n of the windows' winds, and the stopping rule below.
+    likelihood = "independent"
+    #: With ``likelihood = "effective"``: declare once this share of the weight is within
+    #: ``declare_radius_m`` of the estimate (instead of ``declare_spread_m``).
+    declare_mass = 0.9
+    declare_radius_m = 2.0
+    #: With ``likelihood = "effective"``: probe once the spread is below this (instead of
+    #: ``approach_spread_m``; the tempered posterior is wider while the vehicle sweeps).
+    effective_approach_spread_m = 20.0
 
     def __init__(self, ctx: BehaviorContext) -> None:
         super().__init__(ctx)
+        if self.likelihood not in LIKELIHOODS:
+            raise FieldError(
+                type(self).__name__,
+                "likelihood",
+                f"{self.likelihood!r}: valid: {', '.join(LIKELIHOODS)}",
+            )
         self.rng = ctx.rng
+        self.wind_series: list[tuple[float, float]] = []  # each window's mean wind ("effective")
         plume = ctx.scenario.plume
         self.curves = dispersion_curves(plume.coefficients, plume.stability)
         self.release_height_m = plume.sources[0].release_height_m
@@ -365,7 +441,20 @@ class ParticleFilter(SeekingBehavior):
     def _update(self, now_s: float, window: WindowMean) -> None:
         """One window into the filter (a cooperative subclass also shares it)."""
         assert self.filter is not None
+        if self.likelihood == "effective":
+            self.wind_series.append(window.wind)
+            self.filter.tempering = effective_fraction(self.wind_series)
         self.filter.update_mean(*window)
+
+    def sure(self, mx: float, my: float, spread: float) -> bool:
+        """The stopping rule's test of the estimate (mx, my) of ``spread``."""
+        if self.likelihood != "effective":
+            return spread < self.declare_spread_m
+        assert self.filter is not None
+        f = self.filter
+        return (
+            mass_within(f.particles, f.weights, mx, my, self.declare_radius_m) >= self.declare_mass
+        )
 
     def seek(self, step: SeekStep) -> Setpoint | None:
         own, readings, wind_read = step.own, step.readings, step.wind
@@ -377,11 +466,16 @@ class ParticleFilter(SeekingBehavior):
         self._average(own.sim_time_s, readings, wind)
         mx, my, q, spread = self.filter.estimate()
         near = math.hypot(mx - x, my - y) <= self.probe_downwind_m + self.probe_across_m + 1.0
-        if self.detected and near and spread < self.declare_spread_m:
+        if self.detected and near and self.sure(mx, my, spread):
             self.declaration = SourceEstimate(
                 x_m=mx, y_m=my, sim_time_s=own.sim_time_s, release_rate_g_s=q, spread_m=spread
             )
             return None
-        if self.detected and spread < self.approach_spread_m:
+        approach = (
+            self.effective_approach_spread_m
+            if self.likelihood == "effective"
+            else self.approach_spread_m
+        )
+        if self.detected and spread < approach:
             return fly(own, self._probe_velocity(own, frame, mx, my), self.altitude)
         return fly(own, self.sweep.velocity(frame, x, y), self.altitude)

@@ -157,6 +157,11 @@ def every_behavior() -> list[str]:
 
 
 BEHAVIORS = every_behavior()
+#: The particle filter with its correlation-aware likelihood (its windows' winds are state too).
+EFFECTIVE_PF = (
+    "plumeswarm.gsl.tuned:agents.behaviors.particle_filter:ParticleFilter"
+    '?{"likelihood":"effective"}'
+)
 
 
 @pytest.mark.parametrize(
@@ -205,7 +210,11 @@ def test_every_gsl_algorithm_is_among_the_behaviours_checked() -> None:
     assert len(BEHAVIORS) >= 6
 
 
-@pytest.mark.parametrize("spec", BEHAVIORS, ids=[s.rpartition(":")[2] for s in BEHAVIORS])
+@pytest.mark.parametrize(
+    "spec",
+    [*BEHAVIORS, EFFECTIVE_PF],
+    ids=[*(s.rpartition(":")[2] for s in BEHAVIORS), "ParticleFilter-effective"],
+)
 def test_every_behaviour_is_restored_and_flies_on_with_the_same_bits(spec: str) -> None:
     """Each behaviour flown offboard for 15 s, captured, restored into a fresh autopilot (its
     own generator, its own sensor): the two fly on for 8 s to the same bits."""
