@@ -38,7 +38,7 @@ from agents.swarm_radio import (
 )
 from swarmbus.closeable import Closeable
 from swarmbus.codec import MessageError, decode
-from swarmbus.keys import Keys, vehicle_of_autopilot
+from swarmbus.keys import Keys, serves_several, vehicle_of_autopilot
 from swarmbus.messages import (
     Clock,
     ConcentrationReading,
@@ -255,8 +255,9 @@ class Swarm(Closeable):
             return sorted(set(self._states) | set(self._status) | set(self._readings))
 
     def autopilots_alive(self) -> list[str]:
-        """Ids of the vehicles whose autopilot token is alive right now."""
-        ids = (vehicle_of_autopilot(name) for name in self._presence.alive)
+        """Ids of the vehicles whose autopilot token is alive right now (the token of a process
+        serving several vehicles is none of theirs: each has its own)."""
+        ids = (vehicle_of_autopilot(n) for n in self._presence.alive if not serves_several(n))
         return sorted(vid for vid in ids if vid is not None)
 
     def state(self, vehicle_id: str) -> VehicleState | None:

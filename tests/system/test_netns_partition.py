@@ -127,6 +127,7 @@ def demo_flight(tmp: Path, shape: Shape, cut_s: float) -> tuple[dict[str, Any], 
     ``shape`` across ``sim`` and ``agents`` on a stepped clock, and the physics log; with
     ``cut_s`` > 0 the agents are cut off that long once uav1 flies its second mission leg."""
     vehicles, per_process = shape
+    tmp.mkdir()
     grace = ("[time]\n", f"[time]\nunreachable_grace_s = {GRACE_S}\n")
     scenario = seed_scenario(tmp, *grace, vehicles=len(vehicles))
     agent_log = (
