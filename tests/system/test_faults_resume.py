@@ -18,33 +18,27 @@ import re
 import signal
 import subprocess
 import sys
-import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from contextlib import contextmanager, suppress
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TypeVar
 
 import pytest
 import zenoh
 
 from deploy.launcher import Launcher, LaunchOptions
-from plumeswarm.experiments.chaos import keep_state
-from swarmbus.codec import decode
 from swarmbus.messages import (
     Arm,
     CommandReply,
-    ConcentrationReading,
     MissionStart,
-    VehicleState,
-    VehicleStatus,
 )
 from swarmbus.reqrep import request
 from swarmbus.scenario import load_scenario
 from swarmbus.session import free_tcp_port
+from tests.support.flown import Flown
 from tests.support.mavclient import write_scenario
-from tests.support.procs import NODE_COMMAND, REPO, keys_for, wait_until
+from tests.support.procs import NODE_COMMAND, REPO, keys_for
 from tests.support.scale import patience
 
 VEHICLES = ("uav1", "uav2", "uav3")
@@ -55,90 +49,33 @@ KILLED = "uav1"
 RESUMED = re.compile(
     r"resumed from checkpoint at tick (?P<tick>\d+) .*\(ticks \d+\.\.(?P<last>\d+)\)"
 )
-T = TypeVar("T")
 
 
 @dataclass
-class ResumeRun:
-    launcher: Launcher
-    vehicles: tuple[str, ...] = VEHICLES
-    gate: str = GATE
-    lock: threading.Lock = field(default_factory=threading.Lock)
-    # every state payload by vehicle and tick (the first seen; a replay must repeat it)
-    states: dict[str, dict[int, bytes]] = field(default_factory=dict)
-    conflicts: list[tuple[str, int]] = field(default_factory=list)
-    status: dict[str, VehicleStatus] = field(default_factory=dict)
-    # every concentration reading payload by vehicle and sim time (the first seen)
-    readings: dict[str, dict[float, bytes]] = field(default_factory=dict)
+class ResumeRun(Flown):
+    """A flight under the launcher: :meth:`wait` supervises (reaps and restarts) meanwhile, as
+    ``up`` does."""
 
-    def on_reading(self, sample: zenoh.Sample) -> None:
-        payload = sample.payload.to_bytes()
-        r = decode(payload, ConcentrationReading)
-        with self.lock:
-            old = self.readings.setdefault(r.vehicle_id, {}).setdefault(r.sim_time_s, payload)
-            if old != payload:
-                self.conflicts.append((r.vehicle_id, -1))
+    launcher: Launcher = field(kw_only=True)
 
-    def on_state(self, sample: zenoh.Sample) -> None:
-        with self.lock:
-            keep_state(self.states, self.conflicts, sample.payload.to_bytes())
-
-    def on_status(self, sample: zenoh.Sample) -> None:
-        s = decode(sample.payload.to_bytes(), VehicleStatus)
-        with self.lock:
-            self.status[s.vehicle_id] = s
-
-    def wait(self, predicate: Callable[[], T], timeout_s: float, what: str) -> T:
-        """``wait_until`` that supervises (reaps and restarts) meanwhile, as ``up`` does."""
-
-        def check() -> T:
-            self.launcher.supervise_once()
-            with self.lock:
-                return predicate()
-
-        return wait_until(check, timeout_s, what, poll_s=0.05)
+    def tend(self) -> None:
+        self.launcher.supervise_once()
 
     def command(self, vid: str, cmd: object) -> CommandReply:
         key = self.launcher.keys.vehicle_cmd(vid)
         return request(self.launcher.session, key, cmd, CommandReply, 30.0)
 
-    def last_tick(self, vid: str) -> int:
-        ticks = self.states.get(vid)
-        return max(ticks) if ticks else -1
 
-    def on_first_leg(self) -> int:
-        """Once :data:`KILLED` flies its first mission leg: the last tick of it seen then, once
-        its states have caught up with the status that says so (the two streams are separate
-        subscriptions: under load the states seen lagged the physics by 200 ticks, still
-        climbing)."""
-        leg = self.wait(
-            lambda: (
-                s if (s := self.status.get(KILLED)) is not None and s.mission_index >= 1 else None
-            ),
-            300.0 * patience(self.vehicles),
-            f"{KILLED} on its first leg",
-        )
-        leg_tick = round(leg.sim_time_s * self.launcher.scenario.time.control_hz)
-        self.wait(
-            lambda: self.last_tick(KILLED) >= leg_tick,
-            60.0 * patience(self.vehicles),
-            f"{KILLED}'s tick {leg_tick}",
-        )
-        with self.lock:
-            return self.last_tick(KILLED)
-
-    def done(self) -> bool:
-        """Every mission finished and every vehicle landed and disarmed (caller holds lock)."""
-        return all(
-            (s := self.status.get(v)) is not None
-            and s.mission_finished
-            and s.landed
-            and not s.armed
-            for v in self.vehicles
-        )
-
-    def z(self, vid: str, tick: int) -> float:
-        return decode(self.states[vid][tick], VehicleState).position_enu_m[2]
+def mission_scenario(path: Path, vehicles: tuple[str, ...], time_table: str = "") -> Path:
+    """The test scenario of ``vehicles`` and the gate in a row, in ``path``, its start-up
+    timeout stretched by :func:`patience`; ``time_table``: more lines of its ``[time]``."""
+    write_scenario(path, len(vehicles) + 1)
+    text = path.read_text()
+    old = "startup_timeout_s = 60.0\n"
+    assert old in text, "the seed scenario's start-up timeout moved"
+    new = f"startup_timeout_s = {60.0 * patience(vehicles)}\n{time_table}"
+    path.write_text(text.replace(old, new, 1))
+    return path
 
 
 @contextmanager
@@ -151,13 +88,8 @@ def flight(
     """The stack flying the missions of ``vehicles`` (uav1.. in a row) from tick START_TICK + 1
     on (``per_process`` vehicles per autopilot process; every node in ``network_mode``, default
     the scenario's)."""
-    path, _, _ = write_scenario(tmp / "scenario.toml", len(vehicles) + 1)
+    path = mission_scenario(tmp / "scenario.toml", vehicles)
     slow = patience(vehicles)
-    if slow > 1.0:
-        text = path.read_text()
-        old = "startup_timeout_s = 60.0\n"
-        assert old in text, "the seed scenario's start-up timeout moved"
-        path.write_text(text.replace(old, f"startup_timeout_s = {60.0 * slow}\n", 1))
     if network_mode is not None:
         path.write_text(path.read_text() + f'\n[network]\nmode = "{network_mode}"\n')
     scenario = load_scenario(path)
@@ -174,7 +106,7 @@ def flight(
     )
     launcher = Launcher(scenario, opts)
     gate_id = f"uav{len(vehicles) + 1}"
-    f = ResumeRun(launcher, vehicles, gate_id)
+    f = ResumeRun(vehicles, gate_id, scenario.time.control_hz, launcher=launcher)
     subs: list[zenoh.Subscriber[None]] = []
     release = tmp / "release"
 
@@ -250,7 +182,7 @@ def fly_with_kill(
     """Fly the missions, SIGKILL ``names`` while uav1 flies its first leg at 10 m; the flight
     and the last tick of uav1 seen before the kill."""
     with flight(tmp, per_process, network_mode, vehicles) as f:
-        before = f.on_first_leg()
+        before = on_first_leg(f)
         old = f.launcher.supervisor.pids()
         kill(f, *names)
         f.wait(
@@ -267,7 +199,12 @@ def fly_with_kill(
     return f, before
 
 
-def assert_nothing_lost(f: ResumeRun, baseline: ResumeRun, killed_at: int) -> None:
+def on_first_leg(f: Flown) -> int:
+    """The last tick of :data:`KILLED` seen once it flies its first mission leg."""
+    return f.on_first_leg(KILLED, 300.0 * patience(f.vehicles))
+
+
+def assert_nothing_lost(f: Flown, baseline: Flown, killed_at: int) -> None:
     assert not f.conflicts, f"replayed ticks differ: {f.conflicts[:5]}"
     # the killed vehicle was flying at the kill, and flew on as it did without the kill: no
     # tick of it lower by more than 1 m than in the run without the kill ...

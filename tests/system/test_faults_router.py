@@ -31,6 +31,7 @@ from tests.system.test_faults_resume import (
     fly_baseline,
     fly_with_kill,
     kill,
+    on_first_leg,
 )
 
 
@@ -63,7 +64,7 @@ def test_router_killed_twice_mid_mission_clients_the_clock_holds_and_nothing_is_
     vehicles, per_process = shape
     slow = patience(vehicles)
     with flight(tmp_path, per_process, "client", vehicles) as f:
-        killed_at = f.on_first_leg()
+        killed_at = on_first_leg(f)
         for _ in range(2):
             old = f.launcher.supervisor.pids()["router"]
             kill(f, "router")
