@@ -190,8 +190,10 @@ class Hosts:
             timeout=timeout_s,
         )
 
-    def stop(self) -> None:
-        for host in reversed(list(self.procs)):
+    def stop(self, first: Sequence[str] = ()) -> None:
+        """Stops ``first``, then every other host and process in the reverse of their start."""
+        rest = [name for name in reversed(list(self.procs)) if name not in first]
+        for host in [*first, *rest]:
             proc = self.procs[host]
             if proc.poll() is None:
                 proc.send_signal(signal.SIGTERM)
