@@ -9,7 +9,7 @@ CORE := $(VENV)/.installed-core
 DEV := $(VENV)/.installed-dev
 STAMP := $(DEV)
 
-.PHONY: demo test lint typecheck unit bench clean test-prereqs docs dist
+.PHONY: demo test test-scale lint typecheck unit bench clean test-prereqs docs dist
 
 $(CORE): pyproject.toml
 	$(PY) -m venv $(VENV)
@@ -58,8 +58,13 @@ docs: $(STAMP)
 
 # The 10-minute sim-time soak (tests/system/test_soak.py, marker soak) runs as its own, slower step.
 test: $(STAMP) lint typecheck docs test-prereqs
-	$(BIN)/python -m pytest -m "not soak"
+	$(BIN)/python -m pytest -m "not soak and not scale"
 	$(BIN)/python -m pytest -m soak -s
+
+# The fault tests at 32 vehicles in 4 autopilot processes of 8 (marker scale: the router kill in
+# both layouts, the lockstep partitions; root for the partitions): minutes each, not in `make test`.
+test-scale: $(STAMP) test-prereqs
+	$(BIN)/python -m pytest -m scale -s
 
 bench: $(STAMP)
 	$(BIN)/python -m plumeswarm.bench

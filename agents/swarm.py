@@ -38,7 +38,7 @@ from agents.swarm_radio import (
 )
 from swarmbus.closeable import Closeable
 from swarmbus.codec import MessageError, decode
-from swarmbus.keys import Keys, vehicle_of_autopilot
+from swarmbus.keys import Keys, serves_several, vehicle_of_autopilot
 from swarmbus.messages import (
     Clock,
     ConcentrationReading,
@@ -255,15 +255,10 @@ class Swarm(Closeable):
             return sorted(set(self._states) | set(self._status) | set(self._readings))
 
     def autopilots_alive(self) -> list[str]:
-        """Ids of the vehicles whose autopilot token is alive right now.
-
-        A process serving several vehicles declares a token per vehicle and one under its own
-        name (``autopilot-uav1-plus7``), which reads like a vehicle's: once vehicles were seen
-        on the bus, only theirs count (a stepped client would wait for the status of a vehicle
-        that does not exist)."""
-        ids = {vid for name in self._presence.alive if (vid := vehicle_of_autopilot(name))}
-        seen = set(self.vehicles)
-        return sorted(ids & seen if seen else ids)
+        """Ids of the vehicles whose autopilot token is alive right now (the token of a process
+        serving several vehicles is none of theirs: each has its own)."""
+        ids = (vehicle_of_autopilot(n) for n in self._presence.alive if not serves_several(n))
+        return sorted(vid for vid in ids if vid is not None)
 
     def state(self, vehicle_id: str) -> VehicleState | None:
         with self._lock:

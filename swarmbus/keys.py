@@ -226,6 +226,16 @@ def vehicle_of_autopilot(node_name: str) -> str | None:
     )
 
 
+_SEVERAL_RE = re.compile(r"-plus[1-9][0-9]*$")
+
+
+def serves_several(node_name: str) -> bool:
+    """Whether ``node_name`` is :func:`process_node`'s name of a process serving several
+    vehicles (``role-<first id>-plus<n - 1>``): an autopilot of that name is no vehicle's
+    presence name (each of its vehicles has its own, ``autopilot-<vehicle id>``)."""
+    return _SEVERAL_RE.search(node_name) is not None
+
+
 def process_node(role: str, vehicle_ids: Sequence[str] = ()) -> str:
     """The default node name of a ``role`` process serving ``vehicle_ids``: ``role``,
     ``role-<id>``, or ``role-<first id>-plus<n - 1>`` (all ids would outgrow a key segment)."""

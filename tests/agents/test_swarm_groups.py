@@ -1,8 +1,9 @@
-"""The stepped Swarm client with several vehicles per autopilot process: ``plumeswarm up
---stepped --vehicles-per-process 2`` (router, physics, the autopilots of the test scenario's
-three vehicles: one process of uav1 and uav2, one of uav3). Such a process declares a token per
-vehicle and one under its own name, ``autopilot-uav1-plus1``; the client's vehicles are the
-scenario's, and a step waits for no status of a vehicle that does not exist."""
+"""The Swarm client on autopilot processes that serve several vehicles (``plumeswarm up
+--vehicles-per-process 2``: one process for uav1 and uav2, one for uav3). Such a process has a
+presence token of its own (``autopilot-uav1-plus1``) beside one per vehicle it serves: the
+client counts the vehicles, not the process, and a step returns once every vehicle's state and
+status of the tick are in, without waiting out its timeout for a vehicle that does not exist.
+"""
 
 from __future__ import annotations
 
@@ -12,34 +13,37 @@ from pathlib import Path
 import pytest
 
 from agents import Swarm
-from swarmbus.scenario import load_scenario
 from swarmbus.session import Presence
-from tests.support.mavclient import write_scenario
 from tests.support.procs import wait_until
 from tests.support.upstack import plumeswarm_up
 
+ROLES = "router,plume,physics,autopilot"
+VEHICLES = ["uav1", "uav2", "uav3"]
+GROUP = "autopilot-uav1-plus1"  # the process serving uav1 and uav2
 
-def test_a_process_of_two_vehicles_is_no_vehicle_of_the_stepped_client(
+
+def test_processes_of_two_vehicles_the_client_sees_the_vehicles_and_steps_on_them(
     tmp_path: Path, caplog: pytest.LogCaptureFixture
 ) -> None:
-    path, _, _ = write_scenario(tmp_path / "scenario.toml", 3)
-    vehicles = sorted(v.id for v in load_scenario(path).vehicles)
-    args = ("--headless", "--stepped", "--roles", "router,physics,autopilot")
+    caplog.set_level(logging.WARNING, logger="agents.swarm")
+    args = ("--headless", "--stepped", "--roles", ROLES, "--vehicles-per-process", "2")
     with (
-        plumeswarm_up(path, tmp_path, *args, "--vehicles-per-process", "2") as up,
-        Swarm.connect(connect=[up.endpoint], command_timeout_s=5.0) as sw,
+        plumeswarm_up(None, tmp_path, *args) as up,
+        Swarm.connect(connect=[up.endpoint], command_timeout_s=10.0) as sw,
     ):
+        assert {GROUP, "autopilot-uav3"} <= set(up.pids()), up.pids()
         presence = Presence(sw.session, sw.keys)
         try:
-            names = {"autopilot-uav1-plus1", "autopilot-uav1", "autopilot-uav3"}
-            assert presence.wait_for(lambda alive: names <= alive, 60.0), presence.alive
+            tokens = {GROUP, *(f"autopilot-{v}" for v in VEHICLES)}
+            wait_until(lambda: tokens <= set(presence.alive), 60.0, "every autopilot token")
         finally:
             presence.close()
-        wait_until(lambda: sw.vehicles == vehicles, 120.0, "the states of tick 0")
-        caplog.set_level(logging.WARNING, logger="agents.swarm")
+        assert sw.autopilots_alive() == VEHICLES
         for _ in range(3):
             reply = sw.step(12)
-        assert sw.autopilots_alive() == vehicles
-        assert {v: sw.state(v).tick for v in vehicles} == dict.fromkeys(vehicles, reply.tick)  # type: ignore[union-attr]
-        late = [r.getMessage() for r in caplog.records if "no state or status" in r.getMessage()]
-        assert late == []
+            for vid in VEHICLES:
+                state, status = sw.state(vid), sw.status(vid)
+                assert state is not None and state.tick == reply.tick, (vid, state)
+                assert status is not None and status.sim_time_s >= reply.sim_time_s, vid
+    late = [r.getMessage() for r in caplog.records if "no state or status" in r.getMessage()]
+    assert not late, late

@@ -7,7 +7,14 @@ import msgspec
 import pytest
 
 from swarmbus.codec import decode, encode
-from swarmbus.keys import KeyNameError, Keys, autopilot_node, process_node, vehicle_of_autopilot
+from swarmbus.keys import (
+    KeyNameError,
+    Keys,
+    autopilot_node,
+    process_node,
+    serves_several,
+    vehicle_of_autopilot,
+)
 from swarmbus.messages import ActuatorBatch, ActuatorCommand, SimTick, VehicleState
 from swarmbus.views import (
     BatchView,
@@ -27,6 +34,10 @@ def test_node_names() -> None:
     assert process_node("physics") == "physics"
     assert process_node("autopilot", ["uav1"]) == "autopilot-uav1"
     assert process_node("autopilot", ["uav1", "uav2", "uav3"]) == "autopilot-uav1-plus2"
+    assert serves_several(process_node("autopilot", ["uav1", "uav2"]))
+    assert serves_several(process_node("autopilot", [f"uav{k}" for k in range(1, 33)]))
+    for single in ("autopilot-uav1", "autopilot-uav-2", "autopilot-plus", "autopilot-a-plus0"):
+        assert not serves_several(single), single
     with pytest.raises(KeyNameError):
         autopilot_node("a/b")
 

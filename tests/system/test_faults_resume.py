@@ -7,7 +7,8 @@ finishes its mission and lands; every plume reading is the same too.
 
 The missions start on a known tick, so that two runs can be compared bit for bit: a fourth
 vehicle, parked on the ground, is a scripted lockstep participant that holds tick
-``START_TICK`` until the test has armed the three and started their missions.
+``START_TICK`` until the test has armed the three and started their missions. The same flight
+scales: N vehicles in a row, the gate the N + 1st (``tests/support/scale.py``).
 """
 
 from __future__ import annotations
@@ -17,33 +18,28 @@ import re
 import signal
 import subprocess
 import sys
-import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from contextlib import contextmanager, suppress
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TypeVar
 
 import pytest
 import zenoh
 
 from deploy.launcher import Launcher, LaunchOptions
-from plumeswarm.experiments.chaos import keep_state
-from swarmbus.codec import decode
 from swarmbus.messages import (
     Arm,
     CommandReply,
-    ConcentrationReading,
     MissionStart,
-    VehicleState,
-    VehicleStatus,
 )
 from swarmbus.reqrep import request
 from swarmbus.scenario import load_scenario
 from swarmbus.session import free_tcp_port
+from tests.support.flown import Flown
 from tests.support.mavclient import write_scenario
-from tests.support.procs import NODE_COMMAND, REPO, keys_for, wait_until
+from tests.support.procs import NODE_COMMAND, REPO, keys_for
+from tests.support.scale import patience
 
 VEHICLES = ("uav1", "uav2", "uav3")
 GATE = "uav4"  # parked, scripted: holds START_TICK until the missions are started
@@ -53,91 +49,47 @@ KILLED = "uav1"
 RESUMED = re.compile(
     r"resumed from checkpoint at tick (?P<tick>\d+) .*\(ticks \d+\.\.(?P<last>\d+)\)"
 )
-T = TypeVar("T")
 
 
 @dataclass
-class ResumeRun:
-    launcher: Launcher
-    lock: threading.Lock = field(default_factory=threading.Lock)
-    # every state payload by vehicle and tick (the first seen; a replay must repeat it)
-    states: dict[str, dict[int, bytes]] = field(default_factory=dict)
-    conflicts: list[tuple[str, int]] = field(default_factory=list)
-    status: dict[str, VehicleStatus] = field(default_factory=dict)
-    # every concentration reading payload by vehicle and sim time (the first seen)
-    readings: dict[str, dict[float, bytes]] = field(default_factory=dict)
+class ResumeRun(Flown):
+    """A flight under the launcher: :meth:`wait` supervises (reaps and restarts) meanwhile, as
+    ``up`` does."""
 
-    def on_reading(self, sample: zenoh.Sample) -> None:
-        payload = sample.payload.to_bytes()
-        r = decode(payload, ConcentrationReading)
-        with self.lock:
-            old = self.readings.setdefault(r.vehicle_id, {}).setdefault(r.sim_time_s, payload)
-            if old != payload:
-                self.conflicts.append((r.vehicle_id, -1))
+    launcher: Launcher = field(kw_only=True)
 
-    def on_state(self, sample: zenoh.Sample) -> None:
-        with self.lock:
-            keep_state(self.states, self.conflicts, sample.payload.to_bytes())
-
-    def on_status(self, sample: zenoh.Sample) -> None:
-        s = decode(sample.payload.to_bytes(), VehicleStatus)
-        with self.lock:
-            self.status[s.vehicle_id] = s
-
-    def wait(self, predicate: Callable[[], T], timeout_s: float, what: str) -> T:
-        """``wait_until`` that supervises (reaps and restarts) meanwhile, as ``up`` does."""
-
-        def check() -> T:
-            self.launcher.supervise_once()
-            with self.lock:
-                return predicate()
-
-        return wait_until(check, timeout_s, what, poll_s=0.05)
+    def tend(self) -> None:
+        self.launcher.supervise_once()
 
     def command(self, vid: str, cmd: object) -> CommandReply:
         key = self.launcher.keys.vehicle_cmd(vid)
         return request(self.launcher.session, key, cmd, CommandReply, 30.0)
 
-    def last_tick(self, vid: str) -> int:
-        ticks = self.states.get(vid)
-        return max(ticks) if ticks else -1
 
-    def on_first_leg(self) -> int:
-        """Once :data:`KILLED` flies its first mission leg: the last tick of it seen then, once
-        its states have caught up with the status that says so (the two streams are separate
-        subscriptions: under load the states seen lagged the physics by 200 ticks, still
-        climbing)."""
-        leg = self.wait(
-            lambda: (
-                s if (s := self.status.get(KILLED)) is not None and s.mission_index >= 1 else None
-            ),
-            300.0,
-            f"{KILLED} on its first leg",
-        )
-        leg_tick = round(leg.sim_time_s * self.launcher.scenario.time.control_hz)
-        self.wait(lambda: self.last_tick(KILLED) >= leg_tick, 60.0, f"{KILLED}'s tick {leg_tick}")
-        with self.lock:
-            return self.last_tick(KILLED)
-
-    def done(self) -> bool:
-        """Every mission finished and every vehicle landed and disarmed (caller holds lock)."""
-        return all(
-            (s := self.status.get(v)) is not None
-            and s.mission_finished
-            and s.landed
-            and not s.armed
-            for v in VEHICLES
-        )
-
-    def z(self, vid: str, tick: int) -> float:
-        return decode(self.states[vid][tick], VehicleState).position_enu_m[2]
+def mission_scenario(path: Path, vehicles: tuple[str, ...], time_table: str = "") -> Path:
+    """The test scenario of ``vehicles`` and the gate in a row, in ``path``, its start-up
+    timeout stretched by :func:`patience`; ``time_table``: more lines of its ``[time]``."""
+    write_scenario(path, len(vehicles) + 1)
+    text = path.read_text()
+    old = "startup_timeout_s = 60.0\n"
+    assert old in text, "the seed scenario's start-up timeout moved"
+    new = f"startup_timeout_s = {60.0 * patience(vehicles)}\n{time_table}"
+    path.write_text(text.replace(old, new, 1))
+    return path
 
 
 @contextmanager
-def flight(tmp: Path, per_process: int = 1, network_mode: str | None = None) -> Iterator[ResumeRun]:
-    """The stack flying the three missions from tick START_TICK + 1 on (``per_process``
-    vehicles per autopilot process; every node in ``network_mode``, default the scenario's)."""
-    path, _, _ = write_scenario(tmp / "scenario.toml", len(VEHICLES) + 1)
+def flight(
+    tmp: Path,
+    per_process: int = 1,
+    network_mode: str | None = None,
+    vehicles: tuple[str, ...] = VEHICLES,
+) -> Iterator[ResumeRun]:
+    """The stack flying the missions of ``vehicles`` (uav1.. in a row) from tick START_TICK + 1
+    on (``per_process`` vehicles per autopilot process; every node in ``network_mode``, default
+    the scenario's)."""
+    path = mission_scenario(tmp / "scenario.toml", vehicles)
+    slow = patience(vehicles)
     if network_mode is not None:
         path.write_text(path.read_text() + f'\n[network]\nmode = "{network_mode}"\n')
     scenario = load_scenario(path)
@@ -149,11 +101,12 @@ def flight(tmp: Path, per_process: int = 1, network_mode: str | None = None) -> 
         run_dir=tmp / "run",
         connect=(endpoint,),
         roles=("router", "plume", "physics", "autopilot"),
-        vehicles=VEHICLES,
+        vehicles=vehicles,
         vehicles_per_process=per_process,
     )
     launcher = Launcher(scenario, opts)
-    f = ResumeRun(launcher)
+    gate_id = f"uav{len(vehicles) + 1}"
+    f = ResumeRun(vehicles, gate_id, scenario.time.control_hz, launcher=launcher)
     subs: list[zenoh.Subscriber[None]] = []
     release = tmp / "release"
 
@@ -168,22 +121,22 @@ def flight(tmp: Path, per_process: int = 1, network_mode: str | None = None) -> 
         launcher.start(on_bus)
         gate = subprocess.Popen(
             [sys.executable, "-m", "tests.support.scripted_participant", "--connect", endpoint,
-             "--scenario", str(path), "--vehicle", GATE, "--throttle", "0",
+             "--scenario", str(path), "--vehicle", gate_id, "--throttle", "0",
              "--delay-tick", str(START_TICK), "--delay-s", "300", "--release-file", str(release),
              "--follow-rewinds"],
             cwd=REPO, env=dict(os.environ, PYTHONPATH=str(REPO)), start_new_session=True,
             stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT,
         )  # fmt: skip
         f.wait(
-            lambda: all(f.last_tick(v) >= START_TICK for v in (*VEHICLES, GATE)),
-            120.0,
+            lambda: all(f.last_tick(v) >= START_TICK for v in (*vehicles, gate_id)),
+            120.0 * slow,
             f"tick {START_TICK}",
         )
-        for vid in VEHICLES:
+        for vid in vehicles:
             for cmd in (Arm(), MissionStart(start_index=0)):
                 reply = f.command(vid, cmd)
                 assert reply.accepted, (vid, cmd, reply.reason)
-        assert all(f.last_tick(v) == START_TICK for v in VEHICLES), "the gate did not hold"
+        assert all(f.last_tick(v) == START_TICK for v in vehicles), "the gate did not hold"
         release.touch()
         yield f
     finally:
@@ -196,10 +149,12 @@ def flight(tmp: Path, per_process: int = 1, network_mode: str | None = None) -> 
         launcher.stop()
 
 
-def fly_baseline(tmp: Path) -> ResumeRun:
+def fly_baseline(
+    tmp: Path, per_process: int = 1, vehicles: tuple[str, ...] = VEHICLES
+) -> ResumeRun:
     """The flight without any kill."""
-    with flight(tmp) as f:
-        f.wait(f.done, 300.0, "every mission finished and landed")
+    with flight(tmp, per_process, vehicles=vehicles) as f:
+        f.wait(f.done, 300.0 * patience(vehicles), "every mission finished and landed")
         f.launcher.supervise_once()
         time.sleep(0.5)  # a few more ticks on the ground
     return f
@@ -218,12 +173,16 @@ def kill(f: ResumeRun, *names: str) -> None:
 
 
 def fly_with_kill(
-    tmp: Path, *names: str, per_process: int = 1, network_mode: str | None = None
+    tmp: Path,
+    *names: str,
+    per_process: int = 1,
+    network_mode: str | None = None,
+    vehicles: tuple[str, ...] = VEHICLES,
 ) -> tuple[ResumeRun, int]:
     """Fly the missions, SIGKILL ``names`` while uav1 flies its first leg at 10 m; the flight
     and the last tick of uav1 seen before the kill."""
-    with flight(tmp, per_process, network_mode) as f:
-        before = f.on_first_leg()
+    with flight(tmp, per_process, network_mode, vehicles) as f:
+        before = on_first_leg(f)
         old = f.launcher.supervisor.pids()
         kill(f, *names)
         f.wait(
@@ -231,12 +190,21 @@ def fly_with_kill(
             120.0,
             f"{', '.join(names)} restarted",
         )
-        f.wait(f.done, 300.0, "every mission finished and landed after the kill")
+        f.wait(
+            f.done,
+            300.0 * patience(vehicles),
+            "every mission finished and landed after the kill",
+        )
         time.sleep(0.5)
     return f, before
 
 
-def assert_nothing_lost(f: ResumeRun, baseline: ResumeRun, killed_at: int) -> None:
+def on_first_leg(f: Flown) -> int:
+    """The last tick of :data:`KILLED` seen once it flies its first mission leg."""
+    return f.on_first_leg(KILLED, 300.0 * patience(f.vehicles))
+
+
+def assert_nothing_lost(f: Flown, baseline: Flown, killed_at: int) -> None:
     assert not f.conflicts, f"replayed ticks differ: {f.conflicts[:5]}"
     # the killed vehicle was flying at the kill, and flew on as it did without the kill: no
     # tick of it lower by more than 1 m than in the run without the kill ...
@@ -245,7 +213,8 @@ def assert_nothing_lost(f: ResumeRun, baseline: ResumeRun, killed_at: int) -> No
     drop = max(baseline.z(KILLED, t) - f.z(KILLED, t) for t in common if t >= killed_at)
     assert drop < 1.0, drop
     # ... and every vehicle's state stream is the bits of the run without the kill
-    for vid in (*VEHICLES, GATE):
+    assert (f.vehicles, f.gate) == (baseline.vehicles, baseline.gate)
+    for vid in (*f.vehicles, f.gate):
         got, want = f.states[vid], baseline.states[vid]
         end = min(max(got), max(want))
         assert end > killed_at + 120 * 5, (vid, end)
@@ -254,7 +223,7 @@ def assert_nothing_lost(f: ResumeRun, baseline: ResumeRun, killed_at: int) -> No
         differ = [t for t in range(end + 1) if got[t] != want[t]]
         assert not differ, f"{vid}: {len(differ)} ticks differ from the run without the kill"
     # ... and so is every reading of the plume, through the kill (sensor state and queries)
-    for vid in VEHICLES:
+    for vid in f.vehicles:
         got_r, want_r = f.readings[vid], baseline.readings[vid]
         end_s = min(max(got_r), max(want_r))
         times = sorted(t for t in set(got_r) | set(want_r) if t <= end_s)

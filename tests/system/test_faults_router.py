@@ -11,6 +11,9 @@ back. There the router is killed twice in a row (the second time as soon as it i
 so the outage outlasts ``participant_timeout_s``: without the hold every participant would be
 dropped. In both, every vehicle's state stream and every reading is bit-identical to the run
 without the kill (the same comparison as ``test_faults_resume``), and the missions finish.
+
+Each test runs with the three vehicles (one per autopilot process) and, under the marker
+``scale`` (``make test-scale``), with 32 in 4 autopilot processes of 8.
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ from pathlib import Path
 
 import pytest
 
+from tests.support.scale import SHAPES, Shape, patience
 from tests.system.test_faults_resume import (
     ResumeRun,
     assert_nothing_lost,
@@ -27,37 +31,49 @@ from tests.system.test_faults_resume import (
     fly_baseline,
     fly_with_kill,
     kill,
+    on_first_leg,
 )
 
 
+@pytest.fixture(scope="module", params=SHAPES)
+def shape(request: pytest.FixtureRequest) -> Shape:
+    """The vehicles and how many each autopilot process serves."""
+    shape: Shape = request.param
+    return shape
+
+
 @pytest.fixture(scope="module")
-def baseline(tmp_path_factory: pytest.TempPathFactory) -> ResumeRun:
+def baseline(shape: Shape, tmp_path_factory: pytest.TempPathFactory) -> ResumeRun:
     """The flight without any kill (every node a peer)."""
-    return fly_baseline(tmp_path_factory.mktemp("baseline"))
+    vehicles, per_process = shape
+    return fly_baseline(tmp_path_factory.mktemp("baseline"), per_process, vehicles)
 
 
 def test_router_killed_mid_mission_peers_the_run_goes_on_and_nothing_is_lost(
-    baseline: ResumeRun, tmp_path: Path
+    shape: Shape, baseline: ResumeRun, tmp_path: Path
 ) -> None:
-    f, killed_at = fly_with_kill(tmp_path, "router")
+    vehicles, per_process = shape
+    f, killed_at = fly_with_kill(tmp_path, "router", per_process=per_process, vehicles=vehicles)
     assert_nothing_lost(f, baseline, killed_at)
     assert f.launcher.supervisor.procs["router"].restarts == 1
 
 
 def test_router_killed_twice_mid_mission_clients_the_clock_holds_and_nothing_is_lost(
-    baseline: ResumeRun, tmp_path: Path
+    shape: Shape, baseline: ResumeRun, tmp_path: Path
 ) -> None:
-    with flight(tmp_path, network_mode="client") as f:
-        killed_at = f.on_first_leg()
+    vehicles, per_process = shape
+    slow = patience(vehicles)
+    with flight(tmp_path, per_process, "client", vehicles) as f:
+        killed_at = on_first_leg(f)
         for _ in range(2):
             old = f.launcher.supervisor.pids()["router"]
             kill(f, "router")
             f.wait(
                 lambda old=old: f.launcher.supervisor.pids()["router"] != old,  # type: ignore[misc]
-                60.0,
+                60.0 * slow,
                 "router restarted",
             )
-        f.wait(f.done, 300.0, "every mission finished and landed after the kills")
+        f.wait(f.done, 300.0 * slow, "every mission finished and landed after the kills")
         time.sleep(0.5)
     assert_nothing_lost(f, baseline, killed_at)
     assert f.launcher.supervisor.procs["router"].restarts == 2

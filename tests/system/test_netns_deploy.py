@@ -14,7 +14,7 @@ import shutil
 import signal
 import subprocess
 import sys
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -112,11 +112,20 @@ class Hosts:
     every host flies the stepped scenario (``up --stepped``), so a demo attached to it steps
     the clock and each command lands on a known tick. Free-running, when each vehicle's mission
     starts depends on the machine's load, and the seed scenario's return legs cross at one
-    altitude: a loaded run once started uav1 and uav3 so that they met mid-air."""
+    altitude: a loaded run once started uav1 and uav3 so that they met mid-air. ``up_args``: more
+    options of every host's ``plumeswarm up`` (``--vehicles-per-process 8``)."""
 
-    def __init__(self, ns: dict[str, str], hosts_file: Path, out: Path, stepped: bool = False):
+    def __init__(
+        self,
+        ns: dict[str, str],
+        hosts_file: Path,
+        out: Path,
+        stepped: bool = False,
+        up_args: Sequence[str] = (),
+    ):
         self.ns, self.hosts_file, self.out = ns, hosts_file, out
         self.stepped = stepped
+        self.up_args = tuple(up_args)
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
         self.family: list[psutil.Process] = []
 
@@ -144,6 +153,7 @@ class Hosts:
                     "--out",
                     str(run),
                     *(["--stepped"] if self.stepped else []),
+                    *self.up_args,
                 ],
                 cwd=REPO,
                 env=self.env(),
@@ -180,8 +190,10 @@ class Hosts:
             timeout=timeout_s,
         )
 
-    def stop(self) -> None:
-        for host in reversed(list(self.procs)):
+    def stop(self, first: Sequence[str] = ()) -> None:
+        """Stops ``first``, then every other host and process in the reverse of their start."""
+        rest = [name for name in reversed(list(self.procs)) if name not in first]
+        for host in [*first, *rest]:
             proc = self.procs[host]
             if proc.poll() is None:
                 proc.send_signal(signal.SIGTERM)

@@ -4,7 +4,8 @@ own network namespaces, the agents' veth set down in ``sim`` for 60 s. The clock
 grace (10 s here), then the physics drops the autopilots and flies their vehicles under its
 failsafe: it holds them 5 s (PX4's ``COM_FAIL_ACT_T``), then lands them at 0.7 m/s. After the
 healing each autopilot finds that ticks were stepped without it, lands (its vehicle is already
-down) and disarms. No vehicle crashes. Needs root."""
+down) and disarms. No vehicle crashes. The same with the seed scenario scaled to 32 vehicles in
+4 autopilot processes of 8 (marker ``scale``). Needs root."""
 
 from __future__ import annotations
 
@@ -13,22 +14,24 @@ from pathlib import Path
 
 import pytest
 
+from tests.support.scale import SHAPES, Shape
 from tests.system.test_netns_partition import GRACE_S
-from tests.system.test_netns_partition_realtime import HOLD_THEN_LAND, VEHICLES, partition
+from tests.system.test_netns_partition_realtime import HOLD_THEN_LAND, partition
 
 pytestmark = pytest.mark.netns
 ALTITUDE_M = 8.0
 
 
+@pytest.mark.parametrize("shape", SHAPES)
 def test_lockstep_partition_of_60_s_with_the_vehicles_at_8_m_no_vehicle_crashes(
-    tmp_path: Path,
+    shape: Shape, tmp_path: Path
 ) -> None:
     change = ("[time]\n", f"[time]\nunreachable_grace_s = {GRACE_S}\n")
-    logs, rows = partition(tmp_path, 60.0, change)
+    logs, rows = partition(tmp_path, 60.0, change, shape)
     physics = logs["physics"]
     print(re.findall(r".*(?:dropped|no command from|commanded again|without a command).*", physics))
     assert re.search(r"tick \d+: dropped uav\d", physics), "nobody was dropped after the grace"
-    for vid in VEHICLES:
+    for vid in shape[0]:
         assert re.search(rf"no command from {vid}: {HOLD_THEN_LAND}", physics), vid
         assert re.search(rf"tick \d+: {vid} commanded again after \d+ ticks", physics), vid
         text = logs[vid]

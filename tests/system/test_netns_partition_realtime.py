@@ -16,13 +16,16 @@ import re
 import subprocess
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import psutil
 import pytest
 
+from swarmbus.keys import process_node
 from tests.support.procs import REPO, wait_until
+from tests.support.scale import THREE, Shape, patience, process_of
 from tests.system.test_netns_deploy import ROUTER, Hosts, _ip, three_namespaces
 from tests.system.test_netns_partition import seed_scenario, sim_and_agents
 
@@ -35,11 +38,11 @@ DRIVER = "tests.support.rt_flight"
 HOLD_THEN_LAND = r"the physics holds it 5 s, then lands it \(its failsafe\)"
 
 
-def _driver(h: Hosts, tmp: Path, out: Path) -> Path:
-    """The driver in ``sim``, stopped with the hosts (first); the file it touches when every
-    vehicle holds at 8 m."""
+def _driver(h: Hosts, tmp: Path, out: Path, vehicles: Sequence[str] = VEHICLES) -> Path:
+    """The driver of ``vehicles`` in ``sim``, stopped with the hosts (first); the file it
+    touches when every vehicle holds at 8 m."""
     ready = tmp / "airborne"
-    args = [ROUTER, ",".join(VEHICLES), str(ALTITUDE_M), str(ready), str(out)]
+    args = [ROUTER, ",".join(vehicles), str(ALTITUDE_M), str(ready), str(out)]
     with open(tmp / "driver.console", "wb") as console:
         proc = subprocess.Popen(
             ["ip", "netns", "exec", h.ns["sim"], sys.executable, "-m", DRIVER, *args],
@@ -54,9 +57,9 @@ def _driver(h: Hosts, tmp: Path, out: Path) -> Path:
     return ready
 
 
-def _landed(out: Path) -> bool:
+def _landed(out: Path, vehicles: Sequence[str] = VEHICLES) -> bool:
     last = _last_lines(out)
-    return len(last) == len(VEHICLES) and all(
+    return len(last) == len(vehicles) and all(
         v["on_ground"] and not v["armed"] for v in last.values()
     )
 
@@ -75,37 +78,45 @@ REALTIME = ('mode = "lockstep"', 'mode = "realtime"')
 
 
 def partition(
-    tmp: Path, seconds: float, change: tuple[str, str] = REALTIME
+    tmp: Path, seconds: float, change: tuple[str, str] = REALTIME, shape: Shape = THREE
 ) -> tuple[dict[str, str], list[dict[str, Any]]]:
-    """The logs (physics, each autopilot) and the flight records of a run (realtime, or the
-    seed scenario with ``change``) whose agents host is cut off for ``seconds`` while the
-    vehicles hold at 8 m."""
-    scenario = seed_scenario(tmp, *change)
+    """The logs (physics, and each vehicle's autopilot process's by vehicle) and the flight
+    records of a run (realtime, or the seed scenario with ``change``; ``shape``'s vehicles and
+    their grouping) whose agents host is cut off for ``seconds`` while the vehicles hold at
+    8 m."""
+    vehicles, per_process = shape
+    slow = patience(vehicles)
+    scenario = seed_scenario(tmp, *change, vehicles=len(vehicles))
     with three_namespaces() as ns:
-        h = sim_and_agents(ns, tmp, scenario)
+        h = sim_and_agents(ns, tmp, scenario, per_process)
         physics = tmp / "sim" / "physics.log"
         out = tmp / "flight.jsonl"
         try:
             h.up("sim")
             h.up("agents")
-            wait_until(lambda: "handshake done" in physics.read_text(), 60.0, "the first tick")
-            ready = _driver(h, tmp, out)
-            wait_until(ready.exists, 180.0, "every vehicle holding at 8 m")
+            wait_until(
+                lambda: "handshake done" in physics.read_text(), 60.0 * slow, "the first tick"
+            )
+            ready = _driver(h, tmp, out, vehicles)
+            wait_until(ready.exists, 180.0 * slow, "every vehicle holding at 8 m")
             time.sleep(1.0)
             _ip("-n", ns["sim"], "link", "set", "vageh", "down")
             time.sleep(seconds)
             _ip("-n", ns["sim"], "link", "set", "vageh", "up")
             wait_until(
-                lambda: all(f"{v} commanded again" in physics.read_text() for v in VEHICLES),
-                90.0,
+                lambda: all(f"{v} commanded again" in physics.read_text() for v in vehicles),
+                90.0 * slow,
                 "every autopilot to command its vehicle again",
             )
-            wait_until(lambda: _landed(out), 90.0, "every vehicle landed and disarmed")
+            wait_until(
+                lambda: _landed(out, vehicles), 90.0 * slow, "every vehicle landed and disarmed"
+            )
         finally:
             h.stop()  # the driver first
         logs = {"physics": physics.read_text()}
-        for vid in VEHICLES:
-            logs[vid] = (tmp / "agents" / f"autopilot-{vid}.log").read_text()
+        for vid, group in process_of(vehicles, per_process).items():
+            name = process_node("autopilot", group)
+            logs[vid] = (tmp / "agents" / f"{name}.log").read_text()
         rows = [json.loads(line) for line in out.read_text().splitlines() if line.strip()]
         return logs, rows
 
