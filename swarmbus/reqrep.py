@@ -16,6 +16,7 @@ import zenoh
 from swarmbus.codec import MessageError, decode, encode
 from swarmbus.errors import PlumeswarmError
 from swarmbus.messages import CommandReply, ErrorReply, RejectCode
+from swarmbus.session import message_limit, payload_or_none
 
 log = logging.getLogger(__name__)
 
@@ -264,9 +265,13 @@ def _refuse(query: zenoh.Query | None, field: str, reason: str) -> None:
         query.drop()
 
 
-def _payload(query: zenoh.Query) -> bytes:
-    payload = query.payload
-    return payload.to_bytes() if payload is not None else b""
+def _payload(query: zenoh.Query) -> bytes | None:
+    """The query's payload, or None (refused with an ``ErrorReply``, logged) when it is over
+    ``[network] max_message_size_bytes``."""
+    data = payload_or_none(query, "a request", log)
+    if data is None:
+        _refuse(query, "", f"over [network] max_message_size_bytes {message_limit()}")
+    return data
 
 
 def _accept(query: zenoh.Query, data: bytes, key: str, request_type: type[Q]) -> Incoming[Q] | None:
@@ -297,6 +302,8 @@ def serve(
 
     def on_query(query: zenoh.Query) -> None:
         data = _payload(query)
+        if data is None:
+            return
         if memo and last and last[0][0] == data:
             query.reply(query.key_expr, last[0][1])
             query.drop()
@@ -322,7 +329,8 @@ def serve_later(
     ``on_request`` (on Zenoh's thread) as an :class:`Incoming` to answer once."""
 
     def on_query(query: zenoh.Query) -> None:
-        incoming = _accept(query, _payload(query), key, request_type)
+        data = _payload(query)
+        incoming = None if data is None else _accept(query, data, key, request_type)
         if incoming is not None:
             on_request(incoming)
 
