@@ -625,8 +625,9 @@ class AutopilotNode:
                 consolidation=zenoh.ConsolidationMode.NONE,  # every kept batch, not the newest
             )
             for reply in replies:
-                if reply.ok is not None:
-                    self._keep_radio(reply.ok.payload.to_bytes())
+                data = None if reply.ok is None else payload_or_none(reply.ok, "radio batch", log)
+                if data is not None:
+                    self._keep_radio(data)
         if then_step:
             self._run_tick(held)  # goes on if the batches are in, or it has waited enough
 

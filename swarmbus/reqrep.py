@@ -144,8 +144,12 @@ class Pending(Generic[R]):
 
     def _read(self, reply: zenoh.Reply) -> R | RequestError:
         if reply.ok is not None:
+            data = payload_or_none(reply.ok, "a reply", log)
+            if data is None:
+                limit = f"over [network] max_message_size_bytes {message_limit()}"
+                return BadReply(self.key, "", f"{len(reply.ok.payload)} bytes, {limit}")
             try:
-                return decode(reply.ok.payload.to_bytes(), self._reply_type)
+                return decode(data, self._reply_type)
             except MessageError as exc:
                 return BadReply(self.key, exc.field, exc.reason)
         data = reply.err.payload.to_bytes() if reply.err is not None else b""
