@@ -52,7 +52,8 @@ DEFAULT_MAX_MESSAGE_BYTES = 32 * 1024 * 1024
 # Zenoh's transport limit (``transport/link/rx/max_message_size``; Zenoh's own default is 1 GiB)
 # is this multiple of it: a message up to that size reaches the process, which refuses it with
 # a line; a larger one is dropped by Zenoh when it reassembles the fragments, with no line of
-# ours. The transport limit is the memory one message in transit may take.
+# ours. The transport limit bounds the memory one message in transit takes: up to about 1.6
+# times its size while Zenoh reassembles it (docs/bus.md, "Message size").
 TRANSPORT_MESSAGE_FACTOR = 4
 MIN_MAX_MESSAGE_BYTES = 64 * 1024  # below this a tick of a few hundred vehicles would not fit
 
