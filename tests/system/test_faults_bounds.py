@@ -10,7 +10,7 @@ the physics' resident memory grows by less than the transport limit (one message
 plus the limit (the copy of an accepted message handed to Python): 160 MiB by default. It was
 64 MiB while Zenoh's transport limit was the limit itself (it dropped the 64 MiB payloads
 unlogged); they now reach the processes to be refused with a line. Measured (``pytest -q -s``):
-growth up to 130 MiB (recorder 90.4 → 226.3 MB, physics 102.6 → 227.5 MB at the peak).
+growth up to 141 MiB in four runs (recorder 69.4 → 217.6 MB, physics 102.6 → 227.5 MB).
 """
 
 from __future__ import annotations
