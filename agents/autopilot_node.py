@@ -56,7 +56,7 @@ from swarmbus.node import NodeContext, NodeRuntime
 from swarmbus.options import OptionError, role_options
 from swarmbus.reqrep import Incoming, serve_later
 from swarmbus.scenario import Scenario
-from swarmbus.session import SINGLE_THREAD_RUNTIME
+from swarmbus.session import SINGLE_THREAD_RUNTIME, payload_or_none
 from swarmbus.views import StateHead
 
 log = logging.getLogger(__name__)
@@ -312,10 +312,14 @@ class AutopilotNode:
 
     # ------------------------------------------------------------------ bus callbacks
     def _on_tick_sample(self, sample: zenoh.Sample) -> None:
-        self.inbox.put(TickArrived(sample.payload.to_bytes()))
+        data = payload_or_none(sample, "tick", log)
+        if data is not None:
+            self.inbox.put(TickArrived(data))
 
     def _on_radio_sample(self, sample: zenoh.Sample) -> None:
-        self.inbox.put(RadioArrived(sample.payload.to_bytes()))
+        data = payload_or_none(sample, "radio batch", log)
+        if data is not None:
+            self.inbox.put(RadioArrived(data))
 
     def _radio_query(self, vehicle_id: str) -> Callable[[zenoh.Query], None]:
         """Answer a query with the vehicle's last radio batches (on Zenoh's thread)."""
@@ -621,8 +625,9 @@ class AutopilotNode:
                 consolidation=zenoh.ConsolidationMode.NONE,  # every kept batch, not the newest
             )
             for reply in replies:
-                if reply.ok is not None:
-                    self._keep_radio(reply.ok.payload.to_bytes())
+                data = None if reply.ok is None else payload_or_none(reply.ok, "radio batch", log)
+                if data is not None:
+                    self._keep_radio(data)
         if then_step:
             self._run_tick(held)  # goes on if the batches are in, or it has waited enough
 

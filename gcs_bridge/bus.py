@@ -27,6 +27,7 @@ from swarmbus.messages import (
     Setpoint,
 )
 from swarmbus.reqrep import BadReply, RequestError, ask, command_reply
+from swarmbus.session import payload_or_none
 from swarmbus.views import StateHead, TickView
 
 log = logging.getLogger(__name__)
@@ -149,12 +150,16 @@ class Streams:
                 vid = vehicle_id_of(str(sample.key_expr))
             except KeyNameError:
                 continue
-            if vid in self._ids:
-                latest[(KIND_READING, vid)] = sample.payload.to_bytes()
+            data = payload_or_none(sample, "a reading", log) if vid in self._ids else None
+            if data is not None:
+                latest[(KIND_READING, vid)] = data
         while (sample := self._ticks.try_recv()) is not None:
             count += 1
+            data = payload_or_none(sample, "a tick", log)
+            if data is None:
+                continue
             try:
-                view = decode(sample.payload.to_bytes(), TickView)
+                view = decode(data, TickView)
             except MessageError as exc:
                 log.warning("%s: %s", self._keys.tick(), exc)
                 continue
@@ -167,10 +172,11 @@ class Streams:
         newest = None
         while (sample := self._ticks.try_recv()) is not None:
             newest = sample
-        if newest is None:
+        data = None if newest is None else payload_or_none(newest, "a tick", log)
+        if data is None:
             return None
         try:
-            view = decode(newest.payload.to_bytes(), TickView)
+            view = decode(data, TickView)
         except MessageError as exc:
             log.warning("%s: %s", self._keys.tick(), exc)
             return None
@@ -214,8 +220,9 @@ def _handler(
             vid = keys.vehicle_id_of(str(sample.key_expr))
         except KeyNameError:
             return
-        if vid in vehicle_ids:
-            inbox.put(kind, vid, sample.payload.to_bytes())
+        data = payload_or_none(sample, kind, log) if vid in vehicle_ids else None
+        if data is not None:
+            inbox.put(kind, vid, data)
 
     return on_sample
 

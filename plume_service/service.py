@@ -44,7 +44,7 @@ from swarmbus.node import NodeContext, NodeRuntime
 from swarmbus.options import RoleOptions, role_main
 from swarmbus.reqrep import Incoming, serve, serve_later
 from swarmbus.scenario import Scenario
-from swarmbus.session import SINGLE_THREAD_RUNTIME
+from swarmbus.session import SINGLE_THREAD_RUNTIME, payload_or_none
 from swarmbus.views import TickView, state_head_decoder
 
 log = logging.getLogger(__name__)
@@ -356,9 +356,9 @@ def _start_state_publisher(
     publisher = rt.session.declare_publisher(rt.keys.plume_state())
 
     def on_clock(sample: zenoh.Sample) -> None:
-        clock = decode_or_none(
-            sample.payload.to_bytes(), Clock, "a clock message", log, str(sample.key_expr)
-        )
+        data = payload_or_none(sample, "a clock message", log)
+        key = str(sample.key_expr)
+        clock = None if data is None else decode_or_none(data, Clock, "a clock message", log, key)
         if clock is None:
             return
         states.on_clock(clock.sim_time_s)
@@ -375,6 +375,12 @@ def _start_state_publisher(
     return subscriber, state_thread
 
 
+def _on_sensor_tick(answers: SensorAnswers, sample: zenoh.Sample) -> None:
+    data = payload_or_none(sample, "a sensor tick", log)
+    if data is not None:
+        answers.on_tick(data)
+
+
 @role_main(PlumeOptions, "plume")
 def main(ctx: NodeContext, options: PlumeOptions) -> int:
     """Serve the scenario's plume until stopped."""
@@ -389,7 +395,7 @@ def main(ctx: NodeContext, options: PlumeOptions) -> int:
         sample_pub = rt.session.declare_publisher(rt.keys.plume_sample())
         answers = SensorAnswers(service, sample_pub.put)
         tick_sub = rt.session.declare_subscriber(
-            rt.keys.sensor_tick(), lambda sample: answers.on_tick(sample.payload.to_bytes())
+            rt.keys.sensor_tick(), lambda sample: _on_sensor_tick(answers, sample)
         )
         state_feed = _start_state_publisher(rt, states) if states.active else None
         rt.ready()

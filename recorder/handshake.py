@@ -10,6 +10,7 @@ order, an acknowledged ``STOPPING`` also means everything published before it wa
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from collections.abc import Callable
@@ -20,7 +21,9 @@ from swarmbus.codec import MessageError, decode
 from swarmbus.errors import PlumeswarmError
 from swarmbus.keys import Keys
 from swarmbus.messages import NodeHealth, NodeState
-from swarmbus.session import Presence
+from swarmbus.session import Presence, payload_or_none
+
+log = logging.getLogger(__name__)
 
 
 class RecorderNotListening(PlumeswarmError, TimeoutError):
@@ -47,8 +50,11 @@ def wait_until_recorded(
     heard = threading.Event()
 
     def on_recorder_health(sample: zenoh.Sample) -> None:
+        data = payload_or_none(sample, "recorder health", log)
+        if data is None:
+            return
         try:
-            health = decode(sample.payload.to_bytes(), NodeHealth)
+            health = decode(data, NodeHealth)
         except MessageError:
             return
         if health.detail == expected:

@@ -68,6 +68,7 @@ from swarmbus.node import NodeContext, NodeRuntime, package_version
 from swarmbus.options import RoleOptions, role_main
 from swarmbus.reqrep import RequestError, request
 from swarmbus.scenario import Scenario
+from swarmbus.session import payload_or_none
 from swarmbus.view_feed import fetch_mesh, isosurface_queries
 
 log = logging.getLogger(__name__)
@@ -187,6 +188,7 @@ class Recorder:
         self._lock = threading.Lock()
         self.received: Counter[str] = Counter()
         self.dropped: Counter[str] = Counter()
+        self.refused: Counter[str] = Counter()  # over [network] max_message_size_bytes
         self.tick_gaps: Counter[str] = Counter()  # messages missing from per-tick streams
         self._last_tick: dict[str, int] = {}
         self._durable_tick: dict[str, int] = {}  # the newest tick of each key in a closed chunk
@@ -231,18 +233,30 @@ class Recorder:
         if original is not None:
             self._on_backfill(original, sample, now)
             return
+        payload = self._within_limit(key, sample)
+        if payload is None:
+            return
         self._clock.observe(key, sample, now)
         with self._lock:
             if (
                 self._received_total - self._taken_total >= self._opts.max_backlog
-                or self._queued_bytes + len(sample.payload) > self._opts.max_backlog_bytes
+                or self._queued_bytes + len(payload) > self._opts.max_backlog_bytes
             ):
                 self.dropped[key] += 1
                 self._dropped_total += 1
                 return
             self.received[key] += 1
             self._received_total += 1
-            self._enqueue(key, sample.payload.to_bytes(), now, publish_time_ns(sample), False)
+            self._enqueue(key, payload, now, publish_time_ns(sample), False)
+
+    def _within_limit(self, key: str, sample: zenoh.Sample) -> bytes | None:
+        """The sample's payload, or None (logged, counted in ``refused``, not recorded) when it
+        is over ``[network] max_message_size_bytes``."""
+        payload = payload_or_none(sample, "a message", log)
+        if payload is None:
+            with self._lock:
+                self.refused[key] += 1
+        return payload
 
     def _enqueue(
         self, key: str, payload: bytes, now_ns: int, publish_ns: int | None, is_reply: bool
@@ -268,9 +282,9 @@ class Recorder:
     def _on_backfill(self, key: str, sample: zenoh.Sample, now: int) -> None:
         """A tick or state the physics re-sent after our restart: recorded under its own key
         if the killed recorder never received it (published after it died)."""
-        payload = sample.payload.to_bytes()
-        tick = _tick_of(payload)
-        if self._previous is None or tick is None:
+        payload = self._within_limit(key, sample)
+        tick = None if payload is None else _tick_of(payload)
+        if payload is None or self._previous is None or tick is None:
             return
         with self._lock:
             if (key, tick) in self._have or tick <= self._have_max.get(key, -1):
@@ -388,9 +402,11 @@ class Recorder:
         with self._lock:
             received = dict(self.received)
             dropped = dict(self.dropped)
+            refused = dict(self.refused)
         return {
             "received": msgspec.json.encode(received).decode(),
             "dropped": msgspec.json.encode(dropped).decode(),
+            "refused": msgspec.json.encode(refused).decode(),
             "undecodable": msgspec.json.encode(dict(self._sink.undecodable)).decode(),
             "tick_gaps": msgspec.json.encode(dict(self.tick_gaps)).decode(),
             "received_total": str(sum(received.values())),

@@ -51,6 +51,7 @@ from swarmbus.messages import (
 from swarmbus.node import NodeContext, NodeRuntime
 from swarmbus.options import OptionError, RoleOptions, role_options
 from swarmbus.reqrep import RequestError, ask
+from swarmbus.session import payload_or_none
 from swarmbus.view_feed import MeshFetcher, isosurface_queries
 
 log = logging.getLogger(__name__)
@@ -146,8 +147,11 @@ class Latest:
             self.take()
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
+        data = payload_or_none(sample, "a message", log)
+        if data is None:
+            return
         with self._lock:
-            self._latest[str(sample.key_expr)] = sample.payload.to_bytes()
+            self._latest[str(sample.key_expr)] = data
 
     def take(self) -> dict[str, bytes]:
         with self._lock:
@@ -227,7 +231,9 @@ class CmdVel:
     def _on_twist(self, vehicle_id: str, sample: zenoh.Sample) -> None:
         self.last_s = time.monotonic()
         self._arrived.set()
-        payload = sample.payload.to_bytes()
+        payload = payload_or_none(sample, "a Twist", log)
+        if payload is None:
+            return
         try:
             twist = wire.decode(payload, cv.TWIST)
             if len(wire.encode(twist, cv.TWIST)) != len(payload):

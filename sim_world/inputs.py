@@ -26,7 +26,7 @@ from swarmbus.codec import decode_or_none
 from swarmbus.keys import Keys, autopilot_node
 from swarmbus.messages import NodeHealth, NodeState, RestartNotice, StepRequest
 from swarmbus.reqrep import Incoming, serve_later
-from swarmbus.session import Presence
+from swarmbus.session import Presence, payload_or_none
 
 log = logging.getLogger(__name__)
 
@@ -114,7 +114,8 @@ class LockstepInputs:
 
     def _on_health(self, sample: zenoh.Sample) -> None:
         what = f"health on {sample.key_expr}"
-        health = decode_or_none(sample.payload.to_bytes(), NodeHealth, what, log)
+        data = payload_or_none(sample, what, log)
+        health = None if data is None else decode_or_none(data, NodeHealth, what, log)
         if health is None:
             return
         if health.name == RECORDER:
@@ -207,7 +208,8 @@ class LockstepInputs:
 
     def _on_field_sample(self, sample: zenoh.Sample) -> None:
         """The plume's answer to a sensor tick: counts like an autopilot's command."""
-        answer = decode_answer(sample.payload.to_bytes(), sample.key_expr)
+        data = payload_or_none(sample, "plume sample", log)
+        answer = None if data is None else decode_answer(data, sample.key_expr)
         if answer is None:
             return
         with self.cond:
@@ -217,7 +219,10 @@ class LockstepInputs:
                     self.cond.notify_all()
 
     def _on_batch(self, sample: zenoh.Sample) -> None:
-        tick, entries = self.intake.entries(str(sample.key_expr), sample.payload.to_bytes())
+        data = payload_or_none(sample, "actuator batch", log)
+        if data is None:
+            return
+        tick, entries = self.intake.entries(str(sample.key_expr), data)
         if not entries:
             return
         with self.cond:
@@ -232,8 +237,11 @@ class LockstepInputs:
     def _on_restart_notice(self, sample: zenoh.Sample) -> None:
         """The launcher's word on a process that ended: hold or drop its vehicles."""
         key = str(sample.key_expr)
-        notice = decode_or_none(
-            sample.payload.to_bytes(), RestartNotice, "restart notice", log, key
+        data = payload_or_none(sample, "restart notice", log)
+        notice = (
+            None
+            if data is None
+            else decode_or_none(data, RestartNotice, "restart notice", log, key)
         )
         if notice is None:
             return

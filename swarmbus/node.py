@@ -31,7 +31,7 @@ from swarmbus.codec import decode_or_none, encode
 from swarmbus.keys import Keys
 from swarmbus.messages import NodeHealth, NodeState
 from swarmbus.scenario import Scenario, scenario_hash
-from swarmbus.session import NetworkConfig, open_session, process_identity
+from swarmbus.session import NetworkConfig, open_session, payload_or_none, process_identity
 
 log = logging.getLogger(__name__)
 HEALTH_PERIOD_S = 1.0
@@ -129,7 +129,8 @@ class NodeRuntime:
 
     def _on_checked_health(self, sample: zenoh.Sample) -> None:
         what = f"health of {self._check_of}"
-        health = decode_or_none(sample.payload.to_bytes(), NodeHealth, what, log)
+        data = payload_or_none(sample, what, log)
+        health = None if data is None else decode_or_none(data, NodeHealth, what, log)
         if health is None or not health.scenario or health.scenario == self.scenario_hash:
             return
         if self.refusal is None:

@@ -16,6 +16,7 @@ import zenoh
 from swarmbus.codec import MessageError, decode, encode
 from swarmbus.errors import PlumeswarmError
 from swarmbus.messages import CommandReply, ErrorReply, RejectCode
+from swarmbus.session import message_limit, payload_or_none
 
 log = logging.getLogger(__name__)
 
@@ -143,8 +144,12 @@ class Pending(Generic[R]):
 
     def _read(self, reply: zenoh.Reply) -> R | RequestError:
         if reply.ok is not None:
+            data = payload_or_none(reply.ok, "a reply", log)
+            if data is None:
+                limit = f"over [network] max_message_size_bytes {message_limit()}"
+                return BadReply(self.key, "", f"{len(reply.ok.payload)} bytes, {limit}")
             try:
-                return decode(reply.ok.payload.to_bytes(), self._reply_type)
+                return decode(data, self._reply_type)
             except MessageError as exc:
                 return BadReply(self.key, exc.field, exc.reason)
         data = reply.err.payload.to_bytes() if reply.err is not None else b""
@@ -264,9 +269,13 @@ def _refuse(query: zenoh.Query | None, field: str, reason: str) -> None:
         query.drop()
 
 
-def _payload(query: zenoh.Query) -> bytes:
-    payload = query.payload
-    return payload.to_bytes() if payload is not None else b""
+def _payload(query: zenoh.Query) -> bytes | None:
+    """The query's payload, or None (refused with an ``ErrorReply``, logged) when it is over
+    ``[network] max_message_size_bytes``."""
+    data = payload_or_none(query, "a request", log)
+    if data is None:
+        _refuse(query, "", f"over [network] max_message_size_bytes {message_limit()}")
+    return data
 
 
 def _accept(query: zenoh.Query, data: bytes, key: str, request_type: type[Q]) -> Incoming[Q] | None:
@@ -297,6 +306,8 @@ def serve(
 
     def on_query(query: zenoh.Query) -> None:
         data = _payload(query)
+        if data is None:
+            return
         if memo and last and last[0][0] == data:
             query.reply(query.key_expr, last[0][1])
             query.drop()
@@ -322,7 +333,8 @@ def serve_later(
     ``on_request`` (on Zenoh's thread) as an :class:`Incoming` to answer once."""
 
     def on_query(query: zenoh.Query) -> None:
-        incoming = _accept(query, _payload(query), key, request_type)
+        data = _payload(query)
+        incoming = None if data is None else _accept(query, data, key, request_type)
         if incoming is not None:
             on_request(incoming)
 

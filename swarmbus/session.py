@@ -21,6 +21,7 @@ from typing import Annotated, Any, Literal
 import msgspec
 import zenoh
 
+from swarmbus.codec import refusals
 from swarmbus.errors import PlumeswarmError
 from swarmbus.keys import JOIN_FLUSH, ROUTER_ADMIN, Keys
 
@@ -42,12 +43,18 @@ SINGLE_THREAD_RUNTIME = (
 PEER_JOIN_TIMEOUT_S = 2.0
 CONNECT_RETRY = {"period_init_ms": 100, "period_max_ms": 1000, "period_increase_factor": 2.0}
 Endpoint = Annotated[str, msgspec.Meta(pattern=r"^(tcp|udp|tls|quic|unixsock-stream)/.+$")]
-# The largest message a session takes (Zenoh's ``transport/link/rx/max_message_size``; Zenoh's
-# own default is 1 GiB): a larger one is dropped by the receiving session when it reassembles
-# its fragments, before it is handed to anyone, and the link goes on. Well above our largest
-# legitimate messages: a 100 000-point plume query (≈ 2.8 MB), a 1 m plume mesh of the seed
-# domain (≈ 0.5 MB), a tick of 1024 vehicles (≈ 350 KB). A 0.1 m mesh (≈ 54 MB) needs more.
+# The largest message a process takes (``[network] max_message_size_bytes``): a larger one is
+# refused by the receiving process before it is decoded or recorded, with a warning naming its
+# key, its size and the limit (:func:`payload_or_none`). Well above our largest legitimate
+# messages: a 100 000-point plume query (≈ 2.8 MB), a 1 m plume mesh of the seed domain
+# (≈ 0.5 MB), a tick of 1024 vehicles (≈ 350 KB). A 0.1 m mesh (≈ 54 MB) needs more.
 DEFAULT_MAX_MESSAGE_BYTES = 32 * 1024 * 1024
+# Zenoh's transport limit (``transport/link/rx/max_message_size``; Zenoh's own default is 1 GiB)
+# is this multiple of it: a message up to that size reaches the process, which refuses it with
+# a line; a larger one is dropped by Zenoh when it reassembles the fragments, with no line of
+# ours. The transport limit bounds the memory one message in transit takes: up to about 1.6
+# times its size while Zenoh reassembles it (docs/bus.md, "Message size").
+TRANSPORT_MESSAGE_FACTOR = 4
 MIN_MAX_MESSAGE_BYTES = 64 * 1024  # below this a tick of a few hundred vehicles would not fit
 
 
@@ -112,8 +119,8 @@ class NetworkConfig(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fi
             ge=MIN_MAX_MESSAGE_BYTES,
             le=2**30,
             description=(
-                "Largest message a session takes (bytes); a larger one is dropped by every "
-                "session that receives it, the router too."
+                "Largest message a process takes (bytes); a larger one is refused with a "
+                "warning naming its key (up to 4 times this; beyond, Zenoh drops it unlogged)."
             ),
         ),
     ] = DEFAULT_MAX_MESSAGE_BYTES
@@ -166,7 +173,8 @@ def zenoh_config(net: NetworkConfig) -> zenoh.Config:
     # published, not only when the recorder got it, and replay reproduces that timing.
     conf.insert_json5("timestamping/enabled", "true")
     conf.insert_json5("transport/shared_memory/enabled", json.dumps(net.shared_memory))
-    conf.insert_json5("transport/link/rx/max_message_size", json.dumps(net.max_message_size_bytes))
+    transport_limit = TRANSPORT_MESSAGE_FACTOR * net.max_message_size_bytes
+    conf.insert_json5("transport/link/rx/max_message_size", json.dumps(transport_limit))
     if net.low_latency:
         conf.insert_json5("transport/unicast/lowlatency", "true")
         conf.insert_json5("transport/unicast/qos/enabled", "false")
@@ -217,10 +225,44 @@ def check_tls_files(tls: TlsConfig) -> None:
             raise NetworkConfigError(f"TLS {kind} {path}: not PEM ({marker.decode()} missing)")
 
 
+_message_limit = DEFAULT_MAX_MESSAGE_BYTES  # of the session this process opened last
+
+
+def message_limit() -> int:
+    """The ``[network] max_message_size_bytes`` of the session this process opened last."""
+    return _message_limit
+
+
+def payload_or_none(
+    message: zenoh.Sample | zenoh.Query, what: object, log: logging.Logger
+) -> bytes | None:
+    """The payload of a received sample or query (empty if it has none), or None after a
+    warning on ``log`` when it is over :func:`message_limit`: ``ignoring <what> of <n> bytes on
+    <key>: over [network] max_message_size_bytes <limit>`` (rate-limited per key,
+    :class:`~swarmbus.codec.Refusals`). The size is read without copying the payload."""
+    payload = message.payload
+    if payload is None:
+        return b""
+    size = len(payload)
+    limit = _message_limit
+    if size > limit:
+        key = str(message.key_expr)
+        refusals(log).refuse(
+            key,
+            f"{what} of {size} bytes on {key}",
+            f"over [network] max_message_size_bytes {limit}",
+            "size",
+        )
+        return None
+    return payload.to_bytes()
+
+
 def open_session(net: NetworkConfig) -> zenoh.Session:
     """Open a session; use it as a context manager (``with open_session(net) as s``). A peer
     returns once it is connected to the peers its router knows (:func:`join_peers`)."""
     session = zenoh.open(zenoh_config(net))
+    global _message_limit
+    _message_limit = net.max_message_size_bytes
     if net.mode == "peer":
         join_peers(session, PEER_JOIN_TIMEOUT_S)
     return session

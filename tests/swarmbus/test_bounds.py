@@ -1,6 +1,7 @@
-"""Bounded messages: every session refuses a message larger than ``[network]
-max_message_size_bytes`` (Zenoh drops it when it reassembles it; the link goes on), and a
-message that does not decode is refused with a log line naming its key, rate-limited per key.
+"""Bounded messages: a process refuses a message larger than ``[network]
+max_message_size_bytes`` with a log line naming its key, its size and the limit; Zenoh drops
+one over 4 times the limit (its transport limit) unlogged; the link goes on; a message that
+does not decode is refused with a log line naming its key, rate-limited per key.
 Real sessions on loopback (a router and its clients or peers)."""
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import zenoh
 
 from swarmbus.codec import Refusals, decode_or_none, encode
 from swarmbus.messages import Clock, SpeedMode
-from swarmbus.session import DEFAULT_MAX_MESSAGE_BYTES, NetworkConfig, open_session
+from swarmbus.session import NetworkConfig, open_session, payload_or_none
 from tests.support.procs import Network, wait_until
 
 KEY = "test/bounds/payload"
@@ -23,15 +24,18 @@ MIB = 1024 * 1024
 
 
 class _Sizes:
-    """The payload sizes a subscriber received."""
+    """The payload sizes a subscriber's handler accepted (through :func:`payload_or_none`)."""
 
-    def __init__(self) -> None:
+    def __init__(self, log: logging.Logger) -> None:
+        self.log = log
         self.sizes: list[int] = []
         self.lock = threading.Lock()
 
     def __call__(self, sample: zenoh.Sample) -> None:
-        with self.lock:
-            self.sizes.append(len(sample.payload.to_bytes()))
+        data = payload_or_none(sample, "a payload", self.log)
+        if data is not None:
+            with self.lock:
+                self.sizes.append(len(data))
 
     def now(self) -> list[int]:
         with self.lock:
@@ -44,44 +48,42 @@ def _matching(pub: zenoh.Publisher) -> bool:
 
 
 @pytest.mark.parametrize("mode", ["client", "peer"])
-def test_a_session_drops_a_message_over_its_limit_and_its_link_goes_on(
-    network: tuple[Network, zenoh.Session], mode: str
+def test_a_message_over_the_limit_is_refused_with_its_key_and_beyond_the_transport_dropped(
+    network: tuple[Network, zenoh.Session], mode: str, caplog: pytest.LogCaptureFixture
 ) -> None:
-    net, _ = network  # the router: our default limit too
-    ours = NetworkConfig(mode=mode, connect=[net.endpoint])  # type: ignore[arg-type]
+    net, _ = network  # the router: the default limits
+    limit = MIB
+    log = logging.getLogger(f"tests.bounds.size.{mode}")  # its own rate limit
     # The rogue's own limit is Zenoh's 1 GiB: only the receiving side can refuse.
-    rogue = msgspec.structs.replace(ours, max_message_size_bytes=2**30, shared_memory=False)
-    assert ours.max_message_size_bytes == DEFAULT_MAX_MESSAGE_BYTES == 32 * MIB
-    with open_session(ours) as receiver, open_session(rogue) as sender:
-        got = _Sizes()
+    rogue = NetworkConfig(
+        mode=mode,  # type: ignore[arg-type]
+        connect=[net.endpoint],
+        max_message_size_bytes=2**30,
+        shared_memory=False,
+    )
+    ours = NetworkConfig(mode=mode, connect=[net.endpoint], max_message_size_bytes=limit)  # type: ignore[arg-type]
+    # the receiver's session is opened last: the limit payload_or_none applies is its own
+    with open_session(rogue) as sender, open_session(ours) as receiver:
+        got = _Sizes(log)
         sub = receiver.declare_subscriber(KEY, got)
         pub = sender.declare_publisher(KEY, congestion_control=zenoh.CongestionControl.BLOCK)
         wait_until(lambda: _matching(pub), 10.0, "the subscriber matched")
-        # the control: a message just under the limit gets through
-        pub.put(b"u" * (DEFAULT_MAX_MESSAGE_BYTES - 64 * 1024))
-        pub.put(b"x" * (64 * MIB))
-        pub.put(b"marker")
-        wait_until(lambda: 6 in got.now(), 30.0, "the marker after the 64 MiB payload")
-        assert got.now() == [DEFAULT_MAX_MESSAGE_BYTES - 64 * 1024, 6]
+        over = limit + 1024  # reaches the process (under 4 × the limit), refused there
+        beyond = 4 * limit + 1024  # over Zenoh's transport limit: dropped unlogged
+        with caplog.at_level(logging.WARNING, logger=log.name):
+            pub.put(b"u" * (limit - 1024))  # the control: just under the limit
+            pub.put(b"x" * over)
+            pub.put(b"y" * beyond)
+            pub.put(b"marker")
+            wait_until(lambda: 6 in got.now(), 30.0, "the marker after the large payloads")
+        assert got.now() == [limit - 1024, 6]
+        lines = [r.getMessage() for r in caplog.records if r.name == log.name]
+        assert lines == [
+            f"ignoring a payload of {over} bytes on {KEY}: over [network] "
+            f"max_message_size_bytes {limit}"
+        ]
         pub.put(b"after!!")  # the link is still up
-        wait_until(lambda: 7 in got.now(), 10.0, "a message after the refused one")
-        sub.undeclare()
-        pub.undeclare()
-
-
-def test_a_lower_limit_is_taken_by_the_session(network: tuple[Network, zenoh.Session]) -> None:
-    net, _ = network
-    small = NetworkConfig(mode="peer", connect=[net.endpoint], max_message_size_bytes=MIB)
-    sender_net = NetworkConfig(mode="peer", connect=[net.endpoint], shared_memory=False)
-    with open_session(small) as receiver, open_session(sender_net) as sender:
-        got = _Sizes()
-        sub = receiver.declare_subscriber(KEY, got)
-        pub = sender.declare_publisher(KEY, congestion_control=zenoh.CongestionControl.BLOCK)
-        wait_until(lambda: _matching(pub), 10.0, "the subscriber matched")
-        for size in (MIB - 1024, MIB + 1024, 5):
-            pub.put(b"y" * size)
-        wait_until(lambda: 5 in got.now(), 30.0, "the marker")
-        assert got.now() == [MIB - 1024, 5]
+        wait_until(lambda: 7 in got.now(), 10.0, "a message after the refused ones")
         sub.undeclare()
         pub.undeclare()
 

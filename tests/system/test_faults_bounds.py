@@ -1,12 +1,16 @@
 """64 MiB payloads on the bus under ``plumeswarm up --record``: a rogue peer (whose own
 message limit is Zenoh's 1 GiB) puts them on a few of the stack's keys, each followed by a
-small malformed payload on the same key. Every session refuses the 64 MiB ones (``[network]
-max_message_size_bytes``, 32 MiB by default); the small ones reach their receivers, which log
-a refusal naming the key; the stack goes on ticking; the recorder's and the physics' resident
-memory stays under their start plus 64 MiB (one accepted payload alone would be 64 MiB, and a
-Python copy of it another 64). Measured: recorder 90.0 → 121.0 MB at its peak, physics 96.7 →
-128.3 MB (Zenoh's reassembly buffer grows to the limit before it refuses); with the limit at
-Zenoh's 1 GiB the same run peaked at 486.8 and 231.4 MB and recorded the 64 MiB payloads.
+small malformed payload on the same key. The 64 MiB ones are over ``[network]
+max_message_size_bytes`` (32 MiB by default) and under Zenoh's transport limit (4 times it):
+each receiving process refuses them before decoding or recording them, with a warning naming
+the key, the size and the limit (the physics for the actuators, the autopilots for the tick, the
+recorder for all three); the small ones reach their receivers, which log a refusal naming the
+key; the stack goes on ticking; the recording holds none of the large ones. The recorder's and
+the physics' resident memory grows by less than the transport limit (one message in transit)
+plus the limit (the copy of an accepted message handed to Python): 160 MiB by default. It was
+64 MiB while Zenoh's transport limit was the limit itself (it dropped the 64 MiB payloads
+unlogged); they now reach the processes to be refused with a line. Measured (``pytest -q -s``):
+growth up to 141 MiB in four runs (recorder 69.4 → 217.6 MB, physics 102.6 → 227.5 MB).
 """
 
 from __future__ import annotations
@@ -15,6 +19,7 @@ import threading
 from collections.abc import Callable
 from pathlib import Path
 
+import msgspec
 import psutil
 import zenoh
 
@@ -23,7 +28,12 @@ from recorder.reader import Recording
 from swarmbus.codec import MessageError, decode
 from swarmbus.messages import SimTick
 from swarmbus.scenario import load_scenario
-from swarmbus.session import NetworkConfig, free_tcp_port, open_session
+from swarmbus.session import (
+    TRANSPORT_MESSAGE_FACTOR,
+    NetworkConfig,
+    free_tcp_port,
+    open_session,
+)
 from tests.support.mavclient import write_scenario
 from tests.support.procs import keys_for, wait_until
 from tests.support.upstack import recording_launch
@@ -31,6 +41,9 @@ from tests.support.upstack import recording_launch
 MIB = 2**20
 ROGUE_PAYLOAD = 64 * MIB
 WATCHED = ("recorder", "physics")
+LIMIT = NetworkConfig().max_message_size_bytes  # the stack's: the scenario sets none
+# one message in transit (up to Zenoh's transport limit) and the copy handed to Python
+RSS_BOUND = TRANSPORT_MESSAGE_FACTOR * LIMIT + LIMIT
 
 
 def _rss(pid: int) -> int:
@@ -75,6 +88,21 @@ def _rogue_puts(rogue: zenoh.Session, targets: list[str]) -> list[zenoh.Publishe
             pub.put(huge)
             pub.put(b"\xc1" * 1000)
     return pubs
+
+
+def _assert_refused_with_key_and_size(run: Path, targets: list[str]) -> None:
+    """Each receiving process logged the 64 MiB payloads' refusal, naming key, size and limit."""
+
+    def refusal(key: str) -> str:
+        return f" of {ROGUE_PAYLOAD} bytes on {key}: over [network] max_message_size_bytes {LIMIT}"
+
+    physics_log = (run / "physics.log").read_text()
+    assert f"ignoring actuator batch{refusal(targets[0])}" in physics_log
+    autopilot_logs = "".join(p.read_text() for p in run.glob("autopilot-*.log"))
+    assert f"ignoring tick{refusal(targets[1])}" in autopilot_logs
+    recorder_log = (run / "recorder.log").read_text()
+    for key in targets:
+        assert f"ignoring a message{refusal(key)}" in recorder_log, key
 
 
 def test_64_mib_payloads_are_refused_the_stack_goes_on_memory_bounded(tmp_path: Path) -> None:
@@ -143,14 +171,19 @@ def test_64_mib_payloads_are_refused_the_stack_goes_on_memory_bounded(tmp_path: 
         "\nRSS at start / peak while the rogue put 6 × 64 MiB (MB): "
         + ", ".join(f"{n} {rss.start[n] / 1e6:.1f} / {rss.peak[n] / 1e6:.1f}" for n in WATCHED)
     )
-    assert all(g < ROGUE_PAYLOAD for g in growth.values()), growth
+    assert LIMIT < ROGUE_PAYLOAD <= TRANSPORT_MESSAGE_FACTOR * LIMIT  # reaches the processes
+    assert all(g < RSS_BOUND for g in growth.values()), growth
     run = opts.run_dir
     physics_log = (run / "physics.log").read_text()
     assert f"ignoring actuator batch on {targets[0]}: invalid ActuatorBatch" in physics_log
     autopilot_logs = "".join(p.read_text() for p in run.glob("autopilot-*.log"))
     assert f"ignoring bad tick on {targets[1]}: invalid" in autopilot_logs
-    recorded = [m for m in Recording.open(run / "recording.mcap").messages() if m.topic in targets]
+    _assert_refused_with_key_and_size(run, targets)
+    recording = Recording.open(run / "recording.mcap")
+    recorded = [m for m in recording.messages() if m.topic in targets]
     # the small malformed payloads, twice on each key; nothing near the 64 MiB
     garbage = [m.topic for m in recorded if m.data == b"\xc1" * 1000]
     assert sorted(garbage) == sorted(targets * 2)
     assert max(len(m.data) for m in recorded) < MIB
+    summary = recording.metadata["plumeswarm.summary"]  # read with the messages
+    assert msgspec.json.decode(summary["refused"]) == dict.fromkeys(targets, 2)
