@@ -6,11 +6,13 @@ each receiving process refuses them before decoding or recording them, with a wa
 the key, the size and the limit (the physics for the actuators, the autopilots for the tick, the
 recorder for all three); the small ones reach their receivers, which log a refusal naming the
 key; the stack goes on ticking; the recording holds none of the large ones. The recorder's and
-the physics' resident memory grows by less than the transport limit (one message in transit)
-plus the limit (the copy of an accepted message handed to Python): 160 MiB by default. It was
-64 MiB while Zenoh's transport limit was the limit itself (it dropped the 64 MiB payloads
-unlogged); they now reach the processes to be refused with a line. Measured (``pytest -q -s``):
-growth up to 141 MiB in four runs (recorder 69.4 → 217.6 MB, physics 102.6 → 227.5 MB).
+the physics' resident memory grows by less than twice the transport limit: one message in
+transit, whose fragments and reassembled bytes Zenoh holds at once, each at most the transport
+limit (256 MiB by default; ``python -m plumeswarm.bench.rxmemory`` measures up to 1.6 times a
+message's size near the limit). It was 64 MiB while Zenoh's transport limit was the limit
+itself (it dropped the 64 MiB payloads unlogged); they now reach the processes to be refused
+with a line. Measured (``pytest -q -s``): growth up to 141 MiB in four runs (recorder 69.4 →
+217.6 MB, physics 102.6 → 227.5 MB); with Zenoh's 1 GiB limit the recorder grew by 377 MiB.
 """
 
 from __future__ import annotations
@@ -42,8 +44,8 @@ MIB = 2**20
 ROGUE_PAYLOAD = 64 * MIB
 WATCHED = ("recorder", "physics")
 LIMIT = NetworkConfig().max_message_size_bytes  # the stack's: the scenario sets none
-# one message in transit (up to Zenoh's transport limit) and the copy handed to Python
-RSS_BOUND = TRANSPORT_MESSAGE_FACTOR * LIMIT + LIMIT
+# one message in transit: its fragments and its reassembled bytes, each up to Zenoh's transport limit
+RSS_BOUND = 2 * TRANSPORT_MESSAGE_FACTOR * LIMIT
 
 
 def _rss(pid: int) -> int:
