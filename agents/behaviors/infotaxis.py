@@ -182,13 +182,13 @@ class Infotaxis(SeekingBehavior):
     #: The observation model: "hits" (the encounter model above) or "concentration" (the
     #: step's mean reading against the mean plume, :meth:`_concentration_at`).
     likelihood = "hits"
-    release_rates_g_s: tuple[float, ...] = (0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0)
-    regimes: tuple[tuple[float, int], ...] = ((1.0, 4), (0.5, 1))
+    release_rates_g_s: tuple[float, ...] = (1.0, 2.83, 8.0, 22.6, 64.0)
+    regimes: tuple[tuple[float, int], ...] = ((1.0, 4), (0.5, 1), (0.15, 1))
     concentration_classes = 7
     class_factor = math.sqrt(10.0)
     stray_probability = 0.02
-    concentration_evidence_weight = 1.0
-    concentration_declare_within_m = 2.0
+    concentration_evidence_weight = 0.5
+    concentration_confirm_m = 2.0
 
     def __init__(self, ctx: BehaviorContext) -> None:
         super().__init__(ctx)
@@ -516,18 +516,29 @@ class Infotaxis(SeekingBehavior):
             self.target_xy = self._decide(frame, x, y, step_dt)
         arrived = math.dist((x, y), self.target_xy) < 0.5
         if (arrived and elapsed >= step_dt) or elapsed > 3.0 * step_dt:
+            detected = self.concentration and self.observation() > 0
             self._update(frame, x, y, elapsed)
             self.step_started_s = now
             mx, my, spread, mass = self._belief_mean()
             sure = mass >= self.declare_mass
-            if sure and (
-                not self.concentration
-                or math.dist((x, y), (mx, my)) <= self.concentration_declare_within_m
-            ):
-                self.declaration = SourceEstimate(x_m=mx, y_m=my, sim_time_s=now, spread_m=spread)
-                return None
-            if sure:  # a confident belief is checked where it points before it is declared
-                self.target_xy = (mx, my)
+            if not self.concentration:
+                if sure:
+                    self.declaration = SourceEstimate(
+                        x_m=mx, y_m=my, sim_time_s=now, spread_m=spread
+                    )
+                    return None
+                self.target_xy = self._decide(frame, x, y, step_dt)
+            elif sure:
+                # A confident belief is checked where it points: just downwind of its mean,
+                # where a source there sends gas without a break, it declares on a step with
+                # a reading over the threshold; a blank there is evidence like any other.
+                dx, dy = frame.velocity(self.concentration_confirm_m, 0.0)
+                self.target_xy = (mx + dx, my + dy)
+                if detected and math.dist((x, y), self.target_xy) <= self.cell_m:
+                    self.declaration = SourceEstimate(
+                        x_m=mx, y_m=my, sim_time_s=now, spread_m=spread
+                    )
+                    return None
             else:
                 self.target_xy = self._decide(frame, x, y, step_dt)
         return fly(own, toward(own, *self.target_xy, self.speed_m_s), self.altitude)
