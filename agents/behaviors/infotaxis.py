@@ -27,6 +27,24 @@ width factor f in ``width_factors`` applied to the scenario's plume σy (its dis
 and stability class, fitted as σy = k·x at 30, 50 and 80 m), so the hits select the rate and
 the width along with the source.
 
+**The concentration likelihood** (``likelihood = "concentration"``;
+:class:`ConcentrationInfotaxis`; the default ``"hits"`` is the model above). The step's
+observation is the class of its mean reading m (``concentration_classes`` 7: m below
+``threshold_g_m3``, then bins a factor ``class_factor`` √10 wide, the last open), and its
+likelihood is that of m given the mean plume of a source in the cell
+(:func:`~agents.behaviors.infotaxis_core.unit_plume_g_m3` × a release rate, released at the
+searcher's height, in the mean wind, the scenario's σy and σz no narrower than a cell):
+a stray reading with probability ``stray_probability`` 0.02, else zero with probability
+1 − γ and gamma-distributed with mean c̄/γ and shape k with probability γ
+(:func:`~agents.behaviors.infotaxis_core.concentration_likelihoods`). The belief is over
+(cell, rate in ``release_rates_g_s``, (γ, k) in ``regimes``): (1, 4) a steady plume, (0.5, 1)
+and (0.15, 1) an intermittent one. Each step's likelihood is raised to
+``concentration_evidence_weight`` 0.5 (consecutive steps of a meandering plume are
+correlated). A confident belief is declared only from a step with a reading over the
+threshold ``concentration_confirm_m`` 1 m (a cell) downwind of its mean, where a source
+there sends gas without a break. docs/gsl.md "The concentration likelihood" has where each
+value comes from and its tuning measurement.
+
 **Declaration by evidence**: when the belief's mass (over every hypothesis) within
 ``declare_radius_m`` of its mean reaches ``declare_mass``, it declares the mean (spread: the
 belief's standard deviation) and holds there. Use
@@ -188,7 +206,7 @@ class Infotaxis(SeekingBehavior):
     class_factor = math.sqrt(10.0)
     stray_probability = 0.02
     concentration_evidence_weight = 0.5
-    concentration_confirm_m = 2.0
+    concentration_confirm_m = 1.0
 
     def __init__(self, ctx: BehaviorContext) -> None:
         super().__init__(ctx)
