@@ -200,13 +200,14 @@ class Infotaxis(SeekingBehavior):
     #: The observation model: "hits" (the encounter model above) or "concentration" (the
     #: step's mean reading against the mean plume, :meth:`_concentration_at`).
     likelihood = "hits"
-    release_rates_g_s: tuple[float, ...] = (1.0, 2.83, 8.0, 22.6, 64.0)
+    release_rates_g_s: tuple[float, ...] = (1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0)
     regimes: tuple[tuple[float, int], ...] = ((1.0, 4), (0.5, 1), (0.15, 1))
     concentration_classes = 7
     class_factor = math.sqrt(10.0)
     stray_probability = 0.02
     concentration_evidence_weight = 0.5
     concentration_confirm_m = 1.0
+    release_height_spread_m = 3.0
 
     def __init__(self, ctx: BehaviorContext) -> None:
         super().__init__(ctx)
@@ -352,7 +353,9 @@ class Infotaxis(SeekingBehavior):
         """P(the step's mean reading at (x, y) is in each class | (release rate, intermittency,
         shape), source cell) for the cells centred at ``xy``: the mean plume of a source there
         (:func:`~agents.behaviors.infotaxis_core.unit_plume_g_m3` × the rate, in the mean
-        wind, the scenario's σy and σz no narrower than a cell) through
+        wind, the scenario's σy and σz no narrower than a cell, σz widened to
+        √(σz² + s²) by a release height unknown by s = ``release_height_spread_m`` about the
+        searcher's: the Gaussian's average over such heights) through
         :func:`~agents.behaviors.infotaxis_core.concentration_likelihoods`. The cells whose
         plume reaches (x, y) (downwind of them, within 6 σy across) are every model's; the
         others see the stray readings alone."""
@@ -368,7 +371,7 @@ class Infotaxis(SeekingBehavior):
             height,
             max(frame.speed_m_s, 0.1),
             sigma_y[keep],
-            np.maximum(sigma_z[keep], self.cell_m),
+            np.hypot(np.maximum(sigma_z[keep], self.cell_m), self.release_height_spread_m),
         )
         # where even the largest rate's mean c̄ is below threshold·min(k·γ)/30, every regime
         # reaches the threshold with probability γ·e^(−x)·Σ_{i<k} x^i/i! (x ≥ 30) < 1e-9:
