@@ -33,7 +33,8 @@ observation is the class of its mean reading m (``concentration_classes`` 7: m b
 ``threshold_g_m3``, then bins a factor ``class_factor`` √10 wide, the last open), and its
 likelihood is that of m given the mean plume of a source in the cell
 (:func:`~agents.behaviors.infotaxis_core.unit_plume_g_m3` × a release rate, released at the
-searcher's height, in the mean wind, the scenario's σy and σz no narrower than a cell):
+searcher's height, in the mean wind, the scenario's σy and σz no narrower than a cell, σz
+widened to √(σz² + s²) for a release height unknown by s = ``release_height_spread_m`` 3 m):
 a stray reading with probability ``stray_probability`` 0.02, else zero with probability
 1 − γ and gamma-distributed with mean c̄/γ and shape k with probability γ
 (:func:`~agents.behaviors.infotaxis_core.concentration_likelihoods`). The belief is over
@@ -42,7 +43,9 @@ and (0.15, 1) an intermittent one. Each step's likelihood is raised to
 ``concentration_evidence_weight`` 0.5 (consecutive steps of a meandering plume are
 correlated). A confident belief is declared only from a step with a reading over the
 threshold ``concentration_confirm_m`` 1 m (a cell) downwind of its mean, where a source
-there sends gas without a break. docs/gsl.md "The concentration likelihood" has where each
+there sends gas without a break; the searcher does not stay put
+(``concentration_may_stay`` false: standing in a blank of a meandering plume, each blank
+favours its own place). docs/gsl.md "The concentration likelihood" has where each
 value comes from and its tuning measurement.
 
 **Declaration by evidence**: when the belief's mass (over every hypothesis) within
@@ -208,6 +211,7 @@ class Infotaxis(SeekingBehavior):
     concentration_evidence_weight = 0.5
     concentration_confirm_m = 1.0
     release_height_spread_m = 3.0
+    concentration_may_stay = False
 
     def __init__(self, ctx: BehaviorContext) -> None:
         super().__init__(ctx)
@@ -456,6 +460,8 @@ class Infotaxis(SeekingBehavior):
             mx, my = frame.velocity(a * s, c * s)
             if lo[0] <= x + mx <= hi[0] and lo[1] <= y + my <= hi[1]:
                 places.append((x + mx, y + my))
+        if self.concentration and not self.concentration_may_stay and len(places) > 1:
+            return places[1:]
         return places
 
     def _scores(
