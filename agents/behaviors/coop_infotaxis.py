@@ -110,7 +110,7 @@ class CooperativeInfotaxis(Infotaxis):
         )
         self.planned_wind = scenario_wind(ctx)
         if self.shared:  # every member weighs every observation alike
-            self.evidence_weight = type(self).evidence_weight * len(starts) ** -self.swarm_exponent
+            self.evidence_weight *= len(starts) ** -self.swarm_exponent
         #: Peer observations received and not yet applied, as :data:`Evidence`.
         self.pending: list[Evidence] = []
         #: Each peer's latest announced next place.
@@ -142,7 +142,7 @@ class CooperativeInfotaxis(Infotaxis):
     def _update(self, frame: WindFrame, x: float, y: float, dt_s: float) -> None:
         e, n, k = self.wind_sum
         ox, oy = self._observed_at(x, y)
-        self.stepped = (ox, oy, dt_s, self.hits, e / k, n / k)
+        self.stepped = (ox, oy, dt_s, self.observation(), e / k, n / k)
         if not self.pending:
             super()._update(frame, x, y, dt_s)
             return
@@ -153,8 +153,7 @@ class CooperativeInfotaxis(Infotaxis):
                 likelihood[k_model, cells] *= ratio
         self.belief = bayes_update(self.belief, likelihood, None)
         self.pending = []
-        self.hits = 0
-        self.observed_xy = (0.0, 0.0, 0.0)
+        self._next_step()
 
     def _peer_factors(self, evidence: Evidence) -> Factors:
         """A peer observation's likelihood per model, to the power ``evidence_weight``, as the
@@ -168,7 +167,7 @@ class CooperativeInfotaxis(Infotaxis):
             return found
         x, y, dt, hits, we, wn = evidence
         sparse = self._sparse_at(self.cells_xy, WindFrame.of((we, wn)), x, y, dt)
-        h = min(hits, self.n_hits - 1)
+        h = min(hits, self.n_classes - 1)
         # a step lasts at least 1 s, so the background's 0.02 /s gives every class a
         # positive probability
         background = float(sparse.background[h])

@@ -27,6 +27,27 @@ width factor f in ``width_factors`` applied to the scenario's plume σy (its dis
 and stability class, fitted as σy = k·x at 30, 50 and 80 m), so the hits select the rate and
 the width along with the source.
 
+**The concentration likelihood** (``likelihood = "concentration"``;
+:class:`ConcentrationInfotaxis`; the default ``"hits"`` is the model above). The step's
+observation is the class of its mean reading m (``concentration_classes`` 7: m below
+``threshold_g_m3``, then bins a factor ``class_factor`` √10 wide, the last open), and its
+likelihood is that of m given the mean plume of a source in the cell
+(:func:`~agents.behaviors.infotaxis_core.unit_plume_g_m3` × a release rate, released at the
+searcher's height, in the mean wind, the scenario's σy and σz no narrower than a cell, σz
+widened to √(σz² + s²) for a release height unknown by s = ``release_height_spread_m`` 3 m):
+a stray reading with probability ``stray_probability`` 0.02, else zero with probability
+1 − γ and gamma-distributed with mean c̄/γ and shape k with probability γ
+(:func:`~agents.behaviors.infotaxis_core.concentration_likelihoods`). The belief is over
+(cell, rate in ``release_rates_g_s``, (γ, k) in ``regimes``): (1, 4) a steady plume, (0.5, 1)
+and (0.15, 1) an intermittent one. Each step's likelihood is raised to
+``concentration_evidence_weight`` 0.5 (consecutive steps of a meandering plume are
+correlated). A confident belief is declared only from a step with a reading over the
+threshold ``concentration_confirm_m`` 1 m (a cell) downwind of its mean, where a source
+there sends gas without a break; the searcher does not stay put
+(``concentration_may_stay`` false: standing in a blank of a meandering plume, each blank
+favours its own place). docs/gsl.md "The concentration likelihood" has where each
+value comes from and its tuning measurement.
+
 **Declaration by evidence**: when the belief's mass (over every hypothesis) within
 ``declare_radius_m`` of its mean reaches ``declare_mass``, it declares the mean (spread: the
 belief's standard deviation) and holds there. Use
@@ -80,7 +101,7 @@ import functools
 import itertools
 import math
 from collections.abc import Sequence
-from typing import Any, ClassVar
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
@@ -95,15 +116,24 @@ from agents.behaviors.infotaxis_core import (
     SparseLikelihoods,
     bayes_update,
     choose_move,
+    concentration_class,
+    concentration_edges,
+    concentration_likelihoods,
+    expected_entropy_shared,
     expected_entropy_sparse,
     hit_likelihoods,
     model_from_statistics,
+    unit_plume_g_m3,
     width_slope,
 )
 from agents.behaviors.seeking import SeekingBehavior, SeekStep
 from agents.behaviors.steering import fly, toward
 from agents.behaviors.wind import WindFrame
+from swarmbus.errors import FieldError
 from swarmbus.messages import ConcentrationReading, Setpoint
+
+if TYPE_CHECKING:
+    from plume_atmosphere.dispersion import DispersionCurves
 
 #: Cells whose belief is below this fraction of the largest are left out of the move choice.
 SUPPORT_FLOOR = 1e-12
@@ -111,13 +141,17 @@ SUPPORT_FLOOR = 1e-12
 WIDTH_FIT_DISTANCES_M = (30.0, 50.0, 80.0)
 
 
-def scenario_width_slope(ctx: BehaviorContext) -> float:
-    """k of σy ≈ k·x for the scenario's plume (its dispersion family and stability class)."""
+def scenario_curves(ctx: BehaviorContext) -> DispersionCurves:
+    """σy(x), σz(x) of the scenario's plume (its dispersion family and stability class)."""
     from plume_atmosphere.dispersion import dispersion_curves
 
     plume = ctx.scenario.plume
-    curves = dispersion_curves(plume.coefficients, plume.stability)
-    sigma_y, _ = curves.sigmas(np.array(WIDTH_FIT_DISTANCES_M))
+    return dispersion_curves(plume.coefficients, plume.stability)
+
+
+def scenario_width_slope(ctx: BehaviorContext) -> float:
+    """k of σy ≈ k·x for the scenario's plume (its dispersion family and stability class)."""
+    sigma_y, _ = scenario_curves(ctx).sigmas(np.array(WIDTH_FIT_DISTANCES_M))
     return width_slope(WIDTH_FIT_DISTANCES_M, list(sigma_y))
 
 
@@ -145,6 +179,8 @@ class Infotaxis(SeekingBehavior):
         "detecting_since_s",
         "observed_xy",
         "wind_sum",
+        "concentration_sum",
+        "search_z_m",
     )
     cell_m = 1.0
     step_m = 2.0
@@ -164,10 +200,35 @@ class Infotaxis(SeekingBehavior):
     evidence_weight = 0.5
     declare_radius_m = 2.0
     declare_mass = 0.9
+    #: The observation model: "hits" (the encounter model above) or "concentration" (the
+    #: step's mean reading against the mean plume, :meth:`_concentration_at`).
+    likelihood = "hits"
+    release_rates_g_s: tuple[float, ...] = (1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0)
+    regimes: tuple[tuple[float, int], ...] = ((1.0, 4), (0.5, 1), (0.15, 1))
+    concentration_classes = 7
+    class_factor = math.sqrt(10.0)
+    stray_probability = 0.02
+    concentration_evidence_weight = 0.5
+    concentration_confirm_m = 1.0
+    release_height_spread_m = 3.0
+    concentration_may_stay = False
 
     def __init__(self, ctx: BehaviorContext) -> None:
         super().__init__(ctx)
         self.detector = detector_for(ctx, self.threshold_g_m3)
+        if self.likelihood not in ("hits", "concentration"):
+            raise FieldError(
+                type(self).__name__,
+                "likelihood",
+                f"{self.likelihood!r}: valid: hits, concentration",
+            )
+        self.concentration = self.likelihood == "concentration"
+        if self.concentration:
+            self.evidence_weight = self.concentration_evidence_weight
+            self.curves = scenario_curves(ctx)
+            self.edges = concentration_edges(
+                self.threshold_g_m3, self.class_factor, self.concentration_classes
+            )
         self.models = self._models(ctx)
         self.cells_xy: FloatArray | None = None  # (n, 2) ENU centres
         self._box = (np.zeros(2), np.zeros(2))  # the cells' least and greatest east, north
@@ -179,8 +240,14 @@ class Infotaxis(SeekingBehavior):
         self.detecting_since_s: float | None = None
         self.observed_xy = (0.0, 0.0, 0.0)  # Σx, Σy, n of this step's readings
         self.wind_sum = (0.0, 0.0, 0.0)  # Σ east, Σ north, n: the mean wind of the search
+        self.concentration_sum = (0.0, 0.0, 0)  # Σ reading, Σ height, n of this step's readings
+        self.search_z_m: float | None = None  # the height of the last step's readings
 
-    def _models(self, ctx: BehaviorContext) -> list[PlumeEncounterModel]:
+    def _models(self, ctx: BehaviorContext) -> list[Any]:
+        if self.concentration:  # (release rate, intermittency, shape) hypotheses
+            return [
+                (q, gamma, shape) for gamma, shape in self.regimes for q in self.release_rates_g_s
+            ]
         width_min_m = self.cell_m
         if self.hit_statistics is not None:
             return [
@@ -253,16 +320,13 @@ class Infotaxis(SeekingBehavior):
         self, xy: FloatArray, frame: WindFrame, x: float, y: float, dt_s: float
     ) -> SparseLikelihoods:
         """:meth:`sparse_likelihoods` for the cells whose centres are ``xy``."""
-        dx = x - xy[:, 0]
-        dy = y - xy[:, 1]
-        along = dx * frame.downwind[0] + dy * frame.downwind[1]
+        if self.concentration:
+            return self._concentration_at(xy, frame, x, y)
         # Only cells whose plume reaches (x, y) need the Poisson classes; the others see the
         # background's. Those are downwind of (x, y)'s source cells (along > 0), where
         # :meth:`PlumeEncounterModel.plume_cells` is its crosswind test alone; the models
         # that share a width share that support.
-        downwind = np.flatnonzero(along > 0.0)
-        along = along[downwind]
-        across = dx[downwind] * frame.crosswind[0] + dy[downwind] * frame.crosswind[1]
+        downwind, along, across = _upwind_cells(xy, frame, x, y)
         # per width: its plume cells, their (along, across) and the models' shared arrays
         supports: dict[tuple[float, float], tuple[IntArray, FloatArray, FloatArray, SharedArrays]]
         supports = {}
@@ -287,17 +351,65 @@ class Infotaxis(SeekingBehavior):
             cells=xy.shape[0],
         )
 
+    def _concentration_at(
+        self, xy: FloatArray, frame: WindFrame, x: float, y: float
+    ) -> SparseLikelihoods:
+        """P(the step's mean reading at (x, y) is in each class | (release rate, intermittency,
+        shape), source cell) for the cells centred at ``xy``: the mean plume of a source there
+        (:func:`~agents.behaviors.infotaxis_core.unit_plume_g_m3` × the rate, in the mean
+        wind, the scenario's σy and σz no narrower than a cell, σz widened to
+        √(σz² + s²) by a release height unknown by s = ``release_height_spread_m`` about the
+        searcher's: the Gaussian's average over such heights) through
+        :func:`~agents.behaviors.infotaxis_core.concentration_likelihoods`. The cells whose
+        plume reaches (x, y) (downwind of them, within 6 σy across) are every model's; the
+        others see the stray readings alone."""
+        downwind, along, across = _upwind_cells(xy, frame, x, y)
+        sigma_y, sigma_z = self.curves.sigmas(along)
+        sigma_y = np.maximum(sigma_y, self.cell_m)
+        keep = np.flatnonzero((across / sigma_y) ** 2 < 36.0)
+        cells = downwind[keep]
+        height = self.search_z_m if self.search_z_m is not None else self.altitude_m or 0.0
+        unit = unit_plume_g_m3(
+            along[keep],
+            across[keep],
+            height,
+            max(frame.speed_m_s, 0.1),
+            sigma_y[keep],
+            np.hypot(np.maximum(sigma_z[keep], self.cell_m), self.release_height_spread_m),
+        )
+        # where even the largest rate's mean c̄ is below threshold·min(k·γ)/30, every regime
+        # reaches the threshold with probability γ·e^(−x)·Σ_{i<k} x^i/i! (x ≥ 30) < 1e-9:
+        # those cells see the strays alone
+        floor = self.threshold_g_m3 * min(g * k for g, k in self.regimes) / 30.0
+        reach = np.flatnonzero(unit * max(self.release_rates_g_s) >= floor)
+        cells, unit = cells[reach], unit[reach]
+        classes = [
+            concentration_likelihoods(q * unit, gamma, shape, self.edges, self.stray_probability)
+            for q, gamma, shape in self.models
+        ]
+        return SparseLikelihoods(
+            background=self._background_classes(1.0),
+            inside=tuple(cells for _ in self.models),
+            classes=np.concatenate(classes, axis=1),
+            offsets=tuple(k * cells.size for k in range(len(self.models) + 1)),
+            cells=xy.shape[0],
+        )
+
     def _background_classes(self, dt_s: float) -> FloatArray:
         """The hit classes of the background alone in a step of ``dt_s`` (every place of a
         decision asks for the same step)."""
+        if self.concentration:
+            return _stray_classes(tuple(self.edges), self.stray_probability)
         return _background_classes(dt_s, self.background_hz, self.n_hits, self.miss_floor)
 
     def _observe(self, readings: Sequence[ConcentrationReading]) -> None:
         sx, sy, n = self.observed_xy
+        sc, sz, nc = self.concentration_sum
         for r in readings:
             if not r.available or r.reported_g_m3 is None:
                 continue
             sx, sy, n = sx + r.position_enu_m[0], sy + r.position_enu_m[1], n + 1
+            sc, sz, nc = sc + r.reported_g_m3, sz + r.position_enu_m[2], nc + 1
             if not self.detector.hit(r.reported_g_m3):
                 self.detecting_since_s = None
             elif (
@@ -307,6 +419,22 @@ class Infotaxis(SeekingBehavior):
                 self.hits += 1
                 self.detecting_since_s = r.sim_time_s
         self.observed_xy = (sx, sy, n)
+        self.concentration_sum = (sc, sz, nc)
+
+    @property
+    def n_classes(self) -> int:
+        """How many observation classes a step has."""
+        return self.concentration_classes if self.concentration else self.n_hits
+
+    def observation(self) -> int:
+        """This step's observation: its hits, or the class of its mean reading."""
+        if not self.concentration:
+            return self.hits
+        sc, _, nc = self.concentration_sum
+        mean = sc / nc if nc else 0.0
+        return concentration_class(
+            mean, self.threshold_g_m3, self.class_factor, self.concentration_classes
+        )
 
     def _near(self, xy: FloatArray, x: float, y: float, radius_m: float) -> IntArray:
         """Which of the cells centred at ``xy`` lie within ``radius_m`` of (x, y) (indices,
@@ -332,6 +460,8 @@ class Infotaxis(SeekingBehavior):
             mx, my = frame.velocity(a * s, c * s)
             if lo[0] <= x + mx <= hi[0] and lo[1] <= y + my <= hi[1]:
                 places.append((x + mx, y + my))
+        if self.concentration and not self.concentration_may_stay and len(places) > 1:
+            return places[1:]
         return places
 
     def _scores(
@@ -345,8 +475,9 @@ class Infotaxis(SeekingBehavior):
         cells = np.flatnonzero(marginal > SUPPORT_FLOOR * marginal.max())
         belief = self.belief[:, cells]
         xy = self.cells_xy[cells]
+        entropy = expected_entropy_shared if self.concentration else expected_entropy_sparse
         return [
-            expected_entropy_sparse(
+            entropy(
                 belief,
                 self._sparse_at(xy, frame, px, py, dt_s),
                 self._near(xy, px, py, 0.5 * self.cell_m),
@@ -357,8 +488,16 @@ class Infotaxis(SeekingBehavior):
     def _update(self, frame: WindFrame, x: float, y: float, dt_s: float) -> None:
         assert self.belief is not None
         self.belief = bayes_update(self.belief, self._own_likelihood(frame, x, y, dt_s), None)
+        self._next_step()
+
+    def _next_step(self) -> None:
+        """Forget the step just applied."""
         self.hits = 0
         self.observed_xy = (0.0, 0.0, 0.0)
+        _, sz, nc = self.concentration_sum
+        if nc:
+            self.search_z_m = sz / nc
+        self.concentration_sum = (0.0, 0.0, 0)
 
     def _observed_at(self, x: float, y: float) -> tuple[float, float]:
         """Where this step observed: the mean position of its readings ((x, y) if none)."""
@@ -370,7 +509,7 @@ class Infotaxis(SeekingBehavior):
         ``evidence_weight``."""
         ox, oy = self._observed_at(x, y)
         likelihood = self.sparse_likelihoods(frame, ox, oy, dt_s).row(
-            min(self.hits, self.n_hits - 1)
+            min(self.observation(), self.n_classes - 1)
         )
         if self.evidence_weight != 1.0:
             likelihood = likelihood**self.evidence_weight
@@ -404,14 +543,65 @@ class Infotaxis(SeekingBehavior):
             self.target_xy = self._decide(frame, x, y, step_dt)
         arrived = math.dist((x, y), self.target_xy) < 0.5
         if (arrived and elapsed >= step_dt) or elapsed > 3.0 * step_dt:
+            detected = self.concentration and self.observation() > 0
             self._update(frame, x, y, elapsed)
             self.step_started_s = now
             mx, my, spread, mass = self._belief_mean()
-            if mass >= self.declare_mass:
-                self.declaration = SourceEstimate(x_m=mx, y_m=my, sim_time_s=now, spread_m=spread)
-                return None
-            self.target_xy = self._decide(frame, x, y, step_dt)
+            sure = mass >= self.declare_mass
+            if not self.concentration:
+                if sure:
+                    self.declaration = SourceEstimate(
+                        x_m=mx, y_m=my, sim_time_s=now, spread_m=spread
+                    )
+                    return None
+                self.target_xy = self._decide(frame, x, y, step_dt)
+            elif sure:
+                # A confident belief is checked where it points: just downwind of its mean,
+                # where a source there sends gas without a break, it declares on a step with
+                # a reading over the threshold; a blank there is evidence like any other.
+                dx, dy = frame.velocity(self.concentration_confirm_m, 0.0)
+                self.target_xy = (mx + dx, my + dy)
+                if detected and math.dist((x, y), self.target_xy) <= self.cell_m:
+                    self.declaration = SourceEstimate(
+                        x_m=mx, y_m=my, sim_time_s=now, spread_m=spread
+                    )
+                    return None
+            else:
+                self.target_xy = self._decide(frame, x, y, step_dt)
         return fly(own, toward(own, *self.target_xy, self.speed_m_s), self.altitude)
+
+
+def _upwind_cells(
+    xy: FloatArray, frame: WindFrame, x: float, y: float
+) -> tuple[IntArray, FloatArray, FloatArray]:
+    """The cells centred at ``xy`` upwind of (x, y) (indices), and (x, y)'s distance downwind
+    of each and across the wind from it: where a source in the cell could send gas to (x, y)."""
+    dx = x - xy[:, 0]
+    dy = y - xy[:, 1]
+    along = dx * frame.downwind[0] + dy * frame.downwind[1]
+    downwind = np.flatnonzero(along > 0.0)
+    across = dx[downwind] * frame.crosswind[0] + dy[downwind] * frame.crosswind[1]
+    return downwind, along[downwind], across
+
+
+class ConcentrationInfotaxis(Infotaxis):
+    """:class:`Infotaxis` with ``likelihood = "concentration"``: use
+    ``behavior = "agents.behaviors.infotaxis:ConcentrationInfotaxis"``, or on the bench
+    ``--algorithms infotaxis_c=agents.behaviors.infotaxis:ConcentrationInfotaxis``."""
+
+    likelihood = "concentration"
+
+
+@functools.lru_cache(maxsize=16)
+def _stray_classes(edges: tuple[float, ...], stray_probability: float) -> FloatArray:
+    """The classes of a step's mean reading where the mean plume has no gas: the stray
+    readings of :func:`~agents.behaviors.infotaxis_core.concentration_likelihoods` alone;
+    read-only."""
+    classes = concentration_likelihoods(np.zeros(1), 1.0, 1, np.asarray(edges), stray_probability)[
+        :, 0
+    ]
+    classes.setflags(write=False)
+    return classes
 
 
 # (along, across) unit moves: upwind, downwind, left, right.

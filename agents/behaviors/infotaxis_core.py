@@ -480,3 +480,104 @@ def hit_statistics_from_points(
         axis.append(float(ps[0]))
         widths.append(math.sqrt(float(np.trapezoid(rates * ys * ys, ys)) / mass))
     return PlumeHitStatistics(tuple(distances), tuple(axis), tuple(widths))
+
+
+# ------------------------------------------------------------ a concentration sensor's readings
+def concentration_edges(threshold_g_m3: float, class_factor: float, n_classes: int) -> FloatArray:
+    """The lower edges of the detected classes 1 … n_classes − 1 of a step's mean reading m:
+    class 0 is m < ``threshold_g_m3``, class j is threshold·f^(j−1) ≤ m < threshold·f^j, the
+    last class everything from its edge up."""
+    return np.asarray(threshold_g_m3 * class_factor ** np.arange(n_classes - 1), dtype=float)
+
+
+def concentration_class(
+    mean_g_m3: float, threshold_g_m3: float, class_factor: float, n_classes: int
+) -> int:
+    """The class of :func:`concentration_edges` that a step's mean reading falls in."""
+    edges = concentration_edges(threshold_g_m3, class_factor, n_classes)
+    return int(np.searchsorted(edges, mean_g_m3, side="right"))
+
+
+def gamma_survival(edges_g_m3: FloatArray, mean_g_m3: FloatArray, shape: int) -> FloatArray:
+    """P(c ≥ e) for c gamma-distributed with mean ``mean_g_m3`` and integer ``shape`` k, at each
+    edge e: Q(k, x) = e^(−x)·Σ_{i<k} x^i/i!, x = k·e/mean (exponential for k = 1); shape
+    ``(len(edges), *mean.shape)``. A mean of 0 never reaches a positive edge."""
+    mean = np.maximum(np.asarray(mean_g_m3, dtype=float), 1e-300)  # 0: x large, S = 0
+    x = (shape * edges_g_m3).reshape(-1, *([1] * mean.ndim)) / mean
+    term = np.exp(-x)
+    total = term.copy()
+    for i in range(1, shape):
+        term = term * x / i
+        total += term
+    return np.asarray(total)
+
+
+def concentration_likelihoods(
+    mean_g_m3: FloatArray,
+    intermittency: float,
+    shape: int,
+    edges_g_m3: FloatArray,
+    stray_probability: float,
+) -> FloatArray:
+    """``L[j, i] = P(a step's mean reading is in class j | mean concentration mean_g_m3[i])``.
+
+    The reading is, with probability ``stray_probability``, a stray one that the plume model
+    does not explain (exponential with mean the threshold, ``edges_g_m3[0]``: a filament or a
+    noisy sample where the mean plume has none); otherwise zero with probability 1 − γ
+    (``intermittency`` γ: the plume's blanks, a step the gas does not touch) and, with
+    probability γ, gamma-distributed with mean c̄/γ and shape ``shape`` (so that its mean is
+    the mean plume's c̄: k = 1 an exponential, the fluctuations of an intermittent plume;
+    larger k a reading nearer its mean). With S(e) the probability of reaching edge e:
+    L[0] = 1 − S(e₀), L[j] = S(e_(j−1)) − S(e_j), the last class S(e_last)."""
+    mean = np.asarray(mean_g_m3, dtype=float)
+    plume = intermittency * gamma_survival(edges_g_m3, mean / intermittency, shape)
+    stray = np.exp(-edges_g_m3 / edges_g_m3[0]).reshape(-1, *([1] * mean.ndim))
+    survival = (1.0 - stray_probability) * plume + stray_probability * stray
+    out = np.empty((len(edges_g_m3) + 1, *mean.shape))
+    out[0] = 1.0 - survival[0]
+    out[1:-1] = survival[:-1] - survival[1:]
+    out[-1] = survival[-1]
+    return np.maximum(out, 0.0, out=out)  # a difference of two roundings may dip below 0
+
+
+def unit_plume_g_m3(
+    along_m: FloatArray,
+    across_m: FloatArray,
+    height_m: float,
+    wind_speed_m_s: float,
+    sigma_y_m: FloatArray,
+    sigma_z_m: FloatArray,
+) -> FloatArray:
+    """The mean concentration (g/m³) of a Gaussian plume releasing 1 g/s at ``height_m`` (the
+    searcher's own height: it flies the plume's centreline) at points ``along`` > 0 downwind
+    and ``across`` of it, the ground reflecting: 1/(2π u σy σz) · exp(−y²/2σy²) · (1 +
+    exp(−2H²/σz²))."""
+    vertical = 1.0 + np.exp(-2.0 * height_m * height_m / (sigma_z_m * sigma_z_m))
+    crosswind = np.exp(-0.5 * (across_m / sigma_y_m) ** 2)
+    return np.asarray(
+        crosswind * vertical / (2.0 * math.pi * wind_speed_m_s * sigma_y_m * sigma_z_m)
+    )
+
+
+def expected_entropy_shared(
+    belief: FloatArray,
+    likelihoods: SparseLikelihoods,
+    here: BoolArray | IntArray | None,
+) -> float:
+    """``expected_entropy(belief, likelihoods.dense(), here, nuisance_axes=1)`` (to rounding)
+    for likelihoods whose models all share one set of ``inside`` cells: the joint of each
+    class and cell is the background's class times the cell's marginal belief outside them,
+    and Σ_k L_k·b_k inside — one product over the models, whatever their number."""
+    given, p_end = _ruled_out(belief, here)
+    if p_end > 1.0 - EPSILON:
+        return -EPSILON
+    total = given.sum()
+    if total > EPSILON:
+        given /= total
+    inside = likelihoods.inside[0]
+    n_hits, models = len(likelihoods.background), belief.shape[0]
+    joint = np.multiply.outer(likelihoods.background, given.sum(axis=0))
+    classes = likelihoods.classes.reshape(n_hits, models, inside.size)
+    joint[:, inside] = np.einsum("hmi,mi->hi", classes, given[:, inside])
+    p_h = joint.sum(axis=1)
+    return (1.0 - p_end) * float((p_h * _row_entropies_bits(joint, p_h)).sum())

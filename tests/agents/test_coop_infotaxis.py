@@ -56,13 +56,19 @@ class Flight:
     received: dict[str, list[tuple[int, Observation]]] = field(default_factory=dict)
 
 
-def fly(scenario: Scenario, seconds: float) -> Flight:
+class ConcentrationMember(CooperativeInfotaxis):
+    likelihood = "concentration"
+
+
+def fly(
+    scenario: Scenario, seconds: float, member: type[CooperativeInfotaxis] = CooperativeInfotaxis
+) -> Flight:
     """The members flown as point masses through the scenario's radio, each reading
     :func:`gas` every tick."""
     link = PeerLink(scenario)
     ids = [v.id for v in scenario.vehicles]
     members = {
-        vid: CooperativeInfotaxis(
+        vid: member(
             BehaviorContext(vid, i, scenario, DT, np.random.default_rng(i), link.mailboxes[vid])
         )
         for i, vid in enumerate(ids)
@@ -112,7 +118,7 @@ def product_posterior(member: CooperativeInfotaxis, observations: list[Observati
     for o in observations:
         frame = WindFrame.of((o.wind_east_m_s, o.wind_north_m_s))
         table = member.likelihoods(frame, o.x_m, o.y_m, o.dt_s)
-        post = post * table[min(o.hits, member.n_hits - 1)] ** member.evidence_weight
+        post = post * table[min(o.hits, member.n_classes - 1)] ** member.evidence_weight
     return post / post.sum()
 
 
@@ -147,6 +153,25 @@ def test_under_a_perfect_radio_the_members_hold_the_product_of_the_same_likeliho
     assert only_a and only_b
     full_a, full_b = product_posterior(a, only_b, a.belief), product_posterior(b, only_a, b.belief)
     np.testing.assert_allclose(full_a, full_b, rtol=1e-9, atol=0.0)
+
+
+def test_members_with_the_concentration_likelihood_hold_the_product_of_theirs() -> None:
+    """The same with ``likelihood = "concentration"``: each member shares the class of its
+    step's mean reading (in ``hits``), and its posterior is the product of every held
+    observation's concentration likelihood."""
+    flight = fly(pair(RadioSpec()), 8.0, ConcentrationMember)
+    a, b = flight.members["uav1"], flight.members["uav2"]
+    assert a.concentration and a.n_classes == Infotaxis.concentration_classes
+    assert a.evidence_weight == pytest.approx(
+        Infotaxis.concentration_evidence_weight / math.sqrt(2.0), rel=1e-15
+    )
+    classes = {m.hits for _, m in flight.published["uav1"] + flight.published["uav2"]}
+    assert 0 in classes and len(classes) > 1  # blanks and readings over the level
+    for vid, member in (("uav1", a), ("uav2", b)):
+        assert member.belief is not None
+        np.testing.assert_allclose(
+            member.belief, product_posterior(member, held(flight, vid)), rtol=1e-9, atol=0.0
+        )
 
 
 def test_a_lost_observation_is_missing_and_a_late_one_is_applied_when_it_arrives() -> None:

@@ -216,3 +216,63 @@ def test_sparse_expected_entropy_is_the_dense_one_bit_for_bit(cells: int, n_mode
     for mask in (None, here, np.broadcast_to(here, belief.shape)):
         want = expected_entropy(belief, dense, mask, nuisance_axes=1)
         assert expected_entropy_sparse(belief, sparse, mask) == want
+
+
+def test_the_concentration_likelihood_is_the_zero_inflated_gamma_law_with_strays() -> None:
+    """P(class | c̄) against scipy's gamma law: with probability p a stray reading
+    (exponential, mean the threshold), else 0 with probability 1 − γ and gamma(k, mean c̄/γ)
+    with probability γ; the classes are the step mean's bins [0, t), [t, t·f), …, [t·f^(n−2),
+    ∞)."""
+    from scipy.stats import expon
+    from scipy.stats import gamma as gamma_law
+
+    from agents.behaviors.infotaxis_core import (
+        concentration_class,
+        concentration_edges,
+        concentration_likelihoods,
+    )
+
+    t, f, n, p = 1e-3, math.sqrt(10.0), 7, 0.02
+    edges = concentration_edges(t, f, n)
+    np.testing.assert_allclose(edges, [t * f**j for j in range(n - 1)])
+    bounds = [0.0, *edges, math.inf]
+    mean = np.array([0.0, 2e-4, 3e-3, 0.05, 2.0])
+    for intermittency, shape in ((1.0, 4), (0.5, 1), (0.2, 2)):
+        got = concentration_likelihoods(mean, intermittency, shape, edges, p)
+        assert got.shape == (n, mean.size)
+        np.testing.assert_allclose(got.sum(axis=0), 1.0, rtol=1e-12)
+        for i, c in enumerate(mean):
+            for j in range(n):
+                lo, hi = bounds[j], bounds[j + 1]
+                stray = expon.cdf(hi, scale=t) - expon.cdf(lo, scale=t)
+                if c > 0.0:
+                    law = gamma_law(shape, scale=c / intermittency / shape)
+                    plume = intermittency * (law.cdf(hi) - law.cdf(lo))
+                    plume += (1.0 - intermittency) * (j == 0)  # the blanks read 0
+                else:  # no plume: the reading is 0
+                    plume = float(j == 0)
+                want = (1.0 - p) * plume + p * stray
+                assert got[j, i] == pytest.approx(want, rel=1e-9, abs=1e-15), (c, j)
+    # the classes a mean reading falls in: below the threshold, each bin, beyond the last edge
+    assert [concentration_class(v, t, f, n) for v in (0.0, 9.9e-4, 1e-3, 3.2e-3, 0.9)] == [
+        0,
+        0,
+        1,
+        2,
+        6,
+    ]
+
+
+def test_the_unit_plume_is_the_gaussian_plume_released_at_the_searchers_height() -> None:
+    """unit_plume_g_m3 is plume_formula's Gaussian plume of 1 g/s released at the height
+    the searcher flies (its second, independent implementation of the same equation)."""
+    from agents.behaviors.infotaxis_core import unit_plume_g_m3
+    from plume_atmosphere.dispersion import dispersion_curves
+    from plume_atmosphere.plume_formula import gaussian_plume_g_m3
+
+    curves = dispersion_curves("mcmullen", "C")
+    along = np.array([3.0, 10.0, 40.0, 90.0])
+    across = np.array([0.0, 1.5, -6.0, 12.0])
+    sy, sz = curves.sigmas(along)
+    want = gaussian_plume_g_m3(along, across, 10.0, 1.0, 4.0, 10.0, curves)
+    np.testing.assert_allclose(unit_plume_g_m3(along, across, 10.0, 4.0, sy, sz), want, rtol=1e-12)

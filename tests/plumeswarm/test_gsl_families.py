@@ -200,13 +200,17 @@ def test_a_drawn_plumes_time_average_has_its_classs_sigma_y_at_50_m(run: int) ->
 
 def test_tuning_environments_are_apart_from_the_published_ones() -> None:
     tuning = tuning_environment_names()
-    assert {"tune_randomised", "tune_north_c"} <= set(tuning)
+    assert {"tune_randomised", "tune_north_c", "tune_steady"} <= set(tuning)
     assert not set(tuning) & set(environment_names())  # never in `--environments all`
     for name in tuning:
         env = load_environment(name)
         assert env.path.parent == GSL_TUNING_DIR
         assert load_environment(f"gsl/tuning/{name}").path == env.path
-        assert load_scenario(GSL_TUNING_DIR / f"{name}.toml").plume.calibration is not None
+        scenario = load_scenario(GSL_TUNING_DIR / f"{name}.toml")
+        if name == "tune_steady":  # the steady Gaussian: its class's σy and σz by definition
+            assert scenario.plume.model == "gaussian" and scenario.wind.model == "steady"
+        else:  # a time-dependent plume whose time average is calibrated to its class
+            assert scenario.plume.calibration is not None
     # the tuning family draws its sources where the test family never does
     test, tune = ranges("randomised"), ranges("tune_randomised")
     assert test["source_x_m"][1] < tune["source_x_m"][0]
