@@ -181,7 +181,9 @@ def test_concentration_infotaxis_finds_the_source_of_a_steady_plume_from_its_rea
     frame = _laid(beh)
     assert beh.belief is not None and beh.cells_xy is not None
     curves = dispersion_curves(SCENARIO.plume.coefficients, SCENARIO.plume.stability)
-    places = [(x, y) for x in (3.0, 6.0, 10.0, 15.0, 20.0, 30.0, 40.0) for y in range(-6, 7, 2)]
+    places = [
+        (x, float(y)) for x in (3.0, 6.0, 10.0, 15.0, 20.0, 30.0, 40.0) for y in range(-6, 7, 2)
+    ]
     places += [(x, y) for x in (-4.0, -2.0) for y in (-2.0, 0.0, 2.0)]
     for t, (x, y) in enumerate(places):
         value = float(gaussian_plume_g_m3(x, float(y), 10.0, 10.0, 6.0, 10.0, curves))

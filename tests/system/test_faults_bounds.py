@@ -44,7 +44,7 @@ MIB = 2**20
 ROGUE_PAYLOAD = 64 * MIB
 WATCHED = ("recorder", "physics")
 LIMIT = NetworkConfig().max_message_size_bytes  # the stack's: the scenario sets none
-# one message in transit: its fragments and its reassembled bytes, each up to Zenoh's transport limit
+# one message in transit: its fragments and its reassembled bytes, each up to the transport limit
 RSS_BOUND = 2 * TRANSPORT_MESSAGE_FACTOR * LIMIT
 
 
