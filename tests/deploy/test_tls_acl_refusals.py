@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import re
 import time
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 import psutil
@@ -33,13 +33,13 @@ from tests.support.tls_probe import join_error, stranger_tls
 KEYS = Keys("default")
 
 
-def start_router(procs: NodeProcs, tmp: Path) -> Path:
+def start_router(procs: NodeProcs, tmp: Path, prefix: Sequence[str] = ()) -> Path:
     """``plumeswarm node router`` of the hosts file in ``tmp`` (as ``router.sim``), once it
-    listens; its log."""
+    listens; its log. ``prefix``: what runs it (as for ``NodeProcs.start_module``)."""
     log = tmp / "router.log"
     procs.start_module(
         "plumeswarm", "-v", "node", "router", "--hosts", str(tmp / "hosts.toml"),
-        "--host", "sim", label="router",
+        "--host", "sim", label="router", prefix=prefix,
     )  # fmt: skip
     wait_until(lambda: "zenoh router listening" in log.read_text(), 60.0, "the router", 0.2)
     return log

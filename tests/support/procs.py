@@ -112,17 +112,22 @@ class NodeProcs:
         return self.start_module(*cmd, *args, label=label, env=env)
 
     def start_module(
-        self, module: str, *args: str, label: str, env: Mapping[str, str] | None = None
+        self,
+        module: str,
+        *args: str,
+        label: str,
+        env: Mapping[str, str] | None = None,
+        prefix: Sequence[str] = (),
     ) -> subprocess.Popen[bytes]:
         """``python -m MODULE ARGS`` in its own process group (``env`` added to this process's
         environment), its output in ``<label>.log`` of the log directory (if any); stopped
-        with the others."""
+        with the others. ``prefix``: what runs it (``ip netns exec NAME``: in a namespace)."""
         out: int | IO[bytes] = subprocess.DEVNULL
         if self.log_dir is not None:
             out = open(self.log_dir / f"{label}.log", "wb")  # noqa: SIM115 - closed with the proc
         environ = dict(os.environ, PYTHONPATH=str(REPO), PYTHONUNBUFFERED="1", **(env or {}))
         proc = subprocess.Popen(
-            [sys.executable, "-m", module, *args],
+            [*prefix, sys.executable, "-m", module, *args],
             cwd=REPO,
             stdout=out,
             stderr=subprocess.STDOUT,
