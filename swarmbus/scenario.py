@@ -452,8 +452,14 @@ def load_scenario(path: str | Path | None = None, overrides: Iterable[str] = ())
     except FileNotFoundError:
         if name is not None:  # a name, not a path: no site-packages path in the message
             raise _no_such_scenario(name) from None
-        bundled = ", ".join(bundled_scenarios())
-        raise ScenarioError(str(p), "", f"no such file (bundled scenarios: {bundled})") from None
+        every = bundled_scenarios()
+        top = [n for n in every if "/" not in n]
+        raise ScenarioError(
+            str(p),
+            "",
+            f"no such file (bundled scenarios: {', '.join(top)}, and {len(every) - len(top)}"
+            " source-seeking environments under gsl/: plumeswarm scenario list)",
+        ) from None
     except IsADirectoryError:
         raise ScenarioError(str(p), "", "is a directory, not a scenario file") from None
     except (PermissionError, UnicodeDecodeError, OSError) as exc:
