@@ -584,10 +584,15 @@ class Recorder:
     def _housekeeping(self, age_s: float = 0.0) -> None:
         if self._gap_pending:
             self._write_segment_gap()
-        if self._sink.maybe_close_chunk():
-            self._durable_tick = dict(self._last_tick)
-            if self._spool is not None:
-                with self._lock:
+        if self._spool is None:
+            if self._sink.maybe_close_chunk():
+                self._durable_tick = dict(self._last_tick)
+        else:
+            # the chunk and its mark back to back, with no wait for the lock between them: a
+            # kill after the chunk but before its mark records the chunk again from the spool
+            with self._lock:
+                if self._sink.maybe_close_chunk():
+                    self._durable_tick = dict(self._last_tick)
                     self._spool.rotate(self._written_ns, self._durable_tick)
         self._watch_backlog(age_s)
         self._report_drops()
