@@ -17,7 +17,7 @@ from collections.abc import Callable
 import msgspec
 import zenoh
 
-from swarmbus.codec import MessageError, decode
+from swarmbus.codec import MessageError, decode, refusals
 from swarmbus.keys import KeyNameError, Keys
 from swarmbus.messages import (
     Command,
@@ -161,7 +161,7 @@ class Streams:
             try:
                 view = decode(data, TickView)
             except MessageError as exc:
-                log.warning("%s: %s", self._keys.tick(), exc)
+                self._refuse("a tick", exc)
                 continue
             if len(view.states) == self._index_len or self.learn(view):
                 ticks.append(view)
@@ -178,7 +178,7 @@ class Streams:
         try:
             view = decode(data, TickView)
         except MessageError as exc:
-            log.warning("%s: %s", self._keys.tick(), exc)
+            self._refuse("a tick", exc)
             return None
         return view if len(view.states) == self._index_len or self.learn(view) else None
 
@@ -188,11 +188,17 @@ class Streams:
         try:  # through swarmbus.codec: garbage may also raise UnicodeDecodeError
             ids = [decode(memoryview(raw), StateHead).vehicle_id for raw in view.states]
         except MessageError as exc:
-            log.warning("%s: states: %s", self._keys.tick(), exc)
+            self._refuse("a tick's states", exc, "states")
             return False
         self._index = {vid: i for i, vid in enumerate(ids) if vid in self._ids}
         self._index_len = len(ids)
         return True
+
+    def _refuse(self, what: str, why: MessageError, kind: str = "") -> None:
+        """A tick that does not decode: logged, rate-limited per kind (a flood of garbage on
+        the tick key is one line per 5 s with its count)."""
+        key = self._keys.tick()
+        refusals(log).refuse(key, f"{what} on {key}", why, kind)
 
     def raw_state(self, view: TickView, vehicle_id: str) -> msgspec.Raw | None:
         i = self._index.get(vehicle_id)

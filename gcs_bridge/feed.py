@@ -22,7 +22,7 @@ from gcs_bridge.handle_commands import GcsHeartbeats
 from gcs_bridge.links import LinkSet
 from gcs_bridge.telemetry import BUILDERS, ID_MISSION_CURRENT
 from gcs_bridge.vehicle import Vehicle
-from swarmbus.codec import MessageError, decode
+from swarmbus.codec import MessageError, decode, refusals
 from swarmbus.messages import VehicleState, VehicleStatus
 from swarmbus.views import TickView
 
@@ -107,7 +107,8 @@ class TelemetryFeed:
             try:
                 state = decode(memoryview(raw), VehicleState)
             except MessageError as exc:
-                log.warning("state of %s: %s", v.id, exc)
+                what = f"state of {v.id}"
+                refusals(log).refuse(what, what, exc)  # one line per 5 s, with a count
                 return
             if state.vehicle_id == v.id:
                 try:

@@ -44,7 +44,7 @@ from gcs_bridge.options import (
 from gcs_bridge.vehicle import Vehicle
 from plume_atmosphere.wind import wind_from_scenario, wind_vector_enu
 from swarmbus.closeable import Closeable
-from swarmbus.codec import MessageError, decode
+from swarmbus.codec import MessageError, decode, refusals
 from swarmbus.keys import Keys
 from swarmbus.messages import VehicleStatus
 from swarmbus.node import NodeContext, NodeRuntime
@@ -285,7 +285,8 @@ class Gateway(Closeable):
             else:
                 v.feed_reading(payload)  # decoded when telemetry needs it
         except MessageError as exc:
-            log.warning("%s of %s: %s", kind, v.id, exc)
+            what = f"{kind} of {v.id}"
+            refusals(log).refuse(what, what, exc)  # one line per 5 s per vehicle and kind
 
     # ------------------------------------------------------------------ MAVLink in
     def _handle(self, link: Link, msg: Msg, addr: tuple[str, int], now: float) -> None:

@@ -25,7 +25,7 @@ from gcs_bridge.modes import (
 from gcs_bridge.params import ParamTable
 from gcs_bridge.telemetry import View
 from plume_atmosphere.wind import WindModel
-from swarmbus.codec import MessageError, decode
+from swarmbus.codec import MessageError, decode, refusals
 from swarmbus.messages import (
     ConcentrationReading,
     FlightMode,
@@ -101,8 +101,9 @@ class Latest(Generic[M]):
             self._raw = None
             try:
                 value = decode(memoryview(raw), self._kind)
-            except MessageError as exc:
-                log.warning("%s of %s: %s", self._kind.__name__, self._vehicle_id, exc)
+            except MessageError as exc:  # one line per 5 s per vehicle and kind, with a count
+                what = f"{self._kind.__name__} of {self._vehicle_id}"
+                refusals(log).refuse(what, what, exc)
             else:
                 if value.vehicle_id == self._vehicle_id:
                     self._value = value
