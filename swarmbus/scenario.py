@@ -27,6 +27,7 @@ from plume_atmosphere.calibration import (
 )
 from plume_atmosphere.gases import FORMULAS
 from swarmbus.errors import FieldError
+from swarmbus.keys import serves_several
 from swarmbus.radio import RadioSpec
 from swarmbus.scenario_errors import did_you_mean, explain
 from swarmbus.scenario_spec import (
@@ -136,6 +137,21 @@ def _check(scenario: Scenario, source: str) -> None:
             "time.control_hz",
             f"must divide time.physics_hz ({t.physics_hz}) exactly, got {t.control_hz}",
         )
+    _check_vehicles(scenario, source)
+    sensor = scenario.sensor.resolved()
+    if sensor.saturation_g_m3 is not None and sensor.saturation_g_m3 <= sensor.detection_limit_g_m3:
+        raise ScenarioError(
+            source,
+            "sensor.saturation_g_m3",
+            f"must exceed sensor.detection_limit_g_m3 ({sensor.detection_limit_g_m3})",
+        )
+    if not scenario.plume.sources:
+        raise ScenarioError(source, "plume.sources", "at least one source is required")
+    _check_env(scenario, source)
+    _check_sensor(sensor, source)
+
+
+def _check_vehicles(scenario: Scenario, source: str) -> None:
     seen: dict[str, int] = {}
     sysids: dict[int, str] = {}
     for i, v in enumerate(scenario.vehicles):
@@ -146,6 +162,13 @@ def _check(scenario: Scenario, source: str) -> None:
                 f"duplicate vehicle id {v.id!r} (also vehicles[{seen[v.id]}])",
             )
         seen[v.id] = i
+        if serves_several(v.id):
+            raise ScenarioError(
+                source,
+                f"vehicles[{i}].id",
+                f"{v.id!r} ends like the name of a process serving several vehicles "
+                "('<id>-plus<N>'); choose another id",
+            )
         try:
             load_vehicle_type(v.type)
         except VehicleTypeError as exc:
@@ -161,17 +184,6 @@ def _check(scenario: Scenario, source: str) -> None:
             raise ScenarioError(
                 source, f"vehicles[{i}].behavior", f"expected 'module:Class', got {v.behavior!r}"
             )
-    sensor = scenario.sensor.resolved()
-    if sensor.saturation_g_m3 is not None and sensor.saturation_g_m3 <= sensor.detection_limit_g_m3:
-        raise ScenarioError(
-            source,
-            "sensor.saturation_g_m3",
-            f"must exceed sensor.detection_limit_g_m3 ({sensor.detection_limit_g_m3})",
-        )
-    if not scenario.plume.sources:
-        raise ScenarioError(source, "plume.sources", "at least one source is required")
-    _check_env(scenario, source)
-    _check_sensor(sensor, source)
 
 
 def _check_env(scenario: Scenario, source: str) -> None:

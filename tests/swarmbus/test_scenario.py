@@ -66,6 +66,8 @@ BROKEN: list[tuple[str, str]] = [
     ),
     ('[[vehicles]]\nid = "a"\nmission = [{ x = 1.0, y = 2.0 }]\n', "vehicles[0].mission[0].z"),
     ('[[vehicles]]\nid = "a"\nbehavior = "nocolon"\n', "vehicles[0].behavior"),
+    # a process serving several vehicles is named <role>-<first id>-plus<N>: no vehicle's id
+    ('[[vehicles]]\nid = "a"\n[[vehicles]]\nid = "uav1-plus2"\n', "vehicles[1].id"),
     (
         "[sensor]\ndetection_limit_g_m3 = 0.5\nsaturation_g_m3 = 0.2\n" + GOOD_VEHICLE,
         "sensor.saturation_g_m3",
