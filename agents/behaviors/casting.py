@@ -10,10 +10,11 @@ and metal-oxide presets: a rise of the equivalent,
 the plume's axis). When the gas is lost it *casts*: cross-wind legs of growing width centred on
 where it last smelled gas, without drifting.
 
-The hit memory, the averaged wind, the cast and the stopping rule — the source declared at
-the most upwind detection after two empty upwind searches with that frontier settled — are
-those of surge-cast (:class:`~agents.behaviors.tracking.PlumeTracker`, where each number and
-the plume statistic it comes from are).
+The hit memory, the averaged wind, the cast and the stopping rule — the source declared
+between the most upwind detection and the cast line just upwind of it once the cast along
+that line has flown ``empty_legs`` (8) legs without a detection — are those of surge-cast
+(:class:`~agents.behaviors.tracking.PlumeTracker`, where each number and the plume statistic
+it comes from are).
 
 Use it with ``behavior = "agents.behaviors.casting:Casting"`` on a vehicle and switch that
 vehicle to offboard mode once it flies (the behaviour holds the altitude it starts at).
