@@ -23,9 +23,10 @@ import zenoh
 from gcs_bridge.vehicle import Vehicle
 from swarmbus.keys import Keys
 from swarmbus.scenario import load_scenario
+from swarmbus.session import open_session
 from tests.support.gateway_stack import gateway, vehicles
 from tests.support.mavclient import MavClient, write_scenario
-from tests.support.procs import open_session, wait_until, zenoh_network
+from tests.support.procs import wait_until, zenoh_network
 
 FLOOD = 300  # garbage payloads a key
 GARBAGE = b"\xc1\xff not msgpack \x00"
