@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import platform
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import suppress
 from fractions import Fraction
 from pathlib import Path
@@ -345,6 +346,35 @@ def test_log_gradient_gives_the_same_bits_on_every_blas_kernel() -> None:
         outputs[kernel or "default"] = done.stdout
     assert len(outputs["default"].splitlines()) == 200
     assert len(set(outputs.values())) == 1, {k: v[:60] for k, v in outputs.items()}
+
+
+EPISODE = """
+from plumeswarm.gsl.bench import make_options, runs_csv, specs_of
+from plumeswarm.gsl.episode import run_episode
+opts = make_options(["gradient_swarm"], ["meander_low"], ["ideal"], runs=2, seed=0)
+spec = [s for s in specs_of(opts) if s.algorithm == "gradient_swarm"][1]
+print(runs_csv([run_episode(spec)]).splitlines()[1])
+"""
+
+
+@pytest.mark.skipif(platform.machine() != "x86_64", reason="OpenBLAS core types are x86-64's")
+def test_gradient_swarm_flies_the_same_episode_on_every_blas_kernel() -> None:
+    """Run 1 of gradient_swarm in meander_low (ideal sensor, test seed 0) in fresh processes
+    on the machine's BLAS kernels, the AVX2 ones and the SSE3 ones: the same line of
+    runs.csv. With the fit through np.linalg.lstsq the three flew it to declarations at
+    113.75 s (AVX-512), 65.55 s (AVX2) and 126.40 s (SSE3)."""
+    kernels = ["", *(k for k in blas_kernels() if k in ("Haswell", "Prescott"))]
+    with ThreadPoolExecutor(len(kernels)) as pool:
+        done = list(
+            pool.map(
+                lambda k: run_python(EPISODE, timeout_s=300.0, env={"OPENBLAS_CORETYPE": k}),
+                kernels,
+            )
+        )
+    assert all(d.returncode == 0 for d in done), [d.stderr for d in done]
+    lines = {k or "default": d.stdout.strip() for k, d in zip(kernels, done, strict=True)}
+    assert lines["default"].startswith("gradient_swarm,meander_low,ideal,kinematic,1,0,")
+    assert len(set(lines.values())) == 1, lines
 
 
 def test_swarm_gradient_estimate_matches_the_analytic_gradient_of_the_plume() -> None:
