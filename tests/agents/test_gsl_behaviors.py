@@ -279,8 +279,9 @@ def _exact_plane_slopes(
     """The least-squares plane a + gx·x + gy·y through (x, y, l), in exact rationals: its
     3 × 3 normal equations (uncentred) solved by Gauss–Jordan elimination."""
     rows = [(Fraction(1), Fraction(x), Fraction(y)) for x, y in pts]
-    a = [[sum(r[i] * r[j] for r in rows) for j in range(3)] for i in range(3)]
-    b = [sum(r[i] * Fraction(v) for r, v in zip(rows, logs, strict=True)) for i in range(3)]
+    zero = Fraction(0)
+    a = [[sum((r[i] * r[j] for r in rows), zero) for j in range(3)] for i in range(3)]
+    b = [sum((r[i] * Fraction(v) for r, v in zip(rows, logs, strict=True)), zero) for i in range(3)]
     for col in range(3):
         pivot = next(k for k in range(col, 3) if a[k][col] != 0)
         a[col], a[pivot], b[col], b[pivot] = a[pivot], a[col], b[pivot], b[col]
