@@ -35,6 +35,7 @@ Use ``behavior = "agents.behaviors.gradient_swarm:GradientSwarm"`` on every memb
 from __future__ import annotations
 
 import math
+import sys
 from collections import deque
 from collections.abc import Sequence
 from typing import Any
@@ -56,14 +57,47 @@ LOG_FLOOR_G_M3 = 1e-12
 def log_gradient(
     points_xy: npt.ArrayLike, values_g_m3: npt.ArrayLike, floor_g_m3: float = LOG_FLOOR_G_M3
 ) -> tuple[float, float]:
-    """Least-squares gradient (per metre) of ln(c + floor) from ≥ 3 non-collinear readings."""
+    """Least-squares gradient (per metre) of ln(c + floor) from ≥ 3 non-collinear readings.
+
+    The plane's slopes in closed form, in correctly rounded float operations (``math.fsum``
+    sums, one ``math.log`` per reading): the same bits whichever BLAS kernels the CPU selects.
+    A LAPACK solver (``np.linalg.lstsq``) runs those kernels (AVX2, AVX-512, ...), whose last
+    bits differ, and a swarm that climbs the fitted direction turns a last bit into another
+    flight. Collinear readings (rank 2 of 3, as ``lstsq`` with its default cut-off
+    decides it) give the least-norm slope, along their line; coincident ones give 0."""
     pts = np.asarray(points_xy, dtype=np.float64)
-    logs = np.log(np.asarray(values_g_m3, dtype=np.float64) + floor_g_m3)
     if pts.shape[0] < 3:
         raise ValueError(f"need at least 3 readings for a gradient, got {pts.shape[0]}")
-    design = np.column_stack([np.ones(len(pts)), pts - pts.mean(axis=0)])
-    coef, *_ = np.linalg.lstsq(design, logs, rcond=None)
-    return float(coef[1]), float(coef[2])
+    xs = [float(v) for v in pts[:, 0]]
+    ys = [float(v) for v in pts[:, 1]]
+    logs = [math.log(float(v) + floor_g_m3) for v in np.asarray(values_g_m3, dtype=np.float64)]
+    n = len(xs)
+    mx, my, ml = math.fsum(xs) / n, math.fsum(ys) / n, math.fsum(logs) / n
+    dx = [x - mx for x in xs]
+    dy = [y - my for y in ys]
+    dl = [v - ml for v in logs]
+    sxx = math.fsum(a * a for a in dx)
+    syy = math.fsum(b * b for b in dy)
+    sxy = math.fsum(a * b for a, b in zip(dx, dy, strict=True))
+    sxl = math.fsum(a * c for a, c in zip(dx, dl, strict=True))
+    syl = math.fsum(b * c for b, c in zip(dy, dl, strict=True))
+    # the eigenvalues of [[sxx, sxy], [sxy, syy]]: the squared singular values of the centred
+    # positions (the column of ones, orthogonal to them, has sqrt(n))
+    half, spread = 0.5 * (sxx + syy), math.hypot(0.5 * (sxx - syy), sxy)
+    big = half + spread
+    det = sxx * syy - sxy * sxy
+    cut = (sys.float_info.epsilon * n) ** 2 * max(float(n), big)  # lstsq's rcond=None
+    if big <= cut:
+        return 0.0, 0.0
+    if det <= cut * big:  # collinear: the least-norm slope, along the principal axis
+        ux, uy = sxy, big - sxx
+        if abs(big - syy) > abs(big - sxx):
+            ux, uy = big - syy, sxy
+        norm = math.hypot(ux, uy)
+        ux, uy = ux / norm, uy / norm
+        along = (ux * sxl + uy * syl) / big
+        return along * ux, along * uy
+    return (syy * sxl - sxy * syl) / det, (sxx * syl - sxy * sxl) / det
 
 
 class GradientSwarm(SeekingBehavior):

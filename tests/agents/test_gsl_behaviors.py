@@ -3,6 +3,11 @@
 from __future__ import annotations
 
 import math
+import platform
+from concurrent.futures import ThreadPoolExecutor
+from contextlib import suppress
+from fractions import Fraction
+from pathlib import Path
 
 import msgspec
 import numpy as np
@@ -29,7 +34,8 @@ from swarmbus.messages import PeerReading, Setpoint, VehicleState
 from swarmbus.scenario import Scenario, Sensor, load_scenario
 from tests.support.messages_samples import reading as noiseless_reading
 from tests.support.messages_samples import vehicle_state
-from tests.support.published import published_and_reflown
+from tests.support.procs import run_python
+from tests.support.published import REPO, published_and_reflown
 
 SCENARIO = load_scenario()  # novak2018: wind 6 m/s from 270° (toward +x), source at the origin
 
@@ -265,6 +271,113 @@ def test_log_gradient_is_exact_for_an_exponential_field() -> None:
     values = np.exp(-3.0 + 0.2 * pts[:, 0] - 0.7 * pts[:, 1])
     gx, gy = log_gradient(pts, values, floor_g_m3=0.0)
     assert gx == pytest.approx(0.2, abs=1e-12) and gy == pytest.approx(-0.7, abs=1e-12)
+
+
+def _exact_plane_slopes(
+    pts: list[tuple[float, float]], logs: list[float]
+) -> tuple[Fraction, Fraction]:
+    """The least-squares plane a + gx·x + gy·y through (x, y, l), in exact rationals: its
+    3 × 3 normal equations (uncentred) solved by Gauss–Jordan elimination."""
+    rows = [(Fraction(1), Fraction(x), Fraction(y)) for x, y in pts]
+    zero = Fraction(0)
+    a = [[sum((r[i] * r[j] for r in rows), zero) for j in range(3)] for i in range(3)]
+    b = [sum((r[i] * Fraction(v) for r, v in zip(rows, logs, strict=True)), zero) for i in range(3)]
+    for col in range(3):
+        pivot = next(k for k in range(col, 3) if a[k][col] != 0)
+        a[col], a[pivot], b[col], b[pivot] = a[pivot], a[col], b[pivot], b[col]
+        for k in range(3):
+            if k != col and a[k][col] != 0:
+                f = a[k][col] / a[col][col]
+                a[k] = [u - f * w for u, w in zip(a[k], a[col], strict=True)]
+                b[k] -= f * b[col]
+    return b[1] / a[1][1], b[2] / a[2][2]
+
+
+def test_log_gradient_is_the_least_squares_plane_of_the_logarithms() -> None:
+    rng = np.random.default_rng(7)
+    for n in (3, 3, 4, 6):
+        pts = [(float(x), float(y)) for x, y in rng.uniform(-3.0, 3.0, (n, 2)) + 50.0]
+        values = [float(v) for v in np.exp(rng.uniform(-12.0, -2.0, n))]
+        gx, gy = log_gradient(pts, values, 1e-4)
+        ex, ey = _exact_plane_slopes(pts, [math.log(v + 1e-4) for v in values])
+        assert gx == pytest.approx(float(ex), rel=1e-12)
+        assert gy == pytest.approx(float(ey), rel=1e-12)
+
+
+def test_log_gradient_of_collinear_readings_is_the_least_norm_slope_along_their_line() -> None:
+    # t = 0, 5, 10, −5 m along (0.6, 0.8), ln c rising 0.1 per metre: no information across
+    # the line, so the least-norm gradient is 0.1 × (0.6, 0.8)
+    pts = [(0.0, 0.0), (3.0, 4.0), (6.0, 8.0), (-3.0, -4.0)]
+    values = [math.exp(-5.0 + 0.1 * t) for t in (0.0, 5.0, 10.0, -5.0)]
+    gx, gy = log_gradient(pts, values, floor_g_m3=0.0)
+    assert gx == pytest.approx(0.06, rel=1e-12) and gy == pytest.approx(0.08, rel=1e-12)
+    assert log_gradient([(5.0, 1.0)] * 3, [1e-3, 2e-3, 3e-3]) == (0.0, 0.0)
+
+
+def blas_kernels() -> list[str]:
+    """OpenBLAS core types this CPU can run (``OPENBLAS_CORETYPE``): SSE3, AVX, AVX2."""
+    flags = ""
+    with suppress(OSError):
+        flags = Path("/proc/cpuinfo").read_text()
+    kernels = ["Prescott"]
+    kernels += ["Sandybridge"] if " avx " in flags else []
+    kernels += ["Haswell"] if " avx2 " in flags else []
+    return kernels
+
+
+FITS = """
+import numpy as np
+from agents.behaviors.gradient_swarm import log_gradient
+rng = np.random.default_rng(2026)
+for _ in range(200):
+    pts = rng.uniform(-3.0, 3.0, (3, 2)) + rng.uniform(0.0, 80.0, 2)
+    gx, gy = log_gradient(pts, np.exp(rng.uniform(-12.0, -2.0, 3)), 1e-4)
+    print(gx.hex(), gy.hex())
+"""
+
+
+@pytest.mark.skipif(platform.machine() != "x86_64", reason="OpenBLAS core types are x86-64's")
+def test_log_gradient_gives_the_same_bits_on_every_blas_kernel() -> None:
+    """A swarm climbs the fitted direction: its last bit must not depend on the BLAS kernels
+    the CPU selects (np.linalg.lstsq gave three answers here: AVX-512, AVX2, AVX/SSE3)."""
+    outputs = {}
+    for kernel in ["", *blas_kernels()]:
+        done = run_python(FITS, timeout_s=60.0, env={"OPENBLAS_CORETYPE": kernel})
+        assert done.returncode == 0, done.stderr
+        outputs[kernel or "default"] = done.stdout
+    assert len(outputs["default"].splitlines()) == 200
+    assert len(set(outputs.values())) == 1, {k: v[:60] for k, v in outputs.items()}
+
+
+EPISODE = """
+from plumeswarm.gsl.bench import make_options, runs_csv, specs_of
+from plumeswarm.gsl.episode import run_episode
+opts = make_options(["gradient_swarm"], ["meander_low"], ["ideal"], runs=2, seed=0)
+spec = [s for s in specs_of(opts) if s.algorithm == "gradient_swarm"][1]
+print(runs_csv([run_episode(spec)]).splitlines()[1])
+"""
+
+
+@pytest.mark.skipif(platform.machine() != "x86_64", reason="OpenBLAS core types are x86-64's")
+def test_gradient_swarm_flies_the_same_episode_on_every_blas_kernel() -> None:
+    """Run 1 of gradient_swarm in meander_low (ideal sensor, test seed 0) in fresh processes
+    on the machine's BLAS kernels, the AVX2 ones and the SSE3 ones: the same line of
+    runs.csv, the one results/gsl-ideal has. With the fit through np.linalg.lstsq the three
+    flew it to declarations at 113.75 s (AVX-512), 65.55 s (AVX2) and 126.40 s (SSE3)."""
+    kernels = ["", *(k for k in blas_kernels() if k in ("Haswell", "Prescott"))]
+    with ThreadPoolExecutor(len(kernels)) as pool:
+        done = list(
+            pool.map(
+                lambda k: run_python(EPISODE, timeout_s=300.0, env={"OPENBLAS_CORETYPE": k}),
+                kernels,
+            )
+        )
+    assert all(d.returncode == 0 for d in done), [d.stderr for d in done]
+    lines = {k or "default": d.stdout.strip() for k, d in zip(kernels, done, strict=True)}
+    assert len(set(lines.values())) == 1, lines
+    table = (REPO / "results" / "gsl-ideal" / "runs.csv").read_text().splitlines()
+    published = [t for t in table if t.startswith("gradient_swarm,meander_low,ideal,kinematic,1,")]
+    assert published == [lines["default"]]  # the published line is the one the code gives
 
 
 def test_swarm_gradient_estimate_matches_the_analytic_gradient_of_the_plume() -> None:

@@ -195,12 +195,15 @@ CORE_PACKAGES = ["swarmbus", "plume_atmosphere", *PROCESS_PACKAGES, "deploy"]
 NODE_COMMAND: tuple[str, ...] = (sys.executable, "-m", "plumeswarm")
 
 
-def run_python(code: str, timeout_s: float = 120.0) -> subprocess.CompletedProcess[str]:
-    """``python -c CODE`` in a fresh interpreter on this tree (bounded); its output as text."""
+def run_python(
+    code: str, timeout_s: float = 120.0, env: Mapping[str, str] | None = None
+) -> subprocess.CompletedProcess[str]:
+    """``python -c CODE`` in a fresh interpreter on this tree (bounded; ``env`` added to this
+    process's environment); its output as text."""
     return subprocess.run(
         [sys.executable, "-c", code],
         cwd=REPO,
-        env=dict(os.environ, PYTHONPATH=str(REPO)),
+        env=dict(os.environ, PYTHONPATH=str(REPO), **(env or {})),
         capture_output=True,
         text=True,
         timeout=timeout_s,
