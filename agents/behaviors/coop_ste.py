@@ -7,21 +7,26 @@ and feeds it its own readings and its peers':
 
 * **What it shares**: each 1 s window of its readings (the unit the filter updates on) as one
   :class:`Window` message: the window's start and end (sim time), its mean wind, the mean
-  altitude, the mean reading, whether any reading was a detection, the reading positions (ENU
-  centimetres, integers), and the point the member flies to next. A member applies the
-  decoded message to its own filter exactly as its peers do, so every filter that receives
-  the same windows multiplies its weights by the same likelihoods. A peer's window is applied
+  altitude, the mean reading, whether any reading was a detection, the weight of its
+  log-likelihood (below), the reading positions (ENU centimetres, integers), and the point the
+  member flies to next. A member applies the decoded message to its own filter exactly as its
+  peers do, so every filter that receives the same windows multiplies its weights by the same
+  tempered likelihoods. A peer's window is applied
   when it arrives, however late (a lost one is never applied).
 * **Correlated windows**: in a meandering wind successive 1 s windows are not independent (the
   plume's centreline wanders with the wind's timescale T_L), and a filter that multiplies
   their likelihoods as if they were collapses its spread on a wrong source. Each window's
-  log-likelihood is tempered by ``window_s / (2 T)`` (at most 1): a series with correlation
-  time T carries D / (2T) independent samples in a duration D (the variance of the mean of an
-  Ornstein–Uhlenbeck process). T is ``correlation_time_s``, or when that is 0 the scenario's
-  meander timescale (``[wind.meander] timescale_s`` of an ``ou`` meander: assumed known, as
-  the stability class is); a steady wind gives 1 (no tempering). Windows of different
-  members taken at the same time share the same meander too; they are not tempered against
-  each other.
+  log-likelihood is tempered by n_eff / n, the effective sample size per window of the series
+  of the member's own windows' mean anemometer winds so far (the particle filter's
+  ``likelihood = "effective"`` estimate,
+  :func:`~agents.behaviors.particle_filter.effective_fraction`: the wind's meander is what
+  moves the plume, and the vehicle measures it itself); for an
+  Ornstein–Uhlenbeck wind of timescale T it is about ``window_s / (2 T)``. The member that
+  took the window computes the weight when it closes the window and sends it in the
+  :class:`Window`, so every member applies the same weight to the same window. A
+  ``correlation_time_s`` T > 0 fixes the weight at ``window_s / (2 T)`` (at most 1) instead.
+  Windows of different members taken at the same time share the same meander too; they are
+  not tempered against each other.
 * **Moves**: before any member has detected gas, the particle filter's crosswind sweeps (each
   member its own side first, by index parity). After, every window (or on reaching its point)
   a member flies to the candidate point (``step_m`` and ``2 × step_m`` away in 8 directions)
@@ -59,7 +64,6 @@ from agents.behaviors.particle_filter import (
 )
 from agents.behaviors.seeking import SeekStep
 from agents.behaviors.steering import fly, toward
-from agents.behaviors.wind import WindFrame
 from swarmbus.messages import Setpoint
 
 
@@ -73,6 +77,7 @@ class Window(msgspec.Struct, frozen=True, array_like=True):
     z_m: float
     mean_g_m3: float
     detected: bool
+    tempering: float  # the weight of its log-likelihood in every member's filter
     x_cm: list[int]
     y_cm: list[int]
     next_x_m: float
@@ -88,9 +93,11 @@ def window_message(
     window: WindowMean,
     next_point: tuple[float, float],
     max_points: int,
+    tempering: float,
 ) -> Window:
     """The :class:`Window` of a window's readings: at most ``max_points`` positions (evenly
-    thinned), to the centimetre, at their mean altitude."""
+    thinned), to the centimetre, at their mean altitude; its log-likelihood weighted by
+    ``tempering``."""
     points, value_g_m3, wind, detected = window
     if len(points) > max_points:
         keep = np.linspace(0, len(points) - 1, max_points).round().astype(int)
@@ -103,6 +110,7 @@ def window_message(
         z_m=sum(p[2] for p in points) / len(points),
         mean_g_m3=value_g_m3,
         detected=detected,
+        tempering=tempering,
         x_cm=[round(p[0] * 100.0) for p in points],
         y_cm=[round(p[1] * 100.0) for p in points],
         next_x_m=next_point[0],
@@ -111,8 +119,10 @@ def window_message(
 
 
 def apply_window(source_filter: SourceTermFilter, window: Window) -> None:
-    """One shared window into a member's filter (the same call on every member)."""
+    """One shared window into a member's filter (the same call on every member): its
+    log-likelihood weighted by the window's own ``tempering``."""
     wind = (window.wind_e_m_s, window.wind_n_m_s)
+    source_filter.tempering = window.tempering
     source_filter.update_mean(window.points(), window.mean_g_m3, wind, window.detected)
 
 
@@ -145,7 +155,7 @@ class CooperativeSTE(ParticleFilter):
     # σy of the class-D plume (McMullen) 50 m downwind, the middle of the starts' 30–80 m:
     # members one plume half-width apart sweep across it side by side
     start_spacing_m = 4.0
-    correlation_time_s = 0.0  # 0: the scenario's meander timescale (steady wind: none)
+    correlation_time_s = 0.0  # 0: estimated online from the own anemometer's windows
     step_m = 3.0
     separation_m = 2.0
     near_m = 7.0
@@ -153,11 +163,11 @@ class CooperativeSTE(ParticleFilter):
 
     def __init__(self, ctx: BehaviorContext) -> None:
         super().__init__(ctx)
-        wind = ctx.scenario.wind
         correlation = self.correlation_time_s
-        if correlation <= 0.0 and wind.model == "meander" and wind.meander.process == "ou":
-            correlation = wind.meander.timescale_s
-        self.tempering = min(1.0, self.window_s / (2.0 * correlation)) if correlation > 0 else 1.0
+        # None: each window's weight is estimated from the own windows' winds (_update)
+        self.fixed_tempering = (
+            min(1.0, self.window_s / (2.0 * correlation)) if correlation > 0.0 else None
+        )
         self.window_points: deque[tuple[float, float]] = deque(maxlen=100)  # windows' centres
         self.peer_points: dict[str, tuple[float, float]] = {}  # each peer's announced point
         self.target: tuple[float, float] | None = None
@@ -165,13 +175,6 @@ class CooperativeSTE(ParticleFilter):
         angles = np.arange(8) * (math.pi / 4.0)
         ring = np.column_stack([np.cos(angles), np.sin(angles)])
         self.offsets = np.vstack([ring * self.step_m, ring * 2.0 * self.step_m])
-
-    def _new_filter(
-        self, frame: WindFrame, x: float, y: float, particles: FloatArray | None = None
-    ) -> SourceTermFilter:
-        made = super()._new_filter(frame, x, y, particles)
-        made.tempering = self.tempering
-        return made
 
     def _apply(self, window: Window) -> None:
         assert self.filter is not None
@@ -185,8 +188,11 @@ class CooperativeSTE(ParticleFilter):
     def _update(self, now_s: float, window: WindowMean) -> None:
         assert self.window_start_s is not None
         here = window.points[-1][:2]
+        tempering = self.fixed_tempering
+        if tempering is None:
+            tempering = self._online_tempering(window.wind)
         message = window_message(
-            self.window_start_s, now_s, window, self.target or here, self.max_points
+            self.window_start_s, now_s, window, self.target or here, self.max_points, tempering
         )
         self._apply(message)
         if self.mailbox is not None:

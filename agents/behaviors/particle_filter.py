@@ -442,9 +442,14 @@ class ParticleFilter(SeekingBehavior):
         """One window into the filter (a cooperative subclass also shares it)."""
         assert self.filter is not None
         if self.likelihood == "effective":
-            self.wind_series.append(window.wind)
-            self.filter.tempering = effective_fraction(self.wind_series)
+            self.filter.tempering = self._online_tempering(window.wind)
         self.filter.update_mean(*window)
+
+    def _online_tempering(self, wind: tuple[float, float]) -> float:
+        """The weight of the window whose mean anemometer wind is ``wind``: n_eff / n of the
+        series of the windows' mean winds so far, this one included (:func:`effective_fraction`)."""
+        self.wind_series.append(wind)
+        return effective_fraction(self.wind_series)
 
     def sure(self, mx: float, my: float, spread: float) -> bool:
         """The stopping rule's test of the estimate (mx, my) of ``spread``."""
