@@ -52,7 +52,9 @@ class PlumeDetector(SavesState):
     """Whether each reading is a detection ("in the plume"), one sample after another.
 
     ``level``: the reading is at least ``threshold_g_m3``. ``rise``: the reading rose by at
-    least ``threshold_g_m3`` (and above 0) since the previous sample — for a lagging sensor,
+    least ``threshold_g_m3`` (and above 0) since the previous sample, a previous 0 counted as
+    ``floor_g_m3`` (the sensor's detection floor: a 0 says only that the output was somewhere
+    below it) — for a lagging sensor,
     which rises while gas arrives (rise time constant) and decays after it (a metal-oxide
     sensor's 15.71 s keeps one burst above 0.001 g/m³ for ≈ 2 min, a PID's 1.3 s a strong
     filament for ≈ 12 s), so a level says little about now but a rise does. Give it the
@@ -61,11 +63,14 @@ class PlumeDetector(SavesState):
 
     state_attributes = ("previous_g_m3",)
 
-    def __init__(self, mode: str = "level", threshold_g_m3: float = 0.0) -> None:
+    def __init__(
+        self, mode: str = "level", threshold_g_m3: float = 0.0, floor_g_m3: float = 0.0
+    ) -> None:
         if mode not in ("level", "rise"):
             raise ValueError(f"detector mode {mode!r}: valid: level, rise")
         self.mode = mode
         self.threshold_g_m3 = threshold_g_m3
+        self.floor_g_m3 = floor_g_m3
         self.previous_g_m3: float | None = None
 
     def hit(self, value_g_m3: float) -> bool:
@@ -74,7 +79,7 @@ class PlumeDetector(SavesState):
             return value_g_m3 > 0.0 and value_g_m3 >= self.threshold_g_m3
         if previous is None:
             return False
-        rise = value_g_m3 - previous
+        rise = value_g_m3 - max(previous, self.floor_g_m3)
         return rise > 0.0 and rise >= self.threshold_g_m3
 
 
@@ -111,8 +116,11 @@ def detector_for(ctx: BehaviorContext, level_g_m3: float = PLUME_THRESHOLD_G_M3)
     :data:`NOISE_MULTIPLE` × its noise std). A lagging one: a rise, per sample, of what a
     sensor in clean air shows in one sample on meeting ``level_g_m3`` — ``level_g_m3`` ×
     (1 − exp(−sample period / rise time constant)) — and at least :data:`NOISE_MULTIPLE` × √2 ×
-    the noise std (the std of the difference of two samples). The floor does not bound a rise:
-    below it the output is 0, so a rise is always to a reading at or above the floor."""
+    the noise std (the std of the difference of two samples). A rise from a 0 is measured from
+    the floor: a 0 says only that the output was below it, and an output just under the floor
+    (a lagging sensor's decaying tail) reads 0 and then, with noise, just over it — a jump of
+    the floor's size that is not gas (measured from 0, the PID's tail made such false rises
+    upwind of the source, where the searchers cast)."""
     sensor = ctx.scenario.sensor.resolved()
     if not lags(sensor, ctx.scenario.time.control_hz):
         return PlumeDetector("level", detection_level_g_m3(ctx, level_g_m3))
@@ -120,5 +128,7 @@ def detector_for(ctx: BehaviorContext, level_g_m3: float = PLUME_THRESHOLD_G_M3)
     period_s = sensor.period_ticks / ctx.scenario.time.control_hz
     rise = -math.expm1(-period_s / sensor.rise_s) if sensor.rise_s > 0.0 else 1.0
     return PlumeDetector(
-        "rise", max(level_g_m3 * rise, NOISE_MULTIPLE * math.sqrt(2.0) * noise_std_g_m3)
+        "rise",
+        max(level_g_m3 * rise, NOISE_MULTIPLE * math.sqrt(2.0) * noise_std_g_m3),
+        _sensor(ctx).floor_g_m3,
     )

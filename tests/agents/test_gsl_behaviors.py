@@ -769,6 +769,32 @@ def test_pid_noise_at_the_rise_threshold_hits_at_the_gaussian_tail_rate() -> Non
     assert abs(hits - expected) <= 4.0 * math.sqrt(expected), (hits, expected)
 
 
+def test_a_pid_decaying_through_its_floor_in_clean_air_makes_no_rise() -> None:
+    """The PID preset meets a strong filament (1 g/m³ for 0.2 s) every 30 s, then clean air: its
+    output decays for 30 s, through the floor (2.29·10⁻⁴ g/m³) after τ·ln(peak / floor) ≈ 7 s.
+    In clean air a first-order output only falls, so every rise after the first sample out of
+    the gas is noise. Just under the floor the output reads 0; a noise draw lifts the next
+    sample just over it, a jump from 0 of the floor's size (more than the 3·√2·σ threshold,
+    3.2·10⁻⁴ g/m³, whenever the output is within σ of the floor). Measured from the floor,
+    a rise needs a noise draw of 3·√2·σ: one-sided Gaussian tail Q(4.24) ≈ 1.1·10⁻⁵ per sample,
+    ≈ 0.7 expected in 200 tails of 300 samples (bound 5). Measured from 0 it hit in many."""
+    sensor = ConcentrationSensor.for_vehicle(PID, 0)
+    detector = detector_for(ctx(scenario=PID))
+    from_zero = PlumeDetector("rise", detector.threshold_g_m3)
+    false_hits = false_from_zero = 0
+    t = 0.0
+    for _ in range(200):
+        for k in range(302):
+            value = sensor.sample(1.0 if k < 2 else 0.0, t)
+            t += 0.1
+            hit, naive = detector.hit(value), from_zero.hit(value)
+            if k >= 3:  # out of the gas: the output only falls
+                false_hits += hit
+                false_from_zero += naive
+    assert false_hits <= 5, false_hits
+    assert false_from_zero > 20, false_from_zero  # what the floor's 0 did
+
+
 @pytest.mark.parametrize(("tau_s", "mode"), [(0.004, "level"), (0.006, "rise"), (0.4, "rise")])
 def test_a_lag_of_a_twentieth_of_the_sample_period_gets_the_rise_detector(
     tau_s: float, mode: str
