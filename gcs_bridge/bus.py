@@ -17,7 +17,7 @@ from collections.abc import Callable
 import msgspec
 import zenoh
 
-from swarmbus.codec import MessageError, decode, refusals
+from swarmbus.codec import decode_or_none
 from swarmbus.keys import KeyNameError, Keys
 from swarmbus.messages import (
     Command,
@@ -158,10 +158,8 @@ class Streams:
             data = payload_or_none(sample, "a tick", log)
             if data is None:
                 continue
-            try:
-                view = decode(data, TickView)
-            except MessageError as exc:
-                self._refuse("a tick", exc)
+            view = decode_or_none(data, TickView, "a tick", log, self._keys.tick())
+            if view is None:
                 continue
             if len(view.states) == self._index_len or self.learn(view):
                 ticks.append(view)
@@ -175,30 +173,25 @@ class Streams:
         data = None if newest is None else payload_or_none(newest, "a tick", log)
         if data is None:
             return None
-        try:
-            view = decode(data, TickView)
-        except MessageError as exc:
-            self._refuse("a tick", exc)
+        view = decode_or_none(data, TickView, "a tick", log, self._keys.tick())
+        if view is None:
             return None
         return view if len(view.states) == self._index_len or self.learn(view) else None
 
     def learn(self, view: TickView) -> bool:
         """Where each served vehicle's state is in ``view`` (the physics keeps the order, so
         this runs once, and again only when a tick's layout changes)."""
-        try:  # through swarmbus.codec: garbage may also raise UnicodeDecodeError
-            ids = [decode(memoryview(raw), StateHead).vehicle_id for raw in view.states]
-        except MessageError as exc:
-            self._refuse("a tick's states", exc, "states")
-            return False
+        ids = []
+        for raw in view.states:  # through swarmbus.codec: garbage may raise UnicodeDecodeError
+            head = decode_or_none(
+                memoryview(raw), StateHead, "a tick's states", log, self._keys.tick(), "states"
+            )
+            if head is None:
+                return False
+            ids.append(head.vehicle_id)
         self._index = {vid: i for i, vid in enumerate(ids) if vid in self._ids}
         self._index_len = len(ids)
         return True
-
-    def _refuse(self, what: str, why: MessageError, kind: str = "") -> None:
-        """A tick that does not decode: logged, rate-limited per kind (a flood of garbage on
-        the tick key is one line per 5 s with its count)."""
-        key = self._keys.tick()
-        refusals(log).refuse(key, f"{what} on {key}", why, kind)
 
     def raw_state(self, view: TickView, vehicle_id: str) -> msgspec.Raw | None:
         i = self._index.get(vehicle_id)

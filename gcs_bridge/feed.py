@@ -22,7 +22,7 @@ from gcs_bridge.handle_commands import GcsHeartbeats
 from gcs_bridge.links import LinkSet
 from gcs_bridge.telemetry import BUILDERS, ID_MISSION_CURRENT
 from gcs_bridge.vehicle import Vehicle
-from swarmbus.codec import MessageError, decode, refusals
+from swarmbus.codec import decode_or_none
 from swarmbus.messages import VehicleState, VehicleStatus
 from swarmbus.views import TickView
 
@@ -104,11 +104,8 @@ class TelemetryFeed:
             raw = streams.raw_state(view, v.id)
             if raw is None:
                 return
-            try:
-                state = decode(memoryview(raw), VehicleState)
-            except MessageError as exc:
-                what = f"state of {v.id}"
-                refusals(log).refuse(what, what, exc)  # one line per 5 s, with a count
+            state = decode_or_none(memoryview(raw), VehicleState, f"state of {v.id}", log)
+            if state is None:
                 return
             if state.vehicle_id == v.id:
                 try:

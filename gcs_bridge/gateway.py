@@ -44,7 +44,7 @@ from gcs_bridge.options import (
 from gcs_bridge.vehicle import Vehicle
 from plume_atmosphere.wind import wind_from_scenario, wind_vector_enu
 from swarmbus.closeable import Closeable
-from swarmbus.codec import MessageError, decode, refusals
+from swarmbus.codec import decode_or_none
 from swarmbus.keys import Keys
 from swarmbus.messages import VehicleStatus
 from swarmbus.node import NodeContext, NodeRuntime
@@ -276,17 +276,13 @@ class Gateway(Closeable):
             log.exception("error handling %s of %s", kind, v.id)
 
     def _on_bus(self, kind: str, v: Vehicle, payload: bytes, now: float) -> None:
-        try:
-            if kind == KIND_STATUS:
-                status = decode(payload, VehicleStatus)
-                if status.vehicle_id == v.id:
-                    self.feed.on_status(v, status, now)
-                    self.params.sync(v, now)
-            else:
-                v.feed_reading(payload)  # decoded when telemetry needs it
-        except MessageError as exc:
-            what = f"{kind} of {v.id}"
-            refusals(log).refuse(what, what, exc)  # one line per 5 s per vehicle and kind
+        if kind != KIND_STATUS:
+            v.feed_reading(payload)  # decoded when telemetry needs it
+            return
+        status = decode_or_none(payload, VehicleStatus, f"{kind} of {v.id}", log)
+        if status is not None and status.vehicle_id == v.id:
+            self.feed.on_status(v, status, now)
+            self.params.sync(v, now)
 
     # ------------------------------------------------------------------ MAVLink in
     def _handle(self, link: Link, msg: Msg, addr: tuple[str, int], now: float) -> None:

@@ -25,7 +25,7 @@ from gcs_bridge.modes import (
 from gcs_bridge.params import ParamTable
 from gcs_bridge.telemetry import View
 from plume_atmosphere.wind import WindModel
-from swarmbus.codec import MessageError, decode, refusals
+from swarmbus.codec import decode_or_none
 from swarmbus.messages import (
     ConcentrationReading,
     FlightMode,
@@ -99,14 +99,10 @@ class Latest(Generic[M]):
         raw = self._raw
         if raw is not None:
             self._raw = None
-            try:
-                value = decode(memoryview(raw), self._kind)
-            except MessageError as exc:  # one line per 5 s per vehicle and kind, with a count
-                what = f"{self._kind.__name__} of {self._vehicle_id}"
-                refusals(log).refuse(what, what, exc)
-            else:
-                if value.vehicle_id == self._vehicle_id:
-                    self._value = value
+            what = f"{self._kind.__name__} of {self._vehicle_id}"
+            value = decode_or_none(memoryview(raw), self._kind, what, log)
+            if value is not None and value.vehicle_id == self._vehicle_id:
+                self._value = value
         return self._value
 
 

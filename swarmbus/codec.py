@@ -136,13 +136,14 @@ def decode_or_none(
     what: object,
     log: logging.Logger,
     key: str = "",
+    kind: str = "",
 ) -> T | None:
     """``data`` decoded as ``type_``, or None after a warning on ``log``, ``ignoring <what> on
     <key>: <why>`` (``ignoring <what>: <why>`` without a key; rate-limited per key or
-    ``what``, :class:`Refusals`): how a process drops a message that does not decode and goes
-    on."""
+    ``what``, and ``kind``, :class:`Refusals`): how a process drops a message that does not
+    decode and goes on."""
     try:
         return decode(data, type_)
     except MessageError as exc:
-        refusals(log).refuse(key or str(what), f"{what} on {key}" if key else what, exc)
+        refusals(log).refuse(key or str(what), f"{what} on {key}" if key else what, exc, kind)
         return None
