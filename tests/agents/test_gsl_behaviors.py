@@ -775,9 +775,11 @@ def test_a_pid_decaying_through_its_floor_in_clean_air_makes_no_rise() -> None:
     In clean air a first-order output only falls, so every rise after the first sample out of
     the gas is noise. Just under the floor the output reads 0; a noise draw lifts the next
     sample just over it, a jump from 0 of the floor's size (more than the 3·√2·σ threshold,
-    3.2·10⁻⁴ g/m³, whenever the output is within σ of the floor). Measured from the floor,
-    a rise needs a noise draw of 3·√2·σ: one-sided Gaussian tail Q(4.24) ≈ 1.1·10⁻⁵ per sample,
-    ≈ 0.7 expected in 200 tails of 300 samples (bound 5). Measured from 0 it hit in many."""
+    3.2·10⁻⁴ g/m³, whenever the output is within σ of the floor). Measured from the floor, the
+    output d·σ above the floor gives a false rise with Φ(−d)·Q(3·√2 − d) ≤ 2.9·10⁻⁴ per sample
+    (d = 2.12) while it decays from 3σ above the floor to it (τ·ln 2 ≈ 9 samples a tail), and
+    with Q(4.24) ≈ 1.1·10⁻⁵ below: about 1 expected in 200 tails of 300 samples (bound 5).
+    Measured from 0 it hit in many."""
     sensor = ConcentrationSensor.for_vehicle(PID, 0)
     detector = detector_for(ctx(scenario=PID))
     from_zero = PlumeDetector("rise", detector.threshold_g_m3)
