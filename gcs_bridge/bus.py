@@ -112,13 +112,14 @@ class Streams:
     def __init__(self, session: zenoh.Session, keys: Keys, vehicle_ids: set[str]) -> None:
         self._session = session
         self._keys = keys
+        self._tick_key = keys.tick()
         self._ids = vehicle_ids
         n = max(1, len(vehicle_ids))
         self._readings_ring = max(1024, 16 * n)  # the newest of each vehicle stays
         self._readings: Readings | None = self._subscribe_readings()
         # as many ticks as the per-vehicle state rings held states (>= 16 ticks)
         self._ticks = session.declare_subscriber(
-            keys.tick(), zenoh.handlers.RingChannel(max(16, 1024 // n))
+            self._tick_key, zenoh.handlers.RingChannel(max(16, 1024 // n))
         )
         self._index: dict[str, int] = {}  # vehicle id → position of its state in a tick
         self._index_len = -1  # the number of states the index was learnt from
@@ -158,7 +159,7 @@ class Streams:
             data = payload_or_none(sample, "a tick", log)
             if data is None:
                 continue
-            view = decode_or_none(data, TickView, "a tick", log, self._keys.tick())
+            view = decode_or_none(data, TickView, "a tick", log, self._tick_key)
             if view is None:
                 continue
             if len(view.states) == self._index_len or self.learn(view):
@@ -173,7 +174,7 @@ class Streams:
         data = None if newest is None else payload_or_none(newest, "a tick", log)
         if data is None:
             return None
-        view = decode_or_none(data, TickView, "a tick", log, self._keys.tick())
+        view = decode_or_none(data, TickView, "a tick", log, self._tick_key)
         if view is None:
             return None
         return view if len(view.states) == self._index_len or self.learn(view) else None
@@ -184,7 +185,7 @@ class Streams:
         ids = []
         for raw in view.states:  # through swarmbus.codec: garbage may raise UnicodeDecodeError
             head = decode_or_none(
-                memoryview(raw), StateHead, "a tick's states", log, self._keys.tick(), "states"
+                memoryview(raw), StateHead, "a tick's states", log, self._tick_key, "states"
             )
             if head is None:
                 return False

@@ -104,7 +104,7 @@ class TelemetryFeed:
             raw = streams.raw_state(view, v.id)
             if raw is None:
                 return
-            state = decode_or_none(memoryview(raw), VehicleState, f"state of {v.id}", log)
+            state = decode_or_none(memoryview(raw), VehicleState, v.state_label, log)
             if state is None:
                 return
             if state.vehicle_id == v.id:

@@ -279,7 +279,7 @@ class Gateway(Closeable):
         if kind != KIND_STATUS:
             v.feed_reading(payload)  # decoded when telemetry needs it
             return
-        status = decode_or_none(payload, VehicleStatus, f"{kind} of {v.id}", log)
+        status = decode_or_none(payload, VehicleStatus, v.status_label, log)
         if status is not None and status.vehicle_id == v.id:
             self.feed.on_status(v, status, now)
             self.params.sync(v, now)

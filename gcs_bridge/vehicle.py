@@ -86,6 +86,7 @@ class Latest(Generic[M]):
     def __init__(self, kind: type[M], vehicle_id: str) -> None:
         self._kind = kind
         self._vehicle_id = vehicle_id
+        self._what = f"{kind.__name__} of {vehicle_id}"
         self._value: M | None = None
         self._raw: Buffer | None = None
 
@@ -99,8 +100,7 @@ class Latest(Generic[M]):
         raw = self._raw
         if raw is not None:
             self._raw = None
-            what = f"{self._kind.__name__} of {self._vehicle_id}"
-            value = decode_or_none(memoryview(raw), self._kind, what, log)
+            value = decode_or_none(memoryview(raw), self._kind, self._what, log)
             if value is not None and value.vehicle_id == self._vehicle_id:
                 self._value = value
         return self._value
@@ -147,6 +147,8 @@ class Vehicle:
         cfg = scenario.vehicle(vehicle_id)
         vtype = load_vehicle_type(cfg.type)
         self.id = vehicle_id
+        self.state_label = f"state of {vehicle_id}"  # how a refused message is logged
+        self.status_label = f"status of {vehicle_id}"
         self.index = index
         sysid = scenario.sysid_of(vehicle_id)
         if sysid is None:

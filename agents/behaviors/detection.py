@@ -124,11 +124,11 @@ def detector_for(ctx: BehaviorContext, level_g_m3: float = PLUME_THRESHOLD_G_M3)
     sensor = ctx.scenario.sensor.resolved()
     if not lags(sensor, ctx.scenario.time.control_hz):
         return PlumeDetector("level", detection_level_g_m3(ctx, level_g_m3))
-    noise_std_g_m3 = _sensor(ctx).noise_std_g_m3
+    model = _sensor(ctx)
     period_s = sensor.period_ticks / ctx.scenario.time.control_hz
     rise = -math.expm1(-period_s / sensor.rise_s) if sensor.rise_s > 0.0 else 1.0
     return PlumeDetector(
         "rise",
-        max(level_g_m3 * rise, NOISE_MULTIPLE * math.sqrt(2.0) * noise_std_g_m3),
-        _sensor(ctx).floor_g_m3,
+        max(level_g_m3 * rise, NOISE_MULTIPLE * math.sqrt(2.0) * model.noise_std_g_m3),
+        model.floor_g_m3,
     )
