@@ -87,5 +87,16 @@ SCENARIO_OPT = click.option(
 
 
 def comma_list(value: str) -> tuple[str, ...]:
-    """A comma-separated list's items."""
-    return tuple(v.strip() for v in value.split(",") if v.strip())
+    """A comma-separated list's items; a comma inside brackets or braces (a tuned
+    algorithm's JSON parameters, ``name=module:Class?{"a":1,"b":2}``) separates nothing."""
+    items, depth, start = [], 0, 0
+    for i, ch in enumerate(value):
+        if ch in "{[(":
+            depth += 1
+        elif ch in "}])":
+            depth = max(depth - 1, 0)
+        elif ch == "," and depth == 0:
+            items.append(value[start:i])
+            start = i + 1
+    items.append(value[start:])
+    return tuple(v.strip() for v in items if v.strip())

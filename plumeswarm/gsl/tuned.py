@@ -21,7 +21,10 @@ def _build(name: str) -> type:
     if not sep or not colon:
         raise AttributeError(f"{name!r}: expected '<module>:<Class>?<json>'")
     base = getattr(importlib.import_module(module_name), class_name)
-    params = json.loads(encoded)
+    try:
+        params = json.loads(encoded)
+    except ValueError as exc:
+        raise AttributeError(f"{name!r}: its parameters are not JSON ({exc})") from None
     if not isinstance(params, dict) or not all(hasattr(base, k) for k in params):
         raise AttributeError(f"{name!r}: not parameters of {class_name}")
     return type(class_name, (base,), {"__module__": base.__module__, **params})

@@ -4,6 +4,7 @@ the package, the columns' definitions, the paired test, parameters and sweeps.""
 from __future__ import annotations
 
 import hashlib
+import importlib
 import json
 import math
 import os
@@ -16,6 +17,7 @@ import numpy as np
 import pytest
 
 from agents.behavior import BehaviorContext, load_behavior
+from plumeswarm.cli.common import comma_list
 from plumeswarm.gsl.bench import make_options, row_of, rows_of, run_all
 from plumeswarm.gsl.episode import (
     EpisodeSpec,
@@ -228,6 +230,18 @@ def test_behaviour_parameters_reach_the_loader_every_runner_uses() -> None:
     assert run_episode(spec).path_length_m == pytest.approx(10.0, rel=1e-6)
     with pytest.raises(GslError, match=r"no such parameter; its parameters: .*mean_run_s"):
         tuned_behavior("agents.behaviors.random_walk:RandomWalk", {"hit_memory_s": 1.0})
+
+
+def test_a_tuned_algorithm_with_two_parameters_is_one_item_of_the_command_line_list() -> None:
+    """The JSON's comma separates nothing; JSON that does not parse is named, not a
+    traceback."""
+    tuned = 'plumeswarm.gsl.tuned:agents.behaviors.random_walk:RandomWalk?{"speed_m_s":1.0,"mean_run_s":2.0}'
+    assert comma_list(f"casting, rw={tuned},oracle") == ("casting", f"rw={tuned}", "oracle")
+    name, algo = resolve_algorithm(f"rw={tuned}")
+    walker = getattr(importlib.import_module("plumeswarm.gsl.tuned"), tuned.partition(":")[2])
+    assert (name, algo.behavior, walker.speed_m_s, walker.mean_run_s) == ("rw", tuned, 1.0, 2.0)
+    with pytest.raises(GslError, match="its parameters are not JSON"):
+        resolve_algorithm('rw=plumeswarm.gsl.tuned:agents.behaviors.random_walk:RandomWalk?{"a":1')
 
 
 def test_a_sweep_refuses_test_seeds_and_environments_and_tables_the_start_distance(
