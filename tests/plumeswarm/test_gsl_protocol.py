@@ -235,13 +235,14 @@ def test_behaviour_parameters_reach_the_loader_every_runner_uses() -> None:
 def test_a_tuned_algorithm_with_two_parameters_is_one_item_of_the_command_line_list() -> None:
     """The JSON's comma separates nothing; JSON that does not parse is named, not a
     traceback."""
-    tuned = 'plumeswarm.gsl.tuned:agents.behaviors.random_walk:RandomWalk?{"speed_m_s":1.0,"mean_run_s":2.0}'
+    walk = "plumeswarm.gsl.tuned:agents.behaviors.random_walk:RandomWalk"
+    tuned = walk + '?{"speed_m_s":1.0,"mean_run_s":2.0}'
     assert comma_list(f"casting, rw={tuned},oracle") == ("casting", f"rw={tuned}", "oracle")
     name, algo = resolve_algorithm(f"rw={tuned}")
     walker = getattr(importlib.import_module("plumeswarm.gsl.tuned"), tuned.partition(":")[2])
     assert (name, algo.behavior, walker.speed_m_s, walker.mean_run_s) == ("rw", tuned, 1.0, 2.0)
     with pytest.raises(GslError, match="its parameters are not JSON"):
-        resolve_algorithm('rw=plumeswarm.gsl.tuned:agents.behaviors.random_walk:RandomWalk?{"a":1')
+        resolve_algorithm(f'rw={walk}?{{"a":1')
 
 
 def test_a_sweep_refuses_test_seeds_and_environments_and_tables_the_start_distance(
