@@ -31,7 +31,7 @@ from swarmbus.messages import ConcentrationReading
 
 class Casting(TrackingBehavior):
     ignores_peers = True  # reads neither its peers' states nor their readings: any radio
-    own_state = ("detector", "tracker", "side", "leg_best")
+    own_state = ("detector", "tracker", "track_altitude_m", "side", "leg_best")
     surge_speed_m_s = 2.0
     weave_speed_m_s = 0.3
     cast_speed_m_s = 2.5
@@ -55,7 +55,7 @@ class Casting(TrackingBehavior):
                     self.side = -self.side
                     self.leg_best = value
                 self.leg_best = max(self.leg_best, value)
-                self.tracker.hit(r.position_enu_m[0], r.position_enu_m[1], r.sim_time_s)
+                self.record(r)
             else:
                 self.leg_best = 0.0
 

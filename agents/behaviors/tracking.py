@@ -35,6 +35,14 @@ wandering with the wind.
   their midpoint along the mean wind (error ≤ 0.75 m along the wind if the source is in that
   interval); crosswind, the median of the detections within ``cluster_m`` (3 m) of the
   frontier. A first whiff or a strong filament is never a declaration.
+* **Search in height** (``vertical_step_m``, off at 0, the published tables' setting): the
+  surge flies at the altitude of the last detection, and each leg of a sweep at another
+  offset from it (0, +1, −1, +2, … steps, within ``max_vertical_offset_m`` of the altitude the
+  search started at), so that a release above or below that altitude is followed up to its
+  height; at a fixed altitude the frontier stops where the plume first reaches that height,
+  metres downwind of such a release. ``max_search_half_width_m`` (0: the cast's cap) widens
+  the sweep before the first detection, for a start beside the plume. docs/gsl.md has their
+  tuning measurement.
 """
 
 from __future__ import annotations
@@ -216,7 +224,7 @@ class TrackingBehavior(SeekingBehavior):
     recent wind, ``surge_across_m_s()`` across it. The first sweep starts to the left on an
     even vehicle index, to the right on an odd one."""
 
-    own_state: ClassVar[tuple[str, ...]] = ("detector", "tracker")
+    own_state: ClassVar[tuple[str, ...]] = ("detector", "tracker", "track_altitude_m")
     # the algorithm's numbers, given by each subclass
     surge_speed_m_s: float
     cast_speed_m_s: float
@@ -224,6 +232,11 @@ class TrackingBehavior(SeekingBehavior):
     cast_growth: float
     max_cast_half_width_m: float
     threshold_g_m3 = PLUME_THRESHOLD_G_M3
+    # the search in height: 0 holds the altitude the search starts at
+    vertical_step_m = 0.0
+    max_vertical_offset_m = 5.0
+    # the sweep before the first detection: 0 grows it to the cast's cap
+    max_search_half_width_m = 0.0
 
     def __init__(self, ctx: BehaviorContext) -> None:
         super().__init__(ctx)
@@ -237,12 +250,40 @@ class TrackingBehavior(SeekingBehavior):
             side=1.0 if ctx.vehicle_index % 2 == 0 else -1.0,
         )
         self.tracker = PlumeTracker(cast)
+        self.track_altitude_m: float | None = None  # the altitude of the last detection
 
     def observe(self, readings: Sequence[ConcentrationReading]) -> None:
         """Give the tracker every detection among ``readings``."""
         for r in readings:
             if r.available and r.reported_g_m3 is not None and self.detector.hit(r.reported_g_m3):
-                self.tracker.hit(r.position_enu_m[0], r.position_enu_m[1], r.sim_time_s)
+                self.record(r)
+
+    def record(self, reading: ConcentrationReading) -> None:
+        """A detection: to the tracker, and its altitude is the one the search goes on at."""
+        x, y, z = reading.position_enu_m
+        self.tracker.hit(x, y, reading.sim_time_s)
+        self.track_altitude_m = z
+
+    def flight_altitude(self) -> float:
+        """The altitude of this step. With ``vertical_step_m`` 0: the search's. Otherwise the
+        surge flies at the altitude of the last detection, and each leg of a sweep (the
+        search's and the cast's) at another offset from it — 0, +1, −1, +2, −2, … steps, as
+        far as ``max_vertical_offset_m`` from the search's altitude — so that a plume released
+        above or below the search's altitude is followed to its height."""
+        if self.vertical_step_m <= 0.0:
+            return self.altitude
+        tracker = self.tracker
+        base = self.altitude if self.track_altitude_m is None else self.track_altitude_m
+        if tracker.state not in ("search", "cast"):
+            return base
+        legs = tracker.cast.legs
+        if tracker.state == "cast" and tracker.cast_line is not None:
+            legs -= tracker.cast_line[0]
+        steps = max(1, int(self.max_vertical_offset_m / self.vertical_step_m))
+        m = legs % (2 * steps + 1)
+        offset = (m + 1) // 2 * (1 if m % 2 else -1) * self.vertical_step_m
+        low = self.altitude - self.max_vertical_offset_m
+        return min(max(base + offset, low), self.altitude + self.max_vertical_offset_m)
 
     @abstractmethod
     def surge_across_m_s(self) -> float:
@@ -255,8 +296,12 @@ class TrackingBehavior(SeekingBehavior):
         tracker.observe_wind(step.wind.vector_m_s, own.sim_time_s)
         self.observe(step.readings)
         self.declaration = tracker.advance(x, y, own.sim_time_s)
+        if self.max_search_half_width_m > 0.0:
+            searching = tracker.state == "search"
+            cap = self.max_search_half_width_m if searching else self.max_cast_half_width_m
+            tracker.cast.max_half_width_m = cap
         velocity = tracker.velocity(x, y)
         if velocity is None:  # surging
             frame = tracker.wind.recent()
             velocity = frame.velocity(-self.surge_speed_m_s, self.surge_across_m_s())
-        return fly(own, velocity, self.altitude)
+        return fly(own, velocity, self.flight_altitude())

@@ -534,6 +534,58 @@ def test_surge_cast_declares_between_the_frontier_and_an_empty_cast_line() -> No
     assert 194.86 / 2.5 <= t_end - cast_start + 0.05 <= 194.86 / 2.5 + 8 * 0.1 + 0.05
 
 
+def _fly_3d(beh, field, x: float, z: float, until_s: float, dt: float = 0.05):
+    """Follow the setpoints, the altitude's too, in ``field(x, y, z)`` until a declaration."""
+    y = t = 0.0
+    while t < until_s and beh.declaration is None:
+        seen = noiseless_reading("uav1", t, (x, y, z), field(x, y, z))
+        sp = beh.step(state(x, y, t, z=z), [], [seen])
+        if beh.declaration is not None:
+            break
+        vx, vy, vz = velocity(sp)
+        x, y, z, t = x + vx * dt, y + vy * dt, z + vz * dt, t + dt
+    return beh.declaration
+
+
+@pytest.mark.parametrize("cls", [SurgeCast, Casting])
+def test_the_search_in_height_follows_a_plume_released_above_the_search_altitude(cls) -> None:
+    """Gas within 1 m of the axis (wind toward +x) and within 0.2·x of the release height
+    13 m, from x = 1 m: at the search altitude, 3 m below the release, it reaches only from
+    x = 15 m. Held at its altitude, the searcher loses the plume there and declares between
+    that frontier and its cast line, > 10 m from the source; searching in height, a cast leg
+    1.5 m up meets the gas further upwind, and again, until the frontier is the release
+    itself (x = 1 m): the declaration, at most 0.75 m from the frontier along the wind, is
+    within 2 m of the source at the origin."""
+
+    def field(x: float, y: float, z: float) -> float:
+        return 0.01 if x >= 1.0 and abs(y) <= 1.0 and abs(z - 13.0) <= 0.2 * x else 0.0
+
+    level = _fly_3d(cls(ctx()), field, 30.0, 10.0, until_s=600.0)
+    assert level is not None and math.hypot(level.x_m, level.y_m) > 10.0
+    searcher = type("InHeight", (cls,), {"vertical_step_m": 1.5})(ctx())
+    found = _fly_3d(searcher, field, 30.0, 10.0, until_s=600.0)
+    assert found is not None and math.hypot(found.x_m, found.y_m) <= 2.0, found
+    assert searcher.track_altitude_m == pytest.approx(13.0, abs=1.0)
+
+
+def test_the_search_before_the_first_detection_widens_to_its_own_cap() -> None:
+    """In clean air the sweep's half-widths grow ×1.6 from 3 m: 3, 4.8, 7.68, 12.29, 19.66,
+    then the cap: 20 m by default; with a 60 m search cap 31.46 and 50.33 before it, so 200 s
+    of legs at 2.5 m/s (≈ 900 m of legs from ±3 m) reach beyond ±50 m of the start."""
+
+    def widest(beh) -> float:
+        y = t = far = 0.0
+        while t < 200.0:
+            _, vy, _ = velocity(beh.step(state(40.0, y, t), [], [reading(40.0, y, t, 0.0)]))
+            y, t = y + vy * 0.05, t + 0.05
+            far = max(far, abs(y))
+        return far
+
+    assert widest(SurgeCast(ctx())) <= 20.0 + 0.125 + 1e-9  # a turn comes ≤ one step late
+    wide = type("Wide", (SurgeCast,), {"max_search_half_width_m": 60.0})(ctx())
+    assert 50.33 <= widest(wide) <= 60.0 + 0.125 + 1e-9
+
+
 def test_casting_weaves_upwind_on_a_hit() -> None:
     beh = Casting(ctx())
     sp = beh.step(state(30.0, 0.0, 0.0), [], [reading(30.0, 0.0, 0.0, 0.01)])
