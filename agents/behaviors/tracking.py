@@ -38,8 +38,8 @@ wandering with the wind.
 * **Search in height** (``vertical_step_m``, off at 0, the published tables' setting): the
   surge flies at the altitude of the last detection, and each leg of a sweep at another
   offset from it (0, +1, −1, +2, … steps, within ``max_vertical_offset_m`` of the altitude the
-  search started at), so that a release above or below that altitude is followed up to its
-  height; at a fixed altitude the frontier stops where the plume first reaches that height,
+  search started at, never below ``min_flight_altitude_m``), so that a release above or below
+  that altitude is followed up to its height; at a fixed altitude the frontier stops where the plume first reaches that height,
   metres downwind of such a release. ``max_search_half_width_m`` (0: the cast's cap) widens
   the sweep before the first detection, for a start beside the plume. docs/gsl.md has their
   tuning measurement.
@@ -235,6 +235,7 @@ class TrackingBehavior(SeekingBehavior):
     # the search in height: 0 holds the altitude the search starts at
     vertical_step_m = 0.0
     max_vertical_offset_m = 5.0
+    min_flight_altitude_m = 1.0  # never lower, whatever the offset (a search started low)
     # the sweep before the first detection: 0 grows it to the cast's cap
     max_search_half_width_m = 0.0
 
@@ -268,8 +269,9 @@ class TrackingBehavior(SeekingBehavior):
         """The altitude of this step. With ``vertical_step_m`` 0: the search's. Otherwise the
         surge flies at the altitude of the last detection, and each leg of a sweep (the
         search's and the cast's) at another offset from it — 0, +1, −1, +2, −2, … steps, as
-        far as ``max_vertical_offset_m`` from the search's altitude — so that a plume released
-        above or below the search's altitude is followed to its height."""
+        far as ``max_vertical_offset_m`` from the search's altitude and never below
+        ``min_flight_altitude_m`` — so that a plume released above or below the search's
+        altitude is followed to its height."""
         if self.vertical_step_m <= 0.0:
             return self.altitude
         tracker = self.tracker
@@ -282,7 +284,7 @@ class TrackingBehavior(SeekingBehavior):
         steps = max(1, int(self.max_vertical_offset_m / self.vertical_step_m))
         m = legs % (2 * steps + 1)
         offset = (m + 1) // 2 * (1 if m % 2 else -1) * self.vertical_step_m
-        low = self.altitude - self.max_vertical_offset_m
+        low = max(self.altitude - self.max_vertical_offset_m, self.min_flight_altitude_m)
         return min(max(base + offset, low), self.altitude + self.max_vertical_offset_m)
 
     @abstractmethod

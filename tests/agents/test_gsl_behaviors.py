@@ -568,6 +568,20 @@ def test_the_search_in_height_follows_a_plume_released_above_the_search_altitude
     assert searcher.track_altitude_m == pytest.approx(13.0, abs=1.0)
 
 
+def test_the_search_in_height_never_flies_below_its_floor() -> None:
+    """A search started at 3 m with steps of 1.5 m: its legs' offsets 0, +1.5, −1.5, +3, −3,
+    … reach 3 − 4.5 = −1.5 m, under the ground; the floor holds them at 1 m. In clean air
+    the search's legs alternate sides: 200 s of them cover every offset."""
+    beh = type("Low", (SurgeCast,), {"vertical_step_m": 1.5})(ctx())
+    y = t = 0.0
+    altitudes = set()
+    while t < 200.0:
+        sp = beh.step(state(40.0, y, t, z=3.0), [], [reading(40.0, y, t, 0.0)])
+        altitudes.add(beh.flight_altitude())
+        y, t = y + velocity(sp)[1] * 0.05, t + 0.05
+    assert min(altitudes) == 1.0 and max(altitudes) == 3.0 + 3 * 1.5
+
+
 def test_the_search_before_the_first_detection_widens_to_its_own_cap() -> None:
     """In clean air the sweep's half-widths grow ×1.6 from 3 m: 3, 4.8, 7.68, 12.29, 19.66,
     then the cap: 20 m by default; with a 60 m search cap 31.46 and 50.33 before it, so 200 s
