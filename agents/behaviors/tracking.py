@@ -39,10 +39,10 @@ wandering with the wind.
   surge flies at the altitude of the last detection, and each leg of a sweep at another
   offset from it (0, +1, −1, +2, … steps, within ``max_vertical_offset_m`` of the altitude the
   search started at, never below ``min_flight_altitude_m``), so that a release above or below
-  that altitude is followed up to its height; at a fixed altitude the frontier stops where the plume first reaches that height,
-  metres downwind of such a release. ``max_search_half_width_m`` (0: the cast's cap) widens
-  the sweep before the first detection, for a start beside the plume. docs/gsl.md has their
-  tuning measurement.
+  that altitude is followed up to its height; at a fixed altitude the frontier stops where
+  the plume first reaches that height, metres downwind of such a release.
+  ``max_search_half_width_m`` (0: the cast's cap) widens the sweep before the first
+  detection, for a start beside the plume. docs/gsl.md has their tuning measurement.
 """
 
 from __future__ import annotations
