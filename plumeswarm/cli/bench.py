@@ -376,6 +376,7 @@ def _gsl_run(kind: str, kwargs: dict[str, Any]) -> None:
                 shard=shard,
                 log=click.echo,
                 cpu_s=cpu_s,
+                warn=lambda line: tqdm.write(line, file=sys.stderr),
             )
         except GslError as exc:
             fail(str(exc))
@@ -474,7 +475,7 @@ def bench_gsl_merge(dirs: tuple[Path, ...], out: Path) -> None:
     outcomes = [outcome_of(s, merged.records[spec_key(s)]) for s in grid.specs]
     for outcome in {o.spec: o for o in outcomes}.values():
         if spec_key(outcome.spec) not in journal.records:
-            journal.append(outcome)
+            journal.append(outcome, merged.behaviors.get(spec_key(outcome.spec)))
     click.echo(f"merged {len(merged.records)} episodes from {len(dirs)} directories")
     _finish(grid, out, outcomes)
 

@@ -14,6 +14,7 @@ import io
 import itertools
 import json
 import math
+import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -33,7 +34,7 @@ from plumeswarm.gsl.episode import (
     episode_time_limit_s,
 )
 from plumeswarm.gsl.family import AUTO_TIME_LIMIT_MULTIPLE, SEARCH_SPEED_M_S
-from plumeswarm.gsl.grid import Executor, Journal, Shard, run_episodes
+from plumeswarm.gsl.grid import Executor, Journal, Shard, behavior_digest, run_episodes
 from plumeswarm.gsl.registry import (
     CEILING,
     FLOOR,
@@ -332,6 +333,10 @@ def specs_of(opts: GslOptions, **fields: Any) -> list[EpisodeSpec]:
     return specs
 
 
+def _stderr(line: str) -> None:
+    print(line, file=sys.stderr)
+
+
 def run_specs(
     specs: Sequence[EpisodeSpec],
     jobs: int,
@@ -342,19 +347,25 @@ def run_specs(
     shard: Shard | None = None,
     log: Callable[[str], None] | None = None,
     cpu_s: dict[EpisodeSpec, float] | None = None,
+    warn: Callable[[str], None] = _stderr,
 ) -> list[Outcome]:
     """Every episode's outcome, in spec order (the order the workers finish in does not
-    matter); a spec given twice is flown once. With a ``journal``, the episodes it holds are
-    read back, not flown, and each one flown is appended to it as it finishes; with a
-    ``shard``, only the shard's episodes run and come back. ``cpu_s``: filled with the CPU
-    seconds of each episode flown (in its worker's process)."""
+    matter); a spec given twice is flown once. With a ``journal``, the episodes it holds with
+    the parameters their behaviour has now are read back, not flown (``warn``: one line for
+    those flown again because the parameters changed, one for those kept without them), and
+    each one flown is appended to it as it finishes; with a ``shard``, only the shard's
+    episodes run and come back. ``cpu_s``: filled with the CPU seconds of each episode flown
+    (in its worker's process)."""
     mine = shard.of(specs) if shard is not None else list(dict.fromkeys(specs))
     done: dict[EpisodeSpec, Outcome] = {}
+    digests: dict[str, str] = {}  # behaviour → its digest, computed once here
     if journal is not None:
-        for spec in mine:
-            outcome = journal.outcome(spec)
-            if outcome is not None:
-                done[spec] = outcome
+        for behavior in dict.fromkeys(s.algorithm_config().behavior for s in mine):
+            digests[behavior] = behavior_digest(behavior)
+        reuse = journal.reusable(mine, lambda s: digests[s.algorithm_config().behavior])
+        done = reuse.outcomes
+        for line in reuse.notices(journal.path):
+            warn(line)
     todo = [s for s in mine if s not in done]
     if log is not None:
         log(f"grid: {len(mine)} episodes, {len(done)} already done, {len(todo)} to run")
@@ -362,7 +373,7 @@ def run_specs(
         progress(len(done), len(mine))
     for outcome, cpu in run_episodes(todo, executor, jobs):
         if journal is not None:
-            journal.append(outcome)
+            journal.append(outcome, digests[outcome.spec.algorithm_config().behavior])
         done[outcome.spec] = outcome
         if cpu_s is not None:
             cpu_s[outcome.spec] = cpu

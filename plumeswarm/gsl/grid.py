@@ -6,8 +6,10 @@ and in which order it runs does not change its outcome. Every finished episode i
 the output directory's ``episodes.jsonl`` (one line, flushed; the first line says which grid
 the directory holds); a grid started again with the same options and ``--out`` reads it back
 and runs only the episodes it lacks, and the tables are written from all of them, in the grid's
-order: the same bytes as a run never interrupted. ``--shard i/N`` runs every N-th episode
-starting at the i-th; :func:`merge_journals` puts the N directories back together.
+order: the same bytes as a run never interrupted. Each line keeps a digest of the parameters of
+the episode's behaviour (:func:`behavior_digest`); an episode kept with other parameters is
+flown again. ``--shard i/N`` runs every N-th episode starting at the i-th;
+:func:`merge_journals` puts the N directories back together.
 """
 
 from __future__ import annotations
@@ -17,15 +19,16 @@ import hashlib
 import json
 import multiprocessing
 import os
+import re
 import socket
 import time
-from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from plumeswarm.gsl.episode import EpisodeSpec, Outcome, run_episode
-from plumeswarm.gsl.registry import GslError
+from plumeswarm.gsl.registry import GslError, behavior_class_name, behavior_parameters
 from swarmbus.extras import missing_extra_message
 
 JOURNAL = "episodes.jsonl"
@@ -108,10 +111,43 @@ def grid_digest(specs: Sequence[EpisodeSpec]) -> str:
     return hashlib.sha256(keys.encode()).hexdigest()[:24]
 
 
-def outcome_record(outcome: Outcome) -> dict[str, Any]:
+def _plain(value: Any) -> Any:
+    """A parameter's value as JSON holds it, the same in every process: containers element by
+    element (a set sorted), a dataclass as its name and fields, an array as a list, anything
+    else its repr without a memory address."""
+    if value is None or isinstance(value, str | int | float):
+        return value
+    if isinstance(value, dict):
+        return {k if isinstance(k, str) else repr(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_plain(v) for v in value]
+    if isinstance(value, set | frozenset):
+        return sorted((_plain(v) for v in value), key=repr)
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        fields = {f.name: _plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
+        return {"dataclass": type(value).__qualname__, **fields}
+    if callable(getattr(value, "tolist", None)):  # a NumPy array or scalar
+        return _plain(value.tolist())
+    return re.sub(r" at 0x[0-9a-fA-F]+", "", repr(value))
+
+
+def behavior_digest(behavior: str) -> str:
+    """The identity of the behaviour ``behavior`` names as a journal keeps it: a digest of its
+    class's ``module:qualname`` and its parameters (the public class attributes,
+    :func:`~plumeswarm.gsl.registry.behavior_parameters`); not of its code."""
+    params = {k: _plain(v) for k, v in behavior_parameters(behavior).items()}
+    text = json.dumps(
+        {"class": behavior_class_name(behavior), "parameters": params}, sort_keys=True, default=repr
+    )
+    return hashlib.sha256(text.encode()).hexdigest()[:24]
+
+
+def outcome_record(outcome: Outcome, behavior: str | None = None) -> dict[str, Any]:
+    """The journal line of ``outcome`` (``behavior``: its behaviour's digest, if known)."""
     fields = {f.name: getattr(outcome, f.name) for f in dataclasses.fields(outcome)}
     del fields["spec"]
-    return {"key": spec_key(outcome.spec), "episode": spec_name(outcome.spec), "outcome": fields}
+    record = {"key": spec_key(outcome.spec), "episode": spec_name(outcome.spec), "outcome": fields}
+    return record if behavior is None else {**record, "behavior": behavior}
 
 
 def outcome_of(spec: EpisodeSpec, fields: dict[str, Any]) -> Outcome:
@@ -135,6 +171,8 @@ class Journal:
     path: Path
     header: dict[str, Any]
     records: dict[str, dict[str, Any]]  # key → the outcome's fields
+    # key → the digest of its behaviour's parameters (None: a line from before the digest)
+    behaviors: dict[str, str | None] = field(default_factory=dict)
 
     @staticmethod
     def read(path: Path, repair: bool = False) -> Journal | None:
@@ -152,13 +190,14 @@ class Journal:
             return None
         try:
             header = json.loads(lines[0])["grid"]
-            records = {}
-            for line in lines[1:]:
+            records, behaviors = {}, {}
+            for line in lines[1:]:  # an episode flown again: its last line
                 record = json.loads(line)
                 records[record["key"]] = record["outcome"]
+                behaviors[record["key"]] = record.get("behavior")
         except (ValueError, KeyError, TypeError) as exc:
             raise GslError(f"{path}: not a grid journal ({exc})") from None
-        return Journal(path, header, records)
+        return Journal(path, header, records, behaviors)
 
     @staticmethod
     def open(out: Path, header: dict[str, Any]) -> Journal:
@@ -182,15 +221,60 @@ class Journal:
         fields = self.records.get(spec_key(spec))
         return None if fields is None else outcome_of(spec, fields)
 
-    def append(self, outcome: Outcome) -> None:
-        """One line, written whole and flushed before the next episode is counted."""
-        record = outcome_record(outcome)
+    def reusable(self, specs: Sequence[EpisodeSpec], digest: Callable[[EpisodeSpec], str]) -> Reuse:
+        """Which of ``specs`` the journal holds: kept with their behaviour's ``digest``
+        (reused), kept with another (flown again), kept without one (reused, unchecked)."""
+        reuse = Reuse()
+        for spec in specs:
+            outcome = self.outcome(spec)
+            if outcome is None:
+                continue
+            kept = self.behaviors.get(spec_key(spec))
+            if kept is not None and kept != digest(spec):
+                reuse.changed.append(spec)
+                continue
+            reuse.outcomes[spec] = outcome
+            reuse.unchecked += kept is None
+        return reuse
+
+    def append(self, outcome: Outcome, behavior: str | None = None) -> None:
+        """One line (with ``behavior``, the digest of the episode's behaviour), written whole
+        and flushed before the next episode is counted."""
+        record = outcome_record(outcome, behavior)
         line = json.dumps(record, sort_keys=True) + "\n"
         with self.path.open("a") as f:
             f.write(line)
             f.flush()
             os.fsync(f.fileno())
         self.records[record["key"]] = record["outcome"]
+        self.behaviors[record["key"]] = behavior
+
+
+@dataclass
+class Reuse:
+    """What a journal gives a grid that resumes: the outcomes to use again, the episodes kept
+    with other behaviour parameters (to fly again), how many outcomes were kept without."""
+
+    outcomes: dict[EpisodeSpec, Outcome] = field(default_factory=dict)
+    changed: list[EpisodeSpec] = field(default_factory=list)
+    unchecked: int = 0
+
+    def notices(self, path: Path) -> list[str]:
+        """One line for the episodes flown again, one for those reused unchecked."""
+        lines = []
+        if self.changed:
+            names = ", ".join(dict.fromkeys(s.algorithm for s in self.changed))
+            lines.append(
+                f"{len(self.changed)} episode(s) in {path} flown again: the parameters of "
+                f"their behaviour changed ({names})"
+            )
+        if self.unchecked:
+            lines.append(
+                f"{self.unchecked} episode(s) reused from {path} without a check of their "
+                "behaviour's parameters (kept before the check existed); to fly them again give "
+                "another --out or delete that file"
+            )
+        return lines
 
 
 def _difference(theirs: dict[str, Any], ours: dict[str, Any]) -> str:
@@ -329,6 +413,7 @@ class Merged:
     header: dict[str, Any]
     records: dict[str, dict[str, Any]]
     overlap: frozenset[str] = frozenset()
+    behaviors: dict[str, str | None] = field(default_factory=dict)
 
 
 def merge_journals(dirs: Sequence[Path]) -> Merged:
@@ -343,6 +428,7 @@ def merge_journals(dirs: Sequence[Path]) -> Merged:
     first = journals[0]
     grid = {k: v for k, v in first.header.items() if k != "shard"}
     records: dict[str, dict[str, Any]] = {}
+    behaviors: dict[str, str | None] = {}
     overlap: set[str] = set()
     for d, journal in zip(dirs, journals, strict=True):
         theirs = {k: v for k, v in journal.header.items() if k != "shard"}
@@ -354,7 +440,8 @@ def merge_journals(dirs: Sequence[Path]) -> Merged:
             if key in records:
                 overlap.add(key)
             records[key] = fields
-    return Merged({**grid, "shard": None}, records, frozenset(overlap))
+            behaviors[key] = journal.behaviors.get(key)
+    return Merged({**grid, "shard": None}, records, frozenset(overlap), behaviors)
 
 
 def _listed(names: Sequence[str]) -> str:

@@ -24,6 +24,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import importlib
+import inspect
 import json
 import logging
 import tomllib
@@ -202,6 +203,35 @@ def tuned_behavior(behavior: str, params: dict[str, Any]) -> str:
             raise GslError(f"behavior.{key}: {value!r} is not like its default {current!r}")
     encoded = json.dumps(params, sort_keys=True, separators=(",", ":"))
     return f"{TUNED_MODULE}:{behavior}?{encoded}"
+
+
+#: Class attributes that are not parameters: the names of a behaviour's saved state, and the
+#: publication it follows.
+NOT_PARAMETERS = frozenset({"own_state", "state_attributes", "source"})
+
+
+def behavior_parameters(behavior: str) -> dict[str, Any]:
+    """The parameters of the behaviour ``behavior`` names, by name: its public class attributes
+    (not starting with ``_``) over the class and its bases, the nearest definition winning;
+    not its functions, methods, class and static methods and properties, nor
+    :data:`NOT_PARAMETERS`. The values its instances set in ``__init__`` are code, not here."""
+    found: dict[str, Any] = {}
+    seen: set[str] = set()
+    for klass in _class_of(behavior).__mro__:
+        for name, value in vars(klass).items():
+            if name.startswith("_") or name in seen:
+                continue
+            seen.add(name)
+            routine = isinstance(value, classmethod | staticmethod | property)
+            if not routine and not inspect.isroutine(value) and name not in NOT_PARAMETERS:
+                found[name] = value
+    return dict(sorted(found.items()))
+
+
+def behavior_class_name(behavior: str) -> str:
+    """``module:qualname`` of the class ``behavior`` names (a tuned one: its base's)."""
+    cls = _class_of(behavior)
+    return f"{cls.__module__}:{cls.__qualname__}"
 
 
 # --- scenario overrides -------------------------------------------------------------------

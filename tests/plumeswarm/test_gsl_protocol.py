@@ -40,7 +40,7 @@ from plumeswarm.gsl.sweep import SweepParam, run_sweep, tuning_warning, write_sw
 from tests.support.procs import REPO, run_cli
 
 # A behaviour from outside the package: two vehicles fly upwind (−x in every environment
-# here) at 3 m/s and declare where they are after 5 s.
+# here) at 3 m/s and declare where they are after ``declare_after_s`` (5 s).
 OUTSIDE = """
 from agents.behavior import SourceEstimate
 from agents.behaviors.steering import fly, hold_at
@@ -50,6 +50,7 @@ class Upwind:
     vehicles = 2
     source = "a test"
     speed_m_s = 3.0
+    declare_after_s = 5.0
 
     def __init__(self, ctx):
         self.t0 = None
@@ -59,7 +60,7 @@ class Upwind:
         if self.declaration is not None:
             return hold_at(self.declaration.x_m, self.declaration.y_m, own.position_enu_m[2])
         self.t0 = own.sim_time_s if self.t0 is None else self.t0
-        if own.sim_time_s - self.t0 >= 5.0:
+        if own.sim_time_s - self.t0 >= self.declare_after_s:
             x, y, _ = own.position_enu_m
             self.declaration = SourceEstimate(x, y, own.sim_time_s)
         return fly(own, (-self.speed_m_s, 0.0), own.position_enu_m[2])
