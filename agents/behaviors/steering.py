@@ -76,13 +76,18 @@ class CrosswindSweep(SavesState):
         """The next call starts a new sweep around where the vehicle is then."""
         self.anchor_across_m = None
 
-    def velocity(self, frame: WindFrame, x_m: float, y_m: float) -> tuple[float, float]:
+    def velocity(
+        self, frame: WindFrame, x_m: float, y_m: float, cap_m: float | None = None
+    ) -> tuple[float, float]:
+        """The sweep's velocity at (x, y) in ``frame``; ``cap_m``: this sweep's cap on the
+        half-width instead of ``max_half_width_m``."""
         _, across = frame.coordinates(x_m, y_m)
         if self.anchor_across_m is None:
             self.anchor_across_m = across
             self.half_width_m = self.first_half_width_m
         if (across - self.anchor_across_m) * self.side > self.half_width_m:
             self.side = -self.side
-            self.half_width_m = min(self.half_width_m * self.growth, self.max_half_width_m)
+            cap = self.max_half_width_m if cap_m is None else cap_m
+            self.half_width_m = min(self.half_width_m * self.growth, cap)
             self.legs += 1
         return frame.velocity(self.drift_m_s, self.speed_m_s * self.side)

@@ -129,6 +129,7 @@ class PlumeTracker(SavesState):
     line_ahead_m: float = 1.5
     back_speed_m_s: float = 2.0
     blank_factor: float = 1.5
+    search_half_width_m: float = 0.0  # the sweep's cap before the first hit; 0: the cast's
     state: str = field(default="search", init=False)
     last_hit_s: float | None = field(default=None, init=False)
     longest_blank_s: float = field(default=0.0, init=False)
@@ -214,7 +215,8 @@ class PlumeTracker(SavesState):
             frame = self.wind.recent()
         else:
             frame = WindFrame.of(self.cast_frame)
-        return self.cast.velocity(frame, x_m, y_m)
+        searching = self.state == "search" and self.search_half_width_m > 0.0
+        return self.cast.velocity(frame, x_m, y_m, self.search_half_width_m if searching else None)
 
 
 class TrackingBehavior(SeekingBehavior):
@@ -250,7 +252,13 @@ class TrackingBehavior(SeekingBehavior):
             self.max_cast_half_width_m,
             side=1.0 if ctx.vehicle_index % 2 == 0 else -1.0,
         )
-        self.tracker = PlumeTracker(cast)
+        self.tracker = PlumeTracker(cast, search_half_width_m=self.max_search_half_width_m)
+        # the search in height: how many steps up (and down) its legs go
+        self.vertical_steps = (
+            max(1, int(self.max_vertical_offset_m / self.vertical_step_m))
+            if self.vertical_step_m > 0.0
+            else 0
+        )
         self.track_altitude_m: float | None = None  # the altitude of the last detection
 
     def observe(self, readings: Sequence[ConcentrationReading]) -> None:
@@ -281,8 +289,7 @@ class TrackingBehavior(SeekingBehavior):
         legs = tracker.cast.legs
         if tracker.state == "cast" and tracker.cast_line is not None:
             legs -= tracker.cast_line[0]
-        steps = max(1, int(self.max_vertical_offset_m / self.vertical_step_m))
-        m = legs % (2 * steps + 1)
+        m = legs % (2 * self.vertical_steps + 1)
         offset = (m + 1) // 2 * (1 if m % 2 else -1) * self.vertical_step_m
         low = max(self.altitude - self.max_vertical_offset_m, self.min_flight_altitude_m)
         return min(max(base + offset, low), self.altitude + self.max_vertical_offset_m)
@@ -298,10 +305,6 @@ class TrackingBehavior(SeekingBehavior):
         tracker.observe_wind(step.wind.vector_m_s, own.sim_time_s)
         self.observe(step.readings)
         self.declaration = tracker.advance(x, y, own.sim_time_s)
-        if self.max_search_half_width_m > 0.0:
-            searching = tracker.state == "search"
-            cap = self.max_search_half_width_m if searching else self.max_cast_half_width_m
-            tracker.cast.max_half_width_m = cap
         velocity = tracker.velocity(x, y)
         if velocity is None:  # surging
             frame = tracker.wind.recent()

@@ -463,14 +463,19 @@ def test_the_swarm_fits_its_peers_sensor_outputs_not_their_true_values() -> None
 
 
 # ---------------------------------------------------------------- casting and surge-cast
-def fly_kinematic(beh, x: float, y: float, t: float, until_s: float, dt: float = 0.05):
-    """Follow the behaviour's velocity setpoints in clean air until it declares or ``until_s``."""
+def fly_kinematic(
+    beh, x: float, y: float, t: float, until_s: float, dt: float = 0.05, field=None, z=10.0
+):
+    """Follow the behaviour's velocity setpoints, the altitude's too, in ``field(x, y, z)``
+    (clean air if None) until it declares or ``until_s``."""
     while t < until_s:
-        sp = beh.step(state(x, y, t), [], [reading(x, y, t, 0.0)])
+        value = 0.0 if field is None else field(x, y, z)
+        seen = noiseless_reading("uav1", t, (x, y, z), value)
+        sp = beh.step(state(x, y, t, z=z), [], [seen])
         if beh.declaration is not None:
             break
-        vx, vy, _ = velocity(sp)
-        x, y, t = x + vx * dt, y + vy * dt, t + dt
+        vx, vy, vz = velocity(sp)
+        x, y, z, t = x + vx * dt, y + vy * dt, z + vz * dt, t + dt
     return x, y, t
 
 
@@ -534,19 +539,6 @@ def test_surge_cast_declares_between_the_frontier_and_an_empty_cast_line() -> No
     assert 194.86 / 2.5 <= t_end - cast_start + 0.05 <= 194.86 / 2.5 + 8 * 0.1 + 0.05
 
 
-def _fly_3d(beh, field, x: float, z: float, until_s: float, dt: float = 0.05):
-    """Follow the setpoints, the altitude's too, in ``field(x, y, z)`` until a declaration."""
-    y = t = 0.0
-    while t < until_s and beh.declaration is None:
-        seen = noiseless_reading("uav1", t, (x, y, z), field(x, y, z))
-        sp = beh.step(state(x, y, t, z=z), [], [seen])
-        if beh.declaration is not None:
-            break
-        vx, vy, vz = velocity(sp)
-        x, y, z, t = x + vx * dt, y + vy * dt, z + vz * dt, t + dt
-    return beh.declaration
-
-
 @pytest.mark.parametrize("cls", [SurgeCast, Casting])
 def test_the_search_in_height_follows_a_plume_released_above_the_search_altitude(cls) -> None:
     """Gas within 1 m of the axis (wind toward +x) and within 0.2·x of the release height
@@ -560,10 +552,13 @@ def test_the_search_in_height_follows_a_plume_released_above_the_search_altitude
     def field(x: float, y: float, z: float) -> float:
         return 0.01 if x >= 1.0 and abs(y) <= 1.0 and abs(z - 13.0) <= 0.2 * x else 0.0
 
-    level = _fly_3d(cls(ctx()), field, 30.0, 10.0, until_s=600.0)
+    at_one = cls(ctx())
+    fly_kinematic(at_one, 30.0, 0.0, 0.0, until_s=600.0, field=field)
+    level = at_one.declaration
     assert level is not None and math.hypot(level.x_m, level.y_m) > 10.0
     searcher = type("InHeight", (cls,), {"vertical_step_m": 1.5})(ctx())
-    found = _fly_3d(searcher, field, 30.0, 10.0, until_s=600.0)
+    fly_kinematic(searcher, 30.0, 0.0, 0.0, until_s=600.0, field=field)
+    found = searcher.declaration
     assert found is not None and math.hypot(found.x_m, found.y_m) <= 2.0, found
     assert searcher.track_altitude_m == pytest.approx(13.0, abs=1.0)
 
