@@ -57,7 +57,7 @@ class CrosswindSweep(SavesState):
     ``max_half_width_m``. ``drift_m_s`` > 0 drifts downwind, < 0 upwind.
     """
 
-    state_attributes = ("side", "anchor_across_m", "half_width_m", "legs")
+    state_attributes = ("side", "anchor_across_m", "anchor_xy", "half_width_m", "legs")
 
     speed_m_s: float
     drift_m_s: float
@@ -65,7 +65,9 @@ class CrosswindSweep(SavesState):
     growth: float
     max_half_width_m: float = 40.0
     side: float = 1.0
+    about_anchor: bool = False  # across measured from the anchor point, not the ENU origin
     anchor_across_m: float | None = field(default=None, init=False)
+    anchor_xy: tuple[float, float] | None = field(default=None, init=False)
     half_width_m: float = field(init=False)
     legs: int = field(default=0, init=False)  # legs completed (turns), over every sweep
 
@@ -75,12 +77,17 @@ class CrosswindSweep(SavesState):
     def restart(self) -> None:
         """The next call starts a new sweep around where the vehicle is then."""
         self.anchor_across_m = None
+        self.anchor_xy = None
 
     def velocity(
         self, frame: WindFrame, x_m: float, y_m: float, cap_m: float | None = None
     ) -> tuple[float, float]:
         """The sweep's velocity at (x, y) in ``frame``; ``cap_m``: this sweep's cap on the
         half-width instead of ``max_half_width_m``."""
+        if self.about_anchor:
+            if self.anchor_xy is None:
+                self.anchor_xy = (x_m, y_m)
+            x_m, y_m = x_m - self.anchor_xy[0], y_m - self.anchor_xy[1]
         _, across = frame.coordinates(x_m, y_m)
         if self.anchor_across_m is None:
             self.anchor_across_m = across

@@ -240,6 +240,9 @@ class TrackingBehavior(SeekingBehavior):
     min_flight_altitude_m = 1.0  # never lower, whatever the offset (a search started low)
     # the sweep before the first detection: 0 grows it to the cast's cap
     max_search_half_width_m = 0.0
+    # the sweep's crosswind coordinate from the point it began, so that the wind's frame
+    # turning does not move the sweep (from the ENU origin: it moves by distance × angle)
+    sweep_about_anchor = False
 
     def __init__(self, ctx: BehaviorContext) -> None:
         super().__init__(ctx)
@@ -251,6 +254,7 @@ class TrackingBehavior(SeekingBehavior):
             self.cast_growth,
             self.max_cast_half_width_m,
             side=1.0 if ctx.vehicle_index % 2 == 0 else -1.0,
+            about_anchor=self.sweep_about_anchor,
         )
         self.tracker = PlumeTracker(cast, search_half_width_m=self.max_search_half_width_m)
         # the search in height: how many steps up (and down) its legs go

@@ -874,3 +874,32 @@ def test_infotaxis_flies_its_published_episode_again_field_for_field() -> None:
     published, new = published_and_reflown("gsl-ideal", "infotaxis", "meander_low", 1)
     assert len(published) == 1
     assert new == published
+
+
+def test_the_anchored_sweep_flies_the_same_wherever_the_scene_is() -> None:
+    """A search in clean air under a 1 m/s wind whose direction swings ±0.6 rad with a 60 s
+    period, from a start and from the same start 583 m away: measured from the point where
+    it began, the anchored sweep's legs are the same (the wind and the sweep are the same
+    relative to the start). Measured from the ENU origin, a turn of the frame by θ moves the
+    sweep by |start|·θ, so the two flights part by metres."""
+
+    def turning(own: VehicleState) -> tuple[float, float]:
+        angle = 0.6 * math.sin(2.0 * math.pi * own.sim_time_s / 60.0)
+        return math.sin(angle), math.cos(angle)  # toward north, swinging east and west
+
+    def track(cls, x0: float, y0: float) -> list[tuple[float, float]]:
+        beh = cls(ctx())
+        beh.read_wind = turning
+        x, y, t, out = x0, y0, 0.0, []
+        while t < 120.0:
+            vx, vy, _ = velocity(beh.step(state(x, y, t), [], [reading(x, y, t, 0.0)]))
+            x, y, t = x + vx * 0.05, y + vy * 0.05, t + 0.05
+            out.append((x - x0, y - y0))
+        return out
+
+    def parting(cls) -> float:
+        near, far = track(cls, 6.0, 27.0), track(cls, 506.0, -273.0)
+        return max(math.hypot(a[0] - b[0], a[1] - b[1]) for a, b in zip(near, far, strict=True))
+
+    assert parting(type("Anchored", (SurgeCast,), {"sweep_about_anchor": True})) < 1e-6
+    assert parting(SurgeCast) > 1.0  # the shift is one the origin's frame does not survive

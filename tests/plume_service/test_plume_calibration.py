@@ -208,9 +208,9 @@ OTHER_CALIBRATED = ("filament", "gsl/sparse_far", "gsl/tuning/tune_north_c")
 #: stability class's drawn plume is measured in tests/plumeswarm/test_gsl_families.py.
 FAMILIES = ("gsl/randomised", "gsl/tuning/tune_randomised")
 #: Bundled time-dependent scenarios that are published references, deliberately not
-#: calibrated to an atmosphere (docs/plume.md): Farrell et al.'s plume as published and the
-#: wind-tunnel thread.
-REFERENCES = ("gsl/farrell2002_reference", "gsl/lab_thread")
+#: calibrated to an atmosphere (docs/plume.md): Farrell et al.'s plume as published, the same
+#: published model in another wind for tuning, and the wind-tunnel thread.
+REFERENCES = ("gsl/farrell2002_reference", "gsl/tuning/tune_farrell", "gsl/lab_thread")
 
 
 def _time_dependent(name: str) -> bool:

@@ -209,6 +209,16 @@ def test_tuning_environments_are_apart_from_the_published_ones() -> None:
         scenario = load_scenario(GSL_TUNING_DIR / f"{name}.toml")
         if name == "tune_steady":  # the steady Gaussian: its class's σy and σz by definition
             assert scenario.plume.model == "gaussian" and scenario.wind.model == "steady"
+        elif name == "tune_farrell":  # Farrell et al.'s published filaments in another wind
+            reference = load_scenario(GSL_ENVIRONMENTS_DIR / "farrell2002_reference.toml")
+            assert scenario.plume.calibration is None and scenario.wind.model == "field"
+            assert scenario.plume.filament == reference.plume.filament.__class__(
+                **{**msgspec.structs.asdict(reference.plume.filament), "max_age_s": 200.0}
+            )
+            assert scenario.wind.speed_m_s != reference.wind.speed_m_s
+            assert scenario.wind.from_deg != reference.wind.from_deg
+            assert scenario.wind.meander.resolved() != reference.wind.meander.resolved()
+            assert scenario.plume.sources != reference.plume.sources
         else:  # a time-dependent plume whose time average is calibrated to its class
             assert scenario.plume.calibration is not None
     # the tuning family draws its sources where the test family never does
