@@ -217,23 +217,20 @@ class Journal:
             )
         return journal
 
-    def outcome(self, spec: EpisodeSpec) -> Outcome | None:
-        fields = self.records.get(spec_key(spec))
-        return None if fields is None else outcome_of(spec, fields)
-
     def reusable(self, specs: Sequence[EpisodeSpec], digest: Callable[[EpisodeSpec], str]) -> Reuse:
         """Which of ``specs`` the journal holds: kept with their behaviour's ``digest``
         (reused), kept with another (flown again), kept without one (reused, unchecked)."""
         reuse = Reuse()
         for spec in specs:
-            outcome = self.outcome(spec)
-            if outcome is None:
+            key = spec_key(spec)  # a digest of the spec: once per episode
+            fields = self.records.get(key)
+            if fields is None:
                 continue
-            kept = self.behaviors.get(spec_key(spec))
+            kept = self.behaviors.get(key)
             if kept is not None and kept != digest(spec):
                 reuse.changed.append(spec)
                 continue
-            reuse.outcomes[spec] = outcome
+            reuse.outcomes[spec] = outcome_of(spec, fields)
             reuse.unchecked += kept is None
         return reuse
 

@@ -212,9 +212,8 @@ def test_tuning_environments_are_apart_from_the_published_ones() -> None:
         elif name == "tune_farrell":  # Farrell et al.'s published filaments in another wind
             reference = load_scenario(GSL_ENVIRONMENTS_DIR / "farrell2002_reference.toml")
             assert scenario.plume.calibration is None and scenario.wind.model == "field"
-            assert scenario.plume.filament == reference.plume.filament.__class__(
-                **{**msgspec.structs.asdict(reference.plume.filament), "max_age_s": 200.0}
-            )
+            filament = msgspec.structs.replace(reference.plume.filament, max_age_s=200.0)
+            assert scenario.plume.filament == filament
             assert scenario.wind.speed_m_s != reference.wind.speed_m_s
             assert scenario.wind.from_deg != reference.wind.from_deg
             assert scenario.wind.meander.resolved() != reference.wind.meander.resolved()
